@@ -1,0 +1,22 @@
+"""Errors a user sees: each names the file (or config) and the field at fault."""
+from __future__ import annotations
+
+
+class SysidError(Exception):
+    """Base class of every error `sysid` raises on bad input."""
+
+
+class ShipDefinitionError(SysidError):
+    """A ship TOML is missing a key, has an out-of-range value, or an override is unknown."""
+
+
+class DataError(SysidError):
+    """A data file is missing, misnamed, or holds NaN, wrong units or non-monotonic time."""
+
+
+class ConfigError(SysidError):
+    """An experiment config is malformed."""
+
+
+class CheckpointError(SysidError):
+    """A run directory or checkpoint is missing or corrupt."""

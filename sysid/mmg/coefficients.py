@@ -1,0 +1,65 @@
+"""MMG coefficients as tensors, so a subset can be identified by gradient.
+
+`Coefficients` holds every scalar of a `Ship` as a 0-d tensor attribute (``c.X_vr``),
+as a buffer by default, or as a bounded trainable parameter. A trainable coefficient is
+stored as an unconstrained raw value; its value is ``low + (high-low)*sigmoid(raw)``
+when bounds are given.
+"""
+from __future__ import annotations
+
+from typing import Iterable, Mapping
+
+import torch
+from torch import nn
+
+from sysid.ship import PARAMETERS, Ship, parameter_name
+from sysid.errors import ShipDefinitionError
+
+
+class Coefficients(nn.Module):
+    """Every ship parameter as a tensor attribute.
+
+    Parameters
+    ----------
+    ship : the validated ship definition.
+    trainable : names of parameters to expose as `nn.Parameter` (e.g. ``["X_vr", "Y_v"]``).
+    bounds : optional ``{name: (low, high)}`` box for trainable parameters.
+    dtype : float64 by default (the physics is compared with the oracle in float64).
+    """
+
+    def __init__(self, ship: Ship, trainable: Iterable[str] = (),
+                 bounds: Mapping[str, tuple[float, float]] | None = None,
+                 dtype: torch.dtype = torch.float64):
+        super().__init__()
+        self.ship_name = ship.name
+        names = [parameter_name(k, "trainable") for k in trainable]
+        bounds = {parameter_name(k, "bounds"): v for k, v in (bounds or {}).items()}
+        self.trainable_names = tuple(names)
+        self._bounds: dict[str, tuple[float, float]] = {}
+        for name in PARAMETERS:
+            value = torch.tensor(ship.parameters[name], dtype=dtype)
+            if name in names:
+                if name in bounds:
+                    low, high = map(float, bounds[name])
+                    if not low < float(value) < high:
+                        raise ShipDefinitionError(
+                            f"bounds: {name} = {float(value)} is not strictly inside [{low}, {high}]")
+                    self._bounds[name] = (low, high)
+                    frac = (value - low) / (high - low)
+                    value = torch.log(frac / (1 - frac))
+                setattr(self, f"raw_{name}", nn.Parameter(value))
+            else:
+                self.register_buffer(name, value)
+
+    def __getattr__(self, name: str):
+        if name in PARAMETERS and name in self.trainable_names:
+            raw = super().__getattr__(f"raw_{name}")
+            if name in self._bounds:
+                low, high = self._bounds[name]
+                return low + (high - low) * torch.sigmoid(raw)
+            return raw
+        return super().__getattr__(name)
+
+    def values(self) -> dict[str, float]:
+        """Current value of every parameter, as plain floats."""
+        return {name: float(getattr(self, name).detach()) for name in PARAMETERS}

@@ -1,0 +1,56 @@
+"""Hull forces: Yoshimura's unified low-speed model (paper Eq. 26, MMG_SPEC §3).
+
+Cross-flow drag integrals are evaluated in closed form (no quadrature), written so that
+no term cancels catastrophically when the yaw rate is small (float32 safe).
+"""
+from __future__ import annotations
+
+import math
+
+import torch
+
+from sysid.mmg.guards import SPEED_GUARD, safe_atan2, safe_div
+
+
+def crossflow_integrals(v: torch.Tensor, b: torch.Tensor, L: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Exact cross-flow integrals over the hull, x in [-L/2, L/2] [m].
+
+    With w(x) = v + b x (local lateral velocity [m/s], b = C_r r [1/s]) returns
+    I1 = ∫ |w| w dx [m^3/s^2] and I2 = ∫ |w| w x dx [m^4/s^2].
+    """
+    half = 0.5 * L
+    w1 = v - b * half
+    w2 = v + b * half
+    same_sign = w1 * w2 >= 0  # no zero crossing along the hull (includes b = 0)
+    sign = torch.where(v >= 0, 1.0, -1.0).to(v.dtype)
+    # no crossing: |w| w = s w^2, polynomial integrals, no division by b
+    i1_same = sign * (v * v * L + b * b * L**3 / 12.0)
+    i2_same = sign * v * b * L**3 / 6.0
+    # crossing: |b| L/2 >= |v|, so dividing by b is well conditioned
+    crossing = ~same_sign
+    a1, a2 = w1.abs(), w2.abs()
+    i1_cross = safe_div(a2**3 - a1**3, 3.0 * b, crossing)
+    f2 = w2**3 * a2 / 4.0 - v * a2**3 / 3.0
+    f1 = w1**3 * a1 / 4.0 - v * a1**3 / 3.0
+    i2_cross = safe_div(f2 - f1, b * b, crossing)
+    return torch.where(same_sign, i1_same, i1_cross), torch.where(same_sign, i2_same, i2_cross)
+
+
+def hull_force(u: torch.Tensor, v: torch.Tensor, r: torch.Tensor, c) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """X_H [N], Y_H [N], N_H [N m about midship] from u, v (midship) [m/s], r [rad/s].
+
+    `c` carries the coefficients (`Coefficients`): L_pp, d, rho, X_0F, X_0A, X_vr, Y_v,
+    Y_r, N_v, N_r, C_D, C_rY, C_rN.
+    """
+    L = c.L_pp
+    q = 0.5 * c.rho * L * c.d  # kg/m
+    U = torch.sqrt(u * u + v * v)
+    U_guarded = torch.where(U < SPEED_GUARD, torch.full_like(U, 1e-7), U)
+    beta_hat = safe_atan2(v, u)  # = -beta of the usual convention, (-pi, pi]
+    X0 = c.X_0F + (c.X_0A - c.X_0F) * beta_hat.abs() / math.pi
+    X_H = q * (X0 * u * U_guarded + c.X_vr * v * r * L)
+    i1, _ = crossflow_integrals(v, c.C_rY * r, L)
+    _, i2 = crossflow_integrals(v, c.C_rN * r, L)
+    Y_H = q * (c.Y_v * v * u.abs() + c.Y_r * r * L * u - c.C_D / L * i1)
+    N_H = q * L * (c.N_v * v * u + c.N_r * r * L * u.abs() - c.C_D / (L * L) * i2)
+    return X_H, Y_H, N_H

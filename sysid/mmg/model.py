@@ -1,0 +1,78 @@
+"""The MMG force model: hull + propeller + rudder + wind, every component by name."""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import Iterable, Mapping
+
+import torch
+from torch import nn
+
+from sysid.mmg.coefficients import Coefficients
+from sysid.mmg.hull import hull_force
+from sysid.mmg.propeller import propeller_force, propeller_inflow
+from sysid.mmg.rudder import rudder_force, rudder_inflow
+from sysid.mmg.wind import relative_wind, wind_force
+from sysid.ship import Ship
+
+
+@dataclass
+class ForceBreakdown:
+    """Forces by component, each (..., 3) = (X [N], Y [N], N [N m] about midship).
+
+    ``correction`` is the FNN term (zeros for MMG-only); ``relative_wind`` is (..., 2)
+    = (U_A [m/s], gamma_A [rad]) as seen with the state the forces were computed for.
+    """
+
+    hull: torch.Tensor
+    propeller: torch.Tensor
+    rudder: torch.Tensor
+    wind: torch.Tensor
+    correction: torch.Tensor
+    relative_wind: torch.Tensor
+
+    @property
+    def mmg(self) -> torch.Tensor:
+        """F_MMG = hull + propeller + rudder + wind."""
+        return self.hull + self.propeller + self.rudder + self.wind
+
+    @property
+    def total(self) -> torch.Tensor:
+        """F_MMG + F_NN, the right-hand side of the maneuvering equations."""
+        return self.mmg + self.correction
+
+    def as_dict(self) -> dict[str, torch.Tensor]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+class MMG(nn.Module):
+    """Batched, differentiable MMG model (paper Appendix A; MMG_SPEC).
+
+    Parameters
+    ----------
+    ship : validated ship definition.
+    trainable : coefficient names to expose as parameters (gradient identification).
+    bounds : ``{name: (low, high)}`` for trainable coefficients.
+    dtype : float64 (default) or float32.
+    """
+
+    def __init__(self, ship: Ship, trainable: Iterable[str] = (),
+                 bounds: Mapping[str, tuple[float, float]] | None = None,
+                 dtype: torch.dtype = torch.float64):
+        super().__init__()
+        self.ship = ship
+        self.coefficients = Coefficients(ship, trainable, bounds, dtype)
+
+    def forward(self, state: torch.Tensor, inputs: torch.Tensor) -> ForceBreakdown:
+        """Force breakdown for state (..., 6) = (x, u, y, v, psi, r) and inputs (..., 4)
+        = (n_prop [rps], delta_rudder [rad], wind_velo_true [m/s], wind_dir_true [rad])."""
+        c = self.coefficients
+        u, v, psi, r = state[..., 1], state[..., 3], state[..., 4], state[..., 5]
+        n, delta, U_T, zeta = inputs.unbind(-1)
+        hull = torch.stack(hull_force(u, v, r, c), -1)
+        prop_state = propeller_inflow(u, v, r, n, c)
+        propeller = torch.stack(propeller_force(u, v, r, n, c, prop_state), -1)
+        rudder = torch.stack(rudder_force(u, v, r, n, delta, c, prop_state), -1)
+        wind_rel = relative_wind(u, v, psi, U_T, zeta)
+        wind = torch.stack(wind_force(wind_rel.U_A, wind_rel.gamma_A, c), -1)
+        return ForceBreakdown(hull, propeller, rudder, wind, torch.zeros_like(hull),
+                              torch.stack(wind_rel, -1))

@@ -1,0 +1,54 @@
+"""Wind forces: Fujiwara's regression (paper Eqs. 49-54, MMG_SPEC §6).
+
+The input is the *true* wind (U_T, zeta: speed and the earth-frame direction it comes
+from, x0 towards y0); the relative wind is computed from the ship's current state, as the
+lab's simulator does in every right-hand-side call.
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import torch
+
+from sysid.mmg.guards import SPEED_GUARD, safe_atan2
+
+TWO_PI = 2.0 * math.pi
+
+
+class RelativeWind(NamedTuple):
+    U_A: torch.Tensor      # m/s, relative wind speed at midship
+    gamma_A: torch.Tensor  # rad in [0, 2 pi), direction it comes from, bow towards starboard
+
+
+def relative_wind(u, v, psi, U_T, zeta) -> RelativeWind:
+    """True wind to relative wind at midship, with the simulator's low-speed guards.
+
+    u, v [m/s] midship body velocity, psi [rad] heading, U_T [m/s], zeta [rad].
+    """
+    U = torch.sqrt(u * u + v * v)
+    slow = U < SPEED_GUARD
+    beta_hat = safe_atan2(v, u)
+    course = psi + beta_hat
+    U_guarded = torch.where(slow, torch.full_like(U, 1e-7), U)
+    # 'from' vector of the relative wind = true 'from' vector + ship velocity (earth frame)
+    W_x = U_T * torch.cos(zeta) + U_guarded * torch.cos(course)
+    W_y = U_T * torch.sin(zeta) + U_guarded * torch.sin(course)
+    U_A = torch.sqrt(W_x * W_x + W_y * W_y)
+    gamma_A = torch.remainder(safe_atan2(W_y, W_x) - psi, TWO_PI)
+    gamma_A = torch.where(slow, torch.remainder(zeta - psi, TWO_PI), gamma_A)
+    gamma_A = torch.where(U_T < SPEED_GUARD, torch.remainder(beta_hat, TWO_PI), gamma_A)  # wins
+    return RelativeWind(U_A, gamma_A)
+
+
+def wind_force(U_A, gamma_A, c):
+    """X_A [N], Y_A [N], N_A [N m] from the relative wind (U_A [m/s], gamma_A [rad]).
+
+    `c` provides rho_air, A_T, A_L, L_wind and Fujiwara's X0..X5, Y1..Y5, N1..N3.
+    """
+    aoa = TWO_PI - gamma_A
+    dyn = 0.5 * c.rho_air * U_A * U_A
+    C_X = c.X0 + c.X1 * torch.cos(aoa) + c.X3 * torch.cos(3 * aoa) + c.X5 * torch.cos(5 * aoa)
+    C_Y = c.Y1 * torch.sin(aoa) + c.Y3 * torch.sin(3 * aoa) + c.Y5 * torch.sin(5 * aoa)
+    C_N = c.N1 * torch.sin(aoa) + c.N2 * torch.sin(2 * aoa) + c.N3 * torch.sin(3 * aoa)
+    return dyn * c.A_T * C_X, dyn * c.A_L * C_Y, dyn * c.A_L * c.L_wind * C_N
