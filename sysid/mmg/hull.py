@@ -11,6 +11,41 @@ import torch
 
 from sysid.mmg.guards import SPEED_GUARD, safe_atan2, safe_div
 
+SIMPSON_POINTS = 100  # the lab simulator's sample count
+
+
+def simpson_avg_weights(points: int = SIMPSON_POINTS) -> torch.Tensor:
+    """Quadrature weights (per unit spacing h) of SciPy's old ``simps(even='avg')``.
+
+    For an even number of points: the mean of (Simpson on the first N-1 points +
+    trapezoid on the last interval) and (trapezoid on the first + Simpson on the last N-1).
+    """
+    def simpson(n):  # odd n points, weights per h
+        w = torch.ones(n, dtype=torch.float64)
+        w[1:-1:2], w[2:-1:2] = 4.0, 2.0
+        return w / 3.0
+    if points % 2:
+        return simpson(points)
+    first = torch.zeros(points, dtype=torch.float64)
+    last = torch.zeros(points, dtype=torch.float64)
+    first[:-1] += simpson(points - 1)
+    first[-2:] += 0.5
+    last[1:] += simpson(points - 1)
+    last[:2] += 0.5
+    return 0.5 * (first + last)
+
+
+def crossflow_integrals_simpson(v: torch.Tensor, b: torch.Tensor, L: torch.Tensor,
+                                points: int = SIMPSON_POINTS) -> tuple[torch.Tensor, torch.Tensor]:
+    """The same integrals as `crossflow_integrals` by the lab's 100-point Simpson rule
+    (to reproduce its simulator to round-off; differs from exact by <= 2e-5 kgf)."""
+    unit = torch.linspace(-0.5, 0.5, points, dtype=v.dtype, device=v.device)
+    x = unit * L  # (points,)
+    w = v[..., None] + b[..., None] * x
+    f = w.abs() * w
+    weights = simpson_avg_weights(points).to(dtype=v.dtype, device=v.device) * (L / (points - 1))
+    return f @ weights, (f * x) @ weights
+
 
 def crossflow_integrals(v: torch.Tensor, b: torch.Tensor, L: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Exact cross-flow integrals over the hull, x in [-L/2, L/2] [m].
@@ -36,11 +71,13 @@ def crossflow_integrals(v: torch.Tensor, b: torch.Tensor, L: torch.Tensor) -> tu
     return torch.where(same_sign, i1_same, i1_cross), torch.where(same_sign, i2_same, i2_cross)
 
 
-def hull_force(u: torch.Tensor, v: torch.Tensor, r: torch.Tensor, c) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def hull_force(u: torch.Tensor, v: torch.Tensor, r: torch.Tensor, c,
+               quadrature: str = "exact") -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """X_H [N], Y_H [N], N_H [N m about midship] from u, v (midship) [m/s], r [rad/s].
 
     `c` carries the coefficients (`Coefficients`): L_pp, d, rho, X_0F, X_0A, X_vr, Y_v,
-    Y_r, N_v, N_r, C_D, C_rY, C_rN.
+    Y_r, N_v, N_r, C_D, C_rY, C_rN. `quadrature` is "exact" (closed form) or "simpson"
+    (the lab simulator's rule).
     """
     L = c.L_pp
     q = 0.5 * c.rho * L * c.d  # kg/m
@@ -49,8 +86,9 @@ def hull_force(u: torch.Tensor, v: torch.Tensor, r: torch.Tensor, c) -> tuple[to
     beta_hat = safe_atan2(v, u)  # = -beta of the usual convention, (-pi, pi]
     X0 = c.X_0F + (c.X_0A - c.X_0F) * beta_hat.abs() / math.pi
     X_H = q * (X0 * u * U_guarded + c.X_vr * v * r * L)
-    i1, _ = crossflow_integrals(v, c.C_rY * r, L)
-    _, i2 = crossflow_integrals(v, c.C_rN * r, L)
+    integrals = crossflow_integrals_simpson if quadrature == "simpson" else crossflow_integrals
+    i1, _ = integrals(v, c.C_rY * r, L)
+    _, i2 = integrals(v, c.C_rN * r, L)
     Y_H = q * (c.Y_v * v * u.abs() + c.Y_r * r * L * u - c.C_D / L * i1)
     N_H = q * L * (c.N_v * v * u + c.N_r * r * L * u.abs() - c.C_D / (L * L) * i2)
     return X_H, Y_H, N_H

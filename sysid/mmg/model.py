@@ -53,13 +53,18 @@ class MMG(nn.Module):
     trainable : coefficient names to expose as parameters (gradient identification).
     bounds : ``{name: (low, high)}`` for trainable coefficients.
     dtype : float64 (default) or float32.
+    quadrature : cross-flow integrals "exact" (closed form, default) or "simpson" (the
+        lab simulator's 100-point rule, to reproduce it to round-off).
     """
 
     def __init__(self, ship: Ship, trainable: Iterable[str] = (),
                  bounds: Mapping[str, tuple[float, float]] | None = None,
-                 dtype: torch.dtype = torch.float64):
+                 dtype: torch.dtype = torch.float64, quadrature: str = "exact"):
         super().__init__()
+        if quadrature not in ("exact", "simpson"):
+            raise ValueError(f"quadrature {quadrature!r}: choose 'exact' or 'simpson'")
         self.ship = ship
+        self.quadrature = quadrature
         self.coefficients = Coefficients(ship, trainable, bounds, dtype)
 
     def forward(self, state: torch.Tensor, inputs: torch.Tensor) -> ForceBreakdown:
@@ -68,7 +73,7 @@ class MMG(nn.Module):
         c = self.coefficients
         u, v, psi, r = state[..., 1], state[..., 3], state[..., 4], state[..., 5]
         n, delta, U_T, zeta = inputs.unbind(-1)
-        hull = torch.stack(hull_force(u, v, r, c), -1)
+        hull = torch.stack(hull_force(u, v, r, c, self.quadrature), -1)
         prop_state = propeller_inflow(u, v, r, n, c)
         propeller = torch.stack(propeller_force(u, v, r, n, c, prop_state), -1)
         rudder = torch.stack(rudder_force(u, v, r, n, delta, c, prop_state), -1)

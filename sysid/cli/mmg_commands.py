@@ -1,0 +1,165 @@
+"""``sysid forces``, ``sysid simulate``, ``sysid evaluate --model mmg``."""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import List, Optional
+
+import numpy as np
+import pandas as pd
+import torch
+import typer
+from tqdm import tqdm
+
+from sysid.cli import app
+from sysid.data import expand_paths, read_run
+from sysid.dynamics import integrate, state_derivative
+from sysid.errors import DataError
+from sysid.evaluate import metrics_table
+from sysid.files import write_csv
+from sysid.mmg import MMG
+from sysid.ship import load_ship, parse_overrides
+
+FORCE_INPUTS = ["x", "u", "y", "v", "psi", "r", "n_prop", "delta_rad", "wind_velo_true", "wind_dir_true"]
+COMPONENT_COLUMNS = [("hull", "H"), ("propeller", "P"), ("rudder", "R"), ("wind", "A")]
+DERIVATIVES = ["x_dot", "u_dot", "y_dot", "v_dot", "psi_dot", "r_dot"]
+
+ShipOption = typer.Option("esso_osaka", "--ship", help="Ship name (configs/ships/NAME.toml) or path to a ship TOML.")
+SetOption = typer.Option(None, "--set", help="Override a ship parameter, e.g. --set Xvr=0.4535 (repeatable).")
+QuadratureOption = typer.Option("exact", "--quadrature",
+                                help="Cross-flow integrals: exact (closed form) or simpson (the lab simulator's).")
+
+
+def _model(ship: str, overrides: Optional[List[str]], quadrature: str) -> MMG:
+    if quadrature not in ("exact", "simpson"):
+        raise DataError(f"--quadrature {quadrature!r}: choose exact or simpson")
+    return MMG(load_ship(ship, parse_overrides(overrides)), quadrature=quadrature)
+
+
+def force_columns(model: MMG, frame: pd.DataFrame) -> pd.DataFrame:
+    """Force components, totals and state derivatives (SI) for rows of `FORCE_INPUTS`."""
+    values = torch.tensor(frame[FORCE_INPUTS].to_numpy(dtype=float), dtype=torch.float64)
+    state, inputs = values[:, :6], values[:, 6:]
+    with torch.no_grad():
+        forces = model(state, inputs)
+        deriv = state_derivative(state, forces.total, model.coefficients)
+    out = {}
+    for comp, key in COMPONENT_COLUMNS:
+        arr = getattr(forces, comp).numpy()
+        for j, axis in enumerate("XYN"):
+            out[f"{axis}{key}_SI"] = arr[:, j]
+    total = forces.total.numpy()
+    for j, axis in enumerate("XYN"):
+        out[f"{axis}_SI"] = total[:, j]
+    for j, name in enumerate(DERIVATIVES):
+        out[name] = deriv.numpy()[:, j]
+    return pd.DataFrame(out, index=frame.index)
+
+
+@app.command()
+def forces(
+    input_csv: Path = typer.Argument(..., help="CSV with columns x u y v psi r n_prop delta_rad wind_velo_true wind_dir_true (SI)."),
+    output: Path = typer.Option(..., "-o", "--output", help="Output CSV."),
+    ship: str = ShipOption,
+    set_: Optional[List[str]] = SetOption,
+    quadrature: str = QuadratureOption,
+    chunk: int = typer.Option(65536, help="Rows per batch."),
+) -> None:
+    """MMG force components (hull, propeller, rudder, wind; X, Y, N) and state derivatives per row."""
+    start = time.perf_counter()
+    model = _model(ship, set_, quadrature)
+    if not input_csv.is_file():
+        raise DataError(f"{input_csv}: file not found")
+    frame = pd.read_csv(input_csv)
+    missing = [c for c in FORCE_INPUTS if c not in frame.columns]
+    if missing:
+        raise DataError(f"{input_csv}: missing column(s) {missing}")
+    numeric = frame[FORCE_INPUTS].apply(pd.to_numeric, errors="coerce")
+    bad = ~np.isfinite(numeric.to_numpy(dtype=float))
+    if bad.any():
+        row, col = np.argwhere(bad)[0]
+        raise DataError(f"{input_csv}: column {FORCE_INPUTS[col]!r} is not a finite number at data row {row + 2}")
+    parts = []
+    bounds = range(0, len(frame), chunk)
+    for lo in tqdm(bounds, desc="forces", unit="batch", disable=len(bounds) < 4):
+        parts.append(force_columns(model, numeric.iloc[lo:lo + chunk]))
+    result = pd.concat([frame[FORCE_INPUTS]] + [pd.concat(parts)], axis=1) if parts else frame[FORCE_INPUTS]
+    write_csv(result, output, float_format="%.17g")
+    typer.echo(f"forces: {len(frame)} rows, ship {model.ship.name}, {quadrature} cross-flow -> {output} "
+               f"({time.perf_counter() - start:.2f} s)")
+
+
+@app.command()
+def simulate(
+    log: Path = typer.Option(..., "--log", help="Processed run (public schema, 10 Hz or 1 Hz)."),
+    start: float = typer.Option(..., "--start", help="Start time T [s] (recorded state at T)."),
+    horizon: float = typer.Option(..., "--horizon", help="Prediction horizon H [s]."),
+    output: Path = typer.Option(..., "-o", "--output", help="Output CSV."),
+    integrator: str = typer.Option("euler", "--integrator", help="euler (the paper's) or rk4 (classical)."),
+    rate: float = typer.Option(1.0, "--rate", help="Step rate [Hz]: 1 = the protocol's 1 Hz grid."),
+    ship: str = ShipOption,
+    set_: Optional[List[str]] = SetOption,
+    quadrature: str = QuadratureOption,
+) -> None:
+    """Predict from the recorded state at T with the recorded inputs (zero-order hold)."""
+    if integrator not in ("euler", "rk4"):
+        raise DataError(f"--integrator {integrator!r}: choose euler or rk4")
+    model = _model(ship, set_, quadrature)
+    run = read_run(log, rate)
+    i0 = int(np.argmin(np.abs(run.t - start)))
+    if abs(run.t[i0] - start) > 0.5 * run.dt:
+        raise DataError(f"{log}: --start {start} s is outside the run ({run.t[0]:.1f}..{run.t[-1]:.1f} s)")
+    steps = int(round(horizon / run.dt))
+    if steps < 1 or i0 + steps >= len(run):
+        raise DataError(f"{log}: --horizon {horizon} s from {run.t[i0]:.1f} s runs past the end "
+                        f"({run.t[-1]:.1f} s)")
+    sl = slice(i0, i0 + steps + 1)
+    x0 = torch.as_tensor(run.states[i0], dtype=torch.float64)
+    inputs = torch.as_tensor(run.inputs[sl], dtype=torch.float64)
+    with torch.no_grad():
+        pred = integrate(model, x0, inputs, run.dt, integrator)
+        forces = model(pred, inputs)
+    out = pd.DataFrame({"t": run.t[sl], "t_rel": run.t[sl] - run.t[i0]})
+    for j, name in enumerate(["x", "u", "y", "v", "psi", "r"]):
+        out[name] = pred[:, j].numpy()
+    for j, name in enumerate(["n_prop", "delta_rudder", "wind_velo_true", "wind_dir_true"]):
+        out[name] = run.inputs[sl, j]
+    for comp, key in COMPONENT_COLUMNS:
+        arr = getattr(forces, comp).numpy()
+        for j, axis in enumerate("XYN"):
+            out[f"{axis}{key}_SI"] = arr[:, j]
+    for j, name in enumerate(["x", "u", "y", "v", "psi", "r"]):
+        out[f"obs_{name}"] = run.states[sl, j]
+    write_csv(out, output, float_format="%.17g")
+    err = np.sqrt(((out[["u", "v", "r"]].to_numpy() - out[["obs_u", "obs_v", "obs_r"]].to_numpy()) ** 2).mean(0))
+    typer.echo(f"simulate: {run.name} from t = {run.t[i0]:.1f} s, {steps} {integrator} steps of {run.dt:g} s -> {output}\n"
+               f"  RMSE vs record: u {err[0]:.4f} m/s, v_m {err[1]:.4f} m/s, r {err[2]:.4f} rad/s")
+
+
+@app.command()
+def evaluate(
+    data: List[Path] = typer.Option(..., "--data", help="Processed files or directories (repeatable; several may follow one --data)."),
+    horizon: List[float] = typer.Option([30.0, 100.0], "--horizon", help="Horizon [s] (repeatable)."),
+    output: Path = typer.Option(..., "-o", "--output", help="Metrics CSV."),
+    model_kind: str = typer.Option("mmg", "--model", help="mmg (the physical model alone)."),
+    integrator: str = typer.Option("euler", "--integrator", help="euler (the protocol's) or rk4."),
+    ship: str = ShipOption,
+    set_: Optional[List[str]] = SetOption,
+    quadrature: str = QuadratureOption,
+) -> None:
+    """The protocol's windowed RMSE of u, v_m, r per file and horizon."""
+    if model_kind != "mmg":
+        raise DataError(f"--model {model_kind!r}: choose mmg")
+    if integrator not in ("euler", "rk4"):
+        raise DataError(f"--integrator {integrator!r}: choose euler or rk4")
+    start = time.perf_counter()
+    model = _model(ship, set_, quadrature)
+    files = expand_paths(data)
+    runs = [read_run(f) for f in tqdm(files, desc="reading", unit="file", disable=len(files) < 4)]
+    table = metrics_table(model, runs, horizon, integrator)
+    write_csv(table, output, float_format="%.6g")
+    with pd.option_context("display.width", 120, "display.float_format", "{:.5f}".format):
+        typer.echo(table.to_string(index=False))
+    overrides = ", ".join(f"{k}={v:g}" for k, v in model.ship.overrides.items()) or "none"
+    typer.echo(f"evaluate: {len(runs)} file(s), horizons {', '.join(f'{h:g}' for h in horizon)} s, "
+               f"MMG ({model.ship.name}, overrides: {overrides}) -> {output} ({time.perf_counter() - start:.1f} s)")
