@@ -37,11 +37,15 @@ def expand_multi_value(argv: list[str]) -> list[str]:
     return out
 
 
+def run(argv: list[str]) -> None:
+    """Run a subcommand; `SysidError` propagates (for tests and embedding)."""
+    app(args=expand_multi_value(list(argv)), standalone_mode=False)
+
+
 def main(argv: list[str] | None = None) -> None:
     """Console entry point: one clear line on bad input, no traceback."""
-    args = expand_multi_value(list(sys.argv[1:] if argv is None else argv))
     try:
-        app(args=args, standalone_mode=False)
+        run(sys.argv[1:] if argv is None else argv)
     except SysidError as exc:
         typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
         sys.exit(2)

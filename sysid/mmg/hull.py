@@ -61,13 +61,13 @@ def crossflow_integrals(v: torch.Tensor, b: torch.Tensor, L: torch.Tensor) -> tu
     # no crossing: |w| w = s w^2, polynomial integrals, no division by b
     i1_same = sign * (v * v * L + b * b * L**3 / 12.0)
     i2_same = sign * v * b * L**3 / 6.0
-    # crossing: |b| L/2 >= |v|, so dividing by b is well conditioned
+    # crossing (w1, w2 of opposite signs): |w2|^3 - |w1|^3 = sign(b) (w1^3 + w2^3) and
+    # w1^3 + w2^3 = 2 v (w1^2 - w1 w2 + w2^2): no cancellation, and |b| L/2 >= |v|
     crossing = ~same_sign
-    a1, a2 = w1.abs(), w2.abs()
-    i1_cross = safe_div(a2**3 - a1**3, 3.0 * b, crossing)
-    f2 = w2**3 * a2 / 4.0 - v * a2**3 / 3.0
-    f1 = w1**3 * a1 / 4.0 - v * a1**3 / 3.0
-    i2_cross = safe_div(f2 - f1, b * b, crossing)
+    quad_form = w1 * w1 - w1 * w2 + w2 * w2
+    i1_cross = safe_div(2.0 * v * quad_form, 3.0 * b.abs(), crossing)
+    moment = (w1**4 + w2**4) / 4.0 - 2.0 * v * v * quad_form / 3.0
+    i2_cross = safe_div(torch.sign(b) * moment, b * b, crossing)
     return torch.where(same_sign, i1_same, i1_cross), torch.where(same_sign, i2_same, i2_cross)
 
 

@@ -1,0 +1,39 @@
+"""Shared fixtures: the oracle vectors and the real dataset (skipped clearly when absent)."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from sysid.errors import DataError
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _shared() -> Path:
+    env = os.environ.get("SYSID_SHARED")
+    return Path(env) if env else ROOT.parent / "shared"
+
+
+@pytest.fixture(scope="session")
+def oracle_dir() -> Path:
+    path = _shared() / "oracle"
+    if not (path / "mmg_vectors_public.csv").is_file():
+        pytest.skip(f"oracle vectors not found in {path} (set SYSID_SHARED to the shared/ directory)")
+    return path
+
+
+@pytest.fixture(scope="session")
+def oracle_vectors(oracle_dir) -> pd.DataFrame:
+    return pd.read_csv(oracle_dir / "mmg_vectors_public.csv")
+
+
+@pytest.fixture(scope="session")
+def dataset_dir() -> Path:
+    from sysid.datasets import data_dir
+    try:
+        return data_dir()
+    except DataError as exc:
+        pytest.skip(f"real dataset unavailable: {exc}")
