@@ -1,0 +1,24 @@
+"""Second-order central difference of a uniformly sampled signal.
+
+v(t) = (p(t + dt) - p(t - dt)) / (2 dt), dt = the differential time (paper: 1.0 s). Near
+the ends, where t +- dt leaves the record, the half-width shrinks to what is available and
+the first/last sample use a one-sided difference.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def central_difference(p: np.ndarray, sample_dt: float, diff_dt: float = 1.0) -> np.ndarray:
+    """Derivative of `p` (shape (N,), step `sample_dt` [s]) with half-width `diff_dt` [s]."""
+    p = np.asarray(p, float)
+    n = len(p)
+    if n < 2:
+        return np.zeros(n)
+    k = max(1, int(round(diff_dt / sample_dt)))
+    idx = np.arange(n)
+    half = np.minimum(k, np.minimum(idx, n - 1 - idx))
+    lo = idx - half
+    hi = idx + half
+    hi[0], lo[-1] = 1, n - 2              # one-sided at the very ends
+    return (p[hi] - p[lo]) / ((hi - lo) * sample_dt)

@@ -1,0 +1,185 @@
+"""Raw and processed log schemas (column names and units), reading and validation.
+
+Headers are ``name [unit]`` as in the public FRT-DS-ESSO files. `read_raw` returns a
+DataFrame with the bare names (``t``, ``gnss_fore_x``, ...) in SI units, or raises
+`RawLogError` naming the file, the column and the row (1-based data row, header excluded).
+Documented repairs (degree headers converted to radians, exact duplicate rows dropped) are
+appended to the `repairs` list the caller passes in.
+"""
+from __future__ import annotations
+
+import difflib
+import os
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+
+class RawLogError(ValueError):
+    """A raw log cannot be processed: missing column, wrong unit, bad time, bad geometry."""
+
+
+# bare name -> unit, raw log
+RAW_COMMON = {
+    "t": "s",
+    "fog_yaw_rate": "rad/s",
+    "anemo_1_speed": "m/s", "anemo_1_dir": "rad",
+    "anemo_2_speed": "m/s", "anemo_2_dir": "rad",
+    "n_prop": "rps",
+    "delta_rudder": "rad",
+}
+RAW_LOCAL = {"gnss_fore_x": "m", "gnss_fore_y": "m", "gnss_aft_x": "m", "gnss_aft_y": "m"}
+RAW_LATLON = {"gnss_fore_lat": "deg", "gnss_fore_lon": "deg",
+              "gnss_aft_lat": "deg", "gnss_aft_lon": "deg"}
+RAW_OPTIONAL = {"gnss_fore_fix": "-", "gnss_aft_fix": "-"}
+
+# processed schema, in the public files' column order
+PROCESSED = {
+    "t": "s", "x_position_mid": "m", "u_velo": "m/s", "y_position_mid": "m", "vm_velo": "m/s",
+    "psi_hat": "rad", "r_angvelo": "rad/s", "n_prop": "rps", "delta_rudder": "rad",
+    "wind_velo_relative_mid": "m/s", "wind_dir_relative_mid": "rad",
+    "wind_velo_true": "m/s", "wind_dir_true": "rad",
+}
+
+# headers in degrees accepted for a radian column, converted (a logged repair)
+_DEGREE_UNITS = {"rad": ("deg", np.pi / 180.0), "rad/s": ("deg/s", np.pi / 180.0)}
+
+# plausibility limits in SI units; a value beyond means wrong units (e.g. degrees in rad)
+PLAUSIBLE_ABS = {
+    "fog_yaw_rate": 1.5,          # rad/s; a ship model turns < 0.5 rad/s
+    "delta_rudder": 1.0,          # rad; rudders stop near 35-45 deg
+    "anemo_1_dir": 2 * np.pi + 0.01, "anemo_2_dir": 2 * np.pi + 0.01,
+    "anemo_1_speed": 60.0, "anemo_2_speed": 60.0,
+    "n_prop": 100.0,
+}
+PLAUSIBLE_MIN = {"anemo_1_dir": -np.pi - 0.01, "anemo_2_dir": -np.pi - 0.01,
+                 "anemo_1_speed": 0.0, "anemo_2_speed": 0.0}
+
+NOMINAL_DT = 0.1  # s, raw log step
+
+
+def header(columns: dict[str, str]) -> list[str]:
+    """``name [unit]`` headers for a name -> unit mapping."""
+    return [f"{k} [{u}]" if u != "-" else k for k, u in columns.items()]
+
+
+def _split_header(h: str) -> tuple[str, str | None]:
+    h = h.strip()
+    if h.endswith("]") and " [" in h:
+        name, unit = h[:-1].split(" [", 1)
+        return name.strip(), unit.strip()
+    return h, None
+
+
+def _need(have: dict[str, str | None], names: dict[str, str], path: str, repairs: list[str],
+          scale: dict[str, float]) -> None:
+    """Check presence and unit of each column; record degree->radian repairs in `scale`."""
+    for name, unit in names.items():
+        if name not in have:
+            close = difflib.get_close_matches(name, list(have), n=1, cutoff=0.6)
+            hint = f" (found {close[0]!r}: misnamed?)" if close else ""
+            raise RawLogError(f"{path}: column {name} [{unit}]: missing{hint}")
+        got = have[name]
+        if got is None or got == unit:
+            continue
+        if unit in _DEGREE_UNITS and got == _DEGREE_UNITS[unit][0]:
+            scale[name] = _DEGREE_UNITS[unit][1]
+            repairs.append(f"column {name}: header unit [{got}], converted to [{unit}]")
+            continue
+        raise RawLogError(f"{path}: column {name}: unit [{got}], expected [{unit}]")
+
+
+def validate_raw(df: pd.DataFrame, path: str = "<raw log>",
+                 repairs: list[str] | None = None) -> tuple[pd.DataFrame, bool]:
+    """Validate a raw log read with its ``name [unit]`` header.
+
+    Returns (frame with bare-name columns in SI units, has_latlon). Raises `RawLogError`.
+    Empty cells stay NaN (GNSS dropouts); the gap logic of the pipeline handles them.
+    """
+    repairs = [] if repairs is None else repairs
+    have: dict[str, str | None] = {}
+    for col in df.columns:
+        name, unit = _split_header(str(col))
+        have[name] = unit
+    scale: dict[str, float] = {}
+    _need(have, RAW_COMMON, path, repairs, scale)
+    if all(k in have for k in RAW_LOCAL):
+        gnss, latlon = RAW_LOCAL, False
+    elif all(k in have for k in RAW_LATLON):
+        gnss, latlon = RAW_LATLON, True
+    else:
+        partial = [k for k in list(RAW_LOCAL) + list(RAW_LATLON) if k in have]
+        form = RAW_LATLON if any(k in RAW_LATLON for k in partial) else RAW_LOCAL
+        _need(have, form, path, repairs, scale)  # raises on the first missing one
+        raise RawLogError(f"{path}: GNSS columns incomplete")  # pragma: no cover
+    _need(have, gnss, path, repairs, scale)
+    out = pd.DataFrame({_split_header(str(c))[0]: df[c] for c in df.columns})
+    keep = list(RAW_COMMON) + list(gnss) + [k for k in RAW_OPTIONAL if k in have]
+    out = out[keep]
+    for col in out.columns:
+        values = pd.to_numeric(out[col], errors="coerce")
+        bad = values.isna() & out[col].notna()
+        if bad.any():
+            row = int(np.flatnonzero(bad.to_numpy())[0]) + 1
+            raise RawLogError(f"{path}: column {col}: row {row}: not a number "
+                              f"({out[col].iloc[row - 1]!r})")
+        values = values.astype(float)
+        inf = np.isinf(values.to_numpy())
+        if inf.any():
+            raise RawLogError(f"{path}: column {col}: row {int(np.flatnonzero(inf)[0]) + 1}: infinite value")
+        out[col] = values * scale.get(col, 1.0)
+    _check_time(out, path, repairs)
+    _check_ranges(out, path)
+    return out.reset_index(drop=True), latlon
+
+
+def _check_time(df: pd.DataFrame, path: str, repairs: list[str]) -> None:
+    """Strictly increasing time; exact duplicate rows are dropped (a logged repair)."""
+    t = df["t"].to_numpy()
+    if len(t) < 2:
+        raise RawLogError(f"{path}: column t: fewer than 2 rows")
+    nan = np.isnan(t)
+    if nan.any():
+        raise RawLogError(f"{path}: column t: row {int(np.flatnonzero(nan)[0]) + 1}: empty time")
+    dup = df.duplicated(keep="first").to_numpy()
+    if dup.any():
+        rows = np.flatnonzero(dup) + 1
+        repairs.append(f"dropped {len(rows)} exact duplicate row(s), first at row {rows[0]}")
+        df.drop(index=df.index[dup], inplace=True)
+        t = df["t"].to_numpy()
+    step = np.diff(t)
+    bad = np.flatnonzero(step <= 0.0)
+    if len(bad):
+        row = int(df.index[bad[0] + 1]) + 1
+        what = "repeated time with different values" if step[bad[0]] == 0 else "time goes backwards"
+        raise RawLogError(f"{path}: column t: row {row}: {what} (t = {t[bad[0] + 1]} s after "
+                          f"{t[bad[0]]} s)")
+    med = float(np.median(step))
+    if abs(med - NOMINAL_DT) > 0.02:
+        raise RawLogError(f"{path}: column t: median step {med:.4f} s, expected {NOMINAL_DT} s "
+                          "(10 Hz log; time in ms?)")
+
+
+def _check_ranges(df: pd.DataFrame, path: str) -> None:
+    for col, lim in PLAUSIBLE_ABS.items():
+        v = df[col].to_numpy()
+        lo = PLAUSIBLE_MIN.get(col, -lim)
+        bad = np.flatnonzero((v > lim) | (v < lo))
+        if len(bad):
+            unit = RAW_COMMON[col]
+            raise RawLogError(
+                f"{path}: column {col}: row {int(df.index[bad[0]]) + 1}: value {v[bad[0]]:.4g} outside "
+                f"[{lo:.3g}, {lim:.3g}] {unit} (degrees in a radian column?)")
+
+
+def read_raw(path: str | os.PathLike, repairs: list[str] | None = None) -> tuple[pd.DataFrame, bool]:
+    """Read and validate a raw CSV log; see `validate_raw`."""
+    path = Path(path)
+    if not path.is_file():
+        raise RawLogError(f"{path}: file not found")
+    try:
+        df = pd.read_csv(path, skipinitialspace=True)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise RawLogError(f"{path}: not a readable CSV ({exc})") from None
+    return validate_raw(df, str(path), repairs)

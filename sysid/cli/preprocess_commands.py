@@ -1,0 +1,140 @@
+"""``sysid synth-raw`` and ``sysid preprocess``: raw 10 Hz logs to processed 1 Hz runs."""
+from __future__ import annotations
+
+import os
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+from tqdm import tqdm
+
+from preprocessing import pipeline, synth
+from preprocessing.schema import RawLogError
+from sysid.cli import app
+from sysid.errors import DataError
+from sysid.ship import load_ship
+
+ShipOption = typer.Option("esso_osaka", "--ship", help="Ship name (configs/ships/NAME.toml) or a ship TOML.")
+
+
+def _parse_dropout(text: str) -> tuple[float, float]:
+    try:
+        start, duration = (float(v) for v in text.split(":"))
+    except ValueError:
+        raise DataError(f"--dropout {text!r}: expected START:DURATION in seconds, e.g. 100:3") from None
+    if duration <= 0 or start < 0:
+        raise DataError(f"--dropout {text!r}: start must be >= 0 and duration > 0")
+    return start, duration
+
+
+def _parse_latlon(text: Optional[str]) -> Optional[tuple[float, float]]:
+    if text is None:
+        return None
+    try:
+        lat, lon = (float(v) for v in text.split(","))
+    except ValueError:
+        raise DataError(f"--reference {text!r}: expected LAT,LON in degrees") from None
+    return lat, lon
+
+
+@app.command("synth-raw")
+def synth_raw(
+    processed: Path = typer.Argument(..., help="Processed run (public schema, 10 Hz) to build the truth from."),
+    output: Path = typer.Option(..., "-o", "--output", help="Raw log CSV to write; the truth goes to OUTPUT.truth.csv."),
+    seed: int = typer.Option(0, "--seed", help="Noise seed."),
+    gnss_noise: float = typer.Option(0.015, "--gnss-noise", help="GNSS white noise per antenna and axis [m]."),
+    gnss_correlated: float = typer.Option(0.0, "--gnss-correlated", help="Std of a correlated GNSS component [m]."),
+    outliers: int = typer.Option(0, "--outliers", help="Number of antenna outliers to inject."),
+    dropout: Optional[List[str]] = typer.Option(None, "--dropout", help="GNSS dropout START:DURATION [s] (repeatable)."),
+    dropout_rows: bool = typer.Option(False, "--dropout-rows", help="Drop whole rows instead of emptying GNSS cells."),
+    latlon: bool = typer.Option(False, "--latlon", help="Write WGS-84 lat/lon fixes instead of local x/y."),
+    reference: Optional[str] = typer.Option(None, "--reference", help="LAT,LON [deg] of the local origin (--latlon)."),
+    ship: str = ShipOption,
+) -> None:
+    """Synthesise a raw 10 Hz log (and its truth) from a processed run."""
+    layout = load_ship(ship).sensors
+    kwargs = {}
+    ref = _parse_latlon(reference)
+    if ref is not None:
+        kwargs["reference"] = ref
+    settings = synth.SynthSettings(
+        seed=seed, gnss_noise=gnss_noise, gnss_correlated=gnss_correlated, outliers=outliers,
+        dropouts=tuple(_parse_dropout(d) for d in (dropout or [])), dropout_rows=dropout_rows,
+        latlon=latlon, **kwargs)
+    try:
+        run = synth.read_processed(processed)
+        result = synth.synthesise(run, layout, settings)
+    except (RawLogError, OSError) as exc:
+        raise DataError(str(exc)) from None
+    output.parent.mkdir(parents=True, exist_ok=True)
+    result.raw.to_csv(output, index=False)
+    truth_path = output.with_suffix(".truth.csv")
+    truth = result.truth.copy()
+    truth.columns = [f"{c} [{synth.schema.PROCESSED[c]}]" for c in truth.columns]
+    truth.to_csv(truth_path, index=False)
+    typer.echo(f"wrote {output} ({len(result.raw)} rows) and {truth_path}; "
+               f"{len(result.outliers)} outlier(s), {len(result.dropouts)} dropout(s)")
+    for o in result.outliers:
+        typer.echo(f"  outlier t={o['t']:.1f} s ({o['kind']})")
+
+
+@app.command()
+def preprocess(
+    raw: List[Path] = typer.Argument(..., help="Raw 10 Hz log CSV file(s)."),
+    ship: str = ShipOption,
+    outdir: Path = typer.Option(..., "-o", "--outdir", help="Directory for processed CSVs and reports."),
+    rate: float = typer.Option(1.0, "--rate", help="Output rate [Hz] (divides 10 Hz)."),
+    jobs: int = typer.Option(1, "--jobs", "-j", help="Parallel worker processes."),
+    max_gap: float = typer.Option(1.0, "--max-gap", help="Interpolate gaps up to this long [s]; longer ones split."),
+    reference: Optional[str] = typer.Option(None, "--reference", help="LAT,LON [deg] of the local origin for lat/lon logs."),
+    swap_antennas: bool = typer.Option(False, "--swap-antennas", help="Repair logs whose fore/aft antennas are swapped."),
+) -> None:
+    """Preprocess raw logs into processed 1 Hz runs plus a JSON quality report per run."""
+    layout = load_ship(ship).sensors
+    try:
+        settings = pipeline.PreprocessSettings(
+            output_rate=rate, max_interp_gap=max_gap, reference=_parse_latlon(reference),
+            swapped_antennas="repair" if swap_antennas else "error")
+    except ValueError as exc:
+        raise DataError(str(exc)) from None
+    outdir.mkdir(parents=True, exist_ok=True)
+    paths = [str(p) for p in raw]
+    results = []
+    bar = tqdm(total=len(paths), unit="file", desc="preprocess")
+    if jobs > 1 and len(paths) > 1:
+        with ProcessPoolExecutor(max_workers=min(jobs, len(paths), os.cpu_count() or 1)) as pool:
+            futures = [pool.submit(pipeline.process_file, p, layout, settings, str(outdir)) for p in paths]
+            for fut in as_completed(futures):
+                results.append(fut.result())
+                bar.update()
+    else:
+        for p in paths:
+            results.append(pipeline.process_file(p, layout, settings, str(outdir)))
+            bar.update()
+    bar.close()
+    order = {p: i for i, p in enumerate(paths)}
+    results.sort(key=lambda r: order[r["file"]])
+    _summary(results, outdir)
+    failed = [r for r in results if not r["ok"]]
+    if failed:
+        raise SystemExit(1)  # (typer.Exit is swallowed by standalone_mode=False)
+
+
+def _summary(results: list[dict], outdir: Path) -> None:
+    """One screen: a line per file, then totals; failures as one-line errors."""
+    typer.echo(f"{'file':34s} {'seg':>3s} {'dur[s]':>7s} {'base-rej':>8s} {'gate-rej':>8s} "
+               f"{'gaps i/s':>8s} {'bias[deg/10min]':>15s}")
+    ok = [r for r in results if r["ok"]]
+    for r in ok:
+        rep = r["report"]
+        dur = sum(s["t_end"] - s["t_start"] for s in rep["segments"])
+        bias = rep["fog_bias_rad_s"]["mean"] * 600 * 180 / 3.141592653589793
+        typer.echo(f"{Path(r['file']).name[:34]:34s} {len(rep['segments']):3d} {dur:7.0f} "
+                   f"{rep['baseline']['rejected']:8d} {rep['heading_gate']['rejected']:8d} "
+                   f"{rep['gaps_interpolated']:>4d}/{rep['gaps_split']:<3d} {bias:15.2f}")
+    for r in results:
+        if not r["ok"]:
+            typer.secho(f"FAILED {r['error']}", fg=typer.colors.RED, err=True)
+    typer.echo(f"{len(ok)} of {len(results)} file(s) processed into {outdir}"
+               + (f"; {len(results) - len(ok)} failed" if len(ok) < len(results) else ""))
