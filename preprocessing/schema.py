@@ -129,12 +129,12 @@ def validate_raw(df: pd.DataFrame, path: str = "<raw log>",
         if inf.any():
             raise RawLogError(f"{path}: column {col}: row {int(np.flatnonzero(inf)[0]) + 1}: infinite value")
         out[col] = values * scale.get(col, 1.0)
-    _check_time(out, path, repairs)
+    out = _check_time(out, path, repairs)
     _check_ranges(out, path)
     return out.reset_index(drop=True), latlon
 
 
-def _check_time(df: pd.DataFrame, path: str, repairs: list[str]) -> None:
+def _check_time(df: pd.DataFrame, path: str, repairs: list[str]) -> pd.DataFrame:
     """Strictly increasing time; exact duplicate rows are dropped (a logged repair)."""
     t = df["t"].to_numpy()
     if len(t) < 2:
@@ -146,7 +146,7 @@ def _check_time(df: pd.DataFrame, path: str, repairs: list[str]) -> None:
     if dup.any():
         rows = np.flatnonzero(dup) + 1
         repairs.append(f"dropped {len(rows)} exact duplicate row(s), first at row {rows[0]}")
-        df.drop(index=df.index[dup], inplace=True)
+        df = df.loc[~dup]
         t = df["t"].to_numpy()
     step = np.diff(t)
     bad = np.flatnonzero(step <= 0.0)
@@ -159,6 +159,7 @@ def _check_time(df: pd.DataFrame, path: str, repairs: list[str]) -> None:
     if abs(med - NOMINAL_DT) > 0.02:
         raise RawLogError(f"{path}: column t: median step {med:.4f} s, expected {NOMINAL_DT} s "
                           "(10 Hz log; time in ms?)")
+    return df
 
 
 def _check_ranges(df: pd.DataFrame, path: str) -> None:
