@@ -11,6 +11,18 @@ from preprocessing.frames import body_to_earth
 from preprocessing.sensors import SensorLayout
 
 
+def antenna_positions(layout: SensorLayout) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Effective body (x, y) [m] of the fore and aft antennas.
+
+    `heading_offset` is read as a rotation of the antenna pair about midship: the measured
+    baseline direction is the geometric one plus the offset, and the antennas sit at the
+    listed positions turned by it (identical to them when the offset is 0).
+    """
+    c, s = np.cos(layout.heading_offset), np.sin(layout.heading_offset)
+    return tuple((px * c - py * s, px * s + py * c)  # type: ignore[return-value]
+                 for px, py in (layout.gnss_fore, layout.gnss_aft))
+
+
 def baseline_error(fore_x, fore_y, aft_x, aft_y, layout: SensorLayout) -> np.ndarray:
     """Measured fore-aft distance minus the nominal baseline [m], shape (N,)."""
     return np.hypot(fore_x - aft_x, fore_y - aft_y) - layout.gnss_baseline
@@ -36,6 +48,7 @@ def antenna_heading(fore_x, fore_y, aft_x, aft_y, layout: SensorLayout) -> np.nd
 
 def midship_position(fore_x, fore_y, aft_x, aft_y, psi, layout: SensorLayout):
     """Midship (x0, y0) [m], mean of the two antennas each moved back by its body offset."""
-    fx, fy = body_to_earth(psi, *layout.gnss_fore)
-    ax, ay = body_to_earth(psi, *layout.gnss_aft)
+    fore, aft = antenna_positions(layout)
+    fx, fy = body_to_earth(psi, *fore)
+    ax, ay = body_to_earth(psi, *aft)
     return 0.5 * (fore_x - fx + aft_x - ax), 0.5 * (fore_y - fy + aft_y - ay)

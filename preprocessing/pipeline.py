@@ -8,7 +8,8 @@ gating); (5) midship position; (6) central difference; (7) Kalman/RTS on u, v_m;
 Gaps: samples missing (absent rows, empty cells, rejected GNSS fixes) over at most
 `max_interp_gap` seconds are linearly interpolated; a longer gap splits the run into
 segments, each processed on its own; segments shorter than `min_segment` are dropped.
-Every such decision goes into the report.
+Every such decision goes into the report. Time stamps are snapped to the nominal 0.1 s grid
+(the largest deviation is reported; more than 25 ms is an error).
 """
 from __future__ import annotations
 
@@ -46,6 +47,8 @@ class PreprocessSettings:
     reference : (lat, lon) [deg] of the local origin for lat/lon logs; None = first aft fix.
     swapped_antennas : "error" or "repair" when fore/aft look swapped (heading 180 deg off
     the course while moving ahead).
+    accepted_fix : GGA quality values kept when the log has ``gnss_*_fix`` columns (4 = RTK
+    fixed / CLAS); other fixes are rejected like baseline failures (empty = unknown, kept).
     """
 
     diff_dt: float = 1.0
@@ -66,6 +69,7 @@ class PreprocessSettings:
     output_rate: float = 1.0
     reference: tuple[float, float] | None = None
     swapped_antennas: str = "error"
+    accepted_fix: tuple[int, ...] = (4,)
 
     def __post_init__(self) -> None:
         if self.swapped_antennas not in ("error", "repair"):
@@ -178,6 +182,14 @@ class Pipeline:
                     g[f"gnss_{a}_lat"], g[f"gnss_{a}_lon"], *ref)
             report["reference_latlon"] = list(ref)
         fx, fy, ax, ay = (g[c] for c in ("gnss_fore_x", "gnss_fore_y", "gnss_aft_x", "gnss_aft_y"))
+        poor = np.zeros(len(t), bool)
+        for c in ("gnss_fore_fix", "gnss_aft_fix"):
+            if c in g:
+                q = g[c]
+                poor |= np.isfinite(q) & ~np.isin(q, s.accepted_fix)
+        for a in (fx, fy, ax, ay):
+            a[poor] = np.nan
+        report["fix_rejected"] = int(poor.sum())
         have = np.isfinite(fx) & np.isfinite(fy) & np.isfinite(ax) & np.isfinite(ay)
         if not have.any():
             raise RawLogError(f"{name}: column gnss_fore_x: no GNSS fix in the whole log")

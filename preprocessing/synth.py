@@ -15,7 +15,7 @@ import pandas as pd
 from scipy.integrate import cumulative_trapezoid
 from scipy.signal import lfilter
 
-from preprocessing import geodesy, schema, wind
+from preprocessing import geodesy, gnss, schema, wind
 from preprocessing.frames import body_to_earth, flow_velocity, wrap_pi, wrap_2pi
 from preprocessing.sensors import SensorLayout
 
@@ -113,7 +113,7 @@ def synthesise(run: pd.DataFrame, layout: SensorLayout, settings: SynthSettings 
     u, v, r = (truth[c].to_numpy() for c in ("u_velo", "vm_velo", "r_angvelo"))
 
     ant = {}
-    for name, pos in (("fore", layout.gnss_fore), ("aft", layout.gnss_aft)):
+    for name, pos in zip(("fore", "aft"), gnss.antenna_positions(layout)):
         ox, oy = body_to_earth(psi, *pos)
         for axis, base in (("x", x + ox), ("y", y + oy)):
             noise = rng.normal(0.0, settings.gnss_noise, n) + _gauss_markov(

@@ -208,3 +208,21 @@ def test_cli_synth_raw_writes_truth(tmp_path, capsys):
     df = pd.read_csv(raw)
     assert "gnss_aft_lon [deg]" in df.columns and df["gnss_aft_lon [deg]"].isna().sum() == 20
     assert (tmp_path / "raw.truth.csv").is_file()
+
+
+def test_poor_gnss_fix_rejected(synthetic, raw):
+    raw["gnss_fore_fix"] = 4
+    raw["gnss_aft_fix"] = 4
+    raw.loc[300:304, "gnss_aft_fix"] = 5                          # RTK float for 0.5 s
+    out = run(raw)
+    assert out.report["fix_rejected"] == 5
+    assert len(out.segments) == 1
+    assert synth.score(out.segments, synthetic.truth)["pos"] < 0.02
+
+
+def test_heading_offset_and_offcentre_antennas():
+    layout = SensorLayout(gnss_fore=(1.0, 0.3), gnss_aft=(-1.3, 0.3), gnss_baseline=2.3,
+                          heading_offset=0.05, anemometer_1=(0.5, 0.2))
+    res = synth.synthesise(analytic_run(), layout, synth.SynthSettings(seed=1))
+    s = synth.score(Pipeline(layout).run(res.raw).segments, res.truth)
+    assert s["psi_deg"] < 0.3 and s["pos"] < 0.02 and s["wind_speed"] < 0.05
