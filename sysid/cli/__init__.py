@@ -15,6 +15,7 @@ app = typer.Typer(add_completion=False, no_args_is_help=True,
 
 # subcommands (each module adds its commands to `app`)
 from sysid.cli import mmg_commands  # noqa: E402,F401
+from sysid.cli import report_commands  # noqa: E402,F401
 from sysid.cli import preprocess_commands  # noqa: E402,F401
 
 

@@ -1,0 +1,145 @@
+"""`build_report`: a run or reproduction directory to ``report.html`` and ``report.pdf``.
+
+Both files hold the same content (summary, methods, RMSE tables, figures) and are written
+atomically. Figures are drawn once each (Agg, no pyplot) and saved as inline SVG for the
+page and as vector graphics into the PDF.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+from matplotlib import rc_context  # noqa: E402
+
+import sysid  # noqa: E402
+from sysid.files import atomic_path, write_text  # noqa: E402
+from sysid.report.html import HtmlFigure, figure_svg, render_html  # noqa: E402
+from sysid.report.methods import methods_paragraphs, run_rows, summary_items  # noqa: E402
+from sysid.report.palette import model_colour  # noqa: E402
+from sysid.report.pdf import PdfReport, paginate, pdf_style, table_pages, text_lines  # noqa: E402
+from sysid.report.plan import figure_plan  # noqa: E402
+from sysid.report.source import ReportSource, read_source  # noqa: E402
+from sysid.report.tables import build_tables  # noqa: E402
+
+STYLE = {"font.size": 9, "axes.titlesize": 9, "axes.labelsize": 9, "axes.grid": True,
+         "grid.alpha": 0.3, "grid.linewidth": 0.5, "legend.fontsize": 8, "lines.linewidth": 1.2,
+         "font.family": "DejaVu Sans", "axes.unicode_minus": False}
+
+
+@dataclass
+class ReportPaths:
+    """What `build_report` wrote: the two files, figure count, skipped-figure notes, seconds."""
+
+    html: Path
+    pdf: Path
+    n_figures: int = 0
+    n_pages: int = 0
+    notes: list[str] = field(default_factory=list)
+    seconds: float = 0.0
+
+
+def ship_size(source: ReportSource) -> tuple[float, float] | None:
+    """(L_pp, B) [m] of the runs' ship, or None when its definition cannot be loaded."""
+    from sysid.ship import load_ship
+    name = next((r.summary.get("ship") for r in source.runs if r.summary.get("ship")), None)
+    if not name:
+        return None
+    try:
+        ship = load_ship(name)
+        return float(ship["L_pp"]), float(ship["B"])
+    except Exception:  # noqa: BLE001 - an unknown ship only costs the outlines
+        return None
+
+
+def _placeholder(message: str):
+    from matplotlib.figure import Figure
+    fig = Figure(figsize=(10.0, 2.0), layout="constrained")
+    fig.text(0.5, 0.5, message, ha="center", va="center", wrap=True)
+    return fig
+
+
+def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
+                 progress: Callable[[str], None] | None = None) -> ReportPaths:
+    """Write ``out_dir/report.html`` and ``out_dir/report.pdf`` for a run directory or a
+    reproduction directory (`sysid.rundir`). Raises `CheckpointError` naming the missing
+    or corrupt file."""
+    started = time.perf_counter()
+    say = progress or (lambda message: None)
+    out_dir = Path(out_dir)
+    source = read_source(source_dir)
+    say(f"read {source.kind} {source.path} ({len(source.runs)} run{'s' if len(source.runs) != 1 else ''})")
+    size = ship_size(source)
+    tables = build_tables(source)
+    plan = figure_plan(source, size)
+    notes = list(plan.notes)
+    if size is None:
+        notes.append("Ship dimensions unknown (summary.json 'ship' missing or not loadable): no outlines")
+    summary = summary_items(source, size)
+    rows = run_rows(source)
+    methods = methods_paragraphs(source)
+    built = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    title = f"sysid accuracy report: {source.title}"
+
+    blocks = [("h1", title), ("h2", "1. Summary")] + [("kv", k, str(v)) for k, v in summary]
+    blocks += [("h2", "Runs")] + [("kv", r.label, f"{r.model}, data set {r.dataset}, epochs {r.epochs}, "
+                                  f"training {r.train_time}, config {r.config_digest}, created {r.created}")
+                                  for r in rows]
+    blocks += [("h2", "2. Methods")] + [("p", p) for p in methods]
+    if notes:
+        blocks += [("h2", "Figures not drawn")] + [("small", f"- {n}") for n in notes]
+    text_pages = paginate(text_lines(blocks))
+    split_tables = [(t, table_pages(t)) for t in tables]
+    total = len(text_pages) + sum(len(p) for _, p in split_tables) + len(plan.figures)
+
+    html_figures: list[HtmlFigure] = []
+    pdf_path = out_dir / "report.pdf"
+    with rc_context(STYLE), pdf_style(), atomic_path(pdf_path, ".pdf") as tmp:
+        pdf = PdfReport(tmp, title, total)
+        for page in text_pages:
+            pdf.add_text(page)
+        for table, pages in split_tables:
+            for i, page_rows in enumerate(pages):
+                part = f" (part {i + 1} of {len(pages)})" if len(pages) > 1 else ""
+                pdf.add_table(table, page_rows, part)
+        say(f"tables: {len(tables)}; drawing {len(plan.figures)} figures")
+        for number, spec in enumerate(plan.figures, 1):
+            try:
+                fig = spec.factory()
+            except Exception as exc:  # noqa: BLE001 - one bad figure must not cost the report
+                notes.append(f"{spec.title}: failed ({type(exc).__name__}: {exc})")
+                fig = _placeholder(f"{spec.title}: not drawn ({type(exc).__name__}: {exc})")
+            html_figures.append(HtmlFigure(number, spec.key, spec.section, spec.title, spec.caption,
+                                           figure_svg(fig, f"f{number}")))
+            pdf.add_figure(fig, f"Figure {number}. {spec.title}. {spec.caption}")
+            say(f"figure {number}/{len(plan.figures)}: {spec.title}")
+        n_pages = pdf.page
+        pdf.close()
+
+    html = render_html(
+        title=title,
+        subtitle=f"{'Reproduction of the paper' if source.kind == 'reproduction' else 'Identification run'} "
+                 f"- built {built}",
+        summary=summary,
+        runs=[{"row": row, "colour": model_colour(r.name, r.model, r.dataset, i)}
+              for i, (row, r) in enumerate(zip(rows, source.runs))],
+        methods=methods, tables=tables, figures=html_figures, notes=notes,
+        version=sysid.__version__, source=str(source.path), built=built)
+    html_path = write_text(html, out_dir / "report.html")
+    for path in (html_path, pdf_path):  # mkstemp creates 0600; reports are for sharing
+        os.chmod(path, 0o644)
+    return ReportPaths(html_path, pdf_path, len(html_figures), n_pages, notes,
+                       time.perf_counter() - started)
+
+
+def write_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
+                 progress: Callable[[str], None] | None = None) -> ReportPaths:
+    """Entry point for `sysid reproduce`: same as `build_report`."""
+    return build_report(source_dir, out_dir, progress)

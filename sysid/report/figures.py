@@ -1,0 +1,341 @@
+"""The report's figures (the paper's Figs. 3-21 and the loss curves), one function each.
+
+Every function takes plain data (trace frames, `sysid.rundir.TRACE_COLUMNS`, with a label
+and a colour per model) and returns a matplotlib `Figure` built without pyplot (no global
+state). Units follow the traces: positions [m], velocities [m/s], angles shown in degrees,
+forces [N], moments [N m].
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
+
+from sysid.report.palette import (COMPONENT_COLOURS, COMPONENT_LABELS, KNN_LINE, MEASURED,
+                                  OOD_SHADE, THRESHOLD)
+
+RAD2DEG = 180.0 / math.pi
+WIDE = (10.0, 6.2)      # in, landscape figures (fits an A4 landscape page with caption)
+TALL = (10.0, 7.0)
+
+
+@dataclass
+class ModelTrace:
+    """A model's trace of one file at one horizon, with the model's label and colour."""
+
+    label: str
+    colour: str
+    frame: pd.DataFrame
+
+
+def _broken(frame: pd.DataFrame, column: str, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Time [s] and values of every window joined with NaN gaps (one line, no jumps drawn)."""
+    ts, ys = [], []
+    for _, w in frame.groupby("window", sort=True):
+        ts += [w["t"].to_numpy(), [np.nan]]
+        ys += [w[column].to_numpy() * scale, [np.nan]]
+    return np.concatenate(ts), np.concatenate(ys)
+
+
+def _measured(frame: pd.DataFrame, column: str, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """The measurement along the whole file (duplicates at window joints dropped)."""
+    m = frame.drop_duplicates("t").sort_values("t")
+    return m["t"].to_numpy(), m[column].to_numpy() * scale
+
+
+def _legend_top(fig: Figure, handles, ncol: int | None = None) -> None:
+    """Figure legend in its own row under the axes (the title stays alone on top)."""
+    fig.legend(handles=handles, loc="outside lower center", ncol=ncol or min(len(handles), 6),
+               frameon=False, fontsize=8)
+
+
+def _model_handles(traces: list[ModelTrace], measured: bool = True, **line) -> list:
+    handles = [Line2D([], [], color=MEASURED, lw=1.6, label="measured")] if measured else []
+    return handles + [Line2D([], [], color=t.colour, lw=1.4, label=t.label, **line) for t in traces]
+
+
+def error_boxplots(traces: list[ModelTrace], title: str) -> Figure:
+    """Absolute prediction error of u, v_m [m/s] and r [rad/s] per model (Figs. 3-5):
+    boxes = IQR, line = median, diamond = mean, whiskers 1.5 IQR."""
+    fig = Figure(figsize=(10.0, 4.6), layout="constrained")
+    axes = fig.subplots(1, 3)
+    for ax, (col, name, unit) in zip(axes, [("u", "u", "m/s"), ("v", "v_m", "m/s"), ("r", "r", "rad/s")]):
+        data = [np.abs(t.frame[f"pred_{col}"] - t.frame[f"obs_{col}"]).to_numpy() for t in traces]
+        box = ax.boxplot(data, patch_artist=True, showmeans=True, widths=0.6,
+                         medianprops={"color": "black"},
+                         meanprops={"marker": "D", "markerfacecolor": "white",
+                                    "markeredgecolor": "black", "markersize": 4},
+                         flierprops={"marker": ".", "markersize": 2, "alpha": 0.4})
+        for patch, t in zip(box["boxes"], traces):
+            patch.set_facecolor(t.colour)
+        ax.set_xticks(range(1, len(traces) + 1), [t.label for t in traces], rotation=35,
+                      ha="right", fontsize=8)
+        ax.set_ylabel(f"|error of {name}| [{unit}]")
+        ax.set_title(name)
+    handles = [Patch(facecolor=t.colour, edgecolor="black", label=t.label) for t in traces]
+    handles += [Line2D([], [], color="black", label="median"),
+                Line2D([], [], marker="D", ls="", markerfacecolor="white", markeredgecolor="black",
+                       label="mean")]
+    _legend_top(fig, handles, ncol=min(len(handles), 8))
+    fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def _window(frame: pd.DataFrame, start_s: float) -> pd.DataFrame:
+    """The window whose first time is closest to `start_s` [s]."""
+    firsts = frame.groupby("window")["t"].min()
+    k = (firsts - start_s).abs().idxmin()
+    return frame[frame["window"] == k]
+
+
+def _signed_deg(angle_rad: np.ndarray) -> np.ndarray:
+    """Angle [rad] to degrees in [-180, 180)."""
+    return (np.asarray(angle_rad) * RAD2DEG + 180.0) % 360.0 - 180.0
+
+
+def actuator_wind(traces: list[ModelTrace], start_s: float, title: str) -> Figure:
+    """Propeller speed [rps], rudder angle [deg] and the relative wind speed [m/s] and
+    direction [deg] (Figs. 6, 8) in the window starting nearest `start_s`. The relative
+    wind of each model is the one seen by its predicted state; "measured" uses the
+    recorded state."""
+    from sysid.report.wind import measured_relative_wind
+    fig = Figure(figsize=TALL, layout="constrained")
+    axes = fig.subplots(4, 1, sharex=True)
+    first = _window(traces[0].frame, start_s)
+    t = first["t"].to_numpy()
+    axes[0].plot(t, first["n_prop"], color=MEASURED, drawstyle="steps-post")
+    axes[1].plot(t, first["delta_rudder"] * RAD2DEG, color=MEASURED, drawstyle="steps-post")
+    U_A, gamma_A = measured_relative_wind(first)
+    axes[2].plot(t, U_A, color=MEASURED, lw=1.6)
+    axes[3].plot(t, _signed_deg(gamma_A), color=MEASURED, lw=1.6, ls="", marker=".", ms=3)
+    for tr in traces:
+        w = _window(tr.frame, start_s)
+        axes[2].plot(w["t"], w["wind_velo_relative"], color=tr.colour, lw=1.1)
+        axes[3].plot(w["t"], _signed_deg(w["wind_dir_relative"].to_numpy()), color=tr.colour, ls="",
+                     marker=".", ms=2.5)
+    labels = ["n_P [rps]", "δ [deg]", "U_A [m/s]", "γ_A [deg]\n(0 = from ahead)"]
+    for ax, label in zip(axes, labels):
+        ax.set_ylabel(label)
+    axes[3].set_ylim(-180, 180)
+    axes[3].set_yticks([-180, -90, 0, 90, 180])
+    axes[-1].set_xlabel("t [s]")
+    _legend_top(fig, _model_handles(traces))
+    fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def state_timeseries(traces: list[ModelTrace], start_s: float, title: str) -> Figure:
+    """Heading ψ [deg], u, v_m [m/s] and r [deg/s] predicted by each model against the
+    measurement in the window starting nearest `start_s` (Figs. 7, 9)."""
+    fig = Figure(figsize=TALL, layout="constrained")
+    axes = fig.subplots(4, 1, sharex=True)
+    rows = [("psi", "ψ [deg]", RAD2DEG), ("u", "u [m/s]", 1.0), ("v", "v_m [m/s]", 1.0),
+            ("r", "r [deg/s]", RAD2DEG)]
+    first = _window(traces[0].frame, start_s)
+    for ax, (col, label, scale) in zip(axes, rows):
+        obs = first[f"obs_{col}"].to_numpy() * scale
+        pred = [(_window(tr.frame, start_s), tr) for tr in traces]
+        if col == "psi":  # unwrap into one branch so a 0/360 crossing draws no jump
+            obs = np.rad2deg(np.unwrap(first["obs_psi"].to_numpy()))
+        ax.plot(first["t"], obs, color=MEASURED, lw=1.8)
+        for w, tr in pred:
+            y = w[f"pred_{col}"].to_numpy() * scale
+            if col == "psi":
+                y = np.rad2deg(np.unwrap(w["pred_psi"].to_numpy()))
+                y += 360.0 * np.round((obs[0] - y[0]) / 360.0)
+            ax.plot(w["t"], y, color=tr.colour, lw=1.2)
+        ax.set_ylabel(label)
+    axes[-1].set_xlabel("t [s]")
+    _legend_top(fig, _model_handles(traces))
+    fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def ship_outline(L: float, B: float) -> np.ndarray:
+    """Waterline outline in the body frame, (n, 2) of (x forward, y starboard) [m]."""
+    return np.array([[-L / 2, -B / 2], [0.3 * L, -B / 2], [L / 2, 0.0], [0.3 * L, B / 2],
+                     [-L / 2, B / 2], [-L / 2, -B / 2]])
+
+
+def _outline_at(outline: np.ndarray, x: float, y: float, psi: float) -> tuple[np.ndarray, np.ndarray]:
+    """Outline placed at earth position (x north, y east) [m] and heading psi [rad];
+    returned as (east, north) for plotting."""
+    c, s = math.cos(psi), math.sin(psi)
+    north = x + outline[:, 0] * c - outline[:, 1] * s
+    east = y + outline[:, 0] * s + outline[:, 1] * c
+    return east, north
+
+
+def trajectories(traces: list[ModelTrace], L: float, B: float, title: str) -> Figure:
+    """Earth-frame trajectories (x0 north, y0 east [m]) of each model's windows against the
+    measured track, with the ship's outline every `interval` seconds (Figs. 10-12)."""
+    n = len(traces)
+    cols = min(n, 2) if n > 1 else 1
+    rows = math.ceil(n / cols)
+    fig = Figure(figsize=(10.0, 3.6 * rows + 0.8), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(rows, cols)).ravel()
+    outline = ship_outline(L, B)
+    measured = traces[0].frame.drop_duplicates("t").sort_values("t")
+    duration = float(measured["t"].iloc[-1] - measured["t"].iloc[0])
+    interval = max(10.0, 10.0 * round(duration / 20.0 / 10.0))
+    for ax, tr in zip(axes, traces):
+        ax.plot(measured["obs_y"], measured["obs_x"], color=MEASURED, lw=1.4)
+        for _, w in tr.frame.groupby("window", sort=True):
+            ax.plot(w["pred_y"], w["pred_x"], color=tr.colour, lw=1.3)
+            ax.plot(w["pred_y"].iloc[0], w["pred_x"].iloc[0], "o", color=tr.colour, ms=3)
+            marks = w[((w["t_rel"] % interval) < 0.5)]
+            for row in marks.itertuples(index=False):
+                e, nn = _outline_at(outline, row.pred_x, row.pred_y, row.pred_psi)
+                ax.plot(e, nn, color=tr.colour, lw=0.7)
+                e, nn = _outline_at(outline, row.obs_x, row.obs_y, row.obs_psi)
+                ax.plot(e, nn, color=MEASURED, lw=0.6, alpha=0.7)
+        ax.set_title(tr.label, fontsize=9)
+    east = np.concatenate([measured["obs_y"].to_numpy()] + [t.frame["pred_y"].to_numpy() for t in traces])
+    north = np.concatenate([measured["obs_x"].to_numpy()] + [t.frame["pred_x"].to_numpy() for t in traces])
+    pad = 0.6 * L
+    for ax in axes[:n]:  # same limits in every panel (equal aspect, boxes sized to the limits)
+        ax.set_xlim(np.nanmin(east) - pad, np.nanmax(east) + pad)
+        ax.set_ylim(np.nanmin(north) - pad, np.nanmax(north) + pad)
+        ax.set_aspect("equal", adjustable="box")
+        ax.set_xlabel("y0 (east) [m]")
+        ax.set_ylabel("x0 (north) [m]")
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    handles = _model_handles(traces)
+    handles.append(Line2D([], [], color="grey", lw=0.7,
+                          label=f"ship outline every {interval:.0f} s ({L:g} m x {B:g} m)"))
+    handles.append(Line2D([], [], color="grey", marker="o", ls="", ms=3, label="window start"))
+    _legend_top(fig, handles, ncol=4)
+    fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def _spans(t: np.ndarray, flag: np.ndarray) -> list[tuple[float, float]]:
+    """Intervals [s] where `flag` holds, each sample covering [t - 0.5, t + 0.5] s."""
+    spans, start = [], None
+    for ti, f in zip(t, flag):
+        if f and start is None:
+            start = ti
+        if not f and start is not None:
+            spans.append((start - 0.5, prev + 0.5))
+            start = None
+        prev = ti
+    if start is not None:
+        spans.append((start - 0.5, prev + 0.5))
+    return spans
+
+
+def knn_distance(trace: ModelTrace, threshold: float | None, title: str) -> Figure:
+    """kNN distance [-] of the hybrid model's inputs at each step, the gate threshold and
+    the periods judged out of distribution (FNN off) shaded (Figs. 13-16)."""
+    fig = Figure(figsize=(10.0, 3.8), layout="constrained")
+    ax = fig.subplots()
+    frame = trace.frame.sort_values(["window", "t_rel"])
+    t, d = _broken(frame, "knn_distance")
+    ax.plot(t, d, color=KNN_LINE, lw=1.1)
+    handles = [Line2D([], [], color=KNN_LINE, label="kNN distance")]
+    if threshold is not None:
+        ax.axhline(threshold, color=THRESHOLD, ls="--", lw=1.4)
+        handles.append(Line2D([], [], color=THRESHOLD, ls="--", label=f"threshold {threshold:.3g}"))
+    off = frame["gate_on"].to_numpy() < 0.5
+    for a, b in _spans(frame["t"].to_numpy(), off):
+        ax.axvspan(a, b, color=OOD_SHADE, alpha=0.25, lw=0)
+    share = 100.0 * off.mean() if len(off) else 0.0
+    handles.append(Patch(color=OOD_SHADE, alpha=0.25, label=f"OOD, FNN off ({share:.0f}% of steps)"))
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("kNN distance [-]")
+    ax.legend(handles=handles, loc="upper right", fontsize=8, framealpha=0.9)
+    fig.suptitle(title, fontsize=10)
+    return fig
+
+
+AXES = [("X", "X [N]"), ("Y", "Y [N]"), ("N", "N [N m]")]
+
+
+def force_components(trace: ModelTrace, title: str) -> Figure:
+    """Hull, propeller, rudder, wind and FNN forces X, Y [N] and moment N [N m] along the
+    predictions (Figs. 17, 19); windows are joined with gaps."""
+    fig = Figure(figsize=TALL, layout="constrained")
+    axes = fig.subplots(3, 1, sharex=True)
+    keys = [k for k in ("H", "P", "R", "A", "NN") if np.nanmax(np.abs(trace.frame[[f"X{k}", f"Y{k}", f"N{k}"]].to_numpy())) > 0]
+    for ax, (axis, label) in zip(axes, AXES):
+        for key in keys:
+            t, y = _broken(trace.frame, f"{axis}{key}")
+            ax.plot(t, y, color=COMPONENT_COLOURS[key], lw=1.1 if key != "NN" else 1.5)
+        ax.set_ylabel(label)
+        ax.axhline(0, color="grey", lw=0.5)
+    axes[-1].set_xlabel("t [s]")
+    handles = [Line2D([], [], color=COMPONENT_COLOURS[k], label=f"{k} ({COMPONENT_LABELS[k]})") for k in keys]
+    _legend_top(fig, handles)
+    fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def force_models(trace: ModelTrace, title: str) -> Figure:
+    """F_MMG (H + P + R + A), F_NN and their sum for X, Y [N] and N [N m] (Figs. 18, 20)."""
+    fig = Figure(figsize=TALL, layout="constrained")
+    axes = fig.subplots(3, 1, sharex=True)
+    frame = trace.frame.copy()
+    for axis, _ in AXES:
+        frame[f"{axis}MMG"] = sum(frame[f"{axis}{k}"] for k in ("H", "P", "R", "A"))
+        frame[f"{axis}SUM"] = frame[f"{axis}MMG"] + frame[f"{axis}NN"]
+    for ax, (axis, label) in zip(axes, AXES):
+        for key, lw, ls in (("MMG", 1.2, "-"), ("NN", 1.4, "-"), ("SUM", 1.0, "--")):
+            t, y = _broken(frame, f"{axis}{key}")
+            ax.plot(t, y, color=COMPONENT_COLOURS[key], lw=lw, ls=ls)
+        ax.set_ylabel(label)
+        ax.axhline(0, color="grey", lw=0.5)
+    axes[-1].set_xlabel("t [s]")
+    handles = [Line2D([], [], color=COMPONENT_COLOURS["MMG"], label="F_MMG"),
+               Line2D([], [], color=COMPONENT_COLOURS["NN"], label="F_NN"),
+               Line2D([], [], color=COMPONENT_COLOURS["SUM"], ls="--", label="F_MMG + F_NN")]
+    _legend_top(fig, handles)
+    fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def fnn_error_scatter(groups: list[tuple[str, str, pd.DataFrame]], title: str) -> Figure:
+    """|F_NN| against the absolute velocity prediction error (Fig. 21): |X_NN| [N] vs |u|
+    error [m/s], |Y_NN| [N] vs v_m error [m/s], |N_NN| [N m] vs r error [rad/s]; `groups`
+    are (label, colour, pooled trace frame)."""
+    fig = Figure(figsize=(10.0, 4.2), layout="constrained")
+    axes = fig.subplots(1, 3)
+    pairs = [("X", "u", "|X_NN| [N]", "|error of u| [m/s]"), ("Y", "v", "|Y_NN| [N]", "|error of v_m| [m/s]"),
+             ("N", "r", "|N_NN| [N m]", "|error of r| [rad/s]")]
+    for ax, (axis, col, xlabel, ylabel) in zip(axes, pairs):
+        for label, colour, frame in groups:
+            ax.scatter(np.abs(frame[f"{axis}NN"]), np.abs(frame[f"pred_{col}"] - frame[f"obs_{col}"]),
+                       s=4, color=colour, alpha=0.35, lw=0, rasterized=len(frame) > 5000)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(ylabel)
+    handles = [Line2D([], [], marker="o", ls="", color=c, label=l) for l, c, _ in groups]
+    _legend_top(fig, handles)
+    fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def loss_curves(histories: list[tuple[str, str, pd.DataFrame, int | None]], title: str) -> Figure:
+    """Training (solid) and validation (dashed) loss [-] per epoch, log scale; the best
+    epoch is marked. `histories` are (label, colour, history frame, best epoch)."""
+    fig = Figure(figsize=(10.0, 4.6), layout="constrained")
+    ax = fig.subplots()
+    for label, colour, hist, best in histories:
+        ax.plot(hist["epoch"], hist["train_loss"], color=colour, lw=1.3)
+        ax.plot(hist["epoch"], hist["val_loss"], color=colour, lw=1.3, ls="--")
+        if best is not None and best in set(hist["epoch"]):
+            ax.plot(best, hist.loc[hist["epoch"] == best, "val_loss"].iloc[0], "*", color=colour, ms=9)
+    ax.set_yscale("log")
+    ax.set_xlabel("epoch [-]")
+    ax.set_ylabel("loss [-]")
+    handles = [Line2D([], [], color=c, label=l) for l, c, _, _ in histories]
+    handles += [Line2D([], [], color="grey", label="training"),
+                Line2D([], [], color="grey", ls="--", label="validation"),
+                Line2D([], [], color="grey", marker="*", ls="", label="best epoch")]
+    ax.legend(handles=handles, fontsize=8, ncol=2, loc="upper right")
+    fig.suptitle(title, fontsize=10)
+    return fig

@@ -1,0 +1,160 @@
+"""The report's summary (what, when, with which software) and its short methods text,
+generated from each run's config.toml and summary.json."""
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import platform
+from dataclasses import dataclass
+
+from sysid.report.palette import model_label
+from sysid.report.source import ReportSource, RunRecord
+
+MODEL_TEXT = {
+    "mmg": "MMG model (hull, propeller, rudder and wind forces of the ship definition); not trained",
+    "nn": "NN-only model: a feed-forward network maps the standardized state, actuator and relative-wind "
+          "inputs to the forces",
+    "hybrid": "hybrid MMG + FNN model: the MMG forces plus a feed-forward correction F_NN, switched off "
+              "by a kNN out-of-distribution gate when the inputs are far from the training data",
+}
+PROTOCOL_TEXT = (
+    "Evaluation follows the benchmark protocol: each 1 Hz test file is cut into consecutive windows of "
+    "H samples (H = {horizons} s); each window starts from the recorded state at its first sample and is "
+    "integrated with explicit Euler, dt = 1 s, with the recorded propeller speed, rudder angle and true "
+    "wind held over each step (the relative wind follows the predicted state). The RMSE of u, v_m [m/s] "
+    "and r [rad/s] is pooled over the H points of every window of a file.")
+
+
+@dataclass
+class RunRow:
+    """One line of the summary's run table."""
+
+    label: str
+    model: str
+    dataset: str
+    epochs: str
+    train_time: str
+    config_digest: str
+    created: str
+
+
+def config_digest(run: RunRecord) -> str:
+    """First 12 hex digits of the SHA-256 of the resolved config.toml ("-" if absent)."""
+    if not run.config_text:
+        return "-"
+    return hashlib.sha256(run.config_text.encode()).hexdigest()[:12]
+
+
+def _seconds(value) -> str:
+    try:
+        s = float(value)
+    except (TypeError, ValueError):
+        return "-"
+    return f"{s:.0f} s" if s < 120 else f"{s / 60:.1f} min"
+
+
+def run_rows(source: ReportSource) -> list[RunRow]:
+    rows = []
+    for run in source.runs:
+        s = run.summary
+        epochs = "-" if run.model == "mmg" else f"{s.get('epochs', '-')} (best {s.get('best_epoch', '-')})"
+        rows.append(RunRow(model_label(run.name, run.model, run.dataset), run.model, run.dataset, epochs,
+                           "-" if run.model == "mmg" else _seconds(s.get("train_seconds")),
+                           config_digest(run), str(s.get("created", "-"))))
+    return rows
+
+
+def _flatten(data, prefix: str = "") -> list[tuple[str, str]]:
+    out = []
+    for key, value in data.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            out += _flatten(value, name + ".")
+        elif isinstance(value, float):
+            out.append((name, f"{value:.4g}"))
+        elif isinstance(value, (list, tuple)) and len(value) > 8:
+            out.append((name, f"{len(value)} items"))
+        else:
+            out.append((name, str(value)))
+    return out
+
+
+def software_versions() -> dict[str, str]:
+    """Versions of the software building the report."""
+    import matplotlib
+    import numpy
+    import pandas
+    import torch
+
+    import sysid
+    return {"python": platform.python_version(), "sysid": sysid.__version__, "torch": torch.__version__,
+            "numpy": numpy.__version__, "pandas": pandas.__version__, "matplotlib": matplotlib.__version__}
+
+
+def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -> list[tuple[str, str]]:
+    """(key, value) lines of the report's summary section."""
+    runs = source.runs
+    ships = sorted({str(r.summary.get("ship", "-")) for r in runs})
+    ship = ", ".join(ships)
+    if ship_size:
+        ship += f" (L_pp {ship_size[0]:g} m, B {ship_size[1]:g} m)"
+    datasets = sorted({r.dataset for r in runs if r.dataset != "-"})
+    scenarios = list(dict.fromkeys(s for r in runs for s in r.scenarios()))
+    trained = [float(r.summary.get("train_seconds") or 0.0) for r in runs]
+    versions: dict[str, set] = {}
+    for r in runs:
+        for k, v in (r.summary.get("versions") or {}).items():
+            versions.setdefault(k, set()).add(str(v))
+    created = sorted(str(r.summary.get("created")) for r in runs if r.summary.get("created"))
+    items = [
+        ("Source", f"{source.path} ({'reproduction, ' + str(len(runs)) + ' runs' if source.kind == 'reproduction' else 'single run'})"),
+        ("Ship", ship),
+        ("Models", ", ".join(model_label(r.name, r.model, r.dataset) for r in runs)),
+        ("Training data sets", ", ".join(datasets) or "none (MMG only)"),
+        ("Test scenarios", ", ".join(scenarios)),
+        ("Configuration digest", ", ".join(f"{r.name}: {config_digest(r)}" for r in runs)),
+        ("Software (runs)", ", ".join(f"{k} {'/'.join(sorted(v))}" for k, v in sorted(versions.items())) or "-"),
+        ("Software (report)", ", ".join(f"{k} {v}" for k, v in software_versions().items())),
+        ("Runs created", created[0] if len(set(created)) == 1 else (f"{created[0]} to {created[-1]}" if created else "-")),
+        ("Report built", _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")),
+        ("Training time", _seconds(sum(trained)) + " in total"),
+    ]
+    if source.kind == "reproduction" and source.summary:
+        items += [(f"Reproduction: {k}", v) for k, v in _flatten(source.summary)]
+    return items
+
+
+def _config_text(config: dict) -> str:
+    parts = []
+    for section, values in config.items():
+        if not isinstance(values, dict):
+            continue
+        pairs = [f"{k} = {v}" for k, v in _flatten(values)[:12]]
+        if pairs:
+            parts.append(f"[{section}] " + ", ".join(pairs))
+    return "; ".join(parts)
+
+
+def methods_paragraphs(source: ReportSource) -> list[str]:
+    """A few paragraphs: the protocol, then what was trained, how and on what, per run."""
+    horizons = sorted({h for r in source.runs for h in r.horizons()})
+    out = [PROTOCOL_TEXT.format(horizons=" and ".join(str(h) for h in horizons))]
+    for run in source.runs:
+        s = run.summary
+        text = f"{model_label(run.name, run.model, run.dataset)}: {MODEL_TEXT.get(run.model, run.model)}."
+        if s.get("mmg_overrides"):
+            text += " MMG coefficients changed from the ship file: " + ", ".join(
+                f"{k} = {v}" for k, v in s["mmg_overrides"].items()) + "."
+        if run.model != "mmg":
+            text += (f" Trained on data set {run.dataset} ({s.get('n_train_windows', '?')} training and "
+                     f"{s.get('n_val_windows', '?')} validation windows) for {s.get('epochs', '?')} epochs; "
+                     f"the weights of epoch {s.get('best_epoch', '?')} were kept "
+                     f"(training time {_seconds(s.get('train_seconds'))}, seed {s.get('seed', '?')}).")
+        if s.get("identified"):
+            text += " Identified coefficients: " + ", ".join(f"{k} = {v}" for k, v in _flatten(s["identified"])) + "."
+        if run.model == "hybrid" and s.get("gate"):
+            text += " OOD gate: " + ", ".join(f"{k} = {v}" for k, v in _flatten(s["gate"])) + "."
+        if run.config:
+            text += f" Configuration: {_config_text(run.config)}."
+        out.append(text)
+    return out

@@ -1,0 +1,191 @@
+"""The PDF: matplotlib `PdfPages`, A4 landscape pages, vector figures and text kept as
+text (TrueType, so the numbers can be searched and extracted), "page n of N" on every page.
+
+Pages: summary and methods text, one page per RMSE table (split when long), one per figure.
+"""
+from __future__ import annotations
+
+import textwrap
+from dataclasses import dataclass
+from pathlib import Path
+
+from matplotlib import rc_context
+from matplotlib.backends.backend_pdf import PdfPages
+from matplotlib.figure import Figure
+from matplotlib.patches import Rectangle
+
+from sysid.report.tables import RmseTable
+
+PAGE = (11.69, 8.27)          # in, A4 landscape
+MARGIN = 0.5                  # in
+LINE = 0.17                   # in, one text line at 8.5 pt
+KEY_WIDTH = 3.1               # in, key column of summary lines
+LINES_PER_PAGE = int((PAGE[1] - 2 * MARGIN - 0.4) / LINE)
+TABLE_ROWS_PER_PAGE = 26
+STYLES = {"h1": (15, "bold", 2.0), "h2": (11, "bold", 1.6), "p": (8.5, "normal", 1.0),
+          "kv": (8.5, "normal", 1.0), "small": (7.5, "normal", 1.0)}
+WRAP = {"h1": 90, "h2": 120, "p": 175, "kv": 105, "small": 190}
+
+
+@dataclass
+class TextLine:
+    style: str
+    text: str
+    key: str = ""
+
+
+def text_lines(blocks: list[tuple[str, str] | tuple[str, str, str]]) -> list[TextLine]:
+    """Blocks (style, text) or ("kv", key, value) wrapped into lines."""
+    lines: list[TextLine] = []
+    for block in blocks:
+        style, text = block[0], block[-1]
+        key = block[1] if len(block) == 3 else ""
+        wrapped = textwrap.wrap(text, WRAP[style]) or [""]
+        for i, piece in enumerate(wrapped):
+            lines.append(TextLine(style, piece, key if i == 0 else ""))
+        if style in ("p", "h1"):
+            lines.append(TextLine("p", ""))
+    return lines
+
+
+def paginate(lines: list[TextLine]) -> list[list[TextLine]]:
+    pages, page, used = [], [], 0.0
+    for line in lines:
+        height = STYLES[line.style][2]
+        if used + height > LINES_PER_PAGE and page:
+            pages.append(page)
+            page, used = [], 0.0
+        page.append(line)
+        used += height
+    if page:
+        pages.append(page)
+    return pages
+
+
+def table_pages(table: RmseTable) -> list[list]:
+    """The table's rows split into pages, never inside a scenario block when avoidable."""
+    pages, page = [], []
+    blocks: dict[str, list] = {}
+    for row in table.rows:
+        blocks.setdefault(row.scenario, []).append(row)
+    for rows in blocks.values():
+        if page and len(page) + len(rows) > TABLE_ROWS_PER_PAGE:
+            pages.append(page)
+            page = []
+        page += rows
+    if page or not pages:
+        pages.append(page)
+    return pages
+
+
+class PdfReport:
+    """Pages written in order, each stamped with the footer "title, page n of N"."""
+
+    def __init__(self, path: Path, title: str, total_pages: int):
+        self.title = title
+        self.total = total_pages
+        self.page = 0
+        self._pdf = PdfPages(path, metadata={"Title": title, "Creator": "sysid report"})
+
+    def _footer(self, fig: Figure) -> None:
+        self.page += 1
+        fig.text(1 - MARGIN / PAGE[0], 0.25 / PAGE[1], f"page {self.page} of {self.total}",
+                 ha="right", va="bottom", fontsize=8, color="#444")
+        fig.text(MARGIN / PAGE[0], 0.25 / PAGE[1], self.title, ha="left", va="bottom",
+                 fontsize=8, color="#444")
+
+    def _save(self, fig: Figure) -> None:
+        self._footer(fig)
+        self._pdf.savefig(fig)
+
+    def add_text(self, lines: list[TextLine]) -> None:
+        fig = Figure(figsize=PAGE)
+        y = PAGE[1] - MARGIN
+        for line in lines:
+            size, weight, height = STYLES[line.style]
+            y -= LINE * height
+            if line.key:
+                fig.text(MARGIN / PAGE[0], y / PAGE[1], line.key, fontsize=size, weight="bold")
+                fig.text((MARGIN + KEY_WIDTH) / PAGE[0], y / PAGE[1], line.text, fontsize=size)
+            else:
+                x = MARGIN + (KEY_WIDTH if line.style == "kv" else 0.0)
+                fig.text(x / PAGE[0], y / PAGE[1], line.text, fontsize=size, weight=weight)
+        self._save(fig)
+
+    def add_table(self, table: RmseTable, rows: list, part: str = "") -> None:
+        """One page of an RMSE table: our value, then the paper's and the change below."""
+        fig = Figure(figsize=PAGE)
+        W, H = PAGE
+        fig.text(MARGIN / W, (H - MARGIN - 0.1) / H, table.title + part, fontsize=11, weight="bold")
+        n_cells = 3 * len(table.groups)
+        x_test, x_model, x_cells = MARGIN, MARGIN + 1.55, MARGIN + 3.0
+        cell_w = (W - MARGIN - x_cells) / n_cells
+        row_h = min(0.34, (H - 2 * MARGIN - 1.6) / max(len(rows), 1))
+        top = H - MARGIN - 0.55
+        for g, group in enumerate(table.groups):
+            xc = x_cells + (3 * g + 1.5) * cell_w
+            fig.text(xc / W, top / H, group, ha="center", fontsize=9, weight="bold")
+            for j, comp in enumerate(("u", "v_m", "r")):
+                fig.text((x_cells + (3 * g + j + 0.5) * cell_w) / W, (top - 0.22) / H, comp,
+                         ha="center", fontsize=8.5, weight="bold")
+        fig.text(x_test / W, (top - 0.22) / H, "Test", fontsize=8.5, weight="bold")
+        fig.text(x_model / W, (top - 0.22) / H, "Model", fontsize=8.5, weight="bold")
+        y = top - 0.3
+        fig.add_artist(Rectangle((MARGIN / W, y / H), (W - 2 * MARGIN) / W, 0.012 / H,
+                                 transform=fig.transFigure, color="#555"))
+        last = None
+        for row in rows:
+            y -= row_h
+            if row.scenario != last:
+                fig.add_artist(Rectangle((MARGIN / W, (y + row_h) / H), (W - 2 * MARGIN) / W, 0.006 / H,
+                                         transform=fig.transFigure, color="#999"))
+                fig.text(x_test / W, (y + row_h * 0.45) / H, row.scenario, fontsize=8.5, weight="bold")
+                last = row.scenario
+            fig.add_artist(Rectangle((x_model / W, (y + row_h * 0.38) / H), 0.12 / W, 0.12 / H,
+                                     transform=fig.transFigure, facecolor=row.colour, edgecolor="#333", lw=0.5))
+            fig.text((x_model + 0.18) / W, (y + row_h * 0.4) / H, row.model, fontsize=8.5)
+            for j, cell in enumerate(row.cells):
+                xr = x_cells + (j + 1) * cell_w - 0.08
+                if cell.best:
+                    fig.add_artist(Rectangle(((xr - cell_w + 0.14) / W, (y + 0.02) / H), (cell_w - 0.1) / W,
+                                             (row_h - 0.04) / H, transform=fig.transFigure,
+                                             facecolor="#fff3b0", edgecolor="none"))
+                fig.text(xr / W, (y + row_h * 0.55) / H, cell.ours_text, ha="right", fontsize=8.5,
+                         weight="bold" if cell.best else "normal")
+                if cell.paper is not None:
+                    colour = "#1b7a34" if cell.beats_paper else "#b02a2a"
+                    fig.text(xr / W, (y + row_h * 0.15) / H, f"{cell.paper_text} {cell.change_text}",
+                             ha="right", fontsize=6.5, color=colour)
+        wins, total = table.wins
+        fig.text(MARGIN / W, (y - 0.35) / H,
+                 f"First line: our RMSE (u, v_m [m/s], r [rad/s]); second line: the paper's value and our change "
+                 f"(green: better than the paper). {wins} of {total} cells better than the paper."
+                 + (" Bold on yellow: lowest RMSE of the test's models in that column." if len(table.groups) > 1 and
+                    any(c.best for r in table.rows for c in r.cells) else ""),
+                 fontsize=7.5, color="#333", wrap=True)
+        self._save(fig)
+
+    def add_figure(self, fig: Figure, caption: str) -> None:
+        """A report figure on an A4 page: resized to the page width (aspect kept, at most
+        the page height), caption below it."""
+        w, h = fig.get_size_inches()
+        content_w = PAGE[0] - 2 * MARGIN
+        content_h = min(PAGE[1] - 2 * MARGIN - 0.9, content_w * h / w)
+        fig.set_size_inches(*PAGE)
+        engine = fig.get_layout_engine()
+        bottom = PAGE[1] - MARGIN - content_h
+        rect = (MARGIN / PAGE[0], bottom / PAGE[1], content_w / PAGE[0], content_h / PAGE[1])
+        if engine is not None:
+            engine.set(rect=rect)
+        for legend in fig.legends:  # figure legends sit at the content's bottom, above the caption
+            legend.set_bbox_to_anchor((0.5, bottom / PAGE[1]), transform=fig.transFigure)
+        fig.text(MARGIN / PAGE[0], (bottom - 0.2) / PAGE[1], "\n".join(textwrap.wrap(caption, 170)),
+                 fontsize=8.5, va="top")
+        self._save(fig)
+
+    def close(self) -> None:
+        self._pdf.close()
+
+
+def pdf_style() -> rc_context:
+    return rc_context({"pdf.fonttype": 42, "pdf.compression": 6})

@@ -1,0 +1,171 @@
+"""Reading a run directory or a reproduction directory (layout: `sysid.rundir`).
+
+Every file the report needs is checked when it is read; a missing or corrupt file raises
+`CheckpointError` naming it. Traces are read lazily (a full reproduction holds ~70 of them).
+"""
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+from sysid.errors import CheckpointError
+from sysid.rundir import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
+
+MODEL_KINDS = ("mmg", "nn", "hybrid")
+
+
+def _read_json(path: Path) -> dict:
+    if not path.is_file():
+        raise CheckpointError(f"{path}: file not found")
+    try:
+        data = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise CheckpointError(f"{path}: not valid JSON ({exc})") from None
+    if not isinstance(data, dict):
+        raise CheckpointError(f"{path}: expected a JSON object")
+    return data
+
+
+def _read_table(path: Path, columns: list[str], required: bool = True) -> pd.DataFrame | None:
+    if not path.is_file():
+        if required:
+            raise CheckpointError(f"{path}: file not found")
+        return None
+    try:
+        frame = pd.read_csv(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise CheckpointError(f"{path}: not a readable CSV ({exc})") from None
+    missing = [c for c in columns if c not in frame.columns]
+    if missing:
+        raise CheckpointError(f"{path}: missing column(s) {missing}")
+    return frame
+
+
+@dataclass
+class RunRecord:
+    """One run directory: its summary, config, metrics, loss history and traces.
+
+    metrics : METRICS_COLUMNS, RMSE in m/s (u, v_m) and rad/s (r); history : epoch-wise
+    losses or None (MMG-only runs).
+    """
+
+    name: str
+    path: Path
+    summary: dict
+    config_text: str
+    config: dict
+    metrics: pd.DataFrame
+    history: pd.DataFrame | None
+    _traces: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def model(self) -> str:
+        """"mmg", "nn" or "hybrid"."""
+        return str(self.summary.get("model", "mmg")).lower()
+
+    @property
+    def dataset(self) -> str:
+        value = self.summary.get("dataset")
+        return str(value) if value not in (None, "") else "-"
+
+    @property
+    def gate_threshold(self) -> float | None:
+        """kNN threshold of the OOD gate (summary.json "gate", else knn.pt), or None."""
+        gate = self.summary.get("gate") or {}
+        value = gate.get("threshold") if isinstance(gate, dict) else None
+        if value is None and (self.path / "knn.pt").is_file():
+            try:
+                import torch
+                value = float(torch.load(self.path / "knn.pt", weights_only=True)["threshold"])
+            except Exception:  # noqa: BLE001 - an unreadable bank only costs the threshold line
+                value = None
+        try:
+            value = float(value) if value is not None else None
+        except (TypeError, ValueError):
+            return None
+        return value if value is not None and math.isfinite(value) else None
+
+    def scenarios(self) -> list[str]:
+        """Scenario names in the order of metrics.csv."""
+        return list(dict.fromkeys(self.metrics["scenario"].astype(str)))
+
+    def horizons(self) -> list[int]:
+        return sorted({int(round(h)) for h in self.metrics["horizon_s"]})
+
+    def trace(self, scenario: str, horizon_s: float) -> pd.DataFrame | None:
+        """The trace of the scenario's (first) file at a horizon, or None when absent."""
+        key = (scenario, int(round(horizon_s)))
+        if key not in self._traces:
+            rows = self.metrics[(self.metrics["scenario"].astype(str) == scenario)
+                                & ((self.metrics["horizon_s"] - horizon_s).abs() < 0.5)]
+            frame = None
+            if len(rows):
+                stem = Path(str(rows.iloc[0]["file"])).stem
+                path = self.path / "traces" / trace_name(stem, horizon_s)
+                frame = _read_table(path, TRACE_COLUMNS, required=False)
+            self._traces[key] = frame
+        return self._traces[key]
+
+
+@dataclass
+class ReportSource:
+    """What a report is built from: one run, or a reproduction's runs and summary."""
+
+    path: Path
+    kind: str  # "run" or "reproduction"
+    runs: list[RunRecord]
+    summary: dict
+
+    @property
+    def title(self) -> str:
+        return self.path.resolve().name
+
+
+def _run_order(run: RunRecord) -> tuple:
+    """MMG (paper X'vr first), NN, hybrid; data sets in order."""
+    return (MODEL_KINDS.index(run.model), run.name != "mmg_paper", run.dataset, run.name)
+
+
+def read_run_dir(path: Path) -> RunRecord:
+    """A run directory (`sysid.rundir`), checked."""
+    path = Path(path)
+    summary = _read_json(path / "summary.json")
+    config_path = path / "config.toml"
+    config_text, config = "", {}
+    if config_path.is_file():
+        config_text = config_path.read_text()
+        try:
+            config = tomllib.loads(config_text)
+        except tomllib.TOMLDecodeError as exc:
+            raise CheckpointError(f"{config_path}: not valid TOML ({exc})") from None
+    metrics = _read_table(path / "metrics.csv", METRICS_COLUMNS)
+    history = _read_table(path / "history.csv", ["epoch", "train_loss", "val_loss"], required=False)
+    model = str(summary.get("model", "mmg")).lower()
+    if model not in MODEL_KINDS:
+        raise CheckpointError(f"{path / 'summary.json'}: model {model!r} is not one of {MODEL_KINDS}")
+    return RunRecord(str(summary.get("name") or path.name), path, summary, config_text, config,
+                     metrics, history)
+
+
+def read_source(path) -> ReportSource:
+    """A run directory (has summary.json and metrics.csv) or a reproduction directory (has runs/)."""
+    path = Path(path)
+    if not path.is_dir():
+        raise CheckpointError(f"{path}: no such directory")
+    if (path / "runs").is_dir():
+        run_dirs = sorted(p for p in (path / "runs").iterdir() if p.is_dir())
+        if not run_dirs:
+            raise CheckpointError(f"{path / 'runs'}: holds no run directories")
+        summary = _read_json(path / "summary.json") if (path / "summary.json").exists() else {}
+        runs = sorted((read_run_dir(p) for p in run_dirs), key=_run_order)
+        return ReportSource(path, "reproduction", runs, summary)
+    if (path / "summary.json").exists() or (path / "metrics.csv").exists():
+        run = read_run_dir(path)
+        return ReportSource(path, "run", [run], run.summary)
+    raise CheckpointError(f"{path}: neither a run directory (summary.json, metrics.csv) "
+                          "nor a reproduction directory (runs/)")

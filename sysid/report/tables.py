@@ -1,0 +1,199 @@
+"""RMSE tables in the layout of the paper's Tables 7 and 8, ours beside the paper's.
+
+A reproduction gives one table per horizon (rows: scenario x model; column groups: data
+sets); a single run gives one table (rows: scenarios; column groups: horizons). Every cell
+holds our RMSE, the paper's and the change in percent; within a scenario the lowest RMSE
+of each column is marked best.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from sysid.report.palette import KIND_LABELS, MODEL_COLOURS, model_colour, model_label
+from sysid.report.paper import paper_rmse
+from sysid.report.source import ReportSource, RunRecord
+
+COMPONENTS = ("u", "v_m", "r")
+UNITS = {"u": "m/s", "v_m": "m/s", "r": "rad/s"}
+PAPER_ORDER = ["Berthing", "Turning 20", "Turning 35", "Zigzag 20/20", "Zigzag 30/30", "Random"]
+
+
+def format_rmse(value: float | None) -> str:
+    """Our RMSE as printed in every table (5 decimals)."""
+    return "-" if value is None or not math.isfinite(value) else f"{value:.5f}"
+
+
+def format_paper(value: float | None) -> str:
+    return "-" if value is None else f"{value:.4f}"
+
+
+@dataclass
+class Cell:
+    """One RMSE: ours and the paper's [m/s or rad/s]."""
+
+    ours: float | None
+    paper: float | None
+    best: bool = False
+
+    @property
+    def change_pct(self) -> float | None:
+        """(ours - paper) / paper in percent; negative is better than the paper."""
+        if self.ours is None or self.paper is None or not math.isfinite(self.ours) or self.paper == 0:
+            return None
+        return 100.0 * (self.ours - self.paper) / self.paper
+
+    @property
+    def beats_paper(self) -> bool:
+        return self.change_pct is not None and self.change_pct < 0
+
+    @property
+    def ours_text(self) -> str:
+        return format_rmse(self.ours)
+
+    @property
+    def paper_text(self) -> str:
+        return format_paper(self.paper)
+
+    @property
+    def change_text(self) -> str:
+        c = self.change_pct
+        return "" if c is None else f"{c:+.0f}%"
+
+
+@dataclass
+class TableRow:
+    scenario: str
+    model: str
+    colour: str
+    cells: list[Cell]
+
+
+@dataclass
+class RmseTable:
+    """title; groups : column-group labels (each has u, v_m, r); rows in scenario blocks."""
+
+    key: str
+    title: str
+    groups: list[str]
+    rows: list[TableRow] = field(default_factory=list)
+
+    @property
+    def wins(self) -> tuple[int, int]:
+        """(cells better than the paper, cells with a paper value)."""
+        cells = [c for row in self.rows for c in row.cells if c.change_pct is not None]
+        return sum(c.beats_paper for c in cells), len(cells)
+
+
+def scenario_files(run: RunRecord) -> dict[str, str]:
+    """Row label per metrics file: the scenario, or "scenario: file" when it has several files."""
+    frame = run.metrics
+    labels = {}
+    counts = frame.groupby(frame["scenario"].astype(str))["file"].nunique()
+    for scenario, file in zip(frame["scenario"].astype(str), frame["file"].astype(str)):
+        stem = Path(file).stem
+        labels[stem] = scenario if counts[scenario] == 1 else f"{scenario}: {stem}"
+    return labels
+
+
+def run_rmse(run: RunRecord) -> dict[tuple[str, int], tuple[float, float, float]]:
+    """(row label, horizon [s]) -> (u, v_m, r) RMSE from metrics.csv."""
+    labels = scenario_files(run)
+    out = {}
+    for row in run.metrics.itertuples(index=False):
+        key = (labels[Path(str(row.file)).stem], int(round(row.horizon_s)))
+        out[key] = (float(row.rmse_u), float(row.rmse_v), float(row.rmse_r))
+    return out
+
+
+def _scenario_order(labels) -> list[str]:
+    labels = list(dict.fromkeys(labels))
+    known = [s for s in PAPER_ORDER if s in labels]
+    return known + [s for s in labels if s not in known]
+
+
+def _paper_scenario(label: str) -> str:
+    return label.split(":")[0]
+
+
+def _mark_best(rows: list[TableRow]) -> None:
+    by_scenario: dict[str, list[TableRow]] = {}
+    for row in rows:
+        by_scenario.setdefault(row.scenario, []).append(row)
+    for block in by_scenario.values():
+        if len(block) < 2:
+            continue
+        for j in range(len(block[0].cells)):
+            values = [(r.cells[j].ours, r) for r in block
+                      if r.cells[j].ours is not None and math.isfinite(r.cells[j].ours)]
+            if len(values) > 1:
+                best = min(v for v, _ in values)
+                for v, r in values:
+                    r.cells[j].best = v == best
+
+
+def reproduction_tables(source: ReportSource) -> list[RmseTable]:
+    """Tables 7 and 8 (one per horizon): rows scenario x model, column groups the data sets."""
+    runs = source.runs
+    rmse = {run.name: run_rmse(run) for run in runs}
+    datasets = sorted({r.dataset for r in runs if r.model != "mmg" and r.dataset != "-"}) or ["-"]
+    # row keys: each MMG run is its own row (dataset-independent); NN and hybrid by kind
+    row_keys: list[tuple[str, str]] = []
+    for run in runs:
+        key = (run.model, run.name if run.model == "mmg" else run.model)
+        if key not in row_keys:
+            row_keys.append(key)
+    known = list(MODEL_COLOURS)
+    row_keys.sort(key=lambda k: (("mmg", "nn", "hybrid").index(k[0]),
+                                 known.index(k[1]) if k[1] in known else len(known), k[1]))
+    horizons = sorted({h for run in runs for h in run.horizons()})
+    scenarios = _scenario_order(s for run in runs for s, _ in rmse[run.name])
+    tables = []
+    for number, horizon in enumerate(horizons):
+        paper_no = {30: "7", 100: "8"}.get(horizon)
+        title = (f"Table {paper_no}" if paper_no else f"Table {7 + number}") + \
+            f": RMSE of {horizon} s predictions (u, v_m [m/s]; r [rad/s])"
+        table = RmseTable(f"table_{horizon}s", title, [f"{d}" for d in datasets])
+        for scenario in scenarios:
+            for kind, key in row_keys:
+                cells, ref = [], None
+                for dataset in datasets:
+                    run = next((r for r in runs if r.model == kind and
+                                (r.name == key if kind == "mmg" else r.dataset == dataset)), None)
+                    values = rmse[run.name].get((scenario, horizon)) if run else None
+                    paper = paper_rmse(_paper_scenario(scenario), kind, dataset, horizon)
+                    for i in range(3):
+                        cells.append(Cell(values[i] if values else None, paper[i] if paper else None))
+                    ref = ref or run
+                if ref is None or all(c.ours is None for c in cells):
+                    continue
+                label = model_label(ref.name, kind, "-") if kind == "mmg" else KIND_LABELS[kind]
+                table.rows.append(TableRow(scenario, label, model_colour(ref.name, kind, ref.dataset), cells))
+        _mark_best(table.rows)
+        tables.append(table)
+    return tables
+
+
+def run_table(run: RunRecord) -> RmseTable:
+    """One run: rows the scenarios, column groups the horizons."""
+    rmse = run_rmse(run)
+    horizons = run.horizons()
+    table = RmseTable("table_run", f"RMSE of {model_label(run.name, run.model, run.dataset)} "
+                      "(u, v_m [m/s]; r [rad/s])", [f"{h} s" for h in horizons])
+    for scenario in _scenario_order(s for s, _ in rmse):
+        cells = []
+        for horizon in horizons:
+            values = rmse.get((scenario, horizon))
+            paper = paper_rmse(_paper_scenario(scenario), run.model, run.dataset, horizon)
+            for i in range(3):
+                cells.append(Cell(values[i] if values else None, paper[i] if paper else None))
+        table.rows.append(TableRow(scenario, model_label(run.name, run.model, run.dataset),
+                                   model_colour(run.name, run.model, run.dataset), cells))
+    return table
+
+
+def build_tables(source: ReportSource) -> list[RmseTable]:
+    if source.kind == "reproduction":
+        return reproduction_tables(source)
+    return [run_table(source.runs[0])]
