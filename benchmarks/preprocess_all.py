@@ -11,6 +11,8 @@ issue 3 are printed in the header).
 from __future__ import annotations
 
 import argparse
+import os
+import resource
 import sys
 import tempfile
 import time
@@ -56,11 +58,14 @@ def main() -> int:
         t_synth = time.perf_counter() - t0
         settings = pipeline.PreprocessSettings()
         t0 = time.perf_counter()
+        cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         with ProcessPoolExecutor(args.jobs) as pool:
             results = list(pool.map(pipeline.process_file, [m[0] for m in made],
                                     [layout] * len(made), [settings] * len(made),
                                     [str(outdir)] * len(made)))
         t_proc = time.perf_counter() - t0
+        cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu = (cpu1.ru_utime + cpu1.ru_stime) - (cpu0.ru_utime + cpu0.ru_stime)
         rows, samples = [], 0
         for (raw, truth), res in zip(made, results):
             name = Path(raw).stem
@@ -92,7 +97,9 @@ def main() -> int:
     print("\nover the bound:", {c: v for c, v in over.items() if v} or "none")
     hours = samples / 10 / 3600
     print(f"\n{len(results)} files, {samples} raw samples ({hours:.2f} h at 10 Hz): synthesis "
-          f"{t_synth:.1f} s, preprocessing {t_proc:.1f} s with {args.jobs} process(es)")
+          f"{t_synth:.1f} s, preprocessing {t_proc:.1f} s wall with {args.jobs} process(es) "
+          f"({cpu:.1f} CPU-s in the workers; load average {os.getloadavg()[0]:.1f} on "
+          f"{os.cpu_count()} cores)")
     return 0
 
 

@@ -29,11 +29,23 @@ def _cv_filter(dt: float, q: float, r: float, x0: float, p0_rate: float) -> Kalm
     return kf
 
 
+def _inv_1x1(s: np.ndarray) -> np.ndarray:
+    """Inverse of the 1x1 innovation covariance (a cheap stand-in for np.linalg.inv)."""
+    return 1.0 / s
+
+
+def _inv_2x2(p: np.ndarray) -> np.ndarray:
+    """Closed-form inverse of a 2x2 covariance (the RTS pass inverts one per step)."""
+    a, b, c, d = p[0, 0], p[0, 1], p[1, 0], p[1, 1]
+    return np.array([[d, -b], [-c, a]]) / (a * d - b * c)
+
+
 def _run(kf: KalmanFilter, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Forward filter + RTS pass; NaN measurements are skipped (predict only)."""
     zs = [None if np.isnan(v) else np.array([[v]]) for v in z]
+    kf.inv = _inv_1x1                    # dim_z = 1: S is 1x1
     means, covs, _, _ = kf.batch_filter(zs)
-    xs, ps, _, _ = kf.rts_smoother(means, covs)
+    xs, ps, _, _ = kf.rts_smoother(means, covs, inv=_inv_2x2)
     return xs[:, :, 0], ps
 
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import List, Optional
@@ -46,7 +47,7 @@ def synth_raw(
     gnss_noise: float = typer.Option(0.015, "--gnss-noise", help="GNSS white noise per antenna and axis [m]."),
     gnss_correlated: float = typer.Option(0.0, "--gnss-correlated", help="Std of a correlated GNSS component [m]."),
     outliers: int = typer.Option(0, "--outliers", help="Number of antenna outliers to inject."),
-    dropout: Optional[List[str]] = typer.Option(None, "--dropout", help="GNSS dropout START:DURATION [s] (repeatable)."),
+    dropout: Optional[List[str]] = typer.Option(None, "--dropout", help="GNSS dropout START:DURATION [s] (repeatable, or comma-separated)."),
     dropout_rows: bool = typer.Option(False, "--dropout-rows", help="Drop whole rows instead of emptying GNSS cells."),
     latlon: bool = typer.Option(False, "--latlon", help="Write WGS-84 lat/lon fixes instead of local x/y."),
     reference: Optional[str] = typer.Option(None, "--reference", help="LAT,LON [deg] of the local origin (--latlon)."),
@@ -60,7 +61,8 @@ def synth_raw(
         kwargs["reference"] = ref
     settings = synth.SynthSettings(
         seed=seed, gnss_noise=gnss_noise, gnss_correlated=gnss_correlated, outliers=outliers,
-        dropouts=tuple(_parse_dropout(d) for d in (dropout or [])), dropout_rows=dropout_rows,
+        dropouts=tuple(_parse_dropout(d) for item in (dropout or []) for d in item.split(",")),
+        dropout_rows=dropout_rows,
         latlon=latlon, **kwargs)
     try:
         run = synth.read_processed(processed)
@@ -98,9 +100,15 @@ def preprocess(
             swapped_antennas="repair" if swap_antennas else "error")
     except ValueError as exc:
         raise DataError(str(exc)) from None
+    stems: dict[str, Path] = {}
+    for p in raw:
+        if p.stem in stems:
+            raise DataError(f"{p}: same file name as {stems[p.stem]}; outputs would collide in {outdir}")
+        stems[p.stem] = p
     outdir.mkdir(parents=True, exist_ok=True)
     paths = [str(p) for p in raw]
     results = []
+    start = time.perf_counter()
     bar = tqdm(total=len(paths), unit="file", desc="preprocess")
     if jobs > 1 and len(paths) > 1:
         with ProcessPoolExecutor(max_workers=min(jobs, len(paths), os.cpu_count() or 1)) as pool:
@@ -115,18 +123,20 @@ def preprocess(
     bar.close()
     order = {p: i for i, p in enumerate(paths)}
     results.sort(key=lambda r: order[r["file"]])
-    _summary(results, outdir)
+    _summary(results, outdir, time.perf_counter() - start)
     failed = [r for r in results if not r["ok"]]
     if failed:
         raise SystemExit(1)  # (typer.Exit is swallowed by standalone_mode=False)
 
 
-def _summary(results: list[dict], outdir: Path) -> None:
-    """One screen: a line per file, then totals; failures as one-line errors."""
+def _summary(results: list[dict], outdir: Path, seconds: float) -> None:
+    """One screen: a line per file (the first 20, then only those split into segments),
+    totals, and failures as one-line errors."""
     typer.echo(f"{'file':34s} {'seg':>3s} {'dur[s]':>7s} {'base-rej':>8s} {'gate-rej':>8s} "
                f"{'gaps i/s':>8s} {'bias[deg/10min]':>15s}")
     ok = [r for r in results if r["ok"]]
-    for r in ok:
+    shown = [r for i, r in enumerate(ok) if i < 20 or len(r["report"]["segments"]) > 1]
+    for r in shown:
         rep = r["report"]
         dur = sum(s["t_end"] - s["t_start"] for s in rep["segments"])
         bias = rep["fog_bias_rad_s"]["mean"] * 600 * 180 / 3.141592653589793
@@ -136,5 +146,10 @@ def _summary(results: list[dict], outdir: Path) -> None:
     for r in results:
         if not r["ok"]:
             typer.secho(f"FAILED {r['error']}", fg=typer.colors.RED, err=True)
-    typer.echo(f"{len(ok)} of {len(results)} file(s) processed into {outdir}"
-               + (f"; {len(results) - len(ok)} failed" if len(ok) < len(results) else ""))
+    if len(shown) < len(ok):
+        typer.echo(f"... {len(ok) - len(shown)} more file(s) with one segment each")
+    rej = sum(r["report"]["baseline"]["rejected"] + r["report"]["heading_gate"]["rejected"] for r in ok)
+    segs = sum(len(r["report"]["segments"]) for r in ok)
+    typer.echo(f"{len(ok)} of {len(results)} file(s) processed into {outdir} in {seconds:.1f} s: "
+               f"{segs} segment(s), {rej} GNSS sample(s) rejected"
+               + (f"; {len(results) - len(ok)} FAILED" if len(ok) < len(results) else ""))
