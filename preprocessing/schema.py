@@ -114,6 +114,11 @@ def validate_raw(df: pd.DataFrame, path: str = "<raw log>",
         _need(have, form, path, repairs, scale)  # raises on the first missing one
         raise RawLogError(f"{path}: GNSS columns incomplete")  # pragma: no cover
     _need(have, gnss, path, repairs, scale)
+    empty = df.isna().all(axis=1).to_numpy()
+    if empty.any():  # blank lines, typically trailing ones from spreadsheet exports
+        repairs.append(f"dropped {int(empty.sum())} empty row(s), first at row "
+                       f"{int(np.flatnonzero(empty)[0]) + 1}")
+        df = df.loc[~empty]
     out = pd.DataFrame({_split_header(str(c))[0]: df[c] for c in df.columns})
     keep = list(RAW_COMMON) + list(gnss) + [k for k in RAW_OPTIONAL if k in have]
     out = out[keep]

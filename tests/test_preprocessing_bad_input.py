@@ -226,3 +226,13 @@ def test_heading_offset_and_offcentre_antennas():
     res = synth.synthesise(analytic_run(), layout, synth.SynthSettings(seed=1))
     s = synth.score(Pipeline(layout).run(res.raw).segments, res.truth)
     assert s["psi_deg"] < 0.3 and s["pos"] < 0.02 and s["wind_speed"] < 0.05
+
+
+def test_empty_rows_dropped_and_logged(synthetic, raw, tmp_path):
+    path = tmp_path / "log.csv"
+    raw.to_csv(path, index=False)
+    with open(path, "a") as fh:
+        fh.write("," * (len(raw.columns) - 1) + "\n" + "," * (len(raw.columns) - 1) + "\n")
+    out = Pipeline(LAYOUT).run(path)
+    assert any("empty row" in r for r in out.report["repairs"])
+    assert synth.score(out.segments, synthetic.truth)["u"] < 5e-3
