@@ -52,7 +52,8 @@ class Run:
     t : (N,) time [s]; states : (N, 6) x, u, y, v, psi, r; inputs : (N, 4) n_prop [rps],
     delta_rudder [rad], wind_velo_true [m/s], wind_dir_true [rad]; relative_wind : (N, 2)
     U_A [m/s], gamma_A [rad] as recorded.
-    dt : sample period [s]; issues : data-quality findings (gaps, frozen GNSS, ...).
+    dt : sample period [s]; issues : data-quality findings (gaps, frozen GNSS, ...);
+    suspect : (t_start, t_end) [s] intervals of frozen GNSS or time gaps.
     """
 
     name: str
@@ -63,6 +64,7 @@ class Run:
     relative_wind: np.ndarray
     dt: float
     issues: list[str] = field(default_factory=list)
+    suspect: list[tuple[float, float]] = field(default_factory=list)
 
     def __len__(self) -> int:
         return len(self.t)
@@ -109,7 +111,7 @@ def read_run(path: str | os.PathLike, rate: float = 1.0) -> Run:
             raise DataError(f"{path}: column {name!r} reaches {peak:.4g}, beyond {limit}: wrong units?")
     period = float(np.median(steps))
     stride = max(1, int(round(1.0 / rate / period)))
-    issues = _quality_issues(t, values, period)
+    issues, suspect = _quality_issues(t, values, period)
     sel = values[::stride]
     return Run(
         name=path.stem, path=path, t=sel[:, 0],
@@ -117,15 +119,17 @@ def read_run(path: str | os.PathLike, rate: float = 1.0) -> Run:
         inputs=sel[:, [frame.columns.get_loc(c) for c in INPUT_COLUMNS]],
         relative_wind=sel[:, [frame.columns.get_loc("wind_velo_relative"),
                               frame.columns.get_loc("wind_dir_relative")]],
-        dt=period * stride, issues=issues)
+        dt=period * stride, issues=issues, suspect=suspect)
 
 
-def _quality_issues(t: np.ndarray, values: np.ndarray, period: float) -> list[str]:
-    """Gaps in time and frozen GNSS (position and heading constant for >= 1 s)."""
-    issues = []
+def _quality_issues(t: np.ndarray, values: np.ndarray, period: float):
+    """Gaps in time and frozen GNSS (position and heading constant for >= 1 s):
+    messages and (t_start, t_end) intervals."""
+    issues, suspect = [], []
     steps = np.diff(t)
     for i in np.nonzero(steps > 1.5 * period)[0]:
         issues.append(f"time gap of {steps[i]:.2f} s at t = {t[i]:.1f} s")
+        suspect.append((float(t[i]), float(t[i + 1])))
     frozen = (np.diff(values[:, 1]) == 0) & (np.diff(values[:, 5]) == 0)  # x and psi unchanged
     run_len = max(2, int(round(1.0 / period)))
     i = 0
@@ -136,10 +140,11 @@ def _quality_issues(t: np.ndarray, values: np.ndarray, period: float) -> list[st
                 j += 1
             if j - i >= run_len:
                 issues.append(f"GNSS frozen for {t[j] - t[i]:.1f} s at t = {t[i]:.1f} s")
+                suspect.append((float(t[i]), float(t[j])))
             i = j
         else:
             i += 1
-    return issues
+    return issues, suspect
 
 
 def duplicate_runs(runs: Sequence[Run], tolerance: float = 1e-9) -> list[tuple[str, str]]:
@@ -188,6 +193,18 @@ def sliding_windows(n_samples: int, length: int, stride: int) -> np.ndarray:
     if n_samples < length:
         return np.zeros(0, dtype=int)
     return np.arange(0, n_samples - length + 1, stride)
+
+
+def window_touches(run: Run, starts: np.ndarray, length: int, margin_s: float = 1.0) -> np.ndarray:
+    """(W,) True where a window [t_start, t_end] comes within `margin_s` of a suspect interval."""
+    hit = np.zeros(len(starts), dtype=bool)
+    if not len(starts):
+        return hit
+    t0 = run.t[starts]
+    t1 = run.t[np.minimum(starts + length - 1, len(run) - 1)]
+    for a, b in run.suspect:
+        hit |= (t1 >= a - margin_s) & (t0 <= b + margin_s)
+    return hit
 
 
 def stack_windows(run: Run, starts: np.ndarray, length: int, dtype=torch.float64,

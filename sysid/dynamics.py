@@ -94,8 +94,10 @@ class ShipDynamics(nn.Module):
     dt : step length [s].
     """
 
-    def __init__(self, force_model: nn.Module, inputs: torch.Tensor, dt: float, compiled: bool = False):
+    def __init__(self, force_model: nn.Module, inputs: torch.Tensor, dt: float, compiled: bool = False,
+                 record: list | None = None):
         super().__init__()
+        self.record = record
         self.force_model = force_model
         self.inputs = inputs
         self.dt = float(dt)
@@ -107,13 +109,17 @@ class ShipDynamics(nn.Module):
 
     def forward(self, tau: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
         k = min(max(int(tau), 0), self.inputs.shape[0] - 1)  # tau >= 0: int() is floor
-        if self._compiled is not None:
+        if self._compiled is not None and self.record is None:
             return self.dt * self._compiled(state, self.inputs[k])
-        return self.dt * self.derivative(state, self.inputs[k])[0]
+        derivative, forces = self.derivative(state, self.inputs[k])
+        if self.record is not None:
+            self.record.append(forces)
+        return self.dt * derivative
 
 
 def integrate(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
-              method: Method = "euler", compiled: bool = False) -> torch.Tensor:
+              method: Method = "euler", compiled: bool = False,
+              record: list | None = None) -> torch.Tensor:
     """Predict trajectories from x0 with recorded inputs held over each step.
 
     Parameters
@@ -126,6 +132,8 @@ def integrate(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt
     method : "euler" (the paper's), "rk4" (classical, the lab simulator's) or "rk4_3/8"
         (torchdiffeq's own rk4).
     compiled : use the torch.compile'd right-hand side (see `compiled_derivative`).
+    record : a list to which each right-hand-side call appends its `ForceBreakdown`; with
+        "euler" that is one entry per step, at the states the step started from.
 
     Returns
     -------
@@ -137,6 +145,6 @@ def integrate(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt
         raise ValueError(f"inputs {tuple(inputs.shape)} do not match x0 {tuple(x0.shape)}: expected (T, *batch, 4)")
     steps = inputs.shape[0]
     tau = torch.arange(steps, dtype=x0.dtype, device=x0.device)
-    rhs = ShipDynamics(force_model, inputs, dt, compiled)
+    rhs = ShipDynamics(force_model, inputs, dt, compiled, record)
     options = {"perturb": True} if method != "euler" else None
     return odeint(rhs, x0, tau, method=_SOLVER_NAME[method], options=options)

@@ -29,6 +29,8 @@ class ForceBreakdown:
     wind: torch.Tensor
     correction: torch.Tensor
     relative_wind: torch.Tensor
+    ood_distance: torch.Tensor | None = None  # (...,) kNN distance, None without a gate
+    gate_on: torch.Tensor | None = None       # (...,) True where F_NN is applied
 
     @property
     def mmg(self) -> torch.Tensor:
@@ -41,7 +43,7 @@ class ForceBreakdown:
         return self.mmg + self.correction
 
     def as_dict(self) -> dict[str, torch.Tensor]:
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        return {f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) is not None}
 
 
 class MMG(nn.Module):

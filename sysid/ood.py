@@ -1,0 +1,67 @@
+"""kNN out-of-distribution gate (paper section 3.4.3, Eqs. 18-21).
+
+d_kNN(z) = mean Euclidean distance from feature z (the FNN's last hidden activations) to
+its k nearest training features; the threshold is the alpha-quantile of the training
+distances (each training feature scored leave-one-out); F_NN is switched off where
+d_kNN exceeds it.
+"""
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import nn
+
+
+class KNNGate(nn.Module):
+    """Feature bank, k, alpha and threshold; `fit` returns self.
+
+    Attributes (after `fit`)
+    ------------------------
+    bank : (N, F) training features; threshold : () delta_kNN; train_distances : (N,).
+    """
+
+    def __init__(self, k: int = 10, alpha: float = 0.9995, features: int = 64,
+                 dtype: torch.dtype = torch.float32, chunk: int = 4096):
+        super().__init__()
+        if k < 1 or not 0.0 < alpha < 1.0:
+            raise ValueError(f"kNN gate: need k >= 1 and 0 < alpha < 1, got k={k}, alpha={alpha}")
+        self.k, self.alpha, self.chunk = int(k), float(alpha), int(chunk)
+        self.register_buffer("bank", torch.zeros(0, features, dtype=dtype))
+        self.register_buffer("threshold", torch.tensor(math.inf, dtype=dtype))
+        self.register_buffer("train_distances", torch.zeros(0, dtype=dtype))
+
+    def _distances(self, z: torch.Tensor, exclude_self: bool) -> torch.Tensor:
+        flat = z.reshape(-1, z.shape[-1]).to(self.bank.dtype)
+        k = self.k + (1 if exclude_self else 0)
+        k = min(k, self.bank.shape[0])
+        out = []
+        for lo in range(0, flat.shape[0], self.chunk):
+            d = torch.cdist(flat[lo:lo + self.chunk], self.bank)
+            nearest = torch.topk(d, k, dim=1, largest=False).values
+            if exclude_self:  # drop the point itself (distance 0)
+                nearest = nearest[:, 1:]
+            out.append(nearest.mean(1))
+        return torch.cat(out).reshape(z.shape[:-1]) if out else flat.new_zeros(z.shape[:-1])
+
+    @torch.no_grad()
+    def fit(self, features: torch.Tensor) -> "KNNGate":
+        """Store the training features and set the threshold (Eqs. 19-20, leave-one-out)."""
+        if features.shape[0] <= self.k:
+            raise ValueError(f"kNN gate: need more than k={self.k} training features, got {features.shape[0]}")
+        self.bank = features.detach().to(self.bank.dtype).clone()
+        d = self._distances(self.bank, exclude_self=True)
+        self.train_distances = d
+        ordered = torch.sort(d).values
+        index = max(0, math.ceil(self.alpha * len(ordered)) - 1)  # inf{x : F(x) >= alpha}
+        self.threshold = ordered[index].clone()
+        return self
+
+    def distance(self, z: torch.Tensor) -> torch.Tensor:
+        """d_kNN (...,) of features z (..., F)."""
+        return self._distances(z, exclude_self=False)
+
+    def forward(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(d_kNN, in_distribution) for features z (..., F); in_distribution is boolean."""
+        d = self.distance(z.detach())
+        return d, d <= self.threshold
