@@ -171,28 +171,10 @@ class Pipeline:
         t = g["t"]
         dt = schema.NOMINAL_DT
 
-        # step 2: lat/lon -> local
         if latlon:
-            ref = s.reference
-            if ref is None:
-                i = int(np.flatnonzero(np.isfinite(g["gnss_aft_lat"]))[0])
-                ref = (float(g["gnss_aft_lat"][i]), float(g["gnss_aft_lon"][i]))
-            for a in ("fore", "aft"):
-                g[f"gnss_{a}_x"], g[f"gnss_{a}_y"] = geodesy.latlon_to_local(
-                    g[f"gnss_{a}_lat"], g[f"gnss_{a}_lon"], *ref)
-            report["reference_latlon"] = list(ref)
+            self._to_local(g, report)                                     # step 2
         fx, fy, ax, ay = (g[c] for c in ("gnss_fore_x", "gnss_fore_y", "gnss_aft_x", "gnss_aft_y"))
-        poor = np.zeros(len(t), bool)
-        for c in ("gnss_fore_fix", "gnss_aft_fix"):
-            if c in g:
-                q = g[c]
-                poor |= np.isfinite(q) & ~np.isin(q, s.accepted_fix)
-        for a in (fx, fy, ax, ay):
-            a[poor] = np.nan
-        report["fix_rejected"] = int(poor.sum())
-        have = np.isfinite(fx) & np.isfinite(fy) & np.isfinite(ax) & np.isfinite(ay)
-        if not have.any():
-            raise RawLogError(f"{name}: column gnss_fore_x: no GNSS fix in the whole log")
+        self._fix_quality(g, (fx, fy, ax, ay), report)
 
         # step 1 (other channels): interpolate short gaps, mark long ones
         valid = self._fill(t, [g["fog_yaw_rate"]], "fog_yaw_rate", report)
@@ -202,23 +184,7 @@ class Pipeline:
         valid &= self._fill(t, [g["n_prop"]], "n_prop", report)
         valid &= self._fill(t, [g["delta_rudder"]], "delta_rudder", report)
 
-        # step 3: baseline check
-        berr = gnss.baseline_error(fx, fy, ax, ay, lay)
-        passed = gnss.baseline_ok(berr, s.baseline_tolerance)
-        share = passed.sum() / max(1, have.sum())
-        if share < s.min_baseline_pass:
-            raise RawLogError(
-                f"{name}: column gnss_fore_x: antenna distance median "
-                f"{np.nanmedian(berr) + lay.gnss_baseline:.3f} m, nominal {lay.gnss_baseline:.3f} m; "
-                f"only {100 * share:.0f}% of fixes within {s.baseline_tolerance} m "
-                "(check [sensors] gnss_baseline and the antenna columns)")
-        rej_base = have & ~passed
-        report["baseline"] = {
-            "rejected": int(rej_base.sum()),
-            "rejected_t": [round(float(v), 3) for v in t[rej_base]],
-            "error_mean_m": float(np.mean(berr[passed])), "error_std_m": float(np.std(berr[passed])),
-            "error_max_abs_m": float(np.max(np.abs(berr[passed]))),
-            "error_median_all_m": float(np.nanmedian(berr))}
+        passed = self._baseline(t, fx, fy, ax, ay, report)                # step 3
 
         # step 4a: raw heading, swapped-antenna check, FOG units, gating
         psi_g = np.where(passed, gnss.antenna_heading(fx, fy, ax, ay, lay), np.nan)
@@ -232,10 +198,9 @@ class Pipeline:
             psi_g = np.where(passed, gnss.antenna_heading(fx, fy, ax, ay, lay), np.nan)
             repairs.append("fore and aft antennas swapped (heading 180 deg off the course)")
         report["swapped_antennas"] = any("swapped" in r for r in repairs)
-        fog = g["fog_yaw_rate"]
-        psi_fog = cumulative_trapezoid(np.nan_to_num(fog), dx=dt, initial=0.0)
+        psi_fog = cumulative_trapezoid(np.nan_to_num(g["fog_yaw_rate"]), dx=dt, initial=0.0)
         self._check_fog_units(name, psi_fog, psi_g)
-        z, keep, sigma = smoothing.gate_heading(psi_fog, psi_g, dt, s.gate_window,
+        _, keep, sigma = smoothing.gate_heading(psi_fog, psi_g, dt, s.gate_window,
                                                 s.gate_sigma, s.gate_floor)
         rej_gate = passed & ~keep
         report["heading_gate"] = {"rejected": int(rej_gate.sum()),
@@ -243,8 +208,7 @@ class Pipeline:
                                   "gnss_heading_sigma_rad": sigma}
         for a in (fx, fy, ax, ay):
             a[~keep] = np.nan
-        gvalid = self._fill(t, [fx, fy, ax, ay], "gnss", report)
-        valid &= gvalid
+        valid &= self._fill(t, [fx, fy, ax, ay], "gnss", report)
 
         # segments
         segments = []
@@ -270,6 +234,54 @@ class Pipeline:
         report["gaps_interpolated"] = sum(1 for x in report["gaps"] if x["action"] == "interpolated")
         report["gaps_split"] = sum(1 for x in report["gaps"] if x["action"] == "split")
         return Result(segments, report)
+
+    # -- steps 2 and 3 --------------------------------------------------------------------
+    def _to_local(self, g: dict, report: dict) -> None:
+        """Step 2: lat/lon [deg] -> gnss_*_x (north), gnss_*_y (east) [m] in `g`."""
+        ref = self.settings.reference
+        if ref is None:
+            found = np.flatnonzero(np.isfinite(g["gnss_aft_lat"]) & np.isfinite(g["gnss_aft_lon"]))
+            if not len(found):
+                raise RawLogError(f"{report['file']}: column gnss_aft_lat: no GNSS fix in the whole log")
+            ref = (float(g["gnss_aft_lat"][found[0]]), float(g["gnss_aft_lon"][found[0]]))
+        for a in ("fore", "aft"):
+            g[f"gnss_{a}_x"], g[f"gnss_{a}_y"] = geodesy.latlon_to_local(
+                g[f"gnss_{a}_lat"], g[f"gnss_{a}_lon"], *ref)
+        report["reference_latlon"] = list(ref)
+
+    def _fix_quality(self, g: dict, antennas: tuple, report: dict) -> None:
+        """Empty the antenna cells (in place) where a GGA fix quality is not accepted."""
+        poor = np.zeros(len(g["t"]), bool)
+        for c in ("gnss_fore_fix", "gnss_aft_fix"):
+            if c in g:
+                poor |= np.isfinite(g[c]) & ~np.isin(g[c], self.settings.accepted_fix)
+        for a in antennas:
+            a[poor] = np.nan
+        report["fix_rejected"] = int(poor.sum())
+        if not np.all([np.isfinite(a) for a in antennas], axis=0).any():
+            raise RawLogError(f"{report['file']}: column gnss_fore_x: no usable GNSS fix in the whole log")
+
+    def _baseline(self, t, fx, fy, ax, ay, report: dict) -> np.ndarray:
+        """Step 3: True where the antenna distance is within tolerance of the nominal one."""
+        s, lay = self.settings, self.layout
+        have = np.isfinite(fx) & np.isfinite(fy) & np.isfinite(ax) & np.isfinite(ay)
+        berr = gnss.baseline_error(fx, fy, ax, ay, lay)
+        passed = gnss.baseline_ok(berr, s.baseline_tolerance)
+        share = passed.sum() / max(1, have.sum())
+        if share < s.min_baseline_pass:
+            raise RawLogError(
+                f"{report['file']}: column gnss_fore_x: antenna distance median "
+                f"{np.nanmedian(berr) + lay.gnss_baseline:.3f} m, nominal {lay.gnss_baseline:.3f} m; "
+                f"only {100 * share:.0f}% of fixes within {s.baseline_tolerance} m "
+                "(check [sensors] gnss_baseline and the antenna columns)")
+        rejected = have & ~passed
+        report["baseline"] = {
+            "rejected": int(rejected.sum()),
+            "rejected_t": [round(float(v), 3) for v in t[rejected]],
+            "error_mean_m": float(np.mean(berr[passed])), "error_std_m": float(np.std(berr[passed])),
+            "error_max_abs_m": float(np.max(np.abs(berr[passed]))),
+            "error_median_all_m": float(np.nanmedian(berr))}
+        return passed
 
     def _swapped(self, t, psi_g, ax, ay, n_prop) -> bool:
         """Heading ~180 deg off the aft antenna's course while the propeller pushes ahead."""

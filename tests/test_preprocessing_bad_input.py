@@ -193,6 +193,9 @@ def test_cli_failed_file_leaves_no_output(synthetic, tmp_path, capsys):
     processed = pd.read_csv(out / "good.csv")
     assert list(processed.columns)[:3] == ["t [s]", "x_position_mid [m]", "u_velo [m/s]"]
     assert len(processed.columns) == 13
+    from sysid.data import read_run                  # loads straight into training/evaluation
+    loaded = read_run(out / "good.csv")
+    assert len(loaded) == len(processed) and loaded.dt == pytest.approx(1.0)
 
 
 def test_cli_synth_raw_writes_truth(tmp_path, capsys):
@@ -236,3 +239,8 @@ def test_empty_rows_dropped_and_logged(synthetic, raw, tmp_path):
     out = Pipeline(LAYOUT).run(path)
     assert any("empty row" in r for r in out.report["repairs"])
     assert synth.score(out.segments, synthetic.truth)["u"] < 5e-3
+
+
+def test_no_gnss_at_all(raw):
+    raw[["gnss_fore_x [m]", "gnss_aft_x [m]"]] = np.nan
+    assert "no usable GNSS fix" in error_of(raw)
