@@ -17,6 +17,7 @@ app = typer.Typer(add_completion=False, no_args_is_help=True,
 from sysid.cli import mmg_commands  # noqa: E402,F401
 from sysid.cli import report_commands  # noqa: E402,F401
 from sysid.cli import preprocess_commands  # noqa: E402,F401
+from sysid.cli import train_commands  # noqa: E402,F401
 
 
 MULTI_VALUE_OPTIONS = ("--data",)

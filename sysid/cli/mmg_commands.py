@@ -138,6 +138,7 @@ def simulate(
 
 @app.command()
 def evaluate(
+    run_dir: Optional[Path] = typer.Argument(None, help="A run directory (sysid train); omit with --model mmg."),
     data: List[Path] = typer.Option(..., "--data", help="Processed files or directories (repeatable; several may follow one --data)."),
     horizon: List[float] = typer.Option([30.0, 100.0], "--horizon", help="Horizon [s] (repeatable)."),
     output: Path = typer.Option(..., "-o", "--output", help="Metrics CSV."),
@@ -147,19 +148,25 @@ def evaluate(
     set_: Optional[List[str]] = SetOption,
     quadrature: str = QuadratureOption,
 ) -> None:
-    """The protocol's windowed RMSE of u, v_m, r per file and horizon."""
-    if model_kind != "mmg":
-        raise DataError(f"--model {model_kind!r}: choose mmg")
+    """The protocol's windowed RMSE of u, v_m, r per file and horizon (MMG or a trained run)."""
     if integrator not in ("euler", "rk4"):
         raise DataError(f"--integrator {integrator!r}: choose euler or rk4")
     start = time.perf_counter()
-    model = _model(ship, set_, quadrature)
+    if run_dir is not None:
+        from sysid.runs import load_model
+        exp, model = load_model(run_dir)
+        label = f"{exp.experiment.model} run {run_dir}"
+    else:
+        if model_kind != "mmg":
+            raise DataError(f"--model {model_kind!r}: give a run directory for trained models, or --model mmg")
+        model = _model(ship, set_, quadrature)
+        overrides = ", ".join(f"{k}={v:g}" for k, v in model.ship.overrides.items()) or "none"
+        label = f"MMG ({model.ship.name}, overrides: {overrides})"
     files = expand_paths(data)
     runs = [read_run(f) for f in tqdm(files, desc="reading", unit="file", disable=len(files) < 4)]
     table = metrics_table(model, runs, horizon, integrator)
     write_csv(table, output, float_format="%.6g")
     with pd.option_context("display.width", 120, "display.float_format", "{:.5f}".format):
         typer.echo(table.to_string(index=False))
-    overrides = ", ".join(f"{k}={v:g}" for k, v in model.ship.overrides.items()) or "none"
     typer.echo(f"evaluate: {len(runs)} file(s), horizons {', '.join(f'{h:g}' for h in horizon)} s, "
-               f"MMG ({model.ship.name}, overrides: {overrides}) -> {output} ({time.perf_counter() - start:.1f} s)")
+               f"{label} -> {output} ({time.perf_counter() - start:.1f} s)")
