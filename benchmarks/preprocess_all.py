@@ -1,6 +1,6 @@
 """Synthesise raw logs from all public runs, preprocess them, print errors and the time.
 
-    python benchmarks/preprocess_all.py [--jobs 2] [--data DIR] [--seed 0]
+    python benchmarks/preprocess_all.py [--jobs 2] [--data DIR] [--seed 0] [--clean]
 
 Raw logs are synthesised (default noise, `preprocessing.synth.SynthSettings()`) into a
 temporary directory first; the timed part is `preprocessing.pipeline.process_file` over
@@ -30,9 +30,14 @@ BOUNDS = {"psi_deg": 0.3, "u": 0.005, "v": 0.005, "r": 1e-3, "pos": 0.02,
           "wind_speed": 0.05, "wind_dir_deg": 2.0}
 
 
+NOISE_FREE = dict(gnss_noise=0.0, fog_noise=0.0, fog_drift=0.0, anemo_speed_noise=0.0,
+                  anemo_dir_noise=0.0)
+
+
 def _synth_one(args):
-    path, outdir, layout, seed = args
-    res = synth.synthesise(synth.read_processed(path), layout, synth.SynthSettings(seed=seed))
+    path, outdir, layout, seed, clean = args
+    settings = synth.SynthSettings(seed=seed, **(NOISE_FREE if clean else {}))
+    res = synth.synthesise(synth.read_processed(path), layout, settings)
     raw = Path(outdir) / f"{Path(path).stem}.csv"
     res.raw.to_csv(raw, index=False)
     return str(raw), res.truth
@@ -43,6 +48,8 @@ def main() -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--data", default=None, help="dataset root (default: sysid.datasets)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--clean", action="store_true",
+                    help="noise-free raw logs: the method's floor against the public runs' content")
     args = ap.parse_args()
     from sysid.datasets import data_dir
     from sysid.ship import load_ship
@@ -53,7 +60,7 @@ def main() -> int:
         rawdir.mkdir()
         t0 = time.perf_counter()
         with ProcessPoolExecutor(args.jobs) as pool:
-            made = list(pool.map(_synth_one, [(str(f), str(rawdir), layout, args.seed + i)
+            made = list(pool.map(_synth_one, [(str(f), str(rawdir), layout, args.seed + i, args.clean)
                                               for i, f in enumerate(files)]))
         t_synth = time.perf_counter() - t0
         settings = pipeline.PreprocessSettings()
