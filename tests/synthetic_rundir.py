@@ -84,7 +84,9 @@ def _trace(run: Run, horizon: int, model: MMG, kind: str, factor: float | None,
            dataset: str, scenario: str, rng: np.random.Generator) -> pd.DataFrame:
     pred = predict_windows(model, [run], horizon)[0]
     obs = pred.observed
-    predicted = pred.predicted if factor is None else obs + factor * (pred.predicted - obs)
+    diff = pred.predicted - obs
+    diff[..., 4] = torch.atan2(torch.sin(diff[..., 4]), torch.cos(diff[..., 4]))  # heading may wrap
+    predicted = pred.predicted if factor is None else obs + factor * diff
     H, W = predicted.shape[:2]
     with torch.no_grad():
         forces = model(predicted, pred.inputs)

@@ -59,9 +59,9 @@ def ship_size(source: ReportSource) -> tuple[float, float] | None:
         return None
 
 
-def _placeholder(message: str):
+def _placeholder(message: str, into=None):
     from matplotlib.figure import Figure
-    fig = Figure(figsize=(10.0, 2.0), layout="constrained")
+    fig = into if into is not None else Figure(figsize=(10.0, 2.0), layout="constrained")
     fig.text(0.5, 0.5, message, ha="center", va="center", wrap=True)
     return fig
 
@@ -113,12 +113,15 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
         for number, spec in enumerate(plan.figures, 1):
             try:
                 fig = spec.factory()
+                draw = spec.factory
             except Exception as exc:  # noqa: BLE001 - one bad figure must not cost the report
-                notes.append(f"{spec.title}: failed ({type(exc).__name__}: {exc})")
-                fig = _placeholder(f"{spec.title}: not drawn ({type(exc).__name__}: {exc})")
+                message = f"{spec.title}: failed ({type(exc).__name__}: {exc})"
+                notes.append(message)
+                fig = _placeholder(message)
+                draw = lambda into=None, m=message: _placeholder(m, into)  # noqa: E731
             html_figures.append(HtmlFigure(number, spec.key, spec.section, spec.title, spec.caption,
                                            figure_svg(fig, f"f{number}")))
-            pdf.add_figure(fig, f"Figure {number}. {spec.title}. {spec.caption}")
+            pdf.add_figure(draw, tuple(fig.get_size_inches()), f"Figure {number}. {spec.title}. {spec.caption}")
             say(f"figure {number}/{len(plan.figures)}: {spec.title}")
         n_pages = pdf.page
         pdf.close()

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-from matplotlib.figure import Figure
+from matplotlib.figure import Figure, FigureBase
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
@@ -48,6 +48,12 @@ def _measured(frame: pd.DataFrame, column: str, scale: float = 1.0) -> tuple[np.
     return m["t"].to_numpy(), m[column].to_numpy() * scale
 
 
+def _canvas(into: FigureBase | None, size: tuple[float, float]) -> FigureBase:
+    """Draw into `into` (a PDF page's sub-figure) or a new constrained-layout figure of
+    `size` [in]."""
+    return into if into is not None else Figure(figsize=size, layout="constrained")
+
+
 def _legend_top(fig: Figure, handles, ncol: int | None = None) -> None:
     """Figure legend in its own row under the axes (the title stays alone on top)."""
     fig.legend(handles=handles, loc="outside lower center", ncol=ncol or min(len(handles), 6),
@@ -59,10 +65,10 @@ def _model_handles(traces: list[ModelTrace], measured: bool = True, **line) -> l
     return handles + [Line2D([], [], color=t.colour, lw=1.4, label=t.label, **line) for t in traces]
 
 
-def error_boxplots(traces: list[ModelTrace], title: str) -> Figure:
+def error_boxplots(traces: list[ModelTrace], title: str, into: FigureBase | None = None) -> FigureBase:
     """Absolute prediction error of u, v_m [m/s] and r [rad/s] per model (Figs. 3-5):
     boxes = IQR, line = median, diamond = mean, whiskers 1.5 IQR."""
-    fig = Figure(figsize=(10.0, 4.6), layout="constrained")
+    fig = _canvas(into, (10.0, 4.6))
     axes = fig.subplots(1, 3)
     for ax, (col, name, unit) in zip(axes, [("u", "u", "m/s"), ("v", "v_m", "m/s"), ("r", "r", "rad/s")]):
         data = [np.abs(t.frame[f"pred_{col}"] - t.frame[f"obs_{col}"]).to_numpy() for t in traces]
@@ -98,13 +104,13 @@ def _signed_deg(angle_rad: np.ndarray) -> np.ndarray:
     return (np.asarray(angle_rad) * RAD2DEG + 180.0) % 360.0 - 180.0
 
 
-def actuator_wind(traces: list[ModelTrace], start_s: float, title: str) -> Figure:
+def actuator_wind(traces: list[ModelTrace], start_s: float, title: str, into: FigureBase | None = None) -> FigureBase:
     """Propeller speed [rps], rudder angle [deg] and the relative wind speed [m/s] and
     direction [deg] (Figs. 6, 8) in the window starting nearest `start_s`. The relative
     wind of each model is the one seen by its predicted state; "measured" uses the
     recorded state."""
     from sysid.report.wind import measured_relative_wind
-    fig = Figure(figsize=TALL, layout="constrained")
+    fig = _canvas(into, TALL)
     axes = fig.subplots(4, 1, sharex=True)
     first = _window(traces[0].frame, start_s)
     t = first["t"].to_numpy()
@@ -129,10 +135,10 @@ def actuator_wind(traces: list[ModelTrace], start_s: float, title: str) -> Figur
     return fig
 
 
-def state_timeseries(traces: list[ModelTrace], start_s: float, title: str) -> Figure:
+def state_timeseries(traces: list[ModelTrace], start_s: float, title: str, into: FigureBase | None = None) -> FigureBase:
     """Heading ψ [deg], u, v_m [m/s] and r [deg/s] predicted by each model against the
     measurement in the window starting nearest `start_s` (Figs. 7, 9)."""
-    fig = Figure(figsize=TALL, layout="constrained")
+    fig = _canvas(into, TALL)
     axes = fig.subplots(4, 1, sharex=True)
     rows = [("psi", "ψ [deg]", RAD2DEG), ("u", "u [m/s]", 1.0), ("v", "v_m [m/s]", 1.0),
             ("r", "r [deg/s]", RAD2DEG)]
@@ -171,16 +177,19 @@ def _outline_at(outline: np.ndarray, x: float, y: float, psi: float) -> tuple[np
     return east, north
 
 
-def trajectories(traces: list[ModelTrace], L: float, B: float, title: str) -> Figure:
+def trajectories(traces: list[ModelTrace], L: float, B: float, title: str, into: FigureBase | None = None) -> FigureBase:
     """Earth-frame trajectories (x0 north, y0 east [m]) of each model's windows against the
     measured track, with the ship's outline every `interval` seconds (Figs. 10-12)."""
     n = len(traces)
-    cols = min(n, 2) if n > 1 else 1
+    measured = traces[0].frame.drop_duplicates("t").sort_values("t")
+    east = np.concatenate([measured["obs_y"].to_numpy()] + [t.frame["pred_y"].to_numpy() for t in traces])
+    north = np.concatenate([measured["obs_x"].to_numpy()] + [t.frame["pred_x"].to_numpy() for t in traces])
+    tall = np.ptp(north) > 1.3 * np.ptp(east)
+    cols = n if tall else (min(n, 2) if n > 1 else 1)  # tall tracks side by side
     rows = math.ceil(n / cols)
-    fig = Figure(figsize=(10.0, 3.6 * rows + 0.8), layout="constrained")
+    fig = _canvas(into, (10.0, 5.4 if tall else 3.6 * rows + 0.8))
     axes = np.atleast_1d(fig.subplots(rows, cols)).ravel()
     outline = ship_outline(L, B)
-    measured = traces[0].frame.drop_duplicates("t").sort_values("t")
     duration = float(measured["t"].iloc[-1] - measured["t"].iloc[0])
     interval = max(10.0, 10.0 * round(duration / 20.0 / 10.0))
     for ax, tr in zip(axes, traces):
@@ -195,8 +204,6 @@ def trajectories(traces: list[ModelTrace], L: float, B: float, title: str) -> Fi
                 e, nn = _outline_at(outline, row.obs_x, row.obs_y, row.obs_psi)
                 ax.plot(e, nn, color=MEASURED, lw=0.6, alpha=0.7)
         ax.set_title(tr.label, fontsize=9)
-    east = np.concatenate([measured["obs_y"].to_numpy()] + [t.frame["pred_y"].to_numpy() for t in traces])
-    north = np.concatenate([measured["obs_x"].to_numpy()] + [t.frame["pred_x"].to_numpy() for t in traces])
     pad = 0.6 * L
     for ax in axes[:n]:  # same limits in every panel (equal aspect, boxes sized to the limits)
         ax.set_xlim(np.nanmin(east) - pad, np.nanmax(east) + pad)
@@ -230,10 +237,10 @@ def _spans(t: np.ndarray, flag: np.ndarray) -> list[tuple[float, float]]:
     return spans
 
 
-def knn_distance(trace: ModelTrace, threshold: float | None, title: str) -> Figure:
+def knn_distance(trace: ModelTrace, threshold: float | None, title: str, into: FigureBase | None = None) -> FigureBase:
     """kNN distance [-] of the hybrid model's inputs at each step, the gate threshold and
     the periods judged out of distribution (FNN off) shaded (Figs. 13-16)."""
-    fig = Figure(figsize=(10.0, 3.8), layout="constrained")
+    fig = _canvas(into, (10.0, 3.8))
     ax = fig.subplots()
     frame = trace.frame.sort_values(["window", "t_rel"])
     t, d = _broken(frame, "knn_distance")
@@ -257,10 +264,10 @@ def knn_distance(trace: ModelTrace, threshold: float | None, title: str) -> Figu
 AXES = [("X", "X [N]"), ("Y", "Y [N]"), ("N", "N [N m]")]
 
 
-def force_components(trace: ModelTrace, title: str) -> Figure:
+def force_components(trace: ModelTrace, title: str, into: FigureBase | None = None) -> FigureBase:
     """Hull, propeller, rudder, wind and FNN forces X, Y [N] and moment N [N m] along the
     predictions (Figs. 17, 19); windows are joined with gaps."""
-    fig = Figure(figsize=TALL, layout="constrained")
+    fig = _canvas(into, TALL)
     axes = fig.subplots(3, 1, sharex=True)
     keys = [k for k in ("H", "P", "R", "A", "NN") if np.nanmax(np.abs(trace.frame[[f"X{k}", f"Y{k}", f"N{k}"]].to_numpy())) > 0]
     for ax, (axis, label) in zip(axes, AXES):
@@ -276,9 +283,9 @@ def force_components(trace: ModelTrace, title: str) -> Figure:
     return fig
 
 
-def force_models(trace: ModelTrace, title: str) -> Figure:
+def force_models(trace: ModelTrace, title: str, into: FigureBase | None = None) -> FigureBase:
     """F_MMG (H + P + R + A), F_NN and their sum for X, Y [N] and N [N m] (Figs. 18, 20)."""
-    fig = Figure(figsize=TALL, layout="constrained")
+    fig = _canvas(into, TALL)
     axes = fig.subplots(3, 1, sharex=True)
     frame = trace.frame.copy()
     for axis, _ in AXES:
@@ -299,11 +306,11 @@ def force_models(trace: ModelTrace, title: str) -> Figure:
     return fig
 
 
-def fnn_error_scatter(groups: list[tuple[str, str, pd.DataFrame]], title: str) -> Figure:
+def fnn_error_scatter(groups: list[tuple[str, str, pd.DataFrame]], title: str, into: FigureBase | None = None) -> FigureBase:
     """|F_NN| against the absolute velocity prediction error (Fig. 21): |X_NN| [N] vs |u|
     error [m/s], |Y_NN| [N] vs v_m error [m/s], |N_NN| [N m] vs r error [rad/s]; `groups`
     are (label, colour, pooled trace frame)."""
-    fig = Figure(figsize=(10.0, 4.2), layout="constrained")
+    fig = _canvas(into, (10.0, 4.2))
     axes = fig.subplots(1, 3)
     pairs = [("X", "u", "|X_NN| [N]", "|error of u| [m/s]"), ("Y", "v", "|Y_NN| [N]", "|error of v_m| [m/s]"),
              ("N", "r", "|N_NN| [N m]", "|error of r| [rad/s]")]
@@ -319,10 +326,10 @@ def fnn_error_scatter(groups: list[tuple[str, str, pd.DataFrame]], title: str) -
     return fig
 
 
-def loss_curves(histories: list[tuple[str, str, pd.DataFrame, int | None]], title: str) -> Figure:
+def loss_curves(histories: list[tuple[str, str, pd.DataFrame, int | None]], title: str, into: FigureBase | None = None) -> FigureBase:
     """Training (solid) and validation (dashed) loss [-] per epoch, log scale; the best
     epoch is marked. `histories` are (label, colour, history frame, best epoch)."""
-    fig = Figure(figsize=(10.0, 4.6), layout="constrained")
+    fig = _canvas(into, (10.0, 4.6))
     ax = fig.subplots()
     for label, colour, hist, best in histories:
         ax.plot(hist["epoch"], hist["train_loss"], color=colour, lw=1.3)

@@ -8,10 +8,11 @@ from __future__ import annotations
 import textwrap
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 from matplotlib import rc_context
 from matplotlib.backends.backend_pdf import PdfPages
-from matplotlib.figure import Figure
+from matplotlib.figure import Figure, FigureBase
 from matplotlib.patches import Rectangle
 
 from sysid.report.tables import RmseTable
@@ -165,23 +166,20 @@ class PdfReport:
                  fontsize=7.5, color="#333", wrap=True)
         self._save(fig)
 
-    def add_figure(self, fig: Figure, caption: str) -> None:
-        """A report figure on an A4 page: resized to the page width (aspect kept, at most
-        the page height), caption below it."""
-        w, h = fig.get_size_inches()
+    def add_figure(self, draw: Callable[..., FigureBase], size: tuple[float, float], caption: str) -> None:
+        """A report figure on an A4 page: `draw(into=subfigure)` redraws it into the page's
+        content box (page width, the aspect of its own `size` [in] kept up to the page
+        height), the caption below it."""
+        w, h = size
         content_w = PAGE[0] - 2 * MARGIN
         content_h = min(PAGE[1] - 2 * MARGIN - 0.9, content_w * h / w)
-        fig.set_size_inches(*PAGE)
-        engine = fig.get_layout_engine()
-        bottom = PAGE[1] - MARGIN - content_h
-        rect = (MARGIN / PAGE[0], bottom / PAGE[1], content_w / PAGE[0], content_h / PAGE[1])
-        if engine is not None:
-            engine.set(rect=rect)
-        for legend in fig.legends:  # figure legends sit at the content's bottom, above the caption
-            legend.set_bbox_to_anchor((0.5, bottom / PAGE[1]), transform=fig.transFigure)
-        fig.text(MARGIN / PAGE[0], (bottom - 0.2) / PAGE[1], "\n".join(textwrap.wrap(caption, 170)),
-                 fontsize=8.5, va="top")
-        self._save(fig)
+        page = Figure(figsize=PAGE, layout="constrained")
+        boxes = page.subfigures(3, 3, width_ratios=[MARGIN, content_w, MARGIN],
+                                height_ratios=[MARGIN, content_h, PAGE[1] - MARGIN - content_h])
+        draw(into=boxes[1, 1])
+        boxes[2, 1].text(0.0, 0.85, "\n".join(textwrap.wrap(caption, 170)), fontsize=8.5, va="top",
+                         transform=boxes[2, 1].transSubfigure)
+        self._save(page)
 
     def close(self) -> None:
         self._pdf.close()

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import pandas as pd
-from matplotlib.figure import Figure
+from matplotlib.figure import FigureBase
 
 from sysid.report import figures as F
 from sysid.report.palette import model_colour, model_label
@@ -29,7 +29,7 @@ class FigureSpec:
     section: str
     title: str
     caption: str
-    factory: Callable[[], Figure]
+    factory: Callable[..., FigureBase]  # factory(into=None): into a sub-figure or a new figure
 
 
 @dataclass
@@ -95,7 +95,7 @@ def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> 
         add(f"box_{scenario}", "Prediction errors", f"Absolute error, {scenario}, {short} s predictions",
             f"Absolute errors of u, v_m and r pooled over every point of every {short} s window of the "
             f"{scenario} test, per model (cf. the paper's Figs. 3-5)." if traces else "no traces in the source",
-            lambda t=traces, s=scenario: F.error_boxplots(t, f"Absolute error, {s} ({short} s predictions)"),
+            lambda into=None, t=traces, s=scenario: F.error_boxplots(t, f"Absolute error, {s} ({short} s predictions)", into=into),
             traces)
     # Figs. 6-9: actuator/wind and state time series
     for scenario, start in [(s, t0) for s, t0 in SERIES_WINDOWS if s in scenarios] or \
@@ -107,12 +107,12 @@ def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> 
             f"starting nearest {start:.0f} s{trained_on}; each model's relative wind follows its own "
             "predicted state, 'measured' uses the recorded state (cf. Figs. 6, 8)." if traces
             else "no traces in the source",
-            lambda t=traces, s=scenario, a=start, sp=span: F.actuator_wind(t, a, f"Actuator and relative wind state, {s} ({sp})"),
+            lambda into=None, t=traces, s=scenario, a=start, sp=span: F.actuator_wind(t, a, f"Actuator and relative wind state, {s} ({sp})", into=into),
             traces)
         add(f"states_{scenario}", "Time series", f"Heading and velocities, {scenario}, {span}",
             f"Heading ψ and velocities u, v_m, r predicted over the {long} s window of the {scenario} test "
             f"against the measurement{trained_on} (cf. Figs. 7, 9)." if traces else "no traces in the source",
-            lambda t=traces, s=scenario, a=start, sp=span: F.state_timeseries(t, a, f"Attitude and velocity, {s} ({sp})"),
+            lambda into=None, t=traces, s=scenario, a=start, sp=span: F.state_timeseries(t, a, f"Attitude and velocity, {s} ({sp})", into=into),
             traces)
     # Figs. 10-12: trajectories
     for scenario in _pick(TRAJECTORY_SCENARIOS, scenarios):
@@ -123,7 +123,7 @@ def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> 
             f"Earth-frame track of the {scenario} test and every {long} s window predicted from the recorded "
             f"start state{trained_on}; outlines of the {L:g} m x {B:g} m ship at fixed intervals "
             "(cf. Figs. 10-12)." if ok else ("no traces in the source" if not traces else "ship dimensions unknown"),
-            lambda t=traces, s=scenario: F.trajectories(t, L, B, f"Trajectory prediction, {s} ({long} s windows)"),
+            lambda into=None, t=traces, s=scenario: F.trajectories(t, L, B, f"Trajectory prediction, {s} ({long} s windows)", into=into),
             ok)
     # Figs. 13-16: kNN distance
     if not hybrids:
@@ -140,8 +140,8 @@ def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> 
                 + ("" if threshold is not None else " (not recorded in summary.json or knn.pt)")
                 + "; shaded: steps judged out of distribution, FNN switched off (cf. Figs. 13-16)." if ok
                 else "the trace has no kNN distances",
-                lambda r=run, f=frame, s=scenario, th=threshold: F.knn_distance(
-                    F.ModelTrace(_label(r), _colour(r), f), th, f"kNN distance and OOD detection, {s} ({_label(r)})"),
+                lambda into=None, r=run, f=frame, s=scenario, th=threshold: F.knn_distance(
+                    F.ModelTrace(_label(r), _colour(r), f), th, f"kNN distance and OOD detection, {s} ({_label(r)})", into=into),
                 ok)
     # Figs. 17-20: forces
     force_run = next((r for r in hybrids if r.dataset == fig_dataset), hybrids[0] if hybrids else None)
@@ -153,15 +153,15 @@ def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> 
         add(f"forces_{scenario}", "Forces", f"Forces by module, {scenario}, {label}",
             f"Hull (H), propeller (P), rudder (R), wind (A) and FNN (NN) forces and moment along the {long} s "
             f"predictions of the {scenario} test, {label} (cf. Figs. 17, 19)." if ok else "no trace in the source",
-            lambda f=frame, s=scenario: F.force_components(
-                F.ModelTrace(label, _colour(force_run), f), f"External forces by module, {s} ({label})"),
+            lambda into=None, f=frame, s=scenario: F.force_components(
+                F.ModelTrace(label, _colour(force_run), f), f"External forces by module, {s} ({label})", into=into),
             ok)
         if force_run.model == "hybrid":
             add(f"force_models_{scenario}", "Forces", f"F_MMG, F_NN and their sum, {scenario}, {label}",
                 f"MMG forces (H + P + R + A), the FNN correction and their sum along the {long} s predictions "
                 f"of the {scenario} test, {label} (cf. Figs. 18, 20)." if ok else "no trace in the source",
-                lambda f=frame, s=scenario: F.force_models(
-                    F.ModelTrace(label, _colour(force_run), f), f"External forces by internal model, {s} ({label})"),
+                lambda into=None, f=frame, s=scenario: F.force_models(
+                    F.ModelTrace(label, _colour(force_run), f), f"External forces by internal model, {s} ({label})", into=into),
                 ok)
     # Fig. 21: |F_NN| vs velocity error
     groups = []
@@ -174,7 +174,7 @@ def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> 
         add("fnn_scatter", "Forces", "|F_NN| against velocity prediction error",
             f"Magnitude of the FNN correction against the absolute velocity error at every point of the "
             f"{short} s predictions of all test scenarios (cf. Fig. 21)." if groups else "no traces in the source",
-            lambda g=groups: F.fnn_error_scatter(g, "|F_NN| and absolute velocity prediction error"),
+            lambda into=None, g=groups: F.fnn_error_scatter(g, "|F_NN| and absolute velocity prediction error", into=into),
             groups)
     # loss curves
     histories = [(_label(r), _colour(r, i), r.history, r.summary.get("best_epoch"))
@@ -182,7 +182,7 @@ def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> 
     if histories:
         add("loss", "Training", "Training and validation loss",
             "Training (solid) and validation (dashed) loss per epoch of every trained model; star: the "
-            "epoch whose weights were kept.", lambda h=histories: F.loss_curves(h, "Training and validation loss"),
+            "epoch whose weights were kept.", lambda into=None, h=histories: F.loss_curves(h, "Training and validation loss", into=into),
             True)
     else:
         plan.notes.append("Loss curves: skipped, no run has a history.csv (MMG-only runs are not trained)")
