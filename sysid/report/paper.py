@@ -4,6 +4,8 @@ Copied from shared/spec/paper_tables_7_8.csv. MMG rows are independent of the da
 """
 from __future__ import annotations
 
+import re
+
 import pandas as pd
 
 _ROWS = {  # scenario -> model -> (D1 30 s, D2 30 s, D1 100 s, D2 100 s), each (u, v_m, r)
@@ -32,6 +34,14 @@ _ROWS = {  # scenario -> model -> (D1 30 s, D2 30 s, D1 100 s, D2 100 s), each (
         "NN": [(.0340, .0182, .0086), (.0164, .0062, .0055), (.0373, .0273, .0082), (.0138, .0079, .0070)],
         "Hybrid": [(.0199, .0109, .0063), (.0149, .0071, .0034), (.0230, .0148, .0086), (.0126, .0086, .0041)]},
 }
+def scenario_key(name: str) -> str:
+    """Spelling-independent scenario key: "Turning 20°", "turning 20 test" and "Turning 20"
+    all give "turning20"; "Zigzag 20°/20°" gives "zigzag20/20"."""
+    name = name.lower().replace("maneuver", "").replace("manoeuvre", "").replace("test", "")
+    return re.sub(r"[^a-z0-9/]", "", name)
+
+
+_BY_KEY = {scenario_key(k): k for k in _ROWS}
 _CELLS = [("D1", 30), ("D2", 30), ("D1", 100), ("D2", 100)]
 PAPER_MODELS = {"mmg": "MMG", "nn": "NN", "hybrid": "Hybrid"}
 
@@ -40,7 +50,7 @@ def paper_rmse(scenario: str, kind: str, dataset: str, horizon_s: float) -> tupl
     """The paper's (u, v_m, r) RMSE for a scenario, model kind ("mmg", "nn", "hybrid"),
     data set and horizon [s]; None when the paper has no such cell (held-out files, ...)."""
     model = PAPER_MODELS.get(kind)
-    rows = _ROWS.get(scenario, {}).get(model)
+    rows = _ROWS.get(_BY_KEY.get(scenario_key(scenario), scenario), {}).get(model)
     if rows is None:
         return None
     if kind == "mmg" and dataset not in ("D1", "D2"):

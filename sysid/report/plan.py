@@ -14,6 +14,7 @@ from matplotlib.figure import FigureBase
 
 from sysid.report import figures as F
 from sysid.report.palette import model_colour, model_label
+from sysid.report.paper import scenario_key
 from sysid.report.source import ReportSource, RunRecord
 
 BOX_SCENARIOS = ["Turning 20", "Zigzag 30/30", "Random"]                 # Figs. 3-5
@@ -47,9 +48,14 @@ def _colour(run: RunRecord, index: int = 0) -> str:
 
 
 def _pick(preferred: list[str], available: list[str]) -> list[str]:
-    """The preferred scenarios the source has, else its first scenario."""
-    found = [s for s in preferred if s in available]
-    return found or available[:1]
+    """The preferred scenarios the source has (any spelling), else its first scenario."""
+    found = [_find(s, available) for s in preferred]
+    return [s for s in found if s is not None] or available[:1]
+
+
+def _find(scenario: str, available: list[str]) -> str | None:
+    """The source's spelling of `scenario`, or None."""
+    return next((s for s in available if scenario_key(s) == scenario_key(scenario)), None)
 
 
 def _horizon(runs: list[RunRecord], wanted: int, short: bool) -> int | None:
@@ -98,8 +104,8 @@ def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> 
             lambda into=None, t=traces, s=scenario: F.error_boxplots(t, f"Absolute error, {s} ({short} s predictions)", into=into),
             traces)
     # Figs. 6-9: actuator/wind and state time series
-    for scenario, start in [(s, t0) for s, t0 in SERIES_WINDOWS if s in scenarios] or \
-            [(s, 0.0) for s in scenarios[:1]]:
+    series = [(_find(s, scenarios), t0) for s, t0 in SERIES_WINDOWS if _find(s, scenarios)]
+    for scenario, start in series or [(s, 0.0) for s in scenarios[:1]]:
         traces = _traces(compared, scenario, long) if long else []
         span = f"{start:.0f}-{start + long:.0f} s" if long else ""
         add(f"inputs_{scenario}", "Time series", f"Actuators and relative wind, {scenario}, {span}",

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from sysid.report.palette import KIND_LABELS, MODEL_COLOURS, model_colour, model_label
-from sysid.report.paper import paper_rmse
+from sysid.report.paper import paper_rmse, scenario_key
 from sysid.report.source import ReportSource, RunRecord
 
 COMPONENTS = ("u", "v_m", "r")
@@ -108,9 +108,10 @@ def run_rmse(run: RunRecord) -> dict[tuple[str, int], tuple[float, float, float]
 
 
 def _scenario_order(labels) -> list[str]:
+    """The paper's order first (any spelling), then the others (held-out files) as found."""
     labels = list(dict.fromkeys(labels))
-    known = [s for s in PAPER_ORDER if s in labels]
-    return known + [s for s in labels if s not in known]
+    rank = {scenario_key(s): i for i, s in enumerate(PAPER_ORDER)}
+    return sorted(labels, key=lambda s: rank.get(scenario_key(s), len(rank)))
 
 
 def _paper_scenario(label: str) -> str:
