@@ -160,6 +160,15 @@ def implied_residual(model: CorrectedModel, windows: WindowSet, pairs: int = 2
     return s, need - f_mmg, f_mmg
 
 
+def output_penalty(f_nn: torch.Tensor, f_mmg: torch.Tensor, w_F: torch.Tensor, band: float = 0.2) -> torch.Tensor:
+    """Eq. (17): w_F^T (|F_NN| - band |F_MMG|)^+ per sample, (..., 3) -> (...).
+
+    Zero while every component of F_NN stays within `band` (20 %) of the MMG force's
+    magnitude; grows linearly outside. w_F (3,) scales X [1/N], Y [1/N], N [1/(N m)].
+    """
+    return (torch.relu(f_nn.abs() - band * f_mmg.abs()) * w_F).sum(-1)
+
+
 class Trainer:
     """Fits an MMG-only (optionally identified), NN-only or hybrid model to processed runs.
 
@@ -192,8 +201,7 @@ class Trainer:
             return loss_v, loss_v.new_zeros(())
         f_nn = torch.stack([r.correction for r in record])
         f_mmg = torch.stack([r.mmg for r in record])
-        loss_F = (torch.relu(f_nn.abs() - 0.2 * f_mmg.abs()) * w_F).sum(-1).mean()
-        return loss_v, loss_F
+        return loss_v, output_penalty(f_nn, f_mmg, w_F).mean()
 
     def _l2(self, model) -> torch.Tensor:
         net = getattr(model, "correction_net", None)

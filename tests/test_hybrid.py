@@ -1,0 +1,182 @@
+"""Hybrid identification: penalty, kNN gate, run artefacts, training on a synthetic ship
+with a known added force (ground truth)."""
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from sysid import MMG, integrate, load_ship
+from sysid.correction import ForceCorrection
+from sysid.data import Run
+from sysid.errors import CheckpointError, ConfigError
+from sysid.experiment import load_experiment, parse_experiment
+from sysid.models import CorrectedModel
+from sysid.ood import KNNGate
+from sysid.runs import evaluate_model, load_model, write_run
+from sysid.train import Trainer, output_penalty
+
+ADDED_FORCE = torch.tensor([-1.5, 0.8, -0.6], dtype=torch.float64)  # X [N], Y [N], N [N m], body frame
+
+
+class ShipWithAddedForce(torch.nn.Module):
+    """The 'true' ship: our MMG plus a constant unmodelled body-frame force."""
+
+    def __init__(self):
+        super().__init__()
+        self.mmg = MMG(load_ship("esso_osaka"))
+
+    @property
+    def coefficients(self):
+        return self.mmg.coefficients
+
+    def forward(self, state, inputs):
+        f = self.mmg(state, inputs)
+        f.correction = ADDED_FORCE.expand_as(f.hull)
+        return f
+
+
+def synthetic_runs(n_runs=4, seconds=240, seed=0):
+    """1 Hz runs simulated at 0.1 s (RK4) with piecewise-constant random rudder and propeller."""
+    rng = np.random.default_rng(seed)
+    truth = ShipWithAddedForce()
+    runs = []
+    for k in range(n_runs):
+        steps = seconds * 10 + 1
+        hold = 150  # 15 s between command changes
+        n_cmd = rng.uniform(6, 14, steps // hold + 1).repeat(hold)[:steps]
+        d_cmd = np.radians(rng.uniform(-30, 30, steps // hold + 1)).repeat(hold)[:steps]
+        inputs = np.stack([n_cmd, d_cmd, np.full(steps, 1.5), np.full(steps, 1.0)], -1)
+        x0 = torch.tensor([0.0, 0.3, 0.0, 0.0, rng.uniform(-3, 3), 0.0], dtype=torch.float64)
+        with torch.no_grad():
+            states = integrate(truth, x0, torch.tensor(inputs), 0.1, "rk4").numpy()
+        sel = slice(0, steps, 10)
+        t = np.arange(steps)[sel] * 0.1
+        runs.append(Run(f"synthetic_{k}", Path(f"synthetic_{k}.csv"), t, states[sel], inputs[sel],
+                        np.zeros((len(t), 2)), 1.0))
+    return runs
+
+
+def small_experiment(**training):
+    opts = {"epochs": 2, "batch_size": 64, "warm_start_epochs": 40, "max_minutes": 2.0, **training}
+    return parse_experiment({"experiment": {"model": "hybrid", "dataset": "D2", "name": "synthetic"},
+                             "data": {"exclude_suspect": False},
+                             "training": opts, "gate": {"k": 5}})
+
+
+@pytest.fixture(scope="module")
+def trained():
+    runs = synthetic_runs()
+    trainer = Trainer(small_experiment(), progress=False, log=lambda m: None).fit(runs)
+    return runs, trainer
+
+
+def test_penalty_is_zero_inside_the_band_and_grows_outside():
+    f_mmg = torch.tensor([[10.0, -20.0, 5.0]])
+    w = torch.tensor([1.0, 0.5, 2.0])
+    inside = torch.tensor([[1.99, 3.9, -0.99]])  # |F_NN| < 0.2 |F_MMG| componentwise
+    assert float(output_penalty(inside, f_mmg, w)) == 0.0
+    just = torch.tensor([[2.0, -4.0, 1.0]])
+    assert float(output_penalty(just, f_mmg, w)) == 0.0
+    out1 = torch.tensor([[3.0, 0.0, 0.0]])
+    out2 = torch.tensor([[-4.0, 0.0, 0.0]])
+    assert float(output_penalty(out1, f_mmg, w)) == pytest.approx(1.0)
+    assert float(output_penalty(out2, f_mmg, w)) == pytest.approx(2.0)  # linear growth, sign-blind
+    both = torch.tensor([[3.0, 6.0, 2.0]])
+    assert float(output_penalty(both, f_mmg, w)) == pytest.approx(1.0 + 0.5 * 2.0 + 2.0 * 1.0)
+
+
+def test_knn_threshold_is_the_alpha_quantile_of_leave_one_out_distances():
+    g = torch.Generator().manual_seed(3)
+    feats = torch.randn(500, 8, generator=g, dtype=torch.float64)
+    gate = KNNGate(k=10, alpha=0.95, features=8, dtype=torch.float64).fit(feats)
+    d = np.linalg.norm(feats.numpy()[:, None] - feats.numpy()[None], axis=-1)
+    np.fill_diagonal(d, np.inf)
+    loo = np.sort(d, axis=1)[:, :10].mean(1)
+    np.testing.assert_allclose(gate.train_distances.numpy(), loo, rtol=1e-10)
+    expected = np.quantile(loo, 0.95, method="inverted_cdf")  # inf{x : F(x) >= alpha}
+    assert float(gate.threshold) == pytest.approx(expected, rel=1e-12)
+    assert (gate.train_distances <= gate.threshold).double().mean() >= 0.95
+    # a query's distance is the mean over its k nearest bank points
+    q = feats[:3] + 0.01
+    dq = np.sort(np.linalg.norm(q.numpy()[:, None] - feats.numpy()[None], axis=-1), axis=1)[:, :10].mean(1)
+    np.testing.assert_allclose(gate.distance(q).numpy(), dq, rtol=1e-10)
+
+
+def test_gate_returns_the_mmg_force_exactly_far_outside(trained):
+    runs, trainer = trained
+    model = trainer.model_.double()
+    state = torch.tensor([[0.0, 0.3, 0.0, 0.01, 0.5, 0.01], [0.0, 4.0, 0.0, 2.5, 0.5, 0.8]], dtype=torch.float64)
+    inputs = torch.tensor([[10.0, 0.2, 1.5, 1.0], [-30.0, -0.6, 15.0, 4.0]], dtype=torch.float64)
+    f = model(state, inputs)
+    assert bool(f.gate_on[0]) and not bool(f.gate_on[1])
+    assert float(f.ood_distance[1]) > float(model.gate.threshold)
+    assert torch.equal(f.total[1], model.mmg(state, inputs).mmg[1])  # exactly F_MMG
+    assert float(f.correction[0].detach().abs().sum()) > 0
+
+
+def test_two_epochs_on_a_synthetic_ship_recover_the_added_force(trained):
+    runs, trainer = trained
+    info, hist = trainer.info_, trainer.history_
+    train_hist = hist[hist.stage == "train"]
+    assert len(train_hist) == 2
+    assert train_hist.val_loss.iloc[-1] < info["mmg_val_loss"] * 0.5  # far better than MMG alone
+    model = trainer.model_.double()
+    states = torch.tensor(np.concatenate([r.states for r in runs]))
+    inputs = torch.tensor(np.concatenate([r.inputs for r in runs]))
+    with torch.no_grad():
+        f_nn = model(states, inputs).correction.mean(0)
+    assert torch.equal(torch.sign(f_nn), torch.sign(ADDED_FORCE))
+    np.testing.assert_allclose(f_nn.numpy(), ADDED_FORCE.numpy(), rtol=0.35)
+
+
+def test_saved_run_reloads_to_identical_predictions(trained, tmp_path):
+    runs, trainer = trained
+    model = trainer.model_.double()
+    exp = small_experiment()
+    evaluation = evaluate_model(model, runs[:2], [30.0])
+    write_run(tmp_path / "run", exp, model, evaluation, trainer.history_, dict(trainer.info_))
+    for name in ("config.toml", "model.pt", "knn.pt", "standardization.json", "history.csv", "metrics.csv", "summary.json"):
+        assert (tmp_path / "run" / name).is_file(), name
+    assert len(list((tmp_path / "run" / "traces").glob("*.csv"))) == 2
+    _, reloaded = load_model(tmp_path / "run")
+    again = evaluate_model(reloaded, runs[:2], [30.0])
+    np.testing.assert_array_equal(again.metrics[["rmse_u", "rmse_v", "rmse_r"]].to_numpy(),
+                                  evaluation.metrics[["rmse_u", "rmse_v", "rmse_r"]].to_numpy())
+    for name, frame in evaluation.traces.items():
+        np.testing.assert_array_equal(again.traces[name].to_numpy(), frame.to_numpy())
+
+    # a corrupt run directory gives one clear error naming the file
+    (tmp_path / "run" / "model.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(CheckpointError, match=r"model.pt: cannot be loaded safely"):
+        load_model(tmp_path / "run")
+    (tmp_path / "run" / "model.pt").unlink()
+    with pytest.raises(CheckpointError, match=r"model.pt: missing"):
+        load_model(tmp_path / "run")
+    with pytest.raises(CheckpointError, match="run directory not found"):
+        load_model(tmp_path / "nowhere")
+
+
+@pytest.mark.parametrize("text, message", [
+    ("[experiment]\nmodel = 'lstm'\n", "model = 'lstm': choose one of mmg, nn, hybrid"),
+    ("[experiment]\nmodel = 'hybrid'\n[training]\nepochs = 'many'\n", r"\[training\] epochs: expected an integer"),
+    ("[experiment]\nmodel = 'hybrid'\n[training]\nlearning_rat = 0.1\n", r"\[training\] unknown key 'learning_rat'"),
+    ("[experiment]\nmodel = 'hybrid'\n[gate]\nalpha = 1.5\n", r"\[gate\] alpha must be in \(0, 1\)"),
+    ("[experiment]\nmodel = 'hybrid'\n[identify]\nparameters = ['X_zz']\n", "unknown ship parameter 'X_zz'"),
+    ("[experiment\nmodel = 'hybrid'\n", "not valid TOML"),
+    ("[experimnt]\nmodel = 'hybrid'\n", r"unknown section\(s\) \['experimnt'\]"),
+])
+def test_bad_configs_give_one_clear_error(tmp_path, text, message):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=message):
+        load_experiment(path)
+
+
+def test_paper_configs_are_valid():
+    root = Path(__file__).resolve().parents[1] / "configs" / "experiments"
+    names = {p.stem for p in root.glob("*.toml")}
+    assert {"mmg_paper", "mmg_lab", "nn_D1", "nn_D2", "hybrid_D1", "hybrid_D2"} <= names
+    for path in root.glob("*.toml"):
+        load_experiment(path)
