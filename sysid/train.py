@@ -275,11 +275,11 @@ class Trainer:
         history: list[dict] = []
         info: dict = {"n_train_windows": len(train), "n_val_windows": len(val), "split": report}
         if identify:
-            info["identified_initial"] = {k: float(getattr(mmg.coefficients, k)) for k in identify}
+            info["identified_initial"] = {k: float(getattr(mmg.coefficients, k).detach()) for k in identify}
         if identify and (kind == "mmg" or not joint):
             history += self._optimize(mmg, list(mmg.parameters()), train, val, w_v, None, False,
                                       exp.identify.epochs, exp.identify.learning_rate, "identify", deadline)
-            info["identified"] = {k: float(getattr(mmg.coefficients, k)) for k in identify}
+            info["identified"] = {k: float(getattr(mmg.coefficients, k).detach()) for k in identify}
             self.log("identified: " + ", ".join(f"{k} = {v:.5g}" for k, v in info["identified"].items()))
             if not joint:
                 for p in mmg.parameters():
@@ -325,7 +325,7 @@ class Trainer:
                                   t.epochs, t.learning_rate, "train", deadline)
         info["best_epoch"] = self.best_epoch_
         if identify and joint:
-            info["identified"] = {k: float(getattr(mmg.coefficients, k)) for k in identify}
+            info["identified"] = {k: float(getattr(mmg.coefficients, k).detach()) for k in identify}
         # kNN gate on the final features of the training samples
         if exp.gate.enabled:
             with torch.no_grad():
