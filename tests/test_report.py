@@ -193,3 +193,28 @@ def test_cli_report(tmp_path, small_runs, capsys):
         main(["report", str(tmp_path / "nope"), "-o", str(tmp_path / "r2")])
     assert exit_info.value.code == 2
     assert "nope: no such directory" in capsys.readouterr().err
+
+
+def test_preprocessing_quality_report(tmp_path):
+    import json
+    out = tmp_path / "processed"
+    out.mkdir()
+    for i in range(3):
+        report = {"file": f"raw/run_{i}.csv", "settings": {"output_rate": 1.0}, "repairs": [],
+                  "gaps": [{"channel": "gnss", "t_start": 12.0, "t_end": 12.5, "duration_s": 0.5,
+                            "action": "interpolated"},
+                           {"channel": "gnss", "t_start": 40.0, "t_end": 44.0, "duration_s": 4.0, "action": "split"}],
+                  "segments": [{"t_start": 0.0, "t_end": 39.9, "samples": 400},
+                               {"t_start": 44.1, "t_end": 90.0 + i, "samples": 460}],
+                  "dropped_segments": [], "rows": 900, "missing_rows": 3,
+                  "baseline": {"rejected": 1, "rejected_t": [20.0]},
+                  "heading_gate": {"rejected": 1, "rejected_t": [30.0]}, "fix_rejected": 0,
+                  "gaps_interpolated": 1, "gaps_split": 1}
+        (out / f"run_{i}.report.json").write_text(json.dumps(report))
+    paths = build_report(out, tmp_path / "report")
+    assert paths.n_figures == 1 and not paths.notes
+    html = paths.html.read_text()
+    _parse(paths.html)
+    assert "run_2" in html and "Preprocessing quality" in html
+    pages, n = _pdf_text(paths.pdf)
+    assert all(f"page {i} of {n}" in p for i, p in enumerate(pages, 1))

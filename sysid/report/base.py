@@ -26,12 +26,17 @@ from sysid.report.methods import methods_paragraphs, run_rows, summary_items  # 
 from sysid.report.palette import model_colour  # noqa: E402
 from sysid.report.pdf import PdfReport, paginate, pdf_style, table_pages, text_lines  # noqa: E402
 from sysid.report.plan import figure_plan  # noqa: E402
+from sysid.report.quality import quality_rows  # noqa: E402
 from sysid.report.source import ReportSource, read_source  # noqa: E402
 from sysid.report.tables import build_tables  # noqa: E402
 
 STYLE = {"font.size": 9, "axes.titlesize": 9, "axes.labelsize": 9, "axes.grid": True,
          "grid.alpha": 0.3, "grid.linewidth": 0.5, "legend.fontsize": 8, "lines.linewidth": 1.2,
          "font.family": "DejaVu Sans", "axes.unicode_minus": False}
+
+
+SUBTITLES = {"reproduction": "Reproduction of the paper", "run": "Identification run",
+             "preprocessing": "Preprocessing run"}
 
 
 @dataclass
@@ -80,7 +85,7 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
     tables = build_tables(source)
     plan = figure_plan(source, size)
     notes = list(plan.notes)
-    if size is None:
+    if size is None and source.runs:
         notes.append("Ship dimensions unknown (summary.json 'ship' missing or not loadable): no outlines")
     summary = summary_items(source, size)
     rows = run_rows(source)
@@ -88,11 +93,18 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
     built = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     title = f"sysid accuracy report: {source.title}"
 
-    blocks = [("h1", title), ("h2", "1. Summary")] + [("kv", k, str(v)) for k, v in summary]
-    blocks += [("h2", "Runs")] + [("kv", r.label, f"{r.model}, data set {r.dataset}, epochs {r.epochs}, "
+    blocks = [("h1", title), ("h2", "Summary")] + [("kv", k, str(v)) for k, v in summary]
+    blocks += [("h2", "Runs")] * bool(rows) + [("kv", r.label, f"{r.model}, data set {r.dataset}, epochs {r.epochs}, "
                                   f"training {r.train_time}, config {r.config_digest}, created {r.created}")
                                   for r in rows]
-    blocks += [("h2", "2. Methods")] + [("p", p) for p in methods]
+    blocks += [("h2", "Methods")] + [("p", p) for p in methods]
+    quality = quality_rows(source.quality)
+    if quality:
+        blocks += [("h2", "Preprocessing quality")] + [
+            ("kv", q.file, f"{q.rows} rows ({q.missing_rows} missing), {q.segments} segments ({q.kept_s:.0f} s kept, "
+             f"{q.dropped} dropped), gaps {q.gaps_interpolated} interpolated / {q.gaps_split} split, GNSS rejected: "
+             f"baseline {q.baseline_rejected}, heading {q.heading_rejected}, fix {q.fix_rejected}; repairs: {q.repairs}")
+            for q in quality]
     if notes:
         blocks += [("h2", "Figures not drawn")] + [("small", f"- {n}") for n in notes]
     text_pages = paginate(text_lines(blocks))
@@ -128,12 +140,12 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
 
     html = render_html(
         title=title,
-        subtitle=f"{'Reproduction of the paper' if source.kind == 'reproduction' else 'Identification run'} "
+        subtitle=f"{SUBTITLES[source.kind]} "
                  f"- built {built}",
         summary=summary,
         runs=[{"row": row, "colour": model_colour(r.name, r.model, r.dataset, i)}
               for i, (row, r) in enumerate(zip(rows, source.runs))],
-        methods=methods, tables=tables, figures=html_figures, notes=notes,
+        methods=methods, tables=tables, figures=html_figures, notes=notes, quality=quality,
         version=sysid.__version__, source=str(source.path), built=built)
     html_path = write_text(html, out_dir / "report.html")
     for path in (html_path, pdf_path):  # mkstemp creates 0600; reports are for sharing

@@ -8,6 +8,7 @@ import platform
 from dataclasses import dataclass
 
 from sysid.report.palette import model_label
+from sysid.report.quality import quality_rows
 from sysid.report.source import ReportSource, RunRecord
 
 MODEL_TEXT = {
@@ -17,6 +18,8 @@ MODEL_TEXT = {
     "hybrid": "hybrid MMG + FNN model: the MMG forces plus a feed-forward correction F_NN, switched off "
               "by a kNN out-of-distribution gate when the inputs are far from the training data",
 }
+SOURCE_KINDS = {"reproduction": "reproduction, {n} runs", "run": "single run",
+                "preprocessing": "preprocessing output, {q} files"}
 PROTOCOL_TEXT = (
     "Evaluation follows the benchmark protocol: each 1 Hz test file is cut into consecutive windows of "
     "H samples (H = {horizons} s); each window starts from the recorded state at its first sample and is "
@@ -107,7 +110,7 @@ def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -
             versions.setdefault(k, set()).add(str(v))
     created = sorted(str(r.summary.get("created")) for r in runs if r.summary.get("created"))
     items = [
-        ("Source", f"{source.path} ({'reproduction, ' + str(len(runs)) + ' runs' if source.kind == 'reproduction' else 'single run'})"),
+        ("Source", f"{source.path} ({SOURCE_KINDS[source.kind].format(n=len(runs), q=len(source.quality))})"),
         ("Ship", ship),
         ("Models", ", ".join(model_label(r.name, r.model, r.dataset) for r in runs)),
         ("Training data sets", ", ".join(datasets) or "none (MMG only)"),
@@ -121,6 +124,15 @@ def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -
     ]
     if source.kind == "reproduction" and source.summary:
         items += [(f"Reproduction: {k}", v) for k, v in _flatten(source.summary)]
+    if source.quality:
+        rows = quality_rows(source.quality)
+        items.append(("Preprocessed files", f"{len(rows)} files, {sum(r.kept_s for r in rows):.0f} s kept in "
+                      f"{sum(r.segments for r in rows)} segments, {sum(r.dropped for r in rows)} dropped; gaps "
+                      f"{sum(r.gaps_interpolated for r in rows)} interpolated, {sum(r.gaps_split for r in rows)} split"))
+    if not runs:
+        items = [i for i in items if i[0] not in ("Models", "Training data sets", "Test scenarios",
+                                                  "Configuration digest", "Software (runs)", "Runs created",
+                                                  "Training time", "Ship")]
     return items
 
 
@@ -138,7 +150,13 @@ def _config_text(config: dict) -> str:
 def methods_paragraphs(source: ReportSource) -> list[str]:
     """A few paragraphs: the protocol, then what was trained, how and on what, per run."""
     horizons = sorted({h for r in source.runs for h in r.horizons()})
-    out = [PROTOCOL_TEXT.format(horizons=" and ".join(str(h) for h in horizons))]
+    out = [PROTOCOL_TEXT.format(horizons=" and ".join(str(h) for h in horizons))] if source.runs else []
+    if source.quality:
+        settings = source.quality[0].get("settings") or {}
+        out.append("Preprocessing: raw 10 Hz logs converted to the processed schema (GNSS to local metres, "
+                   "antenna-baseline and heading-gate checks, gaps interpolated or split into segments, "
+                   "velocities by filtering); settings of the first file: "
+                   + (", ".join(f"{k} = {v}" for k, v in _flatten(settings)) or "not recorded") + ".")
     for run in source.runs:
         s = run.summary
         text = f"{model_label(run.name, run.model, run.dataset)}: {MODEL_TEXT.get(run.model, run.model)}."

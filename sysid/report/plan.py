@@ -15,6 +15,7 @@ from matplotlib.figure import FigureBase
 from sysid.report import figures as F
 from sysid.report.palette import model_colour, model_label
 from sysid.report.paper import scenario_key
+from sysid.report.quality import FILES_PER_FIGURE, quality_timeline
 from sysid.report.source import ReportSource, RunRecord
 
 BOX_SCENARIOS = ["Turning 20", "Zigzag 30/30", "Random"]                 # Figs. 3-5
@@ -76,10 +77,25 @@ def _traces(runs: list[RunRecord], scenario: str, horizon: int) -> list[F.ModelT
     return out
 
 
+def _quality_figures(source: ReportSource, plan: FigurePlan) -> FigurePlan:
+    """Timelines of the preprocessing quality reports, FILES_PER_FIGURE files each."""
+    chunks = [source.quality[i:i + FILES_PER_FIGURE] for i in range(0, len(source.quality), FILES_PER_FIGURE)]
+    for i, chunk in enumerate(chunks, 1):
+        part = f" ({i} of {len(chunks)})" if len(chunks) > 1 else ""
+        plan.figures.append(FigureSpec(
+            f"quality_{i}", "Preprocessing quality", f"Preprocessing quality timeline{part}",
+            "Per preprocessed file: kept and dropped segments, gaps split or interpolated, and GNSS fixes "
+            "rejected by the antenna-baseline check (above the bar) or the heading gate (below), over the "
+            "log's time.", lambda into=None, c=chunk, p=part: quality_timeline(c, f"Preprocessing quality{p}", into=into)))
+    return plan
+
+
 def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> FigurePlan:
     """The figures of a report for `source`; `ship_size` = (L_pp, B) [m] for outlines."""
     plan = FigurePlan()
     runs = source.runs
+    if not runs:
+        return _quality_figures(source, plan)
     scenarios = list(dict.fromkeys(s for r in runs for s in r.scenarios()))
     datasets = sorted({r.dataset for r in runs if r.model != "mmg" and r.dataset != "-"})
     fig_dataset = "D2" if "D2" in datasets else (datasets[-1] if datasets else None)
@@ -192,4 +208,4 @@ def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> 
             True)
     else:
         plan.notes.append("Loss curves: skipped, no run has a history.csv (MMG-only runs are not trained)")
-    return plan
+    return _quality_figures(source, plan)

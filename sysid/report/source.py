@@ -120,6 +120,7 @@ class ReportSource:
     kind: str  # "run" or "reproduction"
     runs: list[RunRecord]
     summary: dict
+    quality: list[dict] = field(default_factory=list)  # preprocessing *.report.json contents
 
     @property
     def title(self) -> str:
@@ -154,18 +155,22 @@ def read_run_dir(path: Path) -> RunRecord:
 
 def read_source(path) -> ReportSource:
     """A run directory (has summary.json and metrics.csv) or a reproduction directory (has runs/)."""
+    from sysid.report.quality import read_quality_reports
     path = Path(path)
     if not path.is_dir():
         raise CheckpointError(f"{path}: no such directory")
+    quality = read_quality_reports(path, path / "preprocessing")
     if (path / "runs").is_dir():
         run_dirs = sorted(p for p in (path / "runs").iterdir() if p.is_dir())
         if not run_dirs:
             raise CheckpointError(f"{path / 'runs'}: holds no run directories")
         summary = _read_json(path / "summary.json") if (path / "summary.json").exists() else {}
         runs = sorted((read_run_dir(p) for p in run_dirs), key=_run_order)
-        return ReportSource(path, "reproduction", runs, summary)
+        return ReportSource(path, "reproduction", runs, summary, quality)
     if (path / "summary.json").exists() or (path / "metrics.csv").exists():
         run = read_run_dir(path)
-        return ReportSource(path, "run", [run], run.summary)
-    raise CheckpointError(f"{path}: neither a run directory (summary.json, metrics.csv) "
-                          "nor a reproduction directory (runs/)")
+        return ReportSource(path, "run", [run], run.summary, quality)
+    if quality:
+        return ReportSource(path, "preprocessing", [], {}, quality)
+    raise CheckpointError(f"{path}: neither a run directory (summary.json, metrics.csv), "
+                          "a reproduction directory (runs/) nor preprocessing output (*.report.json)")

@@ -195,6 +195,8 @@ def run_table(run: RunRecord) -> RmseTable:
 
 
 def build_tables(source: ReportSource) -> list[RmseTable]:
+    if not source.runs:
+        return []
     if source.kind == "reproduction":
         return reproduction_tables(source)
     return [run_table(source.runs[0])]
