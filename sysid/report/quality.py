@@ -2,7 +2,6 @@
 row per file and a timeline figure of kept segments, gaps and rejected GNSS fixes."""
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -11,7 +10,7 @@ from matplotlib.figure import Figure, FigureBase
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
-from sysid.errors import CheckpointError
+from sysid.report.source import read_json
 
 KEPT, DROPPED, SPLIT, FILLED, BASELINE, GATE = "#1b8a3a", "#9a9a9a", "#d62728", "#ff9f1c", "#1f5fbf", "#8c3fbf"
 FILES_PER_FIGURE = 20
@@ -22,12 +21,7 @@ def read_quality_reports(*folders: Path) -> list[dict]:
     reports = []
     for folder in folders:
         for path in sorted(Path(folder).glob("*.report.json")) if Path(folder).is_dir() else []:
-            try:
-                data = json.loads(path.read_text())
-            except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-                raise CheckpointError(f"{path}: not valid JSON ({exc})") from None
-            if not isinstance(data, dict):
-                raise CheckpointError(f"{path}: expected a JSON object")
+            data = read_json(path)
             data.setdefault("file", path.name.removesuffix(".report.json"))
             reports.append(data)
     return reports

@@ -19,7 +19,8 @@ from sysid.rundir import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
 MODEL_KINDS = ("mmg", "nn", "hybrid")
 
 
-def _read_json(path: Path) -> dict:
+def read_json(path: Path) -> dict:
+    """A JSON object from `path`, or `CheckpointError` naming the file."""
     if not path.is_file():
         raise CheckpointError(f"{path}: file not found")
     try:
@@ -135,7 +136,7 @@ def _run_order(run: RunRecord) -> tuple:
 def read_run_dir(path: Path) -> RunRecord:
     """A run directory (`sysid.rundir`), checked."""
     path = Path(path)
-    summary = _read_json(path / "summary.json")
+    summary = read_json(path / "summary.json")
     config_path = path / "config.toml"
     config_text, config = "", {}
     if config_path.is_file():
@@ -164,7 +165,7 @@ def read_source(path) -> ReportSource:
         run_dirs = sorted(p for p in (path / "runs").iterdir() if p.is_dir())
         if not run_dirs:
             raise CheckpointError(f"{path / 'runs'}: holds no run directories")
-        summary = _read_json(path / "summary.json") if (path / "summary.json").exists() else {}
+        summary = read_json(path / "summary.json") if (path / "summary.json").exists() else {}
         runs = sorted((read_run_dir(p) for p in run_dirs), key=_run_order)
         return ReportSource(path, "reproduction", runs, summary, quality)
     if (path / "summary.json").exists() or (path / "metrics.csv").exists():
