@@ -331,13 +331,28 @@ def loss_curves(histories: list[tuple[str, str, pd.DataFrame, int | None]], titl
     epoch is marked. `histories` are (label, colour, history frame, best epoch)."""
     fig = _canvas(into, (10.0, 4.6))
     ax = fig.subplots()
+    positive = True
     for label, colour, hist, best in histories:
-        ax.plot(hist["epoch"], hist["train_loss"], color=colour, lw=1.3)
-        ax.plot(hist["epoch"], hist["val_loss"], color=colour, lw=1.3, ls="--")
-        if best is not None and best in set(hist["epoch"]):
-            ax.plot(best, hist.loc[hist["epoch"] == best, "val_loss"].iloc[0], "*", color=colour, ms=9)
-    ax.set_yscale("log")
-    ax.set_xlabel("epoch [-]")
+        x = hist["epoch"].to_numpy()
+        last = np.ones(len(hist), dtype=bool)
+        if "stage" in hist.columns and hist["stage"].nunique() > 1:  # stages restart their epochs
+            x = np.arange(1, len(hist) + 1)
+            stages = hist["stage"].astype(str).to_numpy()
+            last = stages == stages[-1]
+            for i in np.nonzero(stages[1:] != stages[:-1])[0]:
+                ax.axvline(x[i] + 0.5, color=colour, ls=":", lw=0.8)
+                ax.annotate(f"{stages[i + 1]}", (x[i] + 0.5, 1.0), xycoords=("data", "axes fraction"),
+                            fontsize=7, color=colour, ha="left", va="top", rotation=90)
+        ax.plot(x, hist["train_loss"], color=colour, lw=1.3)
+        ax.plot(x, hist["val_loss"], color=colour, lw=1.3, ls="--")
+        positive &= bool((hist[["train_loss", "val_loss"]].to_numpy() > 0).all())
+        hit = last & (hist["epoch"].to_numpy() == best)
+        if best is not None and hit.any():
+            ax.plot(x[hit][0], hist["val_loss"].to_numpy()[hit][0], "*", color=colour, ms=9)
+    if positive:
+        ax.set_xlabel("epoch [-] (stages of several-stage trainings one after the other)"
+                  if any("stage" in h.columns and h["stage"].nunique() > 1 for _, _, h, _ in histories)
+                  else "epoch [-]")
     ax.set_ylabel("loss [-]")
     handles = [Line2D([], [], color=c, label=l) for l, c, _, _ in histories]
     handles += [Line2D([], [], color="grey", label="training"),

@@ -171,7 +171,8 @@ def methods_paragraphs(source: ReportSource) -> list[str]:
         if s.get("identified"):
             text += " Identified coefficients: " + ", ".join(f"{k} = {v}" for k, v in _flatten(s["identified"])) + "."
         if run.model == "hybrid" and s.get("gate"):
-            text += " OOD gate: " + ", ".join(f"{k} = {v}" for k, v in _flatten(s["gate"])) + "."
+            scalars = {k: v for k, v in s["gate"].items() if not isinstance(v, (dict, list))}
+            text += " OOD gate: " + ", ".join(f"{k} = {v}" for k, v in _flatten(scalars)) + "."
         if run.config:
             text += f" Configuration: {_config_text(run.config)}."
         out.append(text)

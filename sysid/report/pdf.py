@@ -53,7 +53,8 @@ def paginate(lines: list[TextLine]) -> list[list[TextLine]]:
     pages, page, used = [], [], 0.0
     for line in lines:
         height = STYLES[line.style][2]
-        if used + height > LINES_PER_PAGE and page:
+        keep = 2.0 if line.style in ("h1", "h2") else 0.0  # a heading keeps two lines with it
+        if used + height + keep > LINES_PER_PAGE and page:
             pages.append(page)
             page, used = [], 0.0
         page.append(line)
@@ -161,8 +162,7 @@ class PdfReport:
         fig.text(MARGIN / W, (y - 0.35) / H,
                  f"First line: our RMSE (u, v_m [m/s], r [rad/s]); second line: the paper's value and our change "
                  f"(green: better than the paper). {wins} of {total} cells better than the paper."
-                 + (" Bold on yellow: lowest RMSE of the test's models in that column." if len(table.groups) > 1 and
-                    any(c.best for r in table.rows for c in r.cells) else ""),
+                 + (" Bold on yellow: lowest RMSE of the test's models in that column." if table.has_best else ""),
                  fontsize=7.5, color="#333", wrap=True)
         self._save(fig)
 

@@ -55,7 +55,7 @@ class RunRecord:
     losses or None (MMG-only runs).
     """
 
-    name: str
+    name: str   # the run directory's name (mmg_paper, hybrid_D2, ... in a reproduction)
     path: Path
     summary: dict
     config_text: str
@@ -146,11 +146,15 @@ def read_run_dir(path: Path) -> RunRecord:
         except tomllib.TOMLDecodeError as exc:
             raise CheckpointError(f"{config_path}: not valid TOML ({exc})") from None
     metrics = _read_table(path / "metrics.csv", METRICS_COLUMNS)
+    # a file outside the protocol's scenarios (held-out) is named by its file stem
+    stems = metrics["file"].astype(str).map(lambda f: Path(f).stem)
+    scenario = metrics["scenario"].where(metrics["scenario"].notna(), "").astype(str).str.strip()
+    metrics["scenario"] = scenario.where(scenario != "", stems)
     history = _read_table(path / "history.csv", ["epoch", "train_loss", "val_loss"], required=False)
     model = str(summary.get("model", "mmg")).lower()
     if model not in MODEL_KINDS:
         raise CheckpointError(f"{path / 'summary.json'}: model {model!r} is not one of {MODEL_KINDS}")
-    return RunRecord(str(summary.get("name") or path.name), path, summary, config_text, config,
+    return RunRecord(path.name, path, summary, config_text, config,
                      metrics, history)
 
 

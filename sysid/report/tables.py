@@ -80,6 +80,10 @@ class RmseTable:
     rows: list[TableRow] = field(default_factory=list)
 
     @property
+    def has_best(self) -> bool:
+        return any(c.best for row in self.rows for c in row.cells)
+
+    @property
     def wins(self) -> tuple[int, int]:
         """(cells better than the paper, cells with a paper value)."""
         cells = [c for row in self.rows for c in row.cells if c.change_pct is not None]
@@ -155,7 +159,8 @@ def reproduction_tables(source: ReportSource) -> list[RmseTable]:
         paper_no = {30: "7", 100: "8"}.get(horizon)
         title = (f"Table {paper_no}" if paper_no else f"Table {7 + number}") + \
             f": RMSE of {horizon} s predictions (u, v_m [m/s]; r [rad/s])"
-        table = RmseTable(f"table_{horizon}s", title, [f"{d}" for d in datasets])
+        table = RmseTable(f"table_{horizon}s", title,
+                          [d if d != "-" else "no training data" for d in datasets])
         for scenario in scenarios:
             for kind, key in row_keys:
                 cells, ref = [], None
