@@ -145,7 +145,7 @@ def write_run(out: Path, name: str, runs: dict[str, Run], horizons=(30, 100), se
     summary = {"name": name, "model": kind, "dataset": dataset if kind != "mmg" else None,
                "ship": "esso_osaka", "seed": seed, "created": "2026-11-22T05:00:00Z",
                "train_seconds": 0.0 if kind == "mmg" else 123.4,
-               "epochs": 0 if kind == "mmg" else 40, "best_epoch": 0 if kind == "mmg" else 31,
+               "epochs": 0 if kind == "mmg" else 40, "best_epoch": 0 if kind == "mmg" else (21 if kind == "hybrid" else 31),
                "n_train_windows": 0 if kind == "mmg" else 2500, "n_val_windows": 0 if kind == "mmg" else 1070,
                "versions": {"sysid": "0.1.0", "torch": torch.__version__, "python": "3.11"},
                "mmg_overrides": overrides, "identified": {},
@@ -158,7 +158,9 @@ def write_run(out: Path, name: str, runs: dict[str, Run], horizons=(30, 100), se
     if kind != "mmg":
         epochs = np.arange(1, 41)
         train = 0.02 * np.exp(-epochs / 8) + 0.002
-        history = pd.DataFrame({"epoch": epochs, "train_loss": train, "val_loss": train * 1.3,
+        stage = np.where(epochs <= 10, "mmg", "fnn") if kind == "hybrid" else np.full(len(epochs), "train")
+        epochs = np.where(epochs <= 10, epochs, epochs - 10) if kind == "hybrid" else epochs
+        history = pd.DataFrame({"stage": stage, "epoch": epochs, "train_loss": train, "val_loss": train * 1.3,
                                 "train_velocity": train * 0.9, "train_penalty": train * 0.1,
                                 "seconds": epochs * 3.0})
         history.to_csv(out / "history.csv", index=False)

@@ -331,7 +331,7 @@ def loss_curves(histories: list[tuple[str, str, pd.DataFrame, int | None]], titl
     epoch is marked. `histories` are (label, colour, history frame, best epoch)."""
     fig = _canvas(into, (10.0, 4.6))
     ax = fig.subplots()
-    positive = True
+    positive, marked = True, set()
     for label, colour, hist, best in histories:
         x = hist["epoch"].to_numpy()
         last = np.ones(len(hist), dtype=bool)
@@ -341,8 +341,12 @@ def loss_curves(histories: list[tuple[str, str, pd.DataFrame, int | None]], titl
             last = stages == stages[-1]
             for i in np.nonzero(stages[1:] != stages[:-1])[0]:
                 ax.axvline(x[i] + 0.5, color=colour, ls=":", lw=0.8)
-                ax.annotate(f"{stages[i + 1]}", (x[i] + 0.5, 1.0), xycoords=("data", "axes fraction"),
-                            fontsize=7, color=colour, ha="left", va="top", rotation=90)
+                if (x[i], stages[i + 1]) in marked:
+                    continue
+                marked.add((x[i], stages[i + 1]))
+                ax.annotate(f"stage {stages[i + 1]}", (x[i] + 0.5, 0.03), xycoords=("data", "axes fraction"),
+                            xytext=(2, 0), textcoords="offset points", fontsize=7, color=colour,
+                            ha="left", va="bottom", rotation=90)
         ax.plot(x, hist["train_loss"], color=colour, lw=1.3)
         ax.plot(x, hist["val_loss"], color=colour, lw=1.3, ls="--")
         positive &= bool((hist[["train_loss", "val_loss"]].to_numpy() > 0).all())
@@ -350,9 +354,9 @@ def loss_curves(histories: list[tuple[str, str, pd.DataFrame, int | None]], titl
         if best is not None and hit.any():
             ax.plot(x[hit][0], hist["val_loss"].to_numpy()[hit][0], "*", color=colour, ms=9)
     if positive:
-        ax.set_xlabel("epoch [-] (stages of several-stage trainings one after the other)"
-                  if any("stage" in h.columns and h["stage"].nunique() > 1 for _, _, h, _ in histories)
-                  else "epoch [-]")
+        ax.set_yscale("log")
+    staged = any("stage" in h.columns and h["stage"].nunique() > 1 for _, _, h, _ in histories)
+    ax.set_xlabel("epoch [-] (stages one after the other)" if staged else "epoch [-]")
     ax.set_ylabel("loss [-]")
     handles = [Line2D([], [], color=c, label=l) for l, c, _, _ in histories]
     handles += [Line2D([], [], color="grey", label="training"),
