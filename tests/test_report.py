@@ -150,7 +150,16 @@ def test_reproduction_pdf_numbered_with_table_values(reproduction, reproduction_
 def test_single_run_report(tmp_path, small_runs):
     runs = small_runs
     run_dir = write_run(tmp_path / "hybrid_D2", "hybrid_D2", runs)
+    # a held-out file outside the paper's scenarios: empty scenario, its own trace
+    metrics = pd.read_csv(run_dir / "metrics.csv")
+    held = metrics[metrics["scenario"] == "Berthing"].assign(scenario="", file="heldout_file",
+                                                              rmse_u=0.0123456, rmse_v=0.0234567)
+    pd.concat([metrics, held]).to_csv(run_dir / "metrics.csv", index=False)
+    for h in (30, 100):
+        stem = runs["Berthing"].name
+        shutil.copy(run_dir / "traces" / f"{stem}_h{h}.csv", run_dir / "traces" / f"heldout_file_h{h}.csv")
     paths = build_report(run_dir, tmp_path / "report")
+    assert "heldout_file" in paths.html.read_text() and "0.01235" in paths.html.read_text()
     assert not [n for n in paths.notes if "failed" in n], paths.notes
     parser = _parse(paths.html)
     assert list(parser.tables) == ["table_run"]
