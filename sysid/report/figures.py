@@ -104,7 +104,8 @@ def _signed_deg(angle_rad: np.ndarray) -> np.ndarray:
     return (np.asarray(angle_rad) * RAD2DEG + 180.0) % 360.0 - 180.0
 
 
-def actuator_wind(traces: list[ModelTrace], start_s: float, title: str, into: FigureBase | None = None) -> FigureBase:
+def actuator_wind(traces: list[ModelTrace], start_s: float, title: str,
+                  into: FigureBase | None = None) -> FigureBase:
     """Propeller speed [rps], rudder angle [deg] and the relative wind speed [m/s] and
     direction [deg] (Figs. 6, 8) in the window starting nearest `start_s`. The relative
     wind of each model is the one seen by its predicted state; "measured" uses the
@@ -135,7 +136,8 @@ def actuator_wind(traces: list[ModelTrace], start_s: float, title: str, into: Fi
     return fig
 
 
-def state_timeseries(traces: list[ModelTrace], start_s: float, title: str, into: FigureBase | None = None) -> FigureBase:
+def state_timeseries(traces: list[ModelTrace], start_s: float, title: str,
+                     into: FigureBase | None = None) -> FigureBase:
     """Heading ψ [deg], u, v_m [m/s] and r [deg/s] predicted by each model against the
     measurement in the window starting nearest `start_s` (Figs. 7, 9)."""
     fig = _canvas(into, TALL)
@@ -177,7 +179,8 @@ def _outline_at(outline: np.ndarray, x: float, y: float, psi: float) -> tuple[np
     return east, north
 
 
-def trajectories(traces: list[ModelTrace], L: float, B: float, title: str, into: FigureBase | None = None) -> FigureBase:
+def trajectories(traces: list[ModelTrace], L: float, B: float, title: str,
+                 into: FigureBase | None = None) -> FigureBase:
     """Earth-frame trajectories (x0 north, y0 east [m]) of each model's windows against the
     measured track, with the ship's outline every `interval` seconds (Figs. 10-12)."""
     n = len(traces)
@@ -237,7 +240,8 @@ def _spans(t: np.ndarray, flag: np.ndarray) -> list[tuple[float, float]]:
     return spans
 
 
-def knn_distance(trace: ModelTrace, threshold: float | None, title: str, into: FigureBase | None = None) -> FigureBase:
+def knn_distance(trace: ModelTrace, threshold: float | None, title: str,
+                 into: FigureBase | None = None) -> FigureBase:
     """kNN distance [-] of the hybrid model's inputs at each step, the gate threshold and
     the periods judged out of distribution (FNN off) shaded (Figs. 13-16)."""
     fig = _canvas(into, (10.0, 3.8))
@@ -269,7 +273,9 @@ def force_components(trace: ModelTrace, title: str, into: FigureBase | None = No
     predictions (Figs. 17, 19); windows are joined with gaps."""
     fig = _canvas(into, TALL)
     axes = fig.subplots(3, 1, sharex=True)
-    keys = [k for k in ("H", "P", "R", "A", "NN") if np.nanmax(np.abs(trace.frame[[f"X{k}", f"Y{k}", f"N{k}"]].to_numpy())) > 0]
+    def present(key: str) -> bool:  # components that are zero throughout (NN-only: H, P, R, A) are left out
+        return bool(np.nanmax(np.abs(trace.frame[[f"X{key}", f"Y{key}", f"N{key}"]].to_numpy())) > 0)
+    keys = [k for k in ("H", "P", "R", "A", "NN") if present(k)]
     for ax, (axis, label) in zip(axes, AXES):
         for key in keys:
             t, y = _broken(trace.frame, f"{axis}{key}")
@@ -306,7 +312,8 @@ def force_models(trace: ModelTrace, title: str, into: FigureBase | None = None) 
     return fig
 
 
-def fnn_error_scatter(groups: list[tuple[str, str, pd.DataFrame]], title: str, into: FigureBase | None = None) -> FigureBase:
+def fnn_error_scatter(groups: list[tuple[str, str, pd.DataFrame]], title: str,
+                      into: FigureBase | None = None) -> FigureBase:
     """|F_NN| against the absolute velocity prediction error (Fig. 21): |X_NN| [N] vs |u|
     error [m/s], |Y_NN| [N] vs v_m error [m/s], |N_NN| [N m] vs r error [rad/s]; `groups`
     are (label, colour, pooled trace frame)."""
@@ -326,7 +333,8 @@ def fnn_error_scatter(groups: list[tuple[str, str, pd.DataFrame]], title: str, i
     return fig
 
 
-def loss_curves(histories: list[tuple[str, str, pd.DataFrame, int | None]], title: str, into: FigureBase | None = None) -> FigureBase:
+def loss_curves(histories: list[tuple[str, str, pd.DataFrame, int | None]], title: str,
+                into: FigureBase | None = None) -> FigureBase:
     """Training (solid) and validation (dashed) loss [-] per epoch, log scale; the best
     epoch is marked. `histories` are (label, colour, history frame, best epoch)."""
     fig = _canvas(into, (10.0, 4.6))

@@ -7,6 +7,7 @@ figure is drawn; a figure whose data is missing is replaced by a note saying why
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Callable
 
 import pandas as pd
@@ -31,7 +32,7 @@ class FigureSpec:
     section: str
     title: str
     caption: str
-    factory: Callable[..., FigureBase]  # factory(into=None): into a sub-figure or a new figure
+    factory: Callable[..., FigureBase]  # factory(into=None): draws into a sub-figure or a new figure
 
 
 @dataclass
@@ -79,133 +80,166 @@ def _traces(runs: list[RunRecord], scenario: str, horizon: int) -> list[F.ModelT
 
 def _quality_figures(source: ReportSource, plan: FigurePlan) -> FigurePlan:
     """Timelines of the preprocessing quality reports, FILES_PER_FIGURE files each."""
-    chunks = [source.quality[i:i + FILES_PER_FIGURE] for i in range(0, len(source.quality), FILES_PER_FIGURE)]
+    reports = source.quality
+    chunks = [reports[i:i + FILES_PER_FIGURE] for i in range(0, len(reports), FILES_PER_FIGURE)]
     for i, chunk in enumerate(chunks, 1):
         part = f" ({i} of {len(chunks)})" if len(chunks) > 1 else ""
         plan.figures.append(FigureSpec(
             f"quality_{i}", "Preprocessing quality", f"Preprocessing quality timeline{part}",
-            "Per preprocessed file: kept and dropped segments, gaps split or interpolated, and GNSS fixes "
-            "rejected by the antenna-baseline check (above the bar) or the heading gate (below), over the "
-            "log's time.", lambda into=None, c=chunk, p=part: quality_timeline(c, f"Preprocessing quality{p}", into=into)))
+            "Per preprocessed file: kept and dropped segments, gaps split or interpolated, and GNSS "
+            "fixes rejected by the antenna-baseline check (above the bar) or the heading gate (below), "
+            "over the log's time.", partial(quality_timeline, chunk, f"Preprocessing quality{part}")))
     return plan
+
+
+@dataclass
+class _Context:
+    """What every figure family needs: the runs, horizons and the plan being filled."""
+
+    plan: FigurePlan
+    runs: list[RunRecord]
+    scenarios: list[str]
+    compared: list[RunRecord]   # MMG runs and the trained runs of the paper's figures' data set
+    hybrids: list[RunRecord]
+    fig_dataset: str | None
+    short: int | None           # horizon [s] of the 30 s figures
+    long: int | None            # horizon [s] of the 100 s figures
+
+    @property
+    def trained_on(self) -> str:
+        return f" (trained models: {self.fig_dataset})" if self.fig_dataset else ""
+
+    def add(self, key: str, section: str, title: str, caption: str, factory, ok) -> None:
+        """Plan the figure, or note why it is skipped (`caption` then says why)."""
+        if ok:
+            self.plan.figures.append(FigureSpec(key, section, title, caption, factory))
+        else:
+            self.plan.notes.append(f"{title}: skipped, {caption}")
+
+
+def _error_figures(c: _Context) -> None:
+    """Figs. 3-5: absolute-error box plots, every model, 30 s."""
+    for scenario in _pick(BOX_SCENARIOS, c.scenarios):
+        traces = _traces(c.runs, scenario, c.short) if c.short else []
+        c.add(f"box_{scenario}", "Prediction errors", f"Absolute error, {scenario}, {c.short} s predictions",
+              f"Absolute errors of u, v_m and r pooled over every point of every {c.short} s window of the "
+              f"{scenario} test, per model (cf. the paper's Figs. 3-5)." if traces else "no traces in the source",
+              partial(F.error_boxplots, traces, f"Absolute error, {scenario} ({c.short} s predictions)"), traces)
+
+
+def _series_figures(c: _Context) -> None:
+    """Figs. 6-9: actuators, relative wind and states over one 100 s window."""
+    series = [(_find(s, c.scenarios), t0) for s, t0 in SERIES_WINDOWS if _find(s, c.scenarios)]
+    for scenario, start in series or [(s, 0.0) for s in c.scenarios[:1]]:
+        traces = _traces(c.compared, scenario, c.long) if c.long else []
+        span = f"{start:.0f}-{start + c.long:.0f} s" if c.long else ""
+        missing = "no traces in the source"
+        c.add(f"inputs_{scenario}", "Time series", f"Actuators and relative wind, {scenario}, {span}",
+              f"Propeller speed, rudder angle and relative wind in the {c.long} s window of the {scenario} "
+              f"test starting nearest {start:.0f} s{c.trained_on}; each model's relative wind follows its "
+              "own predicted state, 'measured' uses the recorded state (cf. Figs. 6, 8)." if traces else missing,
+              partial(F.actuator_wind, traces, start, f"Actuator and relative wind state, {scenario} ({span})"),
+              traces)
+        c.add(f"states_{scenario}", "Time series", f"Heading and velocities, {scenario}, {span}",
+              f"Heading ψ and velocities u, v_m, r predicted over the {c.long} s window of the {scenario} "
+              f"test against the measurement{c.trained_on} (cf. Figs. 7, 9)." if traces else missing,
+              partial(F.state_timeseries, traces, start, f"Attitude and velocity, {scenario} ({span})"), traces)
+
+
+def _trajectory_figures(c: _Context, ship_size: tuple[float, float] | None) -> None:
+    """Figs. 10-12: earth-frame tracks with the ship's outline."""
+    L, B = ship_size or (0.0, 0.0)
+    for scenario in _pick(TRAJECTORY_SCENARIOS, c.scenarios):
+        traces = _traces(c.compared, scenario, c.long) if c.long else []
+        ok = bool(traces) and ship_size is not None
+        why = "no traces in the source" if not traces else "ship dimensions unknown"
+        c.add(f"track_{scenario}", "Trajectories", f"Trajectories, {scenario}, {c.long} s predictions",
+              f"Earth-frame track of the {scenario} test and every {c.long} s window predicted from the "
+              f"recorded start state{c.trained_on}; outlines of the {L:g} m x {B:g} m ship at fixed "
+              "intervals (cf. Figs. 10-12)." if ok else why,
+              partial(F.trajectories, traces, L, B, f"Trajectory prediction, {scenario} ({c.long} s windows)"), ok)
+
+
+def _gate_figures(c: _Context) -> None:
+    """Figs. 13-16: kNN distance of every hybrid run, 30 s."""
+    if not c.hybrids:
+        c.plan.notes.append("kNN distance (Figs. 13-16): skipped, no hybrid run in the source")
+        return
+    for scenario in _pick(KNN_SCENARIOS, c.scenarios):
+        for run in c.hybrids:
+            frame = run.trace(scenario, c.short) if c.short else None
+            ok = frame is not None and frame["knn_distance"].notna().any()
+            threshold = run.gate_threshold
+            unknown = "" if threshold is not None else " (not recorded in summary.json or knn.pt)"
+            label = _label(run)
+            c.add(f"knn_{run.name}_{scenario}", "Out-of-distribution gate", f"kNN distance, {scenario}, {label}",
+                  f"kNN distance of the hybrid model's inputs ({label}) in the {c.short} s predictions of the "
+                  f"{scenario} test; dashed: gate threshold{unknown}; shaded: steps judged out of "
+                  "distribution, FNN switched off (cf. Figs. 13-16)." if ok else "the trace has no kNN distances",
+                  partial(F.knn_distance, F.ModelTrace(label, _colour(run), frame), threshold,
+                          f"kNN distance and OOD detection, {scenario} ({label})"), ok)
+
+
+def _force_figures(c: _Context) -> None:
+    """Figs. 17-20 (forces of the hybrid of the figures' data set) and Fig. 21."""
+    run = next((r for r in c.hybrids if r.dataset == c.fig_dataset), c.hybrids[0] if c.hybrids else None)
+    run = run or next((r for r in c.runs if r.model == "mmg"), None)
+    for scenario in _pick(FORCE_SCENARIOS, c.scenarios) if run else []:
+        frame = run.trace(scenario, c.long) if c.long else None
+        ok = frame is not None and len(frame) > 0
+        label = _label(run)
+        trace = F.ModelTrace(label, _colour(run), frame)
+        c.add(f"forces_{scenario}", "Forces", f"Forces by module, {scenario}, {label}",
+              f"Hull (H), propeller (P), rudder (R), wind (A) and FNN (NN) forces and moment along the "
+              f"{c.long} s predictions of the {scenario} test, {label} (cf. Figs. 17, 19)." if ok
+              else "no trace in the source",
+              partial(F.force_components, trace, f"External forces by module, {scenario} ({label})"), ok)
+        if run.model == "hybrid":
+            c.add(f"force_models_{scenario}", "Forces", f"F_MMG, F_NN and their sum, {scenario}, {label}",
+                  f"MMG forces (H + P + R + A), the FNN correction and their sum along the {c.long} s "
+                  f"predictions of the {scenario} test, {label} (cf. Figs. 18, 20)." if ok
+                  else "no trace in the source",
+                  partial(F.force_models, trace, f"External forces by internal model, {scenario} ({label})"), ok)
+    groups = []
+    for i, hybrid in enumerate(c.hybrids):
+        frames = [hybrid.trace(s, c.short) for s in hybrid.scenarios()] if c.short else []
+        frames = [f for f in frames if f is not None]
+        if frames:
+            groups.append((_label(hybrid), _colour(hybrid, i), pd.concat(frames, ignore_index=True)))
+    if c.hybrids:
+        c.add("fnn_scatter", "Forces", "|F_NN| against velocity prediction error",
+              "Magnitude of the FNN correction against the absolute velocity error at every point of the "
+              f"{c.short} s predictions of all test scenarios (cf. Fig. 21)." if groups else "no traces in the source",
+              partial(F.fnn_error_scatter, groups, "|F_NN| and absolute velocity prediction error"), groups)
+
+
+def _loss_figure(c: _Context) -> None:
+    histories = [(_label(r), _colour(r, i), r.history, r.summary.get("best_epoch"))
+                 for i, r in enumerate(c.runs) if r.history is not None and len(r.history)]
+    if histories:
+        c.add("loss", "Training", "Training and validation loss",
+              "Training (solid) and validation (dashed) loss per epoch of every trained model; star: the "
+              "epoch whose weights were kept.", partial(F.loss_curves, histories, "Training and validation loss"),
+              True)
+    else:
+        c.plan.notes.append("Loss curves: skipped, no run has a history.csv (MMG-only runs are not trained)")
 
 
 def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> FigurePlan:
     """The figures of a report for `source`; `ship_size` = (L_pp, B) [m] for outlines."""
     plan = FigurePlan()
     runs = source.runs
-    if not runs:
-        return _quality_figures(source, plan)
-    scenarios = list(dict.fromkeys(s for r in runs for s in r.scenarios()))
-    datasets = sorted({r.dataset for r in runs if r.model != "mmg" and r.dataset != "-"})
-    fig_dataset = "D2" if "D2" in datasets else (datasets[-1] if datasets else None)
-    compared = [r for r in runs if r.model == "mmg" or r.dataset == fig_dataset]
-    hybrids = [r for r in runs if r.model == "hybrid"]
-    trained_on = f" (trained models: {fig_dataset})" if fig_dataset else ""
-
-    def add(key, section, title, caption, factory, needs):
-        if needs:
-            plan.figures.append(FigureSpec(key, section, title, caption, factory))
-        else:
-            plan.notes.append(f"{title}: skipped, {caption}")
-
-    short = _horizon(runs, 30, short=True)
-    long = _horizon(runs, 100, short=False)
-    # Figs. 3-5: absolute-error box plots
-    for scenario in _pick(BOX_SCENARIOS, scenarios):
-        traces = _traces(runs, scenario, short) if short else []
-        add(f"box_{scenario}", "Prediction errors", f"Absolute error, {scenario}, {short} s predictions",
-            f"Absolute errors of u, v_m and r pooled over every point of every {short} s window of the "
-            f"{scenario} test, per model (cf. the paper's Figs. 3-5)." if traces else "no traces in the source",
-            lambda into=None, t=traces, s=scenario: F.error_boxplots(t, f"Absolute error, {s} ({short} s predictions)", into=into),
-            traces)
-    # Figs. 6-9: actuator/wind and state time series
-    series = [(_find(s, scenarios), t0) for s, t0 in SERIES_WINDOWS if _find(s, scenarios)]
-    for scenario, start in series or [(s, 0.0) for s in scenarios[:1]]:
-        traces = _traces(compared, scenario, long) if long else []
-        span = f"{start:.0f}-{start + long:.0f} s" if long else ""
-        add(f"inputs_{scenario}", "Time series", f"Actuators and relative wind, {scenario}, {span}",
-            f"Propeller speed, rudder angle and relative wind in the {long} s window of the {scenario} test "
-            f"starting nearest {start:.0f} s{trained_on}; each model's relative wind follows its own "
-            "predicted state, 'measured' uses the recorded state (cf. Figs. 6, 8)." if traces
-            else "no traces in the source",
-            lambda into=None, t=traces, s=scenario, a=start, sp=span: F.actuator_wind(t, a, f"Actuator and relative wind state, {s} ({sp})", into=into),
-            traces)
-        add(f"states_{scenario}", "Time series", f"Heading and velocities, {scenario}, {span}",
-            f"Heading ψ and velocities u, v_m, r predicted over the {long} s window of the {scenario} test "
-            f"against the measurement{trained_on} (cf. Figs. 7, 9)." if traces else "no traces in the source",
-            lambda into=None, t=traces, s=scenario, a=start, sp=span: F.state_timeseries(t, a, f"Attitude and velocity, {s} ({sp})", into=into),
-            traces)
-    # Figs. 10-12: trajectories
-    for scenario in _pick(TRAJECTORY_SCENARIOS, scenarios):
-        traces = _traces(compared, scenario, long) if long else []
-        ok = bool(traces) and ship_size is not None
-        L, B = ship_size or (0.0, 0.0)
-        add(f"track_{scenario}", "Trajectories", f"Trajectories, {scenario}, {long} s predictions",
-            f"Earth-frame track of the {scenario} test and every {long} s window predicted from the recorded "
-            f"start state{trained_on}; outlines of the {L:g} m x {B:g} m ship at fixed intervals "
-            "(cf. Figs. 10-12)." if ok else ("no traces in the source" if not traces else "ship dimensions unknown"),
-            lambda into=None, t=traces, s=scenario: F.trajectories(t, L, B, f"Trajectory prediction, {s} ({long} s windows)", into=into),
-            ok)
-    # Figs. 13-16: kNN distance
-    if not hybrids:
-        plan.notes.append("kNN distance (Figs. 13-16): skipped, no hybrid run in the source")
-    for scenario in _pick(KNN_SCENARIOS, scenarios) if hybrids else []:
-        for run in hybrids:
-            frame = run.trace(scenario, short) if short else None
-            ok = frame is not None and frame["knn_distance"].notna().any()
-            threshold = run.gate_threshold
-            add(f"knn_{run.name}_{scenario}", "Out-of-distribution gate",
-                f"kNN distance, {scenario}, {_label(run)}",
-                f"kNN distance of the hybrid model's inputs ({_label(run)}) in the {short} s predictions of the "
-                f"{scenario} test; dashed: gate threshold"
-                + ("" if threshold is not None else " (not recorded in summary.json or knn.pt)")
-                + "; shaded: steps judged out of distribution, FNN switched off (cf. Figs. 13-16)." if ok
-                else "the trace has no kNN distances",
-                lambda into=None, r=run, f=frame, s=scenario, th=threshold: F.knn_distance(
-                    F.ModelTrace(_label(r), _colour(r), f), th, f"kNN distance and OOD detection, {s} ({_label(r)})", into=into),
-                ok)
-    # Figs. 17-20: forces
-    force_run = next((r for r in hybrids if r.dataset == fig_dataset), hybrids[0] if hybrids else None)
-    force_run = force_run or next((r for r in runs if r.model == "mmg"), None)
-    for scenario in _pick(FORCE_SCENARIOS, scenarios) if force_run else []:
-        frame = force_run.trace(scenario, long) if long else None
-        ok = frame is not None and len(frame) > 0
-        label = _label(force_run)
-        add(f"forces_{scenario}", "Forces", f"Forces by module, {scenario}, {label}",
-            f"Hull (H), propeller (P), rudder (R), wind (A) and FNN (NN) forces and moment along the {long} s "
-            f"predictions of the {scenario} test, {label} (cf. Figs. 17, 19)." if ok else "no trace in the source",
-            lambda into=None, f=frame, s=scenario: F.force_components(
-                F.ModelTrace(label, _colour(force_run), f), f"External forces by module, {s} ({label})", into=into),
-            ok)
-        if force_run.model == "hybrid":
-            add(f"force_models_{scenario}", "Forces", f"F_MMG, F_NN and their sum, {scenario}, {label}",
-                f"MMG forces (H + P + R + A), the FNN correction and their sum along the {long} s predictions "
-                f"of the {scenario} test, {label} (cf. Figs. 18, 20)." if ok else "no trace in the source",
-                lambda into=None, f=frame, s=scenario: F.force_models(
-                    F.ModelTrace(label, _colour(force_run), f), f"External forces by internal model, {s} ({label})", into=into),
-                ok)
-    # Fig. 21: |F_NN| vs velocity error
-    groups = []
-    for i, run in enumerate(hybrids):
-        frames = [run.trace(s, short) for s in run.scenarios()] if short else []
-        frames = [f for f in frames if f is not None]
-        if frames:
-            groups.append((_label(run), _colour(run, i), pd.concat(frames, ignore_index=True)))
-    if hybrids:
-        add("fnn_scatter", "Forces", "|F_NN| against velocity prediction error",
-            f"Magnitude of the FNN correction against the absolute velocity error at every point of the "
-            f"{short} s predictions of all test scenarios (cf. Fig. 21)." if groups else "no traces in the source",
-            lambda into=None, g=groups: F.fnn_error_scatter(g, "|F_NN| and absolute velocity prediction error", into=into),
-            groups)
-    # loss curves
-    histories = [(_label(r), _colour(r, i), r.history, r.summary.get("best_epoch"))
-                 for i, r in enumerate(runs) if r.history is not None and len(r.history)]
-    if histories:
-        add("loss", "Training", "Training and validation loss",
-            "Training (solid) and validation (dashed) loss per epoch of every trained model; star: the "
-            "epoch whose weights were kept.", lambda into=None, h=histories: F.loss_curves(h, "Training and validation loss", into=into),
-            True)
-    else:
-        plan.notes.append("Loss curves: skipped, no run has a history.csv (MMG-only runs are not trained)")
+    if runs:
+        datasets = sorted({r.dataset for r in runs if r.model != "mmg" and r.dataset != "-"})
+        fig_dataset = "D2" if "D2" in datasets else (datasets[-1] if datasets else None)
+        c = _Context(plan, runs, list(dict.fromkeys(s for r in runs for s in r.scenarios())),
+                     [r for r in runs if r.model == "mmg" or r.dataset == fig_dataset],
+                     [r for r in runs if r.model == "hybrid"], fig_dataset,
+                     _horizon(runs, 30, short=True), _horizon(runs, 100, short=False))
+        _error_figures(c)
+        _series_figures(c)
+        _trajectory_figures(c, ship_size)
+        _gate_figures(c)
+        _force_figures(c)
+        _loss_figure(c)
     return _quality_figures(source, plan)
