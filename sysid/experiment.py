@@ -41,7 +41,7 @@ from pathlib import Path
 from typing import Any
 
 from sysid.errors import ConfigError
-from sysid.models import KINDS
+from sysid.models import GATE_SPACES, KINDS
 from sysid.ship import parameter_name
 
 
@@ -94,6 +94,7 @@ class GateOptions:
     enabled: bool = True
     k: int = 10
     alpha: float = 0.9995
+    space: str = "features"   # features (paper: last hidden activations) | inputs (standardised s)
 
 
 @dataclass(frozen=True)
@@ -214,6 +215,7 @@ def _validate(exp: Experiment, src: str) -> None:
         (t.dtype in ("float32", "float64"), "[training] dtype must be float32 or float64"),
         (g.k >= 1, "[gate] k must be >= 1"),
         (0.0 < g.alpha < 1.0, "[gate] alpha must be in (0, 1)"),
+        (g.space in GATE_SPACES, f"[gate] space must be one of {', '.join(GATE_SPACES)}"),
         (i.stage in ("before", "joint"), "[identify] stage must be before or joint"),
         (all(h > 0 for h in exp.evaluation.horizons), "[evaluation] horizons must be > 0"),
         (exp.evaluation.integrator in ("euler", "rk4"), "[evaluation] integrator must be euler or rk4"),

@@ -15,6 +15,7 @@ from sysid.mmg.wind import relative_wind
 from sysid.ood import KNNGate
 
 KINDS = ("mmg", "nn", "hybrid")
+GATE_SPACES = ("features", "inputs")
 
 
 class CorrectedModel(nn.Module):
@@ -26,16 +27,28 @@ class CorrectedModel(nn.Module):
     correction : the FNN term.
     gate : optional kNN OOD gate; F_NN is zeroed where the input is out of distribution.
     physics : include F_MMG (hybrid) or not (NN-only).
+    gate_space : where the gate measures kNN distances: "features" (the paper's: the 64
+        activations before the output layer) or "inputs" (the standardised input s-bar).
     """
 
     def __init__(self, mmg: MMG, correction: ForceCorrection, gate: KNNGate | None = None,
-                 physics: bool = True):
+                 physics: bool = True, gate_space: str = "features"):
         super().__init__()
+        if gate_space not in GATE_SPACES:
+            raise ValueError(f"gate space {gate_space!r}: choose one of {', '.join(GATE_SPACES)}")
         self.mmg = mmg
         self.correction_net = correction
         self.gate = gate
         self.physics = physics
+        self.gate_space = gate_space
         self.gate_enabled = gate is not None
+
+    def gate_coordinates(self, s: torch.Tensor, z: torch.Tensor | None = None) -> torch.Tensor:
+        """The vectors the kNN gate compares: features z (..., 64) or standardised s (..., 9)."""
+        if self.gate_space == "inputs":
+            net = self.correction_net
+            return (s.to(net.input_mean.dtype) - net.input_mean) / net.input_std
+        return self.correction_net.features(s) if z is None else z
 
     @property
     def coefficients(self):
@@ -57,7 +70,7 @@ class CorrectedModel(nn.Module):
         z = self.correction_net.features(s)
         f_nn = self.correction_net.force(z).to(state.dtype)
         if self.gate is not None and self.gate_enabled and self.gate.bank.shape[0] > 0:
-            distance, on = self.gate(z)
+            distance, on = self.gate(self.gate_coordinates(s, z))
             f_nn = torch.where(on[..., None], f_nn, torch.zeros_like(f_nn))
             forces.ood_distance, forces.gate_on = distance.to(state.dtype), on
         forces.correction = f_nn

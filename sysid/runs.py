@@ -50,7 +50,7 @@ def build_model(exp: Experiment, dtype: torch.dtype = torch.float64) -> torch.nn
     if exp.experiment.model == "mmg":
         return mmg
     net = ForceCorrection(exp.network.hidden, dtype)
-    return CorrectedModel(mmg, net, None, physics=exp.experiment.model == "hybrid")
+    return CorrectedModel(mmg, net, None, physics=exp.experiment.model == "hybrid", gate_space=exp.gate.space)
 
 
 def _save_tensors(obj, path: Path) -> None:

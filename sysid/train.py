@@ -16,7 +16,8 @@ Steps, in order:
 5. Multi-step training: Euler rollouts of T steps through torchdiffeq, loss
    lambda_v * L_v + lambda_F * L_F + lambda_L2 * |theta|^2, Adam, early stopping on the
    validation velocity loss, best weights restored.
-6. The kNN gate is fitted on the final features of the training samples.
+6. The kNN gate is fitted on the training samples: final features (the paper's) or the
+   standardised inputs (``[gate] space``).
 """
 from __future__ import annotations
 
@@ -294,7 +295,7 @@ class Trainer:
             info["mmg_train_loss"] = float(self._loss(mmg, train, w_v, None, False)[0])
         self.log(f"MMG-only multi-step loss: training {info['mmg_train_loss']:.5f}, validation {info['mmg_val_loss']:.5f}")
         net = ForceCorrection(exp.network.hidden, dtype)
-        model = CorrectedModel(mmg, net, None, physics=(kind == "hybrid"))
+        model = CorrectedModel(mmg, net, None, physics=(kind == "hybrid"), gate_space=exp.gate.space)
         s, residual, f_mmg = implied_residual(model, train, max(1, int(round(t.stride_s / train.dt))))
         net.set_standardization(s.mean(0), s.std(0), residual.mean(0), residual.std(0))
         info["residual_force_mean"] = residual.mean(0).tolist()
@@ -331,10 +332,11 @@ class Trainer:
             with torch.no_grad():
                 states, inputs = samples
                 rel = model.mmg(states, inputs).relative_wind
-                z = net.features(correction_inputs(states, inputs, rel))
+                z = model.gate_coordinates(correction_inputs(states, inputs, rel))
             model.gate = KNNGate(exp.gate.k, exp.gate.alpha, z.shape[-1], dtype).fit(z)
             model.gate_enabled = True
-            info["gate"] = {"k": exp.gate.k, "alpha": exp.gate.alpha, "bank": int(z.shape[0]),
+            info["gate"] = {"k": exp.gate.k, "alpha": exp.gate.alpha, "space": exp.gate.space,
+                            "bank": int(z.shape[0]),
                             "threshold": float(model.gate.threshold)}
             self.log(f"kNN gate: {z.shape[0]} training features, threshold {float(model.gate.threshold):.4f}")
         info["train_seconds"] = time.perf_counter() - started
