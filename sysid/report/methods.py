@@ -82,6 +82,26 @@ def _flatten(data, prefix: str = "") -> list[tuple[str, str]]:
     return out
 
 
+def reproduction_items(summary: dict) -> list[tuple[str, str]]:
+    """Readable lines of a reproduction's summary.json (time, scorecard, gate shares)."""
+    items = []
+    if summary.get("seconds") is not None:
+        items.append(("Reproduction time", _seconds(float(summary["seconds"]))))
+    card = dict(summary.get("scorecard") or {})
+    baseline = card.pop("baseline", "MMG")
+    for ds, c in card.items():
+        by = ", ".join(f"{k} {100 * v:.0f} %" for k, v in (c.get("reduction_vs_mmg_30s_by_scenario") or {}).items())
+        items.append((f"Hybrid {ds} vs {baseline}",
+                      f"{100 * c.get('reduction_vs_mmg_30s_mean', float('nan')):.0f} % lower RMSE at 30 s "
+                      f"({by}); {100 * c.get('reduction_vs_mmg_100s_mean', float('nan')):.0f} % at 100 s; "
+                      f"beats the paper's hybrid in {c.get('cells_beating_paper_hybrid')} of {c.get('cells')} cells"))
+    shares = {k: v for k, v in (summary.get("gate_off_share_random_30s") or {}).items() if v is not None}
+    if shares:
+        items.append(("kNN gate off, Random test (30 s)",
+                      ", ".join(f"{k} {100 * float(v):.0f} % of steps" for k, v in shares.items())))
+    return items
+
+
 def software_versions() -> dict[str, str]:
     """Versions of the software building the report."""
     import matplotlib
@@ -123,7 +143,7 @@ def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -
         ("Training time", _seconds(sum(trained)) + " in total"),
     ]
     if source.kind == "reproduction" and source.summary:
-        items += [(f"Reproduction: {k}", v) for k, v in _flatten(source.summary)]
+        items += reproduction_items(source.summary)
     if source.quality:
         rows = quality_rows(source.quality)
         items.append(("Preprocessed files", f"{len(rows)} files, {sum(r.kept_s for r in rows):.0f} s kept in "
