@@ -16,6 +16,7 @@ from sysid.datasets import TEST_FILES, data_root, test_files, training_files
 from sysid.errors import ConfigError
 from sysid.experiment import Experiment, load_experiment
 from sysid.files import write_csv, write_text
+from sysid.paper import paper_table
 from sysid.rundir import TABLE_COLUMNS
 from sysid.runs import evaluate_model, write_run
 
@@ -31,14 +32,6 @@ PROTOCOL = {
 }
 SCENARIO_ORDER = list(TEST_FILES)
 _PAPER_NAMES = {"Turning 20": "Turning 20", "Turning 35": "Turning 35"}
-
-
-def paper_table() -> pd.DataFrame:
-    """The paper's Tables 7 and 8 (scenario, model, dataset, horizon_s, rmse_u/v/r)."""
-    path = CONFIGS / "paper" / "tables_7_8.csv"
-    if not path.is_file():
-        raise ConfigError(f"{path}: the paper's table is missing")
-    return pd.read_csv(path)
 
 
 def comparison_table(results: dict[str, tuple[str, str, pd.DataFrame]]) -> pd.DataFrame:

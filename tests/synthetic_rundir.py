@@ -172,7 +172,7 @@ def write_run(out: Path, name: str, runs: dict[str, Run], horizons=(30, 100), se
 
 def write_reproduction(out: Path, scale: float = 1.0, names=tuple(RUNS)) -> Path:
     """A reproduction directory: runs/, comparison.csv, summary.json."""
-    from sysid.report.paper import paper_rmse
+    from sysid.paper import paper_rmse
     runs = measured_runs(scale)
     rows = []
     for i, name in enumerate(names):

@@ -15,7 +15,7 @@ from matplotlib.figure import FigureBase
 
 from sysid.report import figures as F
 from sysid.report.palette import model_colour, model_label
-from sysid.report.paper import scenario_key
+from sysid.paper import scenario_key
 from sysid.report.quality import FILES_PER_FIGURE, quality_timeline
 from sysid.report.source import ReportSource, RunRecord
 

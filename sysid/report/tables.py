@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from sysid.report.palette import KIND_LABELS, MODEL_COLOURS, model_colour, model_label
-from sysid.report.paper import paper_rmse, scenario_key
+from sysid.paper import paper_rmse, scenario_key
 from sysid.report.source import ReportSource, RunRecord
 
 COMPONENTS = ("u", "v_m", "r")
