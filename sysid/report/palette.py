@@ -14,6 +14,8 @@ MODEL_COLOURS = {
     "nn_D2": "#e06c00",
     "hybrid_D1": "#8fd18f",
     "hybrid_D2": "#1b8a3a",
+    "mmg_identified_D2": "#8c3fbf",
+    "hybrid_identified_D2": "#17a2a2",
 }
 KIND_COLOURS = {"mmg": "#1f5fbf", "nn": "#e06c00", "hybrid": "#1b8a3a"}
 KIND_LABELS = {"mmg": "MMG", "nn": "NN", "hybrid": "Hybrid"}
@@ -50,7 +52,9 @@ def model_label(name: str, kind: str, dataset: str) -> str:
     """Short label: "MMG (paper X'vr)", "NN D2", "Hybrid D1", ..."""
     if kind == "mmg":
         if name.startswith("mmg_"):
-            return f"MMG ({name[4:]})"
+            return f"MMG ({name[4:].replace('_', ' ')})"
         return "MMG" if name in ("mmg", "") else f"MMG ({name})"
     base = KIND_LABELS.get(kind, kind)
+    if name.startswith(f"{kind}_") and name != f"{kind}_{dataset}":  # e.g. hybrid_identified_D2
+        return f"{base} {name[len(kind) + 1:].replace('_', ' ')}"
     return f"{base} {dataset}" if dataset and dataset != "-" else base
