@@ -190,7 +190,8 @@ def write_run(run_dir: str | os.PathLike, exp: Experiment, model, evaluation: Ev
     info = dict(info or {})
     summary = {
         "name": exp.experiment.name, "model": exp.experiment.model,
-        "dataset": "files" if exp.data.files else exp.experiment.dataset,
+        "dataset": "files" if exp.data.files else (
+            "-" if exp.experiment.model == "mmg" and not exp.identify.parameters else exp.experiment.dataset),
         "ship": exp.experiment.ship, "seed": exp.experiment.seed,
         "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "seconds": seconds,
         "train_seconds": info.pop("train_seconds", None),

@@ -138,15 +138,24 @@ def _mark_best(rows: list[TableRow]) -> None:
                     r.cells[j].best = v == best
 
 
+def _variant(run: RunRecord) -> str:
+    """A trained run's name without its data-set suffix (hybrid_D2 -> hybrid)."""
+    suffix = f"_{run.dataset}"
+    if run.name.startswith(f"{run.model}") and run.name.endswith(suffix):
+        return run.name[: -len(suffix)]
+    return run.model
+
+
 def reproduction_tables(source: ReportSource) -> list[RmseTable]:
     """Tables 7 and 8 (one per horizon): rows scenario x model, column groups the data sets."""
     runs = source.runs
     rmse = {run.name: run_rmse(run) for run in runs}
     datasets = sorted({r.dataset for r in runs if r.model != "mmg" and r.dataset != "-"}) or ["-"]
-    # row keys: each MMG run is its own row (dataset-independent); NN and hybrid by kind
+    # row keys: each MMG run is its own row (dataset-independent); NN and hybrid by variant
+    # (the run name without its data set: hybrid_D2 -> hybrid, hybrid_identified_D2 -> hybrid_identified)
     row_keys: list[tuple[str, str]] = []
     for run in runs:
-        key = (run.model, run.name if run.model == "mmg" else run.model)
+        key = (run.model, run.name if run.model == "mmg" else _variant(run))
         if key not in row_keys:
             row_keys.append(key)
     known = list(MODEL_COLOURS)
@@ -166,15 +175,18 @@ def reproduction_tables(source: ReportSource) -> list[RmseTable]:
                 cells, ref = [], None
                 for dataset in datasets:
                     run = next((r for r in runs if r.model == kind and
-                                (r.name == key if kind == "mmg" else r.dataset == dataset)), None)
+                                (r.name == key if kind == "mmg" else (r.dataset == dataset and _variant(r) == key))),
+                               None)
                     values = rmse[run.name].get((scenario, horizon)) if run else None
-                    paper = paper_rmse(_paper_scenario(scenario), kind, dataset, horizon)
+                    paper = paper_rmse(_paper_scenario(scenario), kind, dataset, horizon) \
+                        if kind == "mmg" or key == kind else None
                     for i in range(3):
                         cells.append(Cell(values[i] if values else None, paper[i] if paper else None))
                     ref = ref or run
                 if ref is None or all(c.ours is None for c in cells):
                     continue
-                label = model_label(ref.name, kind, "-") if kind == "mmg" else KIND_LABELS[kind]
+                label = (model_label(ref.name, kind, "-") if kind == "mmg" else KIND_LABELS[kind] if key == kind
+                         else f"{KIND_LABELS[kind]} ({key[len(kind) + 1:].replace('_', ' ')})")
                 table.rows.append(TableRow(scenario, label, model_colour(ref.name, kind, ref.dataset), cells))
         _mark_best(table.rows)
         tables.append(table)

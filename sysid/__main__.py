@@ -1,0 +1,4 @@
+"""``python -m sysid`` = the ``sysid`` command."""
+from sysid.cli import main
+
+main()
