@@ -31,14 +31,25 @@ class KNNGate(nn.Module):
         self.register_buffer("threshold", torch.tensor(math.inf, dtype=dtype))
         self.register_buffer("train_distances", torch.zeros(0, dtype=dtype))
 
+    def _bank_sq(self) -> torch.Tensor:
+        """|b|^2 of every bank vector, cached until the bank changes."""
+        key = (self.bank.data_ptr(), self.bank._version, self.bank.shape, self.bank.dtype)
+        cached = self.__dict__.get("_bank_sq_cache")
+        if cached is None or cached[0] != key:
+            cached = (key, (self.bank * self.bank).sum(1))
+            self.__dict__["_bank_sq_cache"] = cached
+        return cached[1]
+
     def _distances(self, z: torch.Tensor, exclude_self: bool) -> torch.Tensor:
         flat = z.reshape(-1, z.shape[-1]).to(self.bank.dtype)
-        k = self.k + (1 if exclude_self else 0)
-        k = min(k, self.bank.shape[0])
+        k = min(self.k + (1 if exclude_self else 0), self.bank.shape[0])
+        bank_sq = self._bank_sq()
         out = []
         for lo in range(0, flat.shape[0], self.chunk):
-            d = torch.cdist(flat[lo:lo + self.chunk], self.bank)
-            nearest = torch.topk(d, k, dim=1, largest=False).values
+            q = flat[lo:lo + self.chunk]
+            # |q - b|^2 = |q|^2 + |b|^2 - 2 q.b: one matrix product, then the k smallest
+            d2 = (q * q).sum(1, keepdim=True) + bank_sq - 2.0 * q @ self.bank.T
+            nearest = torch.topk(d2, k, dim=1, largest=False).values.clamp_min(0.0).sqrt()
             if exclude_self:  # drop the point itself (distance 0)
                 nearest = nearest[:, 1:]
             out.append(nearest.mean(1))
