@@ -57,6 +57,18 @@ def body_acceleration(state: torch.Tensor, force: torch.Tensor, c) -> torch.Tens
     return torch.stack((u_dot, v_dot, r_dot), -1)
 
 
+def required_force(state: torch.Tensor, acceleration: torch.Tensor, c) -> torch.Tensor:
+    """(X, Y, N) (..., 3) [N, N, N m] that produces `acceleration` = (u_dot, v_dot, r_dot)
+    in Eq. (4): the inverse of `body_acceleration`."""
+    u, v, r = state[..., 1], state[..., 3], state[..., 5]
+    du, dv, dr = acceleration.unbind(-1)
+    m, xG = c.m, c.x_G
+    X = (m + c.m_x) * du - (m + c.m_y) * v * r - xG * m * r * r
+    Y = (m + c.m_y) * dv + (m + c.m_x) * u * r + xG * m * dr
+    N = (c.I_zz_J_zz + xG * xG * m) * dr + xG * m * (dv + u * r)
+    return torch.stack((X, Y, N), -1)
+
+
 def state_derivative(state: torch.Tensor, force: torch.Tensor, c) -> torch.Tensor:
     """dx/dt (..., 6) = (x_dot, u_dot, y_dot, v_dot, psi_dot, r_dot), Eqs. (1) and (4)."""
     u, v, psi, r = state[..., 1], state[..., 3], state[..., 4], state[..., 5]

@@ -34,7 +34,7 @@ from tqdm import tqdm
 
 from sysid.correction import ForceCorrection, correction_inputs
 from sysid.data import Run, duplicate_runs, sliding_windows, window_touches
-from sysid.dynamics import integrate
+from sysid.dynamics import integrate, required_force
 from sysid.errors import DataError
 from sysid.experiment import Experiment, ship_overrides
 from sysid.mmg.model import MMG
@@ -107,8 +107,8 @@ def split_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction
         counts = {}
         for part, flag in (("train", False), ("val", True)):
             # a window lies wholly in one part: no validation window overlaps a training one
-            mine = starts[(part_of[starts] == flag) & (part_of[ends] == flag) &
-                          np.array([(part_of[a:b + 1] == flag).all() for a, b in zip(starts, ends)], dtype=bool)]
+            inside = np.concatenate([[0], np.cumsum(part_of == flag)])
+            mine = starts[inside[ends + 1] - inside[starts] == length]
             if exclude_suspect:
                 bad = window_touches(run, mine, length)
                 report["suspect_windows"] += int(bad.sum())
@@ -133,17 +133,6 @@ def split_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction
         raise DataError("no validation windows: the files are too short for the 70/30 split")
     make = lambda parts: WindowSet(torch.cat(parts[0], 1), torch.cat(parts[1], 1), dt)
     return make(train), make(val), (torch.cat(samples[0]), torch.cat(samples[1])), report
-
-
-def required_force(state: torch.Tensor, acceleration: torch.Tensor, c) -> torch.Tensor:
-    """(X, Y, N) (..., 3) that produces `acceleration` (u_dot, v_dot, r_dot) in Eq. (4)."""
-    u, v, r = state[..., 1], state[..., 3], state[..., 5]
-    du, dv, dr = acceleration.unbind(-1)
-    m, xG = c.m, c.x_G
-    X = (m + c.m_x) * du - (m + c.m_y) * v * r - xG * m * r * r
-    Y = (m + c.m_y) * dv + (m + c.m_x) * u * r + xG * m * dr
-    N = (c.I_zz_J_zz + xG * xG * m) * dr + xG * m * (dv + u * r)
-    return torch.stack((X, Y, N), -1)
 
 
 def implied_residual(model: CorrectedModel, windows: WindowSet, pairs: int = 2

@@ -142,3 +142,13 @@ def test_euler_gradient_matches_finite_differences(oracle_dir):
     fd = (u_after(-0.3728 + h) - u_after(-0.3728 - h)) / (2 * h)
     assert abs(fd) > 1e-6  # the derivative is not trivially zero
     assert float(grad) == pytest.approx(fd, rel=1e-6)
+
+
+def test_required_force_inverts_the_equations_of_motion(oracle_vectors):
+    from sysid.dynamics import body_acceleration, required_force
+    model = MMG(load_ship("esso_osaka"))
+    s = torch.tensor(oracle_vectors[STATE].to_numpy())
+    f = torch.tensor(oracle_vectors[["X_SI", "Y_SI", "N_SI"]].to_numpy())
+    acc = body_acceleration(s, f, model.coefficients)
+    np.testing.assert_allclose(acc.numpy(), oracle_vectors[["u_dot", "v_dot", "r_dot"]].to_numpy(), atol=1e-12)
+    np.testing.assert_allclose(required_force(s, acc, model.coefficients).numpy(), f.numpy(), rtol=1e-10, atol=1e-10)
