@@ -30,6 +30,11 @@ QuadratureOption = typer.Option("exact", "--quadrature",
                                 help="Cross-flow integrals: exact (closed form) or simpson (the lab simulator's).")
 
 
+def _check_integrator(integrator: str) -> None:
+    if integrator not in ("euler", "rk4"):
+        raise DataError(f"--integrator {integrator!r}: choose euler or rk4")
+
+
 def _model(ship: str, overrides: Optional[List[str]], quadrature: str) -> MMG:
     if quadrature not in ("exact", "simpson"):
         raise DataError(f"--quadrature {quadrature!r}: choose exact or simpson")
@@ -102,8 +107,7 @@ def simulate(
     quadrature: str = QuadratureOption,
 ) -> None:
     """Predict from the recorded state at T with the recorded inputs (zero-order hold)."""
-    if integrator not in ("euler", "rk4"):
-        raise DataError(f"--integrator {integrator!r}: choose euler or rk4")
+    _check_integrator(integrator)
     model = _model(ship, set_, quadrature)
     run = read_run(log, rate)
     i0 = int(np.argmin(np.abs(run.t - start)))
@@ -149,8 +153,7 @@ def evaluate(
     quadrature: str = QuadratureOption,
 ) -> None:
     """The protocol's windowed RMSE of u, v_m, r per file and horizon (MMG or a trained run)."""
-    if integrator not in ("euler", "rk4"):
-        raise DataError(f"--integrator {integrator!r}: choose euler or rk4")
+    _check_integrator(integrator)
     start = time.perf_counter()
     if run_dir is not None:
         from sysid.runs import load_model
