@@ -6,6 +6,7 @@ a 9-64-64-3 tanh network (Table 6); output de-standardised to N, N, N m (Eq. 10)
 """
 from __future__ import annotations
 
+import math
 from typing import Sequence
 
 import torch
@@ -25,19 +26,39 @@ def correction_inputs(state: torch.Tensor, inputs: torch.Tensor, relative_wind: 
 
 
 class ForceCorrection(nn.Module):
-    """F_NN = sigma_F * f_NN((s - mu_s) / sigma_s) + mu_F.
+    """F_NN = sigma_F * f_NN((s - mu_s) / sigma_s) + mu_F, as the mean of K members.
+
+    Each member is the paper's network (9-64-64-3, tanh); K = 1 is the paper's model. The
+    members differ by their random initialisation and are trained side by side, each on its
+    own loss (see `member_axis`); the correction is their mean, which averages out the
+    variance of a single small network trained on little data.
 
     Parameters
     ----------
     hidden : hidden layer widths (paper: 64, 64).
     dtype : parameter dtype.
+    members : K, the number of networks averaged.
+
+    Attributes
+    ----------
+    member_axis : False (default): inputs (..., 9) give the mean force (..., 3). True
+        (training): inputs (K, ..., 9) give each member's force (K, ..., 3).
     """
 
-    def __init__(self, hidden: Sequence[int] = (64, 64), dtype: torch.dtype = torch.float32):
+    def __init__(self, hidden: Sequence[int] = (64, 64), dtype: torch.dtype = torch.float32,
+                 members: int = 1):
         super().__init__()
-        widths = [len(INPUT_NAMES), *hidden]
-        self.hidden = nn.ModuleList(nn.Linear(a, b, dtype=dtype) for a, b in zip(widths[:-1], widths[1:]))
-        self.output = nn.Linear(widths[-1], len(OUTPUT_NAMES), dtype=dtype)
+        if members < 1:
+            raise ValueError(f"members must be >= 1, got {members}")
+        self.members = int(members)
+        self.member_axis = False
+        widths = [len(INPUT_NAMES), *hidden, len(OUTPUT_NAMES)]
+        self.weights = nn.ParameterList()
+        self.biases = nn.ParameterList()
+        for n_in, n_out in zip(widths[:-1], widths[1:]):
+            bound = 1.0 / math.sqrt(n_in)  # nn.Linear's default initialisation
+            self.weights.append(nn.Parameter(torch.empty(members, n_in, n_out, dtype=dtype).uniform_(-bound, bound)))
+            self.biases.append(nn.Parameter(torch.empty(members, n_out, dtype=dtype).uniform_(-bound, bound)))
         self.register_buffer("input_mean", torch.zeros(len(INPUT_NAMES), dtype=dtype))
         self.register_buffer("input_std", torch.ones(len(INPUT_NAMES), dtype=dtype))
         self.register_buffer("output_mean", torch.zeros(len(OUTPUT_NAMES), dtype=dtype))
@@ -53,16 +74,32 @@ class ForceCorrection(nn.Module):
             getattr(self, name).copy_(value)
         return self
 
-    def features(self, s: torch.Tensor) -> torch.Tensor:
-        """Activations before the output layer (..., 64): the kNN gate's feature space."""
-        z = ((s.to(self.input_mean.dtype) - self.input_mean) / self.input_std)
-        for layer in self.hidden:
-            z = torch.tanh(layer(z))
-        return z
+    def _layer(self, z: torch.Tensor, i: int) -> torch.Tensor:
+        b = self.biases[i].reshape(self.members, *([1] * (z.dim() - 2)), -1)
+        return torch.einsum("k...i,kio->k...o", z, self.weights[i]) + b
 
-    def force(self, z: torch.Tensor) -> torch.Tensor:
-        """F_NN (..., 3) [N, N, N m] from features."""
-        return self.output(z) * self.output_std + self.output_mean
+    def evaluate(self, s: torch.Tensor, standardized: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
+        """(F_NN, features) for inputs s.
+
+        F_NN [N, N, N m] (or the standardised output y of Eq. 10 when `standardized`);
+        features are the activations before the output layer (64), the kNN gate's space
+        (the first member's when several are averaged).
+        """
+        z = (s.to(self.input_mean.dtype) - self.input_mean) / self.input_std
+        if not self.member_axis:
+            z = z.expand(self.members, *z.shape)
+        for i in range(len(self.weights) - 1):
+            z = torch.tanh(self._layer(z, i))
+        y = self._layer(z, len(self.weights) - 1)
+        force = y if standardized else y * self.output_std + self.output_mean
+        if self.member_axis:
+            return force, z
+        return force.mean(0), z[0]
+
+    def features(self, s: torch.Tensor) -> torch.Tensor:
+        """Activations before the output layer (..., 64)."""
+        return self.evaluate(s)[1]
 
     def forward(self, s: torch.Tensor) -> torch.Tensor:
-        return self.force(self.features(s))
+        """F_NN (..., 3) [N, N, N m] (per member, (K, ..., 3), with `member_axis`)."""
+        return self.evaluate(s)[0]

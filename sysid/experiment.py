@@ -69,6 +69,7 @@ class MMGOptions:
 @dataclass(frozen=True)
 class NetworkOptions:
     hidden: tuple[int, ...] = (64, 64)
+    members: int = 1               # networks averaged (1 = the paper's single FNN)
 
 
 @dataclass(frozen=True)
@@ -221,6 +222,7 @@ def _validate(exp: Experiment, src: str) -> None:
         (exp.evaluation.integrator in ("euler", "rk4"), "[evaluation] integrator must be euler or rk4"),
         (all(w >= 1 for w in exp.network.hidden) and exp.network.hidden, "[network] hidden must list widths >= 1"),
         (exp.data.rate > 0, "[data] rate must be > 0"),
+        (exp.network.members >= 1, "[network] members must be >= 1"),
     ]
     for ok, message in checks:
         if not ok:

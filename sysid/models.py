@@ -67,8 +67,8 @@ class CorrectedModel(nn.Module):
             zero = torch.zeros(state.shape[:-1] + (3,), dtype=state.dtype, device=state.device)
             forces = ForceBreakdown(zero, zero, zero, zero, zero, rel)
         s = correction_inputs(state, inputs, forces.relative_wind)
-        z = self.correction_net.features(s)
-        f_nn = self.correction_net.force(z).to(state.dtype)
+        f_nn, z = self.correction_net.evaluate(s)
+        f_nn = f_nn.to(state.dtype)
         if self.gate is not None and self.gate_enabled and self.gate.bank.shape[0] > 0:
             distance, on = self.gate(self.gate_coordinates(s, z))
             f_nn = torch.where(on[..., None], f_nn, torch.zeros_like(f_nn))

@@ -49,7 +49,7 @@ def build_model(exp: Experiment, dtype: torch.dtype = torch.float64) -> torch.nn
     mmg = MMG(ship, trainable=identify, bounds=bounds or None, dtype=dtype)
     if exp.experiment.model == "mmg":
         return mmg
-    net = ForceCorrection(exp.network.hidden, dtype)
+    net = ForceCorrection(exp.network.hidden, dtype, exp.network.members)
     return CorrectedModel(mmg, net, None, physics=exp.experiment.model == "hybrid", gate_space=exp.gate.space)
 
 

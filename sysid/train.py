@@ -183,9 +183,14 @@ class Trainer:
                    dtype=dtype)
 
     def _loss(self, model, batch: WindowSet, w_v, w_F, penalty: bool):
+        states, inputs = batch.states, batch.inputs
+        net = getattr(model, "correction_net", None)
+        if net is not None and net.member_axis:  # every member rolls out the same windows
+            states = states.unsqueeze(1).expand(states.shape[0], net.members, *states.shape[1:])
+            inputs = inputs.unsqueeze(1).expand(inputs.shape[0], net.members, *inputs.shape[1:])
         record: list = []
-        pred = integrate(model, batch.states[0], batch.inputs, batch.dt, "euler", record=record)
-        err = pred[1:, :, VEL] - batch.states[1:, :, VEL]
+        pred = integrate(model, states[0], inputs, batch.dt, "euler", record=record)
+        err = pred[1:, ..., VEL] - states[1:, ..., VEL]
         loss_v = ((err * err) * w_v).sum(-1).mean()
         if not penalty:
             return loss_v, loss_v.new_zeros(())
@@ -197,7 +202,8 @@ class Trainer:
         net = getattr(model, "correction_net", None)
         if net is None:
             return torch.zeros(())
-        return sum((p * p).sum() for name, p in net.named_parameters() if name.endswith("weight"))
+        # ||theta||^2 of the weights, per member (the loss is a mean over members)
+        return sum((w * w).sum() for w in net.weights) / net.members
 
     def _optimize(self, model, params, train: WindowSet, val: WindowSet, w_v, w_F, penalty: bool,
                   epochs: int, lr: float, label: str, deadline: float) -> list[dict]:
@@ -283,7 +289,7 @@ class Trainer:
             info["mmg_val_loss"] = float(self._loss(mmg, val, w_v, None, False)[0])
             info["mmg_train_loss"] = float(self._loss(mmg, train, w_v, None, False)[0])
         self.log(f"MMG-only multi-step loss: training {info['mmg_train_loss']:.5f}, validation {info['mmg_val_loss']:.5f}")
-        net = ForceCorrection(exp.network.hidden, dtype)
+        net = ForceCorrection(exp.network.hidden, dtype, exp.network.members)
         model = CorrectedModel(mmg, net, None, physics=(kind == "hybrid"), gate_space=exp.gate.space)
         s, residual, f_mmg = implied_residual(model, train, max(1, int(round(t.stride_s / train.dt))))
         net.set_standardization(s.mean(0), s.std(0), residual.mean(0), residual.std(0))
@@ -293,6 +299,8 @@ class Trainer:
         # warm start: one-step regression of the standardised residual force
         if t.warm_start_epochs:
             target = (residual - net.output_mean) / net.output_std
+            net.member_axis = True
+            s_members = s.expand(net.members, *s.shape)
             opt = torch.optim.Adam(net.parameters(), lr=3e-3)
             gen = torch.Generator().manual_seed(exp.experiment.seed + 2)
             for _ in tqdm(range(t.warm_start_epochs), desc="warm start", unit="epoch",
@@ -300,13 +308,14 @@ class Trainer:
                 order = torch.randperm(len(s), generator=gen)
                 for lo in range(0, len(s), 256):
                     idx = order[lo:lo + 256]
-                    y = net.output(net.features(s[idx]))
+                    y = net.evaluate(s_members[:, idx], standardized=True)[0]
                     loss = ((y - target[idx]) ** 2).mean() + t.lambda_L2 * self._l2(model)
                     opt.zero_grad()
                     loss.backward()
                     opt.step()
                 if time.perf_counter() > deadline:
                     break
+        net.member_axis = True
         with torch.no_grad():
             info["warm_val_loss"] = float(self._loss(model, val, w_v, None, False)[0])
         self.log(f"after warm start: validation loss {info['warm_val_loss']:.5f}")
@@ -314,6 +323,11 @@ class Trainer:
         history += self._optimize(model, params, train, val, w_v, w_F, kind == "hybrid",
                                   t.epochs, t.learning_rate, "train", deadline)
         info["best_epoch"] = self.best_epoch_
+        net.member_axis = False
+        with torch.no_grad():
+            info["ensemble_val_loss"] = float(self._loss(model, val, w_v, None, False)[0])
+        if net.members > 1:
+            self.log(f"mean of {net.members} networks: validation loss {info['ensemble_val_loss']:.5f}")
         if identify and joint:
             info["identified"] = {k: float(getattr(mmg.coefficients, k).detach()) for k in identify}
         # kNN gate on the final features of the training samples

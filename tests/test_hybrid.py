@@ -206,3 +206,24 @@ def test_gradient_identification_recovers_a_perturbed_coefficient():
     assert trainer.info_["identified_initial"]["N_r"] == pytest.approx(-0.04849)
     assert found["N_r"] == pytest.approx(-0.07, abs=0.004)  # started at -0.04849
     assert found["N_v"] == pytest.approx(-0.1458, abs=0.01)  # stays where the truth has it
+
+
+def test_force_correction_is_the_papers_network_and_members_average():
+    torch.manual_seed(0)
+    net = ForceCorrection((64, 64), torch.float64, members=3)
+    net.set_standardization(torch.arange(9.0), torch.full((9,), 2.0), torch.tensor([1.0, -2.0, 0.5]),
+                            torch.tensor([10.0, 20.0, 5.0]))
+    assert sum(p.numel() for p in net.parameters()) == 3 * 4995  # paper Eq. (25), per member
+    s = torch.randn(7, 9, dtype=torch.float64)
+    force, z = net.evaluate(s)
+    assert force.shape == (7, 3) and z.shape == (7, 64)
+    by_hand = []
+    for k in range(3):  # 9-64-64-3, tanh, Eqs. (8)-(10)
+        h = (s - net.input_mean) / net.input_std
+        h = torch.tanh(h @ net.weights[0][k] + net.biases[0][k])
+        h = torch.tanh(h @ net.weights[1][k] + net.biases[1][k])
+        by_hand.append((h @ net.weights[2][k] + net.biases[2][k]) * net.output_std + net.output_mean)
+    torch.testing.assert_close(force, torch.stack(by_hand).mean(0))
+    net.member_axis = True
+    per_member = net(s.expand(3, 7, 9))
+    torch.testing.assert_close(per_member, torch.stack(by_hand))
