@@ -88,6 +88,7 @@ class TrainingOptions:
     max_minutes: float = 2.5
     warm_start_epochs: int = 150   # one-step regression on the implied residual force
     dtype: str = "float32"
+    device: str = "auto"           # auto (CUDA when present) | cpu | cuda | cuda:N
 
 
 @dataclass(frozen=True)
@@ -214,6 +215,8 @@ def _validate(exp: Experiment, src: str) -> None:
         (t.patience >= 1, "[training] patience must be >= 1"),
         (t.max_minutes > 0, "[training] max_minutes must be > 0"),
         (t.dtype in ("float32", "float64"), "[training] dtype must be float32 or float64"),
+        (t.device == "auto" or t.device == "cpu" or t.device.startswith("cuda"),
+         "[training] device must be auto, cpu or cuda[:N]"),
         (g.k >= 1, "[gate] k must be >= 1"),
         (0.0 < g.alpha < 1.0, "[gate] alpha must be in (0, 1)"),
         (g.space in GATE_SPACES, f"[gate] space must be one of {', '.join(GATE_SPACES)}"),

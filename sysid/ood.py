@@ -32,13 +32,12 @@ class KNNGate(nn.Module):
         self.register_buffer("train_distances", torch.zeros(0, dtype=dtype))
 
     def _bank_sq(self) -> torch.Tensor:
-        """|b|^2 of every bank vector, cached until the bank changes."""
-        key = (self.bank.data_ptr(), self.bank._version, self.bank.shape, self.bank.dtype)
-        cached = self.__dict__.get("_bank_sq_cache")
-        if cached is None or cached[0] != key:
-            cached = (key, (self.bank * self.bank).sum(1))
+        """|b|^2 of every bank vector, cached until the bank tensor is replaced or modified."""
+        cached = self.__dict__.get("_bank_sq_cache")  # (bank tensor, its version, norms)
+        if cached is None or cached[0] is not self.bank or cached[1] != self.bank._version:
+            cached = (self.bank, self.bank._version, (self.bank * self.bank).sum(1))
             self.__dict__["_bank_sq_cache"] = cached
-        return cached[1]
+        return cached[2]
 
     def _distances(self, z: torch.Tensor, exclude_self: bool) -> torch.Tensor:
         flat = z.reshape(-1, z.shape[-1]).to(self.bank.dtype)

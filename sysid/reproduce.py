@@ -136,7 +136,7 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
             if ds not in cache:
                 cache[ds] = [read_run(p) for p in training_files(ds, data)]
             trainer = Trainer(exp, progress=progress, log=lambda m: log("    " + m)).fit(cache[ds])
-            model, history, info = trainer.model_.double(), trainer.history_, trainer.info_
+            model, history, info = trainer.model_.cpu().double(), trainer.history_, trainer.info_
         evaluation = evaluate_model(model, tests, exp.evaluation.horizons, exp.evaluation.integrator)
         write_run(out / "runs" / name, exp, model, evaluation, history, info, time.perf_counter() - t0)
         results[name] = (label, dataset, evaluation.metrics)

@@ -34,6 +34,7 @@ from tqdm import tqdm
 
 from sysid.correction import ForceCorrection, correction_inputs
 from sysid.data import Run, duplicate_runs, sliding_windows, window_touches
+from sysid.device import resolve_device
 from sysid.dynamics import integrate, required_force
 from sysid.errors import DataError
 from sysid.experiment import Experiment, ship_overrides
@@ -58,6 +59,7 @@ class WindowSet:
         return self.states.shape[1]
 
     def select(self, index: torch.Tensor) -> "WindowSet":
+        index = index.to(self.states.device)
         return WindowSet(self.states[:, index], self.inputs[:, index], self.dt)
 
     def to(self, dtype: torch.dtype) -> "WindowSet":
@@ -81,7 +83,8 @@ def _block_parts(n: int, block: int, val_fraction: float, rng: np.random.Generat
 
 
 def split_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction: float,
-                  exclude_suspect: bool = True, dtype=torch.float64, block_s: float = 30.0, seed: int = 0):
+                  exclude_suspect: bool = True, dtype=torch.float64, block_s: float = 30.0, seed: int = 0,
+                  device: str | torch.device = "cpu"):
     """Training and validation `WindowSet`s, the training samples (N, 6)/(N, 4), and a report.
 
     Each file is cut into blocks of `block_s`; a random `val_fraction` of the blocks (seeded)
@@ -118,13 +121,13 @@ def split_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction
                 continue
             idx = mine[None, :] + np.arange(length)[:, None]
             target = train if part == "train" else val
-            target[0].append(torch.as_tensor(run.states[idx], dtype=dtype))
-            target[1].append(torch.as_tensor(run.inputs[idx], dtype=dtype))
+            target[0].append(torch.as_tensor(run.states[idx], dtype=dtype, device=device))
+            target[1].append(torch.as_tensor(run.inputs[idx], dtype=dtype, device=device))
         keep = ~part_of
         for a, b in run.suspect if exclude_suspect else []:
             keep &= ~((run.t >= a - 1.0) & (run.t <= b + 1.0))
-        samples[0].append(torch.as_tensor(run.states[keep], dtype=dtype))
-        samples[1].append(torch.as_tensor(run.inputs[keep], dtype=dtype))
+        samples[0].append(torch.as_tensor(run.states[keep], dtype=dtype, device=device))
+        samples[1].append(torch.as_tensor(run.inputs[keep], dtype=dtype, device=device))
         report["files"].append({"file": run.name, "train_windows": counts["train"],
                                 "val_windows": counts["val"], "issues": run.issues})
     if not train[0]:
@@ -161,6 +164,9 @@ def output_penalty(f_nn: torch.Tensor, f_mmg: torch.Tensor, w_F: torch.Tensor, b
 
 class Trainer:
     """Fits an MMG-only (optionally identified), NN-only or hybrid model to processed runs.
+
+    Training runs on ``[training] device`` ("auto": CUDA when present, else CPU); the fitted
+    ``model_`` stays there (``model_.cpu()`` for CPU evaluation).
 
     Parameters
     ----------
@@ -253,11 +259,12 @@ class Trainer:
         t, kind = exp.training, exp.experiment.model
         seed_everything(exp.experiment.seed)
         dtype = torch.float32 if t.dtype == "float32" else torch.float64
+        device = resolve_device(t.device)
         started = time.perf_counter()
         deadline = started + 60.0 * t.max_minutes
         train, val, samples, report = split_windows(runs, t.steps, t.stride_s, t.val_fraction,
                                                     exp.data.exclude_suspect, dtype, t.block_s,
-                                                    exp.experiment.seed)
+                                                    exp.experiment.seed, device)
         for name in report["dropped_copies"]:
             self.log(f"left out {name}: an exact copy of the start of another training file")
         self.log(f"{len(train)} training and {len(val)} validation windows of {t.steps} steps "
@@ -267,9 +274,10 @@ class Trainer:
         w_v = 1.0 / vel.var(0)
         identify = list(exp.identify.parameters)
         joint = exp.identify.stage == "joint"
-        mmg = self._mmg(dtype, trainable=identify)
+        mmg = self._mmg(dtype, trainable=identify).to(device)
         history: list[dict] = []
-        info: dict = {"n_train_windows": len(train), "n_val_windows": len(val), "split": report}
+        info: dict = {"n_train_windows": len(train), "n_val_windows": len(val), "split": report,
+                      "device": str(device)}
         if identify:
             info["identified_initial"] = {k: float(getattr(mmg.coefficients, k).detach()) for k in identify}
         if identify and (kind == "mmg" or not joint):
@@ -289,7 +297,7 @@ class Trainer:
             info["mmg_val_loss"] = float(self._loss(mmg, val, w_v, None, False)[0])
             info["mmg_train_loss"] = float(self._loss(mmg, train, w_v, None, False)[0])
         self.log(f"MMG-only multi-step loss: training {info['mmg_train_loss']:.5f}, validation {info['mmg_val_loss']:.5f}")
-        net = ForceCorrection(exp.network.hidden, dtype, exp.network.members)
+        net = ForceCorrection(exp.network.hidden, dtype, exp.network.members).to(device)
         model = CorrectedModel(mmg, net, None, physics=(kind == "hybrid"), gate_space=exp.gate.space)
         s, residual, f_mmg = implied_residual(model, train, max(1, int(round(t.stride_s / train.dt))))
         net.set_standardization(s.mean(0), s.std(0), residual.mean(0), residual.std(0))
@@ -305,7 +313,7 @@ class Trainer:
             gen = torch.Generator().manual_seed(exp.experiment.seed + 2)
             for _ in tqdm(range(t.warm_start_epochs), desc="warm start", unit="epoch",
                           disable=not self.progress, leave=False):
-                order = torch.randperm(len(s), generator=gen)
+                order = torch.randperm(len(s), generator=gen).to(device)
                 for lo in range(0, len(s), 256):
                     idx = order[lo:lo + 256]
                     y = net.evaluate(s_members[:, idx], standardized=True)[0]

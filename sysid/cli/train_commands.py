@@ -37,7 +37,7 @@ def train(
         model, history, info = build_model(exp), None, {}
     else:
         trainer = Trainer(exp, log=lambda m: typer.echo("  " + m)).fit(runs)
-        model, history, info = trainer.model_.double(), trainer.history_, trainer.info_
+        model, history, info = trainer.model_.cpu().double(), trainer.history_, trainer.info_
     test_paths = expand_paths(test) if test else list(test_files(data).values())
     tests = [read_run(p) for p in test_paths]
     evaluation = evaluate_model(model, tests, exp.evaluation.horizons, exp.evaluation.integrator)
