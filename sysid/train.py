@@ -12,7 +12,8 @@ Steps, in order:
    residual force the data implies: M * (v[k+1] - v[k]) / dt + C(v[k]) - F_MMG(x[k])
    (for NN-only without F_MMG), the force that makes one Euler step land on the record.
 3. Optional gradient identification of MMG coefficients (``[identify]``, stage "before").
-4. Warm start: the FNN regresses that residual force (one-step fit).
+4. Warm start: the FNN regresses that residual force (one-step fit). With ``[network]
+   members`` K > 1, K networks are trained side by side (each on its own loss) and averaged.
 5. Multi-step training: Euler rollouts of T steps through torchdiffeq, loss
    lambda_v * L_v + lambda_F * L_F + lambda_L2 * |theta|^2, Adam, early stopping on the
    validation velocity loss, best weights restored.
