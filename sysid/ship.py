@@ -139,11 +139,6 @@ class Ship:
         return Ship(self.name, MappingProxyType(params), self.sensors, self.source,
                     self.description, MappingProxyType(applied))
 
-    @property
-    def mass_matrix_terms(self) -> dict[str, float]:
-        p = self.parameters
-        return {k: p[k] for k in ("m", "m_x", "m_y", "I_zz_J_zz", "x_G")}
-
 
 def _check_value(name: str, value: object, source: str) -> float:
     section, low, high = PARAMETERS[name]

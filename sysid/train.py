@@ -63,9 +63,6 @@ class WindowSet:
         index = index.to(self.states.device)
         return WindowSet(self.states[:, index], self.inputs[:, index], self.dt)
 
-    def to(self, dtype: torch.dtype) -> "WindowSet":
-        return WindowSet(self.states.to(dtype), self.inputs.to(dtype), self.dt)
-
 
 def seed_everything(seed: int) -> None:
     random.seed(seed)

@@ -1,7 +1,7 @@
 """The MMG force model: hull + propeller + rudder + wind, every component by name."""
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Iterable, Mapping
 
 import torch
@@ -41,9 +41,6 @@ class ForceBreakdown:
     def total(self) -> torch.Tensor:
         """F_MMG + F_NN, the right-hand side of the maneuvering equations."""
         return self.mmg + self.correction
-
-    def as_dict(self) -> dict[str, torch.Tensor]:
-        return {f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) is not None}
 
 
 class MMG(nn.Module):
