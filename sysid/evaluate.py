@@ -38,6 +38,12 @@ class WindowPrediction:
     predicted: torch.Tensor
     inputs: torch.Tensor
 
+    def metrics_row(self, horizon_s: float) -> dict:
+        """``file, horizon_s, n_windows, rmse_u, rmse_v, rmse_r`` (NaN RMSE without windows)."""
+        rmse = self.rmse() if len(self.starts) else np.full(3, np.nan)
+        return {"file": self.run.name, "horizon_s": horizon_s, "n_windows": len(self.starts),
+                "rmse_u": rmse[0], "rmse_v": rmse[1], "rmse_r": rmse[2]}
+
     def rmse(self) -> np.ndarray:
         """Pooled RMSE of (u [m/s], v_m [m/s], r [rad/s]) over every window point."""
         idx = list(VELOCITY_INDEX)
@@ -87,8 +93,5 @@ def metrics_table(model: nn.Module, runs: Sequence[Run], horizons: Sequence[floa
     """Rows ``file, horizon_s, n_windows, rmse_u, rmse_v, rmse_r`` per file and horizon."""
     rows = []
     for horizon in horizons:
-        for pred in predict_windows(model, runs, horizon, method, **kwargs):
-            rmse = pred.rmse() if len(pred.starts) else np.full(3, np.nan)
-            rows.append({"file": pred.run.name, "horizon_s": horizon, "n_windows": len(pred.starts),
-                         "rmse_u": rmse[0], "rmse_v": rmse[1], "rmse_r": rmse[2]})
+        rows += [pred.metrics_row(horizon) for pred in predict_windows(model, runs, horizon, method, **kwargs)]
     return pd.DataFrame(rows, columns=METRIC_COLUMNS)

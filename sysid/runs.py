@@ -162,10 +162,7 @@ def evaluate_model(model, runs: Sequence[Run], horizons: Sequence[float], integr
     rows, frames, shares = [], {}, {}
     for horizon in horizons:
         for pred in predict_windows(model, runs, horizon, integrator):
-            rmse = pred.rmse() if len(pred.starts) else np.full(3, np.nan)
-            rows.append({"scenario": SCENARIO_OF.get(pred.run.name, ""), "file": pred.run.name,
-                         "horizon_s": horizon, "n_windows": len(pred.starts),
-                         "rmse_u": rmse[0], "rmse_v": rmse[1], "rmse_r": rmse[2]})
+            rows.append({"scenario": SCENARIO_OF.get(pred.run.name, ""), **pred.metrics_row(horizon)})
             if traces and len(pred.starts):
                 frame = trace_frame(model, pred)
                 name = trace_name(pred.run.name, horizon)
