@@ -34,6 +34,7 @@ class _ClassicalRK4(_RK4_3_8):
 
 _TORCHDIFFEQ_SOLVERS.setdefault("rk4_classic", _ClassicalRK4)
 _SOLVER_NAME = {"euler": "euler", "rk4": "rk4_classic", "rk4_3/8": "rk4"}
+INTEGRATORS = ("euler", "rk4")  # what configs and the CLI offer: the paper's and the lab's
 
 
 def body_acceleration(state: torch.Tensor, force: torch.Tensor, c) -> torch.Tensor:

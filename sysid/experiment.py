@@ -40,9 +40,13 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+from sysid.dynamics import INTEGRATORS
 from sysid.errors import ConfigError
-from sysid.models import GATE_SPACES, KINDS
 from sysid.ship import parameter_name
+
+
+KINDS = ("mmg", "nn", "hybrid")         # MMG-only, NN-only, hybrid MMG + FNN
+GATE_SPACES = ("features", "inputs")    # where the kNN gate measures distances
 
 
 @dataclass(frozen=True)
@@ -125,6 +129,11 @@ class Experiment:
     identify: IdentifyOptions = IdentifyOptions()
     evaluation: EvaluationOptions = EvaluationOptions()
     source: str = ""
+
+    @property
+    def needs_training(self) -> bool:
+        """False for an MMG-only model with nothing to identify (it is used as defined)."""
+        return not (self.experiment.model == "mmg" and not self.identify.parameters)
 
     def replace(self, **sections: dict) -> "Experiment":
         """A copy with some options changed: ``exp.replace(training={"epochs": 2})``."""
@@ -222,7 +231,8 @@ def _validate(exp: Experiment, src: str) -> None:
         (g.space in GATE_SPACES, f"[gate] space must be one of {', '.join(GATE_SPACES)}"),
         (i.stage in ("before", "joint"), "[identify] stage must be before or joint"),
         (all(h > 0 for h in exp.evaluation.horizons), "[evaluation] horizons must be > 0"),
-        (exp.evaluation.integrator in ("euler", "rk4"), "[evaluation] integrator must be euler or rk4"),
+        (exp.evaluation.integrator in INTEGRATORS,
+         f"[evaluation] integrator must be one of {', '.join(INTEGRATORS)}"),
         (all(w >= 1 for w in exp.network.hidden) and exp.network.hidden, "[network] hidden must list widths >= 1"),
         (exp.data.rate > 0, "[data] rate must be > 0"),
         (exp.network.members >= 1, "[network] members must be >= 1"),

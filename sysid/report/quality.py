@@ -10,21 +10,11 @@ from matplotlib.figure import Figure, FigureBase
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
-from sysid.report.source import read_json
+from sysid.report.palette import QUALITY_COLOURS
 
-KEPT, DROPPED, SPLIT, FILLED, BASELINE, GATE = "#1b8a3a", "#9a9a9a", "#d62728", "#ff9f1c", "#1f5fbf", "#8c3fbf"
+KEPT, DROPPED, SPLIT, FILLED, BASELINE, GATE = (QUALITY_COLOURS[k] for k in (
+    "kept", "dropped", "split", "filled", "baseline", "gate"))
 FILES_PER_FIGURE = 20
-
-
-def read_quality_reports(*folders: Path) -> list[dict]:
-    """Every ``*.report.json`` directly in the folders, sorted by file name."""
-    reports = []
-    for folder in folders:
-        for path in sorted(Path(folder).glob("*.report.json")) if Path(folder).is_dir() else []:
-            data = read_json(path)
-            data.setdefault("file", path.name.removesuffix(".report.json"))
-            reports.append(data)
-    return reports
 
 
 @dataclass

@@ -14,9 +14,9 @@ from pathlib import Path
 import pandas as pd
 
 from sysid.errors import CheckpointError
-from sysid.rundir import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
+from sysid.experiment import KINDS as MODEL_KINDS
+from sysid.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
 
-MODEL_KINDS = ("mmg", "nn", "hybrid")
 
 
 def read_json(path: Path) -> dict:
@@ -158,9 +158,19 @@ def read_run_dir(path: Path) -> RunRecord:
                      metrics, history)
 
 
+def read_quality_reports(*folders: Path) -> list[dict]:
+    """Every ``*.report.json`` directly in the folders, sorted by file name."""
+    reports = []
+    for folder in folders:
+        for path in sorted(Path(folder).glob("*.report.json")) if Path(folder).is_dir() else []:
+            data = read_json(path)
+            data.setdefault("file", path.name.removesuffix(".report.json"))
+            reports.append(data)
+    return reports
+
+
 def read_source(path) -> ReportSource:
     """A run directory (has summary.json and metrics.csv) or a reproduction directory (has runs/)."""
-    from sysid.report.quality import read_quality_reports
     path = Path(path)
     if not path.is_dir():
         raise CheckpointError(f"{path}: no such directory")
