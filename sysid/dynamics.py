@@ -18,7 +18,7 @@ from torchdiffeq._impl.odeint import SOLVERS as _TORCHDIFFEQ_SOLVERS
 from torchdiffeq._impl.fixed_grid import RK4 as _RK4_3_8
 from torchdiffeq._impl.rk_common import rk4_step_func
 
-from sysid.mmg.model import ForceBreakdown
+from sysid.mmg.breakdown import ForceBreakdown
 
 Method = Literal["euler", "rk4", "rk4_3/8"]
 

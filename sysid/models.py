@@ -15,7 +15,7 @@ from torch import nn
 from sysid.correction import ForceCorrection, correction_inputs
 from sysid.experiment import GATE_SPACES, Experiment, ship_overrides
 from sysid.mmg.coefficients import Coefficients
-from sysid.mmg.model import MMG, ForceBreakdown
+from sysid.mmg.breakdown import MMG, ForceBreakdown
 from sysid.mmg.wind import relative_wind
 from sysid.ood import KNNGate
 from sysid.ship import load_ship

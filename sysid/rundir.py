@@ -41,7 +41,7 @@ from sysid.errors import CheckpointError, ConfigError
 from sysid.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, Evaluation, trace_name  # noqa: F401 (layout)
 from sysid.experiment import Experiment, load_experiment, ship_overrides
 from sysid.files import atomic_path, write_csv, write_text
-from sysid.mmg.model import MMG
+from sysid.mmg.breakdown import MMG
 from sysid.models import CorrectedModel, build_model
 from sysid.ood import KNNGate
 

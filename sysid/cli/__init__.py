@@ -11,9 +11,7 @@ import typer
 from sysid.errors import SysidError
 from sysid.cli.interrupts import interrupt_note
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, rich_markup_mode=None,
-                  pretty_exceptions_enable=False,
-                  help="Ship maneuvering system identification: MMG, hybrid MMG+FNN, reports.")
+from sysid.cli.app import app  # noqa: E402
 
 # subcommands (each module adds its commands to `app`)
 from sysid.cli import mmg_commands  # noqa: E402,F401

@@ -11,7 +11,7 @@ import torch
 import typer
 from tqdm import tqdm
 
-from sysid.cli import app
+from sysid.cli.app import app
 from sysid.data import expand_paths, read_run
 from sysid.dynamics import INTEGRATORS, integrate, state_derivative
 from sysid.errors import DataError

@@ -12,7 +12,7 @@ from tqdm import tqdm
 
 from preprocessing import pipeline, synth
 from preprocessing.schema import RawLogError
-from sysid.cli import app
+from sysid.cli.app import app
 from sysid.errors import DataError
 from sysid.ship import load_ship
 

@@ -7,7 +7,7 @@ from typing import List, Optional
 
 import typer
 
-from sysid.cli import app
+from sysid.cli.app import app
 
 
 @app.command()
