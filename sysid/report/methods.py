@@ -172,7 +172,7 @@ def methods_paragraphs(source: ReportSource) -> list[str]:
     horizons = sorted({h for r in source.runs for h in r.horizons()})
     out = [PROTOCOL_TEXT.format(horizons=" and ".join(str(h) for h in horizons))] if source.runs else []
     if source.quality:
-        settings = source.quality[0].get("settings") or {}
+        settings = source.quality[0].settings
         out.append("Preprocessing: raw 10 Hz logs converted to the processed schema (GNSS to local metres, "
                    "antenna-baseline and heading-gate checks, gaps interpolated or split into segments, "
                    "velocities by filtering); settings of the first file: "
