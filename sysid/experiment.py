@@ -89,7 +89,8 @@ class TrainingOptions:
     lambda_F: float = 1e-3
     lambda_L2: float = 1e-6
     patience: int = 40
-    max_minutes: float = 2.5
+    max_minutes: float = 0.0       # 0: off; > 0: a safety limit whose hit fails the run
+    threads: int = 1               # torch intra-op threads; 0: one per core
     warm_start_epochs: int = 150   # one-step regression on the implied residual force
     dtype: str = "float32"
     device: str = "auto"           # auto (CUDA when present) | cpu | cuda | cuda:N
@@ -222,7 +223,8 @@ def _validate(exp: Experiment, src: str) -> None:
         (t.learning_rate > 0, "[training] learning_rate must be > 0"),
         (min(t.lambda_v, t.lambda_F, t.lambda_L2) >= 0, "[training] lambdas must be >= 0"),
         (t.patience >= 1, "[training] patience must be >= 1"),
-        (t.max_minutes > 0, "[training] max_minutes must be > 0"),
+        (t.max_minutes >= 0, "[training] max_minutes must be >= 0 (0: no wall-clock limit)"),
+        (t.threads >= 0, "[training] threads must be >= 0 (0: one per core)"),
         (t.dtype in ("float32", "float64"), "[training] dtype must be float32 or float64"),
         (t.device == "auto" or t.device == "cpu" or t.device.startswith("cuda"),
          "[training] device must be auto, cpu or cuda[:N]"),

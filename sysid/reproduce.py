@@ -108,6 +108,7 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
     cache: dict[str, list] = {}
     results = []
     shares: dict[str, dict] = {}
+    failed: dict[str, str] = {}
     for i, (name, exp) in enumerate(experiments.items(), 1):
         if overrides and exp.experiment.model != "mmg":
             exp = exp.replace(**overrides)
@@ -123,12 +124,15 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
         results.append((name, exp.experiment.model, dataset if exp.needs_training else "-",
                         result.evaluation.metrics))
         shares[name] = result.evaluation.gate_off_share
+        if result.failure:
+            failed[name] = result.failure
+            log(f"    FAILED: {result.failure}")
         log(f"    done in {result.seconds:.0f} s")
     table = comparison_table(results)
     write_csv(table, out / "comparison.csv", float_format="%.5f")
     for horizon, fname in ((30, "table7.md"), (100, "table8.md")):
         write_text(markdown_table(table, horizon), out / fname)
-    summary = {"seconds": time.perf_counter() - started, "runs": names}
+    summary = {"seconds": time.perf_counter() - started, "runs": names, "failed": failed}
     if {"hybrid_D1", "hybrid_D2", "mmg_paper", "mmg_lab"} <= set(names):
         summary["scorecard"] = scorecard(table, hybrid_baseline())
     if "hybrid_identified_D2" in names:

@@ -4,8 +4,9 @@
 A **run directory** (``sysid train CONFIG -o runs/NAME``)::
 
     config.toml        resolved experiment config (all defaults filled in)
-    summary.json       {"name", "model": "mmg"|"nn"|"hybrid", "dataset": "D1"|"D2"|..., "ship",
-                        "seed", "created", "train_seconds", "epochs", "best_epoch",
+    summary.json       {"name", "model": "mmg"|"nn"|"hybrid", "status": "complete"|"failed: ...",
+                        "dataset": "D1"|"D2"|..., "ship", "seed", "created", "train_seconds",
+                        "epochs", "best_epoch", "stopped": {stage: "early stop"|"epoch limit"|...},
                         "n_train_windows", "n_val_windows", "versions": {...},
                         "mmg_overrides": {...}, "identified": {...}, "gate": {...},
                         "training": {...}}
@@ -132,12 +133,14 @@ def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds:
     info = training.to_dict() if training is not None else {}
     return {
         "name": exp.experiment.name, "model": exp.experiment.model,
+        "status": f"failed: {info['failure']}" if info.get("failure") else "complete",
         "dataset": "files" if exp.data.files else (exp.experiment.dataset if exp.needs_training else "-"),
         "ship": exp.experiment.ship, "seed": exp.experiment.seed,
         "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "seconds": seconds,
         "train_seconds": info.pop("train_seconds", None),
         "epochs": info.pop("epochs", 0),
         "best_epoch": info.pop("best_epoch", None),
+        "stopped": info.pop("stopped", {}),
         "n_train_windows": info.pop("n_train_windows", None),
         "n_val_windows": info.pop("n_val_windows", None),
         "versions": versions(), "mmg_overrides": ship_overrides(exp),

@@ -24,7 +24,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import random
+import sys
 import time
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
@@ -35,10 +37,11 @@ import torch
 from tqdm import tqdm
 
 from sysid.correction import ForceCorrection, correction_inputs
+from sysid.checkpoint import TrainingCheckpoint
 from sysid.data import Run, duplicate_runs, sliding_windows, stack_windows, window_touches
 from sysid.device import resolve_device
 from sysid.dynamics import integrate, required_force
-from sysid.errors import DataError
+from sysid.errors import DataError, TrainingError
 from sysid.experiment import Experiment
 from sysid.models import CorrectedModel, PerMember, build_mmg, correction_of
 from sysid.ood import KNNGate
@@ -80,7 +83,7 @@ class StageResult:
     history: list[dict]
     best_epoch: int
     best_loss: float
-    stopped: str  # "early stop" | "epoch limit" | "time budget"
+    stopped: str  # "early stop" | "epoch limit" | "time limit" (a failure)
 
 
 @dataclass
@@ -104,9 +107,14 @@ class TrainingSummary:
     ensemble_val_loss: float | None = None
     gate: dict | None = None
     train_seconds: float = 0.0
+    failure: str | None = None            # why the run failed (a hit wall-clock limit)
 
     def to_dict(self) -> dict:
         return {k: v for k, v in dataclasses.asdict(self).items() if v is not None}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "TrainingSummary":
+        return cls(**{**d, "split": SplitReport(**d["split"])})
 
 
 def seed_everything(seed: int) -> None:
@@ -244,14 +252,19 @@ class Trainer:
     Parameters
     ----------
     experiment : validated experiment options.
-    progress : show tqdm progress bars.
+    progress : show progress (tqdm bars on a terminal, a line every 10 epochs elsewhere).
     log : callable receiving one-line messages.
+    checkpoint : file for the per-epoch training checkpoint (None: none written).
+    resume : continue from `checkpoint` when it exists (same config required).
     """
 
-    def __init__(self, experiment: Experiment, progress: bool = True, log: Callable[[str], None] = print):
+    def __init__(self, experiment: Experiment, progress: bool = True, log: Callable[[str], None] = print,
+                 checkpoint: str | os.PathLike | None = None, resume: bool = False):
         self.experiment = experiment
         self.progress = progress
         self.log = log
+        self.checkpoint = TrainingCheckpoint(checkpoint, experiment.to_toml()) if checkpoint else None
+        self.resume = resume
 
     # -- building blocks -------------------------------------------------------------
     def _l2(self, model) -> torch.Tensor:
@@ -260,12 +273,26 @@ class Trainer:
 
     def _optimize(self, model, params, train: WindowSet, val: WindowSet, w_v, w_F,
                   epochs: int, lr: float, label: str) -> StageResult:
-        """Adam on the multi-step loss with early stopping; restores the best state."""
+        """Adam on the multi-step loss with early stopping; restores the best state.
+
+        Stops on `patience` epochs without a better validation loss or at `epochs`; a
+        checkpoint is written after every epoch, and a resumed stage continues from it.
+        """
         t = self.experiment.training
         opt = torch.optim.Adam(params, lr=lr)
         best, best_state, best_epoch, history = math.inf, None, 0, []
         gen = torch.Generator().manual_seed(self.experiment.experiment.seed + 1)
-        bar = tqdm(range(1, epochs + 1), desc=label, unit="epoch", disable=not self.progress, leave=False)
+        first = 1
+        resume = self._resume if self._resume and self._resume["stage"] == label else None
+        if resume:
+            model.load_state_dict(resume["model"])
+            opt.load_state_dict(resume["optimizer"])
+            gen.set_state(resume["generator"])
+            best, best_epoch, best_state = resume["best_loss"], resume["best_epoch"], resume["best_state"]
+            history, first = list(resume["stage_history"]), resume["epoch"] + 1
+            self.log(f"{label}: resumed after epoch {resume['epoch']} from {self.checkpoint.path}")
+        stopped = "epoch limit"
+        bar = self._bar(range(first, epochs + 1), label, epochs, first - 1)
         for epoch in bar:
             start = time.perf_counter()
             order = torch.randperm(len(train), generator=gen)
@@ -274,6 +301,9 @@ class Trainer:
                 batch = train.select(order[lo:lo + t.batch_size])
                 loss_v, loss_F = multistep_loss(model, batch, w_v, w_F)
                 loss = t.lambda_v * loss_v + t.lambda_F * loss_F + t.lambda_L2 * self._l2(model)
+                if not torch.isfinite(loss):
+                    raise TrainingError(f"{self.experiment.source}: [training] the {label} loss became "
+                                        f"{float(loss)} at epoch {epoch} (learning_rate = {lr:g}?); no run written")
                 opt.zero_grad()
                 loss.backward()
                 opt.step()
@@ -282,22 +312,46 @@ class Trainer:
             with torch.no_grad():
                 val_v, _ = multistep_loss(model, val, w_v)
             sums /= len(train)
-            row = {"stage": label, "epoch": epoch, "train_loss": sums[0], "train_velocity": sums[1],
-                   "train_penalty": sums[2], "val_loss": float(val_v), "seconds": time.perf_counter() - start}
+            row = {"stage": label, "epoch": epoch, "train_loss": float(sums[0]), "train_velocity": float(sums[1]),
+                   "train_penalty": float(sums[2]), "val_loss": float(val_v), "seconds": time.perf_counter() - start}
             history.append(row)
             if float(val_v) < best:
                 best, best_epoch = float(val_v), epoch
                 best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
-            bar.set_postfix(train=f"{sums[1]:.4f}", val=f"{float(val_v):.4f}", best=best_epoch)
-            if epoch - best_epoch >= t.patience or time.perf_counter() > self._deadline:
+            self._progress(bar, epoch, epochs, sums[1], float(val_v), best_epoch)
+            if epoch - best_epoch >= t.patience:
+                stopped = "early stop"
+            elif time.perf_counter() > self._deadline:
+                stopped = "time limit"
+            if self.checkpoint is not None:
+                self.checkpoint.save(stage=label, epoch=epoch, model=model.state_dict(), optimizer=opt.state_dict(),
+                                     generator=gen.get_state(), best_loss=best, best_epoch=best_epoch,
+                                     best_state=best_state, stage_history=history, history=self._history,
+                                     summary=self._summary.to_dict())
+            if stopped != "epoch limit":
                 break
-        bar.close()
+        if hasattr(bar, "close"):
+            bar.close()
         if best_state is not None:
             model.load_state_dict(best_state)
-        stopped = "early stop" if history and history[-1]["epoch"] - best_epoch >= t.patience else (
-            "time budget" if time.perf_counter() > self._deadline else "epoch limit")
+        if stopped == "time limit":
+            self._summary.failure = (f"wall-clock limit of {self.experiment.training.max_minutes:g} min "
+                                     f"([training] max_minutes) hit in stage {label} at epoch {len(history)}")
+            self.log(f"FAILED: {self._summary.failure}")
         self.log(f"{label}: {len(history)} epochs, best validation loss {best:.5f} at epoch {best_epoch} ({stopped})")
         return StageResult(history, best_epoch, best, stopped)
+
+    def _bar(self, epochs, label: str, total: int, done: int):
+        """tqdm on a terminal; elsewhere the epochs plain (progress then comes as log lines)."""
+        if self.progress and sys.stderr.isatty():
+            return tqdm(epochs, desc=label, unit="epoch", leave=False, total=total, initial=done)
+        return epochs
+
+    def _progress(self, bar, epoch: int, total: int, train_v: float, val_v: float, best_epoch: int) -> None:
+        if hasattr(bar, "set_postfix"):
+            bar.set_postfix(train=f"{train_v:.4f}", val=f"{val_v:.4f}", best=best_epoch)
+        elif self.progress and (epoch % 10 == 0 or epoch == total):
+            self.log(f"  epoch {epoch}/{total}: training {train_v:.5f}, validation {val_v:.5f} (best at {best_epoch})")
 
     def _coefficients(self, mmg) -> dict[str, float]:
         return {k: float(getattr(mmg.coefficients, k).detach()) for k in self.experiment.identify.parameters}
@@ -340,8 +394,7 @@ class Trainer:
         s_members = s.expand(net.members, *s.shape)
         opt = torch.optim.Adam(net.parameters(), lr=3e-3)
         gen = torch.Generator().manual_seed(self.experiment.experiment.seed + 2)
-        for _ in tqdm(range(t.warm_start_epochs), desc="warm start", unit="epoch",
-                      disable=not self.progress, leave=False):
+        for _ in self._bar(range(t.warm_start_epochs), "warm start", t.warm_start_epochs, 0):
             order = torch.randperm(len(s), generator=gen).to(device)
             for lo in range(0, len(s), 256):
                 idx = order[lo:lo + 256]
@@ -350,8 +403,9 @@ class Trainer:
                 opt.zero_grad()
                 loss.backward()
                 opt.step()
-            if time.perf_counter() > self._deadline:
-                break
+            if not torch.isfinite(loss):
+                raise TrainingError(f"{self.experiment.source}: [training] the warm-start loss became "
+                                    f"{float(loss)}; no run written")
 
     def train(self, model: CorrectedModel, params, train: WindowSet, val: WindowSet, w_v, w_F) -> StageResult:
         """Stage 5: multi-step training of every FNN member (and joint MMG coefficients)."""
@@ -379,7 +433,8 @@ class Trainer:
         dtype = torch.float32 if t.dtype == "float32" else torch.float64
         device = resolve_device(t.device)
         started = time.perf_counter()
-        self._deadline = started + 60.0 * t.max_minutes
+        self._deadline = started + 60.0 * t.max_minutes if t.max_minutes > 0 else math.inf
+        self._resume = self.checkpoint.load() if self.checkpoint is not None and self.resume else None
         train, val, samples, report = self.split(runs, dtype, device)
         # velocity weights w_v: inverse variance of the recorded velocities
         w_v = 1.0 / train.states[:, :, VEL].reshape(-1, 3).var(0)
@@ -387,36 +442,45 @@ class Trainer:
         joint = exp.identify.stage == "joint"
         mmg = build_mmg(exp, dtype).to(device)
         summary = TrainingSummary(len(train), len(val), report, str(device))
-        history: list[dict] = []
-        if identify:
+        self._summary, self._history = summary, []
+        resumed_in = self._resume["stage"] if self._resume else None
+        if resumed_in == "train":  # earlier stages are done: their results come from the checkpoint
+            summary = self._summary = TrainingSummary.from_dict(self._resume["summary"])
+            self._history = list(self._resume["history"])
+        if identify and not summary.identified_initial:
             summary.identified_initial = self._coefficients(mmg)
-        if identify and (kind == "mmg" or not joint):
+        if identify and (kind == "mmg" or not joint) and resumed_in != "train":
             stage = self.identify(mmg, train, val, w_v)
-            history += stage.history
+            self._history += stage.history
             summary.stopped["identify"] = stage.stopped
             summary.identified = self._coefficients(mmg)
-            if not joint:
-                mmg.requires_grad_(False)
+        if identify and not joint:
+            mmg.requires_grad_(False)
         model = mmg
-        if kind != "mmg":
-            with torch.no_grad():
-                summary.mmg_val_loss = float(multistep_loss(mmg, val, w_v)[0])
-                summary.mmg_train_loss = float(multistep_loss(mmg, train, w_v)[0])
-            self.log(f"MMG-only multi-step loss: training {summary.mmg_train_loss:.5f}, "
-                     f"validation {summary.mmg_val_loss:.5f}")
+        if kind != "mmg" and summary.failure is None:
             net = ForceCorrection(exp.network.hidden, dtype, exp.network.members).to(device)
             model = CorrectedModel(mmg, net, None, physics=(kind == "hybrid"), gate_space=exp.gate.space)
-            s, residual = self.standardize(model, train)
-            summary.residual_force_mean = residual.mean(0).tolist()
-            summary.residual_force_std = residual.std(0).tolist()
-            if t.warm_start_epochs:
-                self.warm_start(net, s, residual, device)
-            with torch.no_grad():
-                summary.warm_val_loss = float(multistep_loss(PerMember(model), val, w_v)[0])
-            self.log(f"after warm start: validation loss {summary.warm_val_loss:.5f}")
+            if resumed_in != "train":
+                with torch.no_grad():
+                    summary.mmg_val_loss = float(multistep_loss(mmg, val, w_v)[0])
+                    summary.mmg_train_loss = float(multistep_loss(mmg, train, w_v)[0])
+                self.log(f"MMG-only multi-step loss: training {summary.mmg_train_loss:.5f}, "
+                         f"validation {summary.mmg_val_loss:.5f}")
+                s, residual = self.standardize(model, train)
+                summary.residual_force_mean = residual.mean(0).tolist()
+                summary.residual_force_std = residual.std(0).tolist()
+                if t.warm_start_epochs:
+                    self.warm_start(net, s, residual, device)
+                with torch.no_grad():
+                    summary.warm_val_loss = float(multistep_loss(PerMember(model), val, w_v)[0])
+                self.log(f"after warm start: validation loss {summary.warm_val_loss:.5f}")
             params = list(net.parameters()) + (list(mmg.parameters()) if identify and joint else [])
-            stage = self.train(model, params, train, val, w_v, 1.0 / net.output_std if kind == "hybrid" else None)
-            history += stage.history
+            w_F = 1.0 / net.output_std if kind == "hybrid" else None
+            if resumed_in == "train":  # buffers (standardisation) first: w_F depends on them
+                PerMember(model).load_state_dict(self._resume["model"])
+                w_F = 1.0 / net.output_std if kind == "hybrid" else None
+            stage = self.train(model, params, train, val, w_v, w_F)
+            self._history += stage.history
             summary.stopped["train"] = stage.stopped
             summary.best_epoch = stage.best_epoch
             with torch.no_grad():
@@ -427,8 +491,8 @@ class Trainer:
                 summary.identified = self._coefficients(mmg)
             if exp.gate.enabled:
                 summary.gate = self.fit_gate(model, samples, dtype)
-        self.history_ = pd.DataFrame(history)
-        summary.epochs = int(self.history_["epoch"].max()) if len(history) else 0
+        self.history_ = pd.DataFrame(self._history)
+        summary.epochs = int(self.history_["epoch"].max()) if len(self._history) else 0
         summary.train_seconds = time.perf_counter() - started
         self.model_, self.summary_ = model, summary
         return self

@@ -17,26 +17,41 @@ def train(
     data: Optional[Path] = typer.Option(None, "--data", help="Dataset root (default: SYSID_DATA or ../shared/data/frt-ds-esso)."),
     test: Optional[List[Path]] = typer.Option(None, "--test", help="Files to evaluate on (default: the six test files)."),
     epochs: Optional[int] = typer.Option(None, "--epochs", help="Override [training] epochs."),
+    threads: Optional[int] = typer.Option(None, "--threads", help="Override [training] threads (torch CPU threads; 0: one per core)."),
+    resume: bool = typer.Option(False, "--resume", help="Continue an interrupted training from its checkpoint."),
 ) -> None:
     """Train an MMG (identified), NN-only or hybrid model and write a run directory."""
+    from sysid.cli.interrupts import on_interrupt
     from sysid.data import expand_paths, read_run
     from sysid.datasets import test_files
     from sysid.experiment import load_experiment
-    from sysid.lifecycle import run_experiment, training_runs
+    from sysid.lifecycle import checkpoint_path, run_experiment, training_runs
 
     start = time.perf_counter()
     exp = load_experiment(config)
     if epochs is not None:
         exp = exp.replace(training={"epochs": epochs})
+    if threads is not None:
+        exp = exp.replace(training={"threads": threads})
+    checkpoint = checkpoint_path(output)
+    on_interrupt(lambda: f"nothing written to {output}" + (
+        f"; the training checkpoint {checkpoint} is kept: rerun with --resume to continue"
+        if checkpoint.is_file() else ""))
     runs = training_runs(exp, data) if exp.needs_training else None
     if runs is not None:
         typer.echo(f"train: {exp.experiment.model} model on {len(runs)} file(s) "
                    f"({sum(r.duration for r in runs):.0f} s of data), seed {exp.experiment.seed}")
     test_paths = expand_paths(test) if test else list(test_files(data).values())
     tests = [read_run(p) for p in test_paths]
-    result = run_experiment(exp, output, tests, runs, data, log=lambda m: typer.echo("  " + m))
+    result = run_experiment(exp, output, tests, runs, data, log=lambda m: typer.echo("  " + m), resume=resume)
     typer.echo(result.evaluation.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
-    typer.echo(f"train: wrote {output} in {time.perf_counter() - start:.0f} s")
+    if result.failure:
+        typer.secho(f"train: FAILED: {result.failure}; the run in {output} is marked failed", fg=typer.colors.RED, err=True)
+        raise SystemExit(1)
+    t = result.training
+    stops = ", ".join(f"{k}: {v}" for k, v in t.stopped.items()) if t else "not trained"
+    typer.echo(f"train: wrote {output} in {time.perf_counter() - start:.0f} s"
+               + (f" ({t.epochs} epochs, best {t.best_epoch}; {stops})" if t else ""))
 
 
 @app.command()
@@ -67,4 +82,8 @@ def reproduce(
     if shares:
         typer.echo("kNN gate off on the Random test (30 s): " +
                    ", ".join(f"{k} {100 * v:.0f} %" for k, v in shares.items() if v is not None))
+    for name, why in summary.get("failed", {}).items():
+        typer.secho(f"reproduce: run {name} FAILED: {why}", fg=typer.colors.RED, err=True)
     typer.echo(f"reproduce: {output} in {summary['seconds'] / 60:.1f} min")
+    if summary.get("failed"):
+        raise SystemExit(1)
