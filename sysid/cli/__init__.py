@@ -41,8 +41,14 @@ def expand_multi_value(argv: list[str]) -> list[str]:
 
 
 def run(argv: list[str]) -> None:
-    """Run a subcommand; `SysidError` propagates (for tests and embedding)."""
-    app(args=expand_multi_value(list(argv)), standalone_mode=False)
+    """Run a subcommand; `SysidError` and `KeyboardInterrupt` propagate (for tests and
+    embedding)."""
+    code = app(args=expand_multi_value(list(argv)), standalone_mode=False)
+    # typer >= 0.29 turns Ctrl-C into Exit(130) and, outside standalone mode, returns the code
+    if code == 130:
+        raise KeyboardInterrupt
+    if isinstance(code, int) and code:
+        raise SystemExit(code)
 
 
 TRACEBACK_FLAG = "--traceback"
