@@ -280,6 +280,10 @@ class Trainer:
         """
         t = self.experiment.training
         opt = torch.optim.Adam(params, lr=lr)
+        # the learning rate falls by lr_factor after lr_patience epochs without a better
+        # validation loss (lr_factor = 1: constant, the paper's Adam)
+        sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=t.lr_factor, patience=t.lr_patience) \
+            if t.lr_factor < 1.0 else None
         best, best_state, best_epoch, history = math.inf, None, 0, []
         gen = torch.Generator().manual_seed(self.experiment.experiment.seed + 1)
         first = 1
@@ -287,6 +291,8 @@ class Trainer:
         if resume:
             model.load_state_dict(resume["model"])
             opt.load_state_dict(resume["optimizer"])
+            if sched is not None:
+                sched.load_state_dict(resume["scheduler"])
             gen.set_state(resume["generator"])
             best, best_epoch, best_state = resume["best_loss"], resume["best_epoch"], resume["best_state"]
             history, first = list(resume["stage_history"]), resume["epoch"] + 1
@@ -318,6 +324,8 @@ class Trainer:
             if float(val_v) < best:
                 best, best_epoch = float(val_v), epoch
                 best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+            if sched is not None:
+                sched.step(float(val_v))
             self._progress(bar, epoch, epochs, sums[1], float(val_v), best_epoch)
             if epoch - best_epoch >= t.patience:
                 stopped = "early stop"
@@ -325,6 +333,7 @@ class Trainer:
                 stopped = "time limit"
             if self.checkpoint is not None:
                 self.checkpoint.save(stage=label, epoch=epoch, model=model.state_dict(), optimizer=opt.state_dict(),
+                                     scheduler=sched.state_dict() if sched is not None else {},
                                      generator=gen.get_state(), best_loss=best, best_epoch=best_epoch,
                                      best_state=best_state, stage_history=history, history=self._history,
                                      summary=self._summary.to_dict())
