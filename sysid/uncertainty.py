@@ -2,7 +2,8 @@
 undetermined directions from the curvature of the multi-step loss.
 
 The residuals are those of the multi-step velocity loss the coefficients were identified
-with: every window is integrated from its recorded first state with its recorded inputs,
+with: every window is integrated (`rollout`, the schemes of `sysid.dynamics.integrate`)
+from its recorded first state with its recorded inputs,
 and r = sqrt(w_v) * (predicted - recorded) for (u, v_m, r) at every later step. With J =
 d r / d theta (by forward-mode `torch.func.jacfwd`, theta the coefficients' physical
 values), the Gauss-Newton (Fisher) information is F = J^T J and
@@ -30,7 +31,7 @@ import torch
 from torch import nn
 from torch.func import functional_call, jacfwd
 
-from sysid.dynamics import integrate
+from sysid.dynamics import state_derivative
 from sysid.state import VELOCITY_INDEX
 
 COVARIANCES = ("sandwich", "gauss_newton")
@@ -98,6 +99,30 @@ class CoefficientUncertainty:
         return "\n".join(rows)
 
 
+def rollout(model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float, method: str = "euler") -> torch.Tensor:
+    """Fixed-step prediction (T, ..., 6) from x0 (..., 6) with inputs (T, ..., 4) held over
+    each step: the same schemes as `sysid.dynamics.integrate` ("euler", classical "rk4"),
+    written out so forward-mode transforms (`torch.func.jacfwd`) can pass through it."""
+    if method not in ("euler", "rk4"):
+        raise ValueError(f"integrator {method!r}: choose euler or rk4")
+    out, x = [x0], x0
+    for k in range(inputs.shape[0] - 1):
+        held = inputs[k]
+
+        def f(s):
+            return state_derivative(s, model(s, held).total, model.coefficients)
+        if method == "euler":
+            x = x + dt * f(x)
+        else:
+            k1 = f(x)
+            k2 = f(x + 0.5 * dt * k1)
+            k3 = f(x + 0.5 * dt * k2)
+            k4 = f(x + dt * k3)
+            x = x + dt / 6.0 * (k1 + 2.0 * (k2 + k3) + k4)
+        out.append(x)
+    return torch.stack(out)
+
+
 class _Rollout(nn.Module):
     """Wraps a force model so `functional_call` can swap its coefficients for a whole rollout."""
 
@@ -107,7 +132,7 @@ class _Rollout(nn.Module):
         self.method = method
 
     def forward(self, states, inputs, dt):
-        return integrate(self.model, states[0], inputs, dt, self.method)
+        return rollout(self.model, states[0], inputs, dt, self.method)
 
 
 def _coefficient_prefix(model: nn.Module) -> str:

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from sysid import MMG, integrate, load_ship
-from sysid.uncertainty import coefficient_uncertainty, multistep_residuals
+from sysid.uncertainty import coefficient_uncertainty, multistep_residuals, rollout
 
 NAMES = ["R_0", "Y_v", "Y_r", "N_v", "N_r"]
 
@@ -136,3 +136,16 @@ def test_unknown_covariance_is_refused():
     ship = load_ship("kvlcc2_l7")
     with pytest.raises(ValueError, match="covariance 'fisher'"):
         coefficient_uncertainty(MMG(ship), _one_step_windows(ship, count=4), NAMES, covariance="fisher")
+
+
+@pytest.mark.parametrize("method", ["euler", "rk4"])
+def test_rollout_is_the_integrators_scheme(method):
+    model = MMG(load_ship("kvlcc2_l7"))
+    x0 = torch.tensor([[0.0, 1.17, 0.0, 0.0, 0.0, 0.0], [0.0, 0.9, 0.0, 0.05, 0.2, 0.01]], dtype=torch.float64)
+    inputs = torch.zeros(25, 2, 4, dtype=torch.float64)
+    inputs[..., 0] = 17.95
+    inputs[:, 0, 1] = torch.linspace(-0.6, 0.6, 25)  # the rudder moves every step
+    inputs[:, 1, 1] = 0.3
+    ours = rollout(model, x0, inputs, 1.0, method)
+    ref = integrate(model, x0, inputs, 1.0, method)
+    assert torch.allclose(ours, ref, rtol=1e-12, atol=1e-12)
