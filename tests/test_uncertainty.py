@@ -95,7 +95,6 @@ def test_sigma_is_honest_over_noise_seeds(covariance, noise):
         covered.append(np.abs(zs) <= 2.0)
     z, covered = np.array(z), np.array(covered)
     # 60 seeds: the sd of z is 1 within about +-0.2 (sampling), coverage 95 % within ~6 %
-    print(covariance, "sd of z", z.std(0).round(2), "coverage", covered.mean(0).round(2))
     assert np.all((z.std(0) > 0.75) & (z.std(0) < 1.3)), z.std(0)
     assert np.all(covered.mean(0) >= 0.85), covered.mean(0)
 
