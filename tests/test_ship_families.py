@@ -47,6 +47,8 @@ def test_override_must_belong_to_the_ships_families():
     with pytest.raises(ShipDefinitionError, match="trainable: Y_vvv is not a parameter of ship 'esso_osaka'"):
         MMG(load_ship("esso_osaka"), trainable=["Y_vvv"])
     assert load_ship("kvlcc2_l7", {"Yvvv": -1.5})["Y_vvv"] == -1.5
+    with pytest.raises(ShipDefinitionError, match="quadrature 'simpson' applies to the yoshimura_low_speed hull"):
+        MMG(load_ship("kvlcc2_l7"), quadrature="simpson")
 
 
 def test_wind_needs_its_whole_section(tmp_path):

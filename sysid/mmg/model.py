@@ -11,6 +11,7 @@ from typing import Iterable, Mapping
 import torch
 from torch import nn
 
+from sysid.errors import ShipDefinitionError
 from sysid.mmg.coefficients import Coefficients
 from sysid.mmg.families import family
 from sysid.mmg.wind import relative_wind
@@ -65,8 +66,8 @@ class MMG(nn.Module):
         if quadrature not in ("exact", "simpson"):
             raise ValueError(f"quadrature {quadrature!r}: choose 'exact' or 'simpson'")
         if quadrature == "simpson" and ship.models["hull"] != "yoshimura_low_speed":
-            raise ValueError(f"quadrature 'simpson' applies to the yoshimura_low_speed hull only, "
-                             f"not to hull model {ship.models['hull']!r}")
+            raise ShipDefinitionError(f"ship {ship.name!r}: quadrature 'simpson' applies to the "
+                                      f"yoshimura_low_speed hull only, not to hull model {ship.models['hull']!r}")
         self.ship = ship
         self.quadrature = quadrature
         self.families = {component: family(component, name) for component, name in ship.models.items()}
