@@ -11,7 +11,9 @@ estimate gets its sigma from `coefficient_uncertainty`. Over many noise seeds th
 prints, per coefficient, the truth, the mean estimate, the mean sigma, the spread of the
 estimates and how often truth lies inside +- 2 sigma (both covariance forms).
 
-    python benchmarks/identification_kvlcc2.py [--seeds 12] [--window 20] [--names Y_v,Y_r,...]
+    python benchmarks/identification_kvlcc2.py [--seeds 12] [--window 10] [--names Y_v,Y_r,...]
+
+Results measured on this project's machine: benchmarks/identification_results.md.
 """
 from __future__ import annotations
 
@@ -189,7 +191,7 @@ def coverage_table(cases, names) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=12)
-    parser.add_argument("--window", type=int, default=20, help="window length [steps of 1 s]")
+    parser.add_argument("--window", type=int, default=10, help="window length [steps of 1 s]")
     parser.add_argument("--names", default=",".join(HULL), help="comma-separated coefficients to identify")
     parser.add_argument("--threads", type=int, default=1)
     args = parser.parse_args()
