@@ -94,7 +94,8 @@ def maneuvers(ship, durations: dict[str, int] | None = None,
 
 
 def windows_from(records, window: int, noise=NOISE, seed: int = 0) -> SimpleNamespace:
-    """Non-overlapping windows of `window` steps from noisy copies of the records:
+    """Consecutive windows of `window` steps (sharing only their boundary sample) from noisy
+    copies of the records:
     states (window+1, W, 6), inputs (window+1, W, 4), dt = 1 s."""
     g = torch.Generator().manual_seed(seed)
     states, inputs = [], []
