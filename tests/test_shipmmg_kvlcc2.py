@@ -101,7 +101,7 @@ def _turning(duration=200.0):
     return time, np.full_like(time, math.radians(35.0)), np.full_like(time, NPS)
 
 
-def _zigzag(ship, duration=120.0):
+def _zigzag(ship, duration=80.0):
     """shipmmg's own 10/10 zigzag rudder schedule (its heading-triggered switching)."""
     time = np.linspace(0.0, duration, int(duration * 4) + 1)
     basic, man = _shipmmg_params(ship)
@@ -109,7 +109,8 @@ def _zigzag(ship, duration=120.0):
                                          np.full_like(time, NPS), δ_rad_rate=math.radians(15.8),
                                          u0=U0, ρ=ship["rho"])[0]
     delta = np.asarray(delta)
-    assert delta.min() < math.radians(-9.9) and delta.max() > math.radians(9.9)  # it did zigzag
+    switches = np.count_nonzero(np.diff(np.sign(np.diff(delta))) != 0)
+    assert delta.min() < math.radians(-9.9) and delta.max() > math.radians(9.9) and switches >= 4  # it zigzags
     return time, delta, np.full_like(time, NPS)
 
 
