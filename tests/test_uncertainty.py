@@ -148,3 +148,21 @@ def test_rollout_is_the_integrators_scheme(method):
     ours = rollout(model, x0, inputs, 1.0, method)
     ref = integrate(model, x0, inputs, 1.0, method)
     assert torch.allclose(ours, ref, rtol=1e-12, atol=1e-12)
+
+
+def test_hybrid_model_with_a_silent_correction_gives_the_mmg_sigma():
+    """The function takes any force model with `coefficients`: a hybrid whose FNN outputs
+    zero (last layer zeroed, output mean 0) has exactly the MMG's uncertainty."""
+    from sysid.correction import ForceCorrection
+    from sysid.models import CorrectedModel
+    ship = load_ship("kvlcc2_l7")
+    windows = _one_step_windows(ship, count=30)
+    w = torch.tensor([1.0, 4.0, 100.0], dtype=torch.float64)
+    net = ForceCorrection([8, 8], torch.float64)
+    with torch.no_grad():
+        net.weights[-1].zero_()
+        net.biases[-1].zero_()
+    hybrid = CorrectedModel(MMG(ship, trainable=["Y_v"]), net)
+    res = coefficient_uncertainty(hybrid, windows, NAMES, weights=w)
+    plain = coefficient_uncertainty(MMG(ship), windows, NAMES, weights=w)
+    np.testing.assert_allclose(res.std_error, plain.std_error, rtol=1e-10)
