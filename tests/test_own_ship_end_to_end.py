@@ -66,8 +66,15 @@ def test_scratch_ship_trains_evaluates_and_reports(tmp_path):
     for name, truth in TRUTH.items():  # moved from the file's value towards the truth
         start = load_ship(ship_path)[name]
         assert abs(identified[name] - truth) < 0.5 * abs(start - truth), (name, identified[name])
+    u = summary["identified_uncertainty"]  # sigma from the multi-step loss's curvature
+    assert u["names"] == ["Y_v", "N_r"] and len(u["correlation"]) == 2
+    for name, est, sd in zip(u["names"], u["estimate"], u["std_error"]):
+        assert est == pytest.approx(identified[name], rel=1e-5)
+        assert sd is not None and 0 < sd < 0.5 * abs(est)
     out = tmp_path / "metrics.csv"
     sysid(["evaluate", str(run_dir), "--data", str(files[2]), "--horizon", "30", "-o", str(out)])
     assert pd.read_csv(out).rmse_r.iloc[0] < 0.01
     sysid(["report", str(run_dir), "-o", str(tmp_path / "report")])
-    assert (tmp_path / "report" / "report.html").stat().st_size > 10_000
+    html = (tmp_path / "report" / "report.html").read_text()
+    assert len(html) > 10_000
+    assert "Identified coefficients of" in html and "± " in html and "prior" in html
