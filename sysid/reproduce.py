@@ -130,6 +130,13 @@ def _run_one(name: str, exp: Experiment, out: Path, data, progress: bool, log) -
                        result.evaluation.metrics, result.evaluation.gate_off_share, result.failure, result.seconds)
 
 
+def expected_cost(exp: Experiment) -> float:
+    """Relative training cost of a run, to start the longest first (results do not depend
+    on the order; the wall time does): hybrid > NN-only > identification, D2 about twice D1."""
+    cost = {"hybrid": 5.0, "nn": 3.5, "mmg": 0.0}[exp.experiment.model] + 1.5 * bool(exp.identify.parameters)
+    return cost * (2.0 if exp.data.files or exp.experiment.dataset == "D2" else 1.0)
+
+
 def _worker(name: str, exp: Experiment, out: Path, data) -> ProtocolRun:
     """A worker process: its lines are prefixed with the run's name."""
     return _run_one(name, exp, out, data, True, lambda m: print(f"[{name}] {m.strip()}", flush=True))
@@ -158,7 +165,8 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
         log(f"training {len(trained)} runs in {min(jobs, len(trained))} worker processes")
         context = multiprocessing.get_context("spawn")
         with ProcessPoolExecutor(min(jobs, len(trained)), mp_context=context) as pool:
-            futures = {pool.submit(_worker, n, experiments[n], out, data): n for n in trained}
+            longest_first = sorted(trained, key=lambda n: -expected_cost(experiments[n]))
+            futures = {pool.submit(_worker, n, experiments[n], out, data): n for n in longest_first}
             for future in as_completed(futures):
                 run = future.result()
                 done[run.name] = run
