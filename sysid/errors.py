@@ -22,5 +22,16 @@ class CheckpointError(SysidError):
     """A run directory or checkpoint is missing or corrupt."""
 
 
+class IncompleteOutputError(SysidError):
+    """An output directory (run, preprocessing, reproduction) is incomplete or was changed
+    after it was written: no manifest, a listed file missing, or a checksum mismatch."""
+
+
+class OutputError(SysidError):
+    """An output cannot be written where asked: the target exists (and ``--overwrite`` was
+    not given), is a file, or its directory cannot be created or written."""
+
+
+
 class TrainingError(SysidError):
     """Training cannot produce a model: a non-finite loss (too high a learning rate, bad data)."""

@@ -1,14 +1,37 @@
 """Atomic file output: write to a temporary file beside the target, then rename.
 
-A crash or a bad input never leaves a half-written file behind.
+A crash or a bad input never leaves a half-written file behind. The file ends with the
+permissions any new file of the user gets (0666 minus the umask), not the private 0600 of
+the temporary file.
 """
 from __future__ import annotations
 
 import os
 import tempfile
+import threading
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
+
+_umask_lock = threading.Lock()
+
+
+def current_umask() -> int:
+    """The process's umask (read by setting it and putting it back)."""
+    with _umask_lock:
+        mask = os.umask(0o022)
+        os.umask(mask)
+    return mask
+
+
+def file_mode() -> int:
+    """Mode of a new regular file under the user's umask (0644 for umask 022)."""
+    return 0o666 & ~current_umask()
+
+
+def directory_mode() -> int:
+    """Mode of a new directory under the user's umask (0755 for umask 022)."""
+    return 0o777 & ~current_umask()
 
 
 @contextmanager
@@ -20,6 +43,7 @@ def atomic_path(path: str | os.PathLike, suffix: str = "") -> Iterator[Path]:
     os.close(fd)
     try:
         yield Path(tmp)
+        os.chmod(tmp, file_mode())  # mkstemp's 0600 is for the temporary file only
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):

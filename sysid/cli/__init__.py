@@ -8,7 +8,7 @@ import sys
 
 import typer
 
-from sysid.errors import SysidError
+from sysid.errors import OutputError, SysidError
 from sysid.cli.interrupts import interrupt_note
 
 from sysid.cli.app import app  # noqa: E402
@@ -68,7 +68,7 @@ def main(argv: list[str] | None = None) -> None:
     """Console entry point: one clear line on bad input, no traceback.
 
     Exit codes: 0 success; 2 usage error or bad input (file and field named); 1 an output
-    problem or an unexpected error; 130 interrupted (Ctrl-C). ``--traceback`` shows the
+    problem (`OutputError`, an unwritable path) or an unexpected error; 130 interrupted (Ctrl-C). ``--traceback`` shows the
     Python traceback of an unexpected error.
     """
     args = list(sys.argv[1:] if argv is None else argv)
@@ -78,7 +78,7 @@ def main(argv: list[str] | None = None) -> None:
         run(args)
     except SysidError as exc:
         typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
-        sys.exit(2)
+        sys.exit(1 if isinstance(exc, OutputError) else 2)
     except (typer.Exit, SystemExit) as exc:
         code = getattr(exc, "exit_code", getattr(exc, "code", 0))
         sys.exit(code or 0)
