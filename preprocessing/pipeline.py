@@ -75,9 +75,13 @@ class PreprocessSettings:
     def __post_init__(self) -> None:
         if self.swapped_antennas not in ("error", "repair"):
             raise ValueError("swapped_antennas must be 'error' or 'repair'")
+        if not (self.output_rate > 0 and np.isfinite(self.output_rate)):
+            raise ValueError(f"output_rate {self.output_rate} Hz: must be > 0 (and divide 10 Hz)")
         step = schema.NOMINAL_DT * round(1.0 / (self.output_rate * schema.NOMINAL_DT))
-        if self.output_rate <= 0 or abs(1.0 / self.output_rate - step) > 1e-9:
+        if step == 0 or abs(1.0 / self.output_rate - step) > 1e-9:
             raise ValueError(f"output_rate {self.output_rate} Hz: must divide 10 Hz")
+        if not (self.max_interp_gap >= 0 and np.isfinite(self.max_interp_gap)):
+            raise ValueError(f"max_interp_gap {self.max_interp_gap} s: must be >= 0")
 
 
 @dataclass

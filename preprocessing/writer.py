@@ -1,7 +1,9 @@
 """Writing processed segments and the run report atomically (temp file, then os.replace).
 
 Segment files are ``STEM.csv`` for a single segment, else ``STEM_seg1.csv``, ...; the
-report is ``STEM.report.json``. Nothing is left behind when a write fails.
+report is ``STEM.report.json``. Nothing is left behind when a write fails; files get the
+user's umask. (`sysid preprocess` writes into a staged directory, so a rerun leaves no
+stale segment of an earlier run.)
 """
 from __future__ import annotations
 
@@ -16,6 +18,7 @@ import pandas as pd
 
 from preprocessing import schema
 from preprocessing.quality import QualityReport
+from sysid.files import file_mode
 
 
 def _atomic(path: Path, write) -> None:
@@ -23,6 +26,7 @@ def _atomic(path: Path, write) -> None:
     try:
         with os.fdopen(fd, "w", newline="") as fh:
             write(fh)
+        os.chmod(tmp, file_mode())
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

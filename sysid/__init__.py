@@ -7,12 +7,34 @@ writes one experiment (``sysid train``), `sysid.reproduce.reproduce` the paper's
 Layers, each importing only those before it: `state`, `ship`, `mmg` → `dynamics`,
 `correction`, `ood` → `experiment`, `models` → `data` → `train` → `evaluate` → `rundir` →
 `lifecycle` → `paper`, `reproduce` → `report` → `cli`.
+
+The names are loaded on first use, so ``import sysid`` (and ``sysid --help``) does not pay
+for torch.
 """
-from sysid.dynamics import ShipDynamics, body_acceleration, integrate, state_derivative
-from sysid.mmg import MMG, ForceBreakdown
-from sysid.ship import Ship, load_ship
+from __future__ import annotations
+
+import importlib
 
 __version__ = "0.1.0"
 
+_HOME = {
+    "Ship": "sysid.ship", "load_ship": "sysid.ship",
+    "MMG": "sysid.mmg", "ForceBreakdown": "sysid.mmg",
+    "ShipDynamics": "sysid.dynamics", "integrate": "sysid.dynamics",
+    "state_derivative": "sysid.dynamics", "body_acceleration": "sysid.dynamics",
+}
+
 __all__ = ["Ship", "load_ship", "MMG", "ForceBreakdown", "ShipDynamics", "integrate",
            "state_derivative", "body_acceleration", "__version__"]
+
+
+def __getattr__(name: str):
+    if name in _HOME:
+        value = getattr(importlib.import_module(_HOME[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'sysid' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

