@@ -60,12 +60,16 @@ class Run:
 def read_run(path: str | os.PathLike, rate: float = 1.0) -> Run:
     """Read and check a processed run, downsampled to `rate` [Hz] by taking samples."""
     path = Path(path)
+    if not (rate > 0 and np.isfinite(rate)):
+        raise DataError(f"{path}: rate {rate} Hz: must be > 0")
     if not path.is_file():
         raise DataError(f"{path}: file not found")
     try:
         frame = pd.read_csv(path)
-    except (pd.errors.ParserError, UnicodeDecodeError, pd.errors.EmptyDataError) as exc:
-        raise DataError(f"{path}: not a readable CSV ({exc})") from None
+    except UnicodeDecodeError:
+        raise DataError(f"{path}: not a UTF-8 text CSV (binary, or another encoding such as UTF-16)") from None
+    except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
+        raise DataError(f"{path}: not a readable CSV ({str(exc).strip()})") from None
     missing = [c for c in COLUMNS if c not in frame.columns]
     if missing:
         raise DataError(f"{path}: missing column(s) {missing}")
@@ -151,10 +155,16 @@ def duplicate_runs(runs: Sequence[Run], tolerance: float = 1e-9) -> list[tuple[s
 def expand_paths(items: Iterable[str | os.PathLike]) -> list[Path]:
     """Files and directories (searched recursively for *.csv) to a sorted file list."""
     out: list[Path] = []
+    from sysid.manifest import has_manifest, verify_manifest
+
     for item in items:
         p = Path(item)
         if p.is_dir():
-            found = sorted(q for q in p.rglob("*.csv") if not q.name.endswith(".truth.csv"))
+            if has_manifest(p):  # sysid preprocess output: refused when incomplete or changed
+                verify_manifest(p)
+            # hidden entries are staging directories and temporaries of unfinished writes
+            found = sorted(q for q in p.rglob("*.csv") if not q.name.endswith(".truth.csv")
+                           and not any(part.startswith(".") for part in q.relative_to(p).parts))
             if not found:
                 raise DataError(f"{p}: directory holds no .csv files")
             out += found

@@ -34,6 +34,7 @@ Every section and key is optional except ``[experiment] model``; unknown keys ar
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import tomllib
 from dataclasses import dataclass, field, fields
@@ -172,7 +173,34 @@ def _toml_value(value: Any) -> str:
     raise TypeError(f"cannot write {value!r} as TOML")
 
 
+MAX_WIDTH = 4096     # hidden layer width
+MAX_MEMBERS = 64     # networks in an ensemble
+
 _SECTIONS = {f.name: f.type for f in fields(Experiment) if f.name != "source"}
+
+
+# the element type of every list option
+_ELEMENT_TYPES = {("data", "files"): str, ("network", "hidden"): int,
+                  ("identify", "parameters"): str, ("evaluation", "horizons"): float}
+_NAMES = {int: "an integer", float: "a finite number", str: "a string"}
+
+
+def _list_element(where: str, item: Any, kind: type):
+    """One element of a list option, checked against its type (ints are numbers too)."""
+    ok = (not isinstance(item, bool)) and (
+        isinstance(item, kind) or (kind is float and isinstance(item, int)))
+    if ok and kind is float:
+        ok = math.isfinite(item)
+    if not ok:
+        raise ConfigError(f"{where}: every element must be {_NAMES[kind]}, got {item!r}")
+    return float(item) if kind is float else item
+
+
+def _number_pair(where: str, value: Any) -> None:
+    if not (isinstance(value, list) and len(value) == 2 and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+            and value[0] < value[1]):
+        raise ConfigError(f"{where} must be [low, high], two finite numbers with low < high, got {value!r}")
 
 
 def _coerce(section: str, opt_cls, table: dict, src: str):
@@ -194,6 +222,8 @@ def _coerce(section: str, opt_cls, table: dict, src: str):
         elif isinstance(default, float):
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise ConfigError(f"{where}: expected a number, got {value!r}")
+            if not math.isfinite(value):
+                raise ConfigError(f"{where}: expected a finite number, got {value!r}")
             value = float(value)
         elif isinstance(default, str):
             if not isinstance(value, str):
@@ -201,7 +231,7 @@ def _coerce(section: str, opt_cls, table: dict, src: str):
         elif isinstance(default, tuple):
             if not isinstance(value, list):
                 raise ConfigError(f"{where}: expected a list, got {value!r}")
-            value = tuple(value)
+            value = tuple(_list_element(where, item, _ELEMENT_TYPES[(section, key)]) for item in value)
         elif isinstance(default, dict):
             if not isinstance(value, dict):
                 raise ConfigError(f"{where}: expected a table, got {value!r}")
@@ -236,7 +266,12 @@ def _validate(exp: Experiment, src: str) -> None:
         (0.0 < g.alpha < 1.0, "[gate] alpha must be in (0, 1)"),
         (g.space in GATE_SPACES, f"[gate] space must be one of {', '.join(GATE_SPACES)}"),
         (i.stage in ("before", "joint"), "[identify] stage must be before or joint"),
+        (e.seed >= 0, f"[experiment] seed = {e.seed}: must be >= 0"),
+        (len(exp.evaluation.horizons) > 0, "[evaluation] horizons must list at least one horizon [s]"),
         (all(h > 0 for h in exp.evaluation.horizons), "[evaluation] horizons must be > 0"),
+        (all(w <= MAX_WIDTH for w in exp.network.hidden), f"[network] hidden widths must be <= {MAX_WIDTH}"),
+        (exp.network.members <= MAX_MEMBERS, f"[network] members must be <= {MAX_MEMBERS}"),
+        (t.steps <= 10_000, "[training] steps must be <= 10000"),
         (exp.evaluation.integrator in INTEGRATORS,
          f"[evaluation] integrator must be one of {', '.join(INTEGRATORS)}"),
         (all(w >= 1 for w in exp.network.hidden) and exp.network.hidden, "[network] hidden must list widths >= 1"),
@@ -251,10 +286,12 @@ def _validate(exp: Experiment, src: str) -> None:
             parameter_name(key, f"{src}: [mmg] overrides")
         for key in i.parameters:
             parameter_name(key, f"{src}: [identify] parameters")
+        for key, value in exp.mmg.overrides.items():
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ConfigError(f"{src}: [mmg] overrides.{key} must be a finite number, got {value!r}")
         for key, bound in i.bounds.items():
             parameter_name(key, f"{src}: [identify] bounds")
-            if not (isinstance(bound, list) and len(bound) == 2 and bound[0] < bound[1]):
-                raise ConfigError(f"{src}: [identify] bounds.{key} must be [low, high] with low < high")
+            _number_pair(f"{src}: [identify] bounds.{key}", bound)
     except ConfigError:
         raise
     except Exception as exc:  # ShipDefinitionError on unknown names
@@ -268,6 +305,10 @@ def parse_experiment(doc: dict, source: str = "<config>") -> Experiment:
     unknown = set(doc) - set(_SECTIONS)
     if unknown:
         raise ConfigError(f"{source}: unknown section(s) {sorted(unknown)} (known: {', '.join(_SECTIONS)})")
+    experiment = doc.get("experiment")
+    if not isinstance(experiment, dict) or "model" not in experiment:
+        raise ConfigError(f"{source}: [experiment] model is required (mmg, nn or hybrid)"
+                          + ("; the file is empty" if not doc else ""))
     sections = {name: _coerce(name, cls if isinstance(cls, type) else globals()[cls], doc.get(name, {}), source)
                 for name, cls in _SECTIONS.items()}
     exp = Experiment(**sections, source=source)
@@ -285,6 +326,9 @@ def load_experiment(path: str | os.PathLike) -> Experiment:
             doc = tomllib.load(fh)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML ({exc})") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: not UTF-8 text (binary, or another encoding such as UTF-16); "
+                          "an experiment config is a UTF-8 TOML file") from None
     return parse_experiment(doc, str(path))
 
 

@@ -59,14 +59,15 @@ def checkpoint_path(out_dir: str | os.PathLike) -> Path:
 def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[Run],
                    train_runs: Sequence[Run] | None = None, data: str | os.PathLike | None = None,
                    progress: bool = True, log: Callable[[str], None] = print,
-                   resume: bool = False) -> RunResult:
+                   resume: bool = False, overwrite: bool = False) -> RunResult:
     """Train `exp` (unless it is an MMG used as defined) on `train_runs` (default: its own
     training files), evaluate it on `tests` at its horizons, write the run directory.
 
     Runs with ``[training] threads`` torch threads. Training writes a checkpoint every epoch
     (`checkpoint_path`); `resume` continues from it to the same model an uninterrupted run
     gives. A run whose wall-clock safety limit was hit is written with its failure in
-    summary.json (``result.failure``).
+    summary.json (``result.failure``). The run directory is written complete or not at all;
+    an existing one is replaced only with `overwrite`.
     """
     started = time.perf_counter()
     history, training = None, None
@@ -80,7 +81,7 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
             model = build_model(exp)
         evaluation = evaluate_model(model, tests, exp.evaluation.horizons, exp.evaluation.integrator)
     seconds = time.perf_counter() - started
-    path = write_run(out_dir, exp, model, evaluation, history, training, seconds)
+    path = write_run(out_dir, exp, model, evaluation, history, training, seconds, overwrite)
     if training is not None:
         TrainingCheckpoint(checkpoint_path(out_dir), exp.to_toml()).remove()
     return RunResult(path, exp, model, evaluation, history, training, seconds)

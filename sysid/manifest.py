@@ -4,8 +4,8 @@ directory, listing every other file with its size and SHA-256.
 A directory without a manifest was interrupted while being written (or comes from an older
 sysid); a file that is missing or differs from its checksum was lost or changed afterwards.
 Readers call `verify_manifest` and refuse such a directory with one line naming it and the
-file at fault. Files added after the manifest (a report beside a reproduction) are not
-checked unless `add_to_manifest` lists them.
+file at fault. Files added after the manifest (the report ``sysid reproduce`` writes beside
+its finished reproduction, and may write again) are not listed and not checked.
 """
 from __future__ import annotations
 
@@ -55,16 +55,6 @@ def write_manifest(directory: str | os.PathLike, kind: str) -> Path:
     directory = Path(directory)
     files = {p.relative_to(directory).as_posix(): _entry(p) for p in _listed_files(directory)}
     doc = {"format": FORMAT, "kind": kind, "written": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "files": files}
-    return write_text(json.dumps(doc, indent=1), directory / MANIFEST)
-
-
-def add_to_manifest(directory: str | os.PathLike, paths: Iterable[str | os.PathLike]) -> Path:
-    """List files written into a complete directory after its manifest (a report)."""
-    directory = Path(directory)
-    doc = read_manifest(directory)
-    for path in paths:
-        path = Path(path)
-        doc["files"][path.relative_to(directory).as_posix()] = _entry(path)
     return write_text(json.dumps(doc, indent=1), directory / MANIFEST)
 
 

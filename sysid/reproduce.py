@@ -189,7 +189,8 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
     write_csv(table, out / "comparison.csv", float_format="%.5f")
     for horizon, fname in ((30, "table7.md"), (100, "table8.md")):
         write_text(markdown_table(table, horizon), out / fname)
-    summary = {"seconds": time.perf_counter() - started, "runs": names, "failed": failed}
+    summary = {"seconds": time.perf_counter() - started, "runs": names, "failed": failed,
+               "protocol": list(PROTOCOL)}
     if {"hybrid_D1", "hybrid_D2", "mmg_paper", "mmg_lab"} <= set(names):
         summary["scorecard"] = scorecard(table, hybrid_baseline())
     if "hybrid_identified_D2" in names:

@@ -18,15 +18,21 @@ A **run directory** (``sysid train CONFIG -o runs/NAME``)::
     history.csv        stage, epoch, train_loss, train_velocity, train_penalty, val_loss, seconds
     metrics.csv        `sysid.evaluate.METRICS_COLUMNS`
     traces/            one CSV per (file, horizon): ``{file_stem}_h{H}.csv``, `TRACE_COLUMNS`
+    manifest.json      written last: every other file with its SHA-256 (`sysid.manifest`)
 
-Untrained MMG-only runs have no model.pt, knn.pt or history.csv.
+Untrained MMG-only runs have no model.pt, knn.pt or history.csv. A run is written into a
+staging directory and moved into place complete (`write_run`); readers refuse a run whose
+manifest is missing or disagrees with its files (`verify_run_dir`).
 
 A **reproduction directory** (``sysid reproduce -o OUTDIR``)::
 
     runs/{name}/        run directories (`sysid.reproduce.PROTOCOL`)
     comparison.csv      `sysid.paper.COMPARISON_COLUMNS`: ours beside the paper's, every cell
     table7.md, table8.md  the paper's layout (30 s, 100 s), ours (paper)
-    summary.json        total time, gate shares, wins against the paper
+    summary.json        total time, gate shares, wins against the paper; "runs" (the protocol
+                        entries run) and "protocol" (all of them): fewer is a partial
+                        reproduction, and its report says so on page 1
+    manifest.json       written last, as in a run directory
 """
 from __future__ import annotations
 
@@ -44,9 +50,11 @@ from sysid.errors import CheckpointError, ConfigError
 from sysid.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, Evaluation, trace_name  # noqa: F401 (layout)
 from sysid.experiment import Experiment, load_experiment, ship_overrides
 from sysid.files import atomic_path, write_csv, write_text
+from sysid.manifest import verify_manifest
 from sysid.mmg.breakdown import MMG
 from sysid.models import CorrectedModel, build_model
 from sysid.ood import KNNGate
+from sysid.staging import staged_directory
 
 
 def versions() -> dict[str, str]:
@@ -72,7 +80,24 @@ def _load_tensors(path: Path):
     try:
         return torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # truncated, not a torch file, unsafe pickle
-        raise CheckpointError(f"{path}: cannot be loaded safely ({type(exc).__name__}: {exc})") from None
+        reason = (str(exc).strip().splitlines() or [""])[0][:160]  # not torch's multi-line advice
+        raise CheckpointError(f"{path}: cannot be loaded safely ({type(exc).__name__}: {reason})") from None
+
+
+def _check_finite(tensors: dict, path: Path) -> None:
+    """Refuse weights holding NaN or inf (a diverged training): they predict nothing."""
+    for key, value in tensors.items():
+        if isinstance(value, torch.Tensor) and value.is_floating_point() and not torch.isfinite(value).all():
+            raise CheckpointError(f"{path}: {key} holds NaN or inf values (a diverged training); train the run again")
+
+
+RUN_FILES = ("config.toml", "summary.json", "metrics.csv")
+
+
+def verify_run_dir(path: str | os.PathLike) -> dict:
+    """Refuse an incomplete or changed run directory (`IncompleteOutputError` naming the
+    directory and the file); returns its manifest."""
+    return verify_manifest(path, "run", RUN_FILES)
 
 
 def model_state(model: torch.nn.Module) -> dict[str, torch.Tensor]:
@@ -104,6 +129,7 @@ def load_model(run_dir: str | os.PathLike, dtype: torch.dtype = torch.float64):
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise CheckpointError(f"{run_dir}: run directory not found")
+    verify_run_dir(run_dir)
     try:
         exp = load_experiment(run_dir / "config.toml")
     except ConfigError as exc:
@@ -114,12 +140,15 @@ def load_model(run_dir: str | os.PathLike, dtype: torch.dtype = torch.float64):
     state = _load_tensors(run_dir / "model.pt")
     if not isinstance(state, dict):
         raise CheckpointError(f"{run_dir / 'model.pt'}: not a state dict")
+    _check_finite(state, run_dir / "model.pt")
     try:
         model.load_state_dict(state)
     except RuntimeError as exc:
         raise CheckpointError(f"{run_dir / 'model.pt'}: does not fit the config's model ({str(exc)[:300]})") from None
     if isinstance(model, CorrectedModel) and exp.gate.enabled:
         knn = _load_tensors(run_dir / "knn.pt")
+        if isinstance(knn, dict):
+            _check_finite(knn, run_dir / "knn.pt")
         try:
             gate = KNNGate(int(knn["k"]), float(knn["alpha"]), knn["bank"].shape[1], dtype)
             gate.bank, gate.threshold = knn["bank"].to(dtype), knn["threshold"].to(dtype)
@@ -156,10 +185,20 @@ def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds:
 
 def write_run(run_dir: str | os.PathLike, exp: Experiment, model, evaluation: Evaluation,
               history: pd.DataFrame | None = None, training=None,
-              seconds: float | None = None) -> Path:
-    """Write a complete run directory (config, weights, kNN bank, history, metrics, traces)."""
-    run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
+              seconds: float | None = None, overwrite: bool = False) -> Path:
+    """Write a complete run directory (config, weights, kNN bank, history, metrics, traces).
+
+    Staged (`sysid.staging`): the files go into a hidden directory beside `run_dir`, sealed
+    with a manifest and moved into place complete; an existing `run_dir` is refused unless
+    `overwrite`, which replaces all of it.
+    """
+    with staged_directory(run_dir, "run", overwrite) as staging:
+        _write_run_files(staging, exp, model, evaluation, history, training, seconds)
+    return Path(run_dir)
+
+
+def _write_run_files(run_dir: Path, exp: Experiment, model, evaluation: Evaluation,
+                     history: pd.DataFrame | None, training, seconds: float | None) -> Path:
     write_text(exp.to_toml(), run_dir / "config.toml")
     save_model(model, run_dir)
     if history is not None and len(history):

@@ -42,7 +42,7 @@ from sysid.checkpoint import TrainingCheckpoint
 from sysid.data import Run, duplicate_runs, sliding_windows, stack_windows, window_touches
 from sysid.device import resolve_device
 from sysid.dynamics import integrate, required_force
-from sysid.errors import DataError, TrainingError
+from sysid.errors import ConfigError, DataError, TrainingError
 from sysid.experiment import Experiment
 from sysid.models import CorrectedModel, PerMember, build_mmg, correction_of
 from sysid.ood import KNNGate
@@ -460,6 +460,9 @@ class Trainer:
         self._deadline = started + 60.0 * t.max_minutes if t.max_minutes > 0 else math.inf
         self._resume = self.checkpoint.load() if self.checkpoint is not None and self.resume else None
         train, val, samples, report = self.split(runs, dtype, device)
+        if kind != "mmg" and exp.gate.enabled and exp.gate.k > len(samples[0]):
+            raise ConfigError(f"{exp.source or 'experiment'}: [gate] k = {exp.gate.k}: more neighbours than "
+                              f"the {len(samples[0])} training samples the gate's bank holds")
         # velocity weights w_v: inverse variance of the recorded velocities
         w_v = 1.0 / train.states[:, :, VEL].reshape(-1, 3).var(0)
         identify = bool(exp.identify.parameters)

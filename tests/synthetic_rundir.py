@@ -18,6 +18,7 @@ import torch
 from sysid import MMG, integrate, load_ship
 from sysid.data import Run
 from sysid.evaluate import predict_windows
+from sysid.manifest import write_manifest
 from sysid.mmg.wind import relative_wind
 from sysid.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
 from sysid.paper import COMPARISON_COLUMNS
@@ -168,6 +169,7 @@ def write_run(out: Path, name: str, runs: dict[str, Run], horizons=(30, 100), se
     if kind == "hybrid":
         torch.save({"bank": torch.randn(50, 64), "threshold": torch.tensor(KNN_THRESHOLD),
                     "k": torch.tensor(10), "alpha": torch.tensor(0.95)}, out / "knn.pt")
+    write_manifest(out, "run")  # complete, as `sysid train` seals it
     return out
 
 
@@ -185,5 +187,6 @@ def write_reproduction(out: Path, scale: float = 1.0, names=tuple(RUNS)) -> Path
     pd.DataFrame(rows, columns=COMPARISON_COLUMNS).to_csv(out / "comparison.csv", index=False)
     (out / "summary.json").write_text(json.dumps(
         {"total_seconds": 987.6, "gate_share_on": {"hybrid_D1": 0.62, "hybrid_D2": 0.91},
-         "wins_against_paper": "n/a (synthetic)"}, indent=2))
+         "wins_against_paper": "n/a (synthetic)", "runs": list(names), "protocol": list(RUNS)}, indent=2))
+    write_manifest(out, "reproduction")
     return out

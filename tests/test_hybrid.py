@@ -10,7 +10,8 @@ import torch
 from sysid import MMG, integrate, load_ship
 from sysid.correction import ForceCorrection
 from sysid.data import Run
-from sysid.errors import CheckpointError, ConfigError
+from sysid.errors import CheckpointError, ConfigError, IncompleteOutputError
+from sysid.manifest import write_manifest
 from sysid.experiment import load_experiment, parse_experiment
 from sysid.models import CorrectedModel
 from sysid.ood import KNNGate
@@ -150,10 +151,13 @@ def test_saved_run_reloads_to_identical_predictions(trained, tmp_path):
 
     # a corrupt run directory gives one clear error naming the file
     (tmp_path / "run" / "model.pt").write_bytes(b"not a checkpoint")
-    with pytest.raises(CheckpointError, match=r"model.pt: cannot be loaded safely"):
+    with pytest.raises(IncompleteOutputError, match=r"run: model.pt does not match its checksum"):
+        load_model(tmp_path / "run")
+    write_manifest(tmp_path / "run", "run")  # sealed as it is: the loader still refuses it
+    with pytest.raises(CheckpointError, match=r"model.pt: cannot be loaded safely \(UnpicklingError: [^\n]*\)$"):
         load_model(tmp_path / "run")
     (tmp_path / "run" / "model.pt").unlink()
-    with pytest.raises(CheckpointError, match=r"model.pt: missing"):
+    with pytest.raises(IncompleteOutputError, match=r"run: incomplete run directory: model.pt is missing"):
         load_model(tmp_path / "run")
     with pytest.raises(CheckpointError, match="run directory not found"):
         load_model(tmp_path / "nowhere")

@@ -15,6 +15,7 @@ from preprocessing import synth
 from preprocessing.pipeline import Pipeline, PreprocessSettings
 from preprocessing.schema import RawLogError
 from preprocessing.sensors import SensorLayout
+from sysid.manifest import verify_manifest
 
 LAYOUT = SensorLayout()
 
@@ -185,7 +186,8 @@ def test_cli_failed_file_leaves_no_output(synthetic, tmp_path, capsys):
         main(["preprocess", str(good), str(bad), "--ship", "esso_osaka", "-o", str(out), "--jobs", "2"])
     assert info.value.code == 1
     names = sorted(p.name for p in out.iterdir())
-    assert names == ["good.csv", "good.report.json"]
+    assert names == ["good.csv", "good.report.json", "manifest.json"]  # complete, sealed
+    assert sorted(verify_manifest(out, "preprocessing")["files"]) == ["good.csv", "good.report.json"]
     err = capsys.readouterr().err
     assert "bad.csv" in err and "column t" in err and "row 701" in err
     report = json.loads((out / "good.report.json").read_text())

@@ -11,7 +11,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from sysid.errors import CheckpointError
+from sysid.errors import CheckpointError, IncompleteOutputError
+from sysid.manifest import write_manifest
 from sysid.report import build_report
 from sysid.report.tables import format_rmse
 
@@ -158,6 +159,7 @@ def test_single_run_report(tmp_path, small_runs):
     for h in (30, 100):
         stem = runs["Berthing"].name
         shutil.copy(run_dir / "traces" / f"{stem}_h{h}.csv", run_dir / "traces" / f"heldout_file_h{h}.csv")
+    write_manifest(run_dir, "run")  # sealed again after the edit
     paths = build_report(run_dir, tmp_path / "report")
     assert "heldout_file" in paths.html.read_text() and "0.01235" in paths.html.read_text()
     assert not [n for n in paths.notes if "failed" in n], paths.notes
@@ -184,9 +186,13 @@ def test_missing_and_corrupt_inputs_name_the_file(tmp_path, reproduction):
     broken = tmp_path / "broken"
     shutil.copytree(reproduction / "runs" / "nn_D1", broken)
     (broken / "metrics.csv").write_text("scenario,file\nBerthing,x\n")
+    with pytest.raises(IncompleteOutputError, match=r"broken: metrics.csv does not match its checksum"):
+        build_report(broken, tmp_path / "out")
+    write_manifest(broken, "run")  # sealed as it is: the reader still checks the columns
     with pytest.raises(CheckpointError, match=r"broken/metrics.csv: missing column"):
         build_report(broken, tmp_path / "out")
     (broken / "summary.json").write_text("{not json")
+    write_manifest(broken, "run")
     with pytest.raises(CheckpointError, match=r"broken/summary.json: not valid JSON"):
         build_report(broken, tmp_path / "out")
     assert not (tmp_path / "out" / "report.html").exists()

@@ -85,7 +85,7 @@ def _read_force_inputs(path: Path):
         raise DataError(f"{path}: not a readable CSV ({str(exc).strip()})") from None
     missing = [c for c in FORCE_INPUTS if c not in frame.columns]
     if missing:
-        raise DataError(f"{path}: missing column(s) {', '.join(missing)} (header: {', '.join(map(str, frame.columns[:12]))})")
+        raise DataError(f"{path}: missing column(s) {missing} (header: {', '.join(map(str, frame.columns[:12]))})")
     if not len(frame):
         raise DataError(f"{path}: no data rows under the header")
     numeric = frame[FORCE_INPUTS].apply(pd.to_numeric, errors="coerce")

@@ -170,7 +170,7 @@ def _summary(results: list[dict], outdir: Path, seconds: float) -> None:
                    f"{rep.gaps_interpolated:>4d}/{rep.gaps_split:<3d} {bias:15.2f}")
     for r in results:
         if not r["ok"]:
-            typer.secho(f"FAILED {r['error']}", fg=typer.colors.RED, err=True)
+            typer.secho(f"error: {r['error']}", fg=typer.colors.RED, err=True)
     if len(shown) < len(ok):
         typer.echo(f"... {len(ok) - len(shown)} more file(s) with one segment each")
     rej = sum(r["report"].baseline.rejected + r["report"].heading_gate.rejected for r in ok)

@@ -8,6 +8,7 @@ from typing import List, Optional
 import typer
 
 from sysid.cli.app import app
+from sysid.cli.interrupts import on_interrupt
 
 
 @app.command()
@@ -19,20 +20,30 @@ def train(
     epochs: Optional[int] = typer.Option(None, "--epochs", help="Override [training] epochs."),
     threads: Optional[int] = typer.Option(None, "--threads", help="Override [training] threads (torch CPU threads; 0: one per core)."),
     resume: bool = typer.Option(False, "--resume", help="Continue an interrupted training from its checkpoint."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing run directory (all of it)."),
 ) -> None:
-    """Train an MMG (identified), NN-only or hybrid model and write a run directory."""
+    """Train an MMG (identified), NN-only or hybrid model and write a run directory.
+
+    The run directory is moved into place only when complete (with a manifest); an
+    interrupted training leaves no run, only its checkpoint for --resume.
+    """
     from sysid.cli.interrupts import on_interrupt
     from sysid.data import expand_paths, read_run
     from sysid.datasets import test_files
+    from sysid.errors import ConfigError
     from sysid.experiment import load_experiment
     from sysid.lifecycle import checkpoint_path, run_experiment, training_runs
+    from sysid.staging import check_target
 
     start = time.perf_counter()
+    if epochs is not None and epochs < 0:
+        raise ConfigError(f"--epochs {epochs}: must be >= 0")
     exp = load_experiment(config)
     if epochs is not None:
         exp = exp.replace(training={"epochs": epochs})
     if threads is not None:
         exp = exp.replace(training={"threads": threads})
+    check_target(output, overwrite)  # a bad -o fails now, not after training
     checkpoint = checkpoint_path(output)
     on_interrupt(lambda: f"nothing written to {output}" + (
         f"; the training checkpoint {checkpoint} is kept: rerun with --resume to continue"
@@ -43,7 +54,8 @@ def train(
                    f"({sum(r.duration for r in runs):.0f} s of data), seed {exp.experiment.seed}")
     test_paths = expand_paths(test) if test else list(test_files(data).values())
     tests = [read_run(p) for p in test_paths]
-    result = run_experiment(exp, output, tests, runs, data, log=lambda m: typer.echo("  " + m), resume=resume)
+    result = run_experiment(exp, output, tests, runs, data, log=lambda m: typer.echo("  " + m), resume=resume,
+                            overwrite=overwrite)
     typer.echo(result.evaluation.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     if result.failure:
         typer.secho(f"train: FAILED: {result.failure}; the run in {output} is marked failed", fg=typer.colors.RED, err=True)
@@ -61,21 +73,32 @@ def reproduce(
     only: Optional[List[str]] = typer.Option(None, "--only", help="Run only these protocol entries (repeatable)."),
     report: bool = typer.Option(True, "--report/--no-report", help="Write report.html and report.pdf too."),
     jobs: Optional[int] = typer.Option(None, "--jobs", help="Runs trained side by side, one worker process each (default: one per core)."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output directory (all of it)."),
 ) -> None:
-    """The whole protocol: MMG, NN-only and hybrid on D1 and D2; Tables 7/8 beside the paper's."""
+    """The whole protocol: MMG, NN-only and hybrid on D1 and D2; Tables 7/8 beside the paper's.
+
+    The output directory is moved into place only when every run is done (with a manifest);
+    an interrupted reproduction leaves nothing behind.
+    """
     from sysid.device import cpu_cores
     from sysid.errors import ConfigError
     from sysid.reproduce import reproduce as run_protocol
+    from sysid.staging import check_target, staged_directory
 
     if jobs is not None and jobs < 1:
         raise ConfigError(f"--jobs {jobs}: must be >= 1")
-    summary = run_protocol(output, data, only, log=typer.echo, jobs=jobs or cpu_cores())
+    check_target(output, overwrite)
+    on_interrupt(f"nothing was written to {output} (it is moved into place only when every run is done)")
+    with staged_directory(output, "reproduction", overwrite) as staging:
+        summary = run_protocol(staging, data, only, log=typer.echo, jobs=jobs or cpu_cores())
     for name in ("table7.md", "table8.md"):
         path = output / name
         if path.is_file():
             typer.echo("\n" + path.read_text())
     if report:
         from sysid.report import build_report
+        on_interrupt(f"the reproduction in {output} is complete; its report was not written "
+                     f"(sysid report {output} -o {output} writes it)")
         paths = build_report(output, output)
         typer.echo(f"report: {paths.html} and {paths.pdf} ({paths.n_figures} figures, {paths.n_pages} pages)")
     card = dict(summary.get("scorecard", {}))

@@ -127,7 +127,7 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
 
     html = render_html(
         title=title,
-        subtitle=f"{SUBTITLES[source.kind]} "
+        subtitle=("PARTIAL " if source.missing_runs else "") + f"{SUBTITLES[source.kind]} "
                  f"- built {built}",
         summary=summary,
         runs=[{"row": row, "colour": model_colour(r.name, r.model, r.dataset, i)}
@@ -135,8 +135,6 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
         methods=methods, tables=tables, figures=html_figures, notes=notes, quality=quality,
         version=sysid.__version__, source=str(source.path), built=built)
     html_path = write_text(html, out_dir / "report.html")
-    for path in (html_path, pdf_path):  # mkstemp creates 0600; reports are for sharing
-        os.chmod(path, 0o644)
     return ReportPaths(html_path, pdf_path, len(html_figures), n_pages, notes,
                        time.perf_counter() - started)
 

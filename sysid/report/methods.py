@@ -144,6 +144,12 @@ def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -
     ]
     if source.kind == "reproduction" and source.summary:
         items += reproduction_items(source.summary)
+    missing = source.missing_runs
+    if missing:  # first line of page 1
+        protocol = len(missing) + len(runs)
+        items.insert(0, ("PARTIAL reproduction", f"{len(runs)} of {protocol} protocol runs "
+                         f"({', '.join(r.name for r in runs)}); not run: {', '.join(missing)}. "
+                         "Tables and figures cover only the runs present."))
     if source.quality:
         rows = quality_rows(source.quality)
         items.append(("Preprocessed files", f"{len(rows)} files, {sum(r.kept_s for r in rows):.0f} s kept in "

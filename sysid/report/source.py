@@ -1,7 +1,8 @@
 """Reading a run directory or a reproduction directory (layout: `sysid.rundir`).
 
 Every file the report needs is checked when it is read; a missing or corrupt file raises
-`CheckpointError` naming it. Traces are read lazily (a full reproduction holds ~70 of them).
+`CheckpointError` naming it, and a run or reproduction whose manifest is missing or disagrees
+with its files is refused (`IncompleteOutputError`). Traces are read lazily (a full reproduction holds ~70 of them).
 """
 from __future__ import annotations
 
@@ -17,6 +18,8 @@ from preprocessing.quality import QualityReport
 from sysid.errors import CheckpointError
 from sysid.experiment import KINDS as MODEL_KINDS
 from sysid.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
+from sysid.manifest import has_manifest, verify_manifest
+from sysid.rundir import verify_run_dir
 
 
 
@@ -128,6 +131,14 @@ class ReportSource:
     def title(self) -> str:
         return self.path.resolve().name
 
+    @property
+    def missing_runs(self) -> list[str]:
+        """Protocol runs a reproduction left out (``sysid reproduce --only``): a partial one."""
+        if self.kind != "reproduction":
+            return []
+        done = set(self.summary.get("runs") or [r.name for r in self.runs])
+        return [name for name in self.summary.get("protocol") or [] if name not in done]
+
 
 def _run_order(run: RunRecord) -> tuple:
     """MMG (paper X'vr first), NN, hybrid; data sets in order."""
@@ -137,6 +148,7 @@ def _run_order(run: RunRecord) -> tuple:
 def read_run_dir(path: Path) -> RunRecord:
     """A run directory (`sysid.rundir`), checked."""
     path = Path(path)
+    verify_run_dir(path)
     summary = read_json(path / "summary.json")
     config_path = path / "config.toml"
     config_text, config = "", {}
@@ -178,6 +190,10 @@ def read_source(path) -> ReportSource:
     path = Path(path)
     if not path.is_dir():
         raise CheckpointError(f"{path}: no such directory")
+    if (path / "runs").is_dir():
+        verify_manifest(path, "reproduction")
+    elif has_manifest(path):  # a run or preprocessing output; older ones have no manifest
+        verify_manifest(path)
     quality = read_quality_reports(path, path / "preprocessing")
     if (path / "runs").is_dir():
         run_dirs = sorted(p for p in (path / "runs").iterdir() if p.is_dir())
