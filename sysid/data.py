@@ -17,6 +17,7 @@ import pandas as pd
 import torch
 
 from preprocessing.schema import PROCESSED, PROCESSED_CHANNEL, PROCESSED_PLAUSIBLE_ABS
+from sysid.csvfiles import read_csv_table
 from sysid.errors import DataError
 from sysid.state import INPUTS, STATE
 
@@ -62,14 +63,7 @@ def read_run(path: str | os.PathLike, rate: float = 1.0) -> Run:
     path = Path(path)
     if not (rate > 0 and np.isfinite(rate)):
         raise DataError(f"{path}: rate {rate} Hz: must be > 0")
-    if not path.is_file():
-        raise DataError(f"{path}: file not found")
-    try:
-        frame = pd.read_csv(path)
-    except UnicodeDecodeError:
-        raise DataError(f"{path}: not a UTF-8 text CSV (binary, or another encoding such as UTF-16)") from None
-    except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
-        raise DataError(f"{path}: not a readable CSV ({str(exc).strip()})") from None
+    frame = read_csv_table(path, "a processed run with the header 'name [unit]'")
     missing = [c for c in COLUMNS if c not in frame.columns]
     if missing:
         raise DataError(f"{path}: missing column(s) {missing}")

@@ -72,17 +72,9 @@ def _read_force_inputs(path: Path):
     non-UTF-8 or non-numeric file."""
     import numpy as np
     import pandas as pd
+    from sysid.csvfiles import read_csv_table
 
-    if not path.is_file():
-        raise DataError(f"{path}: file not found")
-    try:
-        frame = pd.read_csv(path, encoding="utf-8")
-    except pd.errors.EmptyDataError:
-        raise DataError(f"{path}: empty file (expected a CSV header {' '.join(FORCE_INPUTS)})") from None
-    except UnicodeDecodeError:
-        raise DataError(f"{path}: not a UTF-8 text CSV (binary, or another encoding such as UTF-16)") from None
-    except pd.errors.ParserError as exc:
-        raise DataError(f"{path}: not a readable CSV ({str(exc).strip()})") from None
+    frame = read_csv_table(path, f"a CSV with the header {' '.join(FORCE_INPUTS)}")
     missing = [c for c in FORCE_INPUTS if c not in frame.columns]
     if missing:
         raise DataError(f"{path}: missing column(s) {missing} (header: {', '.join(map(str, frame.columns[:12]))})")

@@ -1,0 +1,49 @@
+"""Reading a CSV file a user hands to sysid: one clear error naming the file when it is
+empty, binary, not UTF-8 (a UTF-16 export) or not parseable as CSV."""
+from __future__ import annotations
+
+import codecs
+import os
+from pathlib import Path
+
+import pandas as pd
+
+from sysid.errors import DataError
+
+_UTF16_MARKS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE, codecs.BOM_UTF32_LE, codecs.BOM_UTF32_BE)
+
+
+def text_problem(path: Path) -> str | None:
+    """Why the file is no UTF-8 text (None when it looks like text), from its first 64 KiB."""
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    if not head:
+        return "empty file"
+    if head.startswith(_UTF16_MARKS):
+        return "UTF-16/32 encoded; save it as UTF-8 CSV"
+    if b"\x00" in head:
+        return "binary, not a text CSV"
+    try:
+        head.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        if exc.start < len(head) - 4:  # not just a character cut at the 64 KiB boundary
+            return "not UTF-8 text (binary, or another encoding); save it as UTF-8 CSV"
+    return None
+
+
+def read_csv_table(path: str | os.PathLike, expect: str = "a CSV with a header row") -> pd.DataFrame:
+    """A CSV file as a DataFrame, or `DataError` naming the file and what is wrong."""
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: file not found")
+    problem = text_problem(path)
+    if problem:
+        raise DataError(f"{path}: {problem} (expected {expect})")
+    try:
+        return pd.read_csv(path, encoding="utf-8")
+    except pd.errors.EmptyDataError:
+        raise DataError(f"{path}: no header row (expected {expect})") from None
+    except UnicodeDecodeError:
+        raise DataError(f"{path}: not UTF-8 text (binary, or another encoding); save it as UTF-8 CSV") from None
+    except pd.errors.ParserError as exc:
+        raise DataError(f"{path}: not a readable CSV ({str(exc).strip()})") from None
