@@ -40,6 +40,7 @@ import json
 import os
 import platform
 import time
+import warnings
 from pathlib import Path
 
 import pandas as pd
@@ -78,10 +79,14 @@ def _load_tensors(path: Path):
     if not path.is_file():
         raise CheckpointError(f"{path}: missing (the run directory is incomplete)")
     try:
-        return torch.load(path, map_location="cpu", weights_only=True)
+        with warnings.catch_warnings():  # torch's pickle-protocol warnings on a foreign file
+            warnings.simplefilter("ignore")
+            return torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # truncated, not a torch file, unsafe pickle
-        reason = (str(exc).strip().splitlines() or [""])[0][:160]  # not torch's multi-line advice
-        raise CheckpointError(f"{path}: cannot be loaded safely ({type(exc).__name__}: {reason})") from None
+        reason = (str(exc).strip().splitlines() or [""])[0][:160]
+        if "weights_only" in str(exc):  # torch's multi-line advice is not for our users
+            reason = "not a checkpoint of plain tensors: truncated, another kind of file, or unsafe objects"
+        raise CheckpointError(f"{path}: cannot be loaded safely ({reason})") from None
 
 
 def _check_finite(tensors: dict, path: Path) -> None:

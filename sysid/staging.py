@@ -60,8 +60,10 @@ def check_target(target: str | os.PathLike, overwrite: bool = False, keep: Itera
         raise OutputError(f"{target}: cannot create the directory {parent}: a file of that name exists") from None
     except OSError as exc:
         raise OutputError(f"{target}: cannot create the directory {parent} ({exc.strerror})") from None
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise OutputError(f"{target}: the directory {parent} is not writable")
+    try:  # the real test (permissions, read-only file systems, /proc): make and remove a directory
+        os.rmdir(tempfile.mkdtemp(dir=parent, prefix=f".{target.name}.probe-"))
+    except OSError as exc:
+        raise OutputError(f"{target}: cannot write in {parent} ({exc.strerror})") from None
     return target
 
 

@@ -312,7 +312,7 @@ class Trainer:
                 loss = t.lambda_v * loss_v + t.lambda_F * loss_F + t.lambda_L2 * self._l2(model)
                 if not torch.isfinite(loss):
                     raise TrainingError(f"{self.experiment.source}: [training] the {label} loss became "
-                                        f"{float(loss)} at epoch {epoch} (learning_rate = {lr:g}?); no run written")
+                                        f"{loss.detach().item()} at epoch {epoch} (learning_rate = {lr:g}?); no run written")
                 opt.zero_grad()
                 loss.backward()
                 opt.step()

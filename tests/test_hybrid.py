@@ -154,7 +154,7 @@ def test_saved_run_reloads_to_identical_predictions(trained, tmp_path):
     with pytest.raises(IncompleteOutputError, match=r"run: model.pt does not match its checksum"):
         load_model(tmp_path / "run")
     write_manifest(tmp_path / "run", "run")  # sealed as it is: the loader still refuses it
-    with pytest.raises(CheckpointError, match=r"model.pt: cannot be loaded safely \(UnpicklingError: [^\n]*\)$"):
+    with pytest.raises(CheckpointError, match=r"model.pt: cannot be loaded safely \(not a checkpoint of plain tensors[^\n]*\)$"):
         load_model(tmp_path / "run")
     (tmp_path / "run" / "model.pt").unlink()
     with pytest.raises(IncompleteOutputError, match=r"run: incomplete run directory: model.pt is missing"):
