@@ -429,7 +429,7 @@ class Trainer:
                 opt.step()
             if not torch.isfinite(loss):
                 raise TrainingError(f"{self.experiment.source}: [training] the warm-start loss became "
-                                    f"{float(loss)}; no run written")
+                                    f"{loss.detach().item()}; no run written")
 
     def train(self, model: CorrectedModel, params, train: WindowSet, val: WindowSet, w_v, w_F) -> StageResult:
         """Stage 5: multi-step training of every FNN member (and joint MMG coefficients)."""

@@ -41,12 +41,15 @@ def expand_multi_value(argv: list[str]) -> list[str]:
     return out
 
 
+INTERRUPTED = 130  # the shell's code for a job stopped by Ctrl-C (128 + SIGINT)
+
+
 def run(argv: list[str]) -> None:
     """Run a subcommand; `SysidError` and `KeyboardInterrupt` propagate (for tests and
     embedding)."""
     code = app(args=expand_multi_value(list(argv)), standalone_mode=False)
     # typer >= 0.29 turns Ctrl-C into Exit(130) and, outside standalone mode, returns the code
-    if code == 130:
+    if code == INTERRUPTED:
         raise KeyboardInterrupt
     if isinstance(code, int) and code:
         raise SystemExit(code)
@@ -84,14 +87,14 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(code or 0)
     except KeyboardInterrupt:
         typer.secho(f"interrupted: {interrupt_note()}", fg=typer.colors.YELLOW, err=True)
-        sys.exit(130)
+        sys.exit(INTERRUPTED)
     except Exception as exc:
         if _is_usage_error(exc):
             exc.show()
             sys.exit(exc.exit_code)
         if _is_abort(exc):  # click turns Ctrl-C into Abort
             typer.secho(f"interrupted: {interrupt_note()}", fg=typer.colors.YELLOW, err=True)
-            sys.exit(130)
+            sys.exit(INTERRUPTED)
         if isinstance(exc, OSError):  # output or input file problems: not our bug
             where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
             typer.secho(f"error: {where}{exc.strerror or exc}", fg=typer.colors.RED, err=True)

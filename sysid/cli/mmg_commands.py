@@ -111,8 +111,8 @@ def forces(
     start = time.perf_counter()
     if chunk < 1:
         raise DataError(f"--chunk {chunk}: rows per batch must be >= 1")
-    model = _model(ship, set_, quadrature)
     numeric = _read_force_inputs(input_csv)
+    model = _model(ship, set_, quadrature)
     parts = []
     bounds = range(0, len(numeric), chunk)
     bar = progress(bounds, desc="forces", unit="batches", quiet=len(bounds) < 4)

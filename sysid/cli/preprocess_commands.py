@@ -1,8 +1,10 @@
 """``sysid synth-raw`` and ``sysid preprocess``: raw 10 Hz logs to processed 1 Hz runs."""
 from __future__ import annotations
 
+import functools
 import math
 import os
+import signal
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
@@ -133,11 +135,8 @@ def preprocess(
     with staged_directory(outdir, "preprocessing", overwrite, keep=raw) as staging:
         bar = progress(total=len(paths), unit="files", desc="preprocess")
         if jobs > 1 and len(paths) > 1:
-            with ProcessPoolExecutor(max_workers=min(jobs, len(paths), os.cpu_count() or 1)) as pool:
-                futures = [pool.submit(pipeline.process_file, p, layout, settings, str(staging)) for p in paths]
-                for fut in as_completed(futures):
-                    results.append(fut.result())
-                    bar.update()
+            work = functools.partial(pipeline.process_file, layout=layout, settings=settings, outdir=str(staging))
+            results = _in_parallel(work, paths, min(jobs, len(paths), os.cpu_count() or 1), bar)
         else:
             for p in paths:
                 results.append(pipeline.process_file(p, layout, settings, str(staging)))
@@ -153,6 +152,38 @@ def preprocess(
     failed = [r for r in results if not r["ok"]]
     if failed:
         raise SystemExit(1)  # (typer.Exit is swallowed by standalone_mode=False)
+
+
+def _in_parallel(work, paths: list[str], workers: int, bar) -> list[dict]:
+    """`work(path)` for every path in worker processes, in completion order.
+
+    The workers ignore Ctrl-C; the main process notes it in a flag as well as raising
+    KeyboardInterrupt, because an interrupt that lands while the pool forks a worker is
+    swallowed there, and the flag still stops the job.
+    """
+    stopped: list[int] = []
+
+    def stop(signum, frame):
+        stopped.append(signum)
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGINT, stop)
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=signal.signal,
+                               initargs=(signal.SIGINT, signal.SIG_IGN))
+    try:
+        futures = [pool.submit(work, p) for p in paths]
+        results = []
+        for future in as_completed(futures):
+            if stopped:
+                raise KeyboardInterrupt
+            results.append(future.result())
+            bar.update()
+        if stopped:
+            raise KeyboardInterrupt
+        return results
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+        signal.signal(signal.SIGINT, previous)
 
 
 def _summary(results: list[dict], outdir: Path, seconds: float) -> None:
