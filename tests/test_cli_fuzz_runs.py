@@ -272,3 +272,12 @@ def test_partial_reproduction_is_complete_on_disk_and_says_partial_on_page_one(s
 
     shutil.rmtree(out / "runs" / "mmg_paper" / "traces")  # as a run lost to a crash would be
     assert_refused(sysid("report", out, "-o", tmp_path / "report2", "--quiet"), 2, str(out), "is missing")
+
+
+@pytest.mark.parametrize("where", ["under /proc", "below a file"])
+def test_report_output_that_cannot_be_written(sysid, trained, tmp_path, where):
+    (tmp_path / "taken").write_text("a file")
+    out = {"under /proc": "/proc/sysid-fuzz-report", "below a file": tmp_path / "taken" / "report"}[where]
+    line = assert_refused(sysid("report", trained, "-o", out, "--quiet"), 1)
+    assert "sysid-fuzz-report" in line or "taken" in line
+    assert leftovers(tmp_path) == [] and (tmp_path / "taken").read_text() == "a file"

@@ -84,8 +84,9 @@ def _read_force_inputs(path: Path):
     bad = ~np.isfinite(numeric.to_numpy(dtype=float))
     if bad.any():
         row, col = np.argwhere(bad)[0]
+        cell = frame[FORCE_INPUTS[col]].iloc[row]
         raise DataError(f"{path}: column {FORCE_INPUTS[col]!r} is not a finite number at data row {row + 2} "
-                        f"({frame[FORCE_INPUTS[col]].iloc[row]!r})")
+                        f"({'empty' if pd.isna(cell) else f'found {cell}'})")
     return numeric.astype(float)
 
 
@@ -111,8 +112,8 @@ def forces(
     start = time.perf_counter()
     if chunk < 1:
         raise DataError(f"--chunk {chunk}: rows per batch must be >= 1")
-    numeric = _read_force_inputs(input_csv)
     model = _model(ship, set_, quadrature)
+    numeric = _read_force_inputs(input_csv)
     parts = []
     bounds = range(0, len(numeric), chunk)
     bar = progress(bounds, desc="forces", unit="batches", quiet=len(bounds) < 4)
