@@ -32,6 +32,5 @@ class OutputError(SysidError):
     not given), is a file, or its directory cannot be created or written."""
 
 
-
 class TrainingError(SysidError):
     """Training cannot produce a model: a non-finite loss (too high a learning rate, bad data)."""

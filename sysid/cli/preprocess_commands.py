@@ -131,7 +131,7 @@ def preprocess(
     paths = [str(p) for p in raw]
     results = []
     start = time.perf_counter()
-    on_interrupt(f"nothing was written to {outdir} (it is moved into place only when every file is done)")
+    on_interrupt(f"nothing written to {outdir} (it is moved into place only when every file is done)")
     with staged_directory(outdir, "preprocessing", overwrite, keep=raw) as staging:
         bar = progress(total=len(paths), unit="files", desc="preprocess")
         if jobs > 1 and len(paths) > 1:

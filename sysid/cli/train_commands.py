@@ -88,7 +88,7 @@ def reproduce(
     if jobs is not None and jobs < 1:
         raise ConfigError(f"--jobs {jobs}: must be >= 1")
     check_target(output, overwrite)
-    on_interrupt(f"nothing was written to {output} (it is moved into place only when every run is done)")
+    on_interrupt(f"nothing written to {output} (it is moved into place only when every run is done)")
     with staged_directory(output, "reproduction", overwrite) as staging:
         summary = run_protocol(staging, data, only, log=typer.echo, jobs=jobs or cpu_cores())
     for name in ("table7.md", "table8.md"):
