@@ -18,6 +18,7 @@ from sysid.checkpoint import TrainingCheckpoint
 from sysid.data import Run, read_run
 from sysid.datasets import training_files
 from sysid.device import compute_threads
+from sysid.errors import TrainingError
 from sysid.evaluate import Evaluation, evaluate_model
 from sysid.experiment import Experiment
 from sysid.models import build_model
@@ -74,8 +75,12 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
     with compute_threads(exp.training.threads):
         if exp.needs_training:
             runs = list(train_runs) if train_runs is not None else training_runs(exp, data)
-            trainer = Trainer(exp, progress=progress, log=log, checkpoint=checkpoint_path(out_dir),
-                              resume=resume).fit(runs)
+            try:
+                trainer = Trainer(exp, progress=progress, log=log, checkpoint=checkpoint_path(out_dir),
+                                  resume=resume).fit(runs)
+            except TrainingError:  # a diverged training resumes to the same divergence: keep nothing
+                TrainingCheckpoint(checkpoint_path(out_dir), exp.to_toml()).remove()
+                raise
             model, history, training = trainer.model_.cpu().double(), trainer.history_, trainer.summary_
         else:
             model = build_model(exp)

@@ -52,7 +52,7 @@ def long_training(files, folder):
 def test_ctrl_c_while_training_exits_130_and_leaves_nothing(files, tmp_path):
     out = tmp_path / "run"
     proc = start("train", long_training(files, tmp_path), "-o", out, "--test", files["test"])
-    before = wait_for(proc.stdout, "after warm start")  # now in the multi-step epochs
+    before = wait_for(proc.stdout, "epoch 10/")  # in the multi-step epochs, checkpointed
     outcome = finish(proc, before, signal.SIGINT)
     line = assert_refused(outcome, 130, "interrupted: nothing written to", str(out), "--resume")
     assert "KeyboardInterrupt" not in outcome.err, line

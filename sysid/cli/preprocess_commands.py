@@ -6,7 +6,7 @@ import math
 import os
 import signal
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import List, Optional
 
@@ -157,27 +157,22 @@ def preprocess(
 def _in_parallel(work, paths: list[str], workers: int, bar) -> list[dict]:
     """`work(path)` for every path in worker processes, in completion order.
 
-    The workers ignore Ctrl-C; the main process notes it in a flag as well as raising
-    KeyboardInterrupt, because an interrupt that lands while the pool forks a worker is
-    swallowed there, and the flag still stops the job.
+    The workers ignore Ctrl-C. The main process only notes it in a flag, checked between
+    short waits: an exception raised by the signal handler itself can land while the pool
+    forks a worker, where Python swallows it with a traceback.
     """
     stopped: list[int] = []
-
-    def stop(signum, frame):
-        stopped.append(signum)
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGINT, stop)
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: stopped.append(signum))
     pool = ProcessPoolExecutor(max_workers=workers, initializer=signal.signal,
                                initargs=(signal.SIGINT, signal.SIG_IGN))
     try:
-        futures = [pool.submit(work, p) for p in paths]
+        pending = {pool.submit(work, p) for p in paths}
         results = []
-        for future in as_completed(futures):
-            if stopped:
-                raise KeyboardInterrupt
-            results.append(future.result())
-            bar.update()
+        while pending and not stopped:
+            done, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
+            for future in done:
+                results.append(future.result())
+                bar.update()
         if stopped:
             raise KeyboardInterrupt
         return results
