@@ -15,7 +15,6 @@ import typer
 from sysid.cli.app import app
 from sysid.cli.interrupts import on_interrupt
 from sysid.errors import DataError
-from sysid.ship import load_ship
 
 ShipOption = typer.Option("esso_osaka", "--ship", help="Ship name (configs/ships/NAME.toml) or a ship TOML.")
 
@@ -58,6 +57,7 @@ def synth_raw(
     from preprocessing import synth
     from preprocessing.schema import RawLogError
     from sysid.files import write_csv
+    from sysid.ship import load_ship
 
     layout = load_ship(ship).sensors
     kwargs = {}
@@ -104,6 +104,7 @@ def preprocess(
     """
     from preprocessing import pipeline
     from sysid.progress import progress
+    from sysid.ship import load_ship
     from sysid.staging import check_target, staged_directory
 
     if not (rate > 0 and math.isfinite(rate)):
