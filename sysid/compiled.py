@@ -99,9 +99,20 @@ def fingerprint(module: nn.Module, example_inputs: Sequence[torch.Tensor]) -> st
 
 
 def export_program(module: nn.Module, example_inputs: Sequence[torch.Tensor]) -> torch.export.ExportedProgram:
-    """`torch.export` capture of `module` at these (static) input shapes, without gradient."""
-    with torch.no_grad():
-        return torch.export.export(module, tuple(example_inputs))
+    """`torch.export` capture of `module` at these (static) input shapes, without gradient.
+
+    Plain attributes the trace assigned (caches such as the kNN bank norms, which would
+    hold traced tensors afterwards) are put back as they were.
+    """
+    saved = [(sub, dict(vars(sub))) for sub in module.modules()]
+    try:
+        with torch.no_grad():
+            return torch.export.export(module, tuple(example_inputs))
+    finally:
+        for sub, before in saved:
+            for key in [k for k in vars(sub) if k not in before]:
+                del sub.__dict__[key]
+            sub.__dict__.update(before)
 
 
 def compile_package(program: torch.export.ExportedProgram, path: Path,
@@ -127,13 +138,14 @@ def load_package(path: str | os.PathLike) -> Compiled:
     """A callable ``f(*tensors) -> tensor`` running an AOTInductor ``.pt2`` package.
 
     Calls go straight to the package's C++ runner when it exposes one (about 15 us
-    instead of about 35 us through the generic wrapper).
+    instead of about 35 us through the generic wrapper). The runner reads its inputs as
+    contiguous: they are made so here.
     """
     package = torch._inductor.aoti_load_package(str(path))
     runner = getattr(getattr(package, "loader", None), "run", None)
     if runner is None:
-        return package
-    return lambda *tensors: runner(list(tensors))[0]
+        return lambda *tensors: package(*(t.contiguous() for t in tensors))
+    return lambda *tensors: runner([t.contiguous() for t in tensors])[0]
 
 
 def package_metadata(path: str | os.PathLike) -> dict[str, str]:
@@ -141,28 +153,36 @@ def package_metadata(path: str | os.PathLike) -> dict[str, str]:
     return dict(torch._inductor.aoti_load_package(str(path)).get_metadata())
 
 
-def compile_cached(module: nn.Module, example_inputs: Sequence[torch.Tensor], label: str,
-                   log: Callable[[str], None] | None = None) -> Compiled | None:
-    """The compiled `module` for inputs shaped like `example_inputs`, from the disk cache
-    or compiled now (and cached); None, after one warning, where compilation fails."""
-    if not enabled():
-        return None
+def cached_package(module: nn.Module, example_inputs: Sequence[torch.Tensor], label: str,
+                   metadata: dict[str, str] | None = None,
+                   log: Callable[[str], None] | None = None) -> Path:
+    """Path of the AOTInductor package of `module` for inputs shaped like `example_inputs`,
+    from the disk cache or compiled now and cached (raises where compilation fails)."""
     key = fingerprint(module, example_inputs)
     path = cache_dir() / f"{label}-{key}.pt2"
-    if key in _failed:
+    if not path.is_file():
+        start = time.perf_counter()
+        (log or _stderr)(f"sysid: compiling {label} for {tuple(example_inputs[0].shape)} "
+                         f"{example_inputs[0].dtype} (once; cached in {path.parent}) ...")
+        compile_package(export_program(module, example_inputs), path, metadata)
+        (log or _stderr)(f"sysid: compiled {label} in {time.perf_counter() - start:.0f} s")
+    return path
+
+
+def compile_cached(module: nn.Module, example_inputs: Sequence[torch.Tensor], label: str,
+                   metadata: dict[str, str] | None = None,
+                   log: Callable[[str], None] | None = None) -> Compiled | None:
+    """The compiled `module` (see `cached_package`) as a callable; None, after one
+    warning, where compilation fails or is switched off."""
+    if not enabled():
         return None
     try:
-        if not path.is_file():
-            start = time.perf_counter()
-            (log or _stderr)(f"sysid: compiling {label} for {tuple(example_inputs[0].shape)} "
-                             f"{example_inputs[0].dtype} (once; cached in {path.parent}) ...")
-            compile_package(export_program(module, example_inputs), path)
-            (log or _stderr)(f"sysid: compiled {label} in {time.perf_counter() - start:.0f} s")
-        return load_package(path)
+        return load_package(cached_package(module, example_inputs, label, metadata, log))
     except Exception as exc:  # no compiler, export limits: eager gives the same numbers
-        _failed.add(key)
-        warnings.warn(f"sysid: cannot compile {label} ({type(exc).__name__}: {str(exc)[:200]}); "
-                      "using the eager step", RuntimeWarning, stacklevel=2)
+        message = f"{label}: {type(exc).__name__}: {str(exc)[:300]}"
+        if message not in _failed:
+            _failed.add(message)
+            warnings.warn(f"sysid: cannot compile {message}; using the eager step", RuntimeWarning, stacklevel=2)
         return None
 
 
@@ -190,7 +210,25 @@ def compiled_step(model: nn.Module, method: Method | str, dt: float, batch: int,
     examples = (torch.zeros(batch, 6, dtype=dtype, device=device),
                 torch.zeros(batch, 4, dtype=dtype, device=device))
     return _memoized(model, ("step", method, float(dt), batch, dtype, str(device)),
-                     lambda: compile_cached(Step(model, method, dt), examples, f"step-{method.name.lower()}"))
+                     lambda: compile_cached(Step(model, method, dt), examples, step_label(method),
+                                            step_metadata(model, method, dt, batch, dtype)))
+
+
+def step_label(method: Method) -> str:
+    return f"step-{Method.parse(method).name.lower()}"
+
+
+def step_metadata(model: nn.Module, method: Method | str, dt: float, batch: int,
+                  dtype: torch.dtype) -> dict[str, str]:
+    """What a user of an exported step needs to know: rule, dt, shapes, channels, units."""
+    from sysid.state import INPUTS, STATE
+    from sysid import __version__
+    return {"sysid_version": __version__, "kind": getattr(model, "kind", "mmg"),
+            "method": Method.parse(method).value, "dt_s": repr(float(dt)), "batch": str(batch),
+            "dtype": str(dtype).replace("torch.", ""), "state": ",".join(STATE), "inputs": ",".join(INPUTS),
+            "units": "state x[m] u[m/s] y[m] v[m/s] psi[rad] r[rad/s]; inputs n_prop[rps] "
+                     "delta_rudder[rad] wind_velo_true[m/s] wind_dir_true[rad, from]",
+            "signature": "step(state (batch, 6), inputs (batch, 4)) -> state after dt"}
 
 
 def compiled_derivative(model: nn.Module, batch: int, dtype: torch.dtype = torch.float64,
