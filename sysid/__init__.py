@@ -1,13 +1,15 @@
 """sysid: physics-informed system identification for ship maneuvering.
 
 One obvious entry point per task: `load_ship` for a ship definition, `MMG` for the force
-model, `integrate` for predictions.
+model, `integrate` for predictions (`Integrator` / `Method` choose the rule and whether the
+step is compiled).
 """
 from sysid.dynamics import ShipDynamics, body_acceleration, integrate, state_derivative
+from sysid.integrators import Integrator, Method
 from sysid.mmg import MMG, ForceBreakdown
 from sysid.ship import Ship, load_ship
 
 __version__ = "0.1.0"
 
-__all__ = ["Ship", "load_ship", "MMG", "ForceBreakdown", "ShipDynamics", "integrate",
+__all__ = ["Ship", "load_ship", "MMG", "ForceBreakdown", "ShipDynamics", "integrate", "Integrator", "Method",
            "state_derivative", "body_acceleration", "__version__"]

@@ -16,7 +16,8 @@ import torch
 from torch import nn
 
 from sysid.data import Run, protocol_windows, stack_windows
-from sysid.dynamics import Method, integrate
+from sysid.dynamics import integrate
+from sysid.integrators import IntegratorLike
 from sysid.state import VELOCITY_INDEX
 
 METRIC_COLUMNS = ["file", "horizon_s", "n_windows", "rmse_u", "rmse_v", "rmse_r"]
@@ -52,7 +53,7 @@ class WindowPrediction:
 
 
 def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
-                    method: Method = "euler", dtype=torch.float64,
+                    method: IntegratorLike = "euler", dtype=torch.float64,
                     device: str | torch.device = "cpu") -> list[WindowPrediction]:
     """Predict the protocol windows of every run in one batched integration."""
     chunks, meta = [], []
@@ -89,7 +90,7 @@ def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
 
 
 def metrics_table(model: nn.Module, runs: Sequence[Run], horizons: Sequence[float],
-                  method: Method = "euler", **kwargs) -> pd.DataFrame:
+                  method: IntegratorLike = "euler", **kwargs) -> pd.DataFrame:
     """Rows ``file, horizon_s, n_windows, rmse_u, rmse_v, rmse_r`` per file and horizon."""
     rows = []
     for horizon in horizons:

@@ -17,6 +17,7 @@ from sysid.dynamics import integrate, state_derivative
 from sysid.errors import DataError
 from sysid.evaluate import metrics_table
 from sysid.files import write_csv
+from sysid.integrators import Integrator
 from sysid.mmg import MMG
 from sysid.ship import load_ship, parse_overrides
 
@@ -28,6 +29,8 @@ ShipOption = typer.Option("esso_osaka", "--ship", help="Ship name (configs/ships
 SetOption = typer.Option(None, "--set", help="Override a ship parameter, e.g. --set Xvr=0.4535 (repeatable).")
 QuadratureOption = typer.Option("exact", "--quadrature",
                                 help="Cross-flow integrals: exact (closed form) or simpson (the lab simulator's).")
+CompiledOption = typer.Option(False, "--compiled",
+                              help="Compiled step (native code, cached on disk; first use compiles, about a minute).")
 
 
 def _check_integrator(integrator: str) -> None:
@@ -105,6 +108,7 @@ def simulate(
     ship: str = ShipOption,
     set_: Optional[List[str]] = SetOption,
     quadrature: str = QuadratureOption,
+    compiled: bool = CompiledOption,
 ) -> None:
     """Predict from the recorded state at T with the recorded inputs (zero-order hold)."""
     _check_integrator(integrator)
@@ -121,7 +125,7 @@ def simulate(
     x0 = torch.as_tensor(run.states[i0], dtype=torch.float64)
     inputs = torch.as_tensor(run.inputs[sl], dtype=torch.float64)
     with torch.no_grad():
-        pred = integrate(model, x0, inputs, run.dt, integrator)
+        pred = integrate(model, x0, inputs, run.dt, Integrator(integrator, compiled))
         forces = model(pred, inputs)
     out = pd.DataFrame({"t": run.t[sl], "t_rel": run.t[sl] - run.t[i0]})
     for j, name in enumerate(["x", "u", "y", "v", "psi", "r"]):
@@ -151,6 +155,7 @@ def evaluate(
     ship: str = ShipOption,
     set_: Optional[List[str]] = SetOption,
     quadrature: str = QuadratureOption,
+    compiled: bool = CompiledOption,
 ) -> None:
     """The protocol's windowed RMSE of u, v_m, r per file and horizon (MMG or a trained run)."""
     _check_integrator(integrator)
@@ -167,7 +172,7 @@ def evaluate(
         label = f"MMG ({model.ship.name}, overrides: {overrides})"
     files = expand_paths(data)
     runs = [read_run(f) for f in tqdm(files, desc="reading", unit="file", disable=len(files) < 4)]
-    table = metrics_table(model, runs, horizon, integrator)
+    table = metrics_table(model, runs, horizon, Integrator(integrator, compiled))
     write_csv(table, output, float_format="%.6g")
     with pd.option_context("display.width", 120, "display.float_format", "{:.5f}".format):
         typer.echo(table.to_string(index=False))
