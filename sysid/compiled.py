@@ -16,6 +16,7 @@ and callers use the eager step, which gives the same numbers to round-off.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import sys
@@ -35,8 +36,7 @@ from sysid.stepper import Derivative, Step, run_steps
 Compiled = Callable[..., torch.Tensor]
 INDUCTOR_OPTIONS = {"force_pointwise_cat": True}  # CPU: fuse the (X, Y, N) stacks, no buffers
 _SOURCE_PACKAGES = ("mmg",)
-_SOURCE_MODULES = ("dynamics.py", "integrators.py", "stepper.py", "compiled.py", "models.py",
-                   "correction.py", "ood.py")
+_SOURCE_MODULES = ("dynamics.py", "integrators.py", "stepper.py", "models.py", "correction.py", "ood.py")
 _memo: "weakref.WeakKeyDictionary[nn.Module, dict]" = weakref.WeakKeyDictionary()
 _failed: set[str] = set()
 
@@ -52,7 +52,9 @@ def cache_dir() -> Path:
     return Path(env) if env else Path.home() / ".cache" / "sysid" / "compiled"
 
 
+@functools.lru_cache(maxsize=None)
 def _source_digest() -> str:
+    """sha256 of the source that computes a step (read once per process)."""
     root = Path(__file__).resolve().parent
     files = sorted(p for pkg in _SOURCE_PACKAGES for p in (root / pkg).glob("*.py"))
     files += [root / name for name in _SOURCE_MODULES]
@@ -87,7 +89,7 @@ def _options(module: nn.Module) -> list:
 def fingerprint(module: nn.Module, example_inputs: Sequence[torch.Tensor]) -> str:
     """sha256 of what decides a compiled module's numbers: state, options, shapes, versions."""
     h = hashlib.sha256()
-    h.update(f"{torch.__version__} {sys.version_info[:2]} {_source_digest()}".encode())
+    h.update(f"{torch.__version__} {sys.version_info[:2]} {_source_digest()} {INDUCTOR_OPTIONS}".encode())
     h.update(repr(_options(module)).encode())
     for x in example_inputs:
         h.update(f"in {tuple(x.shape)} {x.dtype} {x.device}".encode())
@@ -106,7 +108,8 @@ def export_program(module: nn.Module, example_inputs: Sequence[torch.Tensor]) ->
     """
     saved = [(sub, dict(vars(sub))) for sub in module.modules()]
     try:
-        with torch.no_grad():
+        with torch.no_grad(), warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=".*assigned during export", category=UserWarning)
             return torch.export.export(module, tuple(example_inputs))
     finally:
         for sub, before in saved:
@@ -126,7 +129,9 @@ def compile_package(program: torch.export.ExportedProgram, path: Path,
     fd, tmp = tempfile.mkstemp(suffix=".pt2", dir=path.parent)
     os.close(fd)
     try:
-        torch._inductor.aoti_compile_and_package(program, package_path=tmp, inductor_configs=options)
+        with warnings.catch_warnings():  # torch-internal deprecation notices
+            warnings.simplefilter("ignore", FutureWarning)
+            torch._inductor.aoti_compile_and_package(program, package_path=tmp, inductor_configs=options)
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):

@@ -11,6 +11,8 @@ Time inside torchdiffeq is counted in steps (tau = t / dt), so step k's input is
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, fields
+
 import torch
 from torch import nn
 from torchdiffeq import odeint
@@ -100,7 +102,7 @@ class ShipDynamics(nn.Module):
 
 
 def integrate(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
-              integrator: IntegratorLike = Method.EULER, *, record: list | None = None) -> torch.Tensor:
+              method: IntegratorLike = Method.EULER, *, record: list | None = None) -> torch.Tensor:
     """Predict trajectories from x0 with recorded inputs held over each step.
 
     Parameters
@@ -110,18 +112,18 @@ def integrate(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt
     inputs : (T, ..., 4) inputs on the time grid; step k (t_k -> t_k+1) uses inputs[k],
         the last row is not used.
     dt : grid step [s].
-    integrator : an `Integrator`, or a `Method` or its name: "euler" (the paper's), "rk4"
+    method : an `Integrator`, or a `Method` or its name: "euler" (the paper's), "rk4"
         (classical, the lab simulator's) or "rk4_3/8" (torchdiffeq's own rk4).
         ``Integrator(method, compiled=True)`` runs the compiled step loop (no gradient).
     record : a list to which each right-hand-side call appends its `ForceBreakdown`; with
         "euler" that is one entry per step, at the states the step started from
-        (`sysid.stepper.rollout_forces` returns them stacked instead).
+        (`integrate_with_forces` returns them stacked instead).
 
     Returns
     -------
     (T, ..., 6) states at t_0 .. t_{T-1}; row 0 is x0.
     """
-    integrator = Integrator.of(integrator)
+    integrator = Integrator.of(method)
     if inputs.shape[1:-1] != x0.shape[:-1]:
         raise ValueError(f"inputs {tuple(inputs.shape)} do not match x0 {tuple(x0.shape)}: expected (T, *batch, 4)")
     if integrator.compiled:
@@ -136,3 +138,36 @@ def integrate(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt
     tau = torch.arange(inputs.shape[0], dtype=x0.dtype, device=x0.device)
     options = {"perturb": True} if integrator.method is not Method.EULER else None
     return odeint(rhs, x0, tau, method=_ODEINT_NAME[integrator.method], options=options)
+
+
+@dataclass
+class Trajectory:
+    """Predicted states (T, ..., 6) and the forces of every right-hand-side call, stacked:
+    a `ForceBreakdown` of (S, ..., 3) tensors (S = T - 1 with Euler: the forces at the
+    state each step started from)."""
+
+    states: torch.Tensor
+    forces: ForceBreakdown
+
+
+def stack_forces(calls: list[ForceBreakdown]) -> ForceBreakdown:
+    """One `ForceBreakdown` whose fields stack those of `calls` along a new first axis."""
+    stacked = {}
+    for f in fields(ForceBreakdown):
+        values = [getattr(c, f.name) for c in calls]
+        stacked[f.name] = None if any(v is None for v in values) else torch.stack(values)
+    return ForceBreakdown(**stacked)
+
+
+def integrate_with_forces(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
+                          method: IntegratorLike = Method.EULER) -> Trajectory:
+    """`integrate` (not compiled) that also returns every call's forces, stacked.
+
+    The training loss uses it with Euler: states from torchdiffeq's `odeint`, F_NN and
+    F_MMG of each step for the output penalty (paper Eq. 17).
+    """
+    record: list[ForceBreakdown] = []
+    states = integrate(force_model, x0, inputs, dt, Integrator.of(method).method, record=record)
+    if not record:
+        raise ValueError("no steps: inputs need at least two rows")
+    return Trajectory(states, stack_forces(record))

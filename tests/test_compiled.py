@@ -160,3 +160,15 @@ def test_export_predicts_the_same_without_sysid(hybrid_run, zigzag, tmp_path, po
         extra = {"sysid.json": ""}
         torch.export.load(str(out), extra_files=extra)
         assert json.loads(extra["sysid.json"])["format"] == "torch.export"
+
+
+def test_trajectory_stacks_the_forces_of_every_euler_step(hybrid_run, zigzag):
+    from sysid.dynamics import integrate_with_forces
+    states, inputs = zigzag
+    model = hybrid_run[1]
+    traj = integrate_with_forces(model, states[0], inputs[:8], 1.0)
+    assert traj.forces.correction.shape == (7, 3) and traj.forces.gate_on.shape == (7,)
+    with torch.no_grad():
+        again = model(traj.states[:-1], inputs[:7])
+    torch.testing.assert_close(traj.forces.total.detach(), again.total, rtol=0, atol=0)
+    torch.testing.assert_close(traj.states, integrate(model, states[0], inputs[:8], 1.0), rtol=0, atol=0)
