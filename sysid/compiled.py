@@ -31,12 +31,14 @@ import torch
 from torch import nn
 
 from sysid.integrators import Method
+from sysid.knn_index import with_indexed_gate
 from sysid.stepper import Derivative, Step, run_steps
 
 Compiled = Callable[..., torch.Tensor]
 INDUCTOR_OPTIONS = {"force_pointwise_cat": True}  # CPU: fuse the (X, Y, N) stacks, no buffers
 _SOURCE_PACKAGES = ("mmg",)
-_SOURCE_MODULES = ("dynamics.py", "integrators.py", "stepper.py", "models.py", "correction.py", "ood.py")
+_SOURCE_MODULES = ("dynamics.py", "integrators.py", "stepper.py", "models.py", "correction.py", "ood.py",
+                   "knn_index.py")
 _memo: "weakref.WeakKeyDictionary[nn.Module, dict]" = weakref.WeakKeyDictionary()
 _failed: set[str] = set()
 
@@ -215,8 +217,8 @@ def compiled_step(model: nn.Module, method: Method | str, dt: float, batch: int,
     examples = (torch.zeros(batch, 6, dtype=dtype, device=device),
                 torch.zeros(batch, 4, dtype=dtype, device=device))
     return _memoized(model, ("step", method, float(dt), batch, dtype, str(device)),
-                     lambda: compile_cached(Step(model, method, dt), examples, step_label(method),
-                                            step_metadata(model, method, dt, batch, dtype)))
+                     lambda: compile_cached(Step(with_indexed_gate(model, batch), method, dt), examples,
+                                            step_label(method), step_metadata(model, method, dt, batch, dtype)))
 
 
 def step_label(method: Method) -> str:
