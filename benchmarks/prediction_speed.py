@@ -6,14 +6,14 @@ Prints, ours (eager and compiled) next to the lab's `mmg-1p1r-simulator`:
 2. rows per second of the batched right-hand side at 4096 and 65536 rows (ours float32);
 3. one 100 s prediction at dt 1 s from a recorded state with the recorded inputs: the
    lab's classical RK4 beside ours (RK4 and Euler) for MMG, NN-only and hybrid models
-   (kNN gate in input and in feature space, bank of --bank training samples);
+   (kNN gate in input and in feature space, bank of the D2 training samples);
 4. the one-time cost: compiling each step (or loading it from the disk cache).
 
 Timings alternate ours and the lab's call by call and report medians, so a busy machine
 slows both alike: compare ratios, within one run. The lab simulator is optional (found in
 $SYSID_SHARED/peers or ../shared/peers); without it the lab's columns are skipped.
 
-    python benchmarks/prediction_speed.py [--threads 1] [--bank 30000] [--cold] [--run RUN_DIR ...]
+    python benchmarks/prediction_speed.py [--threads 1] [--bank 20000] [--cold] [--run RUN_DIR ...]
 """
 from __future__ import annotations
 
@@ -91,6 +91,23 @@ def random_rows(batch: int, dtype=torch.float64, seed: int = 0):
     return state.to(dtype), inputs.to(dtype)
 
 
+def training_samples(bank: int):
+    """(states, inputs, label) of the kNN bank: the D2 training files' samples (up to
+    `bank`) when the dataset is present, else random rows (a harder, unstructured bank)."""
+    try:
+        from sysid.data import read_run
+        from sysid.datasets import training_files
+        runs = [read_run(f) for f in training_files("D2")]
+        states = torch.tensor(np.concatenate([r.states for r in runs]))[:bank]
+        inputs = torch.tensor(np.concatenate([r.inputs for r in runs]))[:bank]
+        return states, inputs, "(D2 samples)"
+    except Exception as exc:  # the dataset is optional here
+        print(f"   (dataset unavailable: {exc}; the kNN bank is random rows)")
+        states, inputs = random_rows(bank, seed=1)
+        states[:, 1] = states[:, 1].abs()
+        return states, inputs, "(random rows)"
+
+
 def models(bank: int, runs: list[str]):
     """(label, model) pairs: MMG, NN-only and hybrid with gates, or the given run directories."""
     from sysid import MMG, load_ship
@@ -101,8 +118,7 @@ def models(bank: int, runs: list[str]):
         from sysid.runs import load_model
         return [(f"run {r}", load_model(r)[1]) for r in runs]
     out = [("MMG", MMG(load_ship("esso_osaka")))]
-    states, inputs = random_rows(bank, seed=1)
-    states[:, 1] = states[:, 1].abs()
+    states, inputs, source = training_samples(bank)
     for label, physics, space in (("NN-only, gate in input space", False, "inputs"),
                                   ("hybrid, gate in input space", True, "inputs"),
                                   ("hybrid, gate in feature space (64)", True, "features")):
@@ -114,10 +130,8 @@ def models(bank: int, runs: list[str]):
         model = CorrectedModel(mmg, net, None, physics=physics, gate_space=space)
         with torch.no_grad():
             z = model.gate_coordinates(s)
-        gate = KNNGate(10, 0.9995, z.shape[-1], torch.float64).fit(z[:2000])  # threshold from a subset
-        gate.bank = z.clone()  # (the leave-one-out fit of the whole bank is O(bank^2))
-        model.gate, model.gate_enabled = gate, True
-        out.append((f"{label}, bank {bank}", model))
+        model.gate, model.gate_enabled = KNNGate(10, 0.9995, z.shape[-1], torch.float64).fit(z), True
+        out.append((f"{label}, bank {len(z)} {source}", model))
     return out
 
 
@@ -130,7 +144,8 @@ def timed_first_call(fn):
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--threads", type=int, default=1, help="torch intra-op threads (default 1)")
-    parser.add_argument("--bank", type=int, default=30000, help="kNN bank size of the synthetic gated models")
+    parser.add_argument("--bank", type=int, default=20000,
+                        help="at most this many samples in the kNN bank of the synthetic gated models")
     parser.add_argument("--run", action="append", default=[], help="benchmark these run directories instead")
     parser.add_argument("--cold", action="store_true", help="empty compile cache (measures compile time)")
     parser.add_argument("--repeats", type=int, default=200)
