@@ -36,6 +36,7 @@ from sysid.stepper import Derivative, Step, run_steps
 
 Compiled = Callable[..., torch.Tensor]
 INDUCTOR_OPTIONS = {"force_pointwise_cat": True}  # CPU: fuse the (X, Y, N) stacks, no buffers
+PARALLEL_ROWS = 256  # above it a compiled kernel runs on the threads set when it was compiled
 _SOURCE_PACKAGES = ("mmg",)
 _SOURCE_MODULES = ("dynamics.py", "integrators.py", "stepper.py", "models.py", "correction.py", "ood.py",
                    "knn_index.py")
@@ -95,6 +96,8 @@ def fingerprint(module: nn.Module, example_inputs: Sequence[torch.Tensor]) -> st
     h.update(repr(_options(module)).encode())
     for x in example_inputs:
         h.update(f"in {tuple(x.shape)} {x.dtype} {x.device}".encode())
+    if example_inputs[0].numel() > 6 * PARALLEL_ROWS:  # kernels this large fix their thread count
+        h.update(f"threads {torch.get_num_threads()}".encode())
     for name, t in module.state_dict().items():
         t = t.detach().cpu().contiguous()
         h.update(f"{name} {tuple(t.shape)} {t.dtype}".encode())
