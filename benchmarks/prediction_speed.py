@@ -155,7 +155,7 @@ def main() -> None:
     if args.cold:
         os.environ["SYSID_CACHE"] = tempfile.mkdtemp(prefix="sysid-cache-")
     torch.set_num_threads(args.threads)
-    from sysid import MMG, integrate, load_ship
+    from sysid import MMG, integrate, load_ship, predict
     from sysid.compiled import cache_dir, compiled_derivative
     from sysid.dynamics import derivative
     from sysid.integrators import Integrator
@@ -215,9 +215,9 @@ def main() -> None:
     for label, model in models(args.bank, args.run):
         for method in ("rk4", "euler") if label == "MMG" or args.all_methods else ("euler",):
             compiled = Integrator(method, compiled=True)
-            _, first = timed_first_call(lambda: integrate(model, x0, inputs, 1.0, compiled))
+            _, first = timed_first_call(lambda: predict(model, x0, inputs, 1.0, compiled))
             calls = {"eager": lambda: integrate(model, x0, inputs, 1.0, method),
-                     "compiled": lambda: integrate(model, x0, inputs, 1.0, compiled)}
+                     "compiled": lambda: predict(model, x0, inputs, 1.0, compiled)}
             if lab_pred is not None:
                 calls["lab"] = lab_pred
             with torch.no_grad():
@@ -228,7 +228,7 @@ def main() -> None:
                   f"{t['compiled'] * 1e3:>7.2f}ms {lab_ms} {ratio}")
     if lab_pred is not None:
         with torch.no_grad():
-            gap = np.abs(integrate(mmg, x0, inputs, 1.0, Integrator("rk4", compiled=True)).numpy() - lab_pred())
+            gap = np.abs(predict(mmg, x0, inputs, 1.0, Integrator("rk4", compiled=True)).numpy() - lab_pred())
         print(f"   MMG RK4, ours vs lab: max |difference| {gap[:, [1, 3, 5]].max():.1e} in u, v, r "
               f"(exact vs 100-point Simpson cross-flow)")
 

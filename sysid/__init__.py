@@ -1,15 +1,16 @@
 """sysid: physics-informed system identification for ship maneuvering.
 
 One obvious entry point per task: `load_ship` for a ship definition, `MMG` for the force
-model, `integrate` for predictions (`Integrator` / `Method` choose the rule and whether the
-step is compiled).
+model, `integrate` for (differentiable) trajectories, `predict` for fast predictions
+(``predict(model, x0, inputs, dt, Integrator("rk4", compiled=True))``).
 """
 from sysid.dynamics import ShipDynamics, body_acceleration, integrate, state_derivative
 from sysid.integrators import Integrator, Method
+from sysid.compiled import predict
 from sysid.mmg import MMG, ForceBreakdown
 from sysid.ship import Ship, load_ship
 
 __version__ = "0.1.0"
 
-__all__ = ["Ship", "load_ship", "MMG", "ForceBreakdown", "ShipDynamics", "integrate", "Integrator", "Method",
+__all__ = ["Ship", "load_ship", "MMG", "ForceBreakdown", "ShipDynamics", "integrate", "predict", "Integrator", "Method",
            "state_derivative", "body_acceleration", "__version__"]

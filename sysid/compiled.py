@@ -30,9 +30,11 @@ from typing import Callable, Sequence
 import torch
 from torch import nn
 
-from sysid.integrators import Method
+from sysid.dynamics import check_shapes, integrate
+from sysid.integrators import Integrator, IntegratorLike, Method, run_steps
 from sysid.knn_index import with_indexed_gate
-from sysid.stepper import Derivative, Step, run_steps
+from sysid.state import INPUTS, STATE
+from sysid.stepper import Derivative, Step
 
 Compiled = Callable[..., torch.Tensor]
 INDUCTOR_OPTIONS = {"force_pointwise_cat": True}  # CPU: fuse the (X, Y, N) stacks, no buffers
@@ -231,9 +233,12 @@ def step_label(method: Method) -> str:
 def step_metadata(model: nn.Module, method: Method | str, dt: float, batch: int,
                   dtype: torch.dtype) -> dict[str, str]:
     """What a user of an exported step needs to know: rule, dt, shapes, channels, units."""
-    from sysid.state import INPUTS, STATE
-    from sysid import __version__
-    return {"sysid_version": __version__, "kind": getattr(model, "kind", "mmg"),
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        sysid_version = version("sysid")
+    except PackageNotFoundError:
+        sysid_version = "unknown"
+    return {"sysid_version": sysid_version, "kind": getattr(model, "kind", "mmg"),
             "method": Method.parse(method).value, "dt_s": repr(float(dt)), "batch": str(batch),
             "dtype": str(dtype).replace("torch.", ""), "state": ",".join(STATE), "inputs": ",".join(INPUTS),
             "units": "state x[m] u[m/s] y[m] v[m/s] psi[rad] r[rad/s]; inputs n_prop[rps] "
@@ -264,3 +269,18 @@ def compiled_rollout(model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, d
     with torch.no_grad():
         states = run_steps(step if step is not None else Step(model, method, dt), x, u)
     return states.reshape(inputs.shape[0], *batch_shape, 6)
+
+
+def predict(model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
+            method: IntegratorLike = Method.EULER) -> torch.Tensor:
+    """States (T, ..., 6) predicted from x0 (..., 6) with inputs (T, ..., 4), no gradient.
+
+    `method` as for `sysid.dynamics.integrate`; ``Integrator(rule, compiled=True)`` runs
+    the compiled step (`compiled_rollout`), anything else `integrate` without gradient.
+    """
+    integrator = Integrator.of(method)
+    if integrator.compiled:
+        check_shapes(x0, inputs)
+        return compiled_rollout(model, x0, inputs, dt, integrator.method)
+    with torch.no_grad():
+        return integrate(model, x0, inputs, dt, integrator.method)

@@ -2,9 +2,9 @@
 
 `ShipDynamics` is the right-hand side f(t, x) of the 3-DOF maneuvering equations for any
 force model (MMG, NN-only, hybrid) with zero-order-hold inputs; `integrate` runs many
-trajectories at once, with the rule and engine an `Integrator` names: torchdiffeq's public
-`odeint` (Euler, the 3/8 rule; plain backprop, no adjoint), the fused step loop of
-`sysid.stepper` (classical RK4, which torchdiffeq does not name), or its compiled form.
+trajectories at once, differentiably, with the rule a `Method` names: torchdiffeq's public
+`odeint` (Euler, the 3/8 rule; plain backprop, no adjoint) or a plain step loop (classical
+RK4, which torchdiffeq's public names lack). Compiled prediction: `sysid.compiled.predict`.
 
 Time inside torchdiffeq is counted in steps (tau = t / dt), so step k's input is
 ``inputs[floor(tau)]`` exactly, also at the perturbed end point of a Runge-Kutta step.
@@ -17,7 +17,7 @@ import torch
 from torch import nn
 from torchdiffeq import odeint
 
-from sysid.integrators import Integrator, IntegratorLike, Method
+from sysid.integrators import Integrator, IntegratorLike, Method, rollout
 from sysid.mmg.model import ForceBreakdown
 
 _ODEINT_NAME = {Method.EULER: "euler", Method.RK4_38: "rk4"}  # torchdiffeq's public names
@@ -101,6 +101,13 @@ class ShipDynamics(nn.Module):
         return self.dt * self.derivative(state, self.inputs[k])[0]
 
 
+def check_shapes(x0: torch.Tensor, inputs: torch.Tensor) -> None:
+    """ValueError unless x0 is (..., 6) and inputs (T, ..., 4) with the same batch shape."""
+    if x0.shape[-1:] != (6,) or inputs.shape[-1:] != (4,) or inputs.shape[1:-1] != x0.shape[:-1]:
+        raise ValueError(f"inputs {tuple(inputs.shape)} do not match x0 {tuple(x0.shape)}: "
+                         "expected x0 (*batch, 6) and inputs (T, *batch, 4)")
+
+
 def integrate(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
               method: IntegratorLike = Method.EULER, *, record: list | None = None) -> torch.Tensor:
     """Predict trajectories from x0 with recorded inputs held over each step.
@@ -114,7 +121,7 @@ def integrate(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt
     dt : grid step [s].
     method : an `Integrator`, or a `Method` or its name: "euler" (the paper's), "rk4"
         (classical, the lab simulator's) or "rk4_3/8" (torchdiffeq's own rk4).
-        ``Integrator(method, compiled=True)`` runs the compiled step loop (no gradient).
+        (A compiled `Integrator` is for `sysid.compiled.predict`, which has no gradient.)
     record : a list to which each right-hand-side call appends its `ForceBreakdown`; with
         "euler" that is one entry per step, at the states the step started from
         (`integrate_with_forces` returns them stacked instead).
@@ -124,16 +131,12 @@ def integrate(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt
     (T, ..., 6) states at t_0 .. t_{T-1}; row 0 is x0.
     """
     integrator = Integrator.of(method)
-    if inputs.shape[1:-1] != x0.shape[:-1]:
-        raise ValueError(f"inputs {tuple(inputs.shape)} do not match x0 {tuple(x0.shape)}: expected (T, *batch, 4)")
+    check_shapes(x0, inputs)
     if integrator.compiled:
-        if record is not None:
-            raise ValueError("a compiled integrator records no forces: use Integrator(method) for record=")
-        from sysid.compiled import compiled_rollout
-        return compiled_rollout(force_model, x0, inputs, dt, integrator.method)
+        raise ValueError("integrate is the differentiable path: predict with a compiled "
+                         "integrator through sysid.compiled.predict")
     rhs = ShipDynamics(force_model, inputs, dt, record)
-    if integrator.method not in _ODEINT_NAME:  # classical RK4: the eager step loop
-        from sysid.stepper import rollout
+    if integrator.method not in _ODEINT_NAME:  # classical RK4: a plain step loop
         return rollout(lambda x, u: rhs.derivative(x, u)[0], x0, inputs, dt, integrator.method)
     tau = torch.arange(inputs.shape[0], dtype=x0.dtype, device=x0.device)
     options = {"perturb": True} if integrator.method is not Method.EULER else None

@@ -16,7 +16,7 @@ import torch
 from torch import nn
 
 from sysid.data import Run, protocol_windows, stack_windows
-from sysid.dynamics import integrate
+from sysid.compiled import predict
 from sysid.integrators import IntegratorLike
 from sysid.state import VELOCITY_INDEX
 
@@ -73,8 +73,7 @@ def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
     if chunks:
         observed = torch.cat([c[0] for c in chunks], 1)
         inputs = torch.cat([c[1] for c in chunks], 1)
-        with torch.no_grad():
-            predicted = integrate(model, observed[0], inputs, dt, method)
+        predicted = predict(model, observed[0], inputs, dt, method)
     out, col = [], 0
     for run, H, starts in meta:
         W = len(starts)

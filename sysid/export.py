@@ -32,9 +32,9 @@ from torch import nn
 
 from sysid.compiled import (cached_package, export_program, load_package, package_metadata,
                             step_label, step_metadata)
-from sysid.integrators import Method
+from sysid.integrators import Method, run_steps
 from sysid.knn_index import with_indexed_gate
-from sysid.stepper import Step, run_steps
+from sysid.stepper import Step
 
 METADATA_FILE = "sysid.json"  # the metadata inside a portable export (extra file)
 

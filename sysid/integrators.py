@@ -3,8 +3,8 @@
 `Method` names the rule: explicit Euler (the paper's), classical RK4 (1/6, 1/3, 1/3, 1/6,
 the lab simulator's) or torchdiffeq's own "rk4" (the 3/8 rule). `Integrator` adds how the
 steps are run: through torchdiffeq's public `odeint` (differentiable; training), or the
-same rule as a fused step loop that can be `torch.compile`d (`compiled=True`; inference,
-see `sysid.stepper`). Classical RK4 has no public name in torchdiffeq, so it is written
+same rule as one compiled function per step (`compiled=True`; inference, see
+`sysid.compiled.predict`). Classical RK4 has no public name in torchdiffeq, so it is written
 here (`rk4_step`) instead of being registered in torchdiffeq's solver table.
 
 Every step holds the inputs over the step (zero-order hold): a step is a function of the
@@ -45,9 +45,10 @@ class Integrator:
     """How `sysid.dynamics.integrate` steps the equations of motion.
 
     method : the step rule.
-    compiled : run the steps as one fused, `torch.compile`d step function called in a
-        loop (`sysid.stepper`): inference only, no gradient, no force record; falls back
-        to the eager step loop (same numbers) where compilation is unavailable.
+    compiled : run each step as one compiled function (`sysid.compiled.predict`):
+        inference only, no gradient, no force record; falls back to the eager step (same
+        numbers) where compilation is unavailable. `sysid.dynamics.integrate`, the
+        differentiable path, refuses it.
     """
 
     method: Method = Method.EULER
@@ -92,3 +93,27 @@ def rk4_38_step(f: Derivative, x: torch.Tensor, dt: float) -> torch.Tensor:
 
 STEP_RULES: dict[Method, Callable[[Derivative, torch.Tensor, float], torch.Tensor]] = {
     Method.EULER: euler_step, Method.RK4: rk4_step, Method.RK4_38: rk4_38_step}
+
+
+def rollout(rhs: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], x0: torch.Tensor,
+            inputs: torch.Tensor, dt: float, method: "Method | str") -> torch.Tensor:
+    """States (T, ..., 6) from x0 (..., 6) and inputs (T, ..., 4) by a plain step loop.
+
+    `rhs(state, inputs) -> dx/dt`; step k holds inputs[k]; row 0 is x0.
+    """
+    rule = STEP_RULES[Method.parse(method)]
+    states = [x0]
+    for k in range(inputs.shape[0] - 1):
+        u = inputs[k]
+        states.append(rule(lambda x: rhs(x, u), states[-1], dt))
+    return torch.stack(states)
+
+
+def run_steps(step: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], x0: torch.Tensor,
+              inputs: torch.Tensor) -> torch.Tensor:
+    """States (T, B, 6) from a whole-step function `step(x (B, 6), u (B, 4)) -> x_next`,
+    x0 (B, 6) and inputs (T, B, 4); row 0 is x0."""
+    states = [x0]
+    for k in range(inputs.shape[0] - 1):
+        states.append(step(states[-1], inputs[k]))
+    return torch.stack(states)

@@ -13,7 +13,8 @@ from tqdm import tqdm
 
 from sysid.cli import app
 from sysid.data import expand_paths, read_run
-from sysid.dynamics import integrate, state_derivative
+from sysid.compiled import predict
+from sysid.dynamics import state_derivative
 from sysid.errors import DataError
 from sysid.evaluate import metrics_table
 from sysid.files import write_csv
@@ -125,7 +126,7 @@ def simulate(
     x0 = torch.as_tensor(run.states[i0], dtype=torch.float64)
     inputs = torch.as_tensor(run.inputs[sl], dtype=torch.float64)
     with torch.no_grad():
-        pred = integrate(model, x0, inputs, run.dt, Integrator(integrator, compiled))
+        pred = predict(model, x0, inputs, run.dt, Integrator(integrator, compiled))
         forces = model(pred, inputs)
     out = pd.DataFrame({"t": run.t[sl], "t_rel": run.t[sl] - run.t[i0]})
     for j, name in enumerate(["x", "u", "y", "v", "psi", "r"]):
