@@ -115,7 +115,7 @@ def models(bank: int, runs: list[str]):
     from sysid.models import CorrectedModel
     from sysid.ood import KNNGate
     if runs:
-        from sysid.runs import load_model
+        from sysid.rundir import load_model
         return [(f"run {r}", load_model(r)[1]) for r in runs]
     out = [("MMG", MMG(load_ship("esso_osaka")))]
     states, inputs, source = training_samples(bank)

@@ -88,7 +88,7 @@ def main() -> int:
                     seg = pd.read_csv(p)
                     seg.columns = [c.split(" [")[0] for c in seg.columns]
                     segs.append(seg)
-            samples += res["report"]["rows"]
+            samples += res["report"].rows
             # the public file's own GNSS freezes (same time base as the truth) are dropouts too
             row = {"file": name, **synth.score(segs, truth)}
             glitches = suspect[name]

@@ -20,6 +20,7 @@ import numpy as np
 import pandas as pd
 from scipy.integrate import cumulative_trapezoid
 
+from preprocessing.quality import QualityReport
 from preprocessing import differencing, geodesy, gnss, gyro, resample, schema, smoothing, wind
 from preprocessing.frames import earth_to_body, wrap_pi
 from preprocessing.schema import RawLogError
@@ -81,10 +82,11 @@ class PreprocessSettings:
 
 @dataclass
 class Result:
-    """segments : processed DataFrames (bare processed-schema names); report : quality dict."""
+    """segments : processed DataFrames (bare processed-schema names); report : what was
+    found and decided."""
 
     segments: list[pd.DataFrame]
-    report: dict = field(default_factory=dict)
+    report: QualityReport
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -233,7 +235,7 @@ class Pipeline:
         report["fog_bias_rad_s"] = {"mean": float(b.mean()), "min": float(b.min()), "max": float(b.max())}
         report["gaps_interpolated"] = sum(1 for x in report["gaps"] if x["action"] == "interpolated")
         report["gaps_split"] = sum(1 for x in report["gaps"] if x["action"] == "split")
-        return Result(segments, report)
+        return Result(segments, QualityReport.from_dict(report))
 
     # -- steps 2 and 3 --------------------------------------------------------------------
     def _to_local(self, g: dict, report: dict) -> None:

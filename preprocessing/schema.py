@@ -42,6 +42,17 @@ PROCESSED = {
     "wind_velo_true": "m/s", "wind_dir_true": "rad",
 }
 
+# processed column -> the channel name of sysid's state and inputs (`sysid.state`)
+PROCESSED_CHANNEL = {
+    "t": "t", "x_position_mid": "x", "u_velo": "u", "y_position_mid": "y", "vm_velo": "v",
+    "psi_hat": "psi", "r_angvelo": "r", "n_prop": "n_prop", "delta_rudder": "delta_rudder",
+    "wind_velo_relative_mid": "wind_velo_relative", "wind_dir_relative_mid": "wind_dir_relative",
+    "wind_velo_true": "wind_velo_true", "wind_dir_true": "wind_dir_true",
+}
+# plausibility limits of a processed run (channel names, SI); beyond means wrong units
+PROCESSED_PLAUSIBLE_ABS = {"u": 20.0, "v": 20.0, "r": 3.0, "delta_rudder": 1.6, "wind_dir_true": 7.0,
+                           "wind_dir_relative": 7.0, "n_prop": 200.0, "wind_velo_true": 60.0}
+
 # headers in degrees accepted for a radian column, converted (a logged repair)
 _DEGREE_UNITS = {"rad": ("deg", np.pi / 180.0), "rad/s": ("deg/s", np.pi / 180.0)}
 

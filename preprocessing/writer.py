@@ -5,6 +5,8 @@ report is ``STEM.report.json``. Nothing is left behind when a write fails.
 """
 from __future__ import annotations
 
+import dataclasses
+
 import json
 import os
 import tempfile
@@ -13,6 +15,7 @@ from pathlib import Path
 import pandas as pd
 
 from preprocessing import schema
+from preprocessing.quality import QualityReport
 
 
 def _atomic(path: Path, write) -> None:
@@ -34,7 +37,7 @@ def segment_paths(outdir: Path, stem: str, count: int) -> list[Path]:
     return [outdir / f"{stem}_seg{i + 1}.csv" for i in range(count)]
 
 
-def write_run(outdir, stem: str, segments: list[pd.DataFrame], report: dict) -> list[Path]:
+def write_run(outdir, stem: str, segments: list[pd.DataFrame], report: QualityReport) -> list[Path]:
     """Write the segments (processed-schema header ``name [unit]``) and the JSON report."""
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
@@ -47,9 +50,9 @@ def write_run(outdir, stem: str, segments: list[pd.DataFrame], report: dict) -> 
             frame.columns = names
             _atomic(path, lambda fh, f=frame: f.to_csv(fh, index=False))
             done.append(path)
-        report = {**report, "outputs": [p.name for p in paths]}
+        report = dataclasses.replace(report, outputs=[p.name for p in paths])
         rpath = outdir / f"{stem}.report.json"
-        _atomic(rpath, lambda fh: json.dump(report, fh, indent=1, default=float))
+        _atomic(rpath, lambda fh: fh.write(report.to_json()))
         done.append(rpath)
     except BaseException:
         for p in done:

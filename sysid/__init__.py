@@ -2,7 +2,14 @@
 
 One obvious entry point per task: `load_ship` for a ship definition, `MMG` for the force
 model, `integrate` for (differentiable) trajectories, `predict` for fast predictions
-(``predict(model, x0, inputs, dt, Integrator("rk4", compiled=True))``).
+(``predict(model, x0, inputs, dt, Integrator("rk4", compiled=True))``);
+`sysid.lifecycle.run_experiment` trains, evaluates and writes one experiment (``sysid
+train``), `sysid.reproduce.reproduce` the paper's protocol.
+
+Layers, each importing only those before it: `state`, `ship`, `mmg`, `integrators` →
+`dynamics`, `correction`, `ood` → `stepper`, `knn_index` → `compiled` → `export`;
+`experiment`, `models` → `data` → `train` → `evaluate` → `rundir` → `lifecycle` → `paper`,
+`reproduce` → `report` → `cli`.
 """
 from sysid.dynamics import ShipDynamics, body_acceleration, integrate, state_derivative
 from sysid.integrators import Integrator, Method

@@ -217,13 +217,32 @@ def _memoized(model: nn.Module, key: tuple, build: Callable[[], Compiled | None]
 
 def compiled_step(model: nn.Module, method: Method | str, dt: float, batch: int,
                   dtype: torch.dtype = torch.float64, device: str | torch.device = "cpu") -> Compiled | None:
-    """Compiled ``step(x (batch, 6), u (batch, 4)) -> x_next``, or None (use eager)."""
+    """Compiled ``step(x (batch, 6), u (batch, 4)) -> x_next``, or None (use eager).
+
+    Batches above one are compiled channels first (vectorized over the batch); the
+    callable returned takes and gives (batch, ·) all the same.
+    """
     method = Method.parse(method)
-    examples = (torch.zeros(batch, 6, dtype=dtype, device=device),
-                torch.zeros(batch, 4, dtype=dtype, device=device))
+    channels_first = batch > 1
+    examples = _examples(batch, dtype, device, channels_first)
+
+    def build():
+        step = Step(with_indexed_gate(model, batch), method, dt, channels_first)
+        return compile_cached(step, examples, step_label(method), step_metadata(model, method, dt, batch, dtype))
     return _memoized(model, ("step", method, float(dt), batch, dtype, str(device)),
-                     lambda: compile_cached(Step(with_indexed_gate(model, batch), method, dt), examples,
-                                            step_label(method), step_metadata(model, method, dt, batch, dtype)))
+                     lambda: _rows_first(build(), channels_first))
+
+
+def _examples(batch: int, dtype: torch.dtype, device, channels_first: bool) -> tuple[torch.Tensor, torch.Tensor]:
+    shapes = ((6, batch), (4, batch)) if channels_first else ((batch, 6), (batch, 4))
+    return tuple(torch.zeros(*s, dtype=dtype, device=device) for s in shapes)
+
+
+def _rows_first(fn: Compiled | None, channels_first: bool) -> Compiled | None:
+    """A channels-first compiled function called with and returning (batch, ·) tensors."""
+    if fn is None or not channels_first:
+        return fn
+    return lambda x, u: fn(x.T, u.T).T
 
 
 def step_label(method: Method) -> str:
@@ -249,10 +268,11 @@ def step_metadata(model: nn.Module, method: Method | str, dt: float, batch: int,
 def compiled_derivative(model: nn.Module, batch: int, dtype: torch.dtype = torch.float64,
                         device: str | torch.device = "cpu") -> Compiled | None:
     """Compiled ``f(x (batch, 6), u (batch, 4)) -> dx/dt``, or None (use eager)."""
-    examples = (torch.zeros(batch, 6, dtype=dtype, device=device),
-                torch.zeros(batch, 4, dtype=dtype, device=device))
+    channels_first = batch > 1
+    examples = _examples(batch, dtype, device, channels_first)
     return _memoized(model, ("rhs", batch, dtype, str(device)),
-                     lambda: compile_cached(Derivative(model), examples, "rhs"))
+                     lambda: _rows_first(compile_cached(Derivative(model, channels_first), examples, "rhs"),
+                                         channels_first))
 
 
 def compiled_rollout(model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,

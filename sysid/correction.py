@@ -30,7 +30,7 @@ class ForceCorrection(nn.Module):
 
     Each member is the paper's network (9-64-64-3, tanh); K = 1 is the paper's model. The
     members differ by their random initialisation and are trained side by side, each on its
-    own loss (see `member_axis`); the correction is their mean, which averages out the
+    own loss (``per_member=True``); the correction is their mean, which averages out the
     variance of a single small network trained on little data.
 
     Parameters
@@ -38,11 +38,6 @@ class ForceCorrection(nn.Module):
     hidden : hidden layer widths (paper: 64, 64).
     dtype : parameter dtype.
     members : K, the number of networks averaged.
-
-    Attributes
-    ----------
-    member_axis : False (default): inputs (..., 9) give the mean force (..., 3). True
-        (training): inputs (K, ..., 9) give each member's force (K, ..., 3).
     """
 
     def __init__(self, hidden: Sequence[int] = (64, 64), dtype: torch.dtype = torch.float32,
@@ -51,7 +46,6 @@ class ForceCorrection(nn.Module):
         if members < 1:
             raise ValueError(f"members must be >= 1, got {members}")
         self.members = int(members)
-        self.member_axis = False
         widths = [len(INPUT_NAMES), *hidden, len(OUTPUT_NAMES)]
         self.weights = nn.ParameterList()
         self.biases = nn.ParameterList()
@@ -78,21 +72,23 @@ class ForceCorrection(nn.Module):
         b = self.biases[i].reshape(self.members, *([1] * (z.dim() - 2)), -1)
         return torch.einsum("k...i,kio->k...o", z, self.weights[i]) + b
 
-    def evaluate(self, s: torch.Tensor, standardized: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
+    def evaluate(self, s: torch.Tensor, standardized: bool = False,
+                 per_member: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
         """(F_NN, features) for inputs s.
 
         F_NN [N, N, N m] (or the standardised output y of Eq. 10 when `standardized`);
         features are the activations before the output layer (64), the kNN gate's space
-        (the first member's when several are averaged).
+        (the first member's when several are averaged). With `per_member` (training), s is
+        (K, ..., 9) and each member's force (K, ..., 3) and features come back.
         """
         z = (s.to(self.input_mean.dtype) - self.input_mean) / self.input_std
-        if not self.member_axis:
+        if not per_member:
             z = z.expand(self.members, *z.shape)
         for i in range(len(self.weights) - 1):
             z = torch.tanh(self._layer(z, i))
         y = self._layer(z, len(self.weights) - 1)
         force = y if standardized else y * self.output_std + self.output_mean
-        if self.member_axis:
+        if per_member:
             return force, z
         return force.mean(0), z[0]
 
@@ -101,5 +97,5 @@ class ForceCorrection(nn.Module):
         return self.evaluate(s)[1]
 
     def forward(self, s: torch.Tensor) -> torch.Tensor:
-        """F_NN (..., 3) [N, N, N m] (per member, (K, ..., 3), with `member_axis`)."""
+        """F_NN (..., 3) [N, N, N m], the members' mean."""
         return self.evaluate(s)[0]

@@ -16,30 +16,13 @@ import numpy as np
 import pandas as pd
 import torch
 
+from preprocessing.schema import PROCESSED, PROCESSED_CHANNEL, PROCESSED_PLAUSIBLE_ABS
 from sysid.errors import DataError
+from sysid.state import INPUTS, STATE
 
-# processed-schema column -> our channel name
-COLUMNS = {
-    "t [s]": "t",
-    "x_position_mid [m]": "x",
-    "u_velo [m/s]": "u",
-    "y_position_mid [m]": "y",
-    "vm_velo [m/s]": "v",
-    "psi_hat [rad]": "psi",
-    "r_angvelo [rad/s]": "r",
-    "n_prop [rps]": "n_prop",
-    "delta_rudder [rad]": "delta_rudder",
-    "wind_velo_relative_mid [m/s]": "wind_velo_relative",
-    "wind_dir_relative_mid [rad]": "wind_dir_relative",
-    "wind_velo_true [m/s]": "wind_velo_true",
-    "wind_dir_true [rad]": "wind_dir_true",
-}
-STATE_COLUMNS = ["x", "u", "y", "v", "psi", "r"]
-INPUT_COLUMNS = ["n_prop", "delta_rudder", "wind_velo_true", "wind_dir_true"]
-
-# plausibility limits for a ship model's log; a value outside means wrong units
-_LIMITS = {"u": 20.0, "v": 20.0, "r": 3.0, "delta_rudder": 1.6, "wind_dir_true": 7.0,
-           "wind_dir_relative": 7.0, "n_prop": 200.0, "wind_velo_true": 60.0}
+# processed-schema header ("u_velo [m/s]") -> our channel name ("u"); one source: preprocessing.schema
+COLUMNS = {f"{name} [{unit}]": PROCESSED_CHANNEL[name] for name, unit in PROCESSED.items()}
+_LIMITS = PROCESSED_PLAUSIBLE_ABS
 
 
 @dataclass
@@ -115,8 +98,8 @@ def read_run(path: str | os.PathLike, rate: float = 1.0) -> Run:
     sel = values[::stride]
     return Run(
         name=path.stem, path=path, t=sel[:, 0],
-        states=sel[:, [frame.columns.get_loc(c) for c in STATE_COLUMNS]],
-        inputs=sel[:, [frame.columns.get_loc(c) for c in INPUT_COLUMNS]],
+        states=sel[:, [frame.columns.get_loc(c) for c in list(STATE)]],
+        inputs=sel[:, [frame.columns.get_loc(c) for c in list(INPUTS)]],
         relative_wind=sel[:, [frame.columns.get_loc("wind_velo_relative"),
                               frame.columns.get_loc("wind_dir_relative")]],
         dt=period * stride, issues=issues, suspect=suspect)

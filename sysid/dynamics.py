@@ -18,9 +18,10 @@ from torch import nn
 from torchdiffeq import odeint
 
 from sysid.integrators import Integrator, IntegratorLike, Method, rollout
-from sysid.mmg.model import ForceBreakdown
+from sysid.mmg.breakdown import ForceBreakdown
 
 _ODEINT_NAME = {Method.EULER: "euler", Method.RK4_38: "rk4"}  # torchdiffeq's public names
+INTEGRATORS = ("euler", "rk4")  # what configs and the CLI offer: the paper's and the lab's
 
 
 def body_acceleration(state: torch.Tensor, force: torch.Tensor, c) -> torch.Tensor:

@@ -20,3 +20,7 @@ class ConfigError(SysidError):
 
 class CheckpointError(SysidError):
     """A run directory or checkpoint is missing or corrupt."""
+
+
+class TrainingError(SysidError):
+    """Training cannot produce a model: a non-finite loss (too high a learning rate, bad data)."""

@@ -1,4 +1,5 @@
-"""Windowed predictions and the protocol's RMSE table (BENCHMARK_PROTOCOL.md).
+"""All evaluation: windowed predictions, the protocol's RMSE table (BENCHMARK_PROTOCOL.md)
+and the per-step traces behind the report's figures.
 
 Every window of every file is integrated in one batched call: each window starts from the
 recorded state at its first sample, runs H-1 Euler steps of dt = 1 s with the recorded
@@ -7,7 +8,9 @@ pooled over the windows of a file.
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -16,11 +19,23 @@ import torch
 from torch import nn
 
 from sysid.data import Run, protocol_windows, stack_windows
+from sysid.datasets import TEST_FILES
 from sysid.compiled import predict
 from sysid.integrators import IntegratorLike
-from sysid.state import VELOCITY_INDEX
+from sysid.state import FORCE, FORCE_COMPONENTS, INPUTS, STATE, VELOCITY_INDEX
 
-METRIC_COLUMNS = ["file", "horizon_s", "n_windows", "rmse_u", "rmse_v", "rmse_r"]
+# one row per file and horizon; RMSE of u, v_m [m/s] and r [rad/s]
+METRICS_COLUMNS = ["scenario", "file", "horizon_s", "n_windows", "rmse_u", "rmse_v", "rmse_r"]
+# one row per window step of a trace (see `trace_frame`)
+TRACE_COLUMNS = (
+    ["window", "t", "t_rel"]
+    + [f"obs_{c}" for c in STATE]
+    + [f"pred_{c}" for c in STATE]
+    + list(INPUTS) + ["wind_velo_relative", "wind_dir_relative"]  # relative wind of the predicted state
+    + [f"{a}{key}" for key in FORCE_COMPONENTS.values() for a in FORCE]  # N, N m
+    + ["knn_distance", "gate_on"]  # NaN / 1 where the model has no gate
+)
+SCENARIO_OF = {Path(v).stem: k for k, v in TEST_FILES.items()}
 
 
 @dataclass
@@ -40,9 +55,11 @@ class WindowPrediction:
     inputs: torch.Tensor
 
     def metrics_row(self, horizon_s: float) -> dict:
-        """``file, horizon_s, n_windows, rmse_u, rmse_v, rmse_r`` (NaN RMSE without windows)."""
+        """A `METRICS_COLUMNS` row (NaN RMSE without windows); the scenario is the
+        protocol's name of a test file, else empty."""
         rmse = self.rmse() if len(self.starts) else np.full(3, np.nan)
-        return {"file": self.run.name, "horizon_s": horizon_s, "n_windows": len(self.starts),
+        return {"scenario": SCENARIO_OF.get(self.run.name, ""), "file": self.run.name,
+                "horizon_s": horizon_s, "n_windows": len(self.starts),
                 "rmse_u": rmse[0], "rmse_v": rmse[1], "rmse_r": rmse[2]}
 
     def rmse(self) -> np.ndarray:
@@ -88,10 +105,57 @@ def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
     return out
 
 
-def metrics_table(model: nn.Module, runs: Sequence[Run], horizons: Sequence[float],
-                  method: IntegratorLike = "euler", **kwargs) -> pd.DataFrame:
-    """Rows ``file, horizon_s, n_windows, rmse_u, rmse_v, rmse_r`` per file and horizon."""
-    rows = []
+@dataclass
+class Evaluation:
+    """Metrics (`METRICS_COLUMNS`), traces (file name -> `TRACE_COLUMNS` frame) and the
+    share of steps on which the kNN gate switched the FNN off, per trace."""
+
+    metrics: pd.DataFrame
+    traces: dict[str, pd.DataFrame]
+    gate_off_share: dict[str, float]
+
+
+def trace_name(file_stem: str, horizon_s: float) -> str:
+    """File name of a trace: ``{file_stem}_h{H}.csv``."""
+    safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", file_stem)
+    return f"{safe}_h{int(round(horizon_s))}.csv"
+
+
+def trace_frame(model: nn.Module, pred: WindowPrediction) -> pd.DataFrame:
+    """Per-step table of one file's windows: record, prediction, inputs, forces, gate."""
+    H, W = pred.predicted.shape[:2]
+    with torch.no_grad():
+        f = model(pred.predicted, pred.inputs)
+    cols: dict[str, np.ndarray] = {
+        "window": np.repeat(np.arange(W)[None, :], H, 0), "t": pred.t,
+        "t_rel": pred.t - pred.t[:1]}
+    for j, c in enumerate(STATE):
+        cols[f"obs_{c}"] = pred.observed[..., j].numpy()
+        cols[f"pred_{c}"] = pred.predicted[..., j].numpy()
+    for j, c in enumerate(INPUTS):
+        cols[c] = pred.inputs[..., j].numpy()
+    cols["wind_velo_relative"] = f.relative_wind[..., 0].numpy()
+    cols["wind_dir_relative"] = f.relative_wind[..., 1].numpy()
+    for component, key in FORCE_COMPONENTS.items():
+        for j, a in enumerate(FORCE):
+            cols[f"{a}{key}"] = getattr(f, component)[..., j].numpy()
+    cols["knn_distance"] = f.ood_distance.numpy() if f.ood_distance is not None else np.full((H, W), np.nan)
+    cols["gate_on"] = f.gate_on.numpy().astype(int) if f.gate_on is not None else np.ones((H, W), dtype=int)
+    # rows ordered window by window, then time
+    frame = pd.DataFrame({k: np.asarray(v).T.reshape(-1) for k, v in cols.items()})
+    return frame[TRACE_COLUMNS]
+
+
+def evaluate_model(model: nn.Module, runs: Sequence[Run], horizons: Sequence[float],
+                   method: IntegratorLike = "euler", traces: bool = True) -> Evaluation:
+    """The protocol's windowed RMSE per file and horizon, with per-step traces."""
+    rows, frames, shares = [], {}, {}
     for horizon in horizons:
-        rows += [pred.metrics_row(horizon) for pred in predict_windows(model, runs, horizon, method, **kwargs)]
-    return pd.DataFrame(rows, columns=METRIC_COLUMNS)
+        for pred in predict_windows(model, runs, horizon, method):
+            rows.append(pred.metrics_row(horizon))
+            if traces and len(pred.starts):
+                frame = trace_frame(model, pred)
+                name = trace_name(pred.run.name, horizon)
+                frames[name] = frame
+                shares[name] = float(1.0 - frame["gate_on"].mean())
+    return Evaluation(pd.DataFrame(rows, columns=METRICS_COLUMNS), frames, shares)

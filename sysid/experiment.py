@@ -40,9 +40,13 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+from sysid.dynamics import INTEGRATORS
 from sysid.errors import ConfigError
-from sysid.models import GATE_SPACES, KINDS
 from sysid.ship import parameter_name
+
+
+KINDS = ("mmg", "nn", "hybrid")         # MMG-only, NN-only, hybrid MMG + FNN
+GATE_SPACES = ("features", "inputs")    # where the kNN gate measures distances
 
 
 @dataclass(frozen=True)
@@ -85,7 +89,8 @@ class TrainingOptions:
     lambda_F: float = 1e-3
     lambda_L2: float = 1e-6
     patience: int = 40
-    max_minutes: float = 2.5
+    max_minutes: float = 0.0       # 0: off; > 0: a safety limit whose hit fails the run
+    threads: int = 1               # torch intra-op threads; 0: one per core
     warm_start_epochs: int = 150   # one-step regression on the implied residual force
     dtype: str = "float32"
     device: str = "auto"           # auto (CUDA when present) | cpu | cuda | cuda:N
@@ -125,6 +130,11 @@ class Experiment:
     identify: IdentifyOptions = IdentifyOptions()
     evaluation: EvaluationOptions = EvaluationOptions()
     source: str = ""
+
+    @property
+    def needs_training(self) -> bool:
+        """False for an MMG-only model with nothing to identify (it is used as defined)."""
+        return not (self.experiment.model == "mmg" and not self.identify.parameters)
 
     def replace(self, **sections: dict) -> "Experiment":
         """A copy with some options changed: ``exp.replace(training={"epochs": 2})``."""
@@ -213,7 +223,8 @@ def _validate(exp: Experiment, src: str) -> None:
         (t.learning_rate > 0, "[training] learning_rate must be > 0"),
         (min(t.lambda_v, t.lambda_F, t.lambda_L2) >= 0, "[training] lambdas must be >= 0"),
         (t.patience >= 1, "[training] patience must be >= 1"),
-        (t.max_minutes > 0, "[training] max_minutes must be > 0"),
+        (t.max_minutes >= 0, "[training] max_minutes must be >= 0 (0: no wall-clock limit)"),
+        (t.threads >= 0, "[training] threads must be >= 0 (0: one per core)"),
         (t.dtype in ("float32", "float64"), "[training] dtype must be float32 or float64"),
         (t.device == "auto" or t.device == "cpu" or t.device.startswith("cuda"),
          "[training] device must be auto, cpu or cuda[:N]"),
@@ -222,7 +233,8 @@ def _validate(exp: Experiment, src: str) -> None:
         (g.space in GATE_SPACES, f"[gate] space must be one of {', '.join(GATE_SPACES)}"),
         (i.stage in ("before", "joint"), "[identify] stage must be before or joint"),
         (all(h > 0 for h in exp.evaluation.horizons), "[evaluation] horizons must be > 0"),
-        (exp.evaluation.integrator in ("euler", "rk4"), "[evaluation] integrator must be euler or rk4"),
+        (exp.evaluation.integrator in INTEGRATORS,
+         f"[evaluation] integrator must be one of {', '.join(INTEGRATORS)}"),
         (all(w >= 1 for w in exp.network.hidden) and exp.network.hidden, "[network] hidden must list widths >= 1"),
         (exp.data.rate > 0, "[data] rate must be > 0"),
         (exp.network.members >= 1, "[network] members must be >= 1"),

@@ -1,21 +1,33 @@
-"""MMG-only, NN-only and hybrid force models behind one interface.
+"""Force models behind one interface, and the one factory that builds them from a config.
 
-Each maps (state (..., 6), inputs (..., 4)) to a `ForceBreakdown` and carries
-``coefficients`` (the mass terms of the equations of motion), so integration, training,
-evaluation and plots never ask which one they hold.
+A force model maps (state (..., 6), inputs (..., 4)) to a `ForceBreakdown` [N, N, N m] and
+carries ``coefficients`` (the mass terms of the equations of motion), so integration,
+training, evaluation and plots never ask which one they hold: `MMG` (physics only),
+`CorrectedModel` with ``physics=False`` (NN-only) or ``physics=True`` (hybrid).
 """
 from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
 
 import torch
 from torch import nn
 
 from sysid.correction import ForceCorrection, correction_inputs
-from sysid.mmg.model import MMG, ForceBreakdown
+from sysid.experiment import GATE_SPACES, Experiment, ship_overrides
+from sysid.mmg.coefficients import Coefficients
+from sysid.mmg.breakdown import MMG, ForceBreakdown
 from sysid.mmg.wind import relative_wind
 from sysid.ood import KNNGate
+from sysid.ship import load_ship
 
-KINDS = ("mmg", "nn", "hybrid")
-GATE_SPACES = ("features", "inputs")
+
+@runtime_checkable
+class ForceModel(Protocol):
+    """What integration, training and evaluation need of a model."""
+
+    coefficients: Coefficients
+
+    def __call__(self, state: torch.Tensor, inputs: torch.Tensor) -> ForceBreakdown: ...
 
 
 class CorrectedModel(nn.Module):
@@ -58,7 +70,9 @@ class CorrectedModel(nn.Module):
     def kind(self) -> str:
         return "hybrid" if self.physics else "nn"
 
-    def forward(self, state: torch.Tensor, inputs: torch.Tensor) -> ForceBreakdown:
+    def forward(self, state: torch.Tensor, inputs: torch.Tensor, per_member: bool = False) -> ForceBreakdown:
+        """Forces at state (..., 6) with inputs (..., 4); with `per_member` (training) the
+        leading axis of both is the FNN's K members and F_NN is each member's own."""
         if self.physics:
             forces = self.mmg(state, inputs)
         else:
@@ -67,7 +81,7 @@ class CorrectedModel(nn.Module):
             zero = torch.zeros(state.shape[:-1] + (3,), dtype=state.dtype, device=state.device)
             forces = ForceBreakdown(zero, zero, zero, zero, zero, rel)
         s = correction_inputs(state, inputs, forces.relative_wind)
-        f_nn, z = self.correction_net.evaluate(s)
+        f_nn, z = self.correction_net.evaluate(s, per_member=per_member)
         f_nn = f_nn.to(state.dtype)
         if self.gate is not None and self.gate_enabled and self.gate.bank.shape[0] > 0:
             distance, on = self.gate(self.gate_coordinates(s, z))
@@ -75,3 +89,42 @@ class CorrectedModel(nn.Module):
             forces.ood_distance, forces.gate_on = distance.to(state.dtype), on
         forces.correction = f_nn
         return forces
+
+
+class PerMember(nn.Module):
+    """A `CorrectedModel` whose K FNN members each predict their own copy of the batch:
+    inputs and states (K, ..., ·), forces (K, ..., 3). Used by training only."""
+
+    def __init__(self, model: CorrectedModel):
+        super().__init__()
+        self.model = model
+
+    @property
+    def coefficients(self):
+        return self.model.coefficients
+
+    def forward(self, state: torch.Tensor, inputs: torch.Tensor) -> ForceBreakdown:
+        return self.model(state, inputs, per_member=True)
+
+
+def build_mmg(exp: Experiment, dtype: torch.dtype = torch.float64) -> MMG:
+    """The experiment's MMG: its ship with ``[mmg] overrides``; the ``[identify]``
+    parameters trainable within their bounds."""
+    ship = load_ship(exp.experiment.ship, ship_overrides(exp))
+    identify = list(exp.identify.parameters)
+    bounds = {k: tuple(v) for k, v in exp.identify.bounds.items() if k in identify}
+    return MMG(ship, trainable=identify, bounds=bounds or None, dtype=dtype)
+
+
+def build_model(exp: Experiment, dtype: torch.dtype = torch.float64) -> nn.Module:
+    """An untrained model with the experiment's structure (MMG, NN-only or hybrid)."""
+    mmg = build_mmg(exp, dtype)
+    if exp.experiment.model == "mmg":
+        return mmg
+    net = ForceCorrection(exp.network.hidden, dtype, exp.network.members)
+    return CorrectedModel(mmg, net, None, physics=exp.experiment.model == "hybrid", gate_space=exp.gate.space)
+
+
+def correction_of(model: nn.Module) -> ForceCorrection | None:
+    """The FNN term of a model, or None for MMG-only."""
+    return model.correction_net if isinstance(model, CorrectedModel) else None

@@ -1,4 +1,6 @@
-"""The seed paper's Tables 7 (30 s) and 8 (100 s): RMSE of u, v_m [m/s] and r [rad/s].
+"""The seed paper's Tables 7 (30 s) and 8 (100 s): RMSE of u, v_m [m/s] and r [rad/s], and
+the one long table of our runs beside them (`comparison_table`), with the model labels
+every table and figure uses (`model_label`, `run_label`).
 
 One source: ``configs/paper/tables_7_8.csv`` (the paper's numbers; MMG rows are the same for
 both data sets). Scenario names match in any spelling ("Turning 20°", "turning 20 test").
@@ -14,7 +16,7 @@ import pandas as pd
 from sysid.errors import ConfigError
 
 TABLE = Path(__file__).resolve().parents[1] / "configs" / "paper" / "tables_7_8.csv"
-PAPER_MODELS = {"mmg": "MMG", "nn": "NN", "hybrid": "Hybrid"}
+KIND_LABELS = {"mmg": "MMG", "nn": "NN", "hybrid": "Hybrid"}  # the paper's model names
 
 
 def scenario_key(name: str) -> str:
@@ -41,7 +43,83 @@ def _cells() -> dict:
 def paper_rmse(scenario: str, kind: str, dataset: str, horizon_s: float) -> tuple[float, float, float] | None:
     """The paper's (u, v_m, r) RMSE for a scenario, model kind ("mmg", "nn", "hybrid"),
     data set and horizon [s]; None when the paper has no such cell (held-out files, ...)."""
-    model = PAPER_MODELS.get(kind)
+    model = KIND_LABELS.get(kind)
     if kind == "mmg" and dataset not in ("D1", "D2"):
         dataset = "D1"  # the paper's MMG rows are the same for both data sets
     return _cells().get((scenario_key(scenario), model, dataset, int(round(horizon_s))))
+
+
+# -- our runs beside the paper's ----------------------------------------------------------
+
+# run variant (the run's name without its data set) -> label; the paper's three models first
+MODEL_LABELS = {
+    "mmg_paper": "MMG",
+    "mmg_lab": "MMG (lab X'vr)",
+    "mmg_identified": "MMG (identified)",
+    "nn": "NN",
+    "hybrid": "Hybrid",
+    "hybrid_identified": "Hybrid (identified MMG)",
+}
+PAPER_VARIANTS = {"mmg_paper": "mmg", "nn": "nn", "hybrid": "hybrid"}  # variants the paper reports
+SCENARIO_ORDER = ["Berthing", "Turning 20", "Turning 35", "Zigzag 20/20", "Zigzag 30/30", "Random"]
+COMPARISON_COLUMNS = ["scenario", "model", "dataset", "horizon_s",
+                      "rmse_u", "rmse_v", "rmse_r", "paper_u", "paper_v", "paper_r"]
+
+
+def run_variant(name: str, dataset: str = "-") -> str:
+    """A run's name without its data-set suffix: hybrid_D2 -> hybrid, mmg_lab -> mmg_lab."""
+    suffix = f"_{dataset}"
+    return name[: -len(suffix)] if dataset not in ("", "-") and name.endswith(suffix) else name
+
+
+def model_label(name: str, kind: str, dataset: str = "-") -> str:
+    """The model's label in tables (data set not included): "MMG", "Hybrid", "MMG (lab X'vr)"."""
+    variant = run_variant(name, dataset)
+    if variant in MODEL_LABELS:
+        return MODEL_LABELS[variant]
+    base = KIND_LABELS.get(kind, kind)
+    if variant in ("", kind):
+        return base
+    rest = variant[len(kind) + 1:] if variant.startswith(f"{kind}_") else variant
+    return f"{base} ({rest.replace('_', ' ')})"
+
+
+def run_label(name: str, kind: str, dataset: str = "-") -> str:
+    """A run's label in legends: the model label and, for trained runs, its data set."""
+    label = model_label(name, kind, dataset)
+    return f"{label} {dataset}" if dataset not in ("", "-", None) else label
+
+
+def _order(values, first: list[str], key=lambda v: v) -> list:
+    rank = {key(v): i for i, v in enumerate(first)}
+    return sorted(values, key=lambda v: rank.get(key(v), len(rank)))
+
+
+def comparison_table(runs, datasets: tuple[str, ...] = ("D1", "D2")) -> pd.DataFrame:
+    """Ours beside the paper's: one row per scenario, model, data set and horizon.
+
+    `runs` yields (name, kind, dataset, metrics) with metrics in `sysid.evaluate`'s
+    METRICS_COLUMNS. A run without training data (dataset "-") stands in every data set's
+    column; paper values are given for the paper's own three models only.
+    """
+    rows = []
+    for name, kind, dataset, metrics in runs:
+        variant = run_variant(name, dataset)
+        label = model_label(name, kind, dataset)
+        for m in metrics.itertuples(index=False):
+            for ds in (datasets if dataset in ("", "-", None) else (dataset,)):
+                ref = paper_rmse(str(m.scenario), kind, ds, m.horizon_s) if variant in PAPER_VARIANTS else None
+                rows.append({"scenario": str(m.scenario), "model": label, "dataset": ds,
+                             "horizon_s": int(round(m.horizon_s)), "rmse_u": m.rmse_u, "rmse_v": m.rmse_v,
+                             "rmse_r": m.rmse_r, **dict(zip(("paper_u", "paper_v", "paper_r"),
+                                                            ref if ref else (float("nan"),) * 3))})
+    table = pd.DataFrame(rows, columns=COMPARISON_COLUMNS)
+    if table.empty:
+        return table
+    scenarios = _order(table.scenario.unique(), SCENARIO_ORDER, scenario_key)
+    models = _order(table.model.unique(), list(MODEL_LABELS.values()))
+    rank_s = {s: i for i, s in enumerate(scenarios)}
+    rank_m = {m: i for i, m in enumerate(models)}
+    table["_o"] = table.scenario.map(rank_s) * 100 + table.model.map(rank_m) * 10 + table.dataset.map(
+        {d: i for i, d in enumerate(sorted(table.dataset.unique()))})
+    return table.sort_values(["horizon_s", "_o"], kind="stable").drop(columns="_o").reset_index(drop=True)

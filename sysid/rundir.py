@@ -1,51 +1,168 @@
-"""Layout of run directories and reproduction directories (the contract between
-`sysid.train`, `sysid.evaluate` and `sysid.report`).
+"""Run directories: their layout, and saving and loading them (the contract between
+`sysid.lifecycle`, `sysid.evaluate` and `sysid.report`).
 
 A **run directory** (``sysid train CONFIG -o runs/NAME``)::
 
     config.toml        resolved experiment config (all defaults filled in)
-    summary.json       {"name", "model": "mmg"|"nn"|"hybrid", "dataset": "D1"|"D2"|..., "ship",
-                        "seed", "created", "train_seconds", "epochs", "best_epoch",
+    summary.json       {"name", "model": "mmg"|"nn"|"hybrid", "status": "complete"|"failed: ...",
+                        "dataset": "D1"|"D2"|..., "ship", "seed", "created", "train_seconds",
+                        "epochs", "best_epoch", "stopped": {stage: "early stop"|"epoch limit"|...},
                         "n_train_windows", "n_val_windows", "versions": {...},
-                        "mmg_overrides": {...}, "identified": {...}, "gate": {...}}
+                        "mmg_overrides": {...}, "identified": {...}, "gate": {...},
+                        "training": {...}}
     model.pt           state dict (torch.save of plain tensors; weights_only=True safe)
     standardization.json  input/output mean and std of the FNN (Eqs. 8, 10)
     knn.pt             {"bank": (N, 64) features, "threshold": (), "k": (), "alpha": ()}
-    history.csv        epoch, train_loss, val_loss, train_velocity, train_penalty, seconds
-    metrics.csv        scenario, file, horizon_s, n_windows, rmse_u, rmse_v, rmse_r
-    traces/            one CSV per (file, horizon): ``{file_stem}_h{H}.csv``, see TRACE_COLUMNS
+    history.csv        stage, epoch, train_loss, train_velocity, train_penalty, val_loss, seconds
+    metrics.csv        `sysid.evaluate.METRICS_COLUMNS`
+    traces/            one CSV per (file, horizon): ``{file_stem}_h{H}.csv``, `TRACE_COLUMNS`
 
-MMG-only runs have no model.pt, knn.pt or history.csv.
+Untrained MMG-only runs have no model.pt, knn.pt or history.csv.
 
 A **reproduction directory** (``sysid reproduce -o OUTDIR``)::
 
-    runs/{model}_{dataset}/     run directories: mmg_paper (X'vr = 0.4535), mmg_lab,
-                                nn_D1, nn_D2, hybrid_D1, hybrid_D2
-    comparison.csv              TABLE_COLUMNS: ours beside the paper's, every cell
-    table7.md, table8.md        the paper's layout (30 s, 100 s), ours / paper / change
-    summary.json                total time, gate shares, wins against the paper
+    runs/{name}/        run directories (`sysid.reproduce.PROTOCOL`)
+    comparison.csv      `sysid.paper.COMPARISON_COLUMNS`: ours beside the paper's, every cell
+    table7.md, table8.md  the paper's layout (30 s, 100 s), ours (paper)
+    summary.json        total time, gate shares, wins against the paper
 """
 from __future__ import annotations
 
-import re
+import json
+import os
+import platform
+import time
+from pathlib import Path
 
-TRACE_COLUMNS = (
-    ["window", "t", "t_rel"]
-    + [f"obs_{c}" for c in ("x", "u", "y", "v", "psi", "r")]
-    + [f"pred_{c}" for c in ("x", "u", "y", "v", "psi", "r")]
-    + ["n_prop", "delta_rudder", "wind_velo_true", "wind_dir_true",
-       "wind_velo_relative", "wind_dir_relative"]  # relative wind seen by the predicted state
-    + [f"{a}{k}" for k in ("H", "P", "R", "A", "NN") for a in ("X", "Y", "N")]  # N, N m
-    + ["knn_distance", "gate_on"]  # NaN / 1 where the model has no gate
-)
+import pandas as pd
+import torch
 
-TABLE_COLUMNS = ["scenario", "model", "dataset", "horizon_s",
-                 "rmse_u", "rmse_v", "rmse_r", "paper_u", "paper_v", "paper_r"]
-
-METRICS_COLUMNS = ["scenario", "file", "horizon_s", "n_windows", "rmse_u", "rmse_v", "rmse_r"]
+from sysid.correction import INPUT_NAMES, OUTPUT_NAMES
+from sysid.errors import CheckpointError, ConfigError
+from sysid.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, Evaluation, trace_name  # noqa: F401 (layout)
+from sysid.experiment import Experiment, load_experiment, ship_overrides
+from sysid.files import atomic_path, write_csv, write_text
+from sysid.mmg.breakdown import MMG
+from sysid.models import CorrectedModel, build_model
+from sysid.ood import KNNGate
 
 
-def trace_name(file_stem: str, horizon_s: float) -> str:
-    """File name of a trace: ``{file_stem}_h{H}.csv``."""
-    safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", file_stem)
-    return f"{safe}_h{int(round(horizon_s))}.csv"
+def versions() -> dict[str, str]:
+    """Versions of the software a run was made with."""
+    import numpy
+    import pandas
+    import scipy
+    import torchdiffeq
+    from sysid import __version__
+    return {"sysid": __version__, "python": platform.python_version(), "torch": torch.__version__,
+            "torchdiffeq": getattr(torchdiffeq, "__version__", "?"), "numpy": numpy.__version__,
+            "pandas": pandas.__version__, "scipy": scipy.__version__}
+
+
+def _save_tensors(obj, path: Path) -> None:
+    with atomic_path(path, ".pt") as tmp:
+        torch.save(obj, tmp)
+
+
+def _load_tensors(path: Path):
+    if not path.is_file():
+        raise CheckpointError(f"{path}: missing (the run directory is incomplete)")
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # truncated, not a torch file, unsafe pickle
+        raise CheckpointError(f"{path}: cannot be loaded safely ({type(exc).__name__}: {exc})") from None
+
+
+def model_state(model: torch.nn.Module) -> dict[str, torch.Tensor]:
+    """State dict without the kNN bank (stored on its own in knn.pt)."""
+    return {k: v.detach().cpu() for k, v in model.state_dict().items() if not k.startswith("gate.")}
+
+
+def save_model(model: torch.nn.Module, run_dir: Path) -> None:
+    """model.pt, standardization.json and knn.pt of a trained model."""
+    if isinstance(model, MMG) and not model.coefficients.trainable_names:
+        return
+    _save_tensors(model_state(model), run_dir / "model.pt")
+    if isinstance(model, CorrectedModel):
+        net = model.correction_net
+        stats = {"inputs": list(INPUT_NAMES), "outputs": list(OUTPUT_NAMES),
+                 "input_mean": net.input_mean.tolist(), "input_std": net.input_std.tolist(),
+                 "output_mean": net.output_mean.tolist(), "output_std": net.output_std.tolist(),
+                 "units": {"outputs": "N, N, N m"}}
+        write_text(json.dumps(stats, indent=2), run_dir / "standardization.json")
+        if model.gate is not None:
+            g = model.gate
+            _save_tensors({"bank": g.bank.cpu(), "threshold": g.threshold.cpu(),
+                           "train_distances": g.train_distances.cpu(), "k": torch.tensor(g.k),
+                           "alpha": torch.tensor(g.alpha, dtype=torch.float64)}, run_dir / "knn.pt")
+
+
+def load_model(run_dir: str | os.PathLike, dtype: torch.dtype = torch.float64):
+    """(experiment, model) of a run directory; clear errors for a missing or corrupt one."""
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise CheckpointError(f"{run_dir}: run directory not found")
+    try:
+        exp = load_experiment(run_dir / "config.toml")
+    except ConfigError as exc:
+        raise CheckpointError(f"{run_dir}: bad run config ({exc})") from None
+    model = build_model(exp, dtype)
+    if not exp.needs_training:
+        return exp, model
+    state = _load_tensors(run_dir / "model.pt")
+    if not isinstance(state, dict):
+        raise CheckpointError(f"{run_dir / 'model.pt'}: not a state dict")
+    try:
+        model.load_state_dict(state)
+    except RuntimeError as exc:
+        raise CheckpointError(f"{run_dir / 'model.pt'}: does not fit the config's model ({str(exc)[:300]})") from None
+    if isinstance(model, CorrectedModel) and exp.gate.enabled:
+        knn = _load_tensors(run_dir / "knn.pt")
+        try:
+            gate = KNNGate(int(knn["k"]), float(knn["alpha"]), knn["bank"].shape[1], dtype)
+            gate.bank, gate.threshold = knn["bank"].to(dtype), knn["threshold"].to(dtype)
+            gate.train_distances = knn["train_distances"].to(dtype)
+        except (KeyError, TypeError, IndexError, AttributeError) as exc:
+            raise CheckpointError(f"{run_dir / 'knn.pt'}: malformed kNN bank ({exc})") from None
+        model.gate, model.gate_enabled = gate, True
+    return exp, model
+
+
+def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds: float | None = None) -> dict:
+    """summary.json of a run; `training` is the trainer's `TrainingSummary` (None if untrained)."""
+    info = training.to_dict() if training is not None else {}
+    return {
+        "name": exp.experiment.name, "model": exp.experiment.model,
+        "status": f"failed: {info['failure']}" if info.get("failure") else "complete",
+        "dataset": "files" if exp.data.files else (exp.experiment.dataset if exp.needs_training else "-"),
+        "ship": exp.experiment.ship, "seed": exp.experiment.seed,
+        "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "seconds": seconds,
+        "train_seconds": info.pop("train_seconds", None),
+        "epochs": info.pop("epochs", 0),
+        "best_epoch": info.pop("best_epoch", None),
+        "stopped": info.pop("stopped", {}),
+        "n_train_windows": info.pop("n_train_windows", None),
+        "n_val_windows": info.pop("n_val_windows", None),
+        "versions": versions(), "mmg_overrides": ship_overrides(exp),
+        "identified": info.pop("identified", {}) or {},
+        "gate": {**(info.pop("gate", None) or {}), "off_share": evaluation.gate_off_share},
+        "training": info,
+    }
+
+
+def write_run(run_dir: str | os.PathLike, exp: Experiment, model, evaluation: Evaluation,
+              history: pd.DataFrame | None = None, training=None,
+              seconds: float | None = None) -> Path:
+    """Write a complete run directory (config, weights, kNN bank, history, metrics, traces)."""
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    write_text(exp.to_toml(), run_dir / "config.toml")
+    save_model(model, run_dir)
+    if history is not None and len(history):
+        write_csv(history, run_dir / "history.csv", float_format="%.6g")
+    write_csv(evaluation.metrics, run_dir / "metrics.csv", float_format="%.6g")
+    for name, frame in evaluation.traces.items():
+        write_csv(frame, run_dir / "traces" / name, float_format="%.8g")
+    summary = run_summary(exp, evaluation, training, seconds)
+    write_text(json.dumps(summary, indent=2, default=str), run_dir / "summary.json")
+    return run_dir

@@ -11,3 +11,10 @@ INPUTS = ("n_prop", "delta_rudder", "wind_velo_true", "wind_dir_true")
 VELOCITY = ("u", "v", "r")
 VELOCITY_INDEX = (1, 3, 5)
 FORCE = ("X", "Y", "N")
+# ForceBreakdown component -> the key in column names (XH, YH, NH, ..., XNN)
+FORCE_COMPONENTS = {"hull": "H", "propeller": "P", "rudder": "R", "wind": "A", "correction": "NN"}
+
+
+def force_column(component: str, axis: str) -> str:
+    """Column name of one force component: ``force_column("hull", "X") == "XH"``."""
+    return f"{axis}{FORCE_COMPONENTS[component]}"

@@ -18,13 +18,20 @@ from sysid.integrators import STEP_RULES, Method
 
 
 class Derivative(nn.Module):
-    """dx/dt (B, 6) of a force model at states (B, 6) with inputs (B, 4)."""
+    """dx/dt (B, 6) of a force model at states (B, 6) with inputs (B, 4).
 
-    def __init__(self, force_model: nn.Module):
+    ``channels_first=True``: states (6, B), inputs (4, B), dx/dt (6, B) instead; each
+    channel is then contiguous, which lets compiled code vectorize over the batch.
+    """
+
+    def __init__(self, force_model: nn.Module, channels_first: bool = False):
         super().__init__()
         self.force_model = force_model
+        self.channels_first = channels_first
 
     def forward(self, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
+        if self.channels_first:
+            return derivative(self.force_model, state.T, inputs.T).T.contiguous()
         return derivative(self.force_model, state, inputs)
 
 
@@ -36,14 +43,19 @@ class Step(nn.Module):
     force_model : MMG, NN-only or hybrid model (with its kNN gate).
     method : the step rule.
     dt : step length [s].
+    channels_first : states (6, B) and inputs (4, B) instead (see `Derivative`).
     """
 
-    def __init__(self, force_model: nn.Module, method: Method | str, dt: float):
+    def __init__(self, force_model: nn.Module, method: Method | str, dt: float, channels_first: bool = False):
         super().__init__()
         self.force_model = force_model
         self.method = Method.parse(method)
         self.dt = float(dt)
+        self.channels_first = channels_first
 
     def forward(self, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
         rule = STEP_RULES[self.method]
+        if self.channels_first:
+            u = inputs.T
+            return rule(lambda x: derivative(self.force_model, x.T, u).T, state, self.dt).contiguous()
         return rule(lambda x: derivative(self.force_model, x, inputs), state, self.dt)

@@ -1,7 +1,7 @@
 """Identification: windows, the multi-step loss (Eqs. 13-17), Adam with early stopping.
 
-`Trainer(experiment).fit(runs)` returns self with ``model_``, ``history_``, ``info_``.
-Steps, in order:
+`Trainer(experiment).fit(runs)` returns self with ``model_``, ``history_`` and
+``summary_`` (a `TrainingSummary`). Stages, in order, one method each:
 
 1. Windows of T+1 samples (T Euler steps) slid by `stride_s` within each file; each file's
    time axis is cut into 30 s blocks, 30 % of them (seeded draw) validation, and a window
@@ -22,10 +22,13 @@ Steps, in order:
 """
 from __future__ import annotations
 
+import dataclasses
 import math
+import os
 import random
+import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 import numpy as np
@@ -34,15 +37,14 @@ import torch
 from tqdm import tqdm
 
 from sysid.correction import ForceCorrection, correction_inputs
-from sysid.data import Run, duplicate_runs, sliding_windows, window_touches
+from sysid.checkpoint import TrainingCheckpoint
+from sysid.data import Run, duplicate_runs, sliding_windows, stack_windows, window_touches
 from sysid.device import resolve_device
 from sysid.dynamics import integrate, required_force
-from sysid.errors import DataError
-from sysid.experiment import Experiment, ship_overrides
-from sysid.mmg.model import MMG
-from sysid.models import CorrectedModel
+from sysid.errors import DataError, TrainingError
+from sysid.experiment import Experiment
+from sysid.models import CorrectedModel, PerMember, build_mmg, correction_of
 from sysid.ood import KNNGate
-from sysid.ship import load_ship
 from sysid.state import VELOCITY_INDEX
 
 VEL = list(VELOCITY_INDEX)
@@ -64,6 +66,57 @@ class WindowSet:
         return WindowSet(self.states[:, index], self.inputs[:, index], self.dt)
 
 
+@dataclass
+class SplitReport:
+    """How the files were cut: per file its training/validation window counts and quality
+    issues; files left out as copies of another; windows left out at frozen GNSS."""
+
+    files: list[dict] = field(default_factory=list)
+    dropped_copies: list[str] = field(default_factory=list)
+    suspect_windows: int = 0
+
+
+@dataclass
+class StageResult:
+    """One optimisation stage: its history rows, best epoch and why it stopped."""
+
+    history: list[dict]
+    best_epoch: int
+    best_loss: float
+    stopped: str  # "early stop" | "epoch limit" | "time limit" (a failure)
+
+
+@dataclass
+class TrainingSummary:
+    """What training found and did; written into the run's summary.json."""
+
+    n_train_windows: int
+    n_val_windows: int
+    split: SplitReport
+    device: str
+    epochs: int = 0                       # the largest epoch number of any stage
+    best_epoch: int | None = None         # of the multi-step training stage
+    stopped: dict = field(default_factory=dict)  # stage -> reason
+    identified_initial: dict = field(default_factory=dict)
+    identified: dict = field(default_factory=dict)
+    mmg_train_loss: float | None = None
+    mmg_val_loss: float | None = None
+    residual_force_mean: list | None = None   # N, N, N m
+    residual_force_std: list | None = None
+    warm_val_loss: float | None = None
+    ensemble_val_loss: float | None = None
+    gate: dict | None = None
+    train_seconds: float = 0.0
+    failure: str | None = None            # why the run failed (a hit wall-clock limit)
+
+    def to_dict(self) -> dict:
+        return {k: v for k, v in dataclasses.asdict(self).items() if v is not None}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "TrainingSummary":
+        return cls(**{**d, "split": SplitReport(**d["split"])})
+
+
 def seed_everything(seed: int) -> None:
     random.seed(seed)
     np.random.seed(seed)
@@ -83,20 +136,22 @@ def _block_parts(n: int, block: int, val_fraction: float, rng: np.random.Generat
 def split_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction: float,
                   exclude_suspect: bool = True, dtype=torch.float64, block_s: float = 30.0, seed: int = 0,
                   device: str | torch.device = "cpu"):
-    """Training and validation `WindowSet`s, the training samples (N, 6)/(N, 4), and a report.
+    """Training and validation `WindowSet`s, the training samples (N, 6)/(N, 4), and a
+    `SplitReport`.
 
     Each file is cut into blocks of `block_s`; a random `val_fraction` of the blocks (seeded)
     is validation. Windows lie wholly inside one part, so none overlaps across the split.
     """
     rng = np.random.default_rng(seed)
-    report = {"files": [], "dropped_copies": [], "suspect_windows": 0}
+    report = SplitReport()
     copies = {copy for copy, _ in duplicate_runs(runs)}
-    train, val, samples = ([], []), ([], []), ([], [])
+    parts: dict[str, list] = {"train": [], "val": []}
+    samples = ([], [])
     dt = None
     length = steps + 1
     for run in runs:
         if run.name in copies:
-            report["dropped_copies"].append(run.name)
+            report.dropped_copies.append(run.name)
             continue
         dt = run.dt if dt is None else dt
         if abs(run.dt - dt) > 1e-9:
@@ -112,28 +167,28 @@ def split_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction
             mine = starts[inside[ends + 1] - inside[starts] == length]
             if exclude_suspect:
                 bad = window_touches(run, mine, length)
-                report["suspect_windows"] += int(bad.sum())
+                report.suspect_windows += int(bad.sum())
                 mine = mine[~bad]
             counts[part] = len(mine)
-            if not len(mine):
-                continue
-            idx = mine[None, :] + np.arange(length)[:, None]
-            target = train if part == "train" else val
-            target[0].append(torch.as_tensor(run.states[idx], dtype=dtype, device=device))
-            target[1].append(torch.as_tensor(run.inputs[idx], dtype=dtype, device=device))
+            if len(mine):
+                parts[part].append(stack_windows(run, mine, length, dtype, device))
         keep = ~part_of
         for a, b in run.suspect if exclude_suspect else []:
             keep &= ~((run.t >= a - 1.0) & (run.t <= b + 1.0))
         samples[0].append(torch.as_tensor(run.states[keep], dtype=dtype, device=device))
         samples[1].append(torch.as_tensor(run.inputs[keep], dtype=dtype, device=device))
-        report["files"].append({"file": run.name, "train_windows": counts["train"],
-                                "val_windows": counts["val"], "issues": run.issues})
-    if not train[0]:
+        report.files.append({"file": run.name, "train_windows": counts["train"],
+                             "val_windows": counts["val"], "issues": run.issues})
+    if not parts["train"]:
         raise DataError("no training windows: the files are shorter than one window")
-    if not val[0]:
+    if not parts["val"]:
         raise DataError("no validation windows: the files are too short for the 70/30 split")
-    make = lambda parts: WindowSet(torch.cat(parts[0], 1), torch.cat(parts[1], 1), dt)
-    return make(train), make(val), (torch.cat(samples[0]), torch.cat(samples[1])), report
+
+    def window_set(chunks) -> WindowSet:
+        return WindowSet(torch.cat([c[0] for c in chunks], 1), torch.cat([c[1] for c in chunks], 1), dt)
+
+    return window_set(parts["train"]), window_set(parts["val"]), \
+        (torch.cat(samples[0]), torch.cat(samples[1])), report
 
 
 def implied_residual(model: CorrectedModel, windows: WindowSet, pairs: int = 2
@@ -160,6 +215,34 @@ def output_penalty(f_nn: torch.Tensor, f_mmg: torch.Tensor, w_F: torch.Tensor, b
     return (torch.relu(f_nn.abs() - band * f_mmg.abs()) * w_F).sum(-1)
 
 
+def weight_norm(net: ForceCorrection) -> torch.Tensor:
+    """||theta||^2 of the FNN weights (Eq. 13), per member (losses are means over members)."""
+    return sum((w * w).sum() for w in net.weights) / net.members
+
+
+def multistep_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor | None = None):
+    """(L_v, L_F) of Eqs. (15)-(17) as means over windows and steps: Euler rollouts of T steps
+    from each window's first recorded state with its recorded inputs.
+
+    `model` is a force model, or `PerMember` of a hybrid (then every FNN member rolls out
+    the same windows and the losses are means over members too). L_F is 0 without `w_F`.
+    """
+    states, inputs = batch.states, batch.inputs
+    if isinstance(model, PerMember):
+        k = model.model.correction_net.members
+        states = states.unsqueeze(1).expand(states.shape[0], k, *states.shape[1:])
+        inputs = inputs.unsqueeze(1).expand(inputs.shape[0], k, *inputs.shape[1:])
+    record: list = []
+    pred = integrate(model, states[0], inputs, batch.dt, "euler", record=record)
+    err = pred[1:, ..., VEL] - states[1:, ..., VEL]
+    loss_v = ((err * err) * w_v).sum(-1).mean()
+    if w_F is None:
+        return loss_v, loss_v.new_zeros(())
+    f_nn = torch.stack([r.correction for r in record])
+    f_mmg = torch.stack([r.mmg for r in record])
+    return loss_v, output_penalty(f_nn, f_mmg, w_F).mean()
+
+
 class Trainer:
     """Fits an MMG-only (optionally identified), NN-only or hybrid model to processed runs.
 
@@ -169,87 +252,178 @@ class Trainer:
     Parameters
     ----------
     experiment : validated experiment options.
-    progress : show tqdm progress bars.
+    progress : show progress (tqdm bars on a terminal, a line every 10 epochs elsewhere).
     log : callable receiving one-line messages.
+    checkpoint : file for the per-epoch training checkpoint (None: none written).
+    resume : continue from `checkpoint` when it exists (same config required).
     """
 
-    def __init__(self, experiment: Experiment, progress: bool = True, log: Callable[[str], None] = print):
+    def __init__(self, experiment: Experiment, progress: bool = True, log: Callable[[str], None] = print,
+                 checkpoint: str | os.PathLike | None = None, resume: bool = False):
         self.experiment = experiment
         self.progress = progress
         self.log = log
+        self.checkpoint = TrainingCheckpoint(checkpoint, experiment.to_toml()) if checkpoint else None
+        self.resume = resume
 
     # -- building blocks -------------------------------------------------------------
-    def _mmg(self, dtype, trainable=()) -> MMG:
-        exp = self.experiment
-        ship = load_ship(exp.experiment.ship, ship_overrides(exp))
-        bounds = {k: tuple(v) for k, v in exp.identify.bounds.items()}
-        return MMG(ship, trainable=trainable, bounds={k: v for k, v in bounds.items() if k in trainable} or None,
-                   dtype=dtype)
-
-    def _loss(self, model, batch: WindowSet, w_v, w_F, penalty: bool):
-        states, inputs = batch.states, batch.inputs
-        net = getattr(model, "correction_net", None)
-        if net is not None and net.member_axis:  # every member rolls out the same windows
-            states = states.unsqueeze(1).expand(states.shape[0], net.members, *states.shape[1:])
-            inputs = inputs.unsqueeze(1).expand(inputs.shape[0], net.members, *inputs.shape[1:])
-        record: list = []
-        pred = integrate(model, states[0], inputs, batch.dt, "euler", record=record)
-        err = pred[1:, ..., VEL] - states[1:, ..., VEL]
-        loss_v = ((err * err) * w_v).sum(-1).mean()
-        if not penalty:
-            return loss_v, loss_v.new_zeros(())
-        f_nn = torch.stack([r.correction for r in record])
-        f_mmg = torch.stack([r.mmg for r in record])
-        return loss_v, output_penalty(f_nn, f_mmg, w_F).mean()
-
     def _l2(self, model) -> torch.Tensor:
-        net = getattr(model, "correction_net", None)
-        if net is None:
-            return torch.zeros(())
-        # ||theta||^2 of the weights, per member (the loss is a mean over members)
-        return sum((w * w).sum() for w in net.weights) / net.members
+        net = correction_of(model.model if isinstance(model, PerMember) else model)
+        return weight_norm(net) if net is not None else torch.zeros(())
 
-    def _optimize(self, model, params, train: WindowSet, val: WindowSet, w_v, w_F, penalty: bool,
-                  epochs: int, lr: float, label: str, deadline: float) -> list[dict]:
-        """Adam on the multi-step loss with early stopping; restores the best state."""
+    def _optimize(self, model, params, train: WindowSet, val: WindowSet, w_v, w_F,
+                  epochs: int, lr: float, label: str) -> StageResult:
+        """Adam on the multi-step loss with early stopping; restores the best state.
+
+        Stops on `patience` epochs without a better validation loss or at `epochs`; a
+        checkpoint is written after every epoch, and a resumed stage continues from it.
+        """
         t = self.experiment.training
         opt = torch.optim.Adam(params, lr=lr)
         best, best_state, best_epoch, history = math.inf, None, 0, []
         gen = torch.Generator().manual_seed(self.experiment.experiment.seed + 1)
-        bar = tqdm(range(1, epochs + 1), desc=label, unit="epoch", disable=not self.progress, leave=False)
+        first = 1
+        resume = self._resume if self._resume and self._resume["stage"] == label else None
+        if resume:
+            model.load_state_dict(resume["model"])
+            opt.load_state_dict(resume["optimizer"])
+            gen.set_state(resume["generator"])
+            best, best_epoch, best_state = resume["best_loss"], resume["best_epoch"], resume["best_state"]
+            history, first = list(resume["stage_history"]), resume["epoch"] + 1
+            self.log(f"{label}: resumed after epoch {resume['epoch']} from {self.checkpoint.path}")
+        stopped = "epoch limit"
+        bar = self._bar(range(first, epochs + 1), label, epochs, first - 1)
         for epoch in bar:
             start = time.perf_counter()
             order = torch.randperm(len(train), generator=gen)
             sums = np.zeros(3)
             for lo in range(0, len(train), t.batch_size):
                 batch = train.select(order[lo:lo + t.batch_size])
-                loss_v, loss_F = self._loss(model, batch, w_v, w_F, penalty)
+                loss_v, loss_F = multistep_loss(model, batch, w_v, w_F)
                 loss = t.lambda_v * loss_v + t.lambda_F * loss_F + t.lambda_L2 * self._l2(model)
+                if not torch.isfinite(loss):
+                    raise TrainingError(f"{self.experiment.source}: [training] the {label} loss became "
+                                        f"{float(loss)} at epoch {epoch} (learning_rate = {lr:g}?); no run written")
                 opt.zero_grad()
                 loss.backward()
                 opt.step()
                 n = len(batch)
                 sums += n * np.array([loss.item(), loss_v.item(), loss_F.item()])
             with torch.no_grad():
-                val_v, _ = self._loss(model, val, w_v, w_F, False)
+                val_v, _ = multistep_loss(model, val, w_v)
             sums /= len(train)
-            row = {"stage": label, "epoch": epoch, "train_loss": sums[0], "train_velocity": sums[1],
-                   "train_penalty": sums[2], "val_loss": float(val_v), "seconds": time.perf_counter() - start}
+            row = {"stage": label, "epoch": epoch, "train_loss": float(sums[0]), "train_velocity": float(sums[1]),
+                   "train_penalty": float(sums[2]), "val_loss": float(val_v), "seconds": time.perf_counter() - start}
             history.append(row)
             if float(val_v) < best:
                 best, best_epoch = float(val_v), epoch
                 best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
-            bar.set_postfix(train=f"{sums[1]:.4f}", val=f"{float(val_v):.4f}", best=best_epoch)
-            if epoch - best_epoch >= t.patience or time.perf_counter() > deadline:
+            self._progress(bar, epoch, epochs, sums[1], float(val_v), best_epoch)
+            if epoch - best_epoch >= t.patience:
+                stopped = "early stop"
+            elif time.perf_counter() > self._deadline:
+                stopped = "time limit"
+            if self.checkpoint is not None:
+                self.checkpoint.save(stage=label, epoch=epoch, model=model.state_dict(), optimizer=opt.state_dict(),
+                                     generator=gen.get_state(), best_loss=best, best_epoch=best_epoch,
+                                     best_state=best_state, stage_history=history, history=self._history,
+                                     summary=self._summary.to_dict())
+            if stopped != "epoch limit":
                 break
-        bar.close()
+        if hasattr(bar, "close"):
+            bar.close()
         if best_state is not None:
             model.load_state_dict(best_state)
-        stopped = "early stop" if history and history[-1]["epoch"] - best_epoch >= t.patience else (
-            "time budget" if time.perf_counter() > deadline else "epoch limit")
+        if stopped == "time limit":
+            self._summary.failure = (f"wall-clock limit of {self.experiment.training.max_minutes:g} min "
+                                     f"([training] max_minutes) hit in stage {label} at epoch {len(history)}")
+            self.log(f"FAILED: {self._summary.failure}")
         self.log(f"{label}: {len(history)} epochs, best validation loss {best:.5f} at epoch {best_epoch} ({stopped})")
-        self.best_epoch_ = best_epoch
-        return history
+        return StageResult(history, best_epoch, best, stopped)
+
+    def _bar(self, epochs, label: str, total: int, done: int):
+        """tqdm on a terminal; elsewhere the epochs plain (progress then comes as log lines)."""
+        if self.progress and sys.stderr.isatty():
+            return tqdm(epochs, desc=label, unit="epoch", leave=False, total=total, initial=done)
+        return epochs
+
+    def _progress(self, bar, epoch: int, total: int, train_v: float, val_v: float, best_epoch: int) -> None:
+        if hasattr(bar, "set_postfix"):
+            bar.set_postfix(train=f"{train_v:.4f}", val=f"{val_v:.4f}", best=best_epoch)
+        elif self.progress and (epoch % 10 == 0 or epoch == total):
+            self.log(f"  epoch {epoch}/{total}: training {train_v:.5f}, validation {val_v:.5f} (best at {best_epoch})")
+
+    def _coefficients(self, mmg) -> dict[str, float]:
+        return {k: float(getattr(mmg.coefficients, k).detach()) for k in self.experiment.identify.parameters}
+
+    # -- stages ----------------------------------------------------------------------
+    def split(self, runs: Sequence[Run], dtype, device) -> tuple[WindowSet, WindowSet, tuple, SplitReport]:
+        """Stage 1: training and validation windows, training samples, the split report."""
+        exp, t = self.experiment, self.experiment.training
+        train, val, samples, report = split_windows(runs, t.steps, t.stride_s, t.val_fraction,
+                                                    exp.data.exclude_suspect, dtype, t.block_s,
+                                                    exp.experiment.seed, device)
+        for name in report.dropped_copies:
+            self.log(f"left out {name}: an exact copy of the start of another training file")
+        self.log(f"{len(train)} training and {len(val)} validation windows of {t.steps} steps "
+                 f"({report.suspect_windows} touching frozen GNSS left out)")
+        return train, val, samples, report
+
+    def identify(self, mmg, train: WindowSet, val: WindowSet, w_v) -> StageResult:
+        """Stage 3 (``[identify]``, stage "before" or MMG-only): gradient identification of
+        the MMG coefficients on the multi-step loss."""
+        ident = self.experiment.identify
+        result = self._optimize(mmg, list(mmg.parameters()), train, val, w_v, None,
+                                ident.epochs, ident.learning_rate, "identify")
+        self.log("identified: " + ", ".join(f"{k} = {v:.5g}" for k, v in self._coefficients(mmg).items()))
+        return result
+
+    def standardize(self, model: CorrectedModel, train: WindowSet) -> torch.Tensor:
+        """Stage 2: FNN input statistics and output statistics of the implied residual force;
+        returns the correction inputs s and the residual (N, 3) for the warm start."""
+        net = model.correction_net
+        stride = max(1, int(round(self.experiment.training.stride_s / train.dt)))
+        s, residual, _ = implied_residual(model, train, stride)
+        net.set_standardization(s.mean(0), s.std(0), residual.mean(0), residual.std(0))
+        return s, residual
+
+    def warm_start(self, net: ForceCorrection, s: torch.Tensor, residual: torch.Tensor, device) -> None:
+        """Stage 4: every FNN member regresses the standardised residual force (one step)."""
+        t = self.experiment.training
+        target = (residual - net.output_mean) / net.output_std
+        s_members = s.expand(net.members, *s.shape)
+        opt = torch.optim.Adam(net.parameters(), lr=3e-3)
+        gen = torch.Generator().manual_seed(self.experiment.experiment.seed + 2)
+        for _ in self._bar(range(t.warm_start_epochs), "warm start", t.warm_start_epochs, 0):
+            order = torch.randperm(len(s), generator=gen).to(device)
+            for lo in range(0, len(s), 256):
+                idx = order[lo:lo + 256]
+                y = net.evaluate(s_members[:, idx], standardized=True, per_member=True)[0]
+                loss = ((y - target[idx]) ** 2).mean() + t.lambda_L2 * weight_norm(net)
+                opt.zero_grad()
+                loss.backward()
+                opt.step()
+            if not torch.isfinite(loss):
+                raise TrainingError(f"{self.experiment.source}: [training] the warm-start loss became "
+                                    f"{float(loss)}; no run written")
+
+    def train(self, model: CorrectedModel, params, train: WindowSet, val: WindowSet, w_v, w_F) -> StageResult:
+        """Stage 5: multi-step training of every FNN member (and joint MMG coefficients)."""
+        t = self.experiment.training
+        return self._optimize(PerMember(model), params, train, val, w_v, w_F, t.epochs, t.learning_rate, "train")
+
+    def fit_gate(self, model: CorrectedModel, samples: tuple[torch.Tensor, torch.Tensor], dtype) -> dict:
+        """Stage 6: the kNN gate on the training samples' features (or standardised inputs)."""
+        gate = self.experiment.gate
+        with torch.no_grad():
+            states, inputs = samples
+            rel = model.mmg(states, inputs).relative_wind
+            z = model.gate_coordinates(correction_inputs(states, inputs, rel))
+        model.gate = KNNGate(gate.k, gate.alpha, z.shape[-1], dtype).fit(z)
+        model.gate_enabled = True
+        self.log(f"kNN gate: {z.shape[0]} training features, threshold {float(model.gate.threshold):.4f}")
+        return {"k": gate.k, "alpha": gate.alpha, "space": gate.space, "bank": int(z.shape[0]),
+                "threshold": float(model.gate.threshold)}
 
     # -- the estimator ---------------------------------------------------------------
     def fit(self, runs: Sequence[Run]) -> "Trainer":
@@ -259,95 +433,66 @@ class Trainer:
         dtype = torch.float32 if t.dtype == "float32" else torch.float64
         device = resolve_device(t.device)
         started = time.perf_counter()
-        deadline = started + 60.0 * t.max_minutes
-        train, val, samples, report = split_windows(runs, t.steps, t.stride_s, t.val_fraction,
-                                                    exp.data.exclude_suspect, dtype, t.block_s,
-                                                    exp.experiment.seed, device)
-        for name in report["dropped_copies"]:
-            self.log(f"left out {name}: an exact copy of the start of another training file")
-        self.log(f"{len(train)} training and {len(val)} validation windows of {t.steps} steps "
-                 f"({report['suspect_windows']} touching frozen GNSS left out)")
+        self._deadline = started + 60.0 * t.max_minutes if t.max_minutes > 0 else math.inf
+        self._resume = self.checkpoint.load() if self.checkpoint is not None and self.resume else None
+        train, val, samples, report = self.split(runs, dtype, device)
         # velocity weights w_v: inverse variance of the recorded velocities
-        vel = train.states[:, :, VEL].reshape(-1, 3)
-        w_v = 1.0 / vel.var(0)
-        identify = list(exp.identify.parameters)
+        w_v = 1.0 / train.states[:, :, VEL].reshape(-1, 3).var(0)
+        identify = bool(exp.identify.parameters)
         joint = exp.identify.stage == "joint"
-        mmg = self._mmg(dtype, trainable=identify).to(device)
-        history: list[dict] = []
-        info: dict = {"n_train_windows": len(train), "n_val_windows": len(val), "split": report,
-                      "device": str(device)}
-        if identify:
-            info["identified_initial"] = {k: float(getattr(mmg.coefficients, k).detach()) for k in identify}
-        if identify and (kind == "mmg" or not joint):
-            history += self._optimize(mmg, list(mmg.parameters()), train, val, w_v, None, False,
-                                      exp.identify.epochs, exp.identify.learning_rate, "identify", deadline)
-            info["identified"] = {k: float(getattr(mmg.coefficients, k).detach()) for k in identify}
-            self.log("identified: " + ", ".join(f"{k} = {v:.5g}" for k, v in info["identified"].items()))
-            if not joint:
-                for p in mmg.parameters():
-                    p.requires_grad_(False)
-        if kind == "mmg":
-            self.model_, self.history_ = mmg, pd.DataFrame(history)
-            info["train_seconds"] = time.perf_counter() - started
-            self.info_ = info
-            return self
-        with torch.no_grad():
-            info["mmg_val_loss"] = float(self._loss(mmg, val, w_v, None, False)[0])
-            info["mmg_train_loss"] = float(self._loss(mmg, train, w_v, None, False)[0])
-        self.log(f"MMG-only multi-step loss: training {info['mmg_train_loss']:.5f}, validation {info['mmg_val_loss']:.5f}")
-        net = ForceCorrection(exp.network.hidden, dtype, exp.network.members).to(device)
-        model = CorrectedModel(mmg, net, None, physics=(kind == "hybrid"), gate_space=exp.gate.space)
-        s, residual, f_mmg = implied_residual(model, train, max(1, int(round(t.stride_s / train.dt))))
-        net.set_standardization(s.mean(0), s.std(0), residual.mean(0), residual.std(0))
-        info["residual_force_mean"] = residual.mean(0).tolist()
-        info["residual_force_std"] = residual.std(0).tolist()
-        w_F = 1.0 / net.output_std
-        # warm start: one-step regression of the standardised residual force
-        if t.warm_start_epochs:
-            target = (residual - net.output_mean) / net.output_std
-            net.member_axis = True
-            s_members = s.expand(net.members, *s.shape)
-            opt = torch.optim.Adam(net.parameters(), lr=3e-3)
-            gen = torch.Generator().manual_seed(exp.experiment.seed + 2)
-            for _ in tqdm(range(t.warm_start_epochs), desc="warm start", unit="epoch",
-                          disable=not self.progress, leave=False):
-                order = torch.randperm(len(s), generator=gen).to(device)
-                for lo in range(0, len(s), 256):
-                    idx = order[lo:lo + 256]
-                    y = net.evaluate(s_members[:, idx], standardized=True)[0]
-                    loss = ((y - target[idx]) ** 2).mean() + t.lambda_L2 * self._l2(model)
-                    opt.zero_grad()
-                    loss.backward()
-                    opt.step()
-                if time.perf_counter() > deadline:
-                    break
-        net.member_axis = True
-        with torch.no_grad():
-            info["warm_val_loss"] = float(self._loss(model, val, w_v, None, False)[0])
-        self.log(f"after warm start: validation loss {info['warm_val_loss']:.5f}")
-        params = list(net.parameters()) + (list(mmg.parameters()) if identify and joint else [])
-        history += self._optimize(model, params, train, val, w_v, w_F, kind == "hybrid",
-                                  t.epochs, t.learning_rate, "train", deadline)
-        info["best_epoch"] = self.best_epoch_
-        net.member_axis = False
-        with torch.no_grad():
-            info["ensemble_val_loss"] = float(self._loss(model, val, w_v, None, False)[0])
-        if net.members > 1:
-            self.log(f"mean of {net.members} networks: validation loss {info['ensemble_val_loss']:.5f}")
-        if identify and joint:
-            info["identified"] = {k: float(getattr(mmg.coefficients, k).detach()) for k in identify}
-        # kNN gate on the final features of the training samples
-        if exp.gate.enabled:
+        mmg = build_mmg(exp, dtype).to(device)
+        summary = TrainingSummary(len(train), len(val), report, str(device))
+        self._summary, self._history = summary, []
+        resumed_in = self._resume["stage"] if self._resume else None
+        if resumed_in == "train":  # earlier stages are done: their results come from the checkpoint
+            summary = self._summary = TrainingSummary.from_dict(self._resume["summary"])
+            self._history = list(self._resume["history"])
+        if identify and not summary.identified_initial:
+            summary.identified_initial = self._coefficients(mmg)
+        if identify and (kind == "mmg" or not joint) and resumed_in != "train":
+            stage = self.identify(mmg, train, val, w_v)
+            self._history += stage.history
+            summary.stopped["identify"] = stage.stopped
+            summary.identified = self._coefficients(mmg)
+        if identify and not joint:
+            mmg.requires_grad_(False)
+        model = mmg
+        if kind != "mmg" and summary.failure is None:
+            net = ForceCorrection(exp.network.hidden, dtype, exp.network.members).to(device)
+            model = CorrectedModel(mmg, net, None, physics=(kind == "hybrid"), gate_space=exp.gate.space)
+            if resumed_in != "train":
+                with torch.no_grad():
+                    summary.mmg_val_loss = float(multistep_loss(mmg, val, w_v)[0])
+                    summary.mmg_train_loss = float(multistep_loss(mmg, train, w_v)[0])
+                self.log(f"MMG-only multi-step loss: training {summary.mmg_train_loss:.5f}, "
+                         f"validation {summary.mmg_val_loss:.5f}")
+                s, residual = self.standardize(model, train)
+                summary.residual_force_mean = residual.mean(0).tolist()
+                summary.residual_force_std = residual.std(0).tolist()
+                if t.warm_start_epochs:
+                    self.warm_start(net, s, residual, device)
+                with torch.no_grad():
+                    summary.warm_val_loss = float(multistep_loss(PerMember(model), val, w_v)[0])
+                self.log(f"after warm start: validation loss {summary.warm_val_loss:.5f}")
+            params = list(net.parameters()) + (list(mmg.parameters()) if identify and joint else [])
+            w_F = 1.0 / net.output_std if kind == "hybrid" else None
+            if resumed_in == "train":  # buffers (standardisation) first: w_F depends on them
+                PerMember(model).load_state_dict(self._resume["model"])
+                w_F = 1.0 / net.output_std if kind == "hybrid" else None
+            stage = self.train(model, params, train, val, w_v, w_F)
+            self._history += stage.history
+            summary.stopped["train"] = stage.stopped
+            summary.best_epoch = stage.best_epoch
             with torch.no_grad():
-                states, inputs = samples
-                rel = model.mmg(states, inputs).relative_wind
-                z = model.gate_coordinates(correction_inputs(states, inputs, rel))
-            model.gate = KNNGate(exp.gate.k, exp.gate.alpha, z.shape[-1], dtype).fit(z)
-            model.gate_enabled = True
-            info["gate"] = {"k": exp.gate.k, "alpha": exp.gate.alpha, "space": exp.gate.space,
-                            "bank": int(z.shape[0]),
-                            "threshold": float(model.gate.threshold)}
-            self.log(f"kNN gate: {z.shape[0]} training features, threshold {float(model.gate.threshold):.4f}")
-        info["train_seconds"] = time.perf_counter() - started
-        self.model_, self.history_, self.info_ = model, pd.DataFrame(history), info
+                summary.ensemble_val_loss = float(multistep_loss(model, val, w_v)[0])
+            if net.members > 1:
+                self.log(f"mean of {net.members} networks: validation loss {summary.ensemble_val_loss:.5f}")
+            if identify and joint:
+                summary.identified = self._coefficients(mmg)
+            if exp.gate.enabled:
+                summary.gate = self.fit_gate(model, samples, dtype)
+        self.history_ = pd.DataFrame(self._history)
+        summary.epochs = int(self.history_["epoch"].max()) if len(self._history) else 0
+        summary.train_seconds = time.perf_counter() - started
+        self.model_, self.summary_ = model, summary
         return self

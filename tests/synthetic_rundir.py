@@ -19,7 +19,8 @@ from sysid import MMG, integrate, load_ship
 from sysid.data import Run
 from sysid.evaluate import predict_windows
 from sysid.mmg.wind import relative_wind
-from sysid.rundir import METRICS_COLUMNS, TABLE_COLUMNS, TRACE_COLUMNS, trace_name
+from sysid.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
+from sysid.paper import COMPARISON_COLUMNS
 
 DEG = math.pi / 180.0
 SCENARIOS = {  # scenario -> (file stem, duration [s])
@@ -181,7 +182,7 @@ def write_reproduction(out: Path, scale: float = 1.0, names=tuple(RUNS)) -> Path
         for m in pd.read_csv(run_dir / "metrics.csv").itertuples(index=False):
             paper = paper_rmse(m.scenario, kind, dataset, m.horizon_s) or (np.nan,) * 3
             rows.append([m.scenario, name, dataset, m.horizon_s, m.rmse_u, m.rmse_v, m.rmse_r, *paper])
-    pd.DataFrame(rows, columns=TABLE_COLUMNS).to_csv(out / "comparison.csv", index=False)
+    pd.DataFrame(rows, columns=COMPARISON_COLUMNS).to_csv(out / "comparison.csv", index=False)
     (out / "summary.json").write_text(json.dumps(
         {"total_seconds": 987.6, "gate_share_on": {"hybrid_D1": 0.62, "hybrid_D2": 0.91},
          "wins_against_paper": "n/a (synthetic)"}, indent=2))

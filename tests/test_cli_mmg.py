@@ -7,20 +7,27 @@ from sysid.cli import run as main
 from sysid.data import read_run
 from sysid.errors import DataError, ShipDefinitionError
 
-OUT = ["XH_SI", "YH_SI", "NH_SI", "XP_SI", "YP_SI", "NP_SI", "XR_SI", "YR_SI", "NR_SI",
-       "XA_SI", "YA_SI", "NA_SI", "X_SI", "Y_SI", "N_SI",
-       "x_dot", "u_dot", "y_dot", "v_dot", "psi_dot", "r_dot"]
+# our column -> the oracle's (the lab's names: delta_rad, XH_SI, ...)
+OUT = {**{f"{a}{k}": f"{a}{k}_SI" for k in "HPRA" for a in "XYN"}, **{a: f"{a}_SI" for a in "XYN"},
+       **{d: d for d in ("x_dot", "u_dot", "y_dot", "v_dot", "psi_dot", "r_dot")}}
+
+
+def _oracle_input(oracle_dir, tmp_path):
+    """The oracle's vectors with our input names (its delta_rad is our delta_rudder)."""
+    path = tmp_path / "oracle_in.csv"
+    pd.read_csv(oracle_dir / "mmg_vectors_public.csv").rename(columns={"delta_rad": "delta_rudder"}).to_csv(path, index=False)
+    return path
 
 
 def test_forces_command_matches_the_oracle(oracle_dir, tmp_path):
     out = tmp_path / "forces.csv"
     main(["forces", "--ship", "esso_osaka", "--quadrature", "simpson",
-          str(oracle_dir / "mmg_vectors_public.csv"), "-o", str(out)])
+          str(_oracle_input(oracle_dir, tmp_path)), "-o", str(out)])
     ours, ref = pd.read_csv(out), pd.read_csv(oracle_dir / "mmg_vectors_public.csv")
     assert len(ours) == len(ref)
-    for col in OUT:
-        err = np.abs(ours[col].to_numpy() - ref[col].to_numpy())
-        assert (err <= np.maximum(1e-9, 1e-6 * np.abs(ref[col].to_numpy()))).all(), col
+    for col, ref_col in OUT.items():
+        err = np.abs(ours[col].to_numpy() - ref[ref_col].to_numpy())
+        assert (err <= np.maximum(1e-9, 1e-6 * np.abs(ref[ref_col].to_numpy()))).all(), col
 
 
 def test_simulate_command_reproduces_the_oracle_trajectory(oracle_dir, dataset_dir, tmp_path):
@@ -43,11 +50,11 @@ def _forces_input(tmp_path, frame):
 
 
 def test_forces_missing_column_and_nan(oracle_vectors, tmp_path):
-    cols = ["x", "u", "y", "v", "psi", "r", "n_prop", "delta_rad", "wind_velo_true", "wind_dir_true"]
-    frame = oracle_vectors[cols].head(5).copy()
+    cols = ["x", "u", "y", "v", "psi", "r", "n_prop", "delta_rudder", "wind_velo_true", "wind_dir_true"]
+    frame = oracle_vectors.rename(columns={"delta_rad": "delta_rudder"})[cols].head(5).copy()
     out = tmp_path / "out.csv"
-    with pytest.raises(DataError, match=r"in.csv: missing column\(s\) \['delta_rad'\]"):
-        main(["forces", str(_forces_input(tmp_path, frame.drop(columns="delta_rad"))), "-o", str(out)])
+    with pytest.raises(DataError, match=r"in.csv: missing column\(s\) \['delta_rudder'\]"):
+        main(["forces", str(_forces_input(tmp_path, frame.drop(columns="delta_rudder"))), "-o", str(out)])
     frame.loc[3, "r"] = np.nan
     with pytest.raises(DataError, match="in.csv: column 'r' is not a finite number at data row 5"):
         main(["forces", str(_forces_input(tmp_path, frame)), "-o", str(out)])

@@ -14,7 +14,8 @@ from sysid.errors import CheckpointError, ConfigError
 from sysid.experiment import load_experiment, parse_experiment
 from sysid.models import CorrectedModel
 from sysid.ood import KNNGate
-from sysid.runs import evaluate_model, load_model, write_run
+from sysid.evaluate import evaluate_model
+from sysid.rundir import load_model, write_run
 from sysid.train import Trainer, output_penalty
 
 ADDED_FORCE = torch.tensor([-1.5, 0.8, -0.6], dtype=torch.float64)  # X [N], Y [N], N [N m], body frame
@@ -118,10 +119,10 @@ def test_gate_returns_the_mmg_force_exactly_far_outside(trained):
 
 def test_two_epochs_on_a_synthetic_ship_recover_the_added_force(trained):
     runs, trainer = trained
-    info, hist = trainer.info_, trainer.history_
+    info, hist = trainer.summary_, trainer.history_
     train_hist = hist[hist.stage == "train"]
     assert len(train_hist) == 2
-    assert train_hist.val_loss.iloc[-1] < info["mmg_val_loss"] * 0.5  # far better than MMG alone
+    assert train_hist.val_loss.iloc[-1] < info.mmg_val_loss * 0.5  # far better than MMG alone
     model = trainer.model_.double()
     states = torch.tensor(np.concatenate([r.states for r in runs]))
     inputs = torch.tensor(np.concatenate([r.inputs for r in runs]))
@@ -136,7 +137,7 @@ def test_saved_run_reloads_to_identical_predictions(trained, tmp_path):
     model = trainer.model_.double()
     exp = small_experiment()
     evaluation = evaluate_model(model, runs[:2], [30.0])
-    write_run(tmp_path / "run", exp, model, evaluation, trainer.history_, dict(trainer.info_))
+    write_run(tmp_path / "run", exp, model, evaluation, trainer.history_, trainer.summary_)
     for name in ("config.toml", "model.pt", "knn.pt", "standardization.json", "history.csv", "metrics.csv", "summary.json"):
         assert (tmp_path / "run" / name).is_file(), name
     assert len(list((tmp_path / "run" / "traces").glob("*.csv"))) == 2
@@ -202,8 +203,8 @@ def test_gradient_identification_recovers_a_perturbed_coefficient():
                             "identify": {"parameters": ["N_r", "N_v"], "epochs": 25, "learning_rate": 0.05,
                                          "bounds": {"N_r": [-0.3, 0.1], "N_v": [-0.5, 0.1]}}})
     trainer = Trainer(exp, progress=False, log=lambda m: None).fit(runs)
-    found = trainer.info_["identified"]
-    assert trainer.info_["identified_initial"]["N_r"] == pytest.approx(-0.04849)
+    found = trainer.summary_.identified
+    assert trainer.summary_.identified_initial["N_r"] == pytest.approx(-0.04849)
     assert found["N_r"] == pytest.approx(-0.07, abs=0.004)  # started at -0.04849
     assert found["N_v"] == pytest.approx(-0.1458, abs=0.01)  # stays where the truth has it
 
@@ -224,6 +225,5 @@ def test_force_correction_is_the_papers_network_and_members_average():
         h = torch.tanh(h @ net.weights[1][k] + net.biases[1][k])
         by_hand.append((h @ net.weights[2][k] + net.biases[2][k]) * net.output_std + net.output_mean)
     torch.testing.assert_close(force, torch.stack(by_hand).mean(0))
-    net.member_axis = True
-    per_member = net(s.expand(3, 7, 9))
+    per_member = net.evaluate(s.expand(3, 7, 9), per_member=True)[0]
     torch.testing.assert_close(per_member, torch.stack(by_hand))

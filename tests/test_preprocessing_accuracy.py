@@ -55,7 +55,7 @@ def test_default_noise_within_bounds(data, kind):
     scores = synth.score(out.segments, res.truth)
     assert scores["samples"] > 100
     _check(scores)
-    assert abs(out.report["fog_bias_rad_s"]["mean"]) == pytest.approx(np.radians(5) / 600, rel=0.4)
+    assert abs(out.report.fog_bias_rad_s["mean"]) == pytest.approx(np.radians(5) / 600, rel=0.4)
 
 
 def test_latlon_input(data):
@@ -66,7 +66,7 @@ def test_latlon_input(data):
     _check(synth.score(out.segments, res.truth))
     # without a reference the first aft fix is the origin: same shape, shifted positions
     out2 = Pipeline(LAYOUT).run(res.raw)
-    ref = out2.report["reference_latlon"]
+    ref = out2.report.reference_latlon
     assert ref[0] == pytest.approx(REFERENCE[0], abs=1e-3)
     d = out2.segments[0]["u_velo"] - out.segments[0]["u_velo"]
     assert np.abs(d).max() < 1e-6
@@ -79,18 +79,18 @@ def test_outliers_and_dropout(data, rows, max_gap):
     res = synth.synthesise(_run(data, "zigzag"), LAYOUT, settings)
     out = Pipeline(LAYOUT, PreprocessSettings(max_interp_gap=max_gap)).run(res.raw)
     rep = out.report
-    rejected = set(rep["baseline"]["rejected_t"]) | set(rep["heading_gate"]["rejected_t"])
+    rejected = set(rep.baseline.rejected_t) | set(rep.heading_gate.rejected_t)
     for o in res.outliers:
         assert round(o["t"], 3) in rejected, f"outlier {o} not rejected"
     kinds = {o["kind"] for o in res.outliers}
     assert kinds == {"baseline_length", "rotation"}
-    gaps = [g for g in rep["gaps"] if g["channel"] == "gnss" and g["duration_s"] >= 2.9]
-    assert len(gaps) == 1 and gaps[0]["t_start"] == pytest.approx(120.0)
+    gaps = [g for g in rep.gaps if g.channel == "gnss" and g.duration_s >= 2.9]
+    assert len(gaps) == 1 and gaps[0].t_start == pytest.approx(120.0)
     if max_gap < 3.0:
-        assert gaps[0]["action"] == "split" and len(out.segments) == 2
+        assert gaps[0].action == "split" and len(out.segments) == 2
         assert out.segments[0]["t"].iloc[-1] < 120.0 < 123.0 <= out.segments[1]["t"].iloc[0]
     else:
-        assert gaps[0]["action"] == "interpolated" and len(out.segments) == 1
+        assert gaps[0].action == "interpolated" and len(out.segments) == 1
     _check(synth.score(out.segments, res.truth, res.dropouts))
 
 

@@ -59,7 +59,7 @@ def test_clean_log_matches_truth(synthetic, raw):
     out = run(raw)
     s = synth.score(out.segments, synthetic.truth)
     assert s["psi_deg"] < 0.3 and s["u"] < 5e-3 and s["r"] < 1e-3
-    assert out.report["repairs"] == []
+    assert out.report.repairs == []
 
 
 def test_missing_column(raw):
@@ -85,7 +85,7 @@ def test_wrong_unit_header(raw):
 def test_degree_header_is_converted_and_logged(synthetic, raw):
     raw["fog_yaw_rate [rad/s]"] = np.degrees(raw["fog_yaw_rate [rad/s]"])
     out = run(raw.rename(columns={"fog_yaw_rate [rad/s]": "fog_yaw_rate [deg/s]"}))
-    assert any("fog_yaw_rate" in r and "deg/s" in r for r in out.report["repairs"])
+    assert any("fog_yaw_rate" in r and "deg/s" in r for r in out.report.repairs)
     assert synth.score(out.segments, synthetic.truth)["r"] < 1e-3
 
 
@@ -130,7 +130,7 @@ def test_repeated_time_with_other_values(raw):
 def test_exact_duplicate_rows_are_dropped_and_logged(synthetic, raw):
     bad = pd.concat([raw.iloc[:301], raw.iloc[[300, 300]], raw.iloc[301:]], ignore_index=True)
     out = run(bad)
-    assert any("duplicate" in r for r in out.report["repairs"])
+    assert any("duplicate" in r for r in out.report.repairs)
     assert synth.score(out.segments, synthetic.truth)["u"] < 5e-3
 
 
@@ -143,9 +143,9 @@ def test_short_nan_burst_interpolated_long_one_splits(synthetic, raw):
     raw.loc[200:204, "fog_yaw_rate [rad/s]"] = np.nan          # 0.5 s
     raw.loc[600:629, "anemo_1_speed [m/s]"] = np.nan           # 3 s
     out = run(raw)
-    gaps = {g["channel"]: g for g in out.report["gaps"]}
-    assert gaps["fog_yaw_rate"]["action"] == "interpolated"
-    assert gaps["anemo_1_speed"]["action"] == "split"
+    gaps = {g.channel: g for g in out.report.gaps}
+    assert gaps["fog_yaw_rate"].action == "interpolated"
+    assert gaps["anemo_1_speed"].action == "split"
     assert len(out.segments) == 2
     s = synth.score(out.segments, synthetic.truth, dropouts=[(60.0, 62.9)])
     assert s["r"] < 1e-3 and s["wind_speed"] < 0.05
@@ -163,7 +163,7 @@ def test_swapped_antennas_error_and_repair(synthetic, raw):
     msg = error_of(swapped)
     assert "swapped" in msg and "gnss_fore" in msg
     out = run(swapped, swapped_antennas="repair")
-    assert out.report["swapped_antennas"] is True
+    assert out.report.swapped_antennas is True
     assert synth.score(out.segments, synthetic.truth)["psi_deg"] < 0.3
 
 
@@ -218,7 +218,7 @@ def test_poor_gnss_fix_rejected(synthetic, raw):
     raw["gnss_aft_fix"] = 4
     raw.loc[300:304, "gnss_aft_fix"] = 5                          # RTK float for 0.5 s
     out = run(raw)
-    assert out.report["fix_rejected"] == 5
+    assert out.report.fix_rejected == 5
     assert len(out.segments) == 1
     assert synth.score(out.segments, synthetic.truth)["pos"] < 0.02
 
@@ -237,7 +237,7 @@ def test_empty_rows_dropped_and_logged(synthetic, raw, tmp_path):
     with open(path, "a") as fh:
         fh.write("," * (len(raw.columns) - 1) + "\n" + "," * (len(raw.columns) - 1) + "\n")
     out = Pipeline(LAYOUT).run(path)
-    assert any("empty row" in r for r in out.report["repairs"])
+    assert any("empty row" in r for r in out.report.repairs)
     assert synth.score(out.segments, synthetic.truth)["u"] < 5e-3
 
 

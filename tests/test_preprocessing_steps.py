@@ -8,6 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from preprocessing.quality import QualityReport
+
 from preprocessing import differencing, geodesy, gnss, gyro, resample, wind, writer
 from preprocessing.frames import body_to_earth, earth_to_body, flow_velocity, from_direction
 from preprocessing.sensors import SensorLayout
@@ -91,10 +93,22 @@ def test_resample_takes_samples_on_the_run_grid():
 
 def test_writer_is_atomic_and_complete(tmp_path):
     seg = pd.DataFrame({c: [0.0, 1.0] for c in writer.schema.PROCESSED})
-    paths = writer.write_run(tmp_path, "run", [seg, seg], {"file": "x"})
+    paths = writer.write_run(tmp_path, "run", [seg, seg], QualityReport("x"))
     assert sorted(p.name for p in paths) == ["run.report.json", "run_seg1.csv", "run_seg2.csv"]
     assert json.loads((tmp_path / "run.report.json").read_text())["outputs"] == ["run_seg1.csv", "run_seg2.csv"]
     assert not [f for f in os.listdir(tmp_path) if f.endswith(".tmp")]
     with pytest.raises(KeyError):
-        writer.write_run(tmp_path / "bad", "run", [seg.drop(columns=["t"])], {})
+        writer.write_run(tmp_path / "bad", "run", [seg.drop(columns=["t"])], QualityReport("bad"))
     assert list((tmp_path / "bad").iterdir()) == []
+
+
+def test_quality_report_round_trips_through_json():
+    report = QualityReport.from_dict({
+        "file": "run.csv", "rows": 1200, "repairs": ["x"], "gaps": [
+            {"channel": "gnss", "t_start": 1.0, "t_end": 2.5, "duration_s": 1.5, "action": "split"}],
+        "baseline": {"rejected": 2, "rejected_t": [3.0, 4.0], "error_mean_m": 0.01},
+        "segments": [{"t_start": 0.0, "t_end": 60.0, "samples": 61}, {"t_start": 70.0, "t_end": 100.0, "samples": 31}]})
+    assert report.kept_s == 90.0 and report.baseline.rejected == 2 and report.gaps[0].action == "split"
+    again = QualityReport.from_json(report.to_json())
+    assert again == report
+    assert json.loads(report.to_json())["baseline"] == {"rejected": 2, "rejected_t": [3.0, 4.0], "error_mean_m": 0.01}

@@ -9,9 +9,9 @@ import sys
 import typer
 
 from sysid.errors import SysidError
+from sysid.cli.interrupts import interrupt_note
 
-app = typer.Typer(add_completion=False, no_args_is_help=True,
-                  help="Ship maneuvering system identification: MMG, hybrid MMG+FNN, reports.")
+from sysid.cli.app import app  # noqa: E402
 
 # subcommands (each module adds its commands to `app`)
 from sysid.cli import mmg_commands  # noqa: E402,F401
@@ -42,25 +42,62 @@ def expand_multi_value(argv: list[str]) -> list[str]:
 
 
 def run(argv: list[str]) -> None:
-    """Run a subcommand; `SysidError` propagates (for tests and embedding)."""
-    app(args=expand_multi_value(list(argv)), standalone_mode=False)
+    """Run a subcommand; `SysidError` and `KeyboardInterrupt` propagate (for tests and
+    embedding)."""
+    code = app(args=expand_multi_value(list(argv)), standalone_mode=False)
+    # typer >= 0.29 turns Ctrl-C into Exit(130) and, outside standalone mode, returns the code
+    if code == 130:
+        raise KeyboardInterrupt
+    if isinstance(code, int) and code:
+        raise SystemExit(code)
+
+
+TRACEBACK_FLAG = "--traceback"
+
+
+def _is_usage_error(exc: BaseException) -> bool:
+    """click's ClickException family (vendored by typer >= 0.29, the `click` package before)."""
+    return callable(getattr(exc, "show", None)) and isinstance(getattr(exc, "exit_code", None), int)
+
+
+def _is_abort(exc: BaseException) -> bool:
+    return type(exc).__name__ == "Abort"
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Console entry point: one clear line on bad input, no traceback."""
+    """Console entry point: one clear line on bad input, no traceback.
+
+    Exit codes: 0 success; 2 usage error or bad input (file and field named); 1 an output
+    problem or an unexpected error; 130 interrupted (Ctrl-C). ``--traceback`` shows the
+    Python traceback of an unexpected error.
+    """
+    args = list(sys.argv[1:] if argv is None else argv)
+    show_traceback = TRACEBACK_FLAG in args
+    args = [a for a in args if a != TRACEBACK_FLAG]
     try:
-        run(sys.argv[1:] if argv is None else argv)
+        run(args)
     except SysidError as exc:
         typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
         sys.exit(2)
     except (typer.Exit, SystemExit) as exc:
         code = getattr(exc, "exit_code", getattr(exc, "code", 0))
         sys.exit(code or 0)
-    except Exception as exc:  # click usage errors and friends
-        import click
-        if isinstance(exc, click.ClickException):
+    except KeyboardInterrupt:
+        typer.secho(f"interrupted: {interrupt_note()}", fg=typer.colors.YELLOW, err=True)
+        sys.exit(130)
+    except Exception as exc:
+        if _is_usage_error(exc):
             exc.show()
             sys.exit(exc.exit_code)
-        if isinstance(exc, click.exceptions.Abort):
+        if _is_abort(exc):  # click turns Ctrl-C into Abort
+            typer.secho(f"interrupted: {interrupt_note()}", fg=typer.colors.YELLOW, err=True)
+            sys.exit(130)
+        if isinstance(exc, OSError):  # output or input file problems: not our bug
+            where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+            typer.secho(f"error: {where}{exc.strerror or exc}", fg=typer.colors.RED, err=True)
             sys.exit(1)
-        raise
+        if show_traceback:
+            raise
+        typer.secho(f"internal error: {type(exc).__name__}: {exc} "
+                    f"(run again with {TRACEBACK_FLAG} to see where)", fg=typer.colors.RED, err=True)
+        sys.exit(1)

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import typer
 
-from sysid.cli import app
+from sysid.cli.app import app
 from sysid.errors import DataError
 
 
@@ -26,7 +26,7 @@ def export(
 
     from sysid.export import export_model, load_step, step_latency
     from sysid.integrators import Method
-    from sysid.runs import load_model  # may move during the orchestration refactor
+    from sysid.rundir import load_model
 
     try:
         method = Method.parse(integrator)

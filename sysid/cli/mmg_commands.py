@@ -11,20 +11,21 @@ import torch
 import typer
 from tqdm import tqdm
 
-from sysid.cli import app
+from sysid.cli.app import app
 from sysid.data import expand_paths, read_run
 from sysid.compiled import predict
-from sysid.dynamics import state_derivative
+from sysid.dynamics import INTEGRATORS, state_derivative
 from sysid.errors import DataError
-from sysid.evaluate import metrics_table
+from sysid.evaluate import evaluate_model
 from sysid.files import write_csv
 from sysid.integrators import Integrator
 from sysid.mmg import MMG
 from sysid.ship import load_ship, parse_overrides
+from sysid.state import FORCE, INPUTS, STATE, force_column
 
-FORCE_INPUTS = ["x", "u", "y", "v", "psi", "r", "n_prop", "delta_rad", "wind_velo_true", "wind_dir_true"]
-COMPONENT_COLUMNS = [("hull", "H"), ("propeller", "P"), ("rudder", "R"), ("wind", "A")]
-DERIVATIVES = ["x_dot", "u_dot", "y_dot", "v_dot", "psi_dot", "r_dot"]
+FORCE_INPUTS = [*STATE, *INPUTS]
+MMG_COMPONENTS = ("hull", "propeller", "rudder", "wind")
+DERIVATIVES = [f"{c}_dot" for c in STATE]
 
 ShipOption = typer.Option("esso_osaka", "--ship", help="Ship name (configs/ships/NAME.toml) or path to a ship TOML.")
 SetOption = typer.Option(None, "--set", help="Override a ship parameter, e.g. --set Xvr=0.4535 (repeatable).")
@@ -35,8 +36,8 @@ CompiledOption = typer.Option(False, "--compiled",
 
 
 def _check_integrator(integrator: str) -> None:
-    if integrator not in ("euler", "rk4"):
-        raise DataError(f"--integrator {integrator!r}: choose euler or rk4")
+    if integrator not in INTEGRATORS:
+        raise DataError(f"--integrator {integrator!r}: choose one of {', '.join(INTEGRATORS)}")
 
 
 def _model(ship: str, overrides: Optional[List[str]], quadrature: str) -> MMG:
@@ -53,13 +54,13 @@ def force_columns(model: MMG, frame: pd.DataFrame) -> pd.DataFrame:
         forces = model(state, inputs)
         deriv = state_derivative(state, forces.total, model.coefficients)
     out = {}
-    for comp, key in COMPONENT_COLUMNS:
+    for comp in MMG_COMPONENTS:
         arr = getattr(forces, comp).numpy()
-        for j, axis in enumerate("XYN"):
-            out[f"{axis}{key}_SI"] = arr[:, j]
+        for j, axis in enumerate(FORCE):
+            out[force_column(comp, axis)] = arr[:, j]
     total = forces.total.numpy()
-    for j, axis in enumerate("XYN"):
-        out[f"{axis}_SI"] = total[:, j]
+    for j, axis in enumerate(FORCE):
+        out[axis] = total[:, j]
     for j, name in enumerate(DERIVATIVES):
         out[name] = deriv.numpy()[:, j]
     return pd.DataFrame(out, index=frame.index)
@@ -67,7 +68,7 @@ def force_columns(model: MMG, frame: pd.DataFrame) -> pd.DataFrame:
 
 @app.command()
 def forces(
-    input_csv: Path = typer.Argument(..., help="CSV with columns x u y v psi r n_prop delta_rad wind_velo_true wind_dir_true (SI)."),
+    input_csv: Path = typer.Argument(..., help="CSV with columns x u y v psi r n_prop delta_rudder wind_velo_true wind_dir_true (SI: m, m/s, rad, rad/s, rps)."),
     output: Path = typer.Option(..., "-o", "--output", help="Output CSV."),
     ship: str = ShipOption,
     set_: Optional[List[str]] = SetOption,
@@ -129,15 +130,15 @@ def simulate(
         pred = predict(model, x0, inputs, run.dt, Integrator(integrator, compiled))
         forces = model(pred, inputs)
     out = pd.DataFrame({"t": run.t[sl], "t_rel": run.t[sl] - run.t[i0]})
-    for j, name in enumerate(["x", "u", "y", "v", "psi", "r"]):
+    for j, name in enumerate(STATE):
         out[name] = pred[:, j].numpy()
-    for j, name in enumerate(["n_prop", "delta_rudder", "wind_velo_true", "wind_dir_true"]):
+    for j, name in enumerate(INPUTS):
         out[name] = run.inputs[sl, j]
-    for comp, key in COMPONENT_COLUMNS:
+    for comp in MMG_COMPONENTS:
         arr = getattr(forces, comp).numpy()
-        for j, axis in enumerate("XYN"):
-            out[f"{axis}{key}_SI"] = arr[:, j]
-    for j, name in enumerate(["x", "u", "y", "v", "psi", "r"]):
+        for j, axis in enumerate(FORCE):
+            out[force_column(comp, axis)] = arr[:, j]
+    for j, name in enumerate(STATE):
         out[f"obs_{name}"] = run.states[sl, j]
     write_csv(out, output, float_format="%.17g")
     err = np.sqrt(((out[["u", "v", "r"]].to_numpy() - out[["obs_u", "obs_v", "obs_r"]].to_numpy()) ** 2).mean(0))
@@ -162,7 +163,7 @@ def evaluate(
     _check_integrator(integrator)
     start = time.perf_counter()
     if run_dir is not None:
-        from sysid.runs import load_model
+        from sysid.rundir import load_model
         exp, model = load_model(run_dir)
         label = f"{exp.experiment.model} run {run_dir}"
     else:
@@ -173,7 +174,7 @@ def evaluate(
         label = f"MMG ({model.ship.name}, overrides: {overrides})"
     files = expand_paths(data)
     runs = [read_run(f) for f in tqdm(files, desc="reading", unit="file", disable=len(files) < 4)]
-    table = metrics_table(model, runs, horizon, Integrator(integrator, compiled))
+    table = evaluate_model(model, runs, horizon, Integrator(integrator, compiled), traces=False).metrics
     write_csv(table, output, float_format="%.6g")
     with pd.option_context("display.width", 120, "display.float_format", "{:.5f}".format):
         typer.echo(table.to_string(index=False))

@@ -12,7 +12,7 @@ from tqdm import tqdm
 
 from preprocessing import pipeline, synth
 from preprocessing.schema import RawLogError
-from sysid.cli import app
+from sysid.cli.app import app
 from sysid.errors import DataError
 from sysid.ship import load_ship
 
@@ -135,21 +135,20 @@ def _summary(results: list[dict], outdir: Path, seconds: float) -> None:
     typer.echo(f"{'file':34s} {'seg':>3s} {'dur[s]':>7s} {'base-rej':>8s} {'gate-rej':>8s} "
                f"{'gaps i/s':>8s} {'bias[deg/10min]':>15s}")
     ok = [r for r in results if r["ok"]]
-    shown = [r for i, r in enumerate(ok) if i < 20 or len(r["report"]["segments"]) > 1]
+    shown = [r for i, r in enumerate(ok) if i < 20 or len(r["report"].segments) > 1]
     for r in shown:
         rep = r["report"]
-        dur = sum(s["t_end"] - s["t_start"] for s in rep["segments"])
-        bias = rep["fog_bias_rad_s"]["mean"] * 600 * 180 / 3.141592653589793
-        typer.echo(f"{Path(r['file']).name[:34]:34s} {len(rep['segments']):3d} {dur:7.0f} "
-                   f"{rep['baseline']['rejected']:8d} {rep['heading_gate']['rejected']:8d} "
-                   f"{rep['gaps_interpolated']:>4d}/{rep['gaps_split']:<3d} {bias:15.2f}")
+        bias = rep.fog_bias_rad_s["mean"] * 600 * 180 / 3.141592653589793
+        typer.echo(f"{Path(r['file']).name[:34]:34s} {len(rep.segments):3d} {rep.kept_s:7.0f} "
+                   f"{rep.baseline.rejected:8d} {rep.heading_gate.rejected:8d} "
+                   f"{rep.gaps_interpolated:>4d}/{rep.gaps_split:<3d} {bias:15.2f}")
     for r in results:
         if not r["ok"]:
             typer.secho(f"FAILED {r['error']}", fg=typer.colors.RED, err=True)
     if len(shown) < len(ok):
         typer.echo(f"... {len(ok) - len(shown)} more file(s) with one segment each")
-    rej = sum(r["report"]["baseline"]["rejected"] + r["report"]["heading_gate"]["rejected"] for r in ok)
-    segs = sum(len(r["report"]["segments"]) for r in ok)
+    rej = sum(r["report"].baseline.rejected + r["report"].heading_gate.rejected for r in ok)
+    segs = sum(len(r["report"].segments) for r in ok)
     typer.echo(f"{len(ok)} of {len(results)} file(s) processed into {outdir} in {seconds:.1f} s: "
                f"{segs} segment(s), {rej} GNSS sample(s) rejected"
                + (f"; {len(results) - len(ok)} FAILED" if len(ok) < len(results) else ""))

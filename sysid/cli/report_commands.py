@@ -5,7 +5,7 @@ from pathlib import Path
 
 import typer
 
-from sysid.cli import app
+from sysid.cli.app import app
 
 
 @app.command()

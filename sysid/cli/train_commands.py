@@ -7,7 +7,7 @@ from typing import List, Optional
 
 import typer
 
-from sysid.cli import app
+from sysid.cli.app import app
 
 
 @app.command()
@@ -17,34 +17,41 @@ def train(
     data: Optional[Path] = typer.Option(None, "--data", help="Dataset root (default: SYSID_DATA or ../shared/data/frt-ds-esso)."),
     test: Optional[List[Path]] = typer.Option(None, "--test", help="Files to evaluate on (default: the six test files)."),
     epochs: Optional[int] = typer.Option(None, "--epochs", help="Override [training] epochs."),
+    threads: Optional[int] = typer.Option(None, "--threads", help="Override [training] threads (torch CPU threads; 0: one per core)."),
+    resume: bool = typer.Option(False, "--resume", help="Continue an interrupted training from its checkpoint."),
 ) -> None:
     """Train an MMG (identified), NN-only or hybrid model and write a run directory."""
+    from sysid.cli.interrupts import on_interrupt
     from sysid.data import expand_paths, read_run
-    from sysid.datasets import test_files, training_files
+    from sysid.datasets import test_files
     from sysid.experiment import load_experiment
-    from sysid.runs import build_model, evaluate_model, write_run
-    from sysid.train import Trainer
+    from sysid.lifecycle import checkpoint_path, run_experiment, training_runs
 
     start = time.perf_counter()
     exp = load_experiment(config)
     if epochs is not None:
         exp = exp.replace(training={"epochs": epochs})
-    files = [Path(f) for f in exp.data.files] if exp.data.files else training_files(exp.experiment.dataset, data)
-    runs = [read_run(f, exp.data.rate) for f in files]
-    typer.echo(f"train: {exp.experiment.model} model on {len(runs)} file(s) "
-               f"({sum(r.duration for r in runs):.0f} s of data), seed {exp.experiment.seed}")
-    if exp.experiment.model == "mmg" and not exp.identify.parameters:
-        model, history, info = build_model(exp), None, {}
-    else:
-        trainer = Trainer(exp, log=lambda m: typer.echo("  " + m)).fit(runs)
-        model, history, info = trainer.model_.cpu().double(), trainer.history_, trainer.info_
+    if threads is not None:
+        exp = exp.replace(training={"threads": threads})
+    checkpoint = checkpoint_path(output)
+    on_interrupt(lambda: f"nothing written to {output}" + (
+        f"; the training checkpoint {checkpoint} is kept: rerun with --resume to continue"
+        if checkpoint.is_file() else ""))
+    runs = training_runs(exp, data) if exp.needs_training else None
+    if runs is not None:
+        typer.echo(f"train: {exp.experiment.model} model on {len(runs)} file(s) "
+                   f"({sum(r.duration for r in runs):.0f} s of data), seed {exp.experiment.seed}")
     test_paths = expand_paths(test) if test else list(test_files(data).values())
     tests = [read_run(p) for p in test_paths]
-    evaluation = evaluate_model(model, tests, exp.evaluation.horizons, exp.evaluation.integrator)
-    write_run(output, exp, model, evaluation, history, info, time.perf_counter() - start)
-    m = evaluation.metrics
-    typer.echo(m.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
-    typer.echo(f"train: wrote {output} in {time.perf_counter() - start:.0f} s")
+    result = run_experiment(exp, output, tests, runs, data, log=lambda m: typer.echo("  " + m), resume=resume)
+    typer.echo(result.evaluation.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+    if result.failure:
+        typer.secho(f"train: FAILED: {result.failure}; the run in {output} is marked failed", fg=typer.colors.RED, err=True)
+        raise SystemExit(1)
+    t = result.training
+    stops = ", ".join(f"{k}: {v}" for k, v in t.stopped.items()) if t else "not trained"
+    typer.echo(f"train: wrote {output} in {time.perf_counter() - start:.0f} s"
+               + (f" ({t.epochs} epochs, best {t.best_epoch}; {stops})" if t else ""))
 
 
 @app.command()
@@ -63,13 +70,9 @@ def reproduce(
         if path.is_file():
             typer.echo("\n" + path.read_text())
     if report:
-        try:
-            from sysid.report import write_report
-        except ImportError:
-            typer.echo("report: sysid.report is not available; skipped")
-        else:
-            paths = write_report(output, output)
-            typer.echo(f"report: {paths}")
+        from sysid.report import build_report
+        paths = build_report(output, output)
+        typer.echo(f"report: {paths.html} and {paths.pdf} ({paths.n_figures} figures, {paths.n_pages} pages)")
     card = dict(summary.get("scorecard", {}))
     baseline = card.pop("baseline", "MMG")
     for ds, c in card.items():
@@ -79,4 +82,8 @@ def reproduce(
     if shares:
         typer.echo("kNN gate off on the Random test (30 s): " +
                    ", ".join(f"{k} {100 * v:.0f} %" for k, v in shares.items() if v is not None))
+    for name, why in summary.get("failed", {}).items():
+        typer.secho(f"reproduce: run {name} FAILED: {why}", fg=typer.colors.RED, err=True)
     typer.echo(f"reproduce: {output} in {summary['seconds'] / 60:.1f} min")
+    if summary.get("failed"):
+        raise SystemExit(1)

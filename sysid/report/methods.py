@@ -7,7 +7,7 @@ import hashlib
 import platform
 from dataclasses import dataclass
 
-from sysid.report.palette import model_label
+from sysid.paper import run_label
 from sysid.report.quality import quality_rows
 from sysid.report.source import ReportSource, RunRecord
 
@@ -61,7 +61,7 @@ def run_rows(source: ReportSource) -> list[RunRow]:
     for run in source.runs:
         s = run.summary
         epochs = "-" if run.model == "mmg" else f"{s.get('epochs', '-')} (best {s.get('best_epoch', '-')})"
-        rows.append(RunRow(model_label(run.name, run.model, run.dataset), run.model, run.dataset, epochs,
+        rows.append(RunRow(run_label(run.name, run.model, run.dataset), run.model, run.dataset, epochs,
                            "-" if run.model == "mmg" else _seconds(s.get("train_seconds")),
                            config_digest(run), str(s.get("created", "-"))))
     return rows
@@ -132,7 +132,7 @@ def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -
     items = [
         ("Source", f"{source.path} ({SOURCE_KINDS[source.kind].format(n=len(runs), q=len(source.quality))})"),
         ("Ship", ship),
-        ("Models", ", ".join(model_label(r.name, r.model, r.dataset) for r in runs)),
+        ("Models", ", ".join(run_label(r.name, r.model, r.dataset) for r in runs)),
         ("Training data sets", ", ".join(datasets) or "none (MMG only)"),
         ("Test scenarios", ", ".join(scenarios)),
         ("Configuration digest", ", ".join(f"{r.name}: {config_digest(r)}" for r in runs)),
@@ -172,14 +172,14 @@ def methods_paragraphs(source: ReportSource) -> list[str]:
     horizons = sorted({h for r in source.runs for h in r.horizons()})
     out = [PROTOCOL_TEXT.format(horizons=" and ".join(str(h) for h in horizons))] if source.runs else []
     if source.quality:
-        settings = source.quality[0].get("settings") or {}
+        settings = source.quality[0].settings
         out.append("Preprocessing: raw 10 Hz logs converted to the processed schema (GNSS to local metres, "
                    "antenna-baseline and heading-gate checks, gaps interpolated or split into segments, "
                    "velocities by filtering); settings of the first file: "
                    + (", ".join(f"{k} = {v}" for k, v in _flatten(settings)) or "not recorded") + ".")
     for run in source.runs:
         s = run.summary
-        text = f"{model_label(run.name, run.model, run.dataset)}: {MODEL_TEXT.get(run.model, run.model)}."
+        text = f"{run_label(run.name, run.model, run.dataset)}: {MODEL_TEXT.get(run.model, run.model)}."
         if s.get("mmg_overrides"):
             text += " MMG coefficients changed from the ship file: " + ", ".join(
                 f"{k} = {v}" for k, v in s["mmg_overrides"].items()) + "."

@@ -1,4 +1,4 @@
-"""One colour and one label per model, the same in every figure and table of a report.
+"""One colour per model, the same in every figure and table of a report (labels: `sysid.paper`).
 
 Measured data is black; MMG blues, NN oranges, hybrid greens (the darker shade for D2, the
 data set the paper's figures use). Force components have their own fixed colours.
@@ -18,7 +18,6 @@ MODEL_COLOURS = {
     "hybrid_identified_D2": "#17a2a2",
 }
 KIND_COLOURS = {"mmg": "#1f5fbf", "nn": "#e06c00", "hybrid": "#1b8a3a"}
-KIND_LABELS = {"mmg": "MMG", "nn": "NN", "hybrid": "Hybrid"}
 EXTRA_COLOURS = ["#8c3fbf", "#bf3f6f", "#6f6f2f", "#2f8f8f"]
 
 # force components (Figs. 17-20)
@@ -47,14 +46,6 @@ def model_colour(name: str, kind: str, dataset: str, index: int = 0) -> str:
         return KIND_COLOURS[kind]
     return EXTRA_COLOURS[index % len(EXTRA_COLOURS)]
 
-
-def model_label(name: str, kind: str, dataset: str) -> str:
-    """Short label: "MMG (paper X'vr)", "NN D2", "Hybrid D1", ..."""
-    if kind == "mmg":
-        if name.startswith("mmg_"):
-            return f"MMG ({name[4:].replace('_', ' ')})"
-        return "MMG" if name in ("mmg", "") else f"MMG ({name})"
-    base = KIND_LABELS.get(kind, kind)
-    if name.startswith(f"{kind}_") and name != f"{kind}_{dataset}":  # e.g. hybrid_identified_D2
-        return f"{base} {name[len(kind) + 1:].replace('_', ' ')}"
-    return f"{base} {dataset}" if dataset and dataset != "-" else base
+# preprocessing quality timeline
+QUALITY_COLOURS = {"kept": "#1b8a3a", "dropped": "#9a9a9a", "split": "#d62728", "filled": "#ff9f1c",
+                   "baseline": "#1f5fbf", "gate": "#8c3fbf"}

@@ -35,6 +35,25 @@ class TextLine:
     key: str = ""
 
 
+def text_blocks(title: str, summary, rows, methods, quality, notes) -> list[tuple]:
+    """The report's text pages as blocks ("h1"/"h2"/"p"/"small", text) or ("kv", key, value):
+    summary items, run rows, methods paragraphs, preprocessing quality rows, figure notes."""
+    blocks = [("h1", title), ("h2", "Summary")] + [("kv", k, str(v)) for k, v in summary]
+    blocks += [("h2", "Runs")] * bool(rows) + [("kv", r.label, f"{r.model}, data set {r.dataset}, epochs {r.epochs}, "
+                                                f"training {r.train_time}, config {r.config_digest}, created {r.created}")
+                                                for r in rows]
+    blocks += [("h2", "Methods")] + [("p", p) for p in methods]
+    if quality:
+        blocks += [("h2", "Preprocessing quality")] + [
+            ("kv", q.file, f"{q.rows} rows ({q.missing_rows} missing), {q.segments} segments ({q.kept_s:.0f} s kept, "
+             f"{q.dropped} dropped), gaps {q.gaps_interpolated} interpolated / {q.gaps_split} split, GNSS rejected: "
+             f"baseline {q.baseline_rejected}, heading {q.heading_rejected}, fix {q.fix_rejected}; repairs: {q.repairs}")
+            for q in quality]
+    if notes:
+        blocks += [("h2", "Figures not drawn")] + [("small", f"- {n}") for n in notes]
+    return blocks
+
+
 def text_lines(blocks: list[tuple[str, str] | tuple[str, str, str]]) -> list[TextLine]:
     """Blocks (style, text) or ("kv", key, value) wrapped into lines."""
     lines: list[TextLine] = []

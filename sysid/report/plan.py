@@ -14,7 +14,8 @@ import pandas as pd
 from matplotlib.figure import FigureBase
 
 from sysid.report import figures as F
-from sysid.report.palette import model_colour, model_label
+from sysid.paper import run_label
+from sysid.report.palette import model_colour
 from sysid.paper import scenario_key
 from sysid.report.quality import FILES_PER_FIGURE, quality_timeline
 from sysid.report.source import ReportSource, RunRecord
@@ -42,7 +43,7 @@ class FigurePlan:
 
 
 def _label(run: RunRecord) -> str:
-    return model_label(run.name, run.model, run.dataset)
+    return run_label(run.name, run.model, run.dataset)
 
 
 def _colour(run: RunRecord, index: int = 0) -> str:

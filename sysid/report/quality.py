@@ -10,21 +10,12 @@ from matplotlib.figure import Figure, FigureBase
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
-from sysid.report.source import read_json
+from preprocessing.quality import QualityReport
+from sysid.report.palette import QUALITY_COLOURS
 
-KEPT, DROPPED, SPLIT, FILLED, BASELINE, GATE = "#1b8a3a", "#9a9a9a", "#d62728", "#ff9f1c", "#1f5fbf", "#8c3fbf"
+KEPT, DROPPED, SPLIT, FILLED, BASELINE, GATE = (QUALITY_COLOURS[k] for k in (
+    "kept", "dropped", "split", "filled", "baseline", "gate"))
 FILES_PER_FIGURE = 20
-
-
-def read_quality_reports(*folders: Path) -> list[dict]:
-    """Every ``*.report.json`` directly in the folders, sorted by file name."""
-    reports = []
-    for folder in folders:
-        for path in sorted(Path(folder).glob("*.report.json")) if Path(folder).is_dir() else []:
-            data = read_json(path)
-            data.setdefault("file", path.name.removesuffix(".report.json"))
-            reports.append(data)
-    return reports
 
 
 @dataclass
@@ -45,24 +36,14 @@ class QualityRow:
     repairs: str
 
 
-def _count(value) -> int:
-    return int(value.get("rejected", 0)) if isinstance(value, dict) else int(value or 0)
+def quality_rows(reports: list[QualityReport]) -> list[QualityRow]:
+    return [QualityRow(Path(r.file).stem, r.rows, r.missing_rows, len(r.segments), r.kept_s,
+                       len(r.dropped_segments), r.gaps_interpolated, r.gaps_split, r.baseline.rejected,
+                       r.heading_gate.rejected, r.fix_rejected, "; ".join(map(str, r.repairs)) or "-")
+            for r in reports]
 
 
-def quality_rows(reports: list[dict]) -> list[QualityRow]:
-    rows = []
-    for r in reports:
-        segments = r.get("segments") or []
-        rows.append(QualityRow(
-            Path(str(r.get("file", "?"))).stem, int(r.get("rows", 0) or 0), int(r.get("missing_rows", 0) or 0),
-            len(segments), float(sum(s.get("t_end", 0) - s.get("t_start", 0) for s in segments)),
-            len(r.get("dropped_segments") or []), int(r.get("gaps_interpolated", 0) or 0),
-            int(r.get("gaps_split", 0) or 0), _count(r.get("baseline")), _count(r.get("heading_gate")),
-            int(r.get("fix_rejected", 0) or 0), "; ".join(map(str, r.get("repairs") or [])) or "-"))
-    return rows
-
-
-def quality_timeline(reports: list[dict], title: str, into: FigureBase | None = None) -> FigureBase:
+def quality_timeline(reports: list[QualityReport], title: str, into: FigureBase | None = None) -> FigureBase:
     """One line per file over time [s]: kept segments (bars), dropped segments, gaps split
     or interpolated, GNSS fixes rejected by the baseline check and by the heading gate."""
     n = len(reports)
@@ -70,20 +51,20 @@ def quality_timeline(reports: list[dict], title: str, into: FigureBase | None = 
     ax = fig.subplots()
     for i, r in enumerate(reports):
         y = n - 1 - i
-        for s in r.get("segments") or []:
-            ax.barh(y, s["t_end"] - s["t_start"], left=s["t_start"], height=0.5, color=KEPT)
-        for s in r.get("dropped_segments") or []:
-            ax.barh(y, s["t_end"] - s["t_start"], left=s["t_start"], height=0.5, color=DROPPED)
-        for g in r.get("gaps") or []:
-            split = g.get("action") == "split"
+        for s in r.segments:
+            ax.barh(y, s.t_end - s.t_start, left=s.t_start, height=0.5, color=KEPT)
+        for s in r.dropped_segments:
+            ax.barh(y, s.t_end - s.t_start, left=s.t_start, height=0.5, color=DROPPED)
+        for g in r.gaps:
+            split = g.action == "split"
             h = 0.32 if split else 0.15
-            ax.plot([g["t_start"], g["t_start"]], [y - h, y + h], color=SPLIT if split else FILLED,
+            ax.plot([g.t_start, g.t_start], [y - h, y + h], color=SPLIT if split else FILLED,
                     lw=1.2 if split else 0.5, alpha=1.0 if split else 0.6)
-        for key, colour, dy in (("baseline", BASELINE, 0.38), ("heading_gate", GATE, -0.38)):
-            times = np.asarray((r.get(key) or {}).get("rejected_t") or [], dtype=float)
+        for rejections, colour, dy in ((r.baseline, BASELINE, 0.38), (r.heading_gate, GATE, -0.38)):
+            times = np.asarray(rejections.rejected_t, dtype=float)
             if len(times):
                 ax.plot(times, np.full_like(times, y + dy), "|", color=colour, ms=4)
-    ax.set_yticks(range(n), [Path(str(r.get("file", "?"))).stem for r in reversed(reports)], fontsize=7)
+    ax.set_yticks(range(n), [Path(r.file).stem for r in reversed(reports)], fontsize=7)
     ax.set_ylim(-0.8, n - 0.2)
     ax.set_xlabel("t [s]")
     ax.grid(axis="y", visible=False)

@@ -13,10 +13,11 @@ from pathlib import Path
 
 import pandas as pd
 
+from preprocessing.quality import QualityReport
 from sysid.errors import CheckpointError
-from sysid.rundir import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
+from sysid.experiment import KINDS as MODEL_KINDS
+from sysid.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
 
-MODEL_KINDS = ("mmg", "nn", "hybrid")
 
 
 def read_json(path: Path) -> dict:
@@ -121,7 +122,7 @@ class ReportSource:
     kind: str  # "run" or "reproduction"
     runs: list[RunRecord]
     summary: dict
-    quality: list[dict] = field(default_factory=list)  # preprocessing *.report.json contents
+    quality: list[QualityReport] = field(default_factory=list)  # preprocessing *.report.json
 
     @property
     def title(self) -> str:
@@ -158,9 +159,22 @@ def read_run_dir(path: Path) -> RunRecord:
                      metrics, history)
 
 
+def read_quality_reports(*folders: Path) -> list[QualityReport]:
+    """Every ``*.report.json`` directly in the folders, sorted by file name."""
+    reports = []
+    for folder in folders:
+        for path in sorted(Path(folder).glob("*.report.json")) if Path(folder).is_dir() else []:
+            data = read_json(path)
+            data.setdefault("file", path.name.removesuffix(".report.json"))
+            try:
+                reports.append(QualityReport.from_dict(data))
+            except (TypeError, ValueError) as exc:
+                raise CheckpointError(f"{path}: not a preprocessing quality report ({exc})") from None
+    return reports
+
+
 def read_source(path) -> ReportSource:
     """A run directory (has summary.json and metrics.csv) or a reproduction directory (has runs/)."""
-    from sysid.report.quality import read_quality_reports
     path = Path(path)
     if not path.is_dir():
         raise CheckpointError(f"{path}: no such directory")

@@ -11,13 +11,12 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from sysid.report.palette import KIND_LABELS, MODEL_COLOURS, model_colour, model_label
-from sysid.paper import paper_rmse, scenario_key
+from sysid.paper import SCENARIO_ORDER, comparison_table, model_label, paper_rmse, run_label, scenario_key
+from sysid.report.palette import model_colour
 from sysid.report.source import ReportSource, RunRecord
 
 COMPONENTS = ("u", "v_m", "r")
 UNITS = {"u": "m/s", "v_m": "m/s", "r": "rad/s"}
-PAPER_ORDER = ["Berthing", "Turning 20", "Turning 35", "Zigzag 20/20", "Zigzag 30/30", "Random"]
 
 
 def format_rmse(value: float | None) -> str:
@@ -114,7 +113,7 @@ def run_rmse(run: RunRecord) -> dict[tuple[str, int], tuple[float, float, float]
 def _scenario_order(labels) -> list[str]:
     """The paper's order first (any spelling), then the others (held-out files) as found."""
     labels = list(dict.fromkeys(labels))
-    rank = {scenario_key(s): i for i, s in enumerate(PAPER_ORDER)}
+    rank = {scenario_key(s): i for i, s in enumerate(SCENARIO_ORDER)}
     return sorted(labels, key=lambda s: rank.get(scenario_key(s), len(rank)))
 
 
@@ -138,56 +137,39 @@ def _mark_best(rows: list[TableRow]) -> None:
                     r.cells[j].best = v == best
 
 
-def _variant(run: RunRecord) -> str:
-    """A trained run's name without its data-set suffix (hybrid_D2 -> hybrid)."""
-    suffix = f"_{run.dataset}"
-    if run.name.startswith(f"{run.model}") and run.name.endswith(suffix):
-        return run.name[: -len(suffix)]
-    return run.model
-
-
 def reproduction_tables(source: ReportSource) -> list[RmseTable]:
-    """Tables 7 and 8 (one per horizon): rows scenario x model, column groups the data sets."""
+    """Tables 7 and 8 (one per horizon) from `sysid.paper.comparison_table`: rows scenario x
+    model, column groups the data sets."""
     runs = source.runs
-    rmse = {run.name: run_rmse(run) for run in runs}
-    datasets = sorted({r.dataset for r in runs if r.model != "mmg" and r.dataset != "-"}) or ["-"]
-    # row keys: each MMG run is its own row (dataset-independent); NN and hybrid by variant
-    # (the run name without its data set: hybrid_D2 -> hybrid, hybrid_identified_D2 -> hybrid_identified)
-    row_keys: list[tuple[str, str]] = []
+    datasets = tuple(sorted({r.dataset for r in runs if r.dataset not in ("-", "files")})) or ("D1", "D2")
+    relabelled = []
     for run in runs:
-        key = (run.model, run.name if run.model == "mmg" else _variant(run))
-        if key not in row_keys:
-            row_keys.append(key)
-    known = list(MODEL_COLOURS)
-    row_keys.sort(key=lambda k: (("mmg", "nn", "hybrid").index(k[0]),
-                                 known.index(k[1]) if k[1] in known else len(known), k[1]))
-    horizons = sorted({h for run in runs for h in run.horizons()})
-    scenarios = _scenario_order(s for run in runs for s, _ in rmse[run.name])
+        labels = scenario_files(run)
+        metrics = run.metrics.assign(scenario=run.metrics["file"].astype(str).map(lambda f: labels[Path(f).stem]))
+        relabelled.append((run.name, run.model, run.dataset, metrics))
+    long = comparison_table(relabelled, datasets)
+    colour = {}
+    for run in runs:
+        colour.setdefault(model_label(run.name, run.model, run.dataset), model_colour(run.name, run.model, run.dataset))
     tables = []
-    for number, horizon in enumerate(horizons):
+    for number, horizon in enumerate(sorted(long.horizon_s.unique())):
+        horizon = int(horizon)
         paper_no = {30: "7", 100: "8"}.get(horizon)
         title = (f"Table {paper_no}" if paper_no else f"Table {7 + number}") + \
             f": RMSE of {horizon} s predictions (u, v_m [m/s]; r [rad/s])"
-        table = RmseTable(f"table_{horizon}s", title,
-                          [d if d != "-" else "no training data" for d in datasets])
-        for scenario in scenarios:
-            for kind, key in row_keys:
-                cells, ref = [], None
-                for dataset in datasets:
-                    run = next((r for r in runs if r.model == kind and
-                                (r.name == key if kind == "mmg" else (r.dataset == dataset and _variant(r) == key))),
-                               None)
-                    values = rmse[run.name].get((scenario, horizon)) if run else None
-                    paper = paper_rmse(_paper_scenario(scenario), kind, dataset, horizon) \
-                        if kind == "mmg" or key == kind else None
-                    for i in range(3):
-                        cells.append(Cell(values[i] if values else None, paper[i] if paper else None))
-                    ref = ref or run
-                if ref is None or all(c.ours is None for c in cells):
-                    continue
-                label = (model_label(ref.name, kind, "-") if kind == "mmg" else KIND_LABELS[kind] if key == kind
-                         else f"{KIND_LABELS[kind]} ({key[len(kind) + 1:].replace('_', ' ')})")
-                table.rows.append(TableRow(scenario, label, model_colour(ref.name, kind, ref.dataset), cells))
+        table = RmseTable(f"table_{horizon}s", title, list(datasets))
+        at = long[long.horizon_s == horizon]
+        for (scenario, model), block in at.groupby(["scenario", "model"], sort=False):
+            cells = []
+            for dataset in datasets:
+                row = block[block.dataset == dataset]
+                for c in ("u", "v", "r"):
+                    if row.empty:
+                        cells.append(Cell(None, None))
+                        continue
+                    paper = float(row[f"paper_{c}"].iloc[0])
+                    cells.append(Cell(float(row[f"rmse_{c}"].iloc[0]), None if math.isnan(paper) else paper))
+            table.rows.append(TableRow(scenario, model, colour.get(model, "#000000"), cells))
         _mark_best(table.rows)
         tables.append(table)
     return tables
@@ -197,7 +179,7 @@ def run_table(run: RunRecord) -> RmseTable:
     """One run: rows the scenarios, column groups the horizons."""
     rmse = run_rmse(run)
     horizons = run.horizons()
-    table = RmseTable("table_run", f"RMSE of {model_label(run.name, run.model, run.dataset)} "
+    table = RmseTable("table_run", f"RMSE of {run_label(run.name, run.model, run.dataset)} "
                       "(u, v_m [m/s]; r [rad/s])", [f"{h} s" for h in horizons])
     for scenario in _scenario_order(s for s, _ in rmse):
         cells = []
@@ -206,7 +188,7 @@ def run_table(run: RunRecord) -> RmseTable:
             paper = paper_rmse(_paper_scenario(scenario), run.model, run.dataset, horizon)
             for i in range(3):
                 cells.append(Cell(values[i] if values else None, paper[i] if paper else None))
-        table.rows.append(TableRow(scenario, model_label(run.name, run.model, run.dataset),
+        table.rows.append(TableRow(scenario, run_label(run.name, run.model, run.dataset),
                                    model_colour(run.name, run.model, run.dataset), cells))
     return table
 

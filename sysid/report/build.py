@@ -24,7 +24,7 @@ from sysid.files import atomic_path, write_text  # noqa: E402
 from sysid.report.html import HtmlFigure, figure_svg, render_html  # noqa: E402
 from sysid.report.methods import methods_paragraphs, run_rows, summary_items  # noqa: E402
 from sysid.report.palette import model_colour  # noqa: E402
-from sysid.report.pdf import PdfReport, paginate, pdf_style, table_pages, text_lines  # noqa: E402
+from sysid.report.pdf import PdfReport, paginate, pdf_style, table_pages, text_blocks, text_lines  # noqa: E402
 from sysid.report.plan import figure_plan  # noqa: E402
 from sysid.report.quality import quality_rows  # noqa: E402
 from sysid.report.source import ReportSource, read_source  # noqa: E402
@@ -93,21 +93,8 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
     built = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     title = f"sysid accuracy report: {source.title}"
 
-    blocks = [("h1", title), ("h2", "Summary")] + [("kv", k, str(v)) for k, v in summary]
-    blocks += [("h2", "Runs")] * bool(rows) + [("kv", r.label, f"{r.model}, data set {r.dataset}, epochs {r.epochs}, "
-                                  f"training {r.train_time}, config {r.config_digest}, created {r.created}")
-                                  for r in rows]
-    blocks += [("h2", "Methods")] + [("p", p) for p in methods]
     quality = quality_rows(source.quality)
-    if quality:
-        blocks += [("h2", "Preprocessing quality")] + [
-            ("kv", q.file, f"{q.rows} rows ({q.missing_rows} missing), {q.segments} segments ({q.kept_s:.0f} s kept, "
-             f"{q.dropped} dropped), gaps {q.gaps_interpolated} interpolated / {q.gaps_split} split, GNSS rejected: "
-             f"baseline {q.baseline_rejected}, heading {q.heading_rejected}, fix {q.fix_rejected}; repairs: {q.repairs}")
-            for q in quality]
-    if notes:
-        blocks += [("h2", "Figures not drawn")] + [("small", f"- {n}") for n in notes]
-    text_pages = paginate(text_lines(blocks))
+    text_pages = paginate(text_lines(text_blocks(title, summary, rows, methods, quality, notes)))
     split_tables = [(t, table_pages(t)) for t in tables]
     total = len(text_pages) + sum(len(p) for _, p in split_tables) + len(plan.figures)
 
@@ -153,8 +140,3 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
     return ReportPaths(html_path, pdf_path, len(html_figures), n_pages, notes,
                        time.perf_counter() - started)
 
-
-def write_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
-                 progress: Callable[[str], None] | None = None) -> ReportPaths:
-    """Entry point for `sysid reproduce`: same as `build_report`."""
-    return build_report(source_dir, out_dir, progress)
