@@ -195,7 +195,7 @@ def main() -> None:
         with torch.no_grad():
             t = medians(calls, 30)
         rates = {k: batch / v for k, v in t.items()}
-        print(f"   {batch:>6} rows: " + ", ".join(f"{k} {v / 1e6:.2f} M rows/s" for k, v in rates.items())
+        print(f"   {batch:>6} rows: " + ", ".join(f"{k} {v:,.0f} rows/s" for k, v in rates.items())
               + (f"; compiled/lab {rates['compiled'] / rates['lab']:.0f}x" if "compiled" in rates and "lab" in rates else "")
               + f" (compile/load {first:.1f} s)")
 
