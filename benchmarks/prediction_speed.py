@@ -100,12 +100,12 @@ def training_samples(bank: int):
         runs = [read_run(f) for f in training_files("D2")]
         states = torch.tensor(np.concatenate([r.states for r in runs]))[:bank]
         inputs = torch.tensor(np.concatenate([r.inputs for r in runs]))[:bank]
-        return states, inputs, "(D2 samples)"
+        return states, inputs, " D2"
     except Exception as exc:  # the dataset is optional here
         print(f"   (dataset unavailable: {exc}; the kNN bank is random rows)")
         states, inputs = random_rows(bank, seed=1)
         states[:, 1] = states[:, 1].abs()
-        return states, inputs, "(random rows)"
+        return states, inputs, " random"
 
 
 def models(bank: int, runs: list[str]):
@@ -119,9 +119,9 @@ def models(bank: int, runs: list[str]):
         return [(f"run {r}", load_model(r)[1]) for r in runs]
     out = [("MMG", MMG(load_ship("esso_osaka")))]
     states, inputs, source = training_samples(bank)
-    for label, physics, space in (("NN-only, gate in input space", False, "inputs"),
-                                  ("hybrid, gate in input space", True, "inputs"),
-                                  ("hybrid, gate in feature space (64)", True, "features")):
+    for label, physics, space in (("NN-only, gate on inputs", False, "inputs"),
+                                  ("hybrid, gate on inputs", True, "inputs"),
+                                  ("hybrid, gate on features (64)", True, "features")):
         torch.manual_seed(0)
         mmg = MMG(load_ship("esso_osaka"))
         net = ForceCorrection(dtype=torch.float64)
@@ -131,7 +131,7 @@ def models(bank: int, runs: list[str]):
         with torch.no_grad():
             z = model.gate_coordinates(s)
         model.gate, model.gate_enabled = KNNGate(10, 0.9995, z.shape[-1], torch.float64).fit(z), True
-        out.append((f"{label}, bank {len(z)} {source}", model))
+        out.append((f"{label}, bank {len(z)}{source}", model))
     return out
 
 
@@ -149,16 +149,15 @@ def main() -> None:
     parser.add_argument("--run", action="append", default=[], help="benchmark these run directories instead")
     parser.add_argument("--cold", action="store_true", help="empty compile cache (measures compile time)")
     parser.add_argument("--repeats", type=int, default=200)
+    parser.add_argument("--sections", default="123", help="which sections to run (default 123)")
     parser.add_argument("--all-methods", action="store_true",
                         help="RK4 and Euler for every model (default: both for MMG, Euler, the paper's, for the others)")
     args = parser.parse_args()
     if args.cold:
         os.environ["SYSID_CACHE"] = tempfile.mkdtemp(prefix="sysid-cache-")
     torch.set_num_threads(args.threads)
-    from sysid import MMG, integrate, load_ship, predict
-    from sysid.compiled import cache_dir, compiled_derivative
-    from sysid.dynamics import derivative
-    from sysid.integrators import Integrator
+    from sysid import MMG, load_ship
+    from sysid.compiled import cache_dir
 
     lab = load_lab()
     x0_np, inputs_np, case = recorded_case()
@@ -167,6 +166,21 @@ def main() -> None:
     print(f"case: {case}; times are medians of interleaved calls\n")
     mmg = MMG(load_ship("esso_osaka"))
 
+    if "1" in args.sections:
+        single_call(mmg, x0_np, inputs_np, lab, args.repeats)
+    if "2" in args.sections:
+        batched(lab)
+    if "3" in args.sections:
+        predictions(args, x0_np, inputs_np, lab, mmg)
+    print("\n4. Training throughput: see the training benchmark (hook: benchmarks/training_speed.py)")
+    hook = Path(__file__).with_name("training_speed.py")
+    if hook.is_file():
+        print(f"   run: python {hook.relative_to(ROOT)}")
+
+
+def single_call(mmg, x0_np, inputs_np, lab, repeats: int) -> None:
+    from sysid.compiled import compiled_derivative
+    from sysid.dynamics import derivative
     print("1. One right-hand-side call on one state (float64)")
     x1 = torch.tensor(x0_np)[None]
     u1 = torch.tensor(inputs_np[0])[None]
@@ -178,10 +192,15 @@ def main() -> None:
     if lab is not None:
         calls["lab"] = lambda: lab.rhs(0.0, x0_np[None], *inputs_np[0])
     with torch.no_grad():
-        t = medians(calls, args.repeats * 5)
+        t = medians(calls, repeats * 5)
     _row(t, "us", 1e6)
 
-    print("\n2. Batched right-hand side, rows per second (ours float32, lab float64 numpy)")
+
+def batched(lab) -> None:
+    from sysid import MMG, load_ship
+    from sysid.compiled import compiled_derivative
+    from sysid.dynamics import derivative
+    print(f"\n2. Batched right-hand side, {torch.get_num_threads()} thread(s), rows per second (ours float32, lab float64 numpy)")
     for batch in (4096, 65536):
         xs, us = random_rows(batch, torch.float32)
         m32 = MMG(load_ship("esso_osaka"), dtype=torch.float32)
@@ -199,6 +218,10 @@ def main() -> None:
               + (f"; compiled/lab {rates['compiled'] / rates['lab']:.0f}x" if "compiled" in rates and "lab" in rates else "")
               + f" (compile/load {first:.1f} s)")
 
+
+def predictions(args, x0_np, inputs_np, lab, mmg) -> None:
+    from sysid import integrate, predict
+    from sysid.integrators import Integrator
     print("\n3. One 100 s prediction at dt 1 s (101 states), one ship, float64")
     x0 = torch.tensor(x0_np)
     inputs = torch.tensor(inputs_np)
@@ -210,7 +233,7 @@ def main() -> None:
                 s = lab.rk4_step(1.0, 0.0, s, *inputs_np[k])
                 out.append(s)
             return np.concatenate(out)
-    header = f"   {'model':<44} {'method':<6} {'compile/load':>12} {'eager':>9} {'compiled':>9} {'lab RK4':>9} {'lab/compiled':>12}"
+    header = f"   {'model':<58} {'method':<6} {'compile/load':>12} {'eager':>9} {'compiled':>9} {'lab RK4':>9} {'lab/compiled':>12}"
     print(header)
     for label, model in models(args.bank, args.run):
         for method in ("rk4", "euler") if label == "MMG" or args.all_methods else ("euler",):
@@ -224,18 +247,13 @@ def main() -> None:
                 t = medians(calls, 20, seconds=6.0)
             ratio = f"{t['lab'] / t['compiled']:>11.0f}x" if "lab" in t else f"{'-':>12}"
             lab_ms = f"{t['lab'] * 1e3:>7.1f}ms" if "lab" in t else f"{'-':>9}"
-            print(f"   {label:<44} {method:<6} {first:>11.1f}s {t['eager'] * 1e3:>7.1f}ms "
+            print(f"   {label:<58} {method:<6} {first:>11.1f}s {t['eager'] * 1e3:>7.1f}ms "
                   f"{t['compiled'] * 1e3:>7.2f}ms {lab_ms} {ratio}")
     if lab_pred is not None:
         with torch.no_grad():
             gap = np.abs(predict(mmg, x0, inputs, 1.0, Integrator("rk4", compiled=True)).numpy() - lab_pred())
         print(f"   MMG RK4, ours vs lab: max |difference| {gap[:, [1, 3, 5]].max():.1e} in u, v, r "
               f"(exact vs 100-point Simpson cross-flow)")
-
-    print("\n4. Training throughput: see the training benchmark (hook: benchmarks/training_speed.py)")
-    hook = Path(__file__).with_name("training_speed.py")
-    if hook.is_file():
-        print(f"   run: python {hook.relative_to(ROOT)}")
 
 
 def _row(times: dict, unit: str, scale: float) -> None:
