@@ -39,6 +39,7 @@ from sysid.stepper import Derivative, Step
 Compiled = Callable[..., torch.Tensor]
 INDUCTOR_OPTIONS = {"force_pointwise_cat": True}  # CPU: fuse the (X, Y, N) stacks, no buffers
 PARALLEL_ROWS = 256  # above it a compiled kernel runs on the threads set when it was compiled
+CHUNK_ROWS = 4096  # larger batches run through the 4096-row function (its buffers stay in cache)
 _SOURCE_PACKAGES = ("mmg",)
 _SOURCE_MODULES = ("dynamics.py", "integrators.py", "stepper.py", "models.py", "correction.py", "ood.py",
                    "knn_index.py")
@@ -219,30 +220,55 @@ def compiled_step(model: nn.Module, method: Method | str, dt: float, batch: int,
                   dtype: torch.dtype = torch.float64, device: str | torch.device = "cpu") -> Compiled | None:
     """Compiled ``step(x (batch, 6), u (batch, 4)) -> x_next``, or None (use eager).
 
-    Batches above one are compiled channels first (vectorized over the batch); the
-    callable returned takes and gives (batch, ·) all the same.
+    Batches above one are compiled channels first (vectorized over the batch), batches
+    above `CHUNK_ROWS` as chunks of it; the callable takes and gives (batch, ·) all the same.
     """
     method = Method.parse(method)
-    channels_first = batch > 1
-    examples = _examples(batch, dtype, device, channels_first)
+    rows = min(batch, CHUNK_ROWS)
 
     def build():
-        step = Step(with_indexed_gate(model, batch), method, dt, channels_first)
-        return compile_cached(step, examples, step_label(method), step_metadata(model, method, dt, batch, dtype))
+        step = Step(with_indexed_gate(model, rows), method, dt, rows > 1)
+        return compile_cached(step, _examples(rows, dtype, device), step_label(method),
+                              step_metadata(model, method, dt, rows, dtype))
     return _memoized(model, ("step", method, float(dt), batch, dtype, str(device)),
-                     lambda: _rows_first(build(), channels_first))
+                     lambda: _by_rows(build(), rows, batch))
 
 
-def _examples(batch: int, dtype: torch.dtype, device, channels_first: bool) -> tuple[torch.Tensor, torch.Tensor]:
-    shapes = ((6, batch), (4, batch)) if channels_first else ((batch, 6), (batch, 4))
+def compiled_derivative(model: nn.Module, batch: int, dtype: torch.dtype = torch.float64,
+                        device: str | torch.device = "cpu") -> Compiled | None:
+    """Compiled ``f(x (batch, 6), u (batch, 4)) -> dx/dt``, or None (use eager); batches
+    as in `compiled_step`."""
+    rows = min(batch, CHUNK_ROWS)
+    return _memoized(model, ("rhs", batch, dtype, str(device)),
+                     lambda: _by_rows(compile_cached(Derivative(model, rows > 1), _examples(rows, dtype, device),
+                                                     "rhs"), rows, batch))
+
+
+def _examples(rows: int, dtype: torch.dtype, device) -> tuple[torch.Tensor, torch.Tensor]:
+    """Example (state, inputs): (rows, 6), (rows, 4), or channels first above one row."""
+    shapes = ((6, rows), (4, rows)) if rows > 1 else ((rows, 6), (rows, 4))
     return tuple(torch.zeros(*s, dtype=dtype, device=device) for s in shapes)
 
 
-def _rows_first(fn: Compiled | None, channels_first: bool) -> Compiled | None:
-    """A channels-first compiled function called with and returning (batch, ·) tensors."""
-    if fn is None or not channels_first:
+def _by_rows(fn: Compiled | None, rows: int, batch: int) -> Compiled | None:
+    """`fn` compiled for `rows` (channels first above one) as a function of (batch, ·)
+    tensors: transposed in and out, in chunks of `rows` (the last one padded)."""
+    if fn is None or rows == 1:
         return fn
-    return lambda x, u: fn(x.T, u.T).T
+
+    def run(x: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
+        if batch == rows:
+            return fn(x.T, u.T).T
+        out = []
+        for lo in range(0, x.shape[0], rows):
+            xs, us = x[lo:lo + rows], u[lo:lo + rows]
+            n = xs.shape[0]
+            if n < rows:  # pad with copies of the chunk's first row, dropped afterwards
+                xs = torch.cat((xs, xs[:1].expand(rows - n, -1)))
+                us = torch.cat((us, us[:1].expand(rows - n, -1)))
+            out.append(fn(xs.T, us.T).T[:n])
+        return torch.cat(out)
+    return run
 
 
 def step_label(method: Method) -> str:
@@ -263,16 +289,6 @@ def step_metadata(model: nn.Module, method: Method | str, dt: float, batch: int,
             "units": "state x[m] u[m/s] y[m] v[m/s] psi[rad] r[rad/s]; inputs n_prop[rps] "
                      "delta_rudder[rad] wind_velo_true[m/s] wind_dir_true[rad, from]",
             "signature": "step(state (batch, 6), inputs (batch, 4)) -> state after dt"}
-
-
-def compiled_derivative(model: nn.Module, batch: int, dtype: torch.dtype = torch.float64,
-                        device: str | torch.device = "cpu") -> Compiled | None:
-    """Compiled ``f(x (batch, 6), u (batch, 4)) -> dx/dt``, or None (use eager)."""
-    channels_first = batch > 1
-    examples = _examples(batch, dtype, device, channels_first)
-    return _memoized(model, ("rhs", batch, dtype, str(device)),
-                     lambda: _rows_first(compile_cached(Derivative(model, channels_first), examples, "rhs"),
-                                         channels_first))
 
 
 def compiled_rollout(model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,

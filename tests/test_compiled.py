@@ -191,3 +191,19 @@ def test_compiled_batch_equals_eager(zigzag):
         eager = integrate(model, x0, u, 1.0, "euler")
     compiled = predict(model, x0, u, 1.0, Integrator("euler", compiled=True))
     torch.testing.assert_close(compiled, eager, rtol=1e-12, atol=1e-12)
+
+
+def test_large_batches_run_in_padded_channels_first_chunks():
+    """`_by_rows` feeds a function compiled for `rows` channels-first rows with any batch."""
+    from sysid.compiled import _by_rows
+    calls = []
+
+    def fn(xT, uT):  # stands for a compiled (6, rows), (4, rows) -> (6, rows) function
+        assert xT.shape == (6, 4) and uT.shape == (4, 4)
+        calls.append(1)
+        return xT * 2.0 + uT[:1]
+    x = torch.arange(60, dtype=torch.float64).reshape(10, 6)
+    u = torch.arange(40, dtype=torch.float64).reshape(10, 4)
+    out = _by_rows(fn, rows=4, batch=10)(x, u)
+    torch.testing.assert_close(out, x * 2.0 + u[:, :1], rtol=0, atol=0)
+    assert len(calls) == 3  # 4 + 4 + 2 (padded to 4)
