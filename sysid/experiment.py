@@ -85,6 +85,8 @@ class TrainingOptions:
     batch_size: int = 128
     epochs: int = 400
     learning_rate: float = 1e-3
+    lr_factor: float = 1.0         # learning rate x factor after lr_patience epochs without progress (1: constant)
+    lr_patience: int = 10
     lambda_v: float = 1.0
     lambda_F: float = 1e-3
     lambda_L2: float = 1e-6
@@ -221,6 +223,8 @@ def _validate(exp: Experiment, src: str) -> None:
         (t.batch_size >= 1, "[training] batch_size must be >= 1"),
         (t.epochs >= 0, "[training] epochs must be >= 0"),
         (t.learning_rate > 0, "[training] learning_rate must be > 0"),
+        (0 < t.lr_factor <= 1, "[training] lr_factor must be in (0, 1]"),
+        (t.lr_patience >= 0, "[training] lr_patience must be >= 0"),
         (min(t.lambda_v, t.lambda_F, t.lambda_L2) >= 0, "[training] lambdas must be >= 0"),
         (t.patience >= 1, "[training] patience must be >= 1"),
         (t.max_minutes >= 0, "[training] max_minutes must be >= 0 (0: no wall-clock limit)"),

@@ -3,8 +3,11 @@ hybrid on D1 and D2, evaluated on the six test files, tables beside the paper's 
 from __future__ import annotations
 
 import json
+import multiprocessing
 import os
 import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -95,39 +98,93 @@ def hybrid_baseline() -> str:
     return MODEL_LABELS["mmg_paper"]
 
 
+@dataclass
+class ProtocolRun:
+    """What the protocol keeps of one finished run."""
+
+    name: str
+    kind: str
+    dataset: str          # "-" for an MMG used as defined
+    metrics: pd.DataFrame
+    gate_off_share: dict
+    failure: str | None
+    seconds: float
+
+
+_TRAINING_CACHE: dict = {}
+
+
+def _run_one(name: str, exp: Experiment, out: Path, data, progress: bool, log) -> ProtocolRun:
+    """One protocol run through `run_experiment` (in this process or a worker's)."""
+    tests = _TRAINING_CACHE.get("tests")
+    if tests is None:
+        tests = _TRAINING_CACHE["tests"] = [read_run(p) for p in test_files(data).values()]
+    train = None
+    if exp.needs_training:
+        key = (exp.experiment.dataset, exp.data.files, exp.data.rate)
+        if key not in _TRAINING_CACHE:
+            _TRAINING_CACHE[key] = training_runs(exp, data)
+        train = _TRAINING_CACHE[key]
+    result = run_experiment(exp, out / "runs" / name, tests, train, data, progress, log=log)
+    return ProtocolRun(name, exp.experiment.model, exp.experiment.dataset if exp.needs_training else "-",
+                       result.evaluation.metrics, result.evaluation.gate_off_share, result.failure, result.seconds)
+
+
+def expected_cost(exp: Experiment) -> float:
+    """Relative training cost of a run, to start the longest first (results do not depend
+    on the order; the wall time does): hybrid > NN-only > identification, D2 about twice D1."""
+    cost = {"hybrid": 5.0, "nn": 3.5, "mmg": 0.0}[exp.experiment.model] + 1.5 * bool(exp.identify.parameters)
+    return cost * (2.0 if exp.data.files or exp.experiment.dataset == "D2" else 1.0)
+
+
+def _worker(name: str, exp: Experiment, out: Path, data) -> ProtocolRun:
+    """A worker process: its lines are prefixed with the run's name."""
+    return _run_one(name, exp, out, data, True, lambda m: print(f"[{name}] {m.strip()}", flush=True))
+
+
 def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
               only: list[str] | None = None, progress: bool = True,
-              overrides: dict | None = None, log: Callable[[str], None] = print) -> dict:
-    """Run the protocol; write runs/, comparison.csv, table7.md, table8.md, summary.json."""
+              overrides: dict | None = None, log: Callable[[str], None] = print,
+              jobs: int = 1) -> dict:
+    """Run the protocol; write runs/, comparison.csv, table7.md, table8.md, summary.json.
+
+    `jobs` > 1 trains that many runs side by side in worker processes (each with its
+    config's ``[training] threads``, 1 by default): the results do not depend on it.
+    """
     started = time.perf_counter()
     out = Path(out_dir)
     data_root(data)  # clear error before any work when the data is missing
     names = only or list(PROTOCOL)
-    experiments = {name: protocol_experiment(name) for name in names}
-    tests = [read_run(p) for p in test_files(data).values()]
-    cache: dict[str, list] = {}
-    results = []
-    shares: dict[str, dict] = {}
-    failed: dict[str, str] = {}
-    for i, (name, exp) in enumerate(experiments.items(), 1):
-        if overrides and exp.experiment.model != "mmg":
-            exp = exp.replace(**overrides)
+    experiments = {}
+    for name in names:
+        exp = protocol_experiment(name)
+        experiments[name] = exp.replace(**overrides) if overrides and exp.experiment.model != "mmg" else exp
+    done: dict[str, ProtocolRun] = {}
+    trained = [n for n in names if experiments[n].needs_training]
+    if jobs > 1 and len(trained) > 1:
+        log(f"training {len(trained)} runs in {min(jobs, len(trained))} worker processes")
+        context = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(min(jobs, len(trained)), mp_context=context) as pool:
+            longest_first = sorted(trained, key=lambda n: -expected_cost(experiments[n]))
+            futures = {pool.submit(_worker, n, experiments[n], out, data): n for n in longest_first}
+            for future in as_completed(futures):
+                run = future.result()
+                done[run.name] = run
+                log(f"[{run.name}] done in {run.seconds:.0f} s" + (f"; FAILED: {run.failure}" if run.failure else ""))
+    for i, name in enumerate(names, 1):
+        if name in done:
+            continue
+        exp = experiments[name]
         dataset = exp.experiment.dataset if exp.needs_training else "D1+D2"
         log(f"[{i}/{len(names)}] {name}: {model_label(name, exp.experiment.model, dataset)} on {dataset}")
-        train = None
-        if exp.needs_training:
-            if dataset not in cache:
-                cache[dataset] = training_runs(exp, data)
-            train = cache[dataset]
-        result = run_experiment(exp, out / "runs" / name, tests, train, data, progress,
-                                log=lambda m: log("    " + m))
-        results.append((name, exp.experiment.model, dataset if exp.needs_training else "-",
-                        result.evaluation.metrics))
-        shares[name] = result.evaluation.gate_off_share
-        if result.failure:
-            failed[name] = result.failure
-            log(f"    FAILED: {result.failure}")
-        log(f"    done in {result.seconds:.0f} s")
+        run = done[name] = _run_one(name, exp, out, data, progress, lambda m: log("    " + m))
+        if run.failure:
+            log(f"    FAILED: {run.failure}")
+        log(f"    done in {run.seconds:.0f} s")
+    runs = [done[n] for n in names]
+    results = [(r.name, r.kind, r.dataset, r.metrics) for r in runs]
+    shares = {r.name: r.gate_off_share for r in runs}
+    failed = {r.name: r.failure for r in runs if r.failure}
     table = comparison_table(results)
     write_csv(table, out / "comparison.csv", float_format="%.5f")
     for horizon, fname in ((30, "table7.md"), (100, "table8.md")):

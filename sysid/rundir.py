@@ -8,7 +8,9 @@ A **run directory** (``sysid train CONFIG -o runs/NAME``)::
                         "dataset": "D1"|"D2"|..., "ship", "seed", "created", "train_seconds",
                         "epochs", "best_epoch", "stopped": {stage: "early stop"|"epoch limit"|...},
                         "n_train_windows", "n_val_windows", "versions": {...},
-                        "mmg_overrides": {...}, "identified": {...}, "gate": {...},
+                        "mmg_overrides": {...}, "identified": {...}, "identified_initial": {...},
+                        "identified_uncertainty": {names, estimate, std_error, correlation,
+                        undetermined, ...} | null, "gate": {...},
                         "training": {...}}
     model.pt           state dict (torch.save of plain tensors; weights_only=True safe)
     standardization.json  input/output mean and std of the FNN (Eqs. 8, 10)
@@ -145,6 +147,8 @@ def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds:
         "n_val_windows": info.pop("n_val_windows", None),
         "versions": versions(), "mmg_overrides": ship_overrides(exp),
         "identified": info.pop("identified", {}) or {},
+        "identified_initial": info.pop("identified_initial", {}) or {},
+        "identified_uncertainty": info.pop("identified_uncertainty", None),
         "gate": {**(info.pop("gate", None) or {}), "off_share": evaluation.gate_off_share},
         "training": info,
     }

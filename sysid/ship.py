@@ -1,9 +1,12 @@
 """Ship definitions: a TOML file to a frozen, validated `Ship`.
 
-A ship TOML (``configs/ships/NAME.toml``) holds principal particulars, every MMG
-coefficient (SI; dimensionless derivatives without the prime) and the ``[sensors]``
-table. `load_ship` checks every key against `PARAMETERS` (section and allowed range)
-and applies overrides such as ``{"Xvr": 0.4535}``; keys are matched without
+A ship TOML (``configs/ships/NAME.toml``) holds principal particulars, masses, one
+section per force component and the ``[sensors]`` table. Each of [hull], [propeller],
+[rudder] and the optional [wind] names its force-model family (``model = "standard"``;
+see `sysid.mmg.families`, the Esso Osaka's families when absent) and holds exactly the
+coefficients that family needs (SI; dimensionless derivatives without the prime). A ship
+without a [wind] section feels no wind force. `load_ship` checks every key (section and
+allowed range) and applies overrides such as ``{"Xvr": 0.4535}``; keys are matched without
 underscores and primes (``X_vr``, ``Xvr`` and ``X'vr`` are the same key).
 """
 from __future__ import annotations
@@ -19,70 +22,44 @@ from typing import Mapping
 from preprocessing.sensors import SensorLayout
 from sysid.errors import ShipDefinitionError
 
-_BIG = 1e6
+from sysid.mmg.families import COMPONENTS, DEFAULT_MODELS, FAMILIES, OPTIONAL_COMPONENTS
 
-# name -> (section, low, high): the allowed closed range of each scalar.
-PARAMETERS: dict[str, tuple[str, float, float]] = {
+# name -> (section, low, high): what every ship needs, whatever its force models
+BASE_PARAMETERS: dict[str, tuple[str, float, float]] = {
     # principal particulars
     "L_pp": ("principal", 1e-3, 1e3),
     "B": ("principal", 1e-3, 1e3),
     "d": ("principal", 1e-3, 1e2),
     "rho": ("principal", 500.0, 1100.0),
-    "rho_air": ("principal", 0.5, 2.0),
     # rigid body and added masses
     "m": ("mass", 1e-6, 1e12),
     "m_x": ("mass", 0.0, 1e12),
     "m_y": ("mass", 0.0, 1e12),
     "I_zz_J_zz": ("mass", 1e-9, 1e16),
     "x_G": ("mass", -1e2, 1e2),
-    # hull
-    "X_0F": ("hull", -1.0, 0.0),
-    "X_0A": ("hull", -1.0, 0.0),
-    "X_vr": ("hull", -2.0, 2.0),
-    "Y_v": ("hull", -5.0, 5.0),
-    "Y_r": ("hull", -5.0, 5.0),
-    "N_v": ("hull", -5.0, 5.0),
-    "N_r": ("hull", -5.0, 5.0),
-    "C_D": ("hull", 0.0, 5.0),
-    "C_rY": ("hull", 0.0, 10.0),
-    "C_rN": ("hull", 0.0, 10.0),
-    # propeller
-    "D": ("propeller", 1e-3, 20.0),
-    "P": ("propeller", 1e-3, 40.0),
-    "t_P": ("propeller", 0.0, 0.99),
-    "w_P0": ("propeller", 0.0, 0.99),
-    "tau": ("propeller", -10.0, 10.0),
-    "C_P": ("propeller", -10.0, 10.0),
-    "x_P": ("propeller", -1.0, 1.0),
-    "k0": ("propeller", -5.0, 5.0),
-    "k1": ("propeller", -5.0, 5.0),
-    "k2": ("propeller", -5.0, 5.0),
-    **{f"A{i}": ("propeller", -1.0, 1.0) for i in range(1, 9)},
-    **{f"B{i}": ("propeller", -1.0, 1.0) for i in range(1, 9)},
-    "C3": ("propeller", -5.0, 5.0),
-    "C6": ("propeller", -5.0, 5.0),
-    "C7": ("propeller", -5.0, 5.0),
-    "C10": ("propeller", -10.0, 10.0),
-    # rudder
-    "A_R": ("rudder", 1e-6, 1e3),
-    "lambda_R": ("rudder", 0.1, 10.0),
-    "epsilon": ("rudder", 0.1, 5.0),
-    "k_x": ("rudder", 0.0, 5.0),
-    "k_xPR": ("rudder", 0.0, 5.0),
-    "C_PR": ("rudder", -5.0, 5.0),
-    "x_R": ("rudder", -1e3, 0.0),
-    "l_R": ("rudder", -1e3, 1e3),
-    "gamma_P": ("rudder", 0.0, 5.0),
-    "gamma_N": ("rudder", 0.0, 5.0),
-    "t_R": ("rudder", 0.0, 0.99),
-    "a_H": ("rudder", -1.0, 5.0),
-    "x_H": ("rudder", -1e3, 1e3),
-    # wind
-    "A_T": ("wind", 0.0, 1e5),
-    "A_L": ("wind", 0.0, 1e6),
-    "L_wind": ("wind", 1e-3, 1e3),
-    **{k: ("wind", -10.0, 10.0) for k in ("X0", "X1", "X3", "X5", "Y1", "Y3", "Y5", "N1", "N2", "N3")},
 }
+SECTIONS = ("principal", "mass") + COMPONENTS
+
+
+def active_parameters(models: Mapping[str, str]) -> dict[str, tuple[str, float, float]]:
+    """name -> (section, low, high) of every key a ship with these force models needs,
+    in file order (section by section; the base keys first, then the families')."""
+    tables = [BASE_PARAMETERS] + [FAMILIES[c][models[c]].parameters for c in COMPONENTS if c in models]
+    out: dict[str, tuple[str, float, float]] = {}
+    for section in SECTIONS:
+        for table in tables:
+            for name, spec in table.items():
+                if spec[0] == section:
+                    out.setdefault(name, spec)
+    return out
+
+
+# every parameter any family knows (the first family's range where names are shared)
+PARAMETERS: dict[str, tuple[str, float, float]] = {}
+for _component in COMPONENTS:
+    for _name in FAMILIES[_component]:
+        for _key, _spec in active_parameters({_component: _name}).items():
+            PARAMETERS.setdefault(_key, _spec)
 
 _SENSOR_KEYS = ("gnss_fore", "gnss_aft", "gnss_baseline", "heading_offset",
                 "anemometer_1", "anemometer_2", "fog")
@@ -116,6 +93,8 @@ class Ship:
     sensors : sensor layout for preprocessing.
     source : file it was read from.
     overrides : the parameters changed from the file's values.
+    models : force-model family per component (``{"hull": "standard", ...}``); no "wind"
+        key when the ship file has no [wind] section.
     """
 
     name: str
@@ -124,6 +103,16 @@ class Ship:
     source: str = ""
     description: str = ""
     overrides: Mapping[str, float] = field(default_factory=dict)
+    models: Mapping[str, str] = field(default_factory=lambda: MappingProxyType(dict(DEFAULT_MODELS)))
+
+    @property
+    def has_wind(self) -> bool:
+        """True when the ship file has a [wind] section (else the wind force is zero)."""
+        return "wind" in self.models
+
+    def describe_models(self) -> str:
+        """``hull 'standard', propeller 'standard', rudder 'standard'`` for messages."""
+        return ", ".join(f"{c} {m!r}" for c, m in self.models.items())
 
     def __getitem__(self, key: str) -> float:
         return self.parameters[parameter_name(key)]
@@ -132,16 +121,21 @@ class Ship:
         """A copy with some parameters replaced (validated like the file's values)."""
         params = dict(self.parameters)
         applied = dict(self.overrides)
+        spec = active_parameters(self.models)
         for key, value in overrides.items():
             name = parameter_name(key, source)
-            params[name] = _check_value(name, value, source)
+            if name not in spec:
+                raise ShipDefinitionError(
+                    f"{source}: {name} is not a parameter of ship {self.name!r} ({self.describe_models()})")
+            params[name] = _check_value(name, value, source, spec[name])
             applied[name] = params[name]
         return Ship(self.name, MappingProxyType(params), self.sensors, self.source,
-                    self.description, MappingProxyType(applied))
+                    self.description, MappingProxyType(applied), self.models)
 
 
-def _check_value(name: str, value: object, source: str) -> float:
-    section, low, high = PARAMETERS[name]
+def _check_value(name: str, value: object, source: str,
+                 spec: tuple[str, float, float] | None = None) -> float:
+    section, low, high = spec or PARAMETERS[name]
     where = f"{source}: [{section}] {name}"
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ShipDefinitionError(f"{where}: expected a number, got {value!r}")
@@ -193,22 +187,27 @@ def load_ship(name_or_path: str | os.PathLike = "esso_osaka",
     except tomllib.TOMLDecodeError as exc:
         raise ShipDefinitionError(f"{path}: not valid TOML ({exc})") from None
     src = str(path)
-    params: dict[str, float] = {}
-    known_sections = {s for s, _, _ in PARAMETERS.values()} | {"ship", "sensors"}
     for section in doc:
-        if section not in known_sections:
+        if section not in SECTIONS + ("ship", "sensors"):
             raise ShipDefinitionError(f"{src}: unknown section [{section}]")
-    for name, (section, _, _) in PARAMETERS.items():
+    models = _read_models(doc, src)
+    spec = active_parameters(models)
+    params: dict[str, float] = {}
+    for name, (section, low, high) in spec.items():
         table = doc.get(section)
         if not isinstance(table, dict):
             raise ShipDefinitionError(f"{src}: missing section [{section}]")
         if name not in table:
-            raise ShipDefinitionError(f"{src}: [{section}] {name} is missing")
-        params[name] = _check_value(name, table[name], src)
-    for section in known_sections - {"ship", "sensors"}:
+            owner = "" if name in BASE_PARAMETERS else f" (needed by {_owner(name, models)})"
+            raise ShipDefinitionError(f"{src}: [{section}] {name} is missing{owner}")
+        params[name] = _check_value(name, table[name], src, spec[name])
+    for section in SECTIONS:
         for key in doc.get(section, {}):
-            if key not in PARAMETERS or PARAMETERS[key][0] != section:
-                raise ShipDefinitionError(f"{src}: [{section}] {key} is not a known parameter")
+            if key == "model" and section in COMPONENTS:
+                continue
+            if key not in spec or spec[key][0] != section:
+                where = f"{section} model {models[section]!r}" if section in models else f"[{section}]"
+                raise ShipDefinitionError(f"{src}: [{section}] {key} is not a parameter of {where}")
     sensors = _load_sensors(doc.get("sensors"), src)
     meta = doc.get("ship", {})
     ship = Ship(
@@ -218,8 +217,32 @@ def load_ship(name_or_path: str | os.PathLike = "esso_osaka",
         source=src,
         description=str(meta.get("description", "")),
         overrides=MappingProxyType({}),
+        models=MappingProxyType(models),
     )
     return ship.with_overrides(overrides, "override") if overrides else ship
+
+
+def _read_models(doc: dict, src: str) -> dict[str, str]:
+    """The force-model family of each component present in the file (``model = ...``;
+    the Esso Osaka's families when a section names none)."""
+    models: dict[str, str] = {}
+    for component in COMPONENTS:
+        table = doc.get(component)
+        if table is None and component in OPTIONAL_COMPONENTS:
+            continue
+        if not isinstance(table, dict):
+            raise ShipDefinitionError(f"{src}: missing section [{component}]")
+        name = table.get("model", DEFAULT_MODELS[component])
+        if name not in FAMILIES[component]:
+            known = ", ".join(repr(k) for k in sorted(FAMILIES[component]))
+            raise ShipDefinitionError(f"{src}: [{component}] model = {name!r} is not known; choose one of {known}")
+        models[component] = name
+    return models
+
+
+def _owner(name: str, models: Mapping[str, str]) -> str:
+    owners = [f"{c} model {m!r}" for c, m in models.items() if name in FAMILIES[c][m].parameters]
+    return " and ".join(owners)
 
 
 def _load_sensors(table: object, src: str) -> SensorLayout:

@@ -11,7 +11,8 @@
    from the recorded state and true wind, as the model sees it); output statistics from the
    residual force the data implies: M * (v[k+1] - v[k]) / dt + C(v[k]) - F_MMG(x[k])
    (for NN-only without F_MMG), the force that makes one Euler step land on the record.
-3. Optional gradient identification of MMG coefficients (``[identify]``, stage "before").
+3. Optional gradient identification of MMG coefficients (``[identify]``, stage "before"),
+   with their standard errors and correlations (`sysid.uncertainty`, disjoint windows).
 4. Warm start: the FNN regresses that residual force (one-step fit). With ``[network]
    members`` K > 1, K networks are trained side by side (each on its own loss) and averaged.
 5. Multi-step training: Euler rollouts of T steps through torchdiffeq, loss
@@ -46,6 +47,7 @@ from sysid.experiment import Experiment
 from sysid.models import CorrectedModel, PerMember, build_mmg, correction_of
 from sysid.ood import KNNGate
 from sysid.state import VELOCITY_INDEX
+from sysid.uncertainty import coefficient_uncertainty
 
 VEL = list(VELOCITY_INDEX)
 
@@ -105,6 +107,7 @@ class TrainingSummary:
     residual_force_std: list | None = None
     warm_val_loss: float | None = None
     ensemble_val_loss: float | None = None
+    identified_uncertainty: dict | None = None  # `CoefficientUncertainty.as_dict()`
     gate: dict | None = None
     train_seconds: float = 0.0
     failure: str | None = None            # why the run failed (a hit wall-clock limit)
@@ -280,6 +283,10 @@ class Trainer:
         """
         t = self.experiment.training
         opt = torch.optim.Adam(params, lr=lr)
+        # the learning rate falls by lr_factor after lr_patience epochs without a better
+        # validation loss (lr_factor = 1: constant, the paper's Adam)
+        sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=t.lr_factor, patience=t.lr_patience) \
+            if t.lr_factor < 1.0 else None
         best, best_state, best_epoch, history = math.inf, None, 0, []
         gen = torch.Generator().manual_seed(self.experiment.experiment.seed + 1)
         first = 1
@@ -287,6 +294,8 @@ class Trainer:
         if resume:
             model.load_state_dict(resume["model"])
             opt.load_state_dict(resume["optimizer"])
+            if sched is not None:
+                sched.load_state_dict(resume["scheduler"])
             gen.set_state(resume["generator"])
             best, best_epoch, best_state = resume["best_loss"], resume["best_epoch"], resume["best_state"]
             history, first = list(resume["stage_history"]), resume["epoch"] + 1
@@ -318,6 +327,8 @@ class Trainer:
             if float(val_v) < best:
                 best, best_epoch = float(val_v), epoch
                 best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+            if sched is not None:
+                sched.step(float(val_v))
             self._progress(bar, epoch, epochs, sums[1], float(val_v), best_epoch)
             if epoch - best_epoch >= t.patience:
                 stopped = "early stop"
@@ -325,6 +336,7 @@ class Trainer:
                 stopped = "time limit"
             if self.checkpoint is not None:
                 self.checkpoint.save(stage=label, epoch=epoch, model=model.state_dict(), optimizer=opt.state_dict(),
+                                     scheduler=sched.state_dict() if sched is not None else {},
                                      generator=gen.get_state(), best_loss=best, best_epoch=best_epoch,
                                      best_state=best_state, stage_history=history, history=self._history,
                                      summary=self._summary.to_dict())
@@ -352,6 +364,18 @@ class Trainer:
             bar.set_postfix(train=f"{train_v:.4f}", val=f"{val_v:.4f}", best=best_epoch)
         elif self.progress and (epoch % 10 == 0 or epoch == total):
             self.log(f"  epoch {epoch}/{total}: training {train_v:.5f}, validation {val_v:.5f} (best at {best_epoch})")
+
+    def uncertainty(self, model, runs: Sequence[Run], dtype, device, w_v) -> dict:
+        """Stage 3b: standard errors and correlations of the identified coefficients from
+        the multi-step residuals on disjoint windows of the training part (`sysid.uncertainty`)."""
+        exp, t = self.experiment, self.experiment.training
+        disjoint = split_windows(runs, t.steps, float(t.steps + 1) / exp.data.rate, t.val_fraction,
+                                 exp.data.exclude_suspect, dtype, t.block_s, exp.experiment.seed, device)[0]
+        result = coefficient_uncertainty(model, disjoint, list(exp.identify.parameters), w_v)
+        self.log("identified ± 2 sigma: " + ", ".join(
+            f"{k} = {e:.4g} ± {2 * s:.2g}" + (" (undetermined)" if u else "")
+            for k, e, s, u in zip(result.names, result.estimate, result.std_error, result.undetermined)))
+        return result.as_dict()
 
     def _coefficients(self, mmg) -> dict[str, float]:
         return {k: float(getattr(mmg.coefficients, k).detach()) for k in self.experiment.identify.parameters}
@@ -454,6 +478,7 @@ class Trainer:
             self._history += stage.history
             summary.stopped["identify"] = stage.stopped
             summary.identified = self._coefficients(mmg)
+            summary.identified_uncertainty = self.uncertainty(mmg, runs, dtype, device, w_v)
         if identify and not joint:
             mmg.requires_grad_(False)
         model = mmg
@@ -489,6 +514,7 @@ class Trainer:
                 self.log(f"mean of {net.members} networks: validation loss {summary.ensemble_val_loss:.5f}")
             if identify and joint:
                 summary.identified = self._coefficients(mmg)
+                summary.identified_uncertainty = self.uncertainty(model, runs, dtype, device, w_v)
             if exp.gate.enabled:
                 summary.gate = self.fit_gate(model, samples, dtype)
         self.history_ = pd.DataFrame(self._history)

@@ -60,11 +60,16 @@ def reproduce(
     data: Optional[Path] = typer.Option(None, "--data", help="Dataset root (default: SYSID_DATA or ../shared/data/frt-ds-esso)."),
     only: Optional[List[str]] = typer.Option(None, "--only", help="Run only these protocol entries (repeatable)."),
     report: bool = typer.Option(True, "--report/--no-report", help="Write report.html and report.pdf too."),
+    jobs: Optional[int] = typer.Option(None, "--jobs", help="Runs trained side by side, one worker process each (default: one per core)."),
 ) -> None:
     """The whole protocol: MMG, NN-only and hybrid on D1 and D2; Tables 7/8 beside the paper's."""
+    from sysid.device import cpu_cores
+    from sysid.errors import ConfigError
     from sysid.reproduce import reproduce as run_protocol
 
-    summary = run_protocol(output, data, only, log=typer.echo)
+    if jobs is not None and jobs < 1:
+        raise ConfigError(f"--jobs {jobs}: must be >= 1")
+    summary = run_protocol(output, data, only, log=typer.echo, jobs=jobs or cpu_cores())
     for name in ("table7.md", "table8.md"):
         path = output / name
         if path.is_file():

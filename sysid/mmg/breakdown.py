@@ -1,4 +1,8 @@
-"""The MMG force model: hull + propeller + rudder + wind, every component by name."""
+"""The MMG force model: hull + propeller + rudder + wind, every component by name.
+
+Each component is computed by the force-model family the ship file chose
+(`sysid.mmg.families`); a ship without a [wind] section has a zero wind force.
+"""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -7,11 +11,10 @@ from typing import Iterable, Mapping
 import torch
 from torch import nn
 
+from sysid.errors import ShipDefinitionError
 from sysid.mmg.coefficients import Coefficients
-from sysid.mmg.hull import hull_force
-from sysid.mmg.propeller import propeller_force, propeller_inflow
-from sysid.mmg.rudder import rudder_force, rudder_inflow
-from sysid.mmg.wind import relative_wind, wind_force
+from sysid.mmg.families import family
+from sysid.mmg.wind import relative_wind
 from sysid.ship import Ship
 
 
@@ -52,8 +55,8 @@ class MMG(nn.Module):
     trainable : coefficient names to expose as parameters (gradient identification).
     bounds : ``{name: (low, high)}`` for trainable coefficients.
     dtype : float64 (default) or float32.
-    quadrature : cross-flow integrals "exact" (closed form, default) or "simpson" (the
-        lab simulator's 100-point rule, to reproduce it to round-off).
+    quadrature : cross-flow integrals of the Yoshimura hull, "exact" (closed form, default)
+        or "simpson" (the lab simulator's 100-point rule, to reproduce it to round-off).
     """
 
     def __init__(self, ship: Ship, trainable: Iterable[str] = (),
@@ -62,8 +65,12 @@ class MMG(nn.Module):
         super().__init__()
         if quadrature not in ("exact", "simpson"):
             raise ValueError(f"quadrature {quadrature!r}: choose 'exact' or 'simpson'")
+        if quadrature == "simpson" and ship.models["hull"] != "yoshimura_low_speed":
+            raise ShipDefinitionError(f"ship {ship.name!r}: quadrature 'simpson' applies to the "
+                                      f"yoshimura_low_speed hull only, not to hull model {ship.models['hull']!r}")
         self.ship = ship
         self.quadrature = quadrature
+        self.families = {component: family(component, name) for component, name in ship.models.items()}
         self.coefficients = Coefficients(ship, trainable, bounds, dtype)
 
     def forward(self, state: torch.Tensor, inputs: torch.Tensor) -> ForceBreakdown:
@@ -72,11 +79,15 @@ class MMG(nn.Module):
         c = self.coefficients
         u, v, psi, r = state[..., 1], state[..., 3], state[..., 4], state[..., 5]
         n, delta, U_T, zeta = inputs.unbind(-1)
-        hull = torch.stack(hull_force(u, v, r, c, self.quadrature), -1)
-        prop_state = propeller_inflow(u, v, r, n, c)
-        propeller = torch.stack(propeller_force(u, v, r, n, c, prop_state), -1)
-        rudder = torch.stack(rudder_force(u, v, r, n, delta, c, prop_state), -1)
+        families = self.families
+        hull = torch.stack(families["hull"].force(u, v, r, c, self.quadrature), -1)
+        prop_state = families["propeller"].inflow(u, v, r, n, c)
+        propeller = torch.stack(families["propeller"].force(u, v, r, n, c, prop_state), -1)
+        rudder = torch.stack(families["rudder"].force(u, v, r, n, delta, c, prop_state), -1)
         wind_rel = relative_wind(u, v, psi, U_T, zeta)
-        wind = torch.stack(wind_force(wind_rel.U_A, wind_rel.gamma_A, c), -1)
+        if "wind" in families:
+            wind = torch.stack(families["wind"].force(wind_rel.U_A, wind_rel.gamma_A, c), -1)
+        else:
+            wind = torch.zeros_like(hull)
         return ForceBreakdown(hull, propeller, rudder, wind, torch.zeros_like(hull),
                               torch.stack(wind_rel, -1))

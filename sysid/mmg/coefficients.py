@@ -1,7 +1,8 @@
 """MMG coefficients as tensors, so a subset can be identified by gradient.
 
-`Coefficients` holds every scalar of a `Ship` as a 0-d tensor attribute (``c.X_vr``),
-as a buffer by default, or as a bounded trainable parameter. A trainable coefficient is
+`Coefficients` holds every scalar of a `Ship` (the keys of its force-model families) as a
+0-d tensor attribute (``c.X_vr``), as a buffer by default, or as a bounded trainable
+parameter. A trainable coefficient is
 stored as an unconstrained raw value; its value is ``low + (high-low)*sigmoid(raw)``
 when bounds are given.
 """
@@ -12,7 +13,7 @@ from typing import Iterable, Mapping
 import torch
 from torch import nn
 
-from sysid.ship import PARAMETERS, Ship, parameter_name
+from sysid.ship import Ship, parameter_name
 from sysid.errors import ShipDefinitionError
 
 
@@ -34,9 +35,14 @@ class Coefficients(nn.Module):
         self.ship_name = ship.name
         names = [parameter_name(k, "trainable") for k in trainable]
         bounds = {parameter_name(k, "bounds"): v for k, v in (bounds or {}).items()}
+        for name in names:
+            if name not in ship.parameters:
+                raise ShipDefinitionError(
+                    f"trainable: {name} is not a parameter of ship {ship.name!r} ({ship.describe_models()})")
         self.trainable_names = tuple(names)
+        self.names = tuple(ship.parameters)
         self._bounds: dict[str, tuple[float, float]] = {}
-        for name in PARAMETERS:
+        for name in self.names:
             value = torch.tensor(ship.parameters[name], dtype=dtype)
             if name in names:
                 if name in bounds:
@@ -52,7 +58,7 @@ class Coefficients(nn.Module):
                 self.register_buffer(name, value)
 
     def __getattr__(self, name: str):
-        if name in PARAMETERS and name in self.trainable_names:
+        if name in self.__dict__.get("trainable_names", ()):
             raw = super().__getattr__(f"raw_{name}")
             if name in self._bounds:
                 low, high = self._bounds[name]
@@ -62,4 +68,4 @@ class Coefficients(nn.Module):
 
     def values(self) -> dict[str, float]:
         """Current value of every parameter, as plain floats."""
-        return {name: float(getattr(self, name).detach()) for name in PARAMETERS}
+        return {name: float(getattr(self, name).detach()) for name in self.names}

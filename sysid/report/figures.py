@@ -373,3 +373,34 @@ def loss_curves(histories: list[tuple[str, str, pd.DataFrame, int | None]], titl
     ax.legend(handles=handles, fontsize=8, ncol=2, loc="upper right")
     fig.suptitle(title, fontsize=10)
     return fig
+
+
+def identified_coefficients(names: list[str], estimate: list, two_sigma: list, prior: list,
+                            correlation: list, title: str, into: FigureBase | None = None) -> FigureBase:
+    """Left: each identified coefficient [-] with its ± 2 sigma bar beside its prior value
+    (the ship file's); right: their correlation matrix [-1, 1]."""
+    fig = _canvas(into, (10.0, 4.0))
+    left, right = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.3, 1.0]})
+    y = np.arange(len(names))[::-1]
+    est = np.array([np.nan if v is None else v for v in estimate], dtype=float)
+    err = np.array([np.nan if v is None else v for v in two_sigma], dtype=float)
+    left.errorbar(est, y, xerr=np.where(np.isfinite(err), err, 0.0), fmt="o", color=MEASURED, capsize=3,
+                  label="identified ± 2σ")
+    if prior:
+        left.plot(np.asarray(prior, dtype=float), y, "s", mfc="none", color="#1f5fbf", label="prior (ship file)")
+    left.axvline(0.0, color="grey", lw=0.6)
+    left.set_yticks(y, names)
+    left.set_xlabel("coefficient value [-] (non-dimensional)")
+    left.legend(fontsize=8, loc="best")
+    corr = np.array([[np.nan if v is None else v for v in row] for row in correlation], dtype=float)
+    image = right.imshow(corr, vmin=-1.0, vmax=1.0, cmap="RdBu_r")
+    right.set_xticks(range(len(names)), names, rotation=45, ha="right")
+    right.set_yticks(range(len(names)), names)
+    right.grid(False)
+    for i in range(len(names)):
+        for j in range(len(names)):
+            if np.isfinite(corr[i, j]):
+                right.text(j, i, f"{corr[i, j]:.2f}", ha="center", va="center", fontsize=7)
+    fig.colorbar(image, ax=right, label="correlation [-]")
+    fig.suptitle(title, fontsize=10)
+    return fig

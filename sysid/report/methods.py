@@ -188,7 +188,17 @@ def methods_paragraphs(source: ReportSource) -> list[str]:
                      f"{s.get('n_val_windows', '?')} validation windows) for {s.get('epochs', '?')} epochs; "
                      f"the weights of epoch {s.get('best_epoch', '?')} were kept "
                      f"(training time {_seconds(s.get('train_seconds'))}, seed {s.get('seed', '?')}).")
-        if s.get("identified"):
+        u = s.get("identified_uncertainty")
+        if isinstance(u, dict) and u.get("names"):
+            prior = s.get("identified_initial") or {}
+            parts = []
+            for name, est, sd, weak in zip(u["names"], u.get("estimate", []), u.get("std_error", []),
+                                           u.get("undetermined", [])):
+                cell = f"{name} = {est:.4g}" + (f" ± {2 * sd:.2g} (2σ)" if sd is not None else " (σ infinite)")
+                cell += f", prior {prior[name]:.4g}" if name in prior else ""
+                parts.append(cell + (", not determined by the data" if weak else ""))
+            text += " Identified coefficients: " + "; ".join(parts) + "."
+        elif s.get("identified"):
             text += " Identified coefficients: " + ", ".join(f"{k} = {v}" for k, v in _flatten(s["identified"])) + "."
         if run.model == "hybrid" and s.get("gate"):
             scalars = {k: v for k, v in s["gate"].items() if not isinstance(v, (dict, list))}

@@ -226,6 +226,25 @@ def _loss_figure(c: _Context) -> None:
         c.plan.notes.append("Loss curves: skipped, no run has a history.csv (MMG-only runs are not trained)")
 
 
+def _uncertainty_figures(c: _Context) -> None:
+    """Identified coefficients with ± 2 sigma beside their prior, and their correlations."""
+    for run in c.runs:
+        u = run.summary.get("identified_uncertainty")
+        if not isinstance(u, dict) or not u.get("names"):
+            continue
+        names = list(u["names"])
+        prior_map = run.summary.get("identified_initial") or {}
+        prior = [prior_map.get(n) for n in names] if all(n in prior_map for n in names) else []
+        two_sigma = [None if s is None else 2.0 * s for s in u.get("std_error", [])]
+        title = f"Identified coefficients of {_label(run)}"
+        c.add(f"identified_{run.name}", "Identification", title,
+              "Estimates with ± 2 standard errors from the curvature of the multi-step loss (Jacobian of "
+              "the residuals on disjoint training windows, windows as independent clusters), beside the "
+              "ship file's values; right: correlations of the estimates.",
+              partial(F.identified_coefficients, names, u.get("estimate", []), two_sigma, prior,
+                      u.get("correlation", []), title), True)
+
+
 def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> FigurePlan:
     """The figures of a report for `source`; `ship_size` = (L_pp, B) [m] for outlines."""
     plan = FigurePlan()
@@ -243,4 +262,5 @@ def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> 
         _gate_figures(c)
         _force_figures(c)
         _loss_figure(c)
+        _uncertainty_figures(c)
     return _quality_figures(source, plan)

@@ -1,0 +1,67 @@
+"""Rudder forces of the standard MMG model (Yasukawa & Yoshimura 2015, Eqs. 17-27).
+
+    X_R = -(1 - t_R) F_N sin(delta),  Y_R = -(1 + a_H) F_N cos(delta),
+    N_R = -(x_R + a_H x_H) F_N cos(delta),  F_N = 1/2 rho A_R U_R^2 f_alpha sin(alpha_R),
+    alpha_R = delta - atan2(v_R, u_R),  v_R = U gamma_R beta_R,  beta_R = beta - l_R r / U,
+    u_R = epsilon u_P sqrt(eta {1 + kappa (sqrt(1 + 8 K_T / (pi J_P^2)) - 1)}^2 + 1 - eta),
+
+with u_P = u (1 - w_P), eta = D / H_R and gamma_R = gamma_R_minus for beta_R < 0, else
+gamma_R_plus. u_R is evaluated in the equivalent form without J_P in a denominator,
+u_R = epsilon sqrt(eta {u_P + kappa (sqrt(u_P^2 + 8 K_T (n D)^2 / pi) - u_P)}^2 + (1 - eta) u_P^2),
+identical for u_P > 0 and finite at J_P = 0. Positive delta turns the ship to starboard.
+Unlike the paper, l_R here is in metres (l'_R L_pp), like the other lengths of the ship file.
+"""
+from __future__ import annotations
+
+import math
+
+import torch
+
+from sysid.mmg.guards import safe_atan2, safe_sqrt
+from sysid.mmg.propeller import PropellerState
+from sysid.mmg.propeller_standard import drift_angles
+from sysid.mmg.rudder import RudderInflow
+
+# name -> (section, low, high)
+PARAMETERS: dict[str, tuple[str, float, float]] = {
+    "A_R": ("rudder", 1e-6, 1e3),            # m^2, rudder area
+    "H_R": ("rudder", 1e-4, 1e2),            # m, rudder span (eta = D / H_R)
+    "f_alpha": ("rudder", 0.0, 10.0),        # -, normal-force gradient
+    "epsilon": ("rudder", 0.1, 5.0),         # -, wake ratio rudder / propeller
+    "kappa": ("rudder", 0.0, 5.0),           # -, propeller-race factor
+    "x_R": ("rudder", -1e3, 0.0),            # m, rudder position (aft: negative)
+    "l_R": ("rudder", -1e3, 1e3),            # m, effective lever in beta_R (l'_R L_pp)
+    "gamma_R_minus": ("rudder", 0.0, 5.0),   # -, flow straightening, beta_R < 0
+    "gamma_R_plus": ("rudder", 0.0, 5.0),    # -, flow straightening, beta_R >= 0
+    "t_R": ("rudder", 0.0, 0.99),            # -, steering resistance deduction
+    "a_H": ("rudder", -1.0, 5.0),            # -, rudder force increase factor
+    "x_H": ("rudder", -1e3, 1e3),            # m, acting point of a_H F_N
+}
+
+
+def rudder_inflow_standard(u, v, r, n, delta, c, prop: PropellerState) -> RudderInflow:
+    """u_R, v_R [m/s], alpha_R [rad], F_N [N]; u, v [m/s], r [rad/s], n [rps], delta [rad]."""
+    eta = c.D / c.H_R
+    u_P = u * prop.one_minus_wP
+    jet = safe_sqrt(u_P * u_P + 8.0 * prop.K_T * n * n * c.D ** 2 / math.pi)
+    core = u_P + c.kappa * (jet - u_P)
+    u_R = c.epsilon * safe_sqrt(eta * core * core + (1.0 - eta) * u_P * u_P)
+    beta, r_nd = drift_angles(u, v, r, c.L_pp)
+    beta_R = beta - c.l_R / c.L_pp * r_nd
+    gamma_R = torch.where(beta_R < 0, c.gamma_R_minus + 0.0 * beta_R, c.gamma_R_plus + 0.0 * beta_R)
+    U = torch.sqrt(u * u + v * v)
+    v_R = U * gamma_R * beta_R
+    alpha_R = delta - safe_atan2(v_R, u_R)
+    F_N = 0.5 * c.rho * c.A_R * (u_R * u_R + v_R * v_R) * c.f_alpha * torch.sin(alpha_R)
+    return RudderInflow(u_R, v_R, alpha_R, F_N)
+
+
+def rudder_force_standard(u, v, r, n, delta, c, prop: PropellerState,
+                          inflow: RudderInflow | None = None):
+    """X_R [N], Y_R [N], N_R [N m about midship] from the rudder normal force."""
+    if inflow is None:
+        inflow = rudder_inflow_standard(u, v, r, n, delta, c, prop)
+    F_N = inflow.F_N
+    cos_d, sin_d = torch.cos(delta), torch.sin(delta)
+    return (-(1.0 - c.t_R) * F_N * sin_d, -(1.0 + c.a_H) * F_N * cos_d,
+            -(c.x_R + c.a_H * c.x_H) * F_N * cos_d)
