@@ -82,13 +82,20 @@ def _plain(value) -> bool:
 
 
 def _options(module: nn.Module) -> list:
-    """Plain attributes of every submodule (quadrature, bounds, gate space, k, dt, ...):
-    what decides the numbers besides the tensors. The train/eval flag is left out."""
+    """Plain attributes of every submodule (quadrature, bounds, gate space, k, dt, force
+    families, ...): what decides the numbers besides the tensors. The train/eval flag is
+    left out."""
     out = []
     for name, sub in module.named_modules():
         for key, value in sorted(vars(sub).items()):
-            if key != "training" and not key.startswith("__") and _plain(value):
+            if key == "training" or key.startswith("__"):
+                continue
+            if _plain(value):
                 out.append((name, key, value))
+            elif isinstance(value, dict) and all(isinstance(k, str) for k in value):
+                # e.g. the MMG's force families: described by type and name
+                out.append((name, key, {k: v if _plain(v) else f"{type(v).__qualname__}:{getattr(v, 'name', '')}"
+                                        for k, v in sorted(value.items())}))
     return out
 
 
