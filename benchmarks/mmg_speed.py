@@ -1,10 +1,11 @@
 """Speed of the batched MMG right-hand side and of predictions, on this machine's CPU.
 
 Prints rows per second of forces + state derivative at batch 1, 64, 4096, 65536 (float32,
-float64), the time of one 100 s Euler prediction of one ship (eager and torch.compile'd),
+float64), the time of one 100 s Euler prediction of one ship (eager and compiled, `sysid.compiled`),
 and of all 30 s protocol windows of the six test files in one batch, with ratios to the
-lab's numpy simulator (PERFORMANCE_NOTES.md: ~11 k rows/s batched, ~1.5 k rows/s single,
-0.15-0.19 s per 100 s RK4 prediction).
+lab's numpy simulator as once measured (PERFORMANCE_NOTES.md: ~11 k rows/s batched,
+~1.5 k rows/s single, 0.15-0.19 s per 100 s RK4 prediction). For the lab's simulator run
+side by side in the same process, use benchmarks/prediction_speed.py.
 
     python benchmarks/mmg_speed.py [--no-compile] [--threads 2]
 """
@@ -15,8 +16,8 @@ import time
 
 import torch
 
-from sysid import MMG, integrate, load_ship, state_derivative
-from sysid.dynamics import compiled_derivative
+from sysid import MMG, integrate, load_ship, predict, state_derivative
+from sysid.integrators import Integrator
 
 LAB_BATCHED_ROWS_PER_S = 11e3
 LAB_SINGLE_ROWS_PER_S = 1.5e3
@@ -79,13 +80,13 @@ def main() -> None:
     if not args.no_compile:
         start = time.perf_counter()
         with torch.no_grad():
-            integrate(model, x0, inputs, 1.0, "euler", compiled=True)
+            predict(model, x0, inputs, 1.0, Integrator("euler", compiled=True))
         compile_s = time.perf_counter() - start
         with torch.no_grad():
-            compiled = time_call(lambda: integrate(model, x0, inputs, 1.0, "euler", compiled=True), 1.0, 50)
-            gap = (integrate(model, x0, inputs, 1.0, "euler", compiled=True)
+            compiled = time_call(lambda: predict(model, x0, inputs, 1.0, Integrator("euler", compiled=True)), 1.0, 50)
+            gap = (predict(model, x0, inputs, 1.0, Integrator("euler", compiled=True))
                    - integrate(model, x0, inputs, 1.0, "euler")).abs().max()
-        print(f"   torch.compile'd:  {compiled * 1e3:8.1f} ms  (compiled once in {compile_s:.0f} s; "
+        print(f"   compiled:         {compiled * 1e3:8.1f} ms  (compiled once in {compile_s:.0f} s; "
               f"max difference to eager {float(gap):.1e}; {eager / compiled:.1f}x eager)")
 
     print("\n3. All 30 s protocol windows of the six test files in one batch (Euler, float64)")

@@ -1,12 +1,15 @@
 """sysid: physics-informed system identification for ship maneuvering.
 
 One obvious entry point per task: `load_ship` for a ship definition, `MMG` for the force
-model, `integrate` for predictions; `sysid.lifecycle.run_experiment` trains, evaluates and
-writes one experiment (``sysid train``), `sysid.reproduce.reproduce` the paper's protocol.
+model, `integrate` for (differentiable) trajectories, `predict` for fast predictions
+(``predict(model, x0, inputs, dt, Integrator("rk4", compiled=True))``);
+`sysid.lifecycle.run_experiment` trains, evaluates and writes one experiment (``sysid
+train``), `sysid.reproduce.reproduce` the paper's protocol.
 
-Layers, each importing only those before it: `state`, `ship`, `mmg` → `dynamics`,
-`correction`, `ood` → `experiment`, `models` → `data` → `train` → `evaluate` → `rundir` →
-`lifecycle` → `paper`, `reproduce` → `report` → `cli`.
+Layers, each importing only those before it: `state`, `ship`, `mmg`, `integrators` →
+`dynamics`, `correction`, `ood` → `stepper`, `knn_index` → `compiled` → `export`;
+`experiment`, `models` → `data` → `train` → `evaluate` → `rundir` → `lifecycle` → `paper`,
+`reproduce` → `report` → `cli`.
 
 The names are loaded on first use, so ``import sysid`` (and ``sysid --help``) does not pay
 for torch.
@@ -21,10 +24,11 @@ _HOME = {
     "Ship": "sysid.ship", "load_ship": "sysid.ship",
     "MMG": "sysid.mmg", "ForceBreakdown": "sysid.mmg",
     "ShipDynamics": "sysid.dynamics", "integrate": "sysid.dynamics",
+    "predict": "sysid.compiled", "Integrator": "sysid.integrators", "Method": "sysid.integrators",
     "state_derivative": "sysid.dynamics", "body_acceleration": "sysid.dynamics",
 }
 
-__all__ = ["Ship", "load_ship", "MMG", "ForceBreakdown", "ShipDynamics", "integrate",
+__all__ = ["Ship", "load_ship", "MMG", "ForceBreakdown", "ShipDynamics", "integrate", "predict", "Integrator", "Method",
            "state_derivative", "body_acceleration", "__version__"]
 
 

@@ -1,39 +1,26 @@
-"""Equations of motion (paper Eqs. 1, 4) and their integration with torchdiffeq.
+"""Equations of motion (paper Eqs. 1, 4) and their integration.
 
 `ShipDynamics` is the right-hand side f(t, x) of the 3-DOF maneuvering equations for any
 force model (MMG, NN-only, hybrid) with zero-order-hold inputs; `integrate` runs many
-trajectories at once through torchdiffeq's `odeint` (plain backprop, no adjoint).
+trajectories at once, differentiably, with the rule a `Method` names: torchdiffeq's public
+`odeint` (Euler, the 3/8 rule; plain backprop, no adjoint) or a plain step loop (classical
+RK4, which torchdiffeq's public names lack). Compiled prediction: `sysid.compiled.predict`.
 
-Time inside the solver is counted in steps (tau = t / dt), so step k's input is
+Time inside torchdiffeq is counted in steps (tau = t / dt), so step k's input is
 ``inputs[floor(tau)]`` exactly, also at the perturbed end point of a Runge-Kutta step.
 """
 from __future__ import annotations
 
-from typing import Literal
+from dataclasses import dataclass, fields
 
 import torch
 from torch import nn
 from torchdiffeq import odeint
-from torchdiffeq._impl.odeint import SOLVERS as _TORCHDIFFEQ_SOLVERS
-from torchdiffeq._impl.fixed_grid import RK4 as _RK4_3_8
-from torchdiffeq._impl.rk_common import rk4_step_func
 
+from sysid.integrators import Integrator, IntegratorLike, Method, rollout
 from sysid.mmg.breakdown import ForceBreakdown
 
-Method = Literal["euler", "rk4", "rk4_3/8"]
-
-
-class _ClassicalRK4(_RK4_3_8):
-    """Classical RK4 (1/6, 1/3, 1/3, 1/6) as the lab's simulator uses; torchdiffeq's
-    "rk4" is the 3/8 rule."""
-
-    def _step_func(self, func, t0, dt, t1, y0):
-        f0 = func(t0, y0)
-        return rk4_step_func(func, t0, dt, t1, y0, f0=f0, perturb=self.perturb), f0
-
-
-_TORCHDIFFEQ_SOLVERS.setdefault("rk4_classic", _ClassicalRK4)
-_SOLVER_NAME = {"euler": "euler", "rk4": "rk4_classic", "rk4_3/8": "rk4"}
+_ODEINT_NAME = {Method.EULER: "euler", Method.RK4_38: "rk4"}  # torchdiffeq's public names
 INTEGRATORS = ("euler", "rk4")  # what configs and the CLI offer: the paper's and the lab's
 
 
@@ -80,20 +67,9 @@ def state_derivative(state: torch.Tensor, force: torch.Tensor, c) -> torch.Tenso
     return torch.stack((x_dot, acc[..., 0], y_dot, acc[..., 1], r, acc[..., 2]), -1)
 
 
-def compiled_derivative(force_model: nn.Module):
-    """torch.compile'd (state, inputs) -> dx/dt of a force model, cached on the model.
-
-    Compiling costs tens of seconds once; afterwards a batch-1 call is about ten times
-    cheaper than eager (benchmarks/mmg_speed.py). Suits long-lived processes (a controller).
-    """
-    fn = force_model.__dict__.get("_compiled_derivative")
-    if fn is None:
-        def derivative(state, inputs):
-            forces = force_model(state, inputs)
-            return state_derivative(state, forces.total, force_model.coefficients)
-        fn = torch.compile(derivative, dynamic=False)
-        force_model.__dict__["_compiled_derivative"] = fn
-    return fn
+def derivative(force_model: nn.Module, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
+    """dx/dt (..., 6) of any force model at state (..., 6) with inputs (..., 4)."""
+    return state_derivative(state, force_model(state, inputs).total, force_model.coefficients)
 
 
 class ShipDynamics(nn.Module):
@@ -105,34 +81,36 @@ class ShipDynamics(nn.Module):
         it carries ``coefficients`` with the mass terms.
     inputs : (T, ..., 4) inputs; step k uses ``inputs[k]``.
     dt : step length [s].
+    record : optional list; each call appends the `ForceBreakdown` it computed.
     """
 
-    def __init__(self, force_model: nn.Module, inputs: torch.Tensor, dt: float, compiled: bool = False,
-                 record: list | None = None):
+    def __init__(self, force_model: nn.Module, inputs: torch.Tensor, dt: float, record: list | None = None):
         super().__init__()
         self.record = record
         self.force_model = force_model
         self.inputs = inputs
         self.dt = float(dt)
-        self._compiled = compiled_derivative(force_model) if compiled else None
 
     def derivative(self, state: torch.Tensor, inputs: torch.Tensor) -> tuple[torch.Tensor, ForceBreakdown]:
         forces = self.force_model(state, inputs)
+        if self.record is not None:
+            self.record.append(forces)
         return state_derivative(state, forces.total, self.force_model.coefficients), forces
 
     def forward(self, tau: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
         k = min(max(int(tau), 0), self.inputs.shape[0] - 1)  # tau >= 0: int() is floor
-        if self._compiled is not None and self.record is None:
-            return self.dt * self._compiled(state, self.inputs[k])
-        derivative, forces = self.derivative(state, self.inputs[k])
-        if self.record is not None:
-            self.record.append(forces)
-        return self.dt * derivative
+        return self.dt * self.derivative(state, self.inputs[k])[0]
+
+
+def check_shapes(x0: torch.Tensor, inputs: torch.Tensor) -> None:
+    """ValueError unless x0 is (..., 6) and inputs (T, ..., 4) with the same batch shape."""
+    if x0.shape[-1:] != (6,) or inputs.shape[-1:] != (4,) or inputs.shape[1:-1] != x0.shape[:-1]:
+        raise ValueError(f"inputs {tuple(inputs.shape)} do not match x0 {tuple(x0.shape)}: "
+                         "expected x0 (*batch, 6) and inputs (T, *batch, 4)")
 
 
 def integrate(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
-              method: Method = "euler", compiled: bool = False,
-              record: list | None = None) -> torch.Tensor:
+              method: IntegratorLike = Method.EULER, *, record: list | None = None) -> torch.Tensor:
     """Predict trajectories from x0 with recorded inputs held over each step.
 
     Parameters
@@ -142,22 +120,58 @@ def integrate(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt
     inputs : (T, ..., 4) inputs on the time grid; step k (t_k -> t_k+1) uses inputs[k],
         the last row is not used.
     dt : grid step [s].
-    method : "euler" (the paper's), "rk4" (classical, the lab simulator's) or "rk4_3/8"
-        (torchdiffeq's own rk4).
-    compiled : use the torch.compile'd right-hand side (see `compiled_derivative`).
+    method : an `Integrator`, or a `Method` or its name: "euler" (the paper's), "rk4"
+        (classical, the lab simulator's) or "rk4_3/8" (torchdiffeq's own rk4).
+        (A compiled `Integrator` is for `sysid.compiled.predict`, which has no gradient.)
     record : a list to which each right-hand-side call appends its `ForceBreakdown`; with
-        "euler" that is one entry per step, at the states the step started from.
+        "euler" that is one entry per step, at the states the step started from
+        (`integrate_with_forces` returns them stacked instead).
 
     Returns
     -------
     (T, ..., 6) states at t_0 .. t_{T-1}; row 0 is x0.
     """
-    if method not in _SOLVER_NAME:
-        raise ValueError(f"integrator {method!r}: choose one of {sorted(_SOLVER_NAME)}")
-    if inputs.shape[1:-1] != x0.shape[:-1]:
-        raise ValueError(f"inputs {tuple(inputs.shape)} do not match x0 {tuple(x0.shape)}: expected (T, *batch, 4)")
-    steps = inputs.shape[0]
-    tau = torch.arange(steps, dtype=x0.dtype, device=x0.device)
-    rhs = ShipDynamics(force_model, inputs, dt, compiled, record)
-    options = {"perturb": True} if method != "euler" else None
-    return odeint(rhs, x0, tau, method=_SOLVER_NAME[method], options=options)
+    integrator = Integrator.of(method)
+    check_shapes(x0, inputs)
+    if integrator.compiled:
+        raise ValueError("integrate is the differentiable path: predict with a compiled "
+                         "integrator through sysid.compiled.predict")
+    rhs = ShipDynamics(force_model, inputs, dt, record)
+    if integrator.method not in _ODEINT_NAME:  # classical RK4: a plain step loop
+        return rollout(lambda x, u: rhs.derivative(x, u)[0], x0, inputs, dt, integrator.method)
+    tau = torch.arange(inputs.shape[0], dtype=x0.dtype, device=x0.device)
+    options = {"perturb": True} if integrator.method is not Method.EULER else None
+    return odeint(rhs, x0, tau, method=_ODEINT_NAME[integrator.method], options=options)
+
+
+@dataclass
+class Trajectory:
+    """Predicted states (T, ..., 6) and the forces of every right-hand-side call, stacked:
+    a `ForceBreakdown` of (S, ..., 3) tensors (S = T - 1 with Euler: the forces at the
+    state each step started from)."""
+
+    states: torch.Tensor
+    forces: ForceBreakdown
+
+
+def stack_forces(calls: list[ForceBreakdown]) -> ForceBreakdown:
+    """One `ForceBreakdown` whose fields stack those of `calls` along a new first axis."""
+    stacked = {}
+    for f in fields(ForceBreakdown):
+        values = [getattr(c, f.name) for c in calls]
+        stacked[f.name] = None if any(v is None for v in values) else torch.stack(values)
+    return ForceBreakdown(**stacked)
+
+
+def integrate_with_forces(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
+                          method: IntegratorLike = Method.EULER) -> Trajectory:
+    """`integrate` (not compiled) that also returns every call's forces, stacked.
+
+    The training loss uses it with Euler: states from torchdiffeq's `odeint`, F_NN and
+    F_MMG of each step for the output penalty (paper Eq. 17).
+    """
+    record: list[ForceBreakdown] = []
+    states = integrate(force_model, x0, inputs, dt, Integrator.of(method).method, record=record)
+    if not record:
+        raise ValueError("no steps: inputs need at least two rows")
+    return Trajectory(states, stack_forces(record))

@@ -20,8 +20,9 @@ from torch import nn
 
 from sysid.data import Run, protocol_windows, stack_windows
 from sysid.datasets import TEST_FILES
-from sysid.dynamics import Method, integrate
+from sysid.compiled import predict
 from sysid.errors import DataError
+from sysid.integrators import IntegratorLike
 from sysid.state import FORCE, FORCE_COMPONENTS, INPUTS, STATE, VELOCITY_INDEX
 
 # one row per file and horizon; RMSE of u, v_m [m/s] and r [rad/s]
@@ -70,7 +71,7 @@ class WindowPrediction:
 
 
 def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
-                    method: Method = "euler", dtype=torch.float64,
+                    method: IntegratorLike = "euler", dtype=torch.float64,
                     device: str | torch.device = "cpu") -> list[WindowPrediction]:
     """Predict the protocol windows of every run in one batched integration."""
     chunks, meta = [], []
@@ -90,8 +91,7 @@ def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
     if chunks:
         observed = torch.cat([c[0] for c in chunks], 1)
         inputs = torch.cat([c[1] for c in chunks], 1)
-        with torch.no_grad():
-            predicted = integrate(model, observed[0], inputs, dt, method)
+        predicted = predict(model, observed[0], inputs, dt, method)
     out, col = [], 0
     for run, H, starts in meta:
         W = len(starts)
@@ -148,7 +148,7 @@ def trace_frame(model: nn.Module, pred: WindowPrediction) -> pd.DataFrame:
 
 
 def evaluate_model(model: nn.Module, runs: Sequence[Run], horizons: Sequence[float],
-                   method: Method = "euler", traces: bool = True) -> Evaluation:
+                   method: IntegratorLike = "euler", traces: bool = True) -> Evaluation:
     """The protocol's windowed RMSE per file and horizon, with per-step traces."""
     rows, frames, shares = [], {}, {}
     for horizon in horizons:

@@ -13,6 +13,16 @@ import torch
 from torch import nn
 
 
+def nearest_distances(q: torch.Tensor, bank: torch.Tensor, bank_sq: torch.Tensor, k: int) -> torch.Tensor:
+    """The k smallest Euclidean distances (B, k), ascending, from q (B, F) to bank (N, F).
+
+    |q - b|^2 = |q|^2 + |b|^2 - 2 q.b (bank_sq = |b|^2, (N,)): one matrix product, then
+    the k smallest.
+    """
+    d2 = (q * q).sum(1, keepdim=True) + bank_sq - 2.0 * q @ bank.T
+    return torch.topk(d2, k, dim=1, largest=False).values.clamp_min(0.0).sqrt()
+
+
 class KNNGate(nn.Module):
     """Feature bank, k, alpha and threshold; `fit` returns self.
 
@@ -45,10 +55,7 @@ class KNNGate(nn.Module):
         bank_sq = self._bank_sq()
         out = []
         for lo in range(0, flat.shape[0], self.chunk):
-            q = flat[lo:lo + self.chunk]
-            # |q - b|^2 = |q|^2 + |b|^2 - 2 q.b: one matrix product, then the k smallest
-            d2 = (q * q).sum(1, keepdim=True) + bank_sq - 2.0 * q @ self.bank.T
-            nearest = torch.topk(d2, k, dim=1, largest=False).values.clamp_min(0.0).sqrt()
+            nearest = nearest_distances(flat[lo:lo + self.chunk], self.bank, bank_sq, k)
             if exclude_self:  # drop the point itself (distance 0)
                 nearest = nearest[:, 1:]
             out.append(nearest.mean(1))

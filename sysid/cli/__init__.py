@@ -19,6 +19,7 @@ from sysid.cli import report_commands  # noqa: E402,F401
 from sysid.cli import preprocess_commands  # noqa: E402,F401
 from sysid.cli import train_commands  # noqa: E402,F401
 from sysid.cli import ship_commands  # noqa: E402,F401
+from sysid.cli import export_commands  # noqa: E402,F401
 
 
 MULTI_VALUE_OPTIONS = ("--data",)

@@ -20,6 +20,8 @@ ShipOption = typer.Option("esso_osaka", "--ship", help="Ship name (configs/ships
 SetOption = typer.Option(None, "--set", help="Override a ship parameter, e.g. --set Xvr=0.4535 (repeatable).")
 QuadratureOption = typer.Option("exact", "--quadrature",
                                 help="Cross-flow integrals: exact (closed form) or simpson (the lab simulator's).")
+CompiledOption = typer.Option(False, "--compiled",
+                              help="Compiled step (native code, cached on disk; first use compiles, about a minute).")
 
 
 def _check_positive(option: str, value: float, unit: str) -> None:
@@ -152,14 +154,16 @@ def simulate(
     ship: str = ShipOption,
     set_: Optional[List[str]] = SetOption,
     quadrature: str = QuadratureOption,
+    compiled: bool = CompiledOption,
 ) -> None:
     """Predict from the recorded state at T with the recorded inputs (zero-order hold)."""
     import numpy as np
     import pandas as pd
     import torch
+    from sysid.compiled import predict
     from sysid.data import read_run
-    from sysid.dynamics import integrate
     from sysid.files import write_csv
+    from sysid.integrators import Integrator
 
     _check_integrator(integrator)
     _check_positive("--rate", rate, "Hz")
@@ -179,7 +183,7 @@ def simulate(
     x0 = torch.as_tensor(run.states[i0], dtype=torch.float64)
     inputs = torch.as_tensor(run.inputs[sl], dtype=torch.float64)
     with torch.no_grad():
-        pred = integrate(model, x0, inputs, run.dt, integrator)
+        pred = predict(model, x0, inputs, run.dt, Integrator(integrator, compiled))
         forces = model(pred, inputs)
     out = pd.DataFrame({"t": run.t[sl], "t_rel": run.t[sl] - run.t[i0]})
     for j, name in enumerate(STATE):
@@ -209,12 +213,14 @@ def evaluate(
     ship: str = ShipOption,
     set_: Optional[List[str]] = SetOption,
     quadrature: str = QuadratureOption,
+    compiled: bool = CompiledOption,
 ) -> None:
     """The protocol's windowed RMSE of u, v_m, r per file and horizon (MMG or a trained run)."""
     import pandas as pd
     from sysid.data import expand_paths, read_run
     from sysid.evaluate import evaluate_model
     from sysid.files import write_csv
+    from sysid.integrators import Integrator
     from sysid.progress import progress
 
     _check_integrator(integrator)
@@ -233,7 +239,7 @@ def evaluate(
         label = f"MMG ({model.ship.name}, overrides: {overrides})"
     files = expand_paths(data)
     runs = [read_run(f) for f in progress(files, desc="reading", unit="files", quiet=len(files) < 4)]
-    table = evaluate_model(model, runs, horizon, integrator, traces=False).metrics
+    table = evaluate_model(model, runs, horizon, Integrator(integrator, compiled), traces=False).metrics
     empty = [h for h in horizon if not table[table.horizon_s == h].n_windows.sum()]
     if empty:
         longest = max(r.duration for r in runs)

@@ -1,0 +1,45 @@
+"""``sysid export``: one integration step of a trained model as a ``.pt2`` file."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from sysid.cli.app import app
+from sysid.errors import DataError
+
+
+@app.command()
+def export(
+    run_dir: Path = typer.Argument(..., help="A run directory (sysid train)."),
+    output: Path = typer.Option(..., "-o", "--output", help="File to write (model.pt2)."),
+    integrator: str = typer.Option("euler", "--integrator", help="euler (the paper's), rk4 (classical) or rk4_3/8."),
+    dt: float = typer.Option(1.0, "--dt", help="Step length [s]."),
+    batch: int = typer.Option(1, "--batch", help="Ships per call (fixed in the file)."),
+    float32: bool = typer.Option(False, "--float32", help="float32 instead of float64."),
+    portable: bool = typer.Option(False, "--portable",
+                                  help="A torch.export program (any platform, eager speed) instead of native code."),
+) -> None:
+    """Export step(state, inputs) -> next state of a trained model (MMG, NN-only, hybrid with its
+    kNN gate), loadable with torch alone; prints its latency."""
+    import torch
+
+    from sysid.export import export_model, load_step, step_latency
+    from sysid.integrators import Method
+    from sysid.rundir import load_model
+
+    try:
+        method = Method.parse(integrator)
+    except ValueError as exc:
+        raise DataError(f"--integrator: {exc}") from None
+    if dt <= 0 or batch < 1:
+        raise DataError(f"--dt must be > 0 and --batch >= 1 (got {dt}, {batch})")
+    dtype = torch.float32 if float32 else torch.float64
+    exp, model = load_model(run_dir, dtype)
+    export_model(model, output, method, dt, batch, dtype, compiled=not portable,
+                 log=lambda m: typer.echo("  " + m))
+    per_step, prediction = step_latency(load_step(output), 200 if portable else 2000)
+    kind = "torch.export program" if portable else "AOTInductor package"
+    typer.echo(f"export: {exp.experiment.model} model of {run_dir}, {method.value} dt {dt:g} s, batch {batch}, "
+               f"{str(dtype)[6:]} -> {output} ({kind})\n"
+               f"  latency: {per_step * 1e6:.0f} us per step, {prediction * 1e3:.1f} ms per 100-step prediction")
