@@ -41,7 +41,7 @@ from sysid.correction import ForceCorrection, correction_inputs
 from sysid.checkpoint import TrainingCheckpoint
 from sysid.data import Run, duplicate_runs, sliding_windows, stack_windows, window_touches
 from sysid.device import resolve_device
-from sysid.dynamics import integrate, required_force
+from sysid.dynamics import integrate, integrate_with_forces, required_force
 from sysid.errors import ConfigError, DataError, TrainingError
 from sysid.experiment import Experiment
 from sysid.models import CorrectedModel, PerMember, build_mmg, correction_of
@@ -235,14 +235,16 @@ def multistep_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor
         k = model.model.correction_net.members
         states = states.unsqueeze(1).expand(states.shape[0], k, *states.shape[1:])
         inputs = inputs.unsqueeze(1).expand(inputs.shape[0], k, *inputs.shape[1:])
-    record: list = []
-    pred = integrate(model, states[0], inputs, batch.dt, "euler", record=record)
+    if w_F is None:
+        pred = integrate(model, states[0], inputs, batch.dt, "euler")
+    else:
+        trajectory = integrate_with_forces(model, states[0], inputs, batch.dt, "euler")
+        pred, forces = trajectory.states, trajectory.forces
     err = pred[1:, ..., VEL] - states[1:, ..., VEL]
     loss_v = ((err * err) * w_v).sum(-1).mean()
     if w_F is None:
         return loss_v, loss_v.new_zeros(())
-    f_nn = torch.stack([r.correction for r in record])
-    f_mmg = torch.stack([r.mmg for r in record])
+    f_nn, f_mmg = forces.correction, forces.mmg
     return loss_v, output_penalty(f_nn, f_mmg, w_F).mean()
 
 
