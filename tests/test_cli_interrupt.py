@@ -20,10 +20,17 @@ def files(dataset_dir):
             "test": berthing / "berthing_12-Nov-2020_11_49_21.csv"}
 
 
+def _foreground_signals() -> None:
+    """In the child: Ctrl-C as a terminal's foreground job gets it. A test run started as a
+    background job (``bash .ci/run &``) inherits SIGINT ignored, and Python keeps that."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def start(*args) -> subprocess.Popen:
     """The console script in its own session, as a terminal's foreground job."""
     return subprocess.Popen([console_script(), *map(str, args)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=environment(), start_new_session=True)
+                            text=True, env=environment(), start_new_session=True,
+                            preexec_fn=_foreground_signals)
 
 
 def wait_for(stream, text: str) -> list[str]:
