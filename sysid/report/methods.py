@@ -60,7 +60,12 @@ def run_rows(source: ReportSource) -> list[RunRow]:
     rows = []
     for run in source.runs:
         s = run.summary
-        epochs = "-" if run.model == "mmg" else f"{s.get('epochs', '-')} (best {s.get('best_epoch', '-')})"
+        stopped = s.get("stopped") or {}
+        why = "; ".join(f"{stage}: {reason}" for stage, reason in stopped.items()) if isinstance(stopped, dict) else ""
+        epochs = ("-" if not s.get("epochs") else f"{s.get('epochs')} (best {s.get('best_epoch', '-')}"
+                  + (f"; {why}" if why else "") + ")")
+        if str(s.get("status", "")).startswith("failed"):
+            epochs += f" - {str(s['status']).upper()}"
         rows.append(RunRow(run_label(run.name, run.model, run.dataset), run.model, run.dataset, epochs,
                            "-" if run.model == "mmg" else _seconds(s.get("train_seconds")),
                            config_digest(run), str(s.get("created", "-"))))
