@@ -169,7 +169,7 @@ def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds:
     info = training.to_dict() if training is not None else {}
     return {
         "name": exp.experiment.name, "model": exp.experiment.model,
-        "status": f"failed: {info['failure']}" if info.get("failure") else "complete",
+        "status": f"failed: {info.pop('failure')}" if info.get("failure") else "complete",
         "dataset": "files" if exp.data.files else (exp.experiment.dataset if exp.needs_training else "-"),
         "ship": exp.experiment.ship, "seed": exp.experiment.seed,
         "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "seconds": seconds,

@@ -505,10 +505,9 @@ class Trainer:
                     summary.warm_val_loss = float(multistep_loss(PerMember(model), val, w_v)[0])
                 self.log(f"after warm start: validation loss {summary.warm_val_loss:.5f}")
             params = list(net.parameters()) + (list(mmg.parameters()) if identify and joint else [])
-            w_F = 1.0 / net.output_std if kind == "hybrid" else None
             if resumed_in == "train":  # buffers (standardisation) first: w_F depends on them
                 PerMember(model).load_state_dict(self._resume["model"])
-                w_F = 1.0 / net.output_std if kind == "hybrid" else None
+            w_F = 1.0 / net.output_std if kind == "hybrid" else None
             stage = self.train(model, params, train, val, w_v, w_F)
             self._history += stage.history
             summary.stopped["train"] = stage.stopped
