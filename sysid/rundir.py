@@ -6,7 +6,8 @@ A **run directory** (``sysid train CONFIG -o runs/NAME``)::
     config.toml        resolved experiment config (all defaults filled in)
     summary.json       {"name", "model": "mmg"|"nn"|"hybrid", "status": "complete"|"failed: ...",
                         "dataset": "D1"|"D2"|..., "ship", "seed", "created", "train_seconds",
-                        "epochs", "best_epoch", "stopped": {stage: "early stop"|"epoch limit"|...},
+                        "epochs", "best_epoch", "val_loss" (validation multi-step loss of
+                        the final model), "stopped": {stage: "early stop"|"epoch limit"|...},
                         "n_train_windows", "n_val_windows", "versions": {...},
                         "mmg_overrides": {...}, "identified": {...}, "identified_initial": {...},
                         "identified_uncertainty": {names, estimate, std_error, correlation,
@@ -176,6 +177,7 @@ def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds:
         "train_seconds": info.pop("train_seconds", None),
         "epochs": info.pop("epochs", 0),
         "best_epoch": info.pop("best_epoch", None),
+        "val_loss": info.pop("val_loss", None),
         "stopped": info.pop("stopped", {}),
         "n_train_windows": info.pop("n_train_windows", None),
         "n_val_windows": info.pop("n_val_windows", None),

@@ -107,6 +107,7 @@ class TrainingSummary:
     residual_force_std: list | None = None
     warm_val_loss: float | None = None
     ensemble_val_loss: float | None = None
+    val_loss: float | None = None         # the final model's validation multi-step loss (sweep objective)
     identified_uncertainty: dict | None = None  # `CoefficientUncertainty.as_dict()`
     gate: dict | None = None
     train_seconds: float = 0.0
@@ -521,6 +522,12 @@ class Trainer:
                 summary.identified_uncertainty = self.uncertainty(model, runs, dtype, device, w_v)
             if exp.gate.enabled:
                 summary.gate = self.fit_gate(model, samples, dtype)
+        if summary.failure is None:
+            final = summary.ensemble_val_loss
+            if final is None:  # MMG-only: the identified (or given) coefficients
+                with torch.no_grad():
+                    final = float(multistep_loss(mmg, val, w_v)[0])
+            summary.val_loss = final
         self.history_ = pd.DataFrame(self._history)
         summary.epochs = int(self.history_["epoch"].max()) if len(self._history) else 0
         summary.train_seconds = time.perf_counter() - started

@@ -1,0 +1,55 @@
+"""``sysid sweep``: many configurations and seeds on Ray (local or a cluster)."""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from sysid.cli.app import app
+
+
+@app.command()
+def sweep(
+    sweep_file: Path = typer.Argument(..., help="Sweep TOML (configs/sweeps/*.toml): base config, [vary], seeds."),
+    output: Path = typer.Option(..., "-o", "--output", help="Sweep directory to write (trials/, results.csv, ...)."),
+    address: Optional[str] = typer.Option(None, "--address", help="Join this Ray cluster (default: a local Ray)."),
+    workers: Optional[int] = typer.Option(None, "--workers", help="Trials side by side (default: one per core)."),
+    resume: bool = typer.Option(False, "--resume", help="Continue an interrupted sweep: finished trials are kept."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing sweep directory."),
+    data: Optional[Path] = typer.Option(None, "--data", help="Dataset root (default: SYSID_DATA or ../shared/data/frt-ds-esso)."),
+) -> None:
+    """Train every configuration x seed of a sweep on Ray Tune; choose on validation loss.
+
+    Each trial is an ordinary run directory (sysid evaluate / sysid report read it). A
+    crashed or killed trial is retried ([sweep] max_retries); after an interruption,
+    --resume continues without training a finished trial again.
+    """
+    from sysid.cli.interrupts import on_interrupt
+    from sysid.errors import ConfigError
+    from sysid.sweep import load_sweep, run_sweep
+
+    start = time.perf_counter()
+    if workers is not None and workers < 1:
+        raise ConfigError(f"--workers {workers}: must be >= 1")
+    spec = load_sweep(sweep_file)
+    on_interrupt(f"finished trials are kept in {output}/trials; rerun with --resume to continue the sweep")
+    results, summary = run_sweep(spec, output, workers, address, resume, overwrite, data,
+                                 log=lambda m: typer.echo(m))
+    if len(results.points):
+        shown = results.points.head(10)
+        typer.echo(shown.to_string(index=False, float_format=lambda v: f"{v:.5f}"))
+    best = summary.get("best")
+    if best:
+        spread = f" ± {best['val_loss_std']:.5f} (std over seeds)" if best.get("val_loss_std") is not None else ""
+        typer.echo(f"sweep: chosen {best['point']}: validation loss {best['val_loss_mean']:.5f}{spread}")
+    counts = f"{summary['complete']}/{summary['trials']} trials complete"
+    if summary["failed"] or summary["missing"]:
+        counts += f", {summary['failed']} failed, {summary['missing']} missing"
+    typer.echo(f"sweep: {counts}; wrote {output} in {(time.perf_counter() - start) / 60:.1f} min")
+    if summary["failed"] or summary["missing"]:
+        for row in results.trials.itertuples():
+            if row.status != "complete":
+                typer.secho(f"sweep: {row.run}: {row.status}", fg=typer.colors.RED, err=True)
+        raise SystemExit(1)

@@ -1,0 +1,107 @@
+"""A sweep's results: one row per trial (``results.csv``), one per configuration over its
+seeds (``points.csv``: mean, std, min, max of the validation loss), the chosen
+configuration (lowest mean validation loss over all its seeds) in ``summary.json``.
+
+Only complete run directories count; a trial without one is "missing" (never trained,
+interrupted) or "failed" (its error from Ray).
+"""
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from sysid.files import write_csv, write_text
+from sysid.sweep.plan import TRIALS_DIR
+from sysid.sweep.spec import SweepSpec
+from sysid.sweep.trial import TrialSpec, complete_summary, result_row
+
+
+@dataclass
+class SweepResults:
+    """Trials and configurations of a sweep, and the chosen one."""
+
+    trials: pd.DataFrame
+    points: pd.DataFrame
+    best: dict | None
+
+    @property
+    def counts(self) -> dict[str, int]:
+        status = self.trials["status"] if len(self.trials) else pd.Series([], dtype=str)
+        return {"trials": len(self.trials), "complete": int((status == "complete").sum()),
+                "failed": int(status.str.startswith("failed").sum()), "missing": int((status == "missing").sum())}
+
+
+def _value(config: dict, key: str):
+    section, option = key.split(".", 1)
+    value = config.get(section, {}).get(option)
+    return tuple(value) if isinstance(value, list) else value
+
+
+def scanned_trials(spec: SweepSpec, out: Path) -> list[TrialSpec]:
+    """Trials found on disk (Optuna's points are only known from their run directories)."""
+    found = []
+    for run_dir in sorted((out / TRIALS_DIR).glob("*/seed*")):
+        config_path = run_dir / "config.toml"
+        if not config_path.is_file() or complete_summary(run_dir) is None:
+            continue
+        config = tomllib.loads(config_path.read_text())
+        values = {key: _value(config, key) for key in spec.keys}
+        found.append(TrialSpec(str(run_dir.relative_to(out)), run_dir.parent.name,
+                               int(config["experiment"]["seed"]), "", values))
+    return found
+
+
+def collect_results(spec: SweepSpec, out: Path, trials: list[TrialSpec], errors: dict[str, str]) -> SweepResults:
+    """Read every trial's run directory into the results tables."""
+    rows = []
+    for trial in trials:
+        row = result_row(trial, complete_summary(out / trial.path), out / trial.path)
+        error = errors.get(trial.path) or errors.get(trial.point)
+        if row["status"] == "missing" and error:
+            row["status"] = f"failed: {error}"
+        rows.append(row)
+    table = pd.DataFrame(rows)
+    if table.empty:
+        return SweepResults(table, pd.DataFrame(), None)
+    for key in spec.keys:  # tuples (layer widths) as text in the tables
+        table[key] = table[key].map(lambda v: "x".join(map(str, v)) if isinstance(v, tuple) else v)
+    done = table[table.status == "complete"]
+    points = []
+    for point, group in table.groupby("point", sort=False):
+        ok = done[done.point == point]["val_loss"]
+        points.append({"point": point, **{k: group[k].iloc[0] for k in spec.keys},
+                       "seeds": int(len(group)), "complete": int(len(ok)),
+                       "val_loss_mean": float(ok.mean()) if len(ok) else math.nan,
+                       "val_loss_std": float(ok.std(ddof=1)) if len(ok) > 1 else math.nan,
+                       "val_loss_min": float(ok.min()) if len(ok) else math.nan,
+                       "val_loss_max": float(ok.max()) if len(ok) else math.nan})
+    points_frame = pd.DataFrame(points).sort_values("val_loss_mean", kind="stable", na_position="last")
+    whole = points_frame[(points_frame.complete == points_frame.seeds) & points_frame.val_loss_mean.notna()]
+    best = None
+    if len(whole):
+        top = whole.iloc[0]
+        best = {"point": top.point, "values": {k: _plain(top[k]) for k in spec.keys},
+                "val_loss_mean": float(top.val_loss_mean),
+                "val_loss_std": None if math.isnan(top.val_loss_std) else float(top.val_loss_std),
+                "runs": list(done[done.point == top.point]["run"])}
+    return SweepResults(table, points_frame.reset_index(drop=True), best)
+
+
+def _plain(value):
+    return value.item() if hasattr(value, "item") else value
+
+
+def write_results(spec: SweepSpec, out: Path, results: SweepResults, seconds: float) -> dict:
+    """results.csv, points.csv and summary.json (each written atomically)."""
+    write_csv(results.trials, out / "results.csv", float_format="%.6g")
+    write_csv(results.points, out / "points.csv", float_format="%.6g")
+    summary = {"name": spec.name, "base": str(spec.base_path), "search": spec.search,
+               "seeds": list(spec.seeds), "objective": spec.objective, "keys": spec.keys,
+               **results.counts, "best": results.best, "seconds": seconds}
+    write_text(json.dumps(summary, indent=2, default=str), out / "summary.json")
+    return summary

@@ -1,0 +1,219 @@
+"""Sweep files: a TOML file to a typed, validated `SweepSpec`.
+
+```toml
+[sweep]
+name = "hybrid_D2_lr"
+base = "../experiments/hybrid_D2.toml"   # experiment config (relative to this file)
+search = "grid"          # grid | random | optuna
+samples = 8              # random / optuna: configurations drawn
+seeds = [0, 1, 2]        # every configuration is trained with each seed
+objective = "val_loss"   # validation multi-step loss, minimised (never a test file)
+max_retries = 2          # a trial that crashes or is killed is retried this often
+search_seed = 0          # seed of the random / optuna sampler
+
+[vary]                   # "section.option" of the experiment config
+"training.learning_rate" = [1e-3, 3e-3]              # grid: the values
+"network.hidden" = [[64, 64], [128, 128]]
+"training.lambda_F" = { loguniform = [1e-3, 1e-1] }   # random / optuna: a distribution
+```
+
+Distributions: ``{ uniform = [low, high] }``, ``{ loguniform = [low, high] }``,
+``{ randint = [low, high] }`` (high exclusive) and ``{ choice = [values] }``; a plain list is
+a grid axis, or a choice in random / optuna search. Every value is checked against the
+experiment schema before anything runs: errors name the sweep file and the key.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sysid.errors import ConfigError
+from sysid.experiment import Experiment, load_experiment, parse_experiment
+
+SEARCHES = ("grid", "random", "optuna")
+OBJECTIVES = ("val_loss",)
+DISTRIBUTIONS = ("uniform", "loguniform", "randint", "choice")
+
+
+@dataclass(frozen=True)
+class Axis:
+    """One varied option: ``values`` (grid or choice) or a continuous ``distribution``."""
+
+    key: str                              # "section.option"
+    values: tuple = ()
+    distribution: str = ""                # "" (values) | uniform | loguniform | randint
+    bounds: tuple[float, float] = (0.0, 0.0)
+
+    @property
+    def section(self) -> str:
+        return self.key.split(".", 1)[0]
+
+    @property
+    def option(self) -> str:
+        return self.key.split(".", 1)[1]
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """A validated sweep: the base experiment, the axes, the seeds and how to search."""
+
+    name: str
+    base: Experiment
+    base_path: Path
+    axes: tuple[Axis, ...]
+    seeds: tuple[int, ...] = (0,)
+    search: str = "grid"
+    samples: int = 1
+    objective: str = "val_loss"
+    max_retries: int = 2
+    search_seed: int = 0
+    source: str = ""
+    text: str = ""                        # the sweep file as written (kept beside the results)
+
+    @property
+    def keys(self) -> list[str]:
+        return [a.key for a in self.axes]
+
+    def experiment(self, values: dict[str, Any], seed: int, name: str) -> Experiment:
+        """The base experiment with `values` ({"section.option": value}) and `seed` set."""
+        return apply_values(self.base, values, seed, name, self.source)
+
+
+def base_document(exp: Experiment) -> dict:
+    """An experiment as a TOML document (every option filled in)."""
+    return tomllib.loads(exp.to_toml())
+
+
+def apply_values(base: Experiment, values: dict[str, Any], seed: int, name: str,
+                 source: str = "<sweep>") -> Experiment:
+    """`base` with ``{"section.option": value}`` applied and validated like a config file."""
+    doc = base_document(base)
+    for key, value in values.items():
+        section, option = key.split(".", 1)
+        doc[section][option] = list(value) if isinstance(value, tuple) else value
+    doc["experiment"]["seed"] = int(seed)
+    doc["experiment"]["name"] = name
+    where = f"{source}: [vary] " + ", ".join(f"{k} = {v!r}" for k, v in values.items()) if values else source
+    exp = parse_experiment(doc, where)
+    return dataclasses.replace(exp, source=base.source)
+
+
+def _number(where: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ConfigError(f"{where}: expected a finite number, got {value!r}")
+    return float(value)
+
+
+def _axis(src: str, key: str, value: Any, base: Experiment) -> Axis:
+    where = f"{src}: [vary] {key!r}"
+    section, _, option = key.partition(".")
+    if not option or section not in base_document(base) or option not in base_document(base)[section]:
+        raise ConfigError(f"{where}: not an experiment option (write \"section.option\", e.g. "
+                          "\"training.learning_rate\")")
+    if key in ("experiment.seed", "experiment.name"):
+        raise ConfigError(f"{where}: set seeds with [sweep] seeds; trial names are made by the sweep")
+    if isinstance(value, list):
+        if not value:
+            raise ConfigError(f"{where}: an empty list of values")
+        return Axis(key, tuple(tuple(v) if isinstance(v, list) else v for v in value))
+    if isinstance(value, dict):
+        if len(value) != 1 or next(iter(value)) not in DISTRIBUTIONS:
+            raise ConfigError(f"{where}: a distribution is one of {', '.join(DISTRIBUTIONS)}, "
+                              f"e.g. {{ loguniform = [1e-4, 1e-2] }}; got {value!r}")
+        kind, arg = next(iter(value.items()))
+        if kind == "choice":
+            if not isinstance(arg, list) or not arg:
+                raise ConfigError(f"{where}: choice needs a non-empty list, got {arg!r}")
+            return Axis(key, tuple(tuple(v) if isinstance(v, list) else v for v in arg))
+        if not isinstance(arg, list) or len(arg) != 2:
+            raise ConfigError(f"{where}: {kind} needs [low, high], got {arg!r}")
+        low, high = _number(where, arg[0]), _number(where, arg[1])
+        if not low < high or (kind == "loguniform" and low <= 0):
+            raise ConfigError(f"{where}: {kind} needs low < high" + (" and low > 0" if kind == "loguniform" else "")
+                              + f", got {arg!r}")
+        if kind == "randint" and not (float(low).is_integer() and float(high).is_integer()):
+            raise ConfigError(f"{where}: randint needs integer bounds, got {arg!r}")
+        return Axis(key, (), kind, (low, high))
+    raise ConfigError(f"{where}: expected a list of values or a distribution table, got {value!r}")
+
+
+def _check_axis_values(spec_src: str, axis: Axis, base: Experiment) -> None:
+    """Apply every value (or both bounds) alone to the base config: bad ones fail now."""
+    if axis.distribution:
+        low, high = axis.bounds
+        probes = [int(low), int(high) - 1] if axis.distribution == "randint" else [low, high]
+    else:
+        probes = list(axis.values)
+    for value in probes:
+        apply_values(base, {axis.key: value}, base.experiment.seed, base.experiment.name, spec_src)
+
+
+def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = None, text: str = "") -> SweepSpec:
+    """A parsed sweep TOML document to a validated `SweepSpec`."""
+    unknown = set(doc) - {"sweep", "vary"}
+    if unknown:
+        raise ConfigError(f"{source}: unknown section(s) {sorted(unknown)} (known: sweep, vary)")
+    table = doc.get("sweep")
+    if not isinstance(table, dict):
+        raise ConfigError(f"{source}: [sweep] is required (base, seeds, search)")
+    known = {"name", "base", "search", "samples", "seeds", "objective", "max_retries", "search_seed"}
+    for key in table:
+        if key not in known:
+            raise ConfigError(f"{source}: [sweep] unknown key {key!r} (known: {', '.join(sorted(known))})")
+    if not isinstance(table.get("base"), str):
+        raise ConfigError(f"{source}: [sweep] base must name the experiment config (a path)")
+    base_path = Path(table["base"])
+    if not base_path.is_absolute():
+        base_path = (directory or Path.cwd()) / base_path
+    base = load_experiment(base_path)
+    search = table.get("search", "grid")
+    if search not in SEARCHES:
+        raise ConfigError(f"{source}: [sweep] search = {search!r}: choose one of {', '.join(SEARCHES)}")
+    objective = table.get("objective", "val_loss")
+    if objective not in OBJECTIVES:
+        raise ConfigError(f"{source}: [sweep] objective = {objective!r}: the objective is the validation "
+                          "loss (val_loss); test files are never used to choose")
+    seeds = table.get("seeds", [base.experiment.seed])
+    if (not isinstance(seeds, list) or not seeds or any(isinstance(s, bool) or not isinstance(s, int) or s < 0
+                                                       for s in seeds) or len(set(seeds)) != len(seeds)):
+        raise ConfigError(f"{source}: [sweep] seeds must be a list of distinct integers >= 0, got {seeds!r}")
+    ints = {}
+    for key, default, low in (("samples", 1, 1), ("max_retries", 2, 0), ("search_seed", 0, 0)):
+        value = table.get(key, default)
+        if isinstance(value, bool) or not isinstance(value, int) or value < low:
+            raise ConfigError(f"{source}: [sweep] {key} must be an integer >= {low}, got {value!r}")
+        ints[key] = value
+    name = table.get("name", Path(source).stem if source != "<sweep>" else "sweep")
+    if not isinstance(name, str) or not name:
+        raise ConfigError(f"{source}: [sweep] name must be a non-empty string")
+    vary = doc.get("vary", {})
+    if not isinstance(vary, dict):
+        raise ConfigError(f"{source}: [vary] must be a table of \"section.option\" = values")
+    axes = tuple(_axis(source, key, value, base) for key, value in vary.items())
+    for axis in axes:
+        if search == "grid" and axis.distribution:
+            raise ConfigError(f"{source}: [vary] {axis.key!r}: a {axis.distribution} distribution needs "
+                              "search = \"random\" or \"optuna\" (grid search takes a list of values)")
+        _check_axis_values(source, axis, base)
+    return SweepSpec(name, base, base_path, axes, tuple(seeds), search, ints["samples"], objective,
+                     ints["max_retries"], ints["search_seed"], source, text)
+
+
+def load_sweep(path: str | os.PathLike) -> SweepSpec:
+    """Read and validate a sweep file; errors name the file and key."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"{path}: sweep file not found")
+    try:
+        text = path.read_text()
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML ({exc})") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: not UTF-8 text; a sweep file is a UTF-8 TOML file") from None
+    return parse_sweep(doc, str(path), path.resolve().parent, text)

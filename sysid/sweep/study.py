@@ -1,0 +1,81 @@
+"""`run_sweep`: a sweep file to trained trials and a results table, resumable.
+
+Output directory::
+
+    sweep.toml        the sweep file as given (a resumed sweep must match it)
+    base.toml         the base experiment, every option resolved
+    trials/{point}/seed{k}/   one ordinary run directory per trial (`sysid.rundir`)
+    trials.log        journal: one JSON line per trial event (started, resumed, trained, reused)
+    results.csv       one row per trial: varied values, seed, status, validation loss, epochs
+    points.csv        one row per configuration: validation loss over its seeds
+    summary.json      counts, the chosen configuration and its runs
+    .ray/             Ray Tune's experiment state
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import time
+from pathlib import Path
+from typing import Callable
+
+from sysid.errors import ConfigError, OutputError
+from sysid.files import write_text
+from sysid.sweep.plan import sweep_trials
+from sysid.sweep.results import SweepResults, collect_results, scanned_trials, write_results
+from sysid.sweep.runner import default_workers, run_optuna, run_trials
+from sysid.sweep.spec import SweepSpec
+from sysid.sweep.trial import TrialContext
+
+
+def prepare_output(spec: SweepSpec, out: Path, resume: bool, overwrite: bool) -> None:
+    """Refuse to mix sweeps: an existing output is continued only with `resume` (and the same
+    sweep file) or replaced with `overwrite` (only if it is a sweep's)."""
+    marker = out / "sweep.toml"
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"{out}: exists and is not a directory; choose another output path")
+    if resume:
+        if not marker.is_file():
+            raise OutputError(f"{out}: no sweep to resume here (no sweep.toml); start it without --resume")
+        if marker.read_text() != spec.text:
+            raise ConfigError(f"{spec.source}: differs from {marker}, the sweep file this sweep was started "
+                              "with; resume with that file, or start a new sweep in another directory")
+        return
+    if out.is_dir() and any(out.iterdir()):
+        if not overwrite:
+            raise OutputError(f"{out}: already exists; pass --resume to continue that sweep, --overwrite to "
+                              "replace it, or choose another output path")
+        if not marker.is_file():
+            raise OutputError(f"{out}: exists and is not a sweep's output (no sweep.toml); "
+                              "--overwrite only replaces sysid outputs")
+        shutil.rmtree(out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_text(spec.base.to_toml(), out / "base.toml")
+    write_text(spec.text, marker)
+
+
+def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = None, address: str | None = None,
+              resume: bool = False, overwrite: bool = False, data: str | os.PathLike | None = None,
+              log: Callable[[str], None] = print) -> tuple[SweepResults, dict]:
+    """Train every trial of `spec` (on Ray) into `out`; returns the results and summary."""
+    from sysid.datasets import data_root
+
+    started = time.perf_counter()
+    out = Path(out)
+    data = str(data_root(data))  # a clear error before Ray starts when the data are missing
+    prepare_output(spec, out, resume, overwrite)
+    workers = workers or default_workers()
+    context = TrialContext(str(out.resolve()), data, spec.source)
+    if spec.search == "optuna":
+        log(f"sweep {spec.name}: optuna, {spec.samples} configurations x {len(spec.seeds)} seeds, "
+            f"{workers} workers" + (f" on {address}" if address else ""))
+        errors = run_optuna(spec, context, workers, address, resume=resume, log=log)
+        trials = scanned_trials(spec, out)
+    else:
+        trials = sweep_trials(spec)
+        log(f"sweep {spec.name}: {spec.search}, {len(trials) // len(spec.seeds)} configurations x "
+            f"{len(spec.seeds)} seeds = {len(trials)} trials, {workers} workers" + (f" on {address}" if address else ""))
+        errors = run_trials(trials, context, workers, address, spec.max_retries, log=log)
+    results = collect_results(spec, out, trials, errors)
+    summary = write_results(spec, out, results, time.perf_counter() - started)
+    return results, summary

@@ -1,0 +1,138 @@
+"""One trial of a sweep: one configuration and seed trained into an ordinary run directory
+(`sysid.rundir`; ``sysid evaluate`` and ``sysid report`` read it).
+
+A trial whose run directory is already complete is not trained again; one interrupted
+mid-training continues from its checkpoint (`sysid.lifecycle.checkpoint_path`). Every
+training that finishes is written to the sweep's journal (``trials.log``, one JSON line
+per event), which is how a resumed sweep shows that no trial ran twice.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+from sysid.data import read_run
+from sysid.datasets import test_files
+from sysid.errors import IncompleteOutputError
+from sysid.experiment import parse_experiment
+from sysid.lifecycle import checkpoint_path, run_experiment, training_runs
+from sysid.rundir import verify_run_dir
+
+JOURNAL = "trials.log"
+
+
+@dataclass(frozen=True)
+class TrialSpec:
+    """What one trial trains: its run directory (relative to the sweep's output), the
+    configuration's name and varied values, the seed, and the resolved experiment TOML."""
+
+    path: str
+    point: str
+    seed: int
+    config: str
+    values: dict = field(default_factory=dict)
+    label: str = ""          # reproduce: the protocol run's name
+
+
+@dataclass(frozen=True)
+class TrialContext:
+    """Where trials write and read: the output directory and the data root."""
+
+    out: str
+    data: str | None = None
+    source: str = "<sweep>"
+
+
+def journal(out: str | os.PathLike, event: str, trial: TrialSpec, **extra: Any) -> None:
+    """Append one event line to the sweep's journal (one write on an O_APPEND file)."""
+    line = json.dumps({"event": event, "trial": trial.path, "time": time.time(), "pid": os.getpid(), **extra})
+    fd = os.open(Path(out) / JOURNAL, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
+    try:
+        os.write(fd, (line + "\n").encode())
+    finally:
+        os.close(fd)
+
+
+def read_journal(out: str | os.PathLike) -> list[dict]:
+    """Every event of the journal (a torn last line, from a kill mid-write, is skipped)."""
+    path = Path(out) / JOURNAL
+    events = []
+    if path.is_file():
+        for line in path.read_text().splitlines():
+            try:
+                events.append(json.loads(line))
+            except json.JSONDecodeError:
+                continue
+    return events
+
+
+def complete_summary(run_dir: Path) -> dict | None:
+    """summary.json of a complete run directory, else None."""
+    if not (run_dir / "manifest.json").is_file():
+        return None
+    try:
+        verify_run_dir(run_dir)
+        return json.loads((run_dir / "summary.json").read_text())
+    except (IncompleteOutputError, OSError, json.JSONDecodeError):
+        return None
+
+
+def result_row(trial: TrialSpec, summary: dict | None, run_dir: Path) -> dict:
+    """The results-table row of a trial (status "missing" when it has no complete run)."""
+    row = {"point": trial.point, "seed": trial.seed, "run": trial.path, **trial.values}
+    if trial.label:
+        row["name"] = trial.label
+    if summary is None:
+        return {**row, "status": "missing", "val_loss": math.nan}
+    val = summary.get("val_loss")
+    return {**row, "status": summary.get("status", "complete"),
+            "val_loss": float(val) if val is not None else math.nan,
+            "epochs": summary.get("epochs"), "best_epoch": summary.get("best_epoch"),
+            "stopped": "; ".join(f"{k}: {v}" for k, v in (summary.get("stopped") or {}).items()),
+            "train_seconds": summary.get("train_seconds")}
+
+
+_CACHE: dict = {}
+
+
+def _tests(data: str | None):
+    if "tests" not in _CACHE:
+        _CACHE["tests"] = [read_run(p) for p in test_files(data).values()]
+    return _CACHE["tests"]
+
+
+def run_trial(trial: TrialSpec, context: TrialContext, log: Callable[[str], None] = lambda m: None) -> dict:
+    """Train `trial` into its run directory unless it is complete; its results-table row."""
+    run_dir = Path(context.out) / trial.path
+    summary = complete_summary(run_dir)
+    if summary is not None:
+        journal(context.out, "reused", trial)
+        return result_row(trial, summary, run_dir)
+    exp = parse_experiment(tomllib.loads(trial.config), f"{context.source} (trial {trial.path})")
+    resume = checkpoint_path(run_dir).is_file()
+    journal(context.out, "resumed" if resume else "started", trial)
+    key = (exp.experiment.dataset, exp.data.files, exp.data.rate)
+    if exp.needs_training and key not in _CACHE:
+        _CACHE[key] = training_runs(exp, context.data)
+    run_dir.parent.mkdir(parents=True, exist_ok=True)
+    result = run_experiment(exp, run_dir, _tests(context.data), _CACHE.get(key), context.data,
+                            progress=False, log=log, resume=resume, overwrite=run_dir.exists())
+    summary = json.loads((result.path / "summary.json").read_text())
+    journal(context.out, "trained", trial, val_loss=summary.get("val_loss"))
+    return result_row(trial, summary, run_dir)
+
+
+def tune_trainable(config: dict, trials: list[TrialSpec], context: TrialContext) -> None:
+    """Ray Tune's function trainable: the trial at index ``config["trial"]``."""
+    from ray import tune
+
+    row = run_trial(trials[int(config["trial"])], context)
+    value = row["val_loss"]
+    tune.report({"val_loss": value if math.isfinite(value) else math.inf,
+                 "epochs": int(row.get("epochs") or 0), "failed": row["status"] != "complete"})
