@@ -28,6 +28,9 @@ alpha = 0.9995
 parameters = ["X_vr", "Y_v"]
 bounds = { X_vr = [-1.0, 1.0] }
 stage = "before"            # before (then the FNN on the identified MMG) | joint
+
+[ensemble]                  # a mean-of-seeds ensemble: these trained runs, forces averaged
+members = ["../hybrid_D2/seed0", "../hybrid_D2/seed1"]
 ```
 Every section and key is optional except ``[experiment] model``; unknown keys are errors.
 """
@@ -123,6 +126,11 @@ class EvaluationOptions:
 
 
 @dataclass(frozen=True)
+class EnsembleOptions:
+    members: tuple[str, ...] = ()   # run directories (relative to this run's) whose forces are averaged
+
+
+@dataclass(frozen=True)
 class Experiment:
     experiment: ExperimentOptions = ExperimentOptions()
     data: DataOptions = DataOptions()
@@ -132,6 +140,7 @@ class Experiment:
     gate: GateOptions = GateOptions()
     identify: IdentifyOptions = IdentifyOptions()
     evaluation: EvaluationOptions = EvaluationOptions()
+    ensemble: EnsembleOptions = EnsembleOptions()
     source: str = ""
 
     @property
@@ -180,7 +189,7 @@ _SECTIONS = {f.name: f.type for f in fields(Experiment) if f.name != "source"}
 
 
 # the element type of every list option
-_ELEMENT_TYPES = {("data", "files"): str, ("network", "hidden"): int,
+_ELEMENT_TYPES = {("data", "files"): str, ("ensemble", "members"): str, ("network", "hidden"): int,
                   ("identify", "parameters"): str, ("evaluation", "horizons"): float}
 _NAMES = {int: "an integer", float: "a finite number", str: "a string"}
 

@@ -59,11 +59,16 @@ MODEL_LABELS = {
     "nn": "NN",
     "hybrid": "Hybrid",
     "hybrid_identified": "Hybrid (identified MMG)",
+    # the mean-of-seeds ensembles of `sysid reproduce --seeds N` (forces averaged over the seeds)
+    "nn_ensemble": "NN (ensemble)",
+    "hybrid_ensemble": "Hybrid (ensemble)",
+    "hybrid_identified_ensemble": "Hybrid (id. MMG, ensemble)",
 }
 PAPER_VARIANTS = {"mmg_paper": "mmg", "nn": "nn", "hybrid": "hybrid"}  # variants the paper reports
 SCENARIO_ORDER = ["Berthing", "Turning 20", "Turning 35", "Zigzag 20/20", "Zigzag 30/30", "Random"]
 COMPARISON_COLUMNS = ["scenario", "model", "dataset", "horizon_s",
-                      "rmse_u", "rmse_v", "rmse_r", "paper_u", "paper_v", "paper_r"]
+                      "rmse_u", "rmse_v", "rmse_r", "paper_u", "paper_v", "paper_r",
+                      "std_u", "std_v", "std_r", "n_seeds"]  # rmse_*: mean over n_seeds seeds; std_*: their std
 
 
 def run_variant(name: str, dataset: str = "-") -> str:
@@ -99,8 +104,9 @@ def comparison_table(runs, datasets: tuple[str, ...] = ("D1", "D2")) -> pd.DataF
     """Ours beside the paper's: one row per scenario, model, data set and horizon.
 
     `runs` yields (name, kind, dataset, metrics) with metrics in `sysid.evaluate`'s
-    METRICS_COLUMNS. A run without training data (dataset "-") stands in every data set's
-    column; paper values are given for the paper's own three models only.
+    METRICS_COLUMNS, or a seed group's `sysid.seeds.seed_metrics` (the spread columns are
+    carried over; one seed has std NaN and n_seeds 1). A run without training data (dataset
+    "-") stands in every data set's column; paper values are given for the paper's own three models only.
     """
     rows = []
     for name, kind, dataset, metrics in runs:
@@ -112,7 +118,9 @@ def comparison_table(runs, datasets: tuple[str, ...] = ("D1", "D2")) -> pd.DataF
                 rows.append({"scenario": str(m.scenario), "model": label, "dataset": ds,
                              "horizon_s": int(round(m.horizon_s)), "rmse_u": m.rmse_u, "rmse_v": m.rmse_v,
                              "rmse_r": m.rmse_r, **dict(zip(("paper_u", "paper_v", "paper_r"),
-                                                            ref if ref else (float("nan"),) * 3))})
+                                                            ref if ref else (float("nan"),) * 3)),
+                             "std_u": getattr(m, "std_u", float("nan")), "std_v": getattr(m, "std_v", float("nan")),
+                             "std_r": getattr(m, "std_r", float("nan")), "n_seeds": int(getattr(m, "n_seeds", 1))})
     table = pd.DataFrame(rows, columns=COMPARISON_COLUMNS)
     if table.empty:
         return table

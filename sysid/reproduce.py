@@ -47,8 +47,10 @@ def protocol_experiment(name: str) -> Experiment:
 def markdown_table(table: pd.DataFrame, horizon: int) -> str:
     """The paper's layout: ours (paper) per cell, u v_m r for D1 and D2."""
     t = table[table.horizon_s == horizon]
+    seeds = int(t["n_seeds"].max()) if "n_seeds" in t and len(t) else 1
+    spread = f" Learned models: mean ± std over {seeds} seeds." if seeds > 1 else ""
     head = (f"RMSE [m/s, m/s, rad/s] of {horizon}-s predictions: ours (paper). Table "
-            f"{7 if horizon == 30 else 8} of the paper.\n\n"
+            f"{7 if horizon == 30 else 8} of the paper.{spread}\n\n"
             "| test | model | D1 u | D1 v_m | D1 r | D2 u | D2 v_m | D2 r |\n|---|---|---|---|---|---|---|---|\n")
     lines = []
     for scenario in dict.fromkeys(t.scenario):
@@ -63,23 +65,26 @@ def markdown_table(table: pd.DataFrame, horizon: int) -> str:
                         cells.append("–")
                         continue
                     ours, ref = row[f"rmse_{c}"].iloc[0], row[f"paper_{c}"].iloc[0]
-                    cells.append(f"{ours:.4f}" + ("" if np.isnan(ref) else f" ({ref:.4f})"))
+                    spread = row[f"std_{c}"].iloc[0] if f"std_{c}" in row else np.nan
+                    cells.append(f"{ours:.4f}" + ("" if np.isnan(spread) else f" ± {spread:.4f}")
+                                 + ("" if np.isnan(ref) else f" ({ref:.4f})"))
             lines.append(f"| {scenario} | {model} | " + " | ".join(cells) + " |")
     return head + "\n".join(lines) + "\n"
 
 
-def scorecard(table: pd.DataFrame, baseline: str = "MMG") -> dict:
-    """Hybrid against MMG-only with the same X'vr (`baseline` label) and against the paper's
-    hybrid, cell by cell."""
-    out: dict = {"baseline": baseline}
+def scorecard(table: pd.DataFrame, baseline: str = "MMG", model: str = "Hybrid") -> dict:
+    """`model` (the hybrid; with seeds, its seed mean) against MMG-only with the same X'vr
+    (`baseline` label) and against the paper's hybrid, cell by cell."""
+    out: dict = {"baseline": baseline, "model": model}
     for ds in ("D1", "D2"):
-        hyb = table[(table.model == "Hybrid") & (table.dataset == ds)].set_index(["scenario", "horizon_s"])
+        hyb = table[(table.model == model) & (table.dataset == ds)].set_index(["scenario", "horizon_s"])
         mmg = table[(table.model == baseline) & (table.dataset == ds)].set_index(["scenario", "horizon_s"])
         cols = ["rmse_u", "rmse_v", "rmse_r"]
         ratio = hyb[cols] / mmg.loc[hyb.index, cols]
         at30 = ratio.xs(30, level="horizon_s")
         paper_cols = ["paper_u", "paper_v", "paper_r"]
-        beats = (hyb[cols].to_numpy() < hyb[paper_cols].to_numpy())
+        ref = table[(table.model == "Hybrid") & (table.dataset == ds)].set_index(["scenario", "horizon_s"])
+        beats = (hyb[cols].to_numpy() < ref.loc[hyb.index, paper_cols].to_numpy())
         out[ds] = {
             "reduction_vs_mmg_30s_by_scenario": {s: float(1 - at30.loc[s].mean()) for s in at30.index},
             "reduction_vs_mmg_30s_mean": float(1 - at30.to_numpy().mean()),
@@ -142,14 +147,42 @@ def _worker(name: str, exp: Experiment, out: Path, data) -> ProtocolRun:
     return _run_one(name, exp, out, data, True, lambda m: print(f"[{name}] {m.strip()}", flush=True))
 
 
+def _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, done) -> list[str]:
+    """Learned runs with `seeds` seeds on Ray into `done`; their ensembles' names."""
+    from sysid.datasets import data_root
+    from sysid.seed_runs import train_seeds, write_ensemble
+
+    ordered = sorted(trained, key=lambda n: -expected_cost(experiments[n]))  # longest first
+    log(f"training {len(trained)} runs x {seeds} seeds = {len(trained) * seeds} trials on Ray, "
+        f"{jobs} side by side" + (f" on {address}" if address else ""))
+    groups = train_seeds({n: experiments[n] for n in ordered}, seeds, out, str(data_root(data)), jobs, address, log)
+    tests = _TRAINING_CACHE.get("tests") or [read_run(p) for p in test_files(data).values()]
+    _TRAINING_CACHE["tests"] = tests
+    ensembles = []
+    for name in trained:
+        exp, group = experiments[name], groups[name]
+        done[name] = ProtocolRun(name, exp.experiment.model, exp.experiment.dataset, group.metrics,
+                                 group.gate_off_share, group.failure, group.seconds)
+        if exp.experiment.model != "mmg" and group.seeds:
+            target, evaluation, _ = write_ensemble(name, exp, group, out, tests)
+            done[target] = ProtocolRun(target, exp.experiment.model, exp.experiment.dataset, evaluation.metrics,
+                                       evaluation.gate_off_share, None, 0.0)
+            ensembles.append(target)
+            log(f"[{target}] mean of {len(group.seeds)} seeds' networks evaluated")
+    return ensembles
+
+
 def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
               only: list[str] | None = None, progress: bool = True,
               overrides: dict | None = None, log: Callable[[str], None] = print,
-              jobs: int = 1) -> dict:
+              jobs: int = 1, seeds: int = 1, address: str | None = None) -> dict:
     """Run the protocol; write runs/, comparison.csv, table7.md, table8.md, summary.json.
 
     `jobs` > 1 trains that many runs side by side in worker processes (each with its
     config's ``[training] threads``, 1 by default): the results do not depend on it.
+    `seeds` > 1 trains every learned run with that many seeds on Ray (`jobs` trials side by
+    side, or on the cluster at `address`): cells are seed means with their spread, and each
+    network's mean-of-seeds ensemble is a model row of its own (`sysid.seed_runs`).
     """
     started = time.perf_counter()
     out = Path(out_dir)
@@ -161,7 +194,10 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
         experiments[name] = exp.replace(**overrides) if overrides and exp.experiment.model != "mmg" else exp
     done: dict[str, ProtocolRun] = {}
     trained = [n for n in names if experiments[n].needs_training]
-    if jobs > 1 and len(trained) > 1:
+    ensembles: list[str] = []
+    if seeds > 1 and trained:
+        ensembles = _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, done)
+    elif jobs > 1 and len(trained) > 1:
         log(f"training {len(trained)} runs in {min(jobs, len(trained))} worker processes")
         context = multiprocessing.get_context("spawn")
         with ProcessPoolExecutor(min(jobs, len(trained)), mp_context=context) as pool:
@@ -181,6 +217,7 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
         if run.failure:
             log(f"    FAILED: {run.failure}")
         log(f"    done in {run.seconds:.0f} s")
+    names = names + ensembles
     runs = [done[n] for n in names]
     results = [(r.name, r.kind, r.dataset, r.metrics) for r in runs]
     shares = {r.name: r.gate_off_share for r in runs}
@@ -190,9 +227,11 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
     for horizon, fname in ((30, "table7.md"), (100, "table8.md")):
         write_text(markdown_table(table, horizon), out / fname)
     summary = {"seconds": time.perf_counter() - started, "runs": names, "failed": failed,
-               "protocol": list(PROTOCOL)}
+               "protocol": list(PROTOCOL), "seeds": seeds}
     if {"hybrid_D1", "hybrid_D2", "mmg_paper", "mmg_lab"} <= set(names):
         summary["scorecard"] = scorecard(table, hybrid_baseline())
+        if {"hybrid_ensemble_D1", "hybrid_ensemble_D2"} <= set(names):
+            summary["scorecard_ensemble"] = scorecard(table, hybrid_baseline(), MODEL_LABELS["hybrid_ensemble"])
     if "hybrid_identified_D2" in names:
         hyb = table[(table.model == MODEL_LABELS["hybrid_identified"])]
         ref = table[(table.model == "Hybrid") & (table.dataset == "D2")].set_index(["scenario", "horizon_s"])

@@ -27,7 +27,10 @@ manifest is missing or disagrees with its files (`verify_run_dir`).
 
 A **reproduction directory** (``sysid reproduce -o OUTDIR``)::
 
-    runs/{name}/        run directories (`sysid.reproduce.PROTOCOL`)
+    runs/{name}/        run directories (`sysid.reproduce.PROTOCOL`); with ``--seeds N`` a
+                        learned run is a folder of N run directories ``seed{k}/``, and
+                        ``runs/{variant}_ensemble_{dataset}/`` is their mean-of-seeds
+                        ensemble (config ``[ensemble] members``)
     comparison.csv      `sysid.paper.COMPARISON_COLUMNS`: ours beside the paper's, every cell
     table7.md, table8.md  the paper's layout (30 s, 100 s), ours (paper)
     summary.json        total time, gate shares, wins against the paper; "runs" (the protocol
@@ -48,6 +51,7 @@ import pandas as pd
 import torch
 
 from sysid.correction import INPUT_NAMES, OUTPUT_NAMES
+from sysid.ensemble import SeedEnsemble
 from sysid.errors import CheckpointError, ConfigError
 from sysid.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, Evaluation, trace_name  # noqa: F401 (layout)
 from sysid.experiment import Experiment, load_experiment, ship_overrides
@@ -115,6 +119,8 @@ def save_model(model: torch.nn.Module, run_dir: Path) -> None:
     """model.pt, standardization.json and knn.pt of a trained model."""
     if isinstance(model, MMG) and not model.coefficients.trainable_names:
         return
+    if isinstance(model, SeedEnsemble):  # the members' run directories hold the weights
+        return
     _save_tensors(model_state(model), run_dir / "model.pt")
     if isinstance(model, CorrectedModel):
         net = model.correction_net
@@ -140,6 +146,9 @@ def load_model(run_dir: str | os.PathLike, dtype: torch.dtype = torch.float64):
         exp = load_experiment(run_dir / "config.toml")
     except ConfigError as exc:
         raise CheckpointError(f"{run_dir}: bad run config ({exc})") from None
+    if exp.ensemble.members:
+        members = [load_model((run_dir / member).resolve(), dtype)[1] for member in exp.ensemble.members]
+        return exp, SeedEnsemble(members)
     model = build_model(exp, dtype)
     if not exp.needs_training:
         return exp, model

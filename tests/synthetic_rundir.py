@@ -183,7 +183,8 @@ def write_reproduction(out: Path, scale: float = 1.0, names=tuple(RUNS)) -> Path
         kind, dataset, _ = RUNS[name]
         for m in pd.read_csv(run_dir / "metrics.csv").itertuples(index=False):
             paper = paper_rmse(m.scenario, kind, dataset, m.horizon_s) or (np.nan,) * 3
-            rows.append([m.scenario, name, dataset, m.horizon_s, m.rmse_u, m.rmse_v, m.rmse_r, *paper])
+            rows.append([m.scenario, name, dataset, m.horizon_s, m.rmse_u, m.rmse_v, m.rmse_r, *paper,
+                         np.nan, np.nan, np.nan, 1])
     pd.DataFrame(rows, columns=COMPARISON_COLUMNS).to_csv(out / "comparison.csv", index=False)
     (out / "summary.json").write_text(json.dumps(
         {"total_seconds": 987.6, "gate_share_on": {"hybrid_D1": 0.62, "hybrid_D2": 0.91},

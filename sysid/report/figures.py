@@ -404,3 +404,47 @@ def identified_coefficients(names: list[str], estimate: list, two_sigma: list, p
     fig.colorbar(image, ax=right, label="correlation [-]")
     fig.suptitle(title, fontsize=10)
     return fig
+
+
+@dataclass
+class SeedSpread:
+    """One learned model's RMSE per seed: rows scenario, columns rmse_u, rmse_v, rmse_r, seed."""
+
+    label: str
+    colour: str
+    rmse: pd.DataFrame
+
+
+def seed_boxplots(models: list[SeedSpread], scenarios: list[str], title: str,
+                  paper: dict | None = None, into: FigureBase | None = None) -> FigureBase:
+    """RMSE of u, v_m [m/s] and r [rad/s] across seeds, per scenario and model: boxes = IQR
+    over the seeds, dots = single seeds, black bar = the paper's hybrid (when given)."""
+    fig = _canvas(into, (10.0, 4.8))
+    axes = fig.subplots(1, 3)
+    width = 0.8 / max(len(models), 1)
+    for ax, (col, name, unit) in zip(axes, [("u", "u", "m/s"), ("v", "v_m", "m/s"), ("r", "r", "rad/s")]):
+        for j, m in enumerate(models):
+            positions = np.arange(len(scenarios)) + (j - (len(models) - 1) / 2) * width
+            data = [m.rmse.loc[m.rmse.scenario == s, f"rmse_{col}"].to_numpy() for s in scenarios]
+            box = ax.boxplot(data, positions=positions, widths=width * 0.85, patch_artist=True,
+                             medianprops={"color": "black"}, showfliers=False)
+            for patch in box["boxes"]:
+                patch.set_facecolor(m.colour)
+                patch.set_alpha(0.75)
+            for x, values in zip(positions, data):
+                ax.plot(np.full(len(values), x), values, ".", color="black", markersize=3)
+        if paper:
+            for i, s in enumerate(scenarios):
+                ref = paper.get(s)
+                if ref is not None:
+                    ax.hlines(ref[["u", "v", "r"].index(col)], i - 0.45, i + 0.45, colors="black", lw=1.6)
+        ax.set_xticks(range(len(scenarios)), scenarios, rotation=35, ha="right", fontsize=8)
+        ax.set_ylabel(f"RMSE of {name} [{unit}]")
+        ax.set_title(name)
+    handles = [Patch(facecolor=m.colour, edgecolor="black", label=m.label) for m in models]
+    handles.append(Line2D([], [], marker=".", ls="", color="black", label="one seed"))
+    if paper:
+        handles.append(Line2D([], [], color="black", lw=1.6, label="paper's hybrid"))
+    _legend_top(fig, handles, ncol=min(len(handles), 6))
+    fig.suptitle(title, fontsize=10)
+    return fig

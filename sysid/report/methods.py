@@ -92,14 +92,22 @@ def reproduction_items(summary: dict) -> list[tuple[str, str]]:
     items = []
     if summary.get("seconds") is not None:
         items.append(("Reproduction time", _seconds(float(summary["seconds"]))))
-    card = dict(summary.get("scorecard") or {})
-    baseline = card.pop("baseline", "MMG")
-    for ds, c in card.items():
-        by = ", ".join(f"{k} {100 * v:.0f} %" for k, v in (c.get("reduction_vs_mmg_30s_by_scenario") or {}).items())
-        items.append((f"Hybrid {ds} vs {baseline}",
-                      f"{100 * c.get('reduction_vs_mmg_30s_mean', float('nan')):.0f} % lower RMSE at 30 s "
-                      f"({by}); {100 * c.get('reduction_vs_mmg_100s_mean', float('nan')):.0f} % at 100 s; "
-                      f"beats the paper's hybrid in {c.get('cells_beating_paper_hybrid')} of {c.get('cells')} cells"))
+    seeds = int(summary.get("seeds") or 1)
+    if seeds > 1:
+        items.append(("Seeds", f"every learned model trained with {seeds} seeds: table cells are the mean ± std "
+                               "over the seeds; an ensemble row averages the forces of the seeds' models"))
+    for key in ("scorecard", "scorecard_ensemble"):
+        card = dict(summary.get(key) or {})
+        baseline = card.pop("baseline", "MMG")
+        model = card.pop("model", "Hybrid")
+        if seeds > 1 and model == "Hybrid":
+            model = f"Hybrid (mean over {seeds} seeds)"
+        for ds, c in card.items():
+            by = ", ".join(f"{k} {100 * v:.0f} %" for k, v in (c.get("reduction_vs_mmg_30s_by_scenario") or {}).items())
+            items.append((f"{model} {ds} vs {baseline}",
+                          f"{100 * c.get('reduction_vs_mmg_30s_mean', float('nan')):.0f} % lower RMSE at 30 s "
+                          f"({by}); {100 * c.get('reduction_vs_mmg_100s_mean', float('nan')):.0f} % at 100 s; "
+                          f"beats the paper's hybrid in {c.get('cells_beating_paper_hybrid')} of {c.get('cells')} cells"))
     shares = {k: v for k, v in (summary.get("gate_off_share_random_30s") or {}).items() if v is not None}
     if shares:
         items.append(("kNN gate off, Random test (30 s)",
@@ -128,7 +136,7 @@ def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -
         ship += f" (L_pp {ship_size[0]:g} m, B {ship_size[1]:g} m)"
     datasets = sorted({r.dataset for r in runs if r.dataset != "-"})
     scenarios = list(dict.fromkeys(s for r in runs for s in r.scenarios()))
-    trained = [float(r.summary.get("train_seconds") or 0.0) for r in runs]
+    trained = [float(s.summary.get("train_seconds") or 0.0) for r in runs for s in (r.seeds or [r])]
     versions: dict[str, set] = {}
     for r in runs:
         for k, v in (r.summary.get("versions") or {}).items():

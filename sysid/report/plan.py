@@ -245,6 +245,31 @@ def _uncertainty_figures(c: _Context) -> None:
                       u.get("correlation", []), title), True)
 
 
+def _seed_figures(c: _Context) -> None:
+    """The spread over seeds of every learned model's short-horizon RMSE, per data set."""
+    from sysid.paper import paper_rmse
+
+    groups = [r for r in c.runs if r.seeds]
+    if not groups or not c.short:
+        return
+    for dataset in sorted({r.dataset for r in groups}):
+        models = []
+        for i, run in enumerate(r for r in groups if r.dataset == dataset):
+            rows = []
+            for record in run.seeds:
+                m = record.metrics[(record.metrics.horizon_s - c.short).abs() < 0.5]
+                rows.append(m.assign(seed=record.summary.get("seed")))
+            models.append(F.SeedSpread(_label(run), _colour(run, i), pd.concat(rows, ignore_index=True)))
+        scenarios = list(dict.fromkeys(s for m in models for s in m.rmse.scenario.astype(str)))
+        paper = {s: paper_rmse(s, "hybrid", dataset, c.short) for s in scenarios}
+        n = max(len(r.seeds) for r in groups)
+        title = f"Spread over {n} seeds, {c.short} s predictions, trained on {dataset}"
+        c.add(f"seeds_{dataset}", "Seed spread", title,
+              f"RMSE of every {c.short} s prediction per scenario for each seed of each learned model "
+              f"(boxes: spread over the seeds; dots: single seeds; black bars: the paper's hybrid, {dataset}).",
+              partial(F.seed_boxplots, models, scenarios, title, {k: v for k, v in paper.items() if v}), True)
+
+
 def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> FigurePlan:
     """The figures of a report for `source`; `ship_size` = (L_pp, B) [m] for outlines."""
     plan = FigurePlan()
@@ -262,5 +287,6 @@ def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> 
         _gate_figures(c)
         _force_figures(c)
         _loss_figure(c)
+        _seed_figures(c)
         _uncertainty_figures(c)
     return _quality_figures(source, plan)

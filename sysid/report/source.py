@@ -20,6 +20,7 @@ from sysid.experiment import KINDS as MODEL_KINDS
 from sysid.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
 from sysid.manifest import has_manifest, verify_manifest
 from sysid.rundir import verify_run_dir
+from sysid.seeds import seed_metrics
 
 
 
@@ -67,6 +68,7 @@ class RunRecord:
     metrics: pd.DataFrame
     history: pd.DataFrame | None
     _traces: dict = field(default_factory=dict, repr=False)
+    seeds: list["RunRecord"] = field(default_factory=list)   # a seed group's runs (seed0 first)
 
     @property
     def model(self) -> str:
@@ -171,6 +173,22 @@ def read_run_dir(path: Path) -> RunRecord:
                      metrics, history)
 
 
+def read_seed_group(path: Path) -> RunRecord:
+    """``runs/{name}/seed{k}/`` of ``sysid reproduce --seeds N``: one record whose metrics are
+    the seed means with their spread (`sysid.seeds.seed_metrics`); summary, history and
+    traces are those of its first seed."""
+    seed_dirs = sorted((p for p in path.iterdir() if p.is_dir() and p.name.startswith("seed")),
+                       key=lambda p: (len(p.name), p.name))
+    if not seed_dirs:
+        raise CheckpointError(f"{path}: neither a run directory nor a folder of seed runs (seed0/, seed1/, ...)")
+    records = [read_run_dir(p) for p in seed_dirs]
+    first = records[0]
+    metrics = seed_metrics([r.metrics for r in records])
+    summary = {**first.summary, "seeds": [r.summary.get("seed") for r in records]}
+    return RunRecord(path.name, first.path, summary, first.config_text, first.config, metrics, first.history,
+                     seeds=records)
+
+
 def read_quality_reports(*folders: Path) -> list[QualityReport]:
     """Every ``*.report.json`` directly in the folders, sorted by file name."""
     reports = []
@@ -200,7 +218,8 @@ def read_source(path) -> ReportSource:
         if not run_dirs:
             raise CheckpointError(f"{path / 'runs'}: holds no run directories")
         summary = read_json(path / "summary.json") if (path / "summary.json").exists() else {}
-        runs = sorted((read_run_dir(p) for p in run_dirs), key=_run_order)
+        runs = sorted((read_run_dir(p) if (p / "manifest.json").is_file() or (p / "summary.json").is_file()
+                       else read_seed_group(p) for p in run_dirs), key=_run_order)
         return ReportSource(path, "reproduction", runs, summary, quality)
     if (path / "summary.json").exists() or (path / "metrics.csv").exists():
         run = read_run_dir(path)

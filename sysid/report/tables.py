@@ -35,6 +35,7 @@ class Cell:
     ours: float | None
     paper: float | None
     best: bool = False
+    spread: float | None = None   # std over seeds (a seed group's cell)
 
     @property
     def change_pct(self) -> float | None:
@@ -49,6 +50,8 @@ class Cell:
 
     @property
     def ours_text(self) -> str:
+        if self.spread is not None and math.isfinite(self.spread) and self.ours is not None:
+            return f"{self.ours:.4f}±{self.spread:.4f}"
         return format_rmse(self.ours)
 
     @property
@@ -168,7 +171,9 @@ def reproduction_tables(source: ReportSource) -> list[RmseTable]:
                         cells.append(Cell(None, None))
                         continue
                     paper = float(row[f"paper_{c}"].iloc[0])
-                    cells.append(Cell(float(row[f"rmse_{c}"].iloc[0]), None if math.isnan(paper) else paper))
+                    spread = float(row[f"std_{c}"].iloc[0])
+                    cells.append(Cell(float(row[f"rmse_{c}"].iloc[0]), None if math.isnan(paper) else paper,
+                                      spread=None if math.isnan(spread) else spread))
             table.rows.append(TableRow(scenario, model, colour.get(model, "#000000"), cells))
         _mark_best(table.rows)
         tables.append(table)

@@ -52,6 +52,7 @@ class TrialContext:
 def journal(out: str | os.PathLike, event: str, trial: TrialSpec, **extra: Any) -> None:
     """Append one event line to the sweep's journal (one write on an O_APPEND file)."""
     line = json.dumps({"event": event, "trial": trial.path, "time": time.time(), "pid": os.getpid(), **extra})
+    Path(out).mkdir(parents=True, exist_ok=True)
     fd = os.open(Path(out) / JOURNAL, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
     try:
         os.write(fd, (line + "\n").encode())
