@@ -98,6 +98,7 @@ class TrainingOptions:
     max_minutes: float = 0.0       # 0: off; > 0: a safety limit whose hit fails the run
     threads: int = 1               # torch intra-op threads; 0: one per core
     warm_start_epochs: int = 150   # one-step regression on the implied residual force
+    objective_s: float = 0.0       # horizon [s] of the final validation loss (summary val_loss); 0: T steps
     dtype: str = "float32"
     device: str = "auto"           # auto (CUDA when present) | cpu | cuda | cuda:N
 
@@ -266,6 +267,7 @@ def _validate(exp: Experiment, src: str) -> None:
         (t.lr_patience >= 0, "[training] lr_patience must be >= 0"),
         (min(t.lambda_v, t.lambda_F, t.lambda_L2) >= 0, "[training] lambdas must be >= 0"),
         (t.patience >= 1, "[training] patience must be >= 1"),
+        (t.objective_s >= 0, "[training] objective_s must be >= 0 (0: the training steps T)"),
         (t.max_minutes >= 0, "[training] max_minutes must be >= 0 (0: no wall-clock limit)"),
         (t.threads >= 0, "[training] threads must be >= 0 (0: one per core)"),
         (t.dtype in ("float32", "float64"), "[training] dtype must be float32 or float64"),

@@ -452,6 +452,18 @@ class Trainer:
         return {"k": gate.k, "alpha": gate.alpha, "space": gate.space, "bank": int(z.shape[0]),
                 "threshold": float(model.gate.threshold)}
 
+    def objective(self, model, runs: Sequence[Run], val: WindowSet, w_v, dtype, device) -> float:
+        """The final model's validation loss L_v (as trained, gate included): over the
+        training windows' T steps, or over ``[training] objective_s`` seconds, a horizon
+        that stays the same when T varies (sweeps compare T on it). Validation blocks only."""
+        exp, t = self.experiment, self.experiment.training
+        if t.objective_s > 0:
+            steps = max(1, int(round(t.objective_s / val.dt)))
+            val = split_windows(runs, steps, t.stride_s, t.val_fraction, exp.data.exclude_suspect, dtype,
+                                t.block_s, exp.experiment.seed, device)[1]
+        with torch.no_grad():
+            return float(multistep_loss(model, val, w_v)[0])
+
     # -- the estimator ---------------------------------------------------------------
     def fit(self, runs: Sequence[Run]) -> "Trainer":
         exp = self.experiment
@@ -523,11 +535,7 @@ class Trainer:
             if exp.gate.enabled:
                 summary.gate = self.fit_gate(model, samples, dtype)
         if summary.failure is None:
-            final = summary.ensemble_val_loss
-            if final is None:  # MMG-only: the identified (or given) coefficients
-                with torch.no_grad():
-                    final = float(multistep_loss(mmg, val, w_v)[0])
-            summary.val_loss = final
+            summary.val_loss = self.objective(model, runs, val, w_v, dtype, device)
         self.history_ = pd.DataFrame(self._history)
         summary.epochs = int(self.history_["epoch"].max()) if len(self._history) else 0
         summary.train_seconds = time.perf_counter() - started

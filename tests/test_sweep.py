@@ -120,6 +120,11 @@ def test_sweep_killed_part_way_resumes_without_training_a_trial_twice(tmp_path, 
     from sysid.rundir import load_model
     exp, model = load_model(out / table.run.iloc[0])
     assert exp.experiment.seed == table.seed.iloc[0] and exp.training.threads == 1
+    # the sweep's report: objective against the keys, seed spread, the chosen configuration
+    from sysid.report import build_report
+    html = build_report(out, tmp_path / "report").html.read_text()
+    assert "Validation loss against the varied keys" in html and "Spread over 2 seeds" in html
+    assert "Chosen" in html and summary["best"]["point"] in html
     # the resumed sweep refuses another sweep file
     path.write_text(path.read_text().replace("3e-3", "5e-3"))
     again = _sysid("sweep", str(path), "-o", str(out), "--resume", env=env)

@@ -35,7 +35,7 @@ STYLE = {"font.size": 9, "axes.titlesize": 9, "axes.labelsize": 9, "axes.grid": 
          "font.family": "DejaVu Sans", "axes.unicode_minus": False}
 
 
-SUBTITLES = {"reproduction": "Reproduction of the paper", "run": "Identification run",
+SUBTITLES = {"reproduction": "Reproduction of the paper", "run": "Identification run", "sweep": "Sweep",
              "preprocessing": "Preprocessing run"}
 
 

@@ -19,6 +19,7 @@ MODEL_TEXT = {
               "by a kNN out-of-distribution gate when the inputs are far from the training data",
 }
 SOURCE_KINDS = {"reproduction": "reproduction, {n} runs", "run": "single run",
+                "sweep": "sweep; runs: its chosen configuration's first seed",
                 "preprocessing": "preprocessing output, {q} files"}
 PROTOCOL_TEXT = (
     "Evaluation follows the benchmark protocol: each 1 Hz test file is cut into consecutive windows of "
@@ -115,6 +116,28 @@ def reproduction_items(summary: dict) -> list[tuple[str, str]]:
     return items
 
 
+def sweep_items(source: ReportSource, top: int = 8) -> list[tuple[str, str]]:
+    """Readable lines of a sweep: what it varied, its trials, the chosen configuration and
+    the best configurations by mean validation loss over their seeds."""
+    s, sweep = source.summary, source.sweep
+    best = s.get("best") or {}
+    items = [("Sweep", f"{s.get('name')}: {s.get('search')} search over {', '.join(s.get('keys') or []) or '-'}; "
+                       f"seeds {s.get('seeds')}; base {s.get('base')}"),
+             ("Trials", f"{s.get('complete')} of {s.get('trials')} complete, {s.get('failed')} failed, "
+                        f"{s.get('missing')} missing; {_seconds(s.get('seconds'))}"),
+             ("Objective", "validation multi-step loss (validation blocks of the training files only; "
+                           "the test files never choose)")]
+    if best:
+        spread = f" ± {best['val_loss_std']:.5f} (std over seeds)" if best.get("val_loss_std") is not None else ""
+        items.append(("Chosen", f"{best['point']}: validation loss {best['val_loss_mean']:.5f}{spread}; "
+                                f"runs {', '.join(best.get('runs', []))}"))
+    for i, row in enumerate(sweep.points.head(top).itertuples(), 1):
+        std = getattr(row, "val_loss_std", float("nan"))
+        items.append((f"#{i}", f"{row.point}: {row.val_loss_mean:.5f}" + ("" if std != std else f" ± {std:.5f}")
+                      + f" ({row.complete} of {row.seeds} seeds)"))
+    return items
+
+
 def software_versions() -> dict[str, str]:
     """Versions of the software building the report."""
     import matplotlib
@@ -157,6 +180,8 @@ def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -
     ]
     if source.kind == "reproduction" and source.summary:
         items += reproduction_items(source.summary)
+    if source.sweep is not None:
+        items = sweep_items(source) + items
     missing = source.missing_runs
     if missing:  # first line of page 1
         protocol = len(missing) + len(runs)

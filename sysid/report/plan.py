@@ -270,9 +270,30 @@ def _seed_figures(c: _Context) -> None:
               partial(F.seed_boxplots, models, scenarios, title, {k: v for k, v in paper.items() if v}), True)
 
 
+def _sweep_figures(source: ReportSource, plan: FigurePlan) -> None:
+    """A sweep: validation loss against each varied key; the seed spread per configuration."""
+    from sysid.report import sweep_figures as SF
+
+    sweep = source.sweep
+    chosen = (source.summary.get("best") or {}).get("point")
+    seeds = len(source.summary.get("seeds") or [])
+    plan.figures.append(FigureSpec(
+        "sweep_keys", "Sweep", "Validation loss against the varied keys",
+        "Validation loss (the sweep's objective; validation windows only, never the test files) of every "
+        "trial against each varied option; grey: means; red circles: the chosen configuration.",
+        partial(SF.objective_by_key, sweep.trials, sweep.keys, chosen, "Validation loss against the varied keys")))
+    plan.figures.append(FigureSpec(
+        "sweep_seeds", "Sweep", f"Spread over {seeds} seeds per configuration",
+        "Validation loss of each configuration over its seeds (box: spread; dots: single seeds), best mean "
+        "first; red: the chosen configuration.",
+        partial(SF.seed_spread, sweep.trials, sweep.points, chosen, f"Spread over {seeds} seeds per configuration")))
+
+
 def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> FigurePlan:
     """The figures of a report for `source`; `ship_size` = (L_pp, B) [m] for outlines."""
     plan = FigurePlan()
+    if source.sweep is not None:
+        _sweep_figures(source, plan)
     runs = source.runs
     if runs:
         datasets = sorted({r.dataset for r in runs if r.model != "mmg" and r.dataset != "-"})

@@ -120,14 +120,26 @@ class RunRecord:
 
 
 @dataclass
+class SweepRecord:
+    """A sweep directory (`sysid.sweep.study`): trials (results.csv), configurations over
+    their seeds (points.csv, best first), the varied keys and the chosen configuration's runs."""
+
+    trials: pd.DataFrame
+    points: pd.DataFrame
+    keys: list[str]
+    chosen: list[RunRecord]
+
+
+@dataclass
 class ReportSource:
     """What a report is built from: one run, or a reproduction's runs and summary."""
 
     path: Path
-    kind: str  # "run" or "reproduction"
+    kind: str  # "run", "reproduction", "sweep" or "preprocessing"
     runs: list[RunRecord]
     summary: dict
     quality: list[QualityReport] = field(default_factory=list)  # preprocessing *.report.json
+    sweep: SweepRecord | None = None
 
     @property
     def title(self) -> str:
@@ -221,10 +233,25 @@ def read_source(path) -> ReportSource:
         runs = sorted((read_run_dir(p) if (p / "manifest.json").is_file() or (p / "summary.json").is_file()
                        else read_seed_group(p) for p in run_dirs), key=_run_order)
         return ReportSource(path, "reproduction", runs, summary, quality)
+    if (path / "sweep.toml").is_file() and (path / "results.csv").is_file():
+        return read_sweep(path, quality)
     if (path / "summary.json").exists() or (path / "metrics.csv").exists():
         run = read_run_dir(path)
         return ReportSource(path, "run", [run], run.summary, quality)
     if quality:
         return ReportSource(path, "preprocessing", [], {}, quality)
     raise CheckpointError(f"{path}: neither a run directory (summary.json, metrics.csv), "
-                          "a reproduction directory (runs/) nor preprocessing output (*.report.json)")
+                          "a reproduction directory (runs/), a sweep directory (sweep.toml, results.csv) nor "
+                          "preprocessing output (*.report.json)")
+
+
+def read_sweep(path: Path, quality: list[QualityReport]) -> ReportSource:
+    """A sweep directory: its tables, summary and the chosen configuration's seed runs (the
+    report's run figures and table show the chosen configuration's first seed)."""
+    summary = read_json(path / "summary.json")
+    trials = _read_table(path / "results.csv", ["point", "seed", "run", "status", "val_loss"])
+    points = _read_table(path / "points.csv", ["point", "val_loss_mean"])
+    keys = list(summary.get("keys") or [])
+    best = summary.get("best") or {}
+    chosen = [read_run_dir(path / run) for run in best.get("runs", [])]
+    return ReportSource(path, "sweep", chosen[:1], summary, quality, SweepRecord(trials, points, keys, chosen))

@@ -11,6 +11,9 @@ objective = "val_loss"   # validation multi-step loss, minimised (never a test f
 max_retries = 2          # a trial that crashes or is killed is retried this often
 search_seed = 0          # seed of the random / optuna sampler
 
+[set]                    # options set in every trial (not varied)
+"training.objective_s" = 20.0
+
 [vary]                   # "section.option" of the experiment config
 "training.learning_rate" = [1e-3, 3e-3]              # grid: the values
 "network.hidden" = [[64, 64], [128, 128]]
@@ -155,9 +158,9 @@ def _check_axis_values(spec_src: str, axis: Axis, base: Experiment) -> None:
 
 def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = None, text: str = "") -> SweepSpec:
     """A parsed sweep TOML document to a validated `SweepSpec`."""
-    unknown = set(doc) - {"sweep", "vary"}
+    unknown = set(doc) - {"sweep", "set", "vary"}
     if unknown:
-        raise ConfigError(f"{source}: unknown section(s) {sorted(unknown)} (known: sweep, vary)")
+        raise ConfigError(f"{source}: unknown section(s) {sorted(unknown)} (known: sweep, set, vary)")
     table = doc.get("sweep")
     if not isinstance(table, dict):
         raise ConfigError(f"{source}: [sweep] is required (base, seeds, search)")
@@ -171,6 +174,14 @@ def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = Non
     if not base_path.is_absolute():
         base_path = (directory or Path.cwd()) / base_path
     base = load_experiment(base_path)
+    fixed = doc.get("set", {})
+    if not isinstance(fixed, dict):
+        raise ConfigError(f"{source}: [set] must be a table of \"section.option\" = value")
+    for key, value in fixed.items():
+        _axis(source, key, [value], base)  # the key is an option (and not the seed)
+    if fixed:
+        base = apply_values(base, {k: tuple(v) if isinstance(v, list) else v for k, v in fixed.items()},
+                            base.experiment.seed, base.experiment.name, source)
     search = table.get("search", "grid")
     if search not in SEARCHES:
         raise ConfigError(f"{source}: [sweep] search = {search!r}: choose one of {', '.join(SEARCHES)}")
