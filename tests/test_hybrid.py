@@ -231,3 +231,28 @@ def test_force_correction_is_the_papers_network_and_members_average():
     torch.testing.assert_close(force, torch.stack(by_hand).mean(0))
     per_member = net.evaluate(s.expand(3, 7, 9), per_member=True)[0]
     torch.testing.assert_close(per_member, torch.stack(by_hand))
+
+
+def test_val_loss_is_the_final_models_validation_loss_at_the_objective_horizon(trained):
+    """summary.val_loss (the sweep objective): L_v of the final (gated) model on the
+    validation windows; with objective_s, on validation windows of that many seconds."""
+    from sysid.train import multistep_loss, split_windows
+    runs, trainer = trained
+    exp = trainer.experiment
+    t = exp.training
+    model = trainer.model_
+    train, val, _, _ = split_windows(runs, t.steps, t.stride_s, t.val_fraction, False, torch.float32,
+                                     t.block_s, exp.experiment.seed)
+    from sysid.state import VELOCITY_INDEX
+    w_v = 1.0 / train.states[:, :, list(VELOCITY_INDEX)].reshape(-1, 3).var(0)
+    with torch.no_grad():
+        expected = float(multistep_loss(model, val, w_v)[0])
+    assert trainer.summary_.val_loss == pytest.approx(expected, rel=1e-5)
+
+    longer = Trainer(small_experiment(objective_s=20.0), progress=False, log=lambda m: None).fit(runs)
+    _, val20, _, _ = split_windows(runs, 20, t.stride_s, t.val_fraction, False, torch.float32, t.block_s,
+                                   exp.experiment.seed)
+    with torch.no_grad():
+        expected20 = float(multistep_loss(longer.model_, val20, w_v)[0])
+    assert longer.summary_.val_loss == pytest.approx(expected20, rel=1e-5)
+    assert longer.summary_.val_loss > trainer.summary_.val_loss  # errors grow over 20 s
