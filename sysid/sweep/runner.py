@@ -38,6 +38,9 @@ def import_ray():
 def start_ray(workers: int, address: str | None) -> bool:
     """Connect to `address` or start a local Ray with `workers` CPUs; True if started here."""
     ray, _ = import_ray()
+    # trial failures are reported by the progress lines and the results table, not tracebacks
+    for name in ("ray.tune", "ray.air", "ray.train"):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
     if ray.is_initialized():
         return False
     if address:
