@@ -14,13 +14,17 @@ from sysid.sweep.spec import Axis, SweepSpec
 
 
 def format_value(value: Any) -> str:
-    """A value as it appears in a point's name: 0.003, 128x128, true."""
+    """A value as it appears in a point's name: 0.003, 128x128 (widths), X_vr+Y_v (names),
+    none (an empty list), true."""
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, float):
         return f"{value:.4g}"
     if isinstance(value, (tuple, list)):
-        return "x".join(format_value(v) for v in value)
+        if not value:
+            return "none"
+        joiner = "+" if all(isinstance(v, str) for v in value) else "x"
+        return joiner.join(format_value(v) for v in value)
     return str(value)
 
 

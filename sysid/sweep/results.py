@@ -17,6 +17,7 @@ import pandas as pd
 
 from sysid.files import write_csv, write_text
 from sysid.sweep.plan import TRIALS_DIR
+from sysid.sweep.points import format_value
 from sysid.sweep.spec import SweepSpec
 from sysid.sweep.trial import TrialSpec, complete_summary, result_row
 
@@ -69,7 +70,7 @@ def collect_results(spec: SweepSpec, out: Path, trials: list[TrialSpec], errors:
     if table.empty:
         return SweepResults(table, pd.DataFrame(), None)
     for key in spec.keys:  # tuples (layer widths) as text in the tables
-        table[key] = table[key].map(lambda v: "x".join(map(str, v)) if isinstance(v, tuple) else v)
+        table[key] = table[key].map(lambda v: format_value(v) if isinstance(v, tuple) else v)
     done = table[table.status == "complete"]
     points = []
     for point, group in table.groupby("point", sort=False):
