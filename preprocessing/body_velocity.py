@@ -12,9 +12,10 @@ with phi the circular mean of the heading over the window and rho <= 1 its resul
 length. Rotating back by psi(t), as a plain "difference, then rotate" does, is off by
 psi(t) - phi ~ -r' h^2 / 6 (r' the yaw acceleration): up to 4e-3 rad (RMS 1-1.6e-3) in
 the KVLCC2 model's zigzags, which moves v_m by u r' h^2 / 6 (up to 4-5 mm/s; v_m lagged the
-truth by 0.06-0.07 s), and it scales the speed by 1 - r^2 h^2 / 6 (2 mm/s at r = 0.1 rad/s). Here V = M^-1 (mean earth velocity): rotate by phi
-and divide by rho. What is left is the body-frame 2h moving average of V itself (zero
-phase), which the differential time implies.
+truth by 0.06-0.07 s), and it scales the speed by 1 - r^2 h^2 / 6 (2 mm/s at r = 0.1
+rad/s). Here V = M^-1 (mean earth velocity): rotate by phi and divide by rho. What is left
+is the body-frame 2h moving average of V itself (zero phase), which the differential time
+implies, and a second-order term r V' h^2 / 3 (V' the body-frame acceleration).
 """
 from __future__ import annotations
 
