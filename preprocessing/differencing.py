@@ -9,16 +9,26 @@ from __future__ import annotations
 import numpy as np
 
 
-def central_difference(p: np.ndarray, sample_dt: float, diff_dt: float = 1.0) -> np.ndarray:
-    """Derivative of `p` (shape (N,), step `sample_dt` [s]) with half-width `diff_dt` [s]."""
-    p = np.asarray(p, float)
-    n = len(p)
-    if n < 2:
-        return np.zeros(n)
+def difference_span(n: int, sample_dt: float, diff_dt: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Sample indices (lo, hi), each shape (n,), that the difference at each sample spans.
+
+    hi - lo = 2 k with k = round(diff_dt / sample_dt), shrunk near the ends; the first and
+    last samples use a one-sided pair. Needs n >= 2.
+    """
     k = max(1, int(round(diff_dt / sample_dt)))
     idx = np.arange(n)
     half = np.minimum(k, np.minimum(idx, n - 1 - idx))
     lo = idx - half
     hi = idx + half
     hi[0], lo[-1] = 1, n - 2              # one-sided at the very ends
+    return lo, hi
+
+
+def central_difference(p: np.ndarray, sample_dt: float, diff_dt: float = 1.0) -> np.ndarray:
+    """Derivative of `p` (shape (N,), step `sample_dt` [s]) with half-width `diff_dt` [s]."""
+    p = np.asarray(p, float)
+    n = len(p)
+    if n < 2:
+        return np.zeros(n)
+    lo, hi = difference_span(n, sample_dt, diff_dt)
     return (p[hi] - p[lo]) / ((hi - lo) * sample_dt)

@@ -21,8 +21,8 @@ import pandas as pd
 from scipy.integrate import cumulative_trapezoid
 
 from preprocessing.quality import QualityReport
-from preprocessing import differencing, geodesy, gnss, gyro, resample, schema, smoothing, wind
-from preprocessing.frames import earth_to_body, wrap_pi
+from preprocessing import body_velocity, geodesy, gnss, gyro, resample, schema, smoothing, wind
+from preprocessing.frames import wrap_pi
 from preprocessing.schema import RawLogError
 from preprocessing.sensors import SensorLayout
 
@@ -340,10 +340,9 @@ class Pipeline:
         psi, bias = smoothing.fuse_heading(psi_fog, z, dt, s.fog_noise, s.fog_bias_walk, heading_noise)
         # step 5: midship position
         x, y = gnss.midship_position(fx, fy, ax, ay, psi, lay)
-        # step 6: central difference (earth frame) -> body frame
-        vx = differencing.central_difference(x, dt, s.diff_dt)
-        vy = differencing.central_difference(y, dt, s.diff_dt)
-        u_cd, v_cd = earth_to_body(psi, vx, vy)
+        # step 6: central difference (earth frame) -> body frame, rotated by the heading
+        # over each difference's window (not psi(t) alone: that lags v_m while turning)
+        u_cd, v_cd = body_velocity.body_velocity(x, y, psi, dt, s.diff_dt)
         # step 7: Kalman/RTS on u, v_m
         u = smoothing.smooth_rate(u_cd, dt, s.velocity_q, s.velocity_r)
         v = smoothing.smooth_rate(v_cd, dt, s.velocity_q, s.velocity_r)

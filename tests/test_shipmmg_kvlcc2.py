@@ -5,9 +5,11 @@ and propeller inputs (shipmmg's natural cubic splines through the input samples)
 difference comes from the models. shipmmg (0.0.11) differs from Yasukawa & Yoshimura (2015)
 in three documented conventions, each tested here:
 
-1. wake: w_P = w_P0 exp(-4 beta_P^2) and x'_P = -0.650, where the paper has the C_1/C_2
-   correction and x'_P = -0.48 -> our "standard_gaussian_wake" family with x_P = -0.650
-   reproduces it; the paper's form is checked against its formula.
+1. wake: w_P = w_P0 exp(-4 beta_P^2) and x'_P = -0.650, where the ship file follows the
+   paper's C_1/C_2 correction with x'_P = -0.48 (values recalled, not checked against the
+   paper on this machine: see the ship file's header) -> our "standard_gaussian_wake"
+   family with x_P = -0.650 reproduces shipmmg; the paper's form is checked against its
+   formula.
 2. U and beta use the lateral velocity at x = -x_G (v_m - x_G r) instead of midship v_m
    -> with x_G = 0 the models agree to 1e-6; with x_G = 0.25 m the gap is real and bounded.
 3. its force-breakdown helper returns Y_R = -(1 - t_R) F_N cos(delta) (its ODE right-hand

@@ -1,4 +1,4 @@
-"""Propeller thrust of the standard MMG model (Yasukawa & Yoshimura 2015, Eqs. 10-16).
+"""Propeller thrust of the standard MMG model (Yasukawa & Yoshimura 2015).
 
     X_P = (1 - t_P) rho n^2 D^4 K_T(J_P),   K_T = k0 + k1 J_P + k2 J_P^2,
     J_P = u (1 - w_P) / (n D),               Y_P = N_P = 0,
@@ -6,11 +6,15 @@
 with the wake fraction in maneuvering motion depending on the geometric inflow angle at
 the propeller, beta_P = beta - x'_P r' (beta = atan2(-v_m, u), r' = r L / U):
 
-* ``standard`` (the paper's Eq. 16):
+* ``standard`` (the paper's wake correction):
   1 - w_P = (1 - w_P0) [1 + (1 - exp(-C_1 |beta_P|)) (C_2 - 1)],
   C_2 = C_2_plus for beta_P > 0, C_2_minus otherwise;
 * ``standard_gaussian_wake``: w_P = w_P0 exp(-4 beta_P^2), the form the shipmmg package
   (0.0.11) implements instead.
+
+The paper is not on this machine: the formulas are written as the paper's from the
+authors' reading of it (equation numbers are not given for that reason); shipmmg's form
+is checked against shipmmg itself (tests/test_shipmmg_kvlcc2.py).
 
 Ahead motion and ahead revolutions (u > 0, n > 0) are the model's range; n = 0 gives zero
 thrust and J_P = 0.
@@ -50,7 +54,7 @@ def drift_angles(u, v, r, L):
 
 
 def wake_yasukawa(beta_P, c):
-    """1 - w_P [-] from Eq. 16 of Yasukawa & Yoshimura (2015)."""
+    """1 - w_P [-] with the C_1/C_2 correction of Yasukawa & Yoshimura (2015)."""
     C_2 = torch.where(beta_P > 0, c.C_2_plus + 0.0 * beta_P, c.C_2_minus + 0.0 * beta_P)
     return (1.0 - c.w_P0) * (1.0 + (1.0 - torch.exp(-c.C_1 * beta_P.abs())) * (C_2 - 1.0))
 
