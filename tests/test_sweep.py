@@ -130,3 +130,13 @@ def test_sweep_killed_part_way_resumes_without_training_a_trial_twice(tmp_path, 
     again = _sysid("sweep", str(path), "-o", str(out), "--resume", env=env)
     text = again.communicate(timeout=120)[0]
     assert again.returncode == 2 and "differs from" in text
+
+
+def test_shipped_sweep_files_are_valid():
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[1] / "configs" / "sweeps"
+    files = sorted(root.glob("*.toml"))
+    assert files
+    for path in files:
+        spec = load_sweep(path)
+        assert spec.objective == "val_loss" and len(spec.seeds) >= 2 and sweep_trials(spec)
