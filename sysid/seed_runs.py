@@ -53,7 +53,7 @@ def train_seeds(experiments: dict[str, Experiment], seeds: int, out: Path, data:
     started = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="sysid-ray-") as storage:
         errors = run_trials(trials, TrialContext(str(out.resolve()), data, "sysid reproduce"), workers, address,
-                            max_retries=1, storage=Path(storage), log=log)
+                            max_retries=1, storage=Path(storage), log=log, prefix="seeds")
     groups = {}
     for name in experiments:
         frames, shares, failures, used = [], [], [], []

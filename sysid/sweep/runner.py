@@ -51,7 +51,7 @@ def start_ray(workers: int, address: str | None) -> bool:
     return True
 
 
-def progress_callback(total: int, names: Callable[[dict], str], log: Callable[[str], None]):
+def progress_callback(total: int, names: Callable[[dict], str], log: Callable[[str], None], prefix: str = "sweep"):
     """A Tune callback printing one line per trial event: counts and the best so far."""
     _, tune = import_ray()
 
@@ -62,7 +62,7 @@ def progress_callback(total: int, names: Callable[[dict], str], log: Callable[[s
 
         def _line(self, event: str) -> None:
             best = f"; best validation loss {self.best[0]:.5f} ({self.best[1]})" if math.isfinite(self.best[0]) else ""
-            log(f"sweep: {event} | {self.done}/{total} done, {len(self.running)} running, "
+            log(f"{prefix}: {event} | {self.done}/{total} done, {len(self.running)} running, "
                 f"{self.failed} failed{f', {self.retried} retried' if self.retried else ''}{best}")
 
         def on_trial_start(self, iteration, trials, trial, **info):
@@ -97,8 +97,10 @@ def _run_config(tune, storage: Path, max_retries: int, callback):
 
 def run_trials(trials: list[TrialSpec], context: TrialContext, workers: int, address: str | None = None,
                max_retries: int = 2, storage: Path | None = None,
-               log: Callable[[str], None] = print) -> dict[str, str]:
+               log: Callable[[str], None] = print, prefix: str = "sweep") -> dict[str, str]:
     """Run `trials` (one Tune trial each, one CPU each); trials already complete are reused.
+    Ray reuses a worker process for the next trial (data read once per process); results
+    do not depend on it (every trial seeds itself).
 
     Returns {trial path: error} for trials that failed after their retries.
     """
@@ -108,10 +110,10 @@ def run_trials(trials: list[TrialSpec], context: TrialContext, workers: int, add
         storage = storage or Path(context.out) / RAY_DIR
         trainable = tune.with_resources(tune.with_parameters(tune_trainable, trials=trials, context=context),
                                         {"cpu": 1})
-        callback = progress_callback(len(trials), lambda c: trials[int(c["trial"])].path, log)
+        callback = progress_callback(len(trials), lambda c: trials[int(c["trial"])].path, log, prefix)
         tuner = tune.Tuner(
             trainable, param_space={"trial": tune.grid_search(list(range(len(trials))))},
-            tune_config=tune.TuneConfig(max_concurrent_trials=workers, reuse_actors=False),
+            tune_config=tune.TuneConfig(max_concurrent_trials=workers, reuse_actors=True),
             run_config=_run_config(tune, storage, max_retries, callback))
         grid = tuner.fit()
         return {trials[int(r.config["trial"])].path: _error_text(r.error) for r in grid if r.error is not None}
