@@ -34,12 +34,14 @@ from sysid.dynamics import check_shapes, integrate
 from sysid.integrators import Integrator, IntegratorLike, Method, run_steps
 from sysid.knn_index import with_indexed_gate
 from sysid.state import INPUTS, STATE
-from sysid.stepper import Derivative, Step
+from sysid.stepper import Derivative, Rollout, Step
 
 Compiled = Callable[..., torch.Tensor]
 INDUCTOR_OPTIONS = {"force_pointwise_cat": True}  # CPU: fuse the (X, Y, N) stacks, no buffers
 PARALLEL_ROWS = 256  # above it a compiled kernel runs on the threads set when it was compiled
 CHUNK_ROWS = 4096  # larger batches run through the 4096-row function (its buffers stay in cache)
+ROLLOUT_STEPS = 128  # steps per call of a compiled rollout (longer predictions: several calls)
+ROLLOUT_ROWS = 64  # up to this many ships a prediction is one compiled rollout, above it a call per step
 _SOURCE_PACKAGES = ("mmg",)
 _SOURCE_MODULES = ("dynamics.py", "integrators.py", "stepper.py", "models.py", "correction.py", "ood.py",
                    "knn_index.py")
@@ -298,19 +300,67 @@ def step_metadata(model: nn.Module, method: Method | str, dt: float, batch: int,
             "signature": "step(state (batch, 6), inputs (batch, 4)) -> state after dt"}
 
 
+def compiled_rollout_function(model: nn.Module, method: Method | str, dt: float, batch: int,
+                              dtype: torch.dtype = torch.float64, device: str | torch.device = "cpu"
+                              ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor] | None:
+    """Compiled ``f(x0 (batch, 6), inputs (T, batch, 4)) -> states (T, batch, 6)`` (row 0
+    is x0), or None (use `compiled_step`, or eager). Up to `ROLLOUT_STEPS` steps run in one
+    native call (a `sysid.stepper.Rollout`): no Python between steps."""
+    method = Method.parse(method)
+    if batch > ROLLOUT_ROWS:
+        return None
+
+    def build():
+        roll = Rollout(Step(with_indexed_gate(model, batch), method, dt, batch > 1), ROLLOUT_STEPS)
+        x0, u = _examples(batch, dtype, device)
+        inputs = u.expand(ROLLOUT_STEPS, *u.shape).contiguous()
+        steps = torch.tensor(ROLLOUT_STEPS, dtype=torch.int64, device=device)
+        fn = compile_cached(roll, (x0, inputs, steps), f"rollout-{method.name.lower()}")
+        return None if fn is None else _chunked_rollout(fn, batch > 1)
+    return _memoized(model, ("rollout", method, float(dt), batch, dtype, str(device)), build)
+
+
+def _chunked_rollout(fn: Compiled, channels_first: bool) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
+    """`fn`, a compiled `Rollout` of `ROLLOUT_STEPS` steps, as ``(x0 (B, 6), inputs (T, B, 4))
+    -> states (T, B, 6)``: calls of up to `ROLLOUT_STEPS` steps, each from the last state."""
+
+    def run(x0: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
+        x = x0.T.contiguous() if channels_first else x0
+        u = inputs.transpose(1, 2) if channels_first else inputs
+        total = inputs.shape[0] - 1
+        out, done = [x[None]], 0
+        while done < total:
+            n = min(ROLLOUT_STEPS, total - done)
+            chunk = u[done:done + n]
+            if n < ROLLOUT_STEPS:  # rows the loop does not reach: any numbers
+                chunk = torch.cat((chunk, chunk[-1:].expand(ROLLOUT_STEPS - n, *chunk.shape[1:])))
+            states = fn(x, chunk, torch.tensor(n))[:n]
+            out.append(states)
+            x, done = states[-1], done + n
+        states = torch.cat(out)
+        return states.transpose(1, 2) if channels_first else states
+    return run
+
+
 def compiled_rollout(model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
                      method: Method | str = Method.EULER) -> torch.Tensor:
     """States (T, ..., 6) from x0 (..., 6) and inputs (T, ..., 4), no gradient.
 
-    One compiled step per time step (see `compiled_step`); the eager `Step` where
-    compilation is unavailable. Row 0 is x0; step k holds inputs[k].
+    Up to `ROLLOUT_ROWS` ships: compiled rollouts of up to `ROLLOUT_STEPS` steps per call
+    (`compiled_rollout_function`); more ships: one compiled step per time step
+    (`compiled_step`); the eager `Step` where compilation is unavailable. Row 0 is x0;
+    step k holds inputs[k].
     """
     batch_shape = x0.shape[:-1]
     x = x0.detach().reshape(-1, 6).contiguous()
     u = inputs.detach().reshape(inputs.shape[0], -1, 4).contiguous()
-    step = compiled_step(model, method, dt, x.shape[0], x.dtype, x.device)
     with torch.no_grad():
-        states = run_steps(step if step is not None else Step(model, method, dt), x, u)
+        roll = compiled_rollout_function(model, method, dt, x.shape[0], x.dtype, x.device)
+        if roll is not None:
+            states = roll(x, u)
+        else:
+            step = compiled_step(model, method, dt, x.shape[0], x.dtype, x.device)
+            states = run_steps(step if step is not None else Step(model, method, dt), x, u)
     return states.reshape(inputs.shape[0], *batch_shape, 6)
 
 

@@ -97,6 +97,7 @@ class IndexedGate(nn.Module):
         self.margin = float(margin if margin is not None else 1e4 * eps)
         self.rounding = 2.0 * (bank.shape[1] + 4) * eps
         self.register_buffer("bank_sq", (bank * bank).sum(1))  # as KNNGate computes it
+        self.register_buffer("scan_bank", bank.clone())  # the gate's bank, as a buffer of this module
         self.register_buffer("bank_sq_max", self.bank_sq.max())
         self.register_buffer("points_t", points.transpose(1, 2).contiguous())  # (C, F, S)
         self.register_buffer("bank_t", bank.T.contiguous())  # (F, N)
@@ -158,7 +159,7 @@ class IndexedGate(nn.Module):
         d, admitted, close = torch.cond(open_rows.any(), whole_bank, bounded, (flat, upper, on, threshold, tol))
 
         def gate_scan(flat, d, admitted, threshold):  # KNNGate.distance, exactly (tier 3)
-            exact = nearest_distances(flat, self.gate.bank, self.bank_sq, k).mean(1)
+            exact = nearest_distances(flat, self.scan_bank, self.bank_sq, k).mean(1)
             return exact, exact <= threshold
 
         def decided(flat, d, admitted, threshold):

@@ -14,7 +14,7 @@ import pytest
 import torch
 
 from sysid import MMG, integrate, load_ship
-from sysid.compiled import compiled_step, predict
+from sysid.compiled import compiled_rollout_function, compiled_step, predict
 from sysid.correction import correction_inputs
 from sysid.experiment import parse_experiment
 from sysid.files import write_text
@@ -115,12 +115,20 @@ def test_record_gives_one_force_breakdown_per_euler_step(zigzag):
 def test_compiled_prediction_equals_eager(hybrid_run, zigzag, method):
     states, inputs = zigzag
     model = hybrid_run[1]
-    if compiled_step(model, method, 1.0, 1) is None:
+    if compiled_rollout_function(model, method, 1.0, 1) is None:
         pytest.skip("compilation unavailable here (the eager fallback was used)")
     with torch.no_grad():
         eager = integrate(model, states[0], inputs, 1.0, method)
+        on = model(eager, inputs).gate_on
+    assert on.any() and not on.all()  # the gate's tiers decide both ways
     compiled = predict(model, states[0], inputs, 1.0, Integrator(method, compiled=True))
     assert compiled.shape == (101, 6)
+    torch.testing.assert_close(compiled, eager, rtol=1e-12, atol=1e-12)
+    # longer than one compiled call (ROLLOUT_STEPS): chained calls, the same states
+    long_inputs = torch.cat((inputs, inputs[1:], inputs[1:]))
+    with torch.no_grad():
+        eager = integrate(model, states[0], long_inputs, 1.0, method)
+    compiled = predict(model, states[0], long_inputs, 1.0, Integrator(method, compiled=True))
     torch.testing.assert_close(compiled, eager, rtol=1e-12, atol=1e-12)
 
 
