@@ -3,7 +3,8 @@
 Prints, ours (eager and compiled) next to the lab's `mmg-1p1r-simulator`:
 
 1. one right-hand-side call on one recorded state (float64);
-2. rows per second of the batched right-hand side at 4096 and 65536 rows (ours float32);
+2. rows per second of the batched right-hand side at 4096 and 65536 rows (ours float32),
+   with --threads and with one thread per core (--batch-threads);
 3. one 100 s prediction at dt 1 s from a recorded state with the recorded inputs: the
    lab's classical RK4 beside ours (RK4 and Euler) for MMG, NN-only and hybrid models
    (kNN gate in input and in feature space, bank of the D2 training samples);
@@ -13,7 +14,7 @@ Timings alternate ours and the lab's call by call and report medians, so a busy 
 slows both alike: compare ratios, within one run. The lab simulator is optional (found in
 $SYSID_SHARED/peers or ../shared/peers); without it the lab's columns are skipped.
 
-    python benchmarks/prediction_speed.py [--threads 1] [--bank 20000] [--cold] [--run RUN_DIR ...]
+    python benchmarks/prediction_speed.py [--threads 1] [--batch-threads 2] [--bank 20000] [--cold] [--run RUN_DIR ...]
 """
 from __future__ import annotations
 
@@ -144,6 +145,8 @@ def timed_first_call(fn):
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--threads", type=int, default=1, help="torch intra-op threads (default 1)")
+    parser.add_argument("--batch-threads", type=int, default=os.cpu_count() or 1,
+                        help="section 2 also runs with this many threads (default: one per core)")
     parser.add_argument("--bank", type=int, default=20000,
                         help="at most this many samples in the kNN bank of the synthetic gated models")
     parser.add_argument("--run", action="append", default=[], help="benchmark these run directories instead")
@@ -169,7 +172,7 @@ def main() -> None:
     if "1" in args.sections:
         single_call(mmg, x0_np, inputs_np, lab, args.repeats)
     if "2" in args.sections:
-        batched(lab)
+        batched(lab, sorted({args.threads, args.batch_threads}))
     if "3" in args.sections:
         predictions(args, x0_np, inputs_np, lab, mmg)
     print("\n4. Training throughput: see the training benchmark (hook: benchmarks/training_speed.py)")
@@ -196,27 +199,32 @@ def single_call(mmg, x0_np, inputs_np, lab, repeats: int) -> None:
     _row(t, "us", 1e6)
 
 
-def batched(lab) -> None:
+def batched(lab, thread_counts: list[int]) -> None:
     from sysid import MMG, load_ship
     from sysid.compiled import compiled_derivative
     from sysid.dynamics import derivative
-    print(f"\n2. Batched right-hand side, {torch.get_num_threads()} thread(s), rows per second (ours float32, lab float64 numpy)")
-    for batch in (4096, 65536):
-        xs, us = random_rows(batch, torch.float32)
-        m32 = MMG(load_ship("esso_osaka"), dtype=torch.float32)
-        rhs, first = timed_first_call(lambda: compiled_derivative(m32, batch, torch.float32))
-        calls = {"eager": lambda: derivative(m32, xs, us)}
-        if rhs is not None:
-            calls["compiled"] = lambda: rhs(xs, us)
-        if lab is not None:
-            xl, ul = xs.double().numpy(), us.double().numpy()
-            calls["lab"] = lambda: lab.rhs(0.0, xl, ul[:, 0], ul[:, 1], ul[:, 2], ul[:, 3])
-        with torch.no_grad():
-            t = medians(calls, 30)
-        rates = {k: batch / v for k, v in t.items()}
-        print(f"   {batch:>6} rows: " + ", ".join(f"{k} {v:,.0f} rows/s" for k, v in rates.items())
-              + (f"; compiled/lab {rates['compiled'] / rates['lab']:.0f}x" if "compiled" in rates and "lab" in rates else "")
-              + f" (compile/load {first:.1f} s)")
+    print("\n2. Batched right-hand side, rows per second (ours float32, lab float64 numpy)")
+    before = torch.get_num_threads()
+    m32 = MMG(load_ship("esso_osaka"), dtype=torch.float32)
+    for threads in thread_counts:
+        torch.set_num_threads(threads)  # large compiled kernels keep the count they were compiled with
+        for batch in (4096, 65536):
+            xs, us = random_rows(batch, torch.float32)
+            rhs, first = timed_first_call(lambda: compiled_derivative(m32, batch, torch.float32))
+            calls = {"eager": lambda: derivative(m32, xs, us)}
+            if rhs is not None:
+                calls["compiled"] = lambda: rhs(xs, us)
+            if lab is not None:
+                xl, ul = xs.double().numpy(), us.double().numpy()
+                calls["lab"] = lambda: lab.rhs(0.0, xl, ul[:, 0], ul[:, 1], ul[:, 2], ul[:, 3])
+            with torch.no_grad():
+                t = medians(calls, 30)
+            rates = {k: batch / v for k, v in t.items()}
+            print(f"   {batch:>6} rows, {threads} thread(s): " + ", ".join(f"{k} {v / 1e6:,.2f} M rows/s" if k != "lab"
+                                                              else f"{k} {v:,.0f} rows/s" for k, v in rates.items())
+                  + (f"; compiled/lab {rates['compiled'] / rates['lab']:.0f}x" if "compiled" in rates and "lab" in rates else "")
+                  + f" (compile/load {first:.1f} s)")
+    torch.set_num_threads(before)
 
 
 def predictions(args, x0_np, inputs_np, lab, mmg) -> None:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import itertools
 import os
 import sys
 import tempfile
@@ -32,7 +33,7 @@ from torch import nn
 
 from sysid.dynamics import check_shapes, integrate
 from sysid.integrators import Integrator, IntegratorLike, Method, run_steps
-from sysid.knn_index import with_indexed_gate
+from sysid.prepared import prepared
 from sysid.state import INPUTS, STATE
 from sysid.stepper import Derivative, Rollout, Step
 
@@ -44,7 +45,7 @@ ROLLOUT_STEPS = 128  # steps per call of a compiled rollout (longer predictions:
 ROLLOUT_ROWS = 64  # up to this many ships a prediction is one compiled rollout, above it a call per step
 _SOURCE_PACKAGES = ("mmg",)
 _SOURCE_MODULES = ("dynamics.py", "integrators.py", "stepper.py", "models.py", "correction.py", "ood.py",
-                   "knn_index.py")
+                   "knn_index.py", "prepared.py")
 _memo: "weakref.WeakKeyDictionary[nn.Module, dict]" = weakref.WeakKeyDictionary()
 _failed: set[str] = set()
 
@@ -214,12 +215,24 @@ def _stderr(message: str) -> None:
 
 def _state_key(model: nn.Module) -> tuple:
     """Cheap in-process identity of a model's current numbers (tensor storage and version)."""
-    return tuple((t.data_ptr(), t._version, tuple(t.shape)) for t in model.state_dict().values())
+    return tuple((t.data_ptr(), t._version, tuple(t.shape)) for t in itertools.chain(model.parameters(), model.buffers()))
+
+
+_SCALARS = (bool, int, float, str, type(None))
+
+
+def _scalar_options(model: nn.Module) -> tuple:
+    """The scalar attributes of every submodule (gate space, k, physics, quadrature, ...):
+    the cheap part of `_options`, enough to tell a live model's settings apart."""
+    return tuple((id(sub), tuple((k, v) for k, v in vars(sub).items() if type(v) in _SCALARS and k != "training"))
+                 for sub in model.modules())
 
 
 def _memoized(model: nn.Module, key: tuple, build: Callable[[], Compiled | None]) -> Compiled | None:
+    """`build()` once per model, key, numbers (`_state_key`) and settings (`_scalar_options`):
+    a lookup costs tens of microseconds (the disk cache's `fingerprint` is the full check)."""
     table = _memo.setdefault(model, {})
-    key = key + (_state_key(model), repr(_options(model)))
+    key = key + (_state_key(model), _scalar_options(model))
     if key not in table:
         table[key] = build()
     return table[key]
@@ -236,7 +249,7 @@ def compiled_step(model: nn.Module, method: Method | str, dt: float, batch: int,
     rows = min(batch, CHUNK_ROWS)
 
     def build():
-        step = Step(with_indexed_gate(model, rows), method, dt, rows > 1)
+        step = Step(prepared(model, rows), method, dt, rows > 1)
         return compile_cached(step, _examples(rows, dtype, device), step_label(method),
                               step_metadata(model, method, dt, rows, dtype))
     return _memoized(model, ("step", method, float(dt), batch, dtype, str(device)),
@@ -249,7 +262,7 @@ def compiled_derivative(model: nn.Module, batch: int, dtype: torch.dtype = torch
     as in `compiled_step`."""
     rows = min(batch, CHUNK_ROWS)
     return _memoized(model, ("rhs", batch, dtype, str(device)),
-                     lambda: _by_rows(compile_cached(Derivative(model, rows > 1), _examples(rows, dtype, device),
+                     lambda: _by_rows(compile_cached(Derivative(prepared(model, rows), rows > 1), _examples(rows, dtype, device),
                                                      "rhs"), rows, batch))
 
 
@@ -311,7 +324,7 @@ def compiled_rollout_function(model: nn.Module, method: Method | str, dt: float,
         return None
 
     def build():
-        roll = Rollout(Step(with_indexed_gate(model, batch), method, dt, batch > 1), ROLLOUT_STEPS)
+        roll = Rollout(Step(prepared(model, batch), method, dt, batch > 1), ROLLOUT_STEPS)
         x0, u = _examples(batch, dtype, device)
         inputs = u.expand(ROLLOUT_STEPS, *u.shape).contiguous()
         steps = torch.tensor(ROLLOUT_STEPS, dtype=torch.int64, device=device)
