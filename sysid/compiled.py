@@ -1,12 +1,14 @@
-"""Ahead-of-time compiled steps and right-hand sides, cached on disk; eager fallback.
+"""Ahead-of-time compiled steps, rollouts and right-hand sides, cached on disk; eager fallback.
 
-A `sysid.stepper.Step` (or `Derivative`) is captured with `torch.export` and compiled by
-AOTInductor into one C++ function (a ``.pt2`` package). The package is stored under
-`cache_dir()` by a fingerprint of everything that decides its numbers (parameters, kNN
-bank, options, shapes, dtype, torch version, the source of the physics), so compilation
-(about a minute on 2 cores) is paid once per model and machine; later processes load
-it in milliseconds. A compiled call has no guards and no Python per operation: about
-15 us for one step of one ship against milliseconds eager.
+A `sysid.stepper.Step`, `Rollout` (up to `ROLLOUT_STEPS` steps in one `while_loop`) or
+`Derivative` of a model prepared for compilation (`sysid.prepared`: packed coefficients,
+leaf-indexed kNN gate) is captured with `torch.export` and compiled by AOTInductor into
+one C++ function (a ``.pt2`` package). The package is stored under `cache_dir()` by a
+fingerprint of everything that decides its numbers (parameters, kNN bank, options,
+shapes, dtype, torch version, the source of the physics), so compilation (a minute or
+two on 2 cores) is paid once per model and machine; later processes load it in seconds.
+A compiled call has no guards and no Python per operation; a prediction of one ship is
+one call per 128 steps (`compiled_rollout`), so no Python runs between steps.
 
 This is the one module that touches `torch._inductor` (AOTInductor's documented entry
 points `aoti_compile_and_package` / `aoti_load_package`). Where they fail (no C++
@@ -38,9 +40,10 @@ from sysid.state import INPUTS, STATE
 from sysid.stepper import Derivative, Rollout, Step
 
 Compiled = Callable[..., torch.Tensor]
-INDUCTOR_OPTIONS = {"force_pointwise_cat": True}  # CPU: fuse the (X, Y, N) stacks, no buffers
+INDUCTOR_OPTIONS = {"force_pointwise_cat": True}  # one row: fuse the small stacks, no buffers
+BATCH_OPTIONS: dict = {}  # channels first: each output channel stored in place from the fused loop
 PARALLEL_ROWS = 256  # above it a compiled kernel runs on the threads set when it was compiled
-CHUNK_ROWS = 4096  # larger batches run through the 4096-row function (its buffers stay in cache)
+CHUNK_ROWS = 65536  # larger batches run through the 65536-row function
 ROLLOUT_STEPS = 128  # steps per call of a compiled rollout (longer predictions: several calls)
 ROLLOUT_ROWS = 64  # up to this many ships a prediction is one compiled rollout, above it a call per step
 _SOURCE_PACKAGES = ("mmg",)
@@ -102,10 +105,11 @@ def _options(module: nn.Module) -> list:
     return out
 
 
-def fingerprint(module: nn.Module, example_inputs: Sequence[torch.Tensor]) -> str:
+def fingerprint(module: nn.Module, example_inputs: Sequence[torch.Tensor], options: dict | None = None) -> str:
     """sha256 of what decides a compiled module's numbers: state, options, shapes, versions."""
     h = hashlib.sha256()
-    h.update(f"{torch.__version__} {sys.version_info[:2]} {_source_digest()} {INDUCTOR_OPTIONS}".encode())
+    options = INDUCTOR_OPTIONS if options is None else options
+    h.update(f"{torch.__version__} {sys.version_info[:2]} {_source_digest()} {options}".encode())
     h.update(repr(_options(module)).encode())
     for x in example_inputs:
         h.update(f"in {tuple(x.shape)} {x.dtype} {x.device}".encode())
@@ -137,11 +141,11 @@ def export_program(module: nn.Module, example_inputs: Sequence[torch.Tensor]) ->
 
 
 def compile_package(program: torch.export.ExportedProgram, path: Path,
-                    metadata: dict[str, str] | None = None) -> Path:
+                    metadata: dict[str, str] | None = None, inductor_options: dict | None = None) -> Path:
     """AOTInductor-compile an exported program into the ``.pt2`` package `path` (atomic)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    options = dict(INDUCTOR_OPTIONS)
+    options = dict(INDUCTOR_OPTIONS if inductor_options is None else inductor_options)
     if metadata:
         options["aot_inductor.metadata"] = {str(k): str(v) for k, v in metadata.items()}
     fd, tmp = tempfile.mkstemp(suffix=".pt2", dir=path.parent)
@@ -178,29 +182,29 @@ def package_metadata(path: str | os.PathLike) -> dict[str, str]:
 
 def cached_package(module: nn.Module, example_inputs: Sequence[torch.Tensor], label: str,
                    metadata: dict[str, str] | None = None,
-                   log: Callable[[str], None] | None = None) -> Path:
+                   log: Callable[[str], None] | None = None, options: dict | None = None) -> Path:
     """Path of the AOTInductor package of `module` for inputs shaped like `example_inputs`,
     from the disk cache or compiled now and cached (raises where compilation fails)."""
-    key = fingerprint(module, example_inputs)
+    key = fingerprint(module, example_inputs, options)
     path = cache_dir() / f"{label}-{key}.pt2"
     if not path.is_file():
         start = time.perf_counter()
         (log or _stderr)(f"sysid: compiling {label} for {tuple(example_inputs[0].shape)} "
                          f"{example_inputs[0].dtype} (once; cached in {path.parent}) ...")
-        compile_package(export_program(module, example_inputs), path, metadata)
+        compile_package(export_program(module, example_inputs), path, metadata, options)
         (log or _stderr)(f"sysid: compiled {label} in {time.perf_counter() - start:.0f} s")
     return path
 
 
 def compile_cached(module: nn.Module, example_inputs: Sequence[torch.Tensor], label: str,
                    metadata: dict[str, str] | None = None,
-                   log: Callable[[str], None] | None = None) -> Compiled | None:
+                   log: Callable[[str], None] | None = None, options: dict | None = None) -> Compiled | None:
     """The compiled `module` (see `cached_package`) as a callable; None, after one
     warning, where compilation fails or is switched off."""
     if not enabled():
         return None
     try:
-        return load_package(cached_package(module, example_inputs, label, metadata, log))
+        return load_package(cached_package(module, example_inputs, label, metadata, log, options))
     except Exception as exc:  # no compiler, export limits: eager gives the same numbers
         message = f"{label}: {type(exc).__name__}: {str(exc)[:300]}"
         if message not in _failed:
@@ -251,7 +255,7 @@ def compiled_step(model: nn.Module, method: Method | str, dt: float, batch: int,
     def build():
         step = Step(prepared(model, rows), method, dt, rows > 1)
         return compile_cached(step, _examples(rows, dtype, device), step_label(method),
-                              step_metadata(model, method, dt, rows, dtype))
+                              step_metadata(model, method, dt, rows, dtype), options=_options_for(rows))
     return _memoized(model, ("step", method, float(dt), batch, dtype, str(device)),
                      lambda: _by_rows(build(), rows, batch))
 
@@ -263,7 +267,12 @@ def compiled_derivative(model: nn.Module, batch: int, dtype: torch.dtype = torch
     rows = min(batch, CHUNK_ROWS)
     return _memoized(model, ("rhs", batch, dtype, str(device)),
                      lambda: _by_rows(compile_cached(Derivative(prepared(model, rows), rows > 1), _examples(rows, dtype, device),
-                                                     "rhs"), rows, batch))
+                                                     "rhs", options=_options_for(rows)), rows, batch))
+
+
+def _options_for(rows: int) -> dict:
+    """Inductor options: one row (`INDUCTOR_OPTIONS`) or channels first (`BATCH_OPTIONS`)."""
+    return INDUCTOR_OPTIONS if rows == 1 else BATCH_OPTIONS
 
 
 def _examples(rows: int, dtype: torch.dtype, device) -> tuple[torch.Tensor, torch.Tensor]:
@@ -328,7 +337,7 @@ def compiled_rollout_function(model: nn.Module, method: Method | str, dt: float,
         x0, u = _examples(batch, dtype, device)
         inputs = u.expand(ROLLOUT_STEPS, *u.shape).contiguous()
         steps = torch.tensor(ROLLOUT_STEPS, dtype=torch.int64, device=device)
-        fn = compile_cached(roll, (x0, inputs, steps), f"rollout-{method.name.lower()}")
+        fn = compile_cached(roll, (x0, inputs, steps), f"rollout-{method.name.lower()}", options=_options_for(batch))
         return None if fn is None else _chunked_rollout(fn, batch > 1)
     return _memoized(model, ("rollout", method, float(dt), batch, dtype, str(device)), build)
 
