@@ -19,6 +19,7 @@ $SYSID_SHARED/peers or ../shared/peers); without it the lab's columns are skippe
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import statistics
 import sys
@@ -68,18 +69,31 @@ def recorded_case():
 
 
 def medians(calls: dict, repeats: int, seconds: float = 3.0) -> dict:
-    """Median seconds per call of each callable, calls interleaved; stops after `seconds`."""
+    """Median seconds per call of each callable, calls interleaved; stops after `seconds`.
+
+    As `timeit` does, the garbage collector is off while a call is timed (and run between
+    rounds), so no call pays for another's garbage (torchdiffeq's eager steps leave cycles).
+    """
     for fn in calls.values():
         fn()
     times = {k: [] for k in calls}
     deadline = time.perf_counter() + seconds
-    for _ in range(repeats):
-        for key, fn in calls.items():
-            start = time.perf_counter()
-            fn()
-            times[key].append(time.perf_counter() - start)
-        if time.perf_counter() > deadline and len(times[key]) >= 3:
-            break
+    enabled = gc.isenabled()
+    try:
+        for _ in range(repeats):
+            gc.collect()
+            gc.disable()
+            for key, fn in calls.items():
+                start = time.perf_counter()
+                fn()
+                times[key].append(time.perf_counter() - start)
+            if enabled:
+                gc.enable()
+            if time.perf_counter() > deadline and len(times[key]) >= 3:
+                break
+    finally:
+        if enabled:
+            gc.enable()
     return {k: statistics.median(v) for k, v in times.items()}
 
 
@@ -247,12 +261,12 @@ def predictions(args, x0_np, inputs_np, lab, mmg) -> None:
         for method in ("rk4", "euler") if label == "MMG" or args.all_methods else ("rk4",):
             compiled = Integrator(method, compiled=True)
             _, first = timed_first_call(lambda: predict(model, x0, inputs, 1.0, compiled))
-            calls = {"eager": lambda: integrate(model, x0, inputs, 1.0, method),
-                     "compiled": lambda: predict(model, x0, inputs, 1.0, compiled)}
+            calls = {"compiled": lambda: predict(model, x0, inputs, 1.0, compiled)}
             if lab_pred is not None:
                 calls["lab"] = lab_pred
-            with torch.no_grad():
-                t = medians(calls, 20, seconds=6.0)
+            with torch.no_grad():  # ours and the lab's interleaved; eager (torchdiffeq) apart,
+                t = medians(calls, 20, seconds=6.0)  # as its garbage slows whatever runs next
+                t.update(medians({"eager": lambda: integrate(model, x0, inputs, 1.0, method)}, 5, seconds=3.0))
             ratio = f"{t['lab'] / t['compiled']:>11.0f}x" if "lab" in t else f"{'-':>12}"
             lab_ms = f"{t['lab'] * 1e3:>7.1f}ms" if "lab" in t else f"{'-':>9}"
             print(f"   {label:<58} {method:<6} {first:>11.1f}s {t['eager'] * 1e3:>7.1f}ms "

@@ -236,7 +236,7 @@ def _memoized(model: nn.Module, key: tuple, build: Callable[[], Compiled | None]
     """`build()` once per model, key, numbers (`_state_key`) and settings (`_scalar_options`):
     a lookup costs tens of microseconds (the disk cache's `fingerprint` is the full check)."""
     table = _memo.setdefault(model, {})
-    key = key + (_state_key(model), _scalar_options(model))
+    key = key + (torch.get_num_threads(), _state_key(model), _scalar_options(model))  # threads: see fingerprint
     if key not in table:
         table[key] = build()
     return table[key]
