@@ -3,7 +3,8 @@
 Prints, ours (eager and compiled) next to the lab's `mmg-1p1r-simulator`:
 
 1. one right-hand-side call on one recorded state (float64);
-2. rows per second of the batched right-hand side at 4096 and 65536 rows (ours float32);
+2. rows per second of the batched right-hand side at 4096 and 65536 rows (ours float32),
+   with --threads and with one thread per core (--batch-threads);
 3. one 100 s prediction at dt 1 s from a recorded state with the recorded inputs: the
    lab's classical RK4 beside ours (RK4 and Euler) for MMG, NN-only and hybrid models
    (kNN gate in input and in feature space, bank of the D2 training samples);
@@ -13,11 +14,12 @@ Timings alternate ours and the lab's call by call and report medians, so a busy 
 slows both alike: compare ratios, within one run. The lab simulator is optional (found in
 $SYSID_SHARED/peers or ../shared/peers); without it the lab's columns are skipped.
 
-    python benchmarks/prediction_speed.py [--threads 1] [--bank 20000] [--cold] [--run RUN_DIR ...]
+    python benchmarks/prediction_speed.py [--threads 1] [--batch-threads 2] [--bank 20000] [--cold] [--run RUN_DIR ...]
 """
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import statistics
 import sys
@@ -67,18 +69,31 @@ def recorded_case():
 
 
 def medians(calls: dict, repeats: int, seconds: float = 3.0) -> dict:
-    """Median seconds per call of each callable, calls interleaved; stops after `seconds`."""
+    """Median seconds per call of each callable, calls interleaved; stops after `seconds`.
+
+    As `timeit` does, the garbage collector is off while a call is timed (and run between
+    rounds), so no call pays for another's garbage (torchdiffeq's eager steps leave cycles).
+    """
     for fn in calls.values():
         fn()
     times = {k: [] for k in calls}
     deadline = time.perf_counter() + seconds
-    for _ in range(repeats):
-        for key, fn in calls.items():
-            start = time.perf_counter()
-            fn()
-            times[key].append(time.perf_counter() - start)
-        if time.perf_counter() > deadline and len(times[key]) >= 3:
-            break
+    enabled = gc.isenabled()
+    try:
+        for _ in range(repeats):
+            gc.collect()
+            gc.disable()
+            for key, fn in calls.items():
+                start = time.perf_counter()
+                fn()
+                times[key].append(time.perf_counter() - start)
+            if enabled:
+                gc.enable()
+            if time.perf_counter() > deadline and len(times[key]) >= 3:
+                break
+    finally:
+        if enabled:
+            gc.enable()
     return {k: statistics.median(v) for k, v in times.items()}
 
 
@@ -144,6 +159,8 @@ def timed_first_call(fn):
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--threads", type=int, default=1, help="torch intra-op threads (default 1)")
+    parser.add_argument("--batch-threads", type=int, default=os.cpu_count() or 1,
+                        help="section 2 also runs with this many threads (default: one per core)")
     parser.add_argument("--bank", type=int, default=20000,
                         help="at most this many samples in the kNN bank of the synthetic gated models")
     parser.add_argument("--run", action="append", default=[], help="benchmark these run directories instead")
@@ -151,7 +168,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=200)
     parser.add_argument("--sections", default="123", help="which sections to run (default 123)")
     parser.add_argument("--all-methods", action="store_true",
-                        help="RK4 and Euler for every model (default: both for MMG, Euler, the paper's, for the others)")
+                        help="RK4 and Euler for every model (default: both for MMG, RK4, the lab's rule, for the others)")
     args = parser.parse_args()
     if args.cold:
         os.environ["SYSID_CACHE"] = tempfile.mkdtemp(prefix="sysid-cache-")
@@ -169,7 +186,7 @@ def main() -> None:
     if "1" in args.sections:
         single_call(mmg, x0_np, inputs_np, lab, args.repeats)
     if "2" in args.sections:
-        batched(lab)
+        batched(lab, sorted({args.threads, args.batch_threads}))
     if "3" in args.sections:
         predictions(args, x0_np, inputs_np, lab, mmg)
     print("\n4. Training throughput: see the training benchmark (hook: benchmarks/training_speed.py)")
@@ -196,27 +213,32 @@ def single_call(mmg, x0_np, inputs_np, lab, repeats: int) -> None:
     _row(t, "us", 1e6)
 
 
-def batched(lab) -> None:
+def batched(lab, thread_counts: list[int]) -> None:
     from sysid import MMG, load_ship
     from sysid.compiled import compiled_derivative
     from sysid.dynamics import derivative
-    print(f"\n2. Batched right-hand side, {torch.get_num_threads()} thread(s), rows per second (ours float32, lab float64 numpy)")
-    for batch in (4096, 65536):
-        xs, us = random_rows(batch, torch.float32)
-        m32 = MMG(load_ship("esso_osaka"), dtype=torch.float32)
-        rhs, first = timed_first_call(lambda: compiled_derivative(m32, batch, torch.float32))
-        calls = {"eager": lambda: derivative(m32, xs, us)}
-        if rhs is not None:
-            calls["compiled"] = lambda: rhs(xs, us)
-        if lab is not None:
-            xl, ul = xs.double().numpy(), us.double().numpy()
-            calls["lab"] = lambda: lab.rhs(0.0, xl, ul[:, 0], ul[:, 1], ul[:, 2], ul[:, 3])
-        with torch.no_grad():
-            t = medians(calls, 30)
-        rates = {k: batch / v for k, v in t.items()}
-        print(f"   {batch:>6} rows: " + ", ".join(f"{k} {v:,.0f} rows/s" for k, v in rates.items())
-              + (f"; compiled/lab {rates['compiled'] / rates['lab']:.0f}x" if "compiled" in rates and "lab" in rates else "")
-              + f" (compile/load {first:.1f} s)")
+    print("\n2. Batched right-hand side, rows per second (ours float32, lab float64 numpy)")
+    before = torch.get_num_threads()
+    m32 = MMG(load_ship("esso_osaka"), dtype=torch.float32)
+    for threads in thread_counts:
+        torch.set_num_threads(threads)  # large compiled kernels keep the count they were compiled with
+        for batch in (4096, 65536):
+            xs, us = random_rows(batch, torch.float32)
+            rhs, first = timed_first_call(lambda: compiled_derivative(m32, batch, torch.float32))
+            calls = {"eager": lambda: derivative(m32, xs, us)}
+            if rhs is not None:
+                calls["compiled"] = lambda: rhs(xs, us)
+            if lab is not None:
+                xl, ul = xs.double().numpy(), us.double().numpy()
+                calls["lab"] = lambda: lab.rhs(0.0, xl, ul[:, 0], ul[:, 1], ul[:, 2], ul[:, 3])
+            with torch.no_grad():
+                t = medians(calls, 30)
+            rates = {k: batch / v for k, v in t.items()}
+            print(f"   {batch:>6} rows, {threads} thread(s): " + ", ".join(f"{k} {v / 1e6:,.2f} M rows/s" if k != "lab"
+                                                              else f"{k} {v:,.0f} rows/s" for k, v in rates.items())
+                  + (f"; compiled/lab {rates['compiled'] / rates['lab']:.0f}x" if "compiled" in rates and "lab" in rates else "")
+                  + f" (compile/load {first:.1f} s)")
+    torch.set_num_threads(before)
 
 
 def predictions(args, x0_np, inputs_np, lab, mmg) -> None:
@@ -236,15 +258,15 @@ def predictions(args, x0_np, inputs_np, lab, mmg) -> None:
     header = f"   {'model':<58} {'method':<6} {'compile/load':>12} {'eager':>9} {'compiled':>9} {'lab RK4':>9} {'lab/compiled':>12}"
     print(header)
     for label, model in models(args.bank, args.run):
-        for method in ("rk4", "euler") if label == "MMG" or args.all_methods else ("euler",):
+        for method in ("rk4", "euler") if label == "MMG" or args.all_methods else ("rk4",):
             compiled = Integrator(method, compiled=True)
             _, first = timed_first_call(lambda: predict(model, x0, inputs, 1.0, compiled))
-            calls = {"eager": lambda: integrate(model, x0, inputs, 1.0, method),
-                     "compiled": lambda: predict(model, x0, inputs, 1.0, compiled)}
+            calls = {"compiled": lambda: predict(model, x0, inputs, 1.0, compiled)}
             if lab_pred is not None:
                 calls["lab"] = lab_pred
-            with torch.no_grad():
-                t = medians(calls, 20, seconds=6.0)
+            with torch.no_grad():  # ours and the lab's interleaved; eager (torchdiffeq) apart,
+                t = medians(calls, 20, seconds=6.0)  # as its garbage slows whatever runs next
+                t.update(medians({"eager": lambda: integrate(model, x0, inputs, 1.0, method)}, 5, seconds=3.0))
             ratio = f"{t['lab'] / t['compiled']:>11.0f}x" if "lab" in t else f"{'-':>12}"
             lab_ms = f"{t['lab'] * 1e3:>7.1f}ms" if "lab" in t else f"{'-':>9}"
             print(f"   {label:<58} {method:<6} {first:>11.1f}s {t['eager'] * 1e3:>7.1f}ms "

@@ -7,7 +7,7 @@ model, `integrate` for (differentiable) trajectories, `predict` for fast predict
 train``), `sysid.reproduce.reproduce` the paper's protocol.
 
 Layers, each importing only those before it: `state`, `ship`, `mmg`, `integrators` →
-`dynamics`, `correction`, `ood` → `stepper`, `knn_index` → `compiled` → `export`;
+`dynamics`, `correction`, `ood` → `stepper`, `knn_index` → `prepared` → `compiled` → `export`;
 `experiment`, `models` → `data` → `train` → `evaluate` → `rundir` → `lifecycle` → `paper`,
 `reproduce` → `report` → `cli`.
 

@@ -1,12 +1,14 @@
-"""Ahead-of-time compiled steps and right-hand sides, cached on disk; eager fallback.
+"""Ahead-of-time compiled steps, rollouts and right-hand sides, cached on disk; eager fallback.
 
-A `sysid.stepper.Step` (or `Derivative`) is captured with `torch.export` and compiled by
-AOTInductor into one C++ function (a ``.pt2`` package). The package is stored under
-`cache_dir()` by a fingerprint of everything that decides its numbers (parameters, kNN
-bank, options, shapes, dtype, torch version, the source of the physics), so compilation
-(about a minute on 2 cores) is paid once per model and machine; later processes load
-it in milliseconds. A compiled call has no guards and no Python per operation: about
-15 us for one step of one ship against milliseconds eager.
+A `sysid.stepper.Step`, `Rollout` (up to `ROLLOUT_STEPS` steps in one `while_loop`) or
+`Derivative` of a model prepared for compilation (`sysid.prepared`: packed coefficients,
+leaf-indexed kNN gate) is captured with `torch.export` and compiled by AOTInductor into
+one C++ function (a ``.pt2`` package). The package is stored under `cache_dir()` by a
+fingerprint of everything that decides its numbers (parameters, kNN bank, options,
+shapes, dtype, torch version, the source of the physics), so compilation (a minute or
+two on 2 cores) is paid once per model and machine; later processes load it in seconds.
+A compiled call has no guards and no Python per operation; a prediction of one ship is
+one call per 128 steps (`compiled_rollout`), so no Python runs between steps.
 
 This is the one module that touches `torch._inductor` (AOTInductor's documented entry
 points `aoti_compile_and_package` / `aoti_load_package`). Where they fail (no C++
@@ -18,6 +20,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import itertools
 import os
 import sys
 import tempfile
@@ -32,17 +35,20 @@ from torch import nn
 
 from sysid.dynamics import check_shapes, integrate
 from sysid.integrators import Integrator, IntegratorLike, Method, run_steps
-from sysid.knn_index import with_indexed_gate
+from sysid.prepared import prepared
 from sysid.state import INPUTS, STATE
-from sysid.stepper import Derivative, Step
+from sysid.stepper import Derivative, Rollout, Step
 
 Compiled = Callable[..., torch.Tensor]
-INDUCTOR_OPTIONS = {"force_pointwise_cat": True}  # CPU: fuse the (X, Y, N) stacks, no buffers
+INDUCTOR_OPTIONS = {"force_pointwise_cat": True}  # one row: fuse the small stacks, no buffers
+BATCH_OPTIONS: dict = {}  # channels first: each output channel stored in place from the fused loop
 PARALLEL_ROWS = 256  # above it a compiled kernel runs on the threads set when it was compiled
-CHUNK_ROWS = 4096  # larger batches run through the 4096-row function (its buffers stay in cache)
+CHUNK_ROWS = 65536  # larger batches run through the 65536-row function
+ROLLOUT_STEPS = 128  # steps per call of a compiled rollout (longer predictions: several calls)
+ROLLOUT_ROWS = 64  # up to this many ships a prediction is one compiled rollout, above it a call per step
 _SOURCE_PACKAGES = ("mmg",)
 _SOURCE_MODULES = ("dynamics.py", "integrators.py", "stepper.py", "models.py", "correction.py", "ood.py",
-                   "knn_index.py")
+                   "knn_index.py", "prepared.py")
 _memo: "weakref.WeakKeyDictionary[nn.Module, dict]" = weakref.WeakKeyDictionary()
 _failed: set[str] = set()
 
@@ -99,10 +105,11 @@ def _options(module: nn.Module) -> list:
     return out
 
 
-def fingerprint(module: nn.Module, example_inputs: Sequence[torch.Tensor]) -> str:
+def fingerprint(module: nn.Module, example_inputs: Sequence[torch.Tensor], options: dict | None = None) -> str:
     """sha256 of what decides a compiled module's numbers: state, options, shapes, versions."""
     h = hashlib.sha256()
-    h.update(f"{torch.__version__} {sys.version_info[:2]} {_source_digest()} {INDUCTOR_OPTIONS}".encode())
+    options = INDUCTOR_OPTIONS if options is None else options
+    h.update(f"{torch.__version__} {sys.version_info[:2]} {_source_digest()} {options}".encode())
     h.update(repr(_options(module)).encode())
     for x in example_inputs:
         h.update(f"in {tuple(x.shape)} {x.dtype} {x.device}".encode())
@@ -134,11 +141,11 @@ def export_program(module: nn.Module, example_inputs: Sequence[torch.Tensor]) ->
 
 
 def compile_package(program: torch.export.ExportedProgram, path: Path,
-                    metadata: dict[str, str] | None = None) -> Path:
+                    metadata: dict[str, str] | None = None, inductor_options: dict | None = None) -> Path:
     """AOTInductor-compile an exported program into the ``.pt2`` package `path` (atomic)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    options = dict(INDUCTOR_OPTIONS)
+    options = dict(INDUCTOR_OPTIONS if inductor_options is None else inductor_options)
     if metadata:
         options["aot_inductor.metadata"] = {str(k): str(v) for k, v in metadata.items()}
     fd, tmp = tempfile.mkstemp(suffix=".pt2", dir=path.parent)
@@ -175,29 +182,29 @@ def package_metadata(path: str | os.PathLike) -> dict[str, str]:
 
 def cached_package(module: nn.Module, example_inputs: Sequence[torch.Tensor], label: str,
                    metadata: dict[str, str] | None = None,
-                   log: Callable[[str], None] | None = None) -> Path:
+                   log: Callable[[str], None] | None = None, options: dict | None = None) -> Path:
     """Path of the AOTInductor package of `module` for inputs shaped like `example_inputs`,
     from the disk cache or compiled now and cached (raises where compilation fails)."""
-    key = fingerprint(module, example_inputs)
+    key = fingerprint(module, example_inputs, options)
     path = cache_dir() / f"{label}-{key}.pt2"
     if not path.is_file():
         start = time.perf_counter()
         (log or _stderr)(f"sysid: compiling {label} for {tuple(example_inputs[0].shape)} "
                          f"{example_inputs[0].dtype} (once; cached in {path.parent}) ...")
-        compile_package(export_program(module, example_inputs), path, metadata)
+        compile_package(export_program(module, example_inputs), path, metadata, options)
         (log or _stderr)(f"sysid: compiled {label} in {time.perf_counter() - start:.0f} s")
     return path
 
 
 def compile_cached(module: nn.Module, example_inputs: Sequence[torch.Tensor], label: str,
                    metadata: dict[str, str] | None = None,
-                   log: Callable[[str], None] | None = None) -> Compiled | None:
+                   log: Callable[[str], None] | None = None, options: dict | None = None) -> Compiled | None:
     """The compiled `module` (see `cached_package`) as a callable; None, after one
     warning, where compilation fails or is switched off."""
     if not enabled():
         return None
     try:
-        return load_package(cached_package(module, example_inputs, label, metadata, log))
+        return load_package(cached_package(module, example_inputs, label, metadata, log, options))
     except Exception as exc:  # no compiler, export limits: eager gives the same numbers
         message = f"{label}: {type(exc).__name__}: {str(exc)[:300]}"
         if message not in _failed:
@@ -212,12 +219,24 @@ def _stderr(message: str) -> None:
 
 def _state_key(model: nn.Module) -> tuple:
     """Cheap in-process identity of a model's current numbers (tensor storage and version)."""
-    return tuple((t.data_ptr(), t._version, tuple(t.shape)) for t in model.state_dict().values())
+    return tuple((t.data_ptr(), t._version, tuple(t.shape)) for t in itertools.chain(model.parameters(), model.buffers()))
+
+
+_SCALARS = (bool, int, float, str, type(None))
+
+
+def _scalar_options(model: nn.Module) -> tuple:
+    """The scalar attributes of every submodule (gate space, k, physics, quadrature, ...):
+    the cheap part of `_options`, enough to tell a live model's settings apart."""
+    return tuple((id(sub), tuple((k, v) for k, v in vars(sub).items() if type(v) in _SCALARS and k != "training"))
+                 for sub in model.modules())
 
 
 def _memoized(model: nn.Module, key: tuple, build: Callable[[], Compiled | None]) -> Compiled | None:
+    """`build()` once per model, key, numbers (`_state_key`) and settings (`_scalar_options`):
+    a lookup costs tens of microseconds (the disk cache's `fingerprint` is the full check)."""
     table = _memo.setdefault(model, {})
-    key = key + (_state_key(model), repr(_options(model)))
+    key = key + (torch.get_num_threads(), _state_key(model), _scalar_options(model))  # threads: see fingerprint
     if key not in table:
         table[key] = build()
     return table[key]
@@ -234,9 +253,9 @@ def compiled_step(model: nn.Module, method: Method | str, dt: float, batch: int,
     rows = min(batch, CHUNK_ROWS)
 
     def build():
-        step = Step(with_indexed_gate(model, rows), method, dt, rows > 1)
+        step = Step(prepared(model, rows), method, dt, rows > 1)
         return compile_cached(step, _examples(rows, dtype, device), step_label(method),
-                              step_metadata(model, method, dt, rows, dtype))
+                              step_metadata(model, method, dt, rows, dtype), options=_options_for(rows))
     return _memoized(model, ("step", method, float(dt), batch, dtype, str(device)),
                      lambda: _by_rows(build(), rows, batch))
 
@@ -247,8 +266,13 @@ def compiled_derivative(model: nn.Module, batch: int, dtype: torch.dtype = torch
     as in `compiled_step`."""
     rows = min(batch, CHUNK_ROWS)
     return _memoized(model, ("rhs", batch, dtype, str(device)),
-                     lambda: _by_rows(compile_cached(Derivative(model, rows > 1), _examples(rows, dtype, device),
-                                                     "rhs"), rows, batch))
+                     lambda: _by_rows(compile_cached(Derivative(prepared(model, rows), rows > 1), _examples(rows, dtype, device),
+                                                     "rhs", options=_options_for(rows)), rows, batch))
+
+
+def _options_for(rows: int) -> dict:
+    """Inductor options: one row (`INDUCTOR_OPTIONS`) or channels first (`BATCH_OPTIONS`)."""
+    return INDUCTOR_OPTIONS if rows == 1 else BATCH_OPTIONS
 
 
 def _examples(rows: int, dtype: torch.dtype, device) -> tuple[torch.Tensor, torch.Tensor]:
@@ -298,19 +322,67 @@ def step_metadata(model: nn.Module, method: Method | str, dt: float, batch: int,
             "signature": "step(state (batch, 6), inputs (batch, 4)) -> state after dt"}
 
 
+def compiled_rollout_function(model: nn.Module, method: Method | str, dt: float, batch: int,
+                              dtype: torch.dtype = torch.float64, device: str | torch.device = "cpu"
+                              ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor] | None:
+    """Compiled ``f(x0 (batch, 6), inputs (T, batch, 4)) -> states (T, batch, 6)`` (row 0
+    is x0), or None (use `compiled_step`, or eager). Up to `ROLLOUT_STEPS` steps run in one
+    native call (a `sysid.stepper.Rollout`): no Python between steps."""
+    method = Method.parse(method)
+    if batch > ROLLOUT_ROWS:
+        return None
+
+    def build():
+        roll = Rollout(Step(prepared(model, batch), method, dt, batch > 1), ROLLOUT_STEPS)
+        x0, u = _examples(batch, dtype, device)
+        inputs = u.expand(ROLLOUT_STEPS, *u.shape).contiguous()
+        steps = torch.tensor(ROLLOUT_STEPS, dtype=torch.int64, device=device)
+        fn = compile_cached(roll, (x0, inputs, steps), f"rollout-{method.name.lower()}", options=_options_for(batch))
+        return None if fn is None else _chunked_rollout(fn, batch > 1)
+    return _memoized(model, ("rollout", method, float(dt), batch, dtype, str(device)), build)
+
+
+def _chunked_rollout(fn: Compiled, channels_first: bool) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
+    """`fn`, a compiled `Rollout` of `ROLLOUT_STEPS` steps, as ``(x0 (B, 6), inputs (T, B, 4))
+    -> states (T, B, 6)``: calls of up to `ROLLOUT_STEPS` steps, each from the last state."""
+
+    def run(x0: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
+        x = x0.T.contiguous() if channels_first else x0
+        u = inputs.transpose(1, 2) if channels_first else inputs
+        total = inputs.shape[0] - 1
+        out, done = [x[None]], 0
+        while done < total:
+            n = min(ROLLOUT_STEPS, total - done)
+            chunk = u[done:done + n]
+            if n < ROLLOUT_STEPS:  # rows the loop does not reach: any numbers
+                chunk = torch.cat((chunk, chunk[-1:].expand(ROLLOUT_STEPS - n, *chunk.shape[1:])))
+            states = fn(x, chunk, torch.tensor(n))[:n]
+            out.append(states)
+            x, done = states[-1], done + n
+        states = torch.cat(out)
+        return states.transpose(1, 2) if channels_first else states
+    return run
+
+
 def compiled_rollout(model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
                      method: Method | str = Method.EULER) -> torch.Tensor:
     """States (T, ..., 6) from x0 (..., 6) and inputs (T, ..., 4), no gradient.
 
-    One compiled step per time step (see `compiled_step`); the eager `Step` where
-    compilation is unavailable. Row 0 is x0; step k holds inputs[k].
+    Up to `ROLLOUT_ROWS` ships: compiled rollouts of up to `ROLLOUT_STEPS` steps per call
+    (`compiled_rollout_function`); more ships: one compiled step per time step
+    (`compiled_step`); the eager `Step` where compilation is unavailable. Row 0 is x0;
+    step k holds inputs[k].
     """
     batch_shape = x0.shape[:-1]
     x = x0.detach().reshape(-1, 6).contiguous()
     u = inputs.detach().reshape(inputs.shape[0], -1, 4).contiguous()
-    step = compiled_step(model, method, dt, x.shape[0], x.dtype, x.device)
     with torch.no_grad():
-        states = run_steps(step if step is not None else Step(model, method, dt), x, u)
+        roll = compiled_rollout_function(model, method, dt, x.shape[0], x.dtype, x.device)
+        if roll is not None:
+            states = roll(x, u)
+        else:
+            step = compiled_step(model, method, dt, x.shape[0], x.dtype, x.device)
+            states = run_steps(step if step is not None else Step(model, method, dt), x, u)
     return states.reshape(inputs.shape[0], *batch_shape, 6)
 
 

@@ -24,14 +24,9 @@ _ODEINT_NAME = {Method.EULER: "euler", Method.RK4_38: "rk4"}  # torchdiffeq's pu
 INTEGRATORS = ("euler", "rk4")  # what configs and the CLI offer: the paper's and the lab's
 
 
-def body_acceleration(state: torch.Tensor, force: torch.Tensor, c) -> torch.Tensor:
-    """(u_dot, v_dot, r_dot) (..., 3) from Eq. (4).
-
-    state (..., 6) = (x, u, y, v, psi, r); force (..., 3) = (X, Y, N) [N, N, N m];
-    `c` provides m, m_x, m_y, I_zz_J_zz [kg, kg m^2] and x_G [m].
-    """
-    u, v, r = state[..., 1], state[..., 3], state[..., 5]
-    X, Y, N = force.unbind(-1)
+def acceleration_channels(u, v, r, X, Y, N, c):
+    """(u_dot, v_dot, r_dot), each (...,), from Eq. (4) for u, v [m/s], r [rad/s] and
+    X, Y [N], N [N m], each (...,); `c` provides m, m_x, m_y, I_zz_J_zz [kg, kg m^2], x_G [m]."""
     m, xG = c.m, c.x_G
     mxG = m * xG
     u_dot = (X + (m + c.m_y) * v * r + mxG * r * r) / (m + c.m_x)
@@ -42,7 +37,16 @@ def body_acceleration(state: torch.Tensor, force: torch.Tensor, c) -> torch.Tens
     det = a11 * a22 - a12 * a12
     v_dot = (a22 * b1 - a12 * b2) / det
     r_dot = (a11 * b2 - a12 * b1) / det
-    return torch.stack((u_dot, v_dot, r_dot), -1)
+    return u_dot, v_dot, r_dot
+
+
+def body_acceleration(state: torch.Tensor, force: torch.Tensor, c) -> torch.Tensor:
+    """(u_dot, v_dot, r_dot) (..., 3) from Eq. (4).
+
+    state (..., 6) = (x, u, y, v, psi, r); force (..., 3) = (X, Y, N) [N, N, N m];
+    `c` provides m, m_x, m_y, I_zz_J_zz [kg, kg m^2] and x_G [m].
+    """
+    return torch.stack(acceleration_channels(state[..., 1], state[..., 3], state[..., 5], *force.unbind(-1), c), -1)
 
 
 def required_force(state: torch.Tensor, acceleration: torch.Tensor, c) -> torch.Tensor:
@@ -57,19 +61,34 @@ def required_force(state: torch.Tensor, acceleration: torch.Tensor, c) -> torch.
     return torch.stack((X, Y, N), -1)
 
 
-def state_derivative(state: torch.Tensor, force: torch.Tensor, c) -> torch.Tensor:
-    """dx/dt (..., 6) = (x_dot, u_dot, y_dot, v_dot, psi_dot, r_dot), Eqs. (1) and (4)."""
+def derivative_channels(state: torch.Tensor, force, c) -> tuple[torch.Tensor, ...]:
+    """(x_dot, u_dot, y_dot, v_dot, psi_dot, r_dot), each (...,), Eqs. (1) and (4), from
+    state (..., 6) and force = (X, Y, N), each (...,) [N, N, N m]."""
     u, v, psi, r = state[..., 1], state[..., 3], state[..., 4], state[..., 5]
-    acc = body_acceleration(state, force, c)
+    u_dot, v_dot, r_dot = acceleration_channels(u, v, r, *force, c)
     cos_psi, sin_psi = torch.cos(psi), torch.sin(psi)
     x_dot = u * cos_psi - v * sin_psi
     y_dot = u * sin_psi + v * cos_psi
-    return torch.stack((x_dot, acc[..., 0], y_dot, acc[..., 1], r, acc[..., 2]), -1)
+    return x_dot, u_dot, y_dot, v_dot, r, r_dot
+
+
+def state_derivative(state: torch.Tensor, force: torch.Tensor, c) -> torch.Tensor:
+    """dx/dt (..., 6) = (x_dot, u_dot, y_dot, v_dot, psi_dot, r_dot), Eqs. (1) and (4)."""
+    return torch.stack(derivative_channels(state, force.unbind(-1), c), -1)
 
 
 def derivative(force_model: nn.Module, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
     """dx/dt (..., 6) of any force model at state (..., 6) with inputs (..., 4)."""
     return state_derivative(state, force_model(state, inputs).total, force_model.coefficients)
+
+
+def lean_derivative(force_model: nn.Module, state: torch.Tensor, inputs: torch.Tensor, dim: int = -1) -> torch.Tensor:
+    """`derivative` through the model's ``force_channels`` (X, Y, N as separate tensors, no
+    force breakdown) where it has one: the same numbers with fewer, larger operations
+    (what compiled steps run). dx/dt is stacked along `dim` (0: channels first, (6, ...))."""
+    channels = getattr(force_model, "force_channels", None)
+    force = channels(state, inputs)[0] if channels is not None else force_model(state, inputs).total.unbind(-1)
+    return torch.stack(derivative_channels(state, force, force_model.coefficients), dim)
 
 
 class ShipDynamics(nn.Module):

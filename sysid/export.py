@@ -33,7 +33,7 @@ from torch import nn
 from sysid.compiled import (cached_package, export_program, load_package, package_metadata,
                             step_label, step_metadata)
 from sysid.integrators import Method, run_steps
-from sysid.knn_index import with_indexed_gate
+from sysid.prepared import prepared
 from sysid.stepper import Step
 
 METADATA_FILE = "sysid.json"  # the metadata inside a portable export (extra file)
@@ -51,7 +51,7 @@ def export_model(model: nn.Module, path: str | Path, method: Method | str = Meth
     Parameters
     ----------
     model : MMG, NN-only or hybrid force model (CPU), kNN gate included (as an
-        `IndexedGate`: the same decisions from a pruned scan).
+        `IndexedGate`: the same decisions from a pruned scan; coefficients packed, `sysid.prepared`).
     method, dt : the step rule and its length [s] (the paper's: Euler, 1 s).
     batch : number of ships per call (shapes are fixed at export).
     dtype : float64 (as evaluated) or float32.
@@ -60,7 +60,7 @@ def export_model(model: nn.Module, path: str | Path, method: Method | str = Meth
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    step = Step(with_indexed_gate(model, batch), method, dt)
+    step = Step(prepared(model, batch), method, dt)
     examples = _examples(batch, dtype)
     metadata = step_metadata(model, method, dt, batch, dtype)
     if compiled:

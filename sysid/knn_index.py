@@ -2,20 +2,23 @@
 
 A step needs only the decision d_kNN(z) <= threshold of `sysid.ood.KNNGate`, not the
 distance. `IndexedGate` partitions the bank into leaves of at most `leaf` points
-(recursive median splits along each node's widest principal direction), with a centre
-and a radius per leaf, scans only the `probe` leaves nearest to z, and decides from two
-bounds on the true mean of the k nearest distances:
+(recursive median splits along each node's widest principal direction) and decides in up
+to three tiers, each only where the one before leaves the decision open:
 
-- upper: the mean of the k smallest distances among probed points (the true k nearest
-  are at least as near) — at or below the threshold: the network is on;
-- lower: every unprobed point is at least L = min over unprobed leaves of
-  (|z - centre| - radius) away, so the true mean is at least the mean of the k smallest
-  of (probed distances, L repeated k times) — above the threshold: off.
+1. an upper bound from the `probe` leaves whose centres are nearest to z: the mean of the
+   k smallest distinct distances to their points (the true k nearest are at least as
+   near) — at or below the threshold: on. In distribution this decides almost every row;
+2. the whole bank, distances summed from squared differences (no matrix product);
+3. the gate's own scan (`KNNGate.distance`, a matrix product), for rows whose distance
+   lies within round-off of the threshold even after tier 2.
 
-A relative margin keeps round-off from deciding; rows the bounds leave open (rare: z
-within the margin of the threshold or between leaves) send the batch to the gate's own
-exact scan (`torch.cond`), so the decision always equals `KNNGate`'s. The distance it
-returns is the probed upper bound, or the exact one where the scan ran.
+A margin (relative, plus a bound on the round-off of `KNNGate`'s own |q|^2 + |b|^2 - 2 q.b)
+keeps round-off from deciding in tiers 1 and 2, so the decision always equals `KNNGate`'s.
+Tiers 2 and 3 run under `torch.cond`, only when some row needs them. The k smallest
+distances are found by k passes of "smallest value above the last one": elementwise
+operations and min reductions only, no sort, top-k or matrix product, so compiled code
+runs each tier as a few fused, vectorized loops. The distance returned is the tier-1 upper
+bound, or the one of the tier that decided.
 """
 from __future__ import annotations
 
@@ -26,6 +29,24 @@ import torch
 from torch import nn
 
 from sysid.ood import KNNGate, nearest_distances
+
+
+def k_smallest_mean(d2: torch.Tensor, k: int) -> torch.Tensor:
+    """Mean of sqrt of the k smallest of d2 (B, M) [squared distances] along dim 1, (B,);
+    +inf with fewer than k finite values. k passes of min reductions, ties counted, no sort.
+    """
+    d2 = d2.clamp_min(0.0)
+    total = torch.zeros(d2.shape[0], dtype=d2.dtype, device=d2.device)
+    taken = torch.zeros_like(total)
+    last = torch.full_like(total, -1.0)  # below every squared distance
+    for _ in range(k):
+        value = torch.where(d2 > last[:, None], d2, math.inf).min(1).values  # next distinct value
+        count = (d2 == value[:, None]).sum(1).to(d2.dtype)
+        use = torch.minimum(count, k - taken)
+        total = total + torch.where(use > 0, use * value.sqrt(), 0.0)
+        taken = taken + use
+        last = value
+    return torch.where(taken < k, math.inf, total) / k
 
 
 def leaf_partition(points: torch.Tensor, leaf: int) -> list[torch.Tensor]:
@@ -56,7 +77,7 @@ class IndexedGate(nn.Module):
     margin : relative margin below which bounds do not decide (the exact scan does).
     """
 
-    def __init__(self, gate: KNNGate, leaf: int = 128, probe: int = 8, margin: float | None = None):
+    def __init__(self, gate: KNNGate, leaf: int = 64, probe: int = 4, margin: float | None = None):
         super().__init__()
         self.gate = gate
         self.k = gate.k
@@ -65,23 +86,22 @@ class IndexedGate(nn.Module):
         leaves = leaf_partition(bank.double(), leaf)
         size = max(len(i) for i in leaves)
         self.probe = min(probe, len(leaves))
-        points = torch.zeros(len(leaves), size, bank.shape[1], dtype=dtype)
-        norms = torch.full((len(leaves), size), math.inf, dtype=dtype)  # padding: infinitely far
+        far = (torch.finfo(dtype).max / (4 * bank.shape[1])) ** 0.5  # padding: far, d^2 still finite
+        points = torch.full((len(leaves), size, bank.shape[1]), far, dtype=dtype)
         centres = torch.zeros(len(leaves), bank.shape[1], dtype=torch.float64)
-        radii = torch.zeros(len(leaves), dtype=torch.float64)
         for j, idx in enumerate(leaves):
             members = bank[idx]
             points[j, : len(idx)] = members
-            norms[j, : len(idx)] = (members * members).sum(1)
             centres[j] = members.double().mean(0)
-            radii[j] = (members.double() - centres[j]).norm(dim=1).max()
         eps = torch.finfo(dtype).eps
         self.margin = float(margin if margin is not None else 1e4 * eps)
+        self.rounding = 2.0 * (bank.shape[1] + 4) * eps
         self.register_buffer("bank_sq", (bank * bank).sum(1))  # as KNNGate computes it
-        self.register_buffer("points", points)
-        self.register_buffer("norms", norms)
-        self.register_buffer("centres", centres.to(dtype))
-        self.register_buffer("radii", (radii * (1 + 1e3 * eps) + 1e3 * eps).to(dtype))
+        self.register_buffer("scan_bank", bank.clone())  # the gate's bank, as a buffer of this module
+        self.register_buffer("bank_sq_max", self.bank_sq.max())
+        self.register_buffer("points_t", points.transpose(1, 2).contiguous())  # (C, F, S)
+        self.register_buffer("bank_t", bank.T.contiguous())  # (F, N)
+        self.register_buffer("centres_t", centres.to(dtype).T.contiguous())  # (F, C)
 
     @property
     def threshold(self) -> torch.Tensor:
@@ -91,41 +111,61 @@ class IndexedGate(nn.Module):
     def bank(self) -> torch.Tensor:
         return self.gate.bank
 
-    def _bounds(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(upper, lower) bounds (B,) of the mean k-nearest distance of z (B, F)."""
-        to_centre = (z.unsqueeze(1) - self.centres).pow(2).sum(-1).sqrt()  # (B, C), no cancellation
-        near = torch.topk(to_centre, self.probe, dim=1, largest=False).indices  # (B, P)
-        cand = self.points[near].flatten(1, 2)  # (B, P*S, F)
-        cand_sq = self.norms[near].flatten(1)  # (B, P*S)
-        d2 = (z * z).sum(1, keepdim=True) + cand_sq - 2.0 * (cand @ z.unsqueeze(-1)).squeeze(-1)
-        nearest = torch.topk(d2, self.k, dim=1, largest=False).values.clamp_min(0.0).sqrt()  # (B, k)
-        upper = nearest.mean(1)
-        leaf_lower = (to_centre - self.radii).clamp_min(0.0)
-        leaf_lower = leaf_lower.scatter(1, near, torch.full_like(leaf_lower, math.inf)[:, : self.probe])
-        outside = leaf_lower.min(1, keepdim=True).values.expand(-1, self.k)  # (B, k)
-        lower = torch.topk(torch.cat((nearest, outside), 1), self.k, dim=1, largest=False).values.mean(1)
-        return upper, lower
+    def _upper(self, z: torch.Tensor) -> torch.Tensor:
+        """Upper bound (B,) of the mean k-nearest distance of z (B, F) (tier 1): the mean
+        of the k smallest distinct distances to the points of the `probe` nearest leaves."""
+        to_centre = (z[:, :, None] - self.centres_t).pow(2).sum(1)  # (B, C) squared
+        leaf_ids = torch.arange(to_centre.shape[1], device=z.device)
+        near = []
+        for _ in range(self.probe):  # the probe nearest leaves
+            j = to_centre.argmin(1, keepdim=True)  # (B, 1)
+            near.append(j)
+            to_centre = torch.where(leaf_ids == j, math.inf, to_centre)
+        near = torch.cat(near, 1)  # (B, P)
+        d2 = (z[:, None, :, None] - self.points_t[near]).pow(2).sum(2).flatten(1).clamp_min(0.0)  # (B, P*S)
+        # the i-th smallest distinct value is at least the i-th smallest: an upper bound,
+        # +inf with fewer than k distinct values
+        total = torch.zeros(d2.shape[0], dtype=d2.dtype, device=d2.device)
+        last = torch.full_like(total, -1.0)
+        for _ in range(self.k):
+            last = torch.where(d2 > last[:, None], d2, math.inf).min(1).values
+            total = total + last.sqrt()
+        return total / self.k
+
+    def _whole_bank(self, z: torch.Tensor) -> torch.Tensor:
+        """Mean k-nearest distance (B,) of z (B, F) over the whole bank (tier 2)."""
+        return k_smallest_mean((z[:, :, None] - self.bank_t).pow(2).sum(1), self.k)
 
     def forward(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(distance, in_distribution) for z (..., F), as `KNNGate.forward` decides."""
-        flat = z.detach().reshape(-1, z.shape[-1]).to(self.points.dtype)
-        upper, lower = self._bounds(flat)
+        flat = z.detach().reshape(-1, z.shape[-1]).to(self.points_t.dtype)
+        upper = self._upper(flat)
         threshold = self.gate.threshold
-        tol = self.margin * threshold.abs()
+        # |q|^2 + |b|^2 - 2 q.b, as KNNGate computes d^2, is off by at most about
+        # 2 (F + 4) eps (|q|^2 + |b|^2), so its distances by at most the root of that
+        err = (self.rounding * ((flat * flat).sum(1) + self.bank_sq_max)).sqrt()  # (B,)
+        tol = self.margin * threshold.abs() + err
         on = upper <= threshold - tol
-        off = lower > threshold + tol
-        open_rows = ~(on | off)
-
+        open_rows = ~on
         k = min(self.k, self.bank_sq.shape[0])
 
-        def scan(flat, upper, on, threshold):  # KNNGate.distance, exactly
-            d = nearest_distances(flat, self.gate.bank, self.bank_sq, k).mean(1)
-            return d, d <= threshold
+        def whole_bank(flat, upper, on, threshold, tol):  # tier 2
+            d = self._whole_bank(flat)
+            return d, d <= threshold, (d - threshold).abs() <= tol
 
-        def bounded(flat, upper, on, threshold):
-            return upper.clone(), on.clone()
+        def bounded(flat, upper, on, threshold, tol):
+            return upper.clone(), on.clone(), torch.zeros_like(on)
 
-        d, admitted = torch.cond(open_rows.any(), scan, bounded, (flat, upper, on, threshold))
+        d, admitted, close = torch.cond(open_rows.any(), whole_bank, bounded, (flat, upper, on, threshold, tol))
+
+        def gate_scan(flat, d, admitted, threshold):  # KNNGate.distance, exactly (tier 3)
+            exact = nearest_distances(flat, self.scan_bank, self.bank_sq, k).mean(1)
+            return exact, exact <= threshold
+
+        def decided(flat, d, admitted, threshold):
+            return d.clone(), admitted.clone()
+
+        d, admitted = torch.cond(close.any(), gate_scan, decided, (flat, d, admitted, threshold))
         return d.reshape(z.shape[:-1]), admitted.reshape(z.shape[:-1])
 
 

@@ -70,6 +70,17 @@ class CorrectedModel(nn.Module):
     def kind(self) -> str:
         return "hybrid" if self.physics else "nn"
 
+    def _correction(self, state: torch.Tensor, inputs: torch.Tensor, relative_wind: torch.Tensor,
+                    per_member: bool = False):
+        """(F_NN (..., 3) with the gate applied, kNN distance or None, gate decision or None)."""
+        s = correction_inputs(state, inputs, relative_wind)
+        f_nn, z = self.correction_net.evaluate(s, per_member=per_member)
+        f_nn = f_nn.to(state.dtype)
+        if self.gate is not None and self.gate_enabled and self.gate.bank.shape[0] > 0:
+            distance, on = self.gate(self.gate_coordinates(s, z))
+            return torch.where(on[..., None], f_nn, torch.zeros_like(f_nn)), distance.to(state.dtype), on
+        return f_nn, None, None
+
     def forward(self, state: torch.Tensor, inputs: torch.Tensor, per_member: bool = False) -> ForceBreakdown:
         """Forces at state (..., 6) with inputs (..., 4); with `per_member` (training) the
         leading axis of both is the FNN's K members and F_NN is each member's own."""
@@ -80,15 +91,24 @@ class CorrectedModel(nn.Module):
             rel = torch.stack(wind, -1)
             zero = torch.zeros(state.shape[:-1] + (3,), dtype=state.dtype, device=state.device)
             forces = ForceBreakdown(zero, zero, zero, zero, zero, rel)
-        s = correction_inputs(state, inputs, forces.relative_wind)
-        f_nn, z = self.correction_net.evaluate(s, per_member=per_member)
-        f_nn = f_nn.to(state.dtype)
-        if self.gate is not None and self.gate_enabled and self.gate.bank.shape[0] > 0:
-            distance, on = self.gate(self.gate_coordinates(s, z))
-            f_nn = torch.where(on[..., None], f_nn, torch.zeros_like(f_nn))
-            forces.ood_distance, forces.gate_on = distance.to(state.dtype), on
+        f_nn, distance, on = self._correction(state, inputs, forces.relative_wind, per_member)
+        if on is not None:
+            forces.ood_distance, forces.gate_on = distance, on
         forces.correction = f_nn
         return forces
+
+    def force_channels(self, state: torch.Tensor, inputs: torch.Tensor):
+        """(X, Y, N) of F_MMG + F_NN (hybrid) or F_NN (NN-only), each (...,) [N, N, N m],
+        and the relative wind: `forward`'s total without its (..., 3) stacks."""
+        if self.physics:
+            total, wind = self.mmg.force_channels(state, inputs)
+        else:
+            total, wind = None, relative_wind(state[..., 1], state[..., 3], state[..., 4],
+                                              inputs[..., 2], inputs[..., 3])
+        f_nn = self._correction(state, inputs, torch.stack(wind, -1))[0].unbind(-1)
+        if total is None:  # 0 + F_NN = F_NN
+            return f_nn, wind
+        return tuple(t + f for t, f in zip(total, f_nn)), wind
 
 
 class PerMember(nn.Module):

@@ -19,7 +19,7 @@ def nearest_distances(q: torch.Tensor, bank: torch.Tensor, bank_sq: torch.Tensor
     |q - b|^2 = |q|^2 + |b|^2 - 2 q.b (bank_sq = |b|^2, (N,)): one matrix product, then
     the k smallest.
     """
-    d2 = (q * q).sum(1, keepdim=True) + bank_sq - 2.0 * q @ bank.T
+    d2 = (q * q).sum(1, keepdim=True) + bank_sq - 2.0 * q @ bank.t()  # t(): a traceable op, not an attribute
     return torch.topk(d2, k, dim=1, largest=False).values.clamp_min(0.0).sqrt()
 
 

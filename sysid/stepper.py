@@ -3,17 +3,23 @@
 `Step` maps (state (B, 6), inputs (B, 4)) to the state one step of dt later with the
 inputs held (Euler, classical RK4 or the 3/8 rule of `sysid.integrators`): the unit that
 `sysid.compiled` compiles and `sysid.export` exports. `Derivative` is the bare right-hand
-side dx/dt (B, 6). `sysid.integrators.run_steps` runs a step over recorded inputs.
+side dx/dt (B, 6). `sysid.integrators.run_steps` runs a step over recorded inputs;
+`Rollout` runs up to a fixed number of steps inside one module (a `while_loop`), so a
+compiled prediction is one native call instead of one per step.
 
-Numbers: `Step` with Euler is bit-identical to torchdiffeq's Euler in
-`sysid.dynamics.integrate` (x + dt f(x)); the Runge-Kutta rules agree to round-off.
+Both evaluate the right-hand side through `sysid.dynamics.lean_derivative` (the model's
+force channels, no force breakdown). Numbers: `Step` with Euler is bit-identical to
+torchdiffeq's Euler in `sysid.dynamics.integrate` (x + dt f(x)); the Runge-Kutta rules
+agree to round-off.
 """
 from __future__ import annotations
 
 import torch
 from torch import nn
 
-from sysid.dynamics import derivative
+from torch._higher_order_ops.while_loop import while_loop
+
+from sysid.dynamics import lean_derivative
 from sysid.integrators import STEP_RULES, Method
 
 
@@ -31,8 +37,8 @@ class Derivative(nn.Module):
 
     def forward(self, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
         if self.channels_first:
-            return derivative(self.force_model, state.T, inputs.T).T.contiguous()
-        return derivative(self.force_model, state, inputs)
+            return lean_derivative(self.force_model, state.T, inputs.T, 0)
+        return lean_derivative(self.force_model, state, inputs)
 
 
 class Step(nn.Module):
@@ -57,5 +63,34 @@ class Step(nn.Module):
         rule = STEP_RULES[self.method]
         if self.channels_first:
             u = inputs.T
-            return rule(lambda x: derivative(self.force_model, x.T, u).T, state, self.dt).contiguous()
-        return rule(lambda x: derivative(self.force_model, x, inputs), state, self.dt)
+            return rule(lambda x: lean_derivative(self.force_model, x.T, u, 0), state, self.dt).contiguous()
+        return rule(lambda x: lean_derivative(self.force_model, x, inputs), state, self.dt)
+
+
+class Rollout(nn.Module):
+    """Up to `capacity` steps of a `Step` in one call, as one `while_loop`.
+
+    ``forward(x0, inputs, steps)``: x0 (B, 6) (or (6, B) for a channels-first step),
+    inputs (capacity, B, 4) (or (capacity, 4, B)), steps () int64 <= capacity, the number
+    of steps to take (step k holds inputs[k]). Returns the states after steps 1..steps,
+    (capacity, B, 6) (or (capacity, 6, B)); rows from `steps` on are zero.
+    """
+
+    def __init__(self, step: Step, capacity: int):
+        super().__init__()
+        self.step = step
+        self.capacity = int(capacity)
+
+    def forward(self, x0: torch.Tensor, inputs: torch.Tensor, steps: torch.Tensor) -> torch.Tensor:
+        states = torch.zeros((self.capacity, *x0.shape), dtype=x0.dtype, device=x0.device)
+        k0 = torch.zeros((), dtype=torch.int64, device=x0.device)
+
+        def more(k, x, states):
+            return k < steps
+
+        def advance(k, x, states):
+            at = k.reshape(1)
+            x = self.step(x, inputs.index_select(0, at)[0])
+            return k + 1, x, states.index_copy(0, at, x[None])
+
+        return while_loop(more, advance, (k0, x0, states))[2]

@@ -14,7 +14,7 @@ import pytest
 import torch
 
 from sysid import MMG, integrate, load_ship
-from sysid.compiled import compiled_step, predict
+from sysid.compiled import compiled_rollout_function, compiled_step, predict
 from sysid.correction import correction_inputs
 from sysid.experiment import parse_experiment
 from sysid.files import write_text
@@ -115,12 +115,20 @@ def test_record_gives_one_force_breakdown_per_euler_step(zigzag):
 def test_compiled_prediction_equals_eager(hybrid_run, zigzag, method):
     states, inputs = zigzag
     model = hybrid_run[1]
-    if compiled_step(model, method, 1.0, 1) is None:
+    if compiled_rollout_function(model, method, 1.0, 1) is None:
         pytest.skip("compilation unavailable here (the eager fallback was used)")
     with torch.no_grad():
         eager = integrate(model, states[0], inputs, 1.0, method)
+        on = model(eager, inputs).gate_on
+    assert on.any() and not on.all()  # the gate's tiers decide both ways
     compiled = predict(model, states[0], inputs, 1.0, Integrator(method, compiled=True))
     assert compiled.shape == (101, 6)
+    torch.testing.assert_close(compiled, eager, rtol=1e-12, atol=1e-12)
+    # longer than one compiled call (ROLLOUT_STEPS): chained calls, the same states
+    long_inputs = torch.cat((inputs, inputs[1:], inputs[1:]))
+    with torch.no_grad():
+        eager = integrate(model, states[0], long_inputs, 1.0, method)
+    compiled = predict(model, states[0], long_inputs, 1.0, Integrator(method, compiled=True))
     torch.testing.assert_close(compiled, eager, rtol=1e-12, atol=1e-12)
 
 
@@ -211,3 +219,48 @@ def test_large_batches_run_in_padded_channels_first_chunks():
     out = _by_rows(fn, rows=4, batch=10)(x, u)
     torch.testing.assert_close(out, x * 2.0 + u[:, :1], rtol=0, atol=0)
     assert len(calls) == 3  # 4 + 4 + 2 (padded to 4)
+
+
+def test_lean_right_hand_side_is_the_breakdown_total_bit_for_bit(hybrid_run, zigzag):
+    """Compiled steps sum X, Y, N as separate channels (no force breakdown): the same
+    operations in the same order, so the same numbers, for MMG, hybrid and NN-only."""
+    from sysid.dynamics import derivative, lean_derivative
+    from sysid.models import CorrectedModel
+    states, inputs = zigzag
+    hybrid = hybrid_run[1]
+    nn_only = CorrectedModel(hybrid.mmg, hybrid.correction_net, hybrid.gate, physics=False, gate_space="inputs")
+    with torch.no_grad():
+        for model in (MMG(load_ship("esso_osaka")), hybrid, nn_only):
+            assert torch.equal(lean_derivative(model, states, inputs), derivative(model, states, inputs))
+            channels_first = lean_derivative(model, states.T.contiguous().T, inputs, 0)
+            assert torch.equal(channels_first, derivative(model, states, inputs).T)
+
+
+def test_packed_coefficients_give_the_same_forces(hybrid_run, zigzag):
+    from sysid.mmg.coefficients import PackedCoefficients
+    from sysid.prepared import packed
+    states, inputs = zigzag
+    hybrid = hybrid_run[1]
+    fast = packed(hybrid)
+    assert isinstance(fast.mmg.coefficients, PackedCoefficients)
+    assert not isinstance(hybrid.mmg.coefficients, PackedCoefficients)  # the model is untouched
+    c, p = hybrid.mmg.coefficients, fast.mmg.coefficients
+    assert all(torch.equal(getattr(c, n), getattr(p, n)) for n in c.names)
+    with torch.no_grad():
+        torch.testing.assert_close(fast(states, inputs).total, hybrid(states, inputs).total, rtol=0, atol=0)
+
+
+def test_compiled_float32_rows_equal_eager(zigzag):
+    """The batched float32 right-hand side (channels first, packed coefficients) agrees
+    with eager float32 to float32 round-off."""
+    from sysid.compiled import compiled_derivative
+    from sysid.dynamics import derivative
+    states, inputs = zigzag
+    model = MMG(load_ship("esso_osaka"), dtype=torch.float32)
+    x, u = states[:8].float(), inputs[:8].float()
+    rhs = compiled_derivative(model, 8, torch.float32)
+    if rhs is None:
+        pytest.skip("compilation unavailable here")
+    with torch.no_grad():
+        eager = derivative(model, x, u)
+    torch.testing.assert_close(rhs(x, u), eager, rtol=1e-5, atol=1e-6)

@@ -73,21 +73,35 @@ class MMG(nn.Module):
         self.families = {component: family(component, name) for component, name in ship.models.items()}
         self.coefficients = Coefficients(ship, trainable, bounds, dtype)
 
-    def forward(self, state: torch.Tensor, inputs: torch.Tensor) -> ForceBreakdown:
-        """Force breakdown for state (..., 6) = (x, u, y, v, psi, r) and inputs (..., 4)
-        = (n_prop [rps], delta_rudder [rad], wind_velo_true [m/s], wind_dir_true [rad])."""
+    def components(self, state: torch.Tensor, inputs: torch.Tensor):
+        """((X, Y, N) of hull, propeller, rudder, wind or None), relative wind: each (...,)."""
         c = self.coefficients
         u, v, psi, r = state[..., 1], state[..., 3], state[..., 4], state[..., 5]
         n, delta, U_T, zeta = inputs.unbind(-1)
         families = self.families
-        hull = torch.stack(families["hull"].force(u, v, r, c, self.quadrature), -1)
+        hull = families["hull"].force(u, v, r, c, self.quadrature)
         prop_state = families["propeller"].inflow(u, v, r, n, c)
-        propeller = torch.stack(families["propeller"].force(u, v, r, n, c, prop_state), -1)
-        rudder = torch.stack(families["rudder"].force(u, v, r, n, delta, c, prop_state), -1)
+        propeller = families["propeller"].force(u, v, r, n, c, prop_state)
+        rudder = families["rudder"].force(u, v, r, n, delta, c, prop_state)
         wind_rel = relative_wind(u, v, psi, U_T, zeta)
-        if "wind" in families:
-            wind = torch.stack(families["wind"].force(wind_rel.U_A, wind_rel.gamma_A, c), -1)
-        else:
-            wind = torch.zeros_like(hull)
-        return ForceBreakdown(hull, propeller, rudder, wind, torch.zeros_like(hull),
-                              torch.stack(wind_rel, -1))
+        wind = families["wind"].force(wind_rel.U_A, wind_rel.gamma_A, c) if "wind" in families else None
+        return (hull, propeller, rudder, wind), wind_rel
+
+    def forward(self, state: torch.Tensor, inputs: torch.Tensor) -> ForceBreakdown:
+        """Force breakdown for state (..., 6) = (x, u, y, v, psi, r) and inputs (..., 4)
+        = (n_prop [rps], delta_rudder [rad], wind_velo_true [m/s], wind_dir_true [rad])."""
+        (hull, propeller, rudder, wind), wind_rel = self.components(state, inputs)
+        hull = torch.stack(hull, -1)
+        wind = torch.zeros_like(hull) if wind is None else torch.stack(wind, -1)
+        return ForceBreakdown(hull, torch.stack(propeller, -1), torch.stack(rudder, -1), wind,
+                              torch.zeros_like(hull), torch.stack(wind_rel, -1))
+
+    def force_channels(self, state: torch.Tensor, inputs: torch.Tensor):
+        """(X, Y, N) of F_MMG, each (...,) [N, N, N m], and the relative wind: the sums of
+        `forward`'s components in the same order, without (..., 3) stacks (fewer, larger
+        operations in compiled code)."""
+        (hull, propeller, rudder, wind), wind_rel = self.components(state, inputs)
+        total = tuple(h + p + r for h, p, r in zip(hull, propeller, rudder))
+        if wind is not None:
+            total = tuple(t + w for t, w in zip(total, wind))
+        return total, wind_rel

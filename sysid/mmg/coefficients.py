@@ -69,3 +69,25 @@ class Coefficients(nn.Module):
     def values(self) -> dict[str, float]:
         """Current value of every parameter, as plain floats."""
         return {name: float(getattr(self, name).detach()) for name in self.names}
+
+
+class PackedCoefficients(nn.Module):
+    """The values of a `Coefficients` as one buffer (``values`` (n,)), read by the same
+    names (``c.X_vr`` is ``values[i]``, a 0-d tensor equal to the original's value).
+
+    What compiled code uses: one constant instead of one per coefficient, so a compiled
+    loop passes one tensor per step, not a hundred. Inference only (values detached).
+    """
+
+    def __init__(self, coefficients: Coefficients):
+        super().__init__()
+        self.ship_name = coefficients.ship_name
+        self.names = coefficients.names
+        self.index = {name: i for i, name in enumerate(self.names)}
+        self.register_buffer("values", torch.stack([getattr(coefficients, n).detach() for n in self.names]))
+
+    def __getattr__(self, name: str):
+        index = self.__dict__.get("index", {})
+        if name in index:
+            return super().__getattr__("values")[index[name]]
+        return super().__getattr__(name)
