@@ -25,7 +25,9 @@ from sysid.sweep.trial import TrialContext, TrialSpec, complete_summary
 
 @dataclass
 class SeedGroup:
-    """One protocol run's seeds: seed-mean metrics, mean gate-off shares, failures."""
+    """One protocol run's seeds: seed-mean metrics, mean gate-off shares, failures, and
+    ``seconds``: the sum of its seed runs' own times (trials run side by side, so this is
+    the compute time of the group, not a share of the wall clock)."""
 
     name: str
     seeds: list[int]
@@ -50,13 +52,12 @@ def train_seeds(experiments: dict[str, Experiment], seeds: int, out: Path, data:
                 address: str | None = None, log: Callable[[str], None] = print) -> dict[str, SeedGroup]:
     """Train the learned runs with `seeds` seeds each on Ray; their `SeedGroup`s."""
     trials = seed_trials(experiments, seeds)
-    started = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="sysid-ray-") as storage:
         errors = run_trials(trials, TrialContext(str(out.resolve()), data, "sysid reproduce"), workers, address,
                             max_retries=1, storage=Path(storage), log=log, prefix="seeds")
     groups = {}
     for name in experiments:
-        frames, shares, failures, used = [], [], [], []
+        frames, shares, failures, used, seconds = [], [], [], [], 0.0
         for trial in (t for t in trials if t.label == name):
             summary = complete_summary(out / trial.path)
             if summary is None:
@@ -67,10 +68,10 @@ def train_seeds(experiments: dict[str, Experiment], seeds: int, out: Path, data:
             frames.append(pd.read_csv(out / trial.path / "metrics.csv"))
             shares.append((summary.get("gate") or {}).get("off_share") or {})
             used.append(trial.seed)
+            seconds += float(summary.get("seconds") or 0.0)
         metrics = seed_metrics(frames) if frames else pd.DataFrame()
         mean_share = {k: sum(s.get(k, 0.0) for s in shares) / len(shares) for k in (shares[0] if shares else {})}
-        groups[name] = SeedGroup(name, used, metrics, mean_share, "; ".join(failures) or None,
-                                 time.perf_counter() - started)
+        groups[name] = SeedGroup(name, used, metrics, mean_share, "; ".join(failures) or None, seconds)
     return groups
 
 

@@ -6,17 +6,12 @@ import pytest
 
 from sysid.cli import run as sysid
 from sysid.errors import CheckpointError, ConfigError, DataError
+from tiny_experiment import TRAIN_FILES, tiny_experiment, tiny_test_file
 
 
 def test_train_then_evaluate_run(dataset_dir, tmp_path):
-    files = [dataset_dir / "berthing" / f"berthing_12-Nov-2020_{t}.csv" for t in ("11_07_23", "11_14_47")]
-    config = tmp_path / "tiny.toml"
-    config.write_text(
-        "[experiment]\nname = 'tiny'\nmodel = 'hybrid'\nseed = 3\n"
-        f"[data]\nfiles = {json.dumps([str(f) for f in files])}\n"
-        "[training]\nepochs = 2\nwarm_start_epochs = 5\nbatch_size = 64\n"
-        "[gate]\nk = 5\nspace = 'inputs'\n[evaluation]\nhorizons = [30.0]\n")
-    test_file = dataset_dir / "berthing" / "berthing_12-Nov-2020_11_49_21.csv"
+    config = tiny_experiment(tmp_path / "tiny.toml", dataset_dir, seed=3, epochs=2, warm_start_epochs=5, patience=None)
+    test_file = tiny_test_file(dataset_dir)
     sysid(["train", str(config), "-o", str(tmp_path / "run"), "--test", str(test_file)])
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert summary["model"] == "hybrid" and summary["epochs"] == 2
@@ -33,6 +28,6 @@ def test_train_then_evaluate_run(dataset_dir, tmp_path):
     with pytest.raises(ConfigError, match="config file not found"):
         sysid(["train", str(tmp_path / "missing.toml"), "-o", str(tmp_path / "x")])
     bad = tmp_path / "bad.toml"
-    bad.write_text(config.read_text().replace(files[1].name, "no_such_file.csv"))
+    bad.write_text(config.read_text().replace(TRAIN_FILES[1], "no_such_file.csv"))
     with pytest.raises(DataError, match="no_such_file.csv: file not found"):
         sysid(["train", str(bad), "-o", str(tmp_path / "y")])

@@ -6,17 +6,12 @@ import pytest
 from sysid.checkpoint import TrainingCheckpoint
 from sysid.cli import main, run as sysid
 from sysid.lifecycle import checkpoint_path
+from tiny_experiment import tiny_experiment, tiny_test_file
 
 
 def _config(tmp_path, dataset_dir):
-    files = [dataset_dir / "berthing" / f"berthing_12-Nov-2020_{t}.csv" for t in ("11_07_23", "11_14_47")]
-    config = tmp_path / "tiny.toml"
-    config.write_text(
-        "[experiment]\nname = 'tiny'\nmodel = 'hybrid'\nseed = 5\n"
-        f"[data]\nfiles = {json.dumps([str(f) for f in files])}\n"
-        "[training]\nepochs = 6\npatience = 100\nwarm_start_epochs = 5\nbatch_size = 64\n"
-        "[gate]\nk = 5\nspace = 'inputs'\n[evaluation]\nhorizons = [30.0]\n")
-    return config, dataset_dir / "berthing" / "berthing_12-Nov-2020_11_49_21.csv"
+    config = tiny_experiment(tmp_path / "tiny.toml", dataset_dir, seed=5, epochs=6, warm_start_epochs=5)
+    return config, tiny_test_file(dataset_dir)
 
 
 def test_interrupted_training_resumes_to_the_same_metrics(dataset_dir, tmp_path, monkeypatch, capsys):

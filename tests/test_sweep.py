@@ -14,6 +14,7 @@ import pandas as pd
 import pytest
 
 from sysid.errors import ConfigError
+from tiny_experiment import tiny_experiment
 from sysid.sweep import load_sweep
 from sysid.sweep.plan import sweep_trials
 from sysid.sweep.points import point_name, sweep_points
@@ -21,14 +22,7 @@ from sysid.sweep.trial import read_journal
 
 
 def _base(tmp_path, dataset_dir) -> str:
-    files = [dataset_dir / "berthing" / f"berthing_12-Nov-2020_{t}.csv" for t in ("11_07_23", "11_14_47")]
-    base = tmp_path / "base.toml"
-    base.write_text(
-        "[experiment]\nname = 'tiny'\nmodel = 'hybrid'\nseed = 0\n"
-        f"[data]\nfiles = {json.dumps([str(f) for f in files])}\n"
-        "[training]\nepochs = 4\npatience = 100\nwarm_start_epochs = 3\nbatch_size = 64\n"
-        "[gate]\nk = 5\nspace = 'inputs'\n[evaluation]\nhorizons = [30.0]\n")
-    return base.name
+    return tiny_experiment(tmp_path / "base.toml", dataset_dir, seed=0, epochs=4, warm_start_epochs=3).name
 
 
 def _sweep(tmp_path, dataset_dir, body: str) -> object:

@@ -148,7 +148,7 @@ def run_optuna(spec, context: TrialContext, workers: int, address: str | None = 
             tuner = tune.Tuner(
                 trainable, param_space=optuna_space(spec),
                 tune_config=tune.TuneConfig(search_alg=search, num_samples=spec.samples,
-                                            max_concurrent_trials=workers, reuse_actors=False),
+                                            max_concurrent_trials=workers, reuse_actors=True),
                 run_config=_run_config(tune, storage, spec.max_retries, callback))
         grid = tuner.fit()
         return {point_of(spec, r.config): _error_text(r.error) for r in grid if r.error is not None}
