@@ -97,7 +97,7 @@ class TrainingSummary:
     split: SplitReport
     device: str
     epochs: int = 0                       # the largest epoch number of any stage
-    best_epoch: int | None = None         # of the multi-step training stage
+    best_epoch: int | None = None         # of the last stage (training, else identification)
     stopped: dict = field(default_factory=dict)  # stage -> reason
     identified_initial: dict = field(default_factory=dict)
     identified: dict = field(default_factory=dict)
@@ -495,6 +495,7 @@ class Trainer:
             stage = self.identify(mmg, train, val, w_v)
             self._history += stage.history
             summary.stopped["identify"] = stage.stopped
+            summary.best_epoch = stage.best_epoch  # the training stage's, if one follows
             summary.identified = self._coefficients(mmg)
             summary.identified_uncertainty = self.uncertainty(mmg, runs, dtype, device, w_v)
         if identify and not joint:
