@@ -14,11 +14,12 @@ import pandas as pd
 import pytest
 
 from sysid.errors import ConfigError
-from tiny_experiment import tiny_experiment
+
 from sysid.sweep import load_sweep
 from sysid.sweep.plan import sweep_trials
 from sysid.sweep.points import point_name, sweep_points
 from sysid.sweep.trial import read_journal
+from tiny_experiment import tiny_experiment
 
 
 def _base(tmp_path, dataset_dir) -> str:
@@ -134,3 +135,28 @@ def test_shipped_sweep_files_are_valid():
     for path in files:
         spec = load_sweep(path)
         assert spec.objective == "val_loss" and len(spec.seeds) >= 2 and sweep_trials(spec)
+
+
+_TRAIN_ONE = """
+import json, sys
+from sysid.sweep.trial import TrialContext, TrialSpec, run_trial
+out, config, data = json.loads(sys.argv[1])
+run_trial(TrialSpec("trials/p/seed0", "p", 0, config), TrialContext(out, data, "test"))
+"""
+
+
+def test_two_processes_on_one_trial_train_it_once(tmp_path, dataset_dir):
+    """Optuna can propose a configuration twice while it trains: the second process waits
+    for the first and reuses its run instead of training the same directory beside it."""
+    from sysid.datasets import data_root
+    from sysid.sweep.trial_lock import lock_path
+    config = tiny_experiment(tmp_path / "t.toml", dataset_dir, seed=0, epochs=3, warm_start_epochs=2).read_text()
+    out = tmp_path / "out"
+    args = json.dumps([str(out), config, str(data_root())])
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    procs = [subprocess.Popen([sys.executable, "-c", _TRAIN_ONE, args], env=env) for _ in range(2)]
+    assert [p.wait(timeout=600) for p in procs] == [0, 0]
+    events = sorted(e["event"] for e in read_journal(out))
+    assert events == ["reused", "started", "trained"]
+    assert (out / "trials" / "p" / "seed0" / "summary.json").is_file()
+    assert lock_path(out, "trials/p/seed0").parent.name == ".locks"

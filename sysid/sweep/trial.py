@@ -23,6 +23,7 @@ from sysid.errors import IncompleteOutputError
 from sysid.experiment import parse_experiment
 from sysid.lifecycle import checkpoint_path, run_experiment, training_runs
 from sysid.rundir import verify_run_dir
+from sysid.sweep.trial_lock import trial_lock
 
 JOURNAL = "trials.log"
 
@@ -109,7 +110,13 @@ def _tests(data: str | None):
 
 
 def run_trial(trial: TrialSpec, context: TrialContext, log: Callable[[str], None] = lambda m: None) -> dict:
-    """Train `trial` into its run directory unless it is complete; its results-table row."""
+    """Train `trial` into its run directory unless it is complete; its results-table row.
+    One process at a time per trial (`sysid.sweep.trial_lock`)."""
+    with trial_lock(context.out, trial.path):
+        return _run_locked(trial, context, log)
+
+
+def _run_locked(trial: TrialSpec, context: TrialContext, log: Callable[[str], None]) -> dict:
     run_dir = Path(context.out) / trial.path
     summary = complete_summary(run_dir)
     if summary is not None:
