@@ -5,10 +5,18 @@ distance. `IndexedGate` partitions the bank into leaves of at most `leaf` points
 (recursive median splits along each node's widest principal direction) and decides in up
 to three tiers, each only where the one before leaves the decision open:
 
-1. an upper bound from the `probe` leaves whose centres are nearest to z: the mean of the
-   k smallest distinct distances to their points (the true k nearest are at least as
-   near) — at or below the threshold: on. In distribution this decides almost every row;
-2. the whole bank, distances summed from squared differences (no matrix product);
+1. an upper bound from the neighbourhood of the leaf whose centre is nearest to z (that
+   leaf and its `probe` - 1 nearest leaves, precomputed): its points fall into k
+   disjoint groups (slot s of a leaf in group s mod k), and the mean over groups of the
+   distance to each group's nearest point is the mean distance to k distinct bank
+   points, so at least d_kNN(z). At or below the threshold: on. One nearest-centre
+   search and one minimum per group, contiguous over each leaf's points, so compiled
+   code runs it as a few vectorized loops with few buffers; in distribution it decides
+   almost every row;
+2. the exact mean distance from the k leaves whose nearest point is nearest: the k
+   nearest points of the whole bank lie in them (each of these leaves holds a point at
+   most as far as the k-th smallest leaf minimum, so the k-th nearest distance is not
+   larger, and a point nearer than that lies in a leaf with a smaller minimum);
 3. the gate's own scan (`KNNGate.distance`, a matrix product), for rows whose distance
    lies within round-off of the threshold even after tier 2.
 
@@ -73,18 +81,18 @@ class IndexedGate(nn.Module):
     ----------
     gate : the fitted gate (bank (N, F), k, threshold); shared, not copied.
     leaf : points per leaf (at most).
-    probe : leaves scanned per query.
+    probe : leaves in a tier-1 neighbourhood (a leaf and its nearest leaves by centre).
     margin : relative margin below which bounds do not decide (the exact scan does).
     """
 
-    def __init__(self, gate: KNNGate, leaf: int = 64, probe: int = 4, margin: float | None = None):
+    def __init__(self, gate: KNNGate, leaf: int = 64, probe: int = 8, margin: float | None = None):
         super().__init__()
         self.gate = gate
         self.k = gate.k
         bank = gate.bank.detach()
         dtype = bank.dtype
         leaves = leaf_partition(bank.double(), leaf)
-        size = max(len(i) for i in leaves)
+        size = math.ceil(max(len(i) for i in leaves) / self.k) * self.k  # slots per leaf: k groups of size / k
         self.probe = min(probe, len(leaves))
         far = (torch.finfo(dtype).max / (4 * bank.shape[1])) ** 0.5  # padding: far, d^2 still finite
         points = torch.full((len(leaves), size, bank.shape[1]), far, dtype=dtype)
@@ -100,8 +108,8 @@ class IndexedGate(nn.Module):
         self.register_buffer("scan_bank", bank.clone())  # the gate's bank, as a buffer of this module
         self.register_buffer("bank_sq_max", self.bank_sq.max())
         self.register_buffer("points_t", points.transpose(1, 2).contiguous())  # (C, F, S)
-        self.register_buffer("bank_t", bank.T.contiguous())  # (F, N)
         self.register_buffer("centres_t", centres.to(dtype).T.contiguous())  # (F, C)
+        self.register_buffer("neighbours", torch.cdist(centres, centres).argsort(1)[:, : self.probe])  # (C, probe)
 
     @property
     def threshold(self) -> torch.Tensor:
@@ -113,28 +121,29 @@ class IndexedGate(nn.Module):
 
     def _upper(self, z: torch.Tensor) -> torch.Tensor:
         """Upper bound (B,) of the mean k-nearest distance of z (B, F) (tier 1): the mean
-        of the k smallest distinct distances to the points of the `probe` nearest leaves."""
-        to_centre = (z[:, :, None] - self.centres_t).pow(2).sum(1)  # (B, C) squared
-        leaf_ids = torch.arange(to_centre.shape[1], device=z.device)
-        near = []
-        for _ in range(self.probe):  # the probe nearest leaves
-            j = to_centre.argmin(1, keepdim=True)  # (B, 1)
-            near.append(j)
-            to_centre = torch.where(leaf_ids == j, math.inf, to_centre)
-        near = torch.cat(near, 1)  # (B, P)
-        d2 = (z[:, None, :, None] - self.points_t[near]).pow(2).sum(2).flatten(1).clamp_min(0.0)  # (B, P*S)
-        # the i-th smallest distinct value is at least the i-th smallest: an upper bound,
-        # +inf with fewer than k distinct values
-        total = torch.zeros(d2.shape[0], dtype=d2.dtype, device=d2.device)
-        last = torch.full_like(total, -1.0)
-        for _ in range(self.k):
-            last = torch.where(d2 > last[:, None], d2, math.inf).min(1).values
-            total = total + last.sqrt()
-        return total / self.k
+        over k groups of points of the nearest leaf's neighbourhood (slot s of every leaf
+        in group s mod k) of the distance to each group's nearest point: k distinct bank
+        points (`neighbourhood_groups` lists them)."""
+        nearest = (z[:, :, None] - self.centres_t).pow(2).sum(1).argmin(1)  # (B,) nearest centre
+        points = self.points_t[self.neighbours[nearest]]  # (B, probe, F, S), S contiguous
+        d2 = (z[:, None, :, None] - points).pow(2).sum(2)  # (B, probe, S) squared
+        groups = d2.reshape(d2.shape[0], -1, self.k)  # (B, probe S / k, k): group = slot mod k
+        return groups.amin(1).clamp_min(0.0).sqrt().mean(1)
 
-    def _whole_bank(self, z: torch.Tensor) -> torch.Tensor:
-        """Mean k-nearest distance (B,) of z (B, F) over the whole bank (tier 2)."""
-        return k_smallest_mean((z[:, :, None] - self.bank_t).pow(2).sum(1), self.k)
+    def _nearest_leaves(self, z: torch.Tensor) -> torch.Tensor:
+        """Mean k-nearest distance (B,) of z (B, F) over the whole bank (tier 2): exact,
+        from the points of the k leaves whose nearest point to z is nearest."""
+        d2 = (z[:, None, :, None] - self.points_t).pow(2).sum(2)  # (B, C, S) squared
+        leaf_min = d2.amin(2)  # (B, C)
+        leaf_ids = torch.arange(leaf_min.shape[1], device=z.device)
+        chosen = []
+        for _ in range(min(self.k, leaf_min.shape[1])):
+            j = leaf_min.argmin(1, keepdim=True)  # (B, 1)
+            chosen.append(j)
+            leaf_min = torch.where(leaf_ids == j, math.inf, leaf_min)
+        chosen = torch.cat(chosen, 1)  # (B, k)
+        near = d2.gather(1, chosen[:, :, None].expand(-1, -1, d2.shape[2]))  # (B, k, S)
+        return k_smallest_mean(near.flatten(1), self.k)
 
     def forward(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(distance, in_distribution) for z (..., F), as `KNNGate.forward` decides."""
@@ -146,27 +155,35 @@ class IndexedGate(nn.Module):
         err = (self.rounding * ((flat * flat).sum(1) + self.bank_sq_max)).sqrt()  # (B,)
         tol = self.margin * threshold.abs() + err
         on = upper <= threshold - tol
-        open_rows = ~on
         k = min(self.k, self.bank_sq.shape[0])
 
-        def whole_bank(flat, upper, on, threshold, tol):  # tier 2
-            d = self._whole_bank(flat)
-            return d, d <= threshold, (d - threshold).abs() <= tol
+        def exact(flat, upper, on, threshold, tol):  # tier 2, and tier 3 where it is too close to call
+            d = self._nearest_leaves(flat)
+
+            def gate_scan(flat, d, threshold):  # KNNGate.distance, exactly (tier 3)
+                scan = nearest_distances(flat, self.scan_bank, self.bank_sq, k).mean(1)
+                return scan, scan <= threshold
+
+            def decided(flat, d, threshold):
+                return d.clone(), d <= threshold
+
+            return torch.cond(((d - threshold).abs() <= tol).any(), gate_scan, decided, (flat, d, threshold))
 
         def bounded(flat, upper, on, threshold, tol):
-            return upper.clone(), on.clone(), torch.zeros_like(on)
+            return upper.clone(), on.clone()
 
-        d, admitted, close = torch.cond(open_rows.any(), whole_bank, bounded, (flat, upper, on, threshold, tol))
-
-        def gate_scan(flat, d, admitted, threshold):  # KNNGate.distance, exactly (tier 3)
-            exact = nearest_distances(flat, self.scan_bank, self.bank_sq, k).mean(1)
-            return exact, exact <= threshold
-
-        def decided(flat, d, admitted, threshold):
-            return d.clone(), admitted.clone()
-
-        d, admitted = torch.cond(close.any(), gate_scan, decided, (flat, d, admitted, threshold))
+        d, admitted = torch.cond((~on).any(), exact, bounded, (flat, upper, on, threshold, tol))
         return d.reshape(z.shape[:-1]), admitted.reshape(z.shape[:-1])
+
+
+def neighbourhood_groups(index: "IndexedGate", leaf: int) -> list[torch.Tensor]:
+    """The k point groups of leaf `leaf`'s tier-1 neighbourhood, as flat slot numbers
+    (leaf * S + slot) into `IndexedGate.points_t`: slot s of every neighbouring leaf is in
+    group s mod k (padding slots included). For checks; `IndexedGate._upper` takes the
+    groups' minima by a reshape."""
+    size = index.points_t.shape[2]
+    slots = (index.neighbours[leaf][:, None] * size + torch.arange(size)).reshape(-1)
+    return [slots[g::index.k] for g in range(index.k)]
 
 
 MAX_INDEXED_BATCH = 256  # beyond it the whole-bank scan (one matrix product) is as quick

@@ -4,7 +4,7 @@ import math
 import pytest
 import torch
 
-from sysid.knn_index import IndexedGate, k_smallest_mean, leaf_partition
+from sysid.knn_index import IndexedGate, k_smallest_mean, leaf_partition, neighbourhood_groups
 from sysid.ood import KNNGate
 
 
@@ -32,7 +32,7 @@ def test_leaves_cover_the_bank_once_and_respect_the_size():
 
 def test_decisions_equal_the_whole_bank_scan(gate_and_queries):
     gate, queries = gate_and_queries
-    index = IndexedGate(gate, leaf=64, probe=4)
+    index = IndexedGate(gate, leaf=64, probe=8)
     exact_d, exact_on = gate(queries)
     assert 0.2 < exact_on.double().mean() < 0.9  # both decisions occur
     _, on = index(queries)  # a batch: falls back to the scan if any row is open
@@ -45,6 +45,36 @@ def test_decisions_equal_the_whole_bank_scan(gate_and_queries):
     tol = index.margin * gate.threshold
     open_rows = ~(upper <= gate.threshold - tol)
     assert open_rows.double().mean() < (~exact_on).double().mean() + 0.2
+
+
+def test_tier_two_equals_the_whole_bank_distance(gate_and_queries):
+    """The k leaves with the nearest minima hold the k nearest points of the bank."""
+    gate, queries = gate_and_queries
+    for leaf in (16, 64):
+        index = IndexedGate(gate, leaf=leaf)
+        whole = k_smallest_mean((queries[:, None, :] - gate.bank).pow(2).sum(2), gate.k)
+        torch.testing.assert_close(index._nearest_leaves(queries), whole, rtol=1e-13, atol=0)
+
+
+def test_tier_one_groups_hold_distinct_bank_points(gate_and_queries):
+    """Each of the k groups of a neighbourhood has a real point, and no point is in two."""
+    gate, queries = gate_and_queries
+    index = IndexedGate(gate, leaf=64, probe=3)
+    far = index.points_t.max()
+    points = index.points_t.transpose(1, 2).reshape(-1, gate.bank.shape[1])  # (C * S, F) slots
+    for leaf in range(index.points_t.shape[0]):
+        groups = neighbourhood_groups(index, leaf)
+        assert len(groups) == gate.k
+        slots = torch.cat(groups)
+        assert slots.numel() == torch.unique(slots).numel()
+        assert all(bool((points[g] < far).all(1).any()) for g in groups)
+    # the bound is the mean over groups of each group's nearest distance
+    z = queries[:7]
+    nearest = (z[:, :, None] - index.centres_t).pow(2).sum(1).argmin(1)
+    expected = torch.stack([torch.stack([(points[g] - q).pow(2).sum(1).min().sqrt()
+                                         for g in neighbourhood_groups(index, int(j))]).mean()
+                            for q, j in zip(z, nearest)])
+    torch.testing.assert_close(index._upper(z), expected, rtol=1e-13, atol=0)
 
 
 def test_k_smallest_mean_counts_ties_as_a_sort_does():
@@ -63,3 +93,32 @@ def test_open_rows_use_the_exact_scan(gate_and_queries):
     exact_d, exact_on = gate(queries[:50])
     assert torch.equal(on, exact_on)
     torch.testing.assert_close(d, exact_d, rtol=0, atol=0)
+
+
+class _Decision(torch.nn.Module):
+    """The gate's distance, signed by its decision (+ on, - off): one tensor to compile."""
+
+    def __init__(self, gate):
+        super().__init__()
+        self.gate = gate
+
+    def forward(self, z):
+        d, on = self.gate(z)
+        return torch.where(on, d, -d)
+
+
+def test_compiled_index_decides_as_the_gate_scan(gate_and_queries):
+    """The tiers compiled (AOTInductor, one row per call, as in a prediction) give the
+    decisions of the gate's whole-bank scan, row by row, all three tiers exercised."""
+    from sysid.compiled import compile_cached
+    gate, queries = gate_and_queries
+    index = IndexedGate(gate)
+    fn = compile_cached(_Decision(index), (queries[:1],), "test-gate")
+    if fn is None:
+        pytest.skip("compilation unavailable here")
+    exact_d, exact_on = gate(queries)
+    signed = torch.cat([fn(q[None]) for q in queries])
+    assert torch.equal(signed > 0, exact_on)
+    upper = index._upper(queries)
+    tol = index.margin * gate.threshold
+    assert (upper <= gate.threshold - tol).any() and (upper > gate.threshold).any()  # tier 1 and beyond
