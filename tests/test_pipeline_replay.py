@@ -33,8 +33,8 @@ def rawlogs():
 def records(rawlogs):
     ship = load_ship(rawlogs.onehz.SHIP)
     model = MMG(ship)
-    return {"zigzag10": rawlogs.simulate_10hz(model, rawlogs.onehz._zigzag(10), 100),
-            "turning35_stbd": rawlogs.simulate_10hz(model, lambda k, s, d: math.radians(35), 60)}
+    return {"zigzag10": rawlogs.simulate_10hz(model, rawlogs.onehz._zigzag(10), 50),
+            "turning35_stbd": rawlogs.simulate_10hz(model, lambda k, s, d: math.radians(35), 30)}
 
 
 def test_replay_of_the_true_ship_reproduces_its_record(records):
@@ -59,15 +59,16 @@ def test_subtracting_the_replayed_bias_recovers_the_truth_from_noise_free_logs(r
                 getattr(model.coefficients, name).fill_(value)
         return model
 
-    start = {n: ship[n] * 1.2 for n in NAMES}
-    identified = identify_with_start_states(model_with(start), windows, NAMES, weights, "rk4").coefficients
+    def identify(w, values):  # converged to 1e-5 relative: enough for per-cent biases
+        return identify_with_start_states(model_with(values), w, NAMES, weights, "rk4", tolerance=1e-5).coefficients
+
+    identified = identify(windows, {n: ship[n] * 1.2 for n in NAMES})
     bias, replicates = processing_bias(
-        model_with(identified),
-        lambda w: identify_with_start_states(model_with(identified), w, NAMES, weights, "rk4").coefficients,
+        model_with(identified), lambda w: identify(w, identified),
         records, windows.first, ship.sensors, 10, [noise_free])
     assert replicates.shape == (1, len(NAMES))
     before = np.array([identified[n] for n in NAMES]) - truth
     after = before - np.array([bias[n] for n in NAMES])
-    # the smoothing biases Y'r by a few per cent here; the replay removes most of it
+    # measured: before Y'v -1.07 %, Y'r +2.22 %, N'v +0.11 %, N'r +0.47 %; after within 0.011 %
     assert np.abs(before / truth).max() > 0.01, before / truth
-    assert np.all(np.abs(after) <= 0.25 * np.abs(before) + 1e-4 * np.abs(truth)), (before / truth, after / truth)
+    assert np.all(np.abs(after) <= 0.05 * np.abs(before)), (before / truth, after / truth)
