@@ -131,8 +131,8 @@ class _Rollout(nn.Module):
         self.model = model
         self.method = method
 
-    def forward(self, states, inputs, dt):
-        return rollout(self.model, states[0], inputs, dt, self.method)
+    def forward(self, start, inputs, dt):
+        return rollout(self.model, start, inputs, dt, self.method)
 
 
 def _coefficient_prefix(model: nn.Module) -> str:
@@ -150,8 +150,12 @@ def velocity_weights(states: torch.Tensor) -> torch.Tensor:
 
 
 def multistep_residuals(model: nn.Module, windows, names: Sequence[str], weights: torch.Tensor | None = None,
-                        method: str = "euler") -> tuple[Callable[[torch.Tensor], torch.Tensor], torch.Tensor]:
+                        method: str = "euler") -> tuple[Callable[..., torch.Tensor], torch.Tensor]:
     """The residual function theta -> r (T, W, 3) of the multi-step loss, and theta now.
+
+    The function also takes an optional ``start`` (W, 3): the (u, v_m, r) each window starts
+    from [m/s, m/s, rad/s] instead of its recorded first sample (the other state components
+    stay as recorded); see `sysid.start_states`.
 
     model : force model carrying ``coefficients`` (MMG, hybrid, ...), left unchanged.
     windows : object with ``states`` (L, W, 6), ``inputs`` (L, W, 4) and ``dt`` [s]
@@ -178,10 +182,15 @@ def multistep_residuals(model: nn.Module, windows, names: Sequence[str], weights
             return f"model.{prefix}raw_{name}", torch.log(frac / (1 - frac))
         return f"model.{prefix}raw_{name}", value
 
-    def residuals(theta: torch.Tensor) -> torch.Tensor:
+    vel = list(VELOCITY_INDEX)
+
+    def residuals(theta: torch.Tensor, start: torch.Tensor | None = None) -> torch.Tensor:
         swapped = dict(entry(n, theta[i]) for i, n in enumerate(names))
-        pred = functional_call(rollout, swapped, (states, inputs, dt))
-        vel = list(VELOCITY_INDEX)
+        x0 = states[0]
+        if start is not None:
+            x0 = torch.cat([x0[..., :1], start[..., :1], x0[..., 2:3], start[..., 1:2], x0[..., 4:5],
+                            start[..., 2:3]], -1)
+        pred = functional_call(rollout, swapped, (x0, inputs, dt))
         return (pred[1:][..., vel] - states[1:][..., vel]) * root_w
 
     theta = torch.stack([getattr(coefficients, n).detach().to(states.dtype) for n in names])
@@ -210,8 +219,10 @@ def coefficient_uncertainty(model: nn.Module, windows, names: Sequence[str], wei
 
 def uncertainty_from_jacobian(names: Sequence[str], theta: torch.Tensor, r: torch.Tensor, J: torch.Tensor,
                               covariance: str = "sandwich", threshold: float = 0.5,
-                              rcond: float = 1e-10) -> CoefficientUncertainty:
-    """The same from residuals r (T, W, k) and their Jacobian J (T, W, k, p)."""
+                              rcond: float = 1e-10, nuisance: int = 0) -> CoefficientUncertainty:
+    """The same from residuals r (T, W, k) and their Jacobian J (T, W, k, p); `nuisance` is
+    the number of other parameters fitted along (profiled out of J), which the Gauss-Newton
+    form's residual variance r^T r / (n - p - nuisance) accounts for."""
     names = tuple(names)
     theta_np = theta.detach().double().numpy()
     p = len(names)
@@ -227,7 +238,7 @@ def uncertainty_from_jacobian(names: Sequence[str], theta: torch.Tensor, r: torc
     keep = lam > rcond * max(lam.max(), np.finfo(float).tiny)
     info_pinv = (vec[:, keep] / lam[keep]) @ vec[:, keep].T
     if covariance == "gauss_newton":
-        cov_s = info_pinv * float(rf @ rf) / max(n - p, 1)
+        cov_s = info_pinv * float(rf @ rf) / max(n - p - nuisance, 1)
     else:
         scores = np.einsum("wnp,wn->wp", Jw * scale, rw)
         meat = scores.T @ scores * (W / max(W - p, 1))
