@@ -1,23 +1,17 @@
 """The known-truth identification benchmark on a small case (the full case and its coverage
 table: benchmarks/identification_kvlcc2.py)."""
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from benchmark_scripts import load_benchmark
 from sysid import load_ship
 
-ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location("identification_kvlcc2",
-                                                  ROOT / "benchmarks" / "identification_kvlcc2.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("identification_kvlcc2")
 
 
 def test_linear_derivatives_recovered_from_perturbed_starts(bench):

@@ -1,32 +1,24 @@
 """The processing bias measured by replaying the identified ship (`sysid.pipeline_replay`),
 against a known truth: KVLCC2 maneuvers simulated at 10 Hz, raw logs without noise, the
 prescribed preprocessing, hull derivatives identified with start states."""
-import importlib.util
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 
+from benchmark_scripts import load_benchmark
 from sysid import MMG, load_ship
 from sysid.pipeline_replay import noise_free, processed_windows, processing_bias, replay_run, STATE_COLUMNS
 from sysid.start_states import identify_with_start_states
 from sysid.uncertainty import velocity_weights
 
-ROOT = Path(__file__).resolve().parents[1]
 NAMES = ["Y_v", "Y_r", "N_v", "N_r"]
 
 
 @pytest.fixture(scope="module")
 def rawlogs():
-    sys.path.insert(0, str(ROOT / "benchmarks"))
-    spec = importlib.util.spec_from_file_location("identification_kvlcc2_rawlogs",
-                                                  ROOT / "benchmarks" / "identification_kvlcc2_rawlogs.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("identification_kvlcc2_rawlogs")
 
 
 @pytest.fixture(scope="module")

@@ -1,27 +1,21 @@
 """Identification with each window's start state estimated (`sysid.start_states`) against a
 known truth: KVLCC2 maneuvers simulated by Euler at 1 Hz (the identification model is then
 exactly right), hull derivatives from starts perturbed by 20-30 %."""
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 
+from benchmark_scripts import load_benchmark
 from sysid import MMG, load_ship
 from sysid.start_states import identify_with_start_states, start_state_residuals, start_state_uncertainty
 
-ROOT = Path(__file__).resolve().parents[1]
 NAMES = ["R_0", "Y_v", "Y_r", "N_v", "N_r"]
 
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location("identification_kvlcc2",
-                                                  ROOT / "benchmarks" / "identification_kvlcc2.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("identification_kvlcc2")
 
 
 @pytest.fixture(scope="module")
