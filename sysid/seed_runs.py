@@ -4,7 +4,6 @@ the seeds with their spread (`sysid.seeds`), and the networks' mean-of-seeds ens
 of its own, ``runs/{variant}_ensemble_{dataset}/`` (`sysid.ensemble`)."""
 from __future__ import annotations
 
-import shutil
 import tempfile
 import time
 from dataclasses import dataclass
@@ -21,7 +20,6 @@ from sysid.rundir import load_model, write_run
 from sysid.seeds import seed_metrics
 from sysid.ensemble import SeedEnsemble
 from sysid.sweep.runner import run_trials
-from sysid.sweep.trial_lock import LOCK_DIR
 from sysid.sweep.trial import TrialContext, TrialSpec, complete_summary
 
 
@@ -57,7 +55,6 @@ def train_seeds(experiments: dict[str, Experiment], seeds: int, out: Path, data:
     with tempfile.TemporaryDirectory(prefix="sysid-ray-") as storage:
         errors = run_trials(trials, TrialContext(str(out.resolve()), data, "sysid reproduce"), workers, address,
                             max_retries=1, storage=Path(storage), log=log, prefix="seeds")
-    shutil.rmtree(out / LOCK_DIR, ignore_errors=True)  # every trial is over
     groups = {}
     for name in experiments:
         frames, shares, failures, used, seconds = [], [], [], [], 0.0

@@ -94,6 +94,7 @@ def test_sweep_killed_part_way_resumes_without_training_a_trial_twice(tmp_path, 
     log = second.communicate(timeout=600)[0]
     assert second.returncode == 0, log[-3000:]
     assert "4/4 trials complete" in log
+    assert not (out / ".locks").exists()  # the runner removes the trial locks when all are over
 
     events = read_journal(out)
     trained = [e["trial"] for e in events if e["event"] == "trained"]

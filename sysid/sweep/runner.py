@@ -16,6 +16,7 @@ from typing import Callable
 
 from sysid.errors import ConfigError
 from sysid.sweep.trial import TrialContext, TrialSpec, tune_trainable
+from sysid.sweep.trial_lock import remove_locks
 
 RAY_DIR = ".ray"   # Ray Tune's experiment state, inside the sweep's output directory
 INSTALL_HINT = "Ray is needed for sweeps and seed studies: pip install \"sysid[sweep]\" (ray[tune], optuna)"
@@ -116,6 +117,7 @@ def run_trials(trials: list[TrialSpec], context: TrialContext, workers: int, add
             tune_config=tune.TuneConfig(max_concurrent_trials=workers, reuse_actors=True),
             run_config=_run_config(tune, storage, max_retries, callback))
         grid = tuner.fit()
+        remove_locks(context.out)  # every trial is over
         return {trials[int(r.config["trial"])].path: _error_text(r.error) for r in grid if r.error is not None}
     finally:
         if started:
@@ -151,6 +153,7 @@ def run_optuna(spec, context: TrialContext, workers: int, address: str | None = 
                                             max_concurrent_trials=workers, reuse_actors=True),
                 run_config=_run_config(tune, storage, spec.max_retries, callback))
         grid = tuner.fit()
+        remove_locks(context.out)  # every trial is over
         return {point_of(spec, r.config): _error_text(r.error) for r in grid if r.error is not None}
     finally:
         if started:

@@ -23,7 +23,6 @@ from sysid.errors import ConfigError, OutputError
 from sysid.files import write_text
 from sysid.sweep.plan import sweep_trials
 from sysid.sweep.results import SweepResults, collect_results, scanned_trials, write_results
-from sysid.sweep.trial_lock import LOCK_DIR
 from sysid.sweep.runner import default_workers, run_optuna, run_trials
 from sysid.sweep.spec import SweepSpec
 from sysid.sweep.trial import TrialContext
@@ -77,7 +76,6 @@ def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = Non
         log(f"sweep {spec.name}: {spec.search}, {len(trials) // len(spec.seeds)} configurations x "
             f"{len(spec.seeds)} seeds = {len(trials)} trials, {workers} workers" + (f" on {address}" if address else ""))
         errors = run_trials(trials, context, workers, address, spec.max_retries, log=log)
-    shutil.rmtree(out / LOCK_DIR, ignore_errors=True)  # every trial is over
     results = collect_results(spec, out, trials, errors)
     summary = write_results(spec, out, results, time.perf_counter() - started)
     return results, summary

@@ -5,11 +5,13 @@ Optuna may propose the same configuration twice while the first is still trainin
 retried trial may start beside the attempt it replaces. The second process waits at the
 lock and then finds the run complete (reused) or resumes it from its checkpoint. The
 kernel releases the lock when its holder dies, so a killed trial never blocks a resume.
-Locks live in ``{out}/.locks/`` so that no reader of the trial directories sees them.
+Locks live in ``{out}/.locks/`` so that no reader of the trial directories sees them; the
+trial runner removes them once every trial is over (`remove_locks`).
 """
 from __future__ import annotations
 
 import os
+import shutil
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
@@ -41,3 +43,8 @@ def trial_lock(out: str | os.PathLike, trial_path: str) -> Iterator[None]:
         yield
     finally:
         os.close(fd)  # closing the descriptor releases the lock
+
+
+def remove_locks(out: str | os.PathLike) -> None:
+    """Remove ``{out}/.locks/``: call only when no trial of `out` can still be running."""
+    shutil.rmtree(Path(out) / LOCK_DIR, ignore_errors=True)
