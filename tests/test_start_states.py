@@ -1,4 +1,4 @@
-"""Identification with each window's start state estimated (`sysid.start_states`) against a
+"""Identification with each window's start state estimated (`sysid.levenberg_marquardt`) against a
 known truth: KVLCC2 maneuvers simulated by Euler at 1 Hz (the identification model is then
 exactly right), hull derivatives from starts perturbed by 20-30 %."""
 
@@ -8,7 +8,7 @@ import torch
 
 from benchmark_scripts import load_benchmark
 from sysid import MMG, load_ship
-from sysid.start_states import identify_with_start_states, start_state_residuals, start_state_uncertainty
+from sysid.levenberg_marquardt import identify_levenberg_marquardt, start_state_residuals, start_state_uncertainty
 
 NAMES = ["R_0", "Y_v", "Y_r", "N_v", "N_r"]
 
@@ -28,11 +28,9 @@ def _fit(bench, records, noise, seed):
     windows = bench.windows_from(records, 10, noise, seed)
     weights = torch.tensor([0.004, 0.003, 0.0008], dtype=torch.float64) ** -2
     start = bench.perturbed_start(ship, NAMES, seed)
-    fit = identify_with_start_states(MMG(ship.with_overrides(start, "start")), windows, NAMES, weights, "euler")
+    fit = identify_levenberg_marquardt(MMG(ship.with_overrides(start, "start")), windows, NAMES, weights, "euler")
     fitted = MMG(ship)
-    with torch.no_grad():
-        for name, value in fit.coefficients.items():
-            getattr(fitted.coefficients, name).fill_(value)
+    fitted.coefficients.assign(fit.coefficients)
     truth = np.array([ship[n] for n in NAMES])
     return windows, weights, fit, fitted, truth, np.array([start[n] for n in NAMES])
 
