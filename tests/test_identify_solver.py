@@ -1,8 +1,10 @@
-"""``sysid train`` with ``[identify] solver = "levenberg_marquardt"`` against a known truth:
+"""``sysid train`` with ``[identify] solver = "levenberg_marquardt"`` (the own-ship example
+config) against a known truth:
 KVLCC2 maneuvers simulated by Euler at 1 Hz (the identification model is then exactly
 right), white noise on the recorded u, v_m, r, hull derivatives identified from a start
 perturbed by 20-30 % ([mmg] overrides), sigma from the estimator that identified them."""
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,13 +14,14 @@ from benchmark_scripts import load_benchmark
 from sysid import load_ship
 from sysid.cli import run as sysid
 from sysid.errors import ConfigError
-from sysid.experiment import parse_experiment
+from sysid.experiment import load_experiment, parse_experiment
 from sysid.report.methods import estimator_text
 from sysid.rundir import load_model
 
 from test_own_ship_end_to_end import write_processed_csv
 
 NAMES = ["Y_v", "Y_r", "N_v", "N_r"]
+EXAMPLE = Path(__file__).resolve().parents[1] / "configs" / "experiments" / "own_ship_identified.toml"
 
 
 @pytest.fixture(scope="module")
@@ -48,15 +51,13 @@ def _write_runs(bench, out_dir, seed=0):
     return [p for p in paths if p.stem != "zigzag20"], next(p for p in paths if p.stem == "zigzag20")
 
 
-def _config(path, files, start, extra="", model="mmg"):
-    overrides = ", ".join(f"{k} = {float(v)!r}" for k, v in start.items())
-    path.write_text(
-        f"[experiment]\nname = 'kvlcc2_lm'\nmodel = '{model}'\nship = 'kvlcc2_l7'\nseed = 0\n"
-        f"[data]\nfiles = {json.dumps([str(f) for f in files])}\n"
-        f"[mmg]\noverrides = {{ {overrides} }}\n"
-        "[training]\nsteps = 10\nstride_s = 5.0\n"
-        f"[identify]\nparameters = {json.dumps(NAMES)}\nsolver = 'levenberg_marquardt'\n{extra}"
-        "[evaluation]\nhorizons = [30.0]\n")
+def _config(path, files, start, **sections):
+    """The own-ship example config (configs/experiments/own_ship_identified.toml) on these
+    files, starting from `start` ([mmg] overrides), one 30-s horizon, `sections` changed."""
+    exp = load_experiment(EXAMPLE).replace(data={"files": tuple(str(f) for f in files)},
+                                           mmg={"overrides": {k: float(v) for k, v in start.items()}},
+                                           evaluation={"horizons": (30.0,)}, **sections)
+    path.write_text(exp.to_toml())
     return path
 
 
@@ -67,7 +68,9 @@ def test_levenberg_marquardt_run_covers_the_truth_within_two_sigma(bench, runs, 
     assert np.all(np.abs(np.array([start[n] for n in NAMES]) - truth) >= 0.2 * np.abs(truth) - 1e-12)
     train, test = runs
     run_dir = tmp_path / "run"
-    sysid(["train", str(_config(tmp_path / "lm.toml", train, start)), "-o", str(run_dir), "--test", str(test)])
+    config = _config(tmp_path / "lm.toml", train, start)
+    assert load_experiment(config).identify.parameters == tuple(NAMES)  # the example's
+    sysid(["train", str(config), "-o", str(run_dir), "--test", str(test)])
     summary = json.loads((run_dir / "summary.json").read_text())
     assert summary["identification"]["solver"] == "levenberg_marquardt"
     assert summary["identification"]["start_states"] == "estimated"
@@ -91,9 +94,9 @@ def test_hybrid_identifies_its_mmg_by_levenberg_marquardt_before_the_network(ben
     ship = load_ship(bench.SHIP)
     train, test = runs
     config = _config(tmp_path / "hybrid.toml", train, bench.perturbed_start(ship, NAMES, 0),
-                     "start_states = 'recorded'\n", model="hybrid")
-    text = config.read_text().replace("[training]\n", "[training]\nepochs = 2\nwarm_start_epochs = 2\n")
-    config.write_text(text + "[network]\nhidden = [8]\n[gate]\nk = 5\nspace = 'inputs'\n")
+                     experiment={"model": "hybrid"}, identify={"start_states": "recorded"},
+                     training={"epochs": 2, "warm_start_epochs": 2}, network={"hidden": (8,)},
+                     gate={"k": 5, "space": "inputs"})
     run_dir = tmp_path / "run"
     sysid(["train", str(config), "-o", str(run_dir), "--test", str(test)])
     summary = json.loads((run_dir / "summary.json").read_text())

@@ -1,6 +1,6 @@
-"""Identification by Levenberg-Marquardt (`sysid.levenberg_marquardt`), start states estimated or with a prior, against a
-known truth: KVLCC2 maneuvers simulated by Euler at 1 Hz (the identification model is then
-exactly right), hull derivatives from starts perturbed by 20-30 %."""
+"""Identification by Levenberg-Marquardt (`sysid.levenberg_marquardt`), start states estimated
+or with a prior, against a known truth: KVLCC2 maneuvers simulated by Euler at 1 Hz (the
+identification model is then exactly right), hull derivatives from starts perturbed by 20-30 %."""
 
 import numpy as np
 import pytest
