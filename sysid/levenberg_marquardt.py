@@ -58,7 +58,6 @@ from sysid.uncertainty import (CoefficientUncertainty, coefficient_uncertainty, 
                                uncertainty_from_jacobian, velocity_weights)
 
 START_STATES = ("estimated", "recorded")
-STOPS = ("converged", "stalled", "iteration limit")
 
 
 @dataclass(frozen=True)
@@ -124,7 +123,7 @@ def _jacobians(residuals, theta, start, estimated: bool):
 
     def shifted(th, shift):
         return residuals(th, start + shift)
-    zero = torch.zeros(3, dtype=start.dtype)
+    zero = torch.zeros(3, dtype=start.dtype, device=start.device)
     J_theta, J_start = jacfwd(shifted, argnums=(0, 1))(theta, zero)
     return e, J_theta.detach(), J_start.detach()
 
@@ -198,8 +197,9 @@ def identify_levenberg_marquardt(model: nn.Module, windows, names: Sequence[str]
     residuals, theta, recorded = _residual_function(model, windows, names, weights, method, start_states)
     start = recorded.clone()
     scale = recorded.pow(2).mean(0).sqrt().clamp_min(1e-6)          # (3,) channel RMS
-    centre = theta.clone() if prior is None else torch.tensor([float(prior[n]) for n in names], dtype=theta.dtype)
-    info = prior_weight / prior_scale(centre) ** 2                   # (p,) the prior's information
+    prior = dict(zip(names, theta.tolist())) if prior is None else prior
+    centre = torch.tensor([float(prior[n]) for n in names], dtype=theta.dtype, device=theta.device)
+    info = torch.as_tensor(prior_information(prior, names, prior_weight), dtype=theta.dtype, device=theta.device)
 
     def total(theta, start) -> float:
         with torch.no_grad():

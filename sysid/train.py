@@ -46,10 +46,10 @@ from sysid.device import resolve_device
 from sysid.dynamics import integrate, integrate_with_forces, required_force
 from sysid.errors import ConfigError, DataError, TrainingError
 from sysid.experiment import Experiment
+from sysid.levenberg_marquardt import fit_uncertainty, identify_levenberg_marquardt
 from sysid.models import CorrectedModel, PerMember, build_mmg, correction_of
 from sysid.ood import KNNGate
 from sysid.state import VELOCITY_INDEX
-from sysid.levenberg_marquardt import fit_uncertainty, identify_levenberg_marquardt
 from sysid.uncertainty import coefficient_uncertainty
 
 VEL = list(VELOCITY_INDEX)
@@ -546,17 +546,16 @@ class Trainer:
             summary.identified_initial = self._coefficients(mmg)
         if identify and (kind == "mmg" or not joint) and resumed_in != "train":
             if exp.identify.solver == "levenberg_marquardt":
-                stage, summary.identified_uncertainty, summary.identification = \
-                    self.identify_least_squares(mmg, runs, train, val, w_v, device)
+                stage, uncertainty, estimator = self.identify_least_squares(mmg, runs, train, val, w_v, device)
             else:
                 stage = self.identify(mmg, train, val, w_v)
+                uncertainty = self.uncertainty(mmg, runs, dtype, device, w_v)
+                estimator = self._gradient_estimator(stage, joint=False)
             self._history += stage.history
             summary.stopped["identify"] = stage.stopped
             summary.best_epoch = stage.best_epoch  # the training stage's, if one follows
             summary.identified = self._coefficients(mmg)
-            if exp.identify.solver == "gradient":
-                summary.identified_uncertainty = self.uncertainty(mmg, runs, dtype, device, w_v)
-                summary.identification = self._gradient_estimator(stage, joint=False)
+            summary.identified_uncertainty, summary.identification = uncertainty, estimator
         if identify and not joint:
             mmg.requires_grad_(False)
         model = mmg
