@@ -65,6 +65,9 @@ def run_rows(source: ReportSource) -> list[RunRow]:
         why = "; ".join(f"{stage}: {reason}" for stage, reason in stopped.items()) if isinstance(stopped, dict) else ""
         epochs = ("-" if not s.get("epochs") else f"{s.get('epochs')} (best {s.get('best_epoch', '-')}"
                   + (f"; {why}" if why else "") + ")")
+        est = s.get("identification") or {}
+        if est.get("solver") == "levenberg_marquardt" and "train" not in stopped:  # no epochs: LM alone
+            epochs = f"{est.get('iterations', '?')} Levenberg-Marquardt iterations" + (f" ({why})" if why else "")
         if str(s.get("status", "")).startswith("failed"):
             epochs += f" - {str(s['status']).upper()}"
         rows.append(RunRow(run_label(run.name, run.model, run.dataset), run.model, run.dataset, epochs,
