@@ -58,9 +58,7 @@ def main() -> None:
     prior = {n: ship[n] for n in NAMES}
     estimate, iterations = identify(ship, windows, NAMES, prior, weights, method="euler")
     fitted = MMG(ship)
-    with torch.no_grad():
-        for name, value in estimate.items():
-            getattr(fitted.coefficients, name).fill_(value)
+    fitted.coefficients.assign(estimate)
     print(f"D2, {windows.states.shape[1]} disjoint {args.steps}-s windows, {iterations} LM iterations")
     for form in ("sandwich", "gauss_newton"):
         res = coefficient_uncertainty(fitted, windows, NAMES, weights, "euler", covariance=form)

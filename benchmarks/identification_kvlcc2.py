@@ -6,10 +6,11 @@ each second, RK4 with dt = 1 s, so the identification model can be exactly right
 noise is added to the recorded u, v_m, r (processed 1 Hz states; this benchmark does not go
 through raw 10 Hz logs and `sysid preprocess`). The records are cut into non-overlapping
 windows; the hull derivatives are identified from starts perturbed by 20-30 % (random sign)
-by Levenberg-Marquardt on the multi-step residuals of `sysid.uncertainty`, and each
-estimate gets its sigma from `coefficient_uncertainty`. Over many noise seeds the script
-prints, per coefficient, the truth, the mean estimate, the mean sigma, the spread of the
-estimates and how often truth lies inside +- 2 sigma (both covariance forms).
+by the package's Levenberg-Marquardt on the multi-step residuals (`sysid.levenberg_marquardt`,
+start states recorded), and each estimate gets its sigma from `coefficient_uncertainty`.
+Over many noise seeds the script prints, per coefficient, the truth, the mean estimate,
+the mean sigma, the spread of the estimates and how often truth lies inside +- 2 sigma
+(both covariance forms).
 
     python benchmarks/identification_kvlcc2.py [--seeds 12] [--window 10] [--names Y_v,Y_r,...]
 
@@ -24,10 +25,10 @@ from types import SimpleNamespace
 
 import numpy as np
 import torch
-from torch.func import jacfwd
 
 from sysid import MMG, integrate, load_ship
-from sysid.uncertainty import coefficient_uncertainty, multistep_residuals
+from sysid.levenberg_marquardt import identify_levenberg_marquardt
+from sysid.uncertainty import coefficient_uncertainty
 
 SHIP = "kvlcc2_l7"
 U0, NPS = 2.29 * 0.512, 17.95        # m/s, rps: shipmmg's example operating point
@@ -110,32 +111,12 @@ def windows_from(records, window: int, noise=NOISE, seed: int = 0) -> SimpleName
 
 def identify(ship, windows, names, start: dict[str, float], weights, iterations: int = 40,
              method: str = "rk4") -> tuple[dict[str, float], int]:
-    """Levenberg-Marquardt on the multi-step residuals from `start`; returns the estimate
-    and the number of iterations taken."""
-    model = MMG(ship.with_overrides(start, "start"))
-    residuals, theta = multistep_residuals(model, windows, names, weights, method)
-    lam = 1e-3
-    with torch.no_grad():
-        cost = float((residuals(theta) ** 2).sum())
-    for it in range(1, iterations + 1):
-        J = jacfwd(residuals)(theta).detach().reshape(-1, len(names))
-        with torch.no_grad():
-            r = residuals(theta).reshape(-1)
-        JtJ, g = J.T @ J, J.T @ r
-        damping = torch.diag(torch.diag(JtJ))
-        while True:
-            delta = -torch.linalg.solve(JtJ + lam * damping, g)
-            with torch.no_grad():
-                trial_cost = float((residuals(theta + delta) ** 2).sum())
-            if math.isfinite(trial_cost) and trial_cost <= cost:
-                theta, cost, lam = theta + delta, trial_cost, max(lam / 5, 1e-9)
-                break
-            lam *= 4
-            if lam > 1e8:
-                return dict(zip(names, theta.tolist())), it
-        if torch.all(delta.abs() <= 1e-7 * theta.abs().clamp_min(1e-3)):
-            break
-    return dict(zip(names, theta.tolist())), it
+    """Levenberg-Marquardt on the multi-step residuals from `start`, every window integrated
+    from its recorded first sample (`sysid.levenberg_marquardt`, ``start_states="recorded"``);
+    returns the estimate and the number of iterations taken."""
+    fit = identify_levenberg_marquardt(MMG(ship.with_overrides(start, "start")), windows, names, weights, method,
+                                       start_states="recorded", iterations=iterations)
+    return fit.coefficients, fit.iterations
 
 
 def perturbed_start(ship, names, seed: int) -> dict[str, float]:
@@ -153,9 +134,7 @@ def run_case(names, seed: int, window: int = 20, records=None, noise=NOISE, meth
     start = perturbed_start(ship, names, seed)
     estimate, iterations = identify(ship, windows, names, start, weights, method=method)
     fitted = MMG(ship)
-    with torch.no_grad():  # the estimate may leave the ship file's ranges where data say little
-        for name, value in estimate.items():
-            getattr(fitted.coefficients, name).fill_(value)
+    fitted.coefficients.assign(estimate)  # it may leave the ship file's ranges where data say little
     out = {"truth": np.array([ship[n] for n in names]), "start": np.array([start[n] for n in names]),
            "iterations": iterations, "windows": windows.states.shape[1]}
     for form in ("sandwich", "gauss_newton"):

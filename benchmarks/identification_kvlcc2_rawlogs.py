@@ -16,7 +16,7 @@ estimate as identified.
 
 ``--start estimated`` (default) fits each window's start state (u, v_m, r) along with the
 coefficients, the recorded first sample being one more measurement of it
-(`sysid.start_states`); ``--start recorded`` integrates every window from its recorded first
+(`sysid.levenberg_marquardt`); ``--start recorded`` integrates every window from its recorded first
 sample as if it were exact (the multi-step loss of training; biased here, see
 benchmarks/identification_results.md).
 
@@ -40,8 +40,8 @@ from preprocessing.synth import SynthSettings
 from sysid import MMG, integrate, load_ship
 from sysid.mmg.wind import relative_wind
 from sysid.pipeline_replay import noise_free, processed_windows, processing_bias
-from sysid.start_states import identify_with_start_states, start_state_uncertainty
-from sysid.uncertainty import coefficient_uncertainty, velocity_weights
+from sysid.levenberg_marquardt import fit_uncertainty, identify_levenberg_marquardt
+from sysid.uncertainty import velocity_weights
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import identification_kvlcc2 as onehz  # noqa: E402
@@ -91,9 +91,7 @@ def preprocessed_windows(ship, records: dict[str, pd.DataFrame], window: int, se
 def _model(ship, values: dict[str, float]) -> MMG:
     """The ship's MMG model with `values` set (they may leave the ship file's ranges)."""
     model = MMG(ship)
-    with torch.no_grad():
-        for name, value in values.items():
-            getattr(model.coefficients, name).fill_(value)
+    model.coefficients.assign(values)
     return model
 
 
@@ -107,26 +105,19 @@ def run_case(ship, records, names, seed: int, window: int, start_states: str = "
     start = onehz.perturbed_start(ship, names, seed)
 
     def identify(w, values):
-        if start_states == "estimated":
-            fit = identify_with_start_states(_model(ship, values), w, names, weights, "rk4")
-            return fit.coefficients, fit.iterations, fit
-        estimate, iterations = onehz.identify(ship, w, names, values, weights, method="rk4")
-        return estimate, iterations, None
+        return identify_levenberg_marquardt(_model(ship, values), w, names, weights, "rk4", start_states)
 
-    estimate, iterations, fit = identify(windows, start)
-    fitted = _model(ship, estimate)
-    out = {"truth": np.array([ship[n] for n in names]), "iterations": iterations,
+    fit = identify(windows, start)
+    fitted = _model(ship, fit.coefficients)
+    out = {"truth": np.array([ship[n] for n in names]), "iterations": fit.iterations,
            "windows": windows.states.shape[1]}
     for form in ("sandwich", "gauss_newton"):
-        if start_states == "estimated":
-            out[form] = start_state_uncertainty(fitted, windows, names, fit.start, weights, "rk4", covariance=form)
-        else:
-            out[form] = coefficient_uncertainty(fitted, windows, names, weights, "rk4", covariance=form)
+        out[form] = fit_uncertainty(fitted, windows, names, fit, weights, "rk4", covariance=form)
     out["identified"] = out["sandwich"].estimate
     out["bias"] = np.zeros(len(names))
     if bias == "replay":
-        found, _ = processing_bias(fitted, lambda w: identify(w, estimate)[0], records, windows.first,
-                                   ship.sensors, window, [noise_free])
+        found, _ = processing_bias(fitted, lambda w: identify(w, fit.coefficients).coefficients, records,
+                                   windows.first, ship.sensors, window, [noise_free])
         out["bias"] = np.array([found[n] for n in names])
     out["estimate"] = out["identified"] - out["bias"]
     return out

@@ -24,10 +24,13 @@ val_fraction = 0.3          # last 30 % of each file's time axis
 k = 10
 alpha = 0.9995
 
-[identify]                  # beyond the paper: gradient identification of MMG coefficients
+[identify]                  # beyond the paper: identification of MMG coefficients
 parameters = ["X_vr", "Y_v"]
 bounds = { X_vr = [-1.0, 1.0] }
 stage = "before"            # before (then the FNN on the identified MMG) | joint
+solver = "gradient"         # gradient (Adam epochs) | levenberg_marquardt (sigma shown honest)
+start_states = "estimated"  # levenberg_marquardt: estimated (default) | recorded
+prior_weight = 0.0          # levenberg_marquardt: pull toward the ship file's values (0: none)
 
 [ensemble]                  # a mean-of-seeds ensemble: these trained runs, forces averaged
 members = ["../hybrid_D2/seed0", "../hybrid_D2/seed1"]
@@ -46,11 +49,13 @@ from typing import Any
 
 from sysid.dynamics import INTEGRATORS
 from sysid.errors import ConfigError
+from sysid.levenberg_marquardt import START_STATES
 from sysid.ship import parameter_name
 
 
 KINDS = ("mmg", "nn", "hybrid")         # MMG-only, NN-only, hybrid MMG + FNN
 GATE_SPACES = ("features", "inputs")    # where the kNN gate measures distances
+SOLVERS = ("gradient", "levenberg_marquardt")  # [identify] solver
 
 
 @dataclass(frozen=True)
@@ -113,11 +118,33 @@ class GateOptions:
 
 @dataclass(frozen=True)
 class IdentifyOptions:
+    """How MMG coefficients are identified (`sysid.train.Trainer.identify`).
+
+    solver : "gradient" (Adam epochs on the multi-step loss, early stopping; `epochs`,
+        `learning_rate`) or "levenberg_marquardt" (least squares on disjoint training
+        windows, `sysid.levenberg_marquardt`; `iterations`, `start_states`, `prior_weight`).
+    start_states : "estimated" (each window's start (u, v_m, r) fitted too; the default for
+        levenberg_marquardt, the estimator whose sigma was shown honest) or "recorded"
+        (windows start from their recorded first sample; gradient's only way).
+    prior_weight : lambda >= 0 of the residuals sqrt(lambda) (theta - prior) / |prior| toward
+        the values identification starts from (ship file with [mmg] overrides);
+        levenberg_marquardt only, 0 = none.
+    """
+
     parameters: tuple[str, ...] = ()
     bounds: dict = field(default_factory=dict)
     stage: str = "before"
     epochs: int = 60
     learning_rate: float = 2e-2
+    solver: str = "gradient"
+    start_states: str = ""          # "": estimated for levenberg_marquardt, recorded for gradient
+    prior_weight: float = 0.0
+    iterations: int = 40            # levenberg_marquardt's iteration limit
+
+    def __post_init__(self):
+        if not self.start_states:
+            resolved = "estimated" if self.solver == "levenberg_marquardt" else "recorded"
+            object.__setattr__(self, "start_states", resolved)
 
 
 @dataclass(frozen=True)
@@ -277,6 +304,21 @@ def _validate(exp: Experiment, src: str) -> None:
         (0.0 < g.alpha < 1.0, "[gate] alpha must be in (0, 1)"),
         (g.space in GATE_SPACES, f"[gate] space must be one of {', '.join(GATE_SPACES)}"),
         (i.stage in ("before", "joint"), "[identify] stage must be before or joint"),
+        (i.solver in SOLVERS, f"[identify] solver = {i.solver!r}: choose one of {', '.join(SOLVERS)}"),
+        (i.start_states in START_STATES,
+         f"[identify] start_states = {i.start_states!r}: choose one of {', '.join(START_STATES)}"),
+        (i.solver == "levenberg_marquardt" or i.start_states == "recorded",
+         f"[identify] start_states = {i.start_states!r} needs solver = \"levenberg_marquardt\" "
+         "(gradient identification integrates every window from its recorded start)"),
+        (i.prior_weight >= 0, "[identify] prior_weight must be >= 0 (0: no prior)"),
+        (i.solver == "levenberg_marquardt" or i.prior_weight == 0,
+         "[identify] prior_weight needs solver = \"levenberg_marquardt\""),
+        (i.iterations >= 1, "[identify] iterations must be >= 1"),
+        (i.solver == "gradient" or i.stage == "before",
+         "[identify] solver = \"levenberg_marquardt\" identifies the MMG alone: stage \"joint\" (with "
+         "the FNN) needs solver = \"gradient\""),
+        (i.solver == "gradient" or bool(i.parameters),
+         "[identify] solver = \"levenberg_marquardt\" needs parameters to identify"),
         (e.seed >= 0, f"[experiment] seed = {e.seed}: must be >= 0"),
         (len(exp.evaluation.horizons) > 0, "[evaluation] horizons must list at least one horizon [s]"),
         (all(h > 0 for h in exp.evaluation.horizons), "[evaluation] horizons must be > 0"),

@@ -11,7 +11,9 @@ A **run directory** (``sysid train CONFIG -o runs/NAME``)::
                         "n_train_windows", "n_val_windows", "versions": {...},
                         "mmg_overrides": {...}, "identified": {...}, "identified_initial": {...},
                         "identified_uncertainty": {names, estimate, std_error, correlation,
-                        undetermined, ...} | null, "gate": {...},
+                        undetermined, ...} | null, "identification": {"solver":
+                        "gradient"|"levenberg_marquardt", "start_states", "iterations"|"epochs",
+                        ...} | null (the estimator of both), "gate": {...},
                         "training": {...}}
     model.pt           state dict (torch.save of plain tensors; weights_only=True safe)
     standardization.json  input/output mean and std of the FNN (Eqs. 8, 10)
@@ -194,6 +196,7 @@ def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds:
         "identified": info.pop("identified", {}) or {},
         "identified_initial": info.pop("identified_initial", {}) or {},
         "identified_uncertainty": info.pop("identified_uncertainty", None),
+        "identification": info.pop("identification", None),
         "gate": {**(info.pop("gate", None) or {}), "off_share": evaluation.gate_off_share},
         "training": info,
     }

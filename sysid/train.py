@@ -11,8 +11,10 @@
    from the recorded state and true wind, as the model sees it); output statistics from the
    residual force the data implies: M * (v[k+1] - v[k]) / dt + C(v[k]) - F_MMG(x[k])
    (for NN-only without F_MMG), the force that makes one Euler step land on the record.
-3. Optional gradient identification of MMG coefficients (``[identify]``, stage "before"),
-   with their standard errors and correlations (`sysid.uncertainty`, disjoint windows).
+3. Optional identification of MMG coefficients (``[identify]``, stage "before"), by
+   gradient (Adam on the multi-step loss) or by Levenberg-Marquardt on the disjoint
+   training windows with start states estimated (`sysid.levenberg_marquardt`), with their
+   standard errors and correlations (`sysid.uncertainty`, disjoint windows).
 4. Warm start: the FNN regresses that residual force (one-step fit). With ``[network]
    members`` K > 1, K networks are trained side by side (each on its own loss) and averaged.
 5. Multi-step training: Euler rollouts of T steps through torchdiffeq, loss
@@ -44,6 +46,7 @@ from sysid.device import resolve_device
 from sysid.dynamics import integrate, integrate_with_forces, required_force
 from sysid.errors import ConfigError, DataError, TrainingError
 from sysid.experiment import Experiment
+from sysid.levenberg_marquardt import fit_uncertainty, identify_levenberg_marquardt
 from sysid.models import CorrectedModel, PerMember, build_mmg, correction_of
 from sysid.ood import KNNGate
 from sysid.state import VELOCITY_INDEX
@@ -109,6 +112,7 @@ class TrainingSummary:
     ensemble_val_loss: float | None = None
     val_loss: float | None = None         # the final model's validation multi-step loss (sweep objective)
     identified_uncertainty: dict | None = None  # `CoefficientUncertainty.as_dict()`
+    identification: dict | None = None    # the estimator: solver, start_states, iterations, ...
     gate: dict | None = None
     train_seconds: float = 0.0
     failure: str | None = None            # why the run failed (a hit wall-clock limit)
@@ -368,17 +372,32 @@ class Trainer:
         elif self.progress and (epoch % 10 == 0 or epoch == total):
             self.log(f"  epoch {epoch}/{total}: training {train_v:.5f}, validation {val_v:.5f} (best at {best_epoch})")
 
-    def uncertainty(self, model, runs: Sequence[Run], dtype, device, w_v) -> dict:
-        """Stage 3b: standard errors and correlations of the identified coefficients from
-        the multi-step residuals on disjoint windows of the training part (`sysid.uncertainty`)."""
+    def disjoint_windows(self, runs: Sequence[Run], dtype, device) -> WindowSet:
+        """Windows of T+1 samples of the training part that share no sample (slid by T+1):
+        independent clusters for the sandwich sigma, and what least squares identifies on."""
         exp, t = self.experiment, self.experiment.training
-        disjoint = split_windows(runs, t.steps, float(t.steps + 1) / exp.data.rate, t.val_fraction,
-                                 exp.data.exclude_suspect, dtype, t.block_s, exp.experiment.seed, device)[0]
-        result = coefficient_uncertainty(model, disjoint, list(exp.identify.parameters), w_v)
+        return split_windows(runs, t.steps, float(t.steps + 1) / exp.data.rate, t.val_fraction,
+                             exp.data.exclude_suspect, dtype, t.block_s, exp.experiment.seed, device)[0]
+
+    def _log_uncertainty(self, result) -> dict:
         self.log("identified ± 2 sigma: " + ", ".join(
             f"{k} = {e:.4g} ± {2 * s:.2g}" + (" (undetermined)" if u else "")
             for k, e, s, u in zip(result.names, result.estimate, result.std_error, result.undetermined)))
         return result.as_dict()
+
+    def uncertainty(self, model, runs: Sequence[Run], dtype, device, w_v) -> dict:
+        """Stage 3b: standard errors and correlations of the identified coefficients from
+        the multi-step residuals on disjoint windows of the training part, each window from
+        its recorded start (`sysid.uncertainty`)."""
+        disjoint = self.disjoint_windows(runs, dtype, device)
+        return self._log_uncertainty(coefficient_uncertainty(model, disjoint, list(self.experiment.identify.parameters),
+                                                             w_v))
+
+    def _gradient_estimator(self, stage: StageResult, joint: bool) -> dict:
+        """What identified the coefficients with ``solver = "gradient"`` (for the summary)."""
+        return {"solver": "gradient", "start_states": "recorded", "epochs": len(stage.history),
+                "stage": "joint with the FNN" if joint else "before", "integrator": "euler",
+                "covariance": "sandwich"}
 
     def _coefficients(self, mmg) -> dict[str, float]:
         return {k: float(getattr(mmg.coefficients, k).detach()) for k in self.experiment.identify.parameters}
@@ -404,6 +423,40 @@ class Trainer:
                                 ident.epochs, ident.learning_rate, "identify")
         self.log("identified: " + ", ".join(f"{k} = {v:.5g}" for k, v in self._coefficients(mmg).items()))
         return result
+
+    def identify_least_squares(self, mmg, runs: Sequence[Run], train: WindowSet, val: WindowSet, w_v,
+                               device) -> tuple[StageResult, dict, dict]:
+        """Stage 3 with ``[identify] solver = "levenberg_marquardt"``: least squares on the
+        disjoint windows of the training part in float64, Euler as in training, start states
+        and prior as configured (`sysid.levenberg_marquardt`), then the sigma of that
+        estimator. Sets the MMG's coefficients; returns the stage (one history row: the
+        identified MMG's multi-step loss on the training and validation windows), the sigma
+        (`CoefficientUncertainty.as_dict`) and what the estimator was."""
+        ident = self.experiment.identify
+        names = list(ident.parameters)
+        started = time.perf_counter()
+        windows = self.disjoint_windows(runs, torch.float64, device)
+        model = build_mmg(self.experiment, torch.float64).to(device)   # float64: identification's precision
+        prior = self._coefficients(model)
+        weights = w_v.to(torch.float64)
+        fit = identify_levenberg_marquardt(model, windows, names, weights, "euler", ident.start_states, prior,
+                                           ident.prior_weight, ident.iterations)
+        model.coefficients.assign(fit.coefficients)
+        result = fit_uncertainty(model, windows, names, fit, weights, "euler", prior=prior,
+                                 prior_weight=ident.prior_weight)
+        mmg.coefficients.assign(fit.coefficients)
+        with torch.no_grad():
+            train_v, val_v = (float(multistep_loss(mmg, w, w_v)[0]) for w in (train, val))
+        self.log(f"identify: Levenberg-Marquardt, start states {ident.start_states}, {len(windows)} disjoint "
+                 f"windows, {fit.iterations} iterations ({fit.stopped}); multi-step loss training "
+                 f"{train_v:.5f}, validation {val_v:.5f}")
+        self.log("identified: " + ", ".join(f"{k} = {v:.5g}" for k, v in self._coefficients(mmg).items()))
+        row = {"stage": "identify", "epoch": fit.iterations, "train_loss": train_v, "train_velocity": train_v,
+               "train_penalty": 0.0, "val_loss": val_v, "seconds": time.perf_counter() - started}
+        estimator = {"solver": "levenberg_marquardt", "start_states": ident.start_states,
+                     "prior_weight": ident.prior_weight, "iterations": fit.iterations, "windows": len(windows),
+                     "integrator": "euler", "covariance": result.method}
+        return (StageResult([row], fit.iterations, val_v, fit.stopped), self._log_uncertainty(result), estimator)
 
     def standardize(self, model: CorrectedModel, train: WindowSet) -> torch.Tensor:
         """Stage 2: FNN input statistics and output statistics of the implied residual force;
@@ -492,12 +545,17 @@ class Trainer:
         if identify and not summary.identified_initial:
             summary.identified_initial = self._coefficients(mmg)
         if identify and (kind == "mmg" or not joint) and resumed_in != "train":
-            stage = self.identify(mmg, train, val, w_v)
+            if exp.identify.solver == "levenberg_marquardt":
+                stage, uncertainty, estimator = self.identify_least_squares(mmg, runs, train, val, w_v, device)
+            else:
+                stage = self.identify(mmg, train, val, w_v)
+                uncertainty = self.uncertainty(mmg, runs, dtype, device, w_v)
+                estimator = self._gradient_estimator(stage, joint=False)
             self._history += stage.history
             summary.stopped["identify"] = stage.stopped
             summary.best_epoch = stage.best_epoch  # the training stage's, if one follows
             summary.identified = self._coefficients(mmg)
-            summary.identified_uncertainty = self.uncertainty(mmg, runs, dtype, device, w_v)
+            summary.identified_uncertainty, summary.identification = uncertainty, estimator
         if identify and not joint:
             mmg.requires_grad_(False)
         model = mmg
@@ -533,6 +591,7 @@ class Trainer:
             if identify and joint:
                 summary.identified = self._coefficients(mmg)
                 summary.identified_uncertainty = self.uncertainty(model, runs, dtype, device, w_v)
+                summary.identification = self._gradient_estimator(stage, joint=True)
             if exp.gate.enabled:
                 summary.gate = self.fit_gate(model, samples, dtype)
         if summary.failure is None:

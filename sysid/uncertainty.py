@@ -32,6 +32,7 @@ from torch import nn
 from torch.func import functional_call, jacfwd
 
 from sysid.dynamics import state_derivative
+from sysid.mmg.coefficients import raw_value
 from sysid.state import VELOCITY_INDEX
 
 COVARIANCES = ("sandwich", "gauss_newton")
@@ -155,7 +156,7 @@ def multistep_residuals(model: nn.Module, windows, names: Sequence[str], weights
 
     The function also takes an optional ``start`` (W, 3): the (u, v_m, r) each window starts
     from [m/s, m/s, rad/s] instead of its recorded first sample (the other state components
-    stay as recorded); see `sysid.start_states`.
+    stay as recorded); see `sysid.levenberg_marquardt`.
 
     model : force model carrying ``coefficients`` (MMG, hybrid, ...), left unchanged.
     windows : object with ``states`` (L, W, 6), ``inputs`` (L, W, 4) and ``dt`` [s]
@@ -177,9 +178,7 @@ def multistep_residuals(model: nn.Module, windows, names: Sequence[str], weights
         if name not in trainable:
             return f"model.{prefix}{name}", value
         if name in bounds:  # the raw parameter that maps to `value`
-            low, high = bounds[name]
-            frac = (value - low) / (high - low)
-            return f"model.{prefix}raw_{name}", torch.log(frac / (1 - frac))
+            return f"model.{prefix}raw_{name}", raw_value(value, *bounds[name])
         return f"model.{prefix}raw_{name}", value
 
     vel = list(VELOCITY_INDEX)
@@ -199,13 +198,15 @@ def multistep_residuals(model: nn.Module, windows, names: Sequence[str], weights
 
 def coefficient_uncertainty(model: nn.Module, windows, names: Sequence[str], weights: torch.Tensor | None = None,
                             method: str = "euler", covariance: str = "sandwich", threshold: float = 0.5,
-                            rcond: float = 1e-10) -> CoefficientUncertainty:
+                            rcond: float = 1e-10, penalty: np.ndarray | None = None) -> CoefficientUncertainty:
     """Standard errors, correlations and undetermined directions of `names`.
 
     Parameters as in `multistep_residuals`; `covariance` is "sandwich" (default, windows as
     independent clusters) or "gauss_newton"; `threshold` is the relative sigma above which a
     coefficient or direction counts as undetermined; `rcond` the relative eigenvalue below
-    which the information is singular. Use non-overlapping windows.
+    which the information is singular; `penalty` (p,) the diagonal information of a prior
+    the estimate was regularised with (`sysid.levenberg_marquardt.prior_information`).
+    Use non-overlapping windows.
     """
     if covariance not in COVARIANCES:
         raise ValueError(f"covariance {covariance!r}: choose one of {', '.join(COVARIANCES)}")
@@ -214,15 +215,21 @@ def coefficient_uncertainty(model: nn.Module, windows, names: Sequence[str], wei
     with torch.no_grad():
         r = residuals(theta)
     J = jacfwd(residuals)(theta).detach()  # (T, W, 3, p)
-    return uncertainty_from_jacobian(names, theta, r, J, covariance, threshold, rcond)
+    return uncertainty_from_jacobian(names, theta, r, J, covariance, threshold, rcond, penalty=penalty)
 
 
 def uncertainty_from_jacobian(names: Sequence[str], theta: torch.Tensor, r: torch.Tensor, J: torch.Tensor,
                               covariance: str = "sandwich", threshold: float = 0.5,
-                              rcond: float = 1e-10, nuisance: int = 0) -> CoefficientUncertainty:
+                              rcond: float = 1e-10, nuisance: int = 0,
+                              penalty: np.ndarray | None = None) -> CoefficientUncertainty:
     """The same from residuals r (T, W, k) and their Jacobian J (T, W, k, p); `nuisance` is
     the number of other parameters fitted along (profiled out of J), which the Gauss-Newton
-    form's residual variance r^T r / (n - p - nuisance) accounts for."""
+    form's residual variance r^T r / (n - p - nuisance) accounts for.
+
+    `penalty` (p,) [1 / unit^2]: the diagonal information P of a prior's residuals the
+    estimate was regularised with. The covariance is then that of the regularised estimate
+    over the data's noise, (J^T J + P)^-1 M (J^T J + P)^-1 with M the data's part (the
+    scores' spread, or s^2 J^T J): it leaves out the estimate's pull toward the prior."""
     names = tuple(names)
     theta_np = theta.detach().double().numpy()
     p = len(names)
@@ -233,12 +240,15 @@ def uncertainty_from_jacobian(names: Sequence[str], theta: torch.Tensor, r: torc
     n = rf.size
     scale = np.where(np.abs(theta_np) > 0, np.abs(theta_np), 1.0)  # relative coordinates
     Js = Jf * scale
-    info = Js.T @ Js
+    data_info = info = Js.T @ Js
+    if penalty is not None:
+        info = data_info + np.diag(np.asarray(penalty, dtype=float) * scale * scale)
     lam, vec = np.linalg.eigh(info)
     keep = lam > rcond * max(lam.max(), np.finfo(float).tiny)
     info_pinv = (vec[:, keep] / lam[keep]) @ vec[:, keep].T
     if covariance == "gauss_newton":
-        cov_s = info_pinv * float(rf @ rf) / max(n - p - nuisance, 1)
+        spread = info_pinv if penalty is None else info_pinv @ data_info @ info_pinv
+        cov_s = spread * float(rf @ rf) / max(n - p - nuisance, 1)
     else:
         scores = np.einsum("wnp,wn->wp", Jw * scale, rw)
         meat = scores.T @ scores * (W / max(W - p, 1))

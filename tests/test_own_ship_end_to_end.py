@@ -33,17 +33,21 @@ def _write_runs(ship_path, out_dir):
         inputs[:, 0], inputs[:, 1] = 14.0, [law(s) for s in t]
         x0 = torch.tensor([0.0, 0.9, 0.0, 0.0, 0.0, 0.0], dtype=torch.float64)
         states = integrate(model, x0, torch.tensor(inputs), 1.0, "rk4").numpy()
-        rel = torch.stack(relative_wind(*(torch.tensor(c) for c in (states[:, 1], states[:, 3], states[:, 4],
-                                                                     inputs[:, 2], inputs[:, 3]))), -1).numpy()
-        values = {"t": t, "x": states[:, 0], "u": states[:, 1], "y": states[:, 2], "v": states[:, 3],
-                  "psi": states[:, 4], "r": states[:, 5], "n_prop": inputs[:, 0], "delta_rudder": inputs[:, 1],
-                  "wind_velo_relative": rel[:, 0], "wind_dir_relative": rel[:, 1],
-                  "wind_velo_true": inputs[:, 2], "wind_dir_true": inputs[:, 3]}
-        frame = pd.DataFrame({column: values[short] for column, short in COLUMNS.items()})
-        path = out_dir / f"{name}.csv"
-        frame.to_csv(path, index=False)
-        paths.append(path)
+        paths.append(write_processed_csv(out_dir / f"{name}.csv", t, states, inputs))
     return paths
+
+
+def write_processed_csv(path, t, states, inputs):
+    """A processed run (the dataset's columns) from t (N,) [s], states (N, 6) and inputs
+    (N, 4); the relative wind computed from them. Returns `path`."""
+    rel = torch.stack(relative_wind(*(torch.tensor(c) for c in (states[:, 1], states[:, 3], states[:, 4],
+                                                                 inputs[:, 2], inputs[:, 3]))), -1).numpy()
+    values = {"t": t, "x": states[:, 0], "u": states[:, 1], "y": states[:, 2], "v": states[:, 3],
+              "psi": states[:, 4], "r": states[:, 5], "n_prop": inputs[:, 0], "delta_rudder": inputs[:, 1],
+              "wind_velo_relative": rel[:, 0], "wind_dir_relative": rel[:, 1],
+              "wind_velo_true": inputs[:, 2], "wind_dir_true": inputs[:, 3]}
+    pd.DataFrame({column: values[short] for column, short in COLUMNS.items()}).to_csv(path, index=False)
+    return path
 
 
 @pytest.mark.slow

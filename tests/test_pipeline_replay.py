@@ -5,12 +5,11 @@ import math
 
 import numpy as np
 import pytest
-import torch
 
 from benchmark_scripts import load_benchmark
 from sysid import MMG, load_ship
 from sysid.pipeline_replay import noise_free, processed_windows, processing_bias, replay_run, STATE_COLUMNS
-from sysid.start_states import identify_with_start_states
+from sysid.levenberg_marquardt import identify_levenberg_marquardt
 from sysid.uncertainty import velocity_weights
 
 NAMES = ["Y_v", "Y_r", "N_v", "N_r"]
@@ -46,13 +45,12 @@ def test_subtracting_the_replayed_bias_recovers_the_truth_from_noise_free_logs(r
 
     def model_with(values):
         model = MMG(ship)
-        with torch.no_grad():
-            for name, value in values.items():
-                getattr(model.coefficients, name).fill_(value)
+        model.coefficients.assign(values)
         return model
 
     def identify(w, values):  # converged to 1e-5 relative: enough for per-cent biases
-        return identify_with_start_states(model_with(values), w, NAMES, weights, "rk4", tolerance=1e-5).coefficients
+        return identify_levenberg_marquardt(model_with(values), w, NAMES, weights, "rk4",
+                                            tolerance=1e-5).coefficients
 
     identified = identify(windows, {n: ship[n] * 1.2 for n in NAMES})
     bias, replicates = processing_bias(

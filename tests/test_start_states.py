@@ -1,6 +1,6 @@
-"""Identification with each window's start state estimated (`sysid.start_states`) against a
-known truth: KVLCC2 maneuvers simulated by Euler at 1 Hz (the identification model is then
-exactly right), hull derivatives from starts perturbed by 20-30 %."""
+"""Identification by Levenberg-Marquardt (`sysid.levenberg_marquardt`), start states estimated
+or with a prior, against a known truth: KVLCC2 maneuvers simulated by Euler at 1 Hz (the
+identification model is then exactly right), hull derivatives from starts perturbed by 20-30 %."""
 
 import numpy as np
 import pytest
@@ -8,7 +8,9 @@ import torch
 
 from benchmark_scripts import load_benchmark
 from sysid import MMG, load_ship
-from sysid.start_states import identify_with_start_states, start_state_residuals, start_state_uncertainty
+from sysid.levenberg_marquardt import (fit_uncertainty, identify_levenberg_marquardt, start_state_residuals,
+                                       start_state_uncertainty)
+from sysid.uncertainty import multistep_residuals
 
 NAMES = ["R_0", "Y_v", "Y_r", "N_v", "N_r"]
 
@@ -28,11 +30,9 @@ def _fit(bench, records, noise, seed):
     windows = bench.windows_from(records, 10, noise, seed)
     weights = torch.tensor([0.004, 0.003, 0.0008], dtype=torch.float64) ** -2
     start = bench.perturbed_start(ship, NAMES, seed)
-    fit = identify_with_start_states(MMG(ship.with_overrides(start, "start")), windows, NAMES, weights, "euler")
+    fit = identify_levenberg_marquardt(MMG(ship.with_overrides(start, "start")), windows, NAMES, weights, "euler")
     fitted = MMG(ship)
-    with torch.no_grad():
-        for name, value in fit.coefficients.items():
-            getattr(fitted.coefficients, name).fill_(value)
+    fitted.coefficients.assign(fit.coefficients)
     truth = np.array([ship[n] for n in NAMES])
     return windows, weights, fit, fitted, truth, np.array([start[n] for n in NAMES])
 
@@ -79,3 +79,39 @@ def test_profile_jacobian_equals_the_schur_complement(bench, records):
     # and the Gauss-Newton step of the full problem is zero at the fit (converged)
     step = torch.linalg.lstsq(full, e).solution
     assert float((step[:p].abs() / theta.abs()).max()) < 1e-5
+
+
+def test_a_prior_pulls_the_estimate_and_its_information_enters_sigma(bench, records):
+    """With prior_weight lambda the fit minimises data + lambda sum ((theta - prior)/|prior|)^2:
+    its gradient is zero there; a huge lambda keeps the prior; and the Gauss-Newton sigma is
+    s^2 (F + P)^-1 F (F + P)^-1 with F = J^T J, P = diag(lambda / prior^2)."""
+    ship = load_ship(bench.SHIP)
+    windows = bench.windows_from(records, 10, (0.004, 0.003, 0.0008), 3)
+    weights = torch.tensor([0.004, 0.003, 0.0008], dtype=torch.float64) ** -2
+    prior = bench.perturbed_start(ship, NAMES, 3)
+    start = MMG(ship.with_overrides(prior, "start"))
+    free = identify_levenberg_marquardt(start, windows, NAMES, weights, "euler", "recorded")
+    held = identify_levenberg_marquardt(start, windows, NAMES, weights, "euler", "recorded", prior_weight=1e12)
+    estimate = lambda fit: np.array([fit.coefficients[n] for n in NAMES])
+    p = np.array([prior[n] for n in NAMES])
+    np.testing.assert_allclose(estimate(held), p, rtol=1e-3)
+    lam = 1e5  # comparable to the data: the estimate departs less from the prior than the free fit
+    fit = identify_levenberg_marquardt(start, windows, NAMES, weights, "euler", "recorded", prior_weight=lam)
+    assert fit.stopped == "converged"
+    departure = lambda fit: float((((estimate(fit) - p) / p) ** 2).sum())
+    assert 0.05 * departure(free) < departure(fit) < 0.95 * departure(free), (departure(fit), departure(free))
+    fitted = MMG(ship)
+    fitted.coefficients.assign(fit.coefficients)
+    residuals, theta = multistep_residuals(fitted, windows, NAMES, weights, "euler")
+    J = torch.func.jacfwd(residuals)(theta).reshape(-1, len(NAMES)).numpy()
+    e = residuals(theta).detach().reshape(-1).numpy()
+    P = np.diag(lam / p ** 2)
+    gradient = J.T @ e + P @ (theta.numpy() - p)
+    assert np.all(np.abs(gradient) <= 1e-5 * np.abs(J.T @ e).max() + 1e-9), gradient
+    res = fit_uncertainty(fitted, windows, NAMES, fit, weights, "euler", "gauss_newton", prior, lam)
+    F = J.T @ J
+    inv = np.linalg.inv(F + P)
+    s2 = e @ e / (e.size - len(NAMES))
+    np.testing.assert_allclose(res.std_error, np.sqrt(np.diag(s2 * inv @ F @ inv)), rtol=1e-6)
+    plain = fit_uncertainty(fitted, windows, NAMES, fit, weights, "euler", "gauss_newton")
+    assert np.all(res.std_error < plain.std_error)

@@ -62,8 +62,15 @@ def train(
         raise SystemExit(1)
     t = result.training
     stops = ", ".join(f"{k}: {v}" for k, v in t.stopped.items()) if t else "not trained"
-    typer.echo(f"train: wrote {output} in {time.perf_counter() - start:.0f} s"
-               + (f" ({t.epochs} epochs, best {t.best_epoch}; {stops})" if t else ""))
+    detail = ""
+    if t is not None:
+        steps = []
+        if (t.identification or {}).get("solver") == "levenberg_marquardt":  # no epochs in that stage
+            steps.append(f"{t.identification['iterations']} Levenberg-Marquardt iterations")
+        if not steps or "train" in t.stopped:
+            steps.append(f"{t.epochs} epochs, best {t.best_epoch}")
+        detail = f" ({', '.join(steps)}; {stops})"
+    typer.echo(f"train: wrote {output} in {time.perf_counter() - start:.0f} s{detail}")
 
 
 @app.command()

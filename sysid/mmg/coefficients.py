@@ -17,6 +17,12 @@ from sysid.ship import Ship, parameter_name
 from sysid.errors import ShipDefinitionError
 
 
+def raw_value(value: torch.Tensor, low: float, high: float) -> torch.Tensor:
+    """The unconstrained raw value whose ``low + (high-low)*sigmoid(raw)`` is `value`."""
+    frac = (value - low) / (high - low)
+    return torch.log(frac / (1 - frac))
+
+
 class Coefficients(nn.Module):
     """Every ship parameter as a tensor attribute.
 
@@ -51,8 +57,7 @@ class Coefficients(nn.Module):
                         raise ShipDefinitionError(
                             f"bounds: {name} = {float(value)} is not strictly inside [{low}, {high}]")
                     self._bounds[name] = (low, high)
-                    frac = (value - low) / (high - low)
-                    value = torch.log(frac / (1 - frac))
+                    value = raw_value(value, low, high)
                 setattr(self, f"raw_{name}", nn.Parameter(value))
             else:
                 self.register_buffer(name, value)
@@ -65,6 +70,22 @@ class Coefficients(nn.Module):
                 return low + (high - low) * torch.sigmoid(raw)
             return raw
         return super().__getattr__(name)
+
+    def assign(self, values: Mapping[str, float]) -> None:
+        """Set coefficients to these values (physical units, e.g. identified ones): a
+        trainable one through its raw value (bounded: the inverse of the sigmoid, so the
+        value must lie strictly inside its bounds), any other in place. No range check
+        against the ship file: an estimate may leave it where the data say little."""
+        with torch.no_grad():
+            for name, value in values.items():
+                if name in self.trainable_names:
+                    raw = super().__getattr__(f"raw_{name}")
+                    target = torch.tensor(float(value), dtype=raw.dtype)
+                    if name in self._bounds:
+                        target = raw_value(target, *self._bounds[name])
+                    raw.copy_(target)
+                else:
+                    super().__getattr__(name).fill_(float(value))
 
     def values(self) -> dict[str, float]:
         """Current value of every parameter, as plain floats."""

@@ -65,6 +65,9 @@ def run_rows(source: ReportSource) -> list[RunRow]:
         why = "; ".join(f"{stage}: {reason}" for stage, reason in stopped.items()) if isinstance(stopped, dict) else ""
         epochs = ("-" if not s.get("epochs") else f"{s.get('epochs')} (best {s.get('best_epoch', '-')}"
                   + (f"; {why}" if why else "") + ")")
+        est = s.get("identification") or {}
+        if est.get("solver") == "levenberg_marquardt" and "train" not in stopped:  # no epochs: LM alone
+            epochs = f"{est.get('iterations', '?')} Levenberg-Marquardt iterations" + (f" ({why})" if why else "")
         if str(s.get("status", "")).startswith("failed"):
             epochs += f" - {str(s['status']).upper()}"
         rows.append(RunRow(run_label(run.name, run.model, run.dataset), run.model, run.dataset, epochs,
@@ -211,6 +214,27 @@ def _config_text(config: dict) -> str:
     return "; ".join(parts)
 
 
+def estimator_text(summary: dict) -> str:
+    """Which estimator produced a run's identified coefficients and their ± 2 sigma, from
+    summary.json's "identification" and "stopped" (older runs: the generic description)."""
+    est = summary.get("identification")
+    if not isinstance(est, dict) or "solver" not in est:
+        return "± 2σ from the curvature of the multi-step loss on disjoint training windows"
+    stopped = (summary.get("stopped") or {}).get("identify")
+    starts = ("each window's start state estimated along" if est.get("start_states") == "estimated"
+              else "each window integrated from its recorded first sample")
+    if est["solver"] == "levenberg_marquardt":
+        how = (f"Levenberg-Marquardt on the multi-step residuals of {est.get('windows', '?')} disjoint training "
+               f"windows, {starts}; {est.get('iterations', '?')} iterations" + (f", {stopped}" if stopped else ""))
+        if est.get("prior_weight"):
+            how += f"; pulled toward the ship file's values with prior weight {est['prior_weight']:g}"
+    else:
+        how = (f"gradient (Adam) on the multi-step loss, {est.get('stage', 'before')}, "
+               f"{est.get('epochs', '?')} epochs" + (f", {stopped}" if stopped else "") + f"; {starts}")
+    return how + ("; ± 2σ: window-clustered sandwich of that estimator on disjoint training windows"
+                  + (", start states profiled out" if est.get("start_states") == "estimated" else ""))
+
+
 def methods_paragraphs(source: ReportSource) -> list[str]:
     """A few paragraphs: the protocol, then what was trained, how and on what, per run."""
     horizons = sorted({h for r in source.runs for h in r.horizons()})
@@ -241,7 +265,7 @@ def methods_paragraphs(source: ReportSource) -> list[str]:
                 cell = f"{name} = {est:.4g}" + (f" ± {2 * sd:.2g} (2σ)" if sd is not None else " (σ infinite)")
                 cell += f", prior {prior[name]:.4g}" if name in prior else ""
                 parts.append(cell + (", not determined by the data" if weak else ""))
-            text += " Identified coefficients: " + "; ".join(parts) + "."
+            text += f" Identified coefficients ({estimator_text(s)}): " + "; ".join(parts) + "."
         elif s.get("identified"):
             text += " Identified coefficients: " + ", ".join(f"{k} = {v}" for k, v in _flatten(s["identified"])) + "."
         if run.model == "hybrid" and s.get("gate"):

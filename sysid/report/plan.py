@@ -15,6 +15,7 @@ from matplotlib.figure import FigureBase
 
 from sysid.report import figures as F
 from sysid.paper import run_label
+from sysid.report.methods import estimator_text
 from sysid.report.palette import model_colour
 from sysid.paper import scenario_key
 from sysid.report.quality import FILES_PER_FIGURE, quality_timeline
@@ -240,7 +241,7 @@ def _uncertainty_figures(c: _Context) -> None:
         c.add(f"identified_{run.name}", "Identification", title,
               "Estimates with ± 2 standard errors from the curvature of the multi-step loss (Jacobian of "
               "the residuals on disjoint training windows, windows as independent clusters), beside the "
-              "ship file's values; right: correlations of the estimates.",
+              f"ship file's values; right: correlations of the estimates. Estimator: {estimator_text(run.summary)}.",
               partial(F.identified_coefficients, names, u.get("estimate", []), two_sigma, prior,
                       u.get("correlation", []), title), True)
 
