@@ -20,7 +20,10 @@ to three tiers, each only where the one before leaves the decision open:
    min(n_i, L) over their k smallest distances n_i is a lower bound (the whole bank's
    i-th nearest distance is below L only if the i nearest all lie in the chosen leaves).
    Upper bound at or below the threshold: on; lower bound above it: off. Both equal
-   d_kNN when L is past the k-th distance;
+   d_kNN when L is past the k-th distance. In more than `BOX_DIMENSIONS` coordinates
+   (the 64 features), where boxes bound loosely, tier 2 is exact instead: the mean
+   distance from the k leaves whose nearest point is nearest (they hold the k nearest
+   points of the bank);
 3. the gate's own scan (`KNNGate.distance`, a matrix product), for rows tier 2 leaves
    open (bounds either side of the threshold, or within round-off of it).
 
@@ -88,6 +91,9 @@ def leaf_partition(points: torch.Tensor, leaf: int) -> list[torch.Tensor]:
     return out
 
 
+BOX_DIMENSIONS = 16  # up to this many coordinates tier 2 searches the nearest boxes (in 64, boxes bound loosely)
+
+
 class IndexedGate(nn.Module):
     """Drop-in for a fitted `KNNGate` in compiled steps: same decision, leaf-pruned scan.
 
@@ -110,6 +116,7 @@ class IndexedGate(nn.Module):
         size = math.ceil(max(len(i) for i in leaves) / self.k) * self.k  # slots per leaf: k groups of size / k
         self.probe = min(probe, len(leaves))
         self.boxes = min(boxes, len(leaves))
+        self.by_boxes = bank.shape[1] <= BOX_DIMENSIONS  # tier 2 by boxes, else by every leaf's minimum
         far = (torch.finfo(dtype).max / (4 * bank.shape[1])) ** 0.5  # padding: far, d^2 still finite
         points = torch.full((len(leaves), size, bank.shape[1]), far, dtype=dtype)
         centres = torch.zeros(len(leaves), bank.shape[1], dtype=torch.float64)
@@ -171,6 +178,23 @@ class IndexedGate(nn.Module):
         d2 = (z[:, None, :, None] - points).pow(2).sum(2)  # (B, boxes, S) squared
         return k_smallest_means(d2.flatten(1), self.k, rest)
 
+    def _nearest_leaves_tier(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """d_kNN (B,) of z (B, F), twice (upper = lower bound; tier 2 in many dimensions,
+        where boxes bound loosely): exact, from the points of the k leaves whose nearest
+        point to z is nearest (they hold the k nearest points of the bank)."""
+        d2 = (z[:, None, :, None] - self.points_t).pow(2).sum(2)  # (B, C, S) squared
+        leaf_min = d2.amin(2)  # (B, C)
+        leaf_ids = torch.arange(leaf_min.shape[1], device=z.device)
+        chosen = []
+        for _ in range(min(self.k, leaf_min.shape[1])):
+            j = leaf_min.argmin(1, keepdim=True)  # (B, 1)
+            chosen.append(j)
+            leaf_min = torch.where(leaf_ids == j, math.inf, leaf_min)
+        chosen = torch.cat(chosen, 1)  # (B, k)
+        near = d2.gather(1, chosen[:, :, None].expand(-1, -1, d2.shape[2]))  # (B, k, S)
+        d = k_smallest_mean(near.flatten(1), self.k)
+        return d, d
+
     def forward(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(distance, in_distribution) for z (..., F), as `KNNGate.forward` decides."""
         flat = z.detach().reshape(-1, z.shape[-1]).to(self.points_t.dtype)
@@ -184,7 +208,7 @@ class IndexedGate(nn.Module):
         k = min(self.k, self.bank_sq.shape[0])
 
         def bounded(flat, upper, threshold, tol):  # tier 2, and tier 3 where it leaves rows open
-            near, lower = self._box_bounds_tier(flat)
+            near, lower = (self._box_bounds_tier if self.by_boxes else self._nearest_leaves_tier)(flat)
 
             def gate_scan(flat, near, threshold, tol):  # KNNGate.distance, exactly (tier 3)
                 scan = nearest_distances(flat, self.scan_bank, self.bank_sq, k).mean(1)

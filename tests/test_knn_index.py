@@ -57,6 +57,7 @@ def test_tier_two_bounds_hold_the_whole_bank_distance(gate_and_queries):
         upper, lower = index._box_bounds_tier(queries)
         assert bool((lower <= whole * (1 + 1e-12)).all()) and bool((upper >= whole * (1 - 1e-12)).all())
     torch.testing.assert_close(upper, whole, rtol=1e-13, atol=0)  # all leaves searched: exact
+    torch.testing.assert_close(index._nearest_leaves_tier(queries)[0], whole, rtol=1e-13, atol=0)  # many dimensions
     torch.testing.assert_close(lower, whole, rtol=1e-13, atol=0)
     index = IndexedGate(gate, leaf=64)
     slots = index.points_t.transpose(1, 2)  # (C, S, F), padding far away
