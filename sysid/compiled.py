@@ -162,7 +162,8 @@ def compile_package(program: torch.export.ExportedProgram, path: Path,
 
 
 def load_package(path: str | os.PathLike) -> Compiled:
-    """A callable ``f(*tensors) -> tensor`` running an AOTInductor ``.pt2`` package.
+    """A callable ``f(*tensors) -> tensor`` running an AOTInductor ``.pt2`` package: its
+    first output (a `Rollout` also gives its last state, which only keeps its loop alive).
 
     Calls go straight to the package's C++ runner when it exposes one (about 15 us
     instead of about 35 us through the generic wrapper). The runner reads its inputs as
@@ -171,7 +172,10 @@ def load_package(path: str | os.PathLike) -> Compiled:
     package = torch._inductor.aoti_load_package(str(path))
     runner = getattr(getattr(package, "loader", None), "run", None)
     if runner is None:
-        return lambda *tensors: package(*(t.contiguous() for t in tensors))
+        def first(*tensors):
+            out = package(*(t.contiguous() for t in tensors))
+            return out[0] if isinstance(out, (tuple, list)) else out
+        return first
     return lambda *tensors: runner([t.contiguous() for t in tensors])[0]
 
 

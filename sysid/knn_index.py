@@ -13,20 +13,27 @@ to three tiers, each only where the one before leaves the decision open:
    search and one minimum per group, contiguous over each leaf's points, so compiled
    code runs it as a few vectorized loops with few buffers; in distribution it decides
    almost every row;
-2. the exact mean distance from the k leaves whose nearest point is nearest: the k
-   nearest points of the whole bank lie in them (each of these leaves holds a point at
-   most as far as the k-th smallest leaf minimum, so the k-th nearest distance is not
-   larger, and a point nearer than that lies in a leaf with a smaller minimum);
-3. the gate's own scan (`KNNGate.distance`, a matrix product), for rows whose distance
-   lies within round-off of the threshold even after tier 2.
+2. bounds from the `boxes` leaves nearest to z by their bounding boxes (each leaf's
+   coordinate-wise minimum and maximum, a lower bound on the distance to any of its
+   points): the mean distance to the k nearest points among them is an upper bound, and
+   with every other point at least L away (the next box's bound) the mean of
+   min(n_i, L) over their k smallest distances n_i is a lower bound (the whole bank's
+   i-th nearest distance is below L only if the i nearest all lie in the chosen leaves).
+   Upper bound at or below the threshold: on; lower bound above it: off. Both equal
+   d_kNN when L is past the k-th distance. In more than `BOX_DIMENSIONS` coordinates
+   (the 64 features), where boxes bound loosely, tier 2 is exact instead: the mean
+   distance from the k leaves whose nearest point is nearest (they hold the k nearest
+   points of the bank);
+3. the gate's own scan (`KNNGate.distance`, a matrix product), for rows tier 2 leaves
+   open (bounds either side of the threshold, or within round-off of it).
 
 A margin (relative, plus a bound on the round-off of `KNNGate`'s own |q|^2 + |b|^2 - 2 q.b)
 keeps round-off from deciding in tiers 1 and 2, so the decision always equals `KNNGate`'s.
 Tiers 2 and 3 run under `torch.cond`, only when some row needs them. The k smallest
-distances are found by k passes of "smallest value above the last one": elementwise
-operations and min reductions only, no sort, top-k or matrix product, so compiled code
-runs each tier as a few fused, vectorized loops. The distance returned is the tier-1 upper
-bound, or the one of the tier that decided.
+distances are found by k passes of "smallest value above the last one", the nearest boxes
+by passes of argmin: elementwise operations and min reductions only, no sort, top-k or
+matrix product, so compiled code runs each tier as a few fused, vectorized loops. The
+distance returned is the tier-1 upper bound, the tier-2 upper bound, or the scan's.
 """
 from __future__ import annotations
 
@@ -39,12 +46,13 @@ from torch import nn
 from sysid.ood import KNNGate, nearest_distances
 
 
-def k_smallest_mean(d2: torch.Tensor, k: int) -> torch.Tensor:
-    """Mean of sqrt of the k smallest of d2 (B, M) [squared distances] along dim 1, (B,);
-    +inf with fewer than k finite values. k passes of min reductions, ties counted, no sort.
-    """
+def k_smallest_means(d2: torch.Tensor, k: int, cap: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(mean of sqrt of the k smallest of d2 (B, M) [squared distances] along dim 1, the
+    same mean with each value first capped at cap (B,)), each (B,); +inf with fewer than k
+    finite values. k passes of min reductions, ties counted, no sort."""
     d2 = d2.clamp_min(0.0)
     total = torch.zeros(d2.shape[0], dtype=d2.dtype, device=d2.device)
+    capped = torch.zeros_like(total)
     taken = torch.zeros_like(total)
     last = torch.full_like(total, -1.0)  # below every squared distance
     for _ in range(k):
@@ -52,9 +60,18 @@ def k_smallest_mean(d2: torch.Tensor, k: int) -> torch.Tensor:
         count = (d2 == value[:, None]).sum(1).to(d2.dtype)
         use = torch.minimum(count, k - taken)
         total = total + torch.where(use > 0, use * value.sqrt(), 0.0)
+        capped = capped + torch.where(use > 0, use * torch.minimum(value, cap).sqrt(), 0.0)
         taken = taken + use
         last = value
-    return torch.where(taken < k, math.inf, total) / k
+    short = taken < k
+    return torch.where(short, math.inf, total) / k, torch.where(short, math.inf, capped) / k
+
+
+def k_smallest_mean(d2: torch.Tensor, k: int) -> torch.Tensor:
+    """Mean of sqrt of the k smallest of d2 (B, M) [squared distances] along dim 1, (B,);
+    +inf with fewer than k finite values. k passes of min reductions, ties counted, no sort.
+    """
+    return k_smallest_means(d2, k, torch.full(d2.shape[:1], math.inf, dtype=d2.dtype, device=d2.device))[0]
 
 
 def leaf_partition(points: torch.Tensor, leaf: int) -> list[torch.Tensor]:
@@ -74,6 +91,9 @@ def leaf_partition(points: torch.Tensor, leaf: int) -> list[torch.Tensor]:
     return out
 
 
+BOX_DIMENSIONS = 16  # up to this many coordinates tier 2 searches the nearest boxes (in 64, boxes bound loosely)
+
+
 class IndexedGate(nn.Module):
     """Drop-in for a fitted `KNNGate` in compiled steps: same decision, leaf-pruned scan.
 
@@ -82,10 +102,11 @@ class IndexedGate(nn.Module):
     gate : the fitted gate (bank (N, F), k, threshold); shared, not copied.
     leaf : points per leaf (at most).
     probe : leaves in a tier-1 neighbourhood (a leaf and its nearest leaves by centre).
+    boxes : leaves searched in tier 2 (those with the nearest bounding boxes).
     margin : relative margin below which bounds do not decide (the exact scan does).
     """
 
-    def __init__(self, gate: KNNGate, leaf: int = 64, probe: int = 8, margin: float | None = None):
+    def __init__(self, gate: KNNGate, leaf: int = 64, probe: int = 8, boxes: int = 16, margin: float | None = None):
         super().__init__()
         self.gate = gate
         self.k = gate.k
@@ -94,6 +115,8 @@ class IndexedGate(nn.Module):
         leaves = leaf_partition(bank.double(), leaf)
         size = math.ceil(max(len(i) for i in leaves) / self.k) * self.k  # slots per leaf: k groups of size / k
         self.probe = min(probe, len(leaves))
+        self.boxes = min(boxes, len(leaves))
+        self.by_boxes = bank.shape[1] <= BOX_DIMENSIONS  # tier 2 by boxes, else by every leaf's minimum
         far = (torch.finfo(dtype).max / (4 * bank.shape[1])) ** 0.5  # padding: far, d^2 still finite
         points = torch.full((len(leaves), size, bank.shape[1]), far, dtype=dtype)
         centres = torch.zeros(len(leaves), bank.shape[1], dtype=torch.float64)
@@ -110,6 +133,8 @@ class IndexedGate(nn.Module):
         self.register_buffer("points_t", points.transpose(1, 2).contiguous())  # (C, F, S)
         self.register_buffer("centres_t", centres.to(dtype).T.contiguous())  # (F, C)
         self.register_buffer("neighbours", torch.cdist(centres, centres).argsort(1)[:, : self.probe])  # (C, probe)
+        self.register_buffer("box_low_t", torch.stack([bank[i].amin(0) for i in leaves], 1))  # (F, C)
+        self.register_buffer("box_high_t", torch.stack([bank[i].amax(0) for i in leaves], 1))  # (F, C)
 
     @property
     def threshold(self) -> torch.Tensor:
@@ -130,9 +155,33 @@ class IndexedGate(nn.Module):
         groups = d2.reshape(d2.shape[0], -1, self.k)  # (B, probe S / k, k): group = slot mod k
         return groups.amin(1).clamp_min(0.0).sqrt().mean(1)
 
-    def _nearest_leaves(self, z: torch.Tensor) -> torch.Tensor:
-        """Mean k-nearest distance (B,) of z (B, F) over the whole bank (tier 2): exact,
-        from the points of the k leaves whose nearest point to z is nearest."""
+    def box_bounds(self, z: torch.Tensor) -> torch.Tensor:
+        """Squared lower bound (B, C) of the distance from z (B, F) to any point of each
+        leaf: the squared distance to the leaf's bounding box."""
+        z = z[:, :, None]
+        outside = (self.box_low_t - z).clamp_min(0.0) + (z - self.box_high_t).clamp_min(0.0)  # one is 0
+        return outside.pow(2).sum(1)
+
+    def _box_bounds_tier(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(upper, lower) bounds (B,) of the mean k-nearest distance of z (B, F) (tier 2),
+        from the points of the `boxes` leaves with the nearest bounding boxes; both are
+        d_kNN when no other box is nearer than the k-th of those points."""
+        bound = self.box_bounds(z)  # (B, C) squared
+        leaf_ids = torch.arange(bound.shape[1], device=z.device)
+        chosen = []
+        for _ in range(self.boxes):
+            j = bound.argmin(1, keepdim=True)  # (B, 1)
+            chosen.append(j)
+            bound = torch.where(leaf_ids == j, math.inf, bound)
+        rest = bound.amin(1)  # (B,) squared: every point outside the chosen leaves is at least this far
+        points = self.points_t[torch.cat(chosen, 1)]  # (B, boxes, F, S)
+        d2 = (z[:, None, :, None] - points).pow(2).sum(2)  # (B, boxes, S) squared
+        return k_smallest_means(d2.flatten(1), self.k, rest)
+
+    def _nearest_leaves_tier(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """d_kNN (B,) of z (B, F), twice (upper = lower bound; tier 2 in many dimensions,
+        where boxes bound loosely): exact, from the points of the k leaves whose nearest
+        point to z is nearest (they hold the k nearest points of the bank)."""
         d2 = (z[:, None, :, None] - self.points_t).pow(2).sum(2)  # (B, C, S) squared
         leaf_min = d2.amin(2)  # (B, C)
         leaf_ids = torch.arange(leaf_min.shape[1], device=z.device)
@@ -143,7 +192,8 @@ class IndexedGate(nn.Module):
             leaf_min = torch.where(leaf_ids == j, math.inf, leaf_min)
         chosen = torch.cat(chosen, 1)  # (B, k)
         near = d2.gather(1, chosen[:, :, None].expand(-1, -1, d2.shape[2]))  # (B, k, S)
-        return k_smallest_mean(near.flatten(1), self.k)
+        d = k_smallest_mean(near.flatten(1), self.k)
+        return d, d
 
     def forward(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(distance, in_distribution) for z (..., F), as `KNNGate.forward` decides."""
@@ -157,22 +207,23 @@ class IndexedGate(nn.Module):
         on = upper <= threshold - tol
         k = min(self.k, self.bank_sq.shape[0])
 
-        def exact(flat, upper, on, threshold, tol):  # tier 2, and tier 3 where it is too close to call
-            d = self._nearest_leaves(flat)
+        def bounded(flat, upper, threshold, tol):  # tier 2, and tier 3 where it leaves rows open
+            near, lower = (self._box_bounds_tier if self.by_boxes else self._nearest_leaves_tier)(flat)
 
-            def gate_scan(flat, d, threshold):  # KNNGate.distance, exactly (tier 3)
+            def gate_scan(flat, near, threshold, tol):  # KNNGate.distance, exactly (tier 3)
                 scan = nearest_distances(flat, self.scan_bank, self.bank_sq, k).mean(1)
                 return scan, scan <= threshold
 
-            def decided(flat, d, threshold):
-                return d.clone(), d <= threshold
+            def decided(flat, near, threshold, tol):
+                return near.clone(), near <= threshold - tol
 
-            return torch.cond(((d - threshold).abs() <= tol).any(), gate_scan, decided, (flat, d, threshold))
+            open_rows = (near > threshold - tol) & (lower <= threshold + tol)
+            return torch.cond(open_rows.any(), gate_scan, decided, (flat, near, threshold, tol))
 
-        def bounded(flat, upper, on, threshold, tol):
-            return upper.clone(), on.clone()
+        def neighbourhood(flat, upper, threshold, tol):
+            return upper.clone(), upper <= threshold - tol
 
-        d, admitted = torch.cond((~on).any(), exact, bounded, (flat, upper, on, threshold, tol))
+        d, admitted = torch.cond((~on).any(), bounded, neighbourhood, (flat, upper, threshold, tol))
         return d.reshape(z.shape[:-1]), admitted.reshape(z.shape[:-1])
 
 

@@ -73,7 +73,9 @@ class Rollout(nn.Module):
     ``forward(x0, inputs, steps)``: x0 (B, 6) (or (6, B) for a channels-first step),
     inputs (capacity, B, 4) (or (capacity, 4, B)), steps () int64 <= capacity, the number
     of steps to take (step k holds inputs[k]). Returns the states after steps 1..steps,
-    (capacity, B, 6) (or (capacity, 6, B)); rows from `steps` on are zero.
+    (capacity, B, 6) (or (capacity, 6, B)), rows from `steps` on zero, and the last state.
+    The loop writes each state into the record in place (a record carried through the
+    loop would be copied, and allocated anew, on every step).
     """
 
     def __init__(self, step: Step, capacity: int):
@@ -85,12 +87,14 @@ class Rollout(nn.Module):
         states = torch.zeros((self.capacity, *x0.shape), dtype=x0.dtype, device=x0.device)
         k0 = torch.zeros((), dtype=torch.int64, device=x0.device)
 
-        def more(k, x, states):
+        def more(k, x):
             return k < steps
 
-        def advance(k, x, states):
+        def advance(k, x):
             at = k.reshape(1)
             x = self.step(x, inputs.index_select(0, at)[0])
-            return k + 1, x, states.index_copy(0, at, x[None])
+            states.index_copy_(0, at, x[None])  # in place: the record is not carried (no copy per step)
+            return k + 1, x
 
-        return while_loop(more, advance, (k0, x0, states))[2]
+        last = while_loop(more, advance, (k0, x0))[1]
+        return states, last  # the last state keeps the loop (and its writes) in the program

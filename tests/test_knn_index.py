@@ -4,7 +4,7 @@ import math
 import pytest
 import torch
 
-from sysid.knn_index import IndexedGate, k_smallest_mean, leaf_partition, neighbourhood_groups
+from sysid.knn_index import IndexedGate, k_smallest_mean, k_smallest_means, leaf_partition, neighbourhood_groups
 from sysid.ood import KNNGate
 
 
@@ -47,13 +47,32 @@ def test_decisions_equal_the_whole_bank_scan(gate_and_queries):
     assert open_rows.double().mean() < (~exact_on).double().mean() + 0.2
 
 
-def test_tier_two_equals_the_whole_bank_distance(gate_and_queries):
-    """The k leaves with the nearest minima hold the k nearest points of the bank."""
+def test_tier_two_bounds_hold_the_whole_bank_distance(gate_and_queries):
+    """The nearest boxes' bounds bracket d_kNN of the whole bank, and equal it when every
+    leaf is searched; a box's bound is below the distance to each of its points."""
     gate, queries = gate_and_queries
-    for leaf in (16, 64):
-        index = IndexedGate(gate, leaf=leaf)
-        whole = k_smallest_mean((queries[:, None, :] - gate.bank).pow(2).sum(2), gate.k)
-        torch.testing.assert_close(index._nearest_leaves(queries), whole, rtol=1e-13, atol=0)
+    whole = k_smallest_mean((queries[:, None, :] - gate.bank).pow(2).sum(2), gate.k)
+    for leaf, boxes in ((16, 4), (64, 8), (64, 1000)):
+        index = IndexedGate(gate, leaf=leaf, boxes=boxes)
+        upper, lower = index._box_bounds_tier(queries)
+        assert bool((lower <= whole * (1 + 1e-12)).all()) and bool((upper >= whole * (1 - 1e-12)).all())
+    torch.testing.assert_close(upper, whole, rtol=1e-13, atol=0)  # all leaves searched: exact
+    torch.testing.assert_close(index._nearest_leaves_tier(queries)[0], whole, rtol=1e-13, atol=0)  # many dimensions
+    torch.testing.assert_close(lower, whole, rtol=1e-13, atol=0)
+    index = IndexedGate(gate, leaf=64)
+    slots = index.points_t.transpose(1, 2)  # (C, S, F), padding far away
+    d2 = (queries[:20, None, None, :] - slots).pow(2).sum(3)  # (20, C, S)
+    assert bool((index.box_bounds(queries[:20])[:, :, None] <= d2 * (1 + 1e-12)).all())
+
+
+def test_k_smallest_means_cap_each_value(gate_and_queries):
+    g = torch.Generator().manual_seed(2)
+    d2 = torch.rand(50, 40, generator=g, dtype=torch.float64)
+    cap = torch.rand(50, generator=g, dtype=torch.float64) * 0.3
+    mean, capped = k_smallest_means(d2, 5, cap)
+    smallest = torch.sort(d2, 1).values[:, :5]
+    torch.testing.assert_close(mean, smallest.sqrt().mean(1), rtol=1e-15, atol=0)
+    torch.testing.assert_close(capped, torch.minimum(smallest, cap[:, None]).sqrt().mean(1), rtol=1e-15, atol=0)
 
 
 def test_tier_one_groups_hold_distinct_bank_points(gate_and_queries):
@@ -109,7 +128,7 @@ class _Decision(torch.nn.Module):
 
 def test_compiled_index_decides_as_the_gate_scan(gate_and_queries):
     """The tiers compiled (AOTInductor, one row per call, as in a prediction) give the
-    decisions of the gate's whole-bank scan, row by row, all three tiers exercised."""
+    decisions of the gate's whole-bank scan, row by row; the scan tier compiled alone too."""
     from sysid.compiled import compile_cached
     gate, queries = gate_and_queries
     index = IndexedGate(gate)
@@ -122,3 +141,6 @@ def test_compiled_index_decides_as_the_gate_scan(gate_and_queries):
     upper = index._upper(queries)
     tol = index.margin * gate.threshold
     assert (upper <= gate.threshold - tol).any() and (upper > gate.threshold).any()  # tier 1 and beyond
+    scan = compile_cached(_Decision(IndexedGate(gate, margin=math.inf)), (queries[:1],), "test-gate")  # tier 3 only
+    signed = torch.cat([scan(q[None]) for q in queries[:100]])
+    assert torch.equal(signed > 0, exact_on[:100])
