@@ -41,6 +41,13 @@ with estimated ones the profile Jacobian (start states projected out,
 J~_w = J_theta,w - J_x,w D_w^-1 B_w^T) in `sysid.uncertainty.uncertainty_from_jacobian`:
 the sandwich then clusters the profile scores by window, and the Gauss-Newton form counts
 the 3 W extra unknowns in its degrees of freedom.
+
+A model-error check (`start_state_check`): the same fit with the other start-state
+treatment. Where the model structure is right and the starts are accurate both estimates
+land within the sigma of each other. A larger gap says the sigma, which measures the noise
+only, is not the whole uncertainty: either the recorded starts are noisy (the recorded fit
+carries the errors-in-variables bias) or the model structure is wrong (free start states
+take up part of the model error, the recorded fit puts it into the coefficients).
 """
 from __future__ import annotations
 
@@ -58,6 +65,8 @@ from sysid.uncertainty import (CoefficientUncertainty, coefficient_uncertainty, 
                                uncertainty_from_jacobian, velocity_weights)
 
 START_STATES = ("estimated", "recorded")
+OTHER_START_STATES = {"estimated": "recorded", "recorded": "estimated"}
+CHECK_LIMIT = 2.0  # |difference| / sigma beyond which the two start-state treatments disagree
 
 
 @dataclass(frozen=True)
@@ -261,3 +270,54 @@ def fit_uncertainty(model: nn.Module, windows, names: Sequence[str], fit: Levenb
         return start_state_uncertainty(model, windows, names, fit.start, weights, method, covariance,
                                        penalty=penalty)
     return coefficient_uncertainty(model, windows, names, weights, method, covariance, penalty=penalty)
+
+
+@dataclass(frozen=True)
+class StartStateCheck:
+    """The configured fit beside the same fit with the other start-state treatment.
+
+    start_states : the other treatment ("recorded" or "estimated").
+    coefficients : name -> its estimate.
+    difference_sigma : name -> (other - configured) / sigma of the configured estimate
+        (nan where that sigma is not finite).
+    agrees : every |difference_sigma| <= `CHECK_LIMIT`.
+    """
+
+    start_states: str
+    coefficients: dict[str, float]
+    difference_sigma: dict[str, float]
+
+    @property
+    def agrees(self) -> bool:
+        return all(not abs(d) > CHECK_LIMIT for d in self.difference_sigma.values())
+
+    @property
+    def largest(self) -> tuple[str, float]:
+        """The coefficient with the largest finite |difference_sigma|, and that value."""
+        finite = {k: v for k, v in self.difference_sigma.items() if math.isfinite(v)}
+        name = max(finite, key=lambda k: abs(finite[k]), default="")
+        return name, finite.get(name, float("nan"))
+
+    def as_dict(self) -> dict:
+        name, value = self.largest
+        return {"start_states": self.start_states, "coefficients": dict(self.coefficients),
+                "difference_sigma": {k: (v if math.isfinite(v) else None) for k, v in self.difference_sigma.items()},
+                "largest": name, "largest_sigma": value if math.isfinite(value) else None,
+                "limit_sigma": CHECK_LIMIT, "agrees": self.agrees}
+
+
+def start_state_check(model: nn.Module, windows, names: Sequence[str], fit: LevenbergMarquardtFit,
+                      sigma: Sequence[float], weights: torch.Tensor | None = None, method: str = "euler",
+                      prior: Mapping[str, float] | None = None, prior_weight: float = 0.0,
+                      iterations: int = 40) -> StartStateCheck:
+    """Fit `names` again with the other start-state treatment than `fit`'s, from the values
+    `model` carries (those `fit` started from; left unchanged), with the same windows,
+    weights, integrator and prior; compare with `fit` in units of its `sigma` (p,)."""
+    other = identify_levenberg_marquardt(model, windows, names, weights, method,
+                                         OTHER_START_STATES[fit.start_states], prior, prior_weight, iterations)
+    difference = {}
+    for name, s in zip(names, sigma):
+        s = float("nan") if s is None else float(s)
+        gap = other.coefficients[name] - fit.coefficients[name]
+        difference[name] = gap / s if math.isfinite(s) and s > 0 else float("nan")
+    return StartStateCheck(other.start_states, other.coefficients, difference)

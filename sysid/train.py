@@ -13,8 +13,9 @@
    (for NN-only without F_MMG), the force that makes one Euler step land on the record.
 3. Optional identification of MMG coefficients (``[identify]``, stage "before"), by
    gradient (Adam on the multi-step loss) or by Levenberg-Marquardt on the disjoint
-   training windows with start states estimated (`sysid.levenberg_marquardt`), with their
-   standard errors and correlations (`sysid.uncertainty`, disjoint windows).
+   training windows with start states estimated or recorded (`sysid.levenberg_marquardt`),
+   with their standard errors and correlations (`sysid.uncertainty`, disjoint windows) and,
+   for LM, the fit with the other start-state treatment beside it (`start_state_check`).
 4. Warm start: the FNN regresses that residual force (one-step fit). With ``[network]
    members`` K > 1, K networks are trained side by side (each on its own loss) and averaged.
 5. Multi-step training: Euler rollouts of T steps through torchdiffeq, loss
@@ -46,7 +47,7 @@ from sysid.device import resolve_device
 from sysid.dynamics import integrate, integrate_with_forces, required_force
 from sysid.errors import ConfigError, DataError, TrainingError
 from sysid.experiment import Experiment
-from sysid.levenberg_marquardt import fit_uncertainty, identify_levenberg_marquardt
+from sysid.levenberg_marquardt import fit_uncertainty, identify_levenberg_marquardt, start_state_check
 from sysid.models import CorrectedModel, PerMember, build_mmg, correction_of
 from sysid.ood import KNNGate
 from sysid.state import VELOCITY_INDEX
@@ -421,8 +422,11 @@ class Trainer:
         ident = self.experiment.identify
         result = self._optimize(mmg, list(mmg.parameters()), train, val, w_v, None,
                                 ident.epochs, ident.learning_rate, "identify")
-        self.log("identified: " + ", ".join(f"{k} = {v:.5g}" for k, v in self._coefficients(mmg).items()))
+        self._log_identified(mmg)
         return result
+
+    def _log_identified(self, mmg) -> None:
+        self.log("identified: " + ", ".join(f"{k} = {v:.5g}" for k, v in self._coefficients(mmg).items()))
 
     def identify_least_squares(self, mmg, runs: Sequence[Run], train: WindowSet, val: WindowSet, w_v,
                                device) -> tuple[StageResult, dict, dict]:
@@ -444,19 +448,35 @@ class Trainer:
         model.coefficients.assign(fit.coefficients)
         result = fit_uncertainty(model, windows, names, fit, weights, "euler", prior=prior,
                                  prior_weight=ident.prior_weight)
-        mmg.coefficients.assign(fit.coefficients)
+        check = start_state_check(build_mmg(self.experiment, torch.float64).to(device), windows, names, fit,
+                                  result.std_error, weights, "euler", prior, ident.prior_weight, ident.iterations)
         with torch.no_grad():
+            mmg.coefficients.assign(check.coefficients)
+            check_val = float(multistep_loss(mmg, val, w_v)[0])
+            mmg.coefficients.assign(fit.coefficients)
             train_v, val_v = (float(multistep_loss(mmg, w, w_v)[0]) for w in (train, val))
         self.log(f"identify: Levenberg-Marquardt, start states {ident.start_states}, {len(windows)} disjoint "
                  f"windows, {fit.iterations} iterations ({fit.stopped}); multi-step loss training "
                  f"{train_v:.5f}, validation {val_v:.5f}")
-        self.log("identified: " + ", ".join(f"{k} = {v:.5g}" for k, v in self._coefficients(mmg).items()))
+        self._log_identified(mmg)
+        self._log_start_state_check(check, val_v, check_val)
         row = {"stage": "identify", "epoch": fit.iterations, "train_loss": train_v, "train_velocity": train_v,
                "train_penalty": 0.0, "val_loss": val_v, "seconds": time.perf_counter() - started}
         estimator = {"solver": "levenberg_marquardt", "start_states": ident.start_states,
                      "prior_weight": ident.prior_weight, "iterations": fit.iterations, "windows": len(windows),
-                     "integrator": "euler", "covariance": result.method}
+                     "integrator": "euler", "covariance": result.method,
+                     "start_state_check": {**check.as_dict(), "val_loss": check_val}}
         return (StageResult([row], fit.iterations, val_v, fit.stopped), self._log_uncertainty(result), estimator)
+
+    def _log_start_state_check(self, check, val_v: float, check_val: float) -> None:
+        name, gap = check.largest
+        said = (f"check: with start states {check.start_states} the estimates move by at most {abs(gap):.1f} sigma "
+                f"({name}); validation loss {check_val:.5f} against {val_v:.5f}")
+        if check.agrees:
+            self.log(said + ": the two agree")
+        else:
+            self.log(said + ": WARNING, they disagree beyond the sigma: noisy start states or model-structure "
+                     "error; the ± 2 sigma measures the noise only and is a lower bound on the uncertainty")
 
     def standardize(self, model: CorrectedModel, train: WindowSet) -> torch.Tensor:
         """Stage 2: FNN input statistics and output statistics of the implied residual force;

@@ -232,7 +232,21 @@ def estimator_text(summary: dict) -> str:
         how = (f"gradient (Adam) on the multi-step loss, {est.get('stage', 'before')}, "
                f"{est.get('epochs', '?')} epochs" + (f", {stopped}" if stopped else "") + f"; {starts}")
     return how + ("; ± 2σ: window-clustered sandwich of that estimator on disjoint training windows"
-                  + (", start states profiled out" if est.get("start_states") == "estimated" else ""))
+                  + (", start states profiled out" if est.get("start_states") == "estimated" else "")
+                  + start_state_check_text(est.get("start_state_check")))
+
+
+def start_state_check_text(check) -> str:
+    """The model-error check of a Levenberg-Marquardt run (summary.json's
+    identification.start_state_check) in a sentence; "" where there is none."""
+    if not isinstance(check, dict) or check.get("largest_sigma") is None:
+        return ""
+    said = (f"; check: with start states {check.get('start_states')} the estimates move by at most "
+            f"{abs(check['largest_sigma']):.1f}σ ({check.get('largest')})")
+    if check.get("agrees"):
+        return said + ", within the ± 2σ"
+    return (said + ": beyond the ± 2σ, so the data carry noisy start states or a model-structure error "
+            "and the ± 2σ, which measures the noise only, is a lower bound on the uncertainty")
 
 
 def methods_paragraphs(source: ReportSource) -> list[str]:
