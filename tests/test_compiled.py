@@ -264,3 +264,30 @@ def test_compiled_float32_rows_equal_eager(zigzag):
     with torch.no_grad():
         eager = derivative(model, x, u)
     torch.testing.assert_close(rhs(x, u), eager, rtol=1e-5, atol=1e-6)
+
+
+def test_compiled_functions_are_rebuilt_when_the_model_changes(hybrid_run):
+    """The in-process memo of compiled functions keys on every parameter's and buffer's
+    storage, version and shape, and on the scalar settings: a change to any of them
+    (training in place, a refitted gate, the gate switched off) builds anew."""
+    from sysid.compiled import _memoized
+    model = hybrid_run[1]
+    builds = []
+
+    def build():
+        builds.append(1)
+        return len(builds)
+
+    assert _memoized(model, ("test",), build) == 1
+    assert _memoized(model, ("test",), build) == 1  # unchanged: the same function
+    with torch.no_grad():
+        model.correction_net.biases[0].add_(0.0)  # an in-place update, same numbers
+    assert _memoized(model, ("test",), build) == 2
+    model.gate.threshold.mul_(1.0)  # a buffer
+    assert _memoized(model, ("test",), build) == 3
+    model.gate_enabled = False
+    try:
+        assert _memoized(model, ("test",), build) == 4
+    finally:
+        model.gate_enabled = True
+    assert _memoized(model, ("test",), build) == 3  # back to the settings of build 3
