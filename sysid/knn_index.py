@@ -91,6 +91,18 @@ def leaf_partition(points: torch.Tensor, leaf: int) -> list[torch.Tensor]:
     return out
 
 
+def smallest_leaves(values: torch.Tensor, n: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The n leaves (B, n) with the smallest of values (B, C) per row, by n passes of argmin,
+    and values with those leaves set to +inf (B, C)."""
+    leaf_ids = torch.arange(values.shape[1], device=values.device)
+    chosen = []
+    for _ in range(n):
+        j = values.argmin(1, keepdim=True)  # (B, 1)
+        chosen.append(j)
+        values = torch.where(leaf_ids == j, math.inf, values)
+    return torch.cat(chosen, 1), values
+
+
 BOX_DIMENSIONS = 16  # up to this many coordinates tier 2 searches the nearest boxes (in 64, boxes bound loosely)
 
 
@@ -166,15 +178,9 @@ class IndexedGate(nn.Module):
         """(upper, lower) bounds (B,) of the mean k-nearest distance of z (B, F) (tier 2),
         from the points of the `boxes` leaves with the nearest bounding boxes; both are
         d_kNN when no other box is nearer than the k-th of those points."""
-        bound = self.box_bounds(z)  # (B, C) squared
-        leaf_ids = torch.arange(bound.shape[1], device=z.device)
-        chosen = []
-        for _ in range(self.boxes):
-            j = bound.argmin(1, keepdim=True)  # (B, 1)
-            chosen.append(j)
-            bound = torch.where(leaf_ids == j, math.inf, bound)
-        rest = bound.amin(1)  # (B,) squared: every point outside the chosen leaves is at least this far
-        points = self.points_t[torch.cat(chosen, 1)]  # (B, boxes, F, S)
+        chosen, others = smallest_leaves(self.box_bounds(z), self.boxes)  # box bounds, (B, C) squared
+        rest = others.amin(1)  # (B,) squared: every point outside the chosen leaves is at least this far
+        points = self.points_t[chosen]  # (B, boxes, F, S)
         d2 = (z[:, None, :, None] - points).pow(2).sum(2)  # (B, boxes, S) squared
         return k_smallest_means(d2.flatten(1), self.k, rest)
 
@@ -184,13 +190,7 @@ class IndexedGate(nn.Module):
         point to z is nearest (they hold the k nearest points of the bank)."""
         d2 = (z[:, None, :, None] - self.points_t).pow(2).sum(2)  # (B, C, S) squared
         leaf_min = d2.amin(2)  # (B, C)
-        leaf_ids = torch.arange(leaf_min.shape[1], device=z.device)
-        chosen = []
-        for _ in range(min(self.k, leaf_min.shape[1])):
-            j = leaf_min.argmin(1, keepdim=True)  # (B, 1)
-            chosen.append(j)
-            leaf_min = torch.where(leaf_ids == j, math.inf, leaf_min)
-        chosen = torch.cat(chosen, 1)  # (B, k)
+        chosen = smallest_leaves(leaf_min, min(self.k, leaf_min.shape[1]))[0]  # (B, k)
         near = d2.gather(1, chosen[:, :, None].expand(-1, -1, d2.shape[2]))  # (B, k, S)
         d = k_smallest_mean(near.flatten(1), self.k)
         return d, d
