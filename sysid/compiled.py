@@ -10,8 +10,9 @@ two on 2 cores) is paid once per model and machine; later processes load it in s
 A compiled call has no guards and no Python per operation; a prediction of one ship is
 one call per 128 steps (`compiled_rollout`), so no Python runs between steps.
 
-This is the one module that touches `torch._inductor` (AOTInductor's documented entry
-points `aoti_compile_and_package` / `aoti_load_package`). Where they fail (no C++
+This module and `sysid.codegen_fixes` (two fixes to the C++ wrapper code of loops and
+branches, applied while compiling) are the ones that touch `torch._inductor`
+(AOTInductor's documented entry points `aoti_compile_and_package` / `aoti_load_package`). Where they fail (no C++
 compiler, an op export cannot capture) `compiled_step` returns None once with a warning,
 and callers use the eager step, which gives the same numbers to round-off.
 ``SYSID_COMPILE=0`` turns compilation off; ``SYSID_CACHE`` moves the cache.
@@ -32,6 +33,7 @@ from typing import Callable, Sequence
 import torch
 from torch import nn
 
+from sysid import codegen_fixes
 from sysid.dynamics import check_shapes, integrate
 from sysid.integrators import Integrator, IntegratorLike, Method, run_steps
 from sysid.prepared import prepared
@@ -47,7 +49,7 @@ ROLLOUT_STEPS = 128  # steps per call of a compiled rollout (longer predictions:
 ROLLOUT_ROWS = 64  # up to this many ships a prediction is one compiled rollout, above it a call per step
 _SOURCE_PACKAGES = ("mmg",)
 _SOURCE_MODULES = ("dynamics.py", "integrators.py", "stepper.py", "models.py", "correction.py", "ood.py",
-                   "knn_index.py", "prepared.py")
+                   "knn_index.py", "prepared.py", "codegen_fixes.py")
 _memo: "weakref.WeakKeyDictionary[nn.Module, dict]" = weakref.WeakKeyDictionary()
 _failed: set[str] = set()
 
@@ -108,7 +110,8 @@ def fingerprint(module: nn.Module, example_inputs: Sequence[torch.Tensor], optio
     """sha256 of what decides a compiled module's numbers: state, options, shapes, versions."""
     h = hashlib.sha256()
     options = INDUCTOR_OPTIONS if options is None else options
-    h.update(f"{torch.__version__} {sys.version_info[:2]} {_source_digest()} {options}".encode())
+    h.update(f"{torch.__version__} {sys.version_info[:2]} {_source_digest()} {options} "
+             f"{codegen_fixes.cache_tag()}".encode())
     h.update(repr(_options(module)).encode())
     for x in example_inputs:
         h.update(f"in {tuple(x.shape)} {x.dtype} {x.device}".encode())
@@ -150,8 +153,8 @@ def compile_package(program: torch.export.ExportedProgram, path: Path,
     fd, tmp = tempfile.mkstemp(suffix=".pt2", dir=path.parent)
     os.close(fd)
     try:
-        with warnings.catch_warnings():  # torch-internal deprecation notices
-            warnings.simplefilter("ignore", FutureWarning)
+        with warnings.catch_warnings(), codegen_fixes.subgraph_fixes():
+            warnings.simplefilter("ignore", FutureWarning)  # torch-internal deprecation notices
             torch._inductor.aoti_compile_and_package(program, package_path=tmp, inductor_configs=options)
         os.replace(tmp, path)
     finally:
@@ -339,13 +342,27 @@ def compiled_rollout_function(model: nn.Module, method: Method | str, dt: float,
         return None
 
     def build():
-        roll = Rollout(Step(prepared(model, batch), method, dt, batch > 1), ROLLOUT_STEPS)
-        x0, u = _examples(batch, dtype, device)
-        inputs = u.expand(ROLLOUT_STEPS, *u.shape).contiguous()
-        steps = torch.tensor(ROLLOUT_STEPS, dtype=torch.int64, device=device)
-        fn = compile_cached(roll, (x0, inputs, steps), f"rollout-{method.name.lower()}", options=_options_for(batch))
+        fn = compile_cached(*_rollout(model, method, dt, batch, dtype, device), options=_options_for(batch))
         return None if fn is None else _chunked_rollout(fn, batch > 1)
     return _memoized(model, ("rollout", method, float(dt), batch, dtype, str(device)), build)
+
+
+def _rollout(model: nn.Module, method: Method, dt: float, batch: int, dtype: torch.dtype, device
+             ) -> tuple[Rollout, tuple[torch.Tensor, torch.Tensor, torch.Tensor], str]:
+    """The `Rollout` compiled for `batch` ships, its example inputs and its cache label."""
+    roll = Rollout(Step(prepared(model, batch), method, dt, batch > 1), ROLLOUT_STEPS)
+    x0, u = _examples(batch, dtype, device)
+    inputs = u.expand(ROLLOUT_STEPS, *u.shape).contiguous()
+    steps = torch.tensor(ROLLOUT_STEPS, dtype=torch.int64, device=device)
+    return roll, (x0, inputs, steps), f"rollout-{method.name.lower()}"
+
+
+def rollout_package(model: nn.Module, method: Method | str, dt: float, batch: int = 1,
+                    dtype: torch.dtype = torch.float64, device: str | torch.device = "cpu") -> Path:
+    """Path of the AOTInductor package behind `compiled_rollout_function` (from the disk
+    cache, or compiled now; raises where compilation fails): for inspection."""
+    return cached_package(*_rollout(model, Method.parse(method), dt, batch, dtype, device),
+                          options=_options_for(batch))
 
 
 def _chunked_rollout(fn: Compiled, channels_first: bool) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:

@@ -106,6 +106,17 @@ def smallest_leaves(values: torch.Tensor, n: int) -> tuple[torch.Tensor, torch.T
 BOX_DIMENSIONS = 16  # up to this many coordinates tier 2 searches the nearest boxes (in 64, boxes bound loosely)
 
 
+def _squared_distances(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """sum over the coordinates (dim -2 of both) of (a - b)^2, broadcast; in up to
+    `BOX_DIMENSIONS` coordinates as a sum of one elementwise term per coordinate (see
+    `IndexedGate._upper`)."""
+    features = max(a.shape[-2], b.shape[-2])
+    if features > BOX_DIMENSIONS:
+        return (a - b).pow(2).sum(-2)
+    return sum((a.select(-2, f if a.shape[-2] > 1 else 0) - b.select(-2, f if b.shape[-2] > 1 else 0)).pow(2)
+               for f in range(features))
+
+
 class IndexedGate(nn.Module):
     """Drop-in for a fitted `KNNGate` in compiled steps: same decision, leaf-pruned scan.
 
@@ -160,10 +171,15 @@ class IndexedGate(nn.Module):
         """Upper bound (B,) of the mean k-nearest distance of z (B, F) (tier 1): the mean
         over k groups of points of the nearest leaf's neighbourhood (slot s of every leaf
         in group s mod k) of the distance to each group's nearest point: k distinct bank
-        points (`neighbourhood_groups` lists them)."""
-        nearest = (z[:, :, None] - self.centres_t).pow(2).sum(1).argmin(1)  # (B,) nearest centre
+        points (`neighbourhood_groups` lists them).
+
+        In up to `BOX_DIMENSIONS` coordinates the sums over them are written out term by
+        term: elementwise expressions, which compiled code folds into the argmin and min
+        loops instead of first storing the (B, C) and (B, probe, S) squared distances (for
+        one row, two allocations of over 1 kB fewer per call)."""
+        nearest = _squared_distances(z[:, :, None], self.centres_t).argmin(1)  # (B,) nearest centre
         points = self.points_t[self.neighbours[nearest]]  # (B, probe, F, S), S contiguous
-        d2 = (z[:, None, :, None] - points).pow(2).sum(2)  # (B, probe, S) squared
+        d2 = _squared_distances(z[:, None, :, None], points)  # (B, probe, S) squared
         groups = d2.reshape(d2.shape[0], -1, self.k)  # (B, probe S / k, k): group = slot mod k
         return groups.amin(1).clamp_min(0.0).sqrt().mean(1)
 

@@ -5,7 +5,9 @@ same states), the lab's RK4 trajectories (test_mmg_oracle.py), and a fresh Pytho
 process that has only torch (the exported file must predict the same without sysid).
 """
 import json
+import re
 import subprocess
+import zipfile
 import sys
 from pathlib import Path
 
@@ -14,7 +16,8 @@ import pytest
 import torch
 
 from sysid import MMG, integrate, load_ship
-from sysid.compiled import compiled_rollout_function, compiled_step, predict
+from sysid import codegen_fixes
+from sysid.compiled import compiled_rollout_function, compiled_step, predict, rollout_package
 from sysid.correction import correction_inputs
 from sysid.experiment import parse_experiment
 from sysid.files import write_text
@@ -130,6 +133,46 @@ def test_compiled_prediction_equals_eager(hybrid_run, zigzag, method):
         eager = integrate(model, states[0], long_inputs, 1.0, method)
     compiled = predict(model, states[0], long_inputs, 1.0, Integrator(method, compiled=True))
     torch.testing.assert_close(compiled, eager, rtol=1e-12, atol=1e-12)
+
+
+def _loop_source(package: Path) -> str:
+    """The C++ of a compiled rollout's while loop (from its wrapper source in the package)."""
+    with zipfile.ZipFile(package) as archive:
+        names = [n for n in archive.namelist() if n.endswith(".wrapper.cpp")]
+        if not names:
+            pytest.skip("this torch does not keep the wrapper source in its packages")
+        source = archive.read(names[0]).decode()
+    return source[source.index("while (1) {"):]
+
+
+def test_compiled_loop_allocates_only_what_its_kernels_use(hybrid_run, zigzag):
+    """The two wrapper fixes of `sysid.codegen_fixes`, read off the generated C++ of the
+    hybrid's RK4 loop (gate with its conds): every tensor the loop allocates is used by a
+    kernel or handed on, and the loop's condition takes handles of only k and steps. The
+    numbers are those of eager (test_compiled_prediction_equals_eager compiles this loop)."""
+    if not codegen_fixes.available():
+        pytest.skip(f"the wrapper fixes are not applied to torch {torch.__version__}")
+    model = hybrid_run[1]
+    if compiled_rollout_function(model, "rk4", 1.0, 1) is None:
+        pytest.skip("compilation unavailable here (the eager fallback was used)")
+    loop = _loop_source(rollout_package(model, "rk4", 1.0))
+    condition = loop[loop.index("// subgraph: while_loop_cond_graph"):loop.index("// subgraph: while_loop_body_graph")]
+    assert condition.count("aoti_torch_assign_tensors_out(") == 2
+    allocated = re.findall(r"aoti_torch_empty_strided\([^;]*&(\w+)_handle\)\);", loop)
+    assert len(allocated) > 10
+    moves = dict(re.findall(r"auto (\w+) = std::move\((\w+)\);  // reuse", loop))
+    renamed = {old: new for new, old in moves.items()}
+    bookkeeping = re.compile(r"^\s*(AtenTensorHandle \w+;|RAIIAtenTensorHandle \w+\(\w+\);|\w+\.reset\(\);"
+                             r"|auto \w+ = std::move\(\w+\);  // reuse|AOTI_TORCH_ERROR_CODE_CHECK\(aoti_torch_empty_strided.*)$")
+    work = "\n".join(line for line in loop.splitlines() if not bookkeeping.match(line))
+    unused = []
+    for name in allocated:
+        names = [name]
+        while names[-1] in renamed:  # a buffer reused under another name
+            names.append(renamed[names[-1]])
+        if not any(re.search(rf"\b{n}\b", work) for n in names):
+            unused.append(name)
+    assert not unused, f"{len(unused)} of {len(allocated)} tensors allocated per pass and never used: {unused[:5]}"
 
 
 def _predict_in_fresh_python(path: Path, loader: str, x0: torch.Tensor, inputs: torch.Tensor, tmp: Path):
