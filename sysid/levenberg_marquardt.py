@@ -306,6 +306,20 @@ class StartStateCheck:
                 "limit_sigma": CHECK_LIMIT, "agrees": self.agrees}
 
 
+def start_state_verdict(check: Mapping) -> str:
+    """A check (`StartStateCheck.as_dict()`, as summary.json keeps it) in one clause, the
+    same in the training log and the report: how far the estimates move in sigma and
+    whether that stays within the ± 2 sigma."""
+    if check.get("largest_sigma") is None:
+        return f"with start states {check.get('start_states')}: no estimate has a finite σ to compare with"
+    said = (f"with start states {check.get('start_states')} the estimates move by at most "
+            f"{abs(check['largest_sigma']):.1f}σ ({check.get('largest')})")
+    if check.get("agrees"):
+        return said + ", within the ± 2σ"
+    return (said + ": beyond the ± 2σ, so the data carry noisy start states or a model-structure error "
+            "and the ± 2σ, which measures the noise only, is a lower bound on the uncertainty")
+
+
 def start_state_check(model: nn.Module, windows, names: Sequence[str], fit: LevenbergMarquardtFit,
                       sigma: Sequence[float], weights: torch.Tensor | None = None, method: str = "euler",
                       prior: Mapping[str, float] | None = None, prior_weight: float = 0.0,

@@ -47,7 +47,8 @@ from sysid.device import resolve_device
 from sysid.dynamics import integrate, integrate_with_forces, required_force
 from sysid.errors import ConfigError, DataError, TrainingError
 from sysid.experiment import Experiment
-from sysid.levenberg_marquardt import fit_uncertainty, identify_levenberg_marquardt, start_state_check
+from sysid.levenberg_marquardt import (fit_uncertainty, identify_levenberg_marquardt, start_state_check,
+                                      start_state_verdict)
 from sysid.models import CorrectedModel, PerMember, build_mmg, correction_of
 from sysid.ood import KNNGate
 from sysid.state import VELOCITY_INDEX
@@ -469,14 +470,9 @@ class Trainer:
         return (StageResult([row], fit.iterations, val_v, fit.stopped), self._log_uncertainty(result), estimator)
 
     def _log_start_state_check(self, check, val_v: float, check_val: float) -> None:
-        name, gap = check.largest
-        said = (f"check: with start states {check.start_states} the estimates move by at most {abs(gap):.1f} sigma "
-                f"({name}); validation loss {check_val:.5f} against {val_v:.5f}")
-        if check.agrees:
-            self.log(said + ": the two agree")
-        else:
-            self.log(said + ": WARNING, they disagree beyond the sigma: noisy start states or model-structure "
-                     "error; the ± 2 sigma measures the noise only and is a lower bound on the uncertainty")
+        said = (f"check: {start_state_verdict(check.as_dict())}; validation loss {check_val:.5f} "
+                f"(start states {check.start_states}) against {val_v:.5f}")
+        self.log(said if check.agrees else "WARNING " + said)
 
     def standardize(self, model: CorrectedModel, train: WindowSet) -> torch.Tensor:
         """Stage 2: FNN input statistics and output statistics of the implied residual force;

@@ -7,6 +7,7 @@ import hashlib
 import platform
 from dataclasses import dataclass
 
+from sysid.levenberg_marquardt import start_state_verdict
 from sysid.paper import run_label
 from sysid.report.quality import quality_rows
 from sysid.report.source import ReportSource, RunRecord
@@ -241,12 +242,7 @@ def start_state_check_text(check) -> str:
     identification.start_state_check) in a sentence; "" where there is none."""
     if not isinstance(check, dict) or check.get("largest_sigma") is None:
         return ""
-    said = (f"; check: with start states {check.get('start_states')} the estimates move by at most "
-            f"{abs(check['largest_sigma']):.1f}σ ({check.get('largest')})")
-    if check.get("agrees"):
-        return said + ", within the ± 2σ"
-    return (said + ": beyond the ± 2σ, so the data carry noisy start states or a model-structure error "
-            "and the ± 2σ, which measures the noise only, is a lower bound on the uncertainty")
+    return "; check: " + start_state_verdict(check)
 
 
 def methods_paragraphs(source: ReportSource) -> list[str]:
