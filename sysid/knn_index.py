@@ -82,13 +82,13 @@ def leaf_partition(points: torch.Tensor, leaf: int) -> list[torch.Tensor]:
 
 
 def smallest_leaves(values: torch.Tensor, n: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """The n leaves (B, n) with the smallest of values (B, C) per row, and the smallest value
-    of the other leaves (B,) (+inf where none is left). One partial sort (`torch.topk`)."""
-    taken = min(n + 1, values.shape[1])
-    smallest = torch.topk(values, taken, dim=1, largest=False, sorted=True)
-    if taken == n:
-        return smallest.indices, torch.full(values.shape[:1], math.inf, dtype=values.dtype, device=values.device)
-    return smallest.indices[:, :n], smallest.values[:, n]
+    """The n leaves (B, n) with the smallest of values (B, C) per row (one partial sort,
+    `torch.topk`), and the smallest value of the other leaves (B,) (+inf where none is left).
+    No slicing of the sort's output: inside a `torch.cond` AOTInductor would run the slice
+    through its slow proxy executor."""
+    chosen = torch.topk(values, n, dim=1, largest=False, sorted=True).indices  # (B, n)
+    taken = (torch.arange(values.shape[1], device=values.device) == chosen[:, :, None]).any(1)  # (B, C)
+    return chosen, torch.where(taken, math.inf, values).amin(1)
 
 
 BOX_DIMENSIONS = 16  # up to this many coordinates tier 2 searches the nearest boxes (in 64, boxes bound loosely)
