@@ -12,9 +12,10 @@ one call per 128 steps (`compiled_rollout`), so no Python runs between steps.
 
 This module and `sysid.codegen_fixes` (two fixes to the C++ wrapper code of loops and
 branches, applied while compiling) are the ones that touch `torch._inductor`
-(AOTInductor's documented entry points `aoti_compile_and_package` / `aoti_load_package`). Where they fail (no C++
-compiler, an op export cannot capture) `compiled_step` returns None once with a warning,
-and callers use the eager step, which gives the same numbers to round-off.
+(AOTInductor's documented entry points `aoti_compile_and_package` / `aoti_load_package`).
+Where they fail (no C++ compiler, an op export cannot capture) `compiled_step` returns
+None once with a warning, and callers use the eager step, which gives the same numbers to
+round-off.
 ``SYSID_COMPILE=0`` turns compilation off; ``SYSID_CACHE`` moves the cache.
 """
 from __future__ import annotations

@@ -162,9 +162,9 @@ class IndexedGate(nn.Module):
         points (`neighbourhood_groups` lists them).
 
         In up to `BOX_DIMENSIONS` coordinates the sums over them are written out term by
-        term: elementwise expressions, which compiled code folds into the argmin and min
-        loops instead of first storing the (B, C) and (B, probe, S) squared distances (for
-        one row, two allocations of over 1 kB fewer per call)."""
+        term: elementwise expressions, which compiled code can fold into the loops that
+        reduce them (it does for the argmin over the (B, C) squared centre distances: one
+        row, one allocation of 2 kB fewer per call)."""
         nearest = _squared_distances(z[:, :, None], self.centres_t).argmin(1)  # (B,) nearest centre
         points = self.points_t[self.neighbours[nearest]]  # (B, probe, F, S), S contiguous
         d2 = _squared_distances(z[:, None, :, None], points)  # (B, probe, S) squared
