@@ -23,7 +23,7 @@ from sysid.evaluate import Evaluation, evaluate_model
 from sysid.experiment import Experiment
 from sysid.models import build_model
 from sysid.rundir import write_run
-from sysid.train import Trainer, TrainingSummary
+from sysid.train import EpochReport, Trainer, TrainingSummary
 
 
 @dataclass
@@ -60,7 +60,8 @@ def checkpoint_path(out_dir: str | os.PathLike) -> Path:
 def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[Run],
                    train_runs: Sequence[Run] | None = None, data: str | os.PathLike | None = None,
                    progress: bool = True, log: Callable[[str], None] = print,
-                   resume: bool = False, overwrite: bool = False) -> RunResult:
+                   resume: bool = False, overwrite: bool = False,
+                   on_epoch: Callable[[EpochReport], None] | None = None) -> RunResult:
     """Train `exp` (unless it is an MMG used as defined) on `train_runs` (default: its own
     training files), evaluate it on `tests` at its horizons, write the run directory.
 
@@ -68,7 +69,8 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
     (`checkpoint_path`); `resume` continues from it to the same model an uninterrupted run
     gives. A run whose wall-clock safety limit was hit is written with its failure in
     summary.json (``result.failure``). The run directory is written complete or not at all;
-    an existing one is replaced only with `overwrite`.
+    an existing one is replaced only with `overwrite`. `on_epoch` receives every epoch's
+    `EpochReport` (sweeps report it to Ray Tune, tracking to MLflow).
     """
     started = time.perf_counter()
     history, training = None, None
@@ -77,7 +79,7 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
             runs = list(train_runs) if train_runs is not None else training_runs(exp, data)
             try:
                 trainer = Trainer(exp, progress=progress, log=log, checkpoint=checkpoint_path(out_dir),
-                                  resume=resume).fit(runs)
+                                  resume=resume, on_epoch=on_epoch).fit(runs)
             except TrainingError:  # a diverged training resumes to the same divergence: keep nothing
                 TrainingCheckpoint(checkpoint_path(out_dir), exp.to_toml()).remove()
                 raise

@@ -147,15 +147,17 @@ def _worker(name: str, exp: Experiment, out: Path, data) -> ProtocolRun:
     return _run_one(name, exp, out, data, True, lambda m: print(f"[{name}] {m.strip()}", flush=True))
 
 
-def _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, done) -> list[str]:
+def _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, done, storage=None,
+            mlflow=None) -> list[str]:
     """Learned runs with `seeds` seeds on Ray into `done`; their ensembles' names."""
     from sysid.datasets import data_root
     from sysid.seed_runs import train_seeds, write_ensemble
 
     ordered = sorted(trained, key=lambda n: -expected_cost(experiments[n]))  # longest first
     log(f"training {len(trained)} runs x {seeds} seeds = {len(trained) * seeds} trials on Ray, "
-        f"{jobs} side by side" + (f" on {address}" if address else ""))
-    groups = train_seeds({n: experiments[n] for n in ordered}, seeds, out, str(data_root(data)), jobs, address, log)
+        + (f"{jobs} side by side" if jobs else "one per CPU of the cluster") + (f" on {address}" if address else ""))
+    groups = train_seeds({n: experiments[n] for n in ordered}, seeds, out, str(data_root(data)), jobs, address, log,
+                         storage, mlflow)
     tests = _TRAINING_CACHE.get("tests") or [read_run(p) for p in test_files(data).values()]
     _TRAINING_CACHE["tests"] = tests
     ensembles = []
@@ -175,14 +177,16 @@ def _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, d
 def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
               only: list[str] | None = None, progress: bool = True,
               overrides: dict | None = None, log: Callable[[str], None] = print,
-              jobs: int = 1, seeds: int = 1, address: str | None = None) -> dict:
+              jobs: int = 1, seeds: int = 1, address: str | None = None, storage: str | None = None,
+              mlflow: str | None = None) -> dict:
     """Run the protocol; write runs/, comparison.csv, table7.md, table8.md, summary.json.
 
     `jobs` > 1 trains that many runs side by side in worker processes (each with its
     config's ``[training] threads``, 1 by default): the results do not depend on it.
     `seeds` > 1 trains every learned run with that many seeds on Ray (`jobs` trials side by
     side, or on the cluster at `address`): cells are seed means with their spread, and each
-    network's mean-of-seeds ensemble is a model row of its own (`sysid.seed_runs`).
+    network's mean-of-seeds ensemble is a model row of its own (`sysid.seed_runs`);
+    `storage` (Tune's experiment) and `mlflow` (tracking) as for sweeps.
     """
     started = time.perf_counter()
     out = Path(out_dir)
@@ -196,7 +200,8 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
     trained = [n for n in names if experiments[n].needs_training]
     ensembles: list[str] = []
     if seeds > 1 and trained:
-        ensembles = _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, done)
+        ensembles = _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, done, storage,
+                            mlflow)
     elif jobs > 1 and len(trained) > 1:
         log(f"training {len(trained)} runs in {min(jobs, len(trained))} worker processes")
         context = multiprocessing.get_context("spawn")

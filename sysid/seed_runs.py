@@ -4,7 +4,6 @@ the seeds with their spread (`sysid.seeds`), and the networks' mean-of-seeds ens
 of its own, ``runs/{variant}_ensemble_{dataset}/`` (`sysid.ensemble`)."""
 from __future__ import annotations
 
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,8 +18,9 @@ from sysid.paper import run_variant
 from sysid.rundir import load_model, write_run
 from sysid.seeds import seed_metrics
 from sysid.ensemble import SeedEnsemble
-from sysid.sweep.runner import run_trials
-from sysid.sweep.trial import TrialContext, TrialSpec, complete_summary
+from sysid.sweep.inbox import complete_summary
+from sysid.sweep.runner import TuneStorage, ray_session, run_trials
+from sysid.sweep.trial import TrialSpec, read_trial_data
 
 
 @dataclass
@@ -48,13 +48,34 @@ def seed_trials(experiments: dict[str, Experiment], seeds: int) -> list[TrialSpe
     return trials
 
 
-def train_seeds(experiments: dict[str, Experiment], seeds: int, out: Path, data: str, workers: int,
-                address: str | None = None, log: Callable[[str], None] = print) -> dict[str, SeedGroup]:
-    """Train the learned runs with `seeds` seeds each on Ray; their `SeedGroup`s."""
+def train_seeds(experiments: dict[str, Experiment], seeds: int, out: Path, data: str, workers: int | None,
+                address: str | None = None, log: Callable[[str], None] = print, storage: str | None = None,
+                mlflow: str | None = None) -> dict[str, SeedGroup]:
+    """Train the learned runs with `seeds` seeds each on Ray (locally with `workers` side
+    by side, or on the cluster at `address`; `sysid.sweep.runner`); their `SeedGroup`s.
+    The data are read here once and shipped to the trials; Tune's experiment goes to
+    ``{out}/tune`` or `storage`; `mlflow` logs every seed run."""
     trials = seed_trials(experiments, seeds)
-    with tempfile.TemporaryDirectory(prefix="sysid-ray-") as storage:
-        errors = run_trials(trials, TrialContext(str(out.resolve()), data, "sysid reproduce"), workers, address,
-                            max_retries=1, storage=Path(storage), log=log, prefix="seeds")
+    trial_data = read_trial_data(experiments.values(), data)
+    callbacks = []
+    with ray_session(out, workers, address, log) as session:
+        tracker = parent = None
+        if mlflow:
+            from sysid.sweep.tracked import tracking_callback
+            from sysid.tracking import Tracker
+            tracker = Tracker(mlflow, "sysid-reproduce")
+            parent = tracker.start("reproduce --seeds", {"seeds": seeds, "runs": ", ".join(experiments)},
+                                   tags={"sysid.kind": "reproduce"})
+            callbacks = [tracking_callback(tracker, parent, out.resolve(), lambda c: trials[int(c["trial"])].path,
+                                           lambda c: {"run": trials[int(c["trial"])].label,
+                                                      "seed": trials[int(c["trial"])].seed},
+                                           lambda c: {"run": trials[int(c["trial"])].path}, log)]
+        outcomes = run_trials(trials, out, trial_data, session, max_retries=1,
+                              storage=TuneStorage(storage, "reproduce") if storage else None,
+                              callbacks=callbacks, log=log, prefix="seeds")
+        if tracker is not None:
+            tracker.finish(parent)
+    errors = outcomes.errors
     groups = {}
     for name in experiments:
         frames, shares, failures, used, seconds = [], [], [], [], 0.0

@@ -33,6 +33,7 @@ import random
 import sys
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
@@ -91,6 +92,21 @@ class StageResult:
     best_epoch: int
     best_loss: float
     stopped: str  # "early stop" | "epoch limit" | "time limit" (a failure)
+
+
+@dataclass(frozen=True)
+class EpochReport:
+    """One finished epoch of an optimisation stage, given to ``Trainer(on_epoch=...)`` after
+    the epoch's checkpoint is written. Losses are the multi-step losses of the history."""
+
+    stage: str                     # "identify" | "train"
+    epoch: int                     # within the stage, from 1
+    epochs: int                    # the stage's epoch limit
+    train_loss: float
+    val_loss: float                # validation velocity loss L_v of this epoch
+    best_loss: float               # best validation loss of the stage so far
+    best_epoch: int
+    checkpoint: Path | None        # the checkpoint file just written (None: none kept)
 
 
 @dataclass
@@ -268,15 +284,18 @@ class Trainer:
     log : callable receiving one-line messages.
     checkpoint : file for the per-epoch training checkpoint (None: none written).
     resume : continue from `checkpoint` when it exists (same config required).
+    on_epoch : called with an `EpochReport` after every epoch (and its checkpoint).
     """
 
     def __init__(self, experiment: Experiment, progress: bool = True, log: Callable[[str], None] = print,
-                 checkpoint: str | os.PathLike | None = None, resume: bool = False):
+                 checkpoint: str | os.PathLike | None = None, resume: bool = False,
+                 on_epoch: Callable[[EpochReport], None] | None = None):
         self.experiment = experiment
         self.progress = progress
         self.log = log
         self.checkpoint = TrainingCheckpoint(checkpoint, experiment.to_toml()) if checkpoint else None
         self.resume = resume
+        self.on_epoch = on_epoch
 
     # -- building blocks -------------------------------------------------------------
     def _l2(self, model) -> torch.Tensor:
@@ -349,6 +368,9 @@ class Trainer:
                                      generator=gen.get_state(), best_loss=best, best_epoch=best_epoch,
                                      best_state=best_state, stage_history=history, history=self._history,
                                      summary=self._summary.to_dict())
+            if self.on_epoch is not None:
+                self.on_epoch(EpochReport(label, epoch, epochs, float(sums[0]), float(val_v), best, best_epoch,
+                                          self.checkpoint.path if self.checkpoint is not None else None))
             if stopped != "epoch limit":
                 break
         if hasattr(bar, "close"):

@@ -18,7 +18,7 @@ from sysid.errors import ConfigError
 from sysid.sweep import load_sweep
 from sysid.sweep.plan import sweep_trials
 from sysid.sweep.points import point_name, sweep_points
-from sysid.sweep.trial import read_journal
+from sysid.sweep.inbox import read_journal
 from tiny_experiment import tiny_experiment
 
 
@@ -62,7 +62,7 @@ def test_grid_and_random_points(tmp_path, dataset_dir):
     assert a == b and len(a) == 5  # the same draws on every run: resumable
     values = [p["training.lambda_F"] for p in a]
     assert all(1e-3 <= v <= 1e-1 for v in values) and len(set(values)) == 5
-    assert point_name({"training.lambda_F": 0.0123456}) == "lambda_F=0.01235"
+    assert point_name({"training.lambda_F": 0.0123456}) == "lambda_F=0.0123456"
 
 
 def _sysid(*args, **kwargs):
@@ -138,26 +138,33 @@ def test_shipped_sweep_files_are_valid():
         assert spec.objective == "val_loss" and len(spec.seeds) >= 2 and sweep_trials(spec)
 
 
-_TRAIN_ONE = """
-import json, sys
-from sysid.sweep.trial import TrialContext, TrialSpec, run_trial
-out, config, data = json.loads(sys.argv[1])
-run_trial(TrialSpec("trials/p/seed0", "p", 0, config), TrialContext(out, data, "test"))
-"""
-
-
-def test_two_processes_on_one_trial_train_it_once(tmp_path, dataset_dir):
-    """Optuna can propose a configuration twice while it trains: the second process waits
-    for the first and reuses its run instead of training the same directory beside it."""
+def test_two_trainings_of_one_trial_train_it_once(tmp_path, dataset_dir):
+    """Optuna can propose a configuration twice while it trains: the second training waits
+    at the inbox's claim and reuses the first one's run instead of training it again."""
+    import threading
     from sysid.datasets import data_root
-    from sysid.sweep.trial_lock import lock_path
-    config = tiny_experiment(tmp_path / "t.toml", dataset_dir, seed=0, epochs=3, warm_start_epochs=2).read_text()
+    from sysid.experiment import load_experiment
+    from sysid.sweep.inbox import RunInbox
+    from sysid.sweep.trial import TrialSpec, read_trial_data, run_trial
+    import sysid.sweep.trial as trial_module
+
+    path = tiny_experiment(tmp_path / "t.toml", dataset_dir, seed=0, epochs=3, warm_start_epochs=2)
+    exp = load_experiment(path)
+    data = read_trial_data([exp], data_root())
     out = tmp_path / "out"
-    args = json.dumps([str(out), config, str(data_root())])
-    env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    procs = [subprocess.Popen([sys.executable, "-c", _TRAIN_ONE, args], env=env) for _ in range(2)]
-    assert [p.wait(timeout=600) for p in procs] == [0, 0]
+    inbox = RunInbox(str(out))
+    trial = TrialSpec("trials/p/seed0", "p", 0, exp.to_toml())
+    trial_module.CLAIM_POLL_S = 0.2
+    rows = {}
+
+    def train(holder):
+        rows[holder] = run_trial(trial, inbox, data, holder)
+    threads = [threading.Thread(target=train, args=(h,)) for h in ("tune-a", "tune-b")]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=600)
     events = sorted(e["event"] for e in read_journal(out))
     assert events == ["reused", "started", "trained"]
-    assert (out / "trials" / "p" / "seed0" / "summary.json").is_file()
-    assert lock_path(out, "trials/p/seed0").parent.name == ".locks"
+    assert rows["tune-a"]["val_loss"] == rows["tune-b"]["val_loss"] and rows["tune-a"]["status"] == "complete"
+    assert (out / "trials" / "p" / "seed0" / "summary.json").is_file() and not inbox.claims

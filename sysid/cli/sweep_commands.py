@@ -14,17 +14,21 @@ from sysid.cli.app import app
 def sweep(
     sweep_file: Path = typer.Argument(..., help="Sweep TOML (configs/sweeps/*.toml): base config, [vary], seeds."),
     output: Path = typer.Option(..., "-o", "--output", help="Sweep directory to write (trials/, results.csv, ...)."),
-    address: Optional[str] = typer.Option(None, "--address", help="Join this Ray cluster (default: a local Ray)."),
-    workers: Optional[int] = typer.Option(None, "--workers", help="Trials side by side (default: one per core)."),
+    address: Optional[str] = typer.Option(None, "--address", help="Join this Ray cluster: HOST:PORT of its head, or auto (default: RAY_ADDRESS, else a local Ray of the sweep's own)."),
+    workers: Optional[int] = typer.Option(None, "--workers", help="Trials side by side (default: one per core locally, one per CPU on a cluster)."),
     resume: bool = typer.Option(False, "--resume", help="Continue an interrupted sweep: finished trials are kept."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing sweep directory."),
     data: Optional[Path] = typer.Option(None, "--data", help="Dataset root (default: SYSID_DATA or ../shared/data/frt-ds-esso)."),
+    storage: Optional[str] = typer.Option(None, "--storage", help="Tune's experiment here (a shared path or a URI such as s3://bucket/dir) instead of OUTPUT/tune."),
+    mlflow: Optional[str] = typer.Option(None, "--mlflow", help="Log the sweep and every trial to this MLflow tracking URI (a path: a file store); overrides [tracking] mlflow."),
 ) -> None:
     """Train every configuration x seed of a sweep on Ray Tune; choose on validation loss.
 
-    Each trial is an ordinary run directory (sysid evaluate / sysid report read it). A
-    crashed or killed trial is retried ([sweep] max_retries); after an interruption,
-    --resume continues without training a finished trial again.
+    Each trial is an ordinary run directory (sysid evaluate / sysid report read it),
+    trained on any node of the cluster and sent back to OUTPUT; the data are read here
+    and shipped to the trials. A crashed trial, or one whose node is lost, is retried
+    from its last epoch ([sweep] max_retries); after an interruption, --resume continues
+    without training a finished trial again. [sweep] scheduler stops poor trials early.
     """
     from sysid.cli.interrupts import on_interrupt
     from sysid.errors import ConfigError
@@ -36,7 +40,7 @@ def sweep(
     spec = load_sweep(sweep_file)
     on_interrupt(f"finished trials are kept in {output}/trials; rerun with --resume to continue the sweep")
     results, summary = run_sweep(spec, output, workers, address, resume, overwrite, data,
-                                 log=lambda m: typer.echo(m))
+                                 log=lambda m: typer.echo(m), storage=storage, mlflow=mlflow)
     if len(results.points):
         shown = results.points.head(10)
         typer.echo(shown.to_string(index=False, float_format=lambda v: f"{v:.5f}"))
@@ -45,11 +49,14 @@ def sweep(
         spread = f" ± {best['val_loss_std']:.5f} (std over seeds)" if best.get("val_loss_std") is not None else ""
         typer.echo(f"sweep: chosen {best['point']}: validation loss {best['val_loss_mean']:.5f}{spread}")
     counts = f"{summary['complete']}/{summary['trials']} trials complete"
+    if summary["stopped_early"]:
+        counts += f", {summary['stopped_early']} stopped early by the {summary['scheduler']} scheduler"
     if summary["failed"] or summary["missing"]:
         counts += f", {summary['failed']} failed, {summary['missing']} missing"
-    typer.echo(f"sweep: {counts}; wrote {output} in {(time.perf_counter() - start) / 60:.1f} min")
+    typer.echo(f"sweep: {counts}; wrote {output} in {(time.perf_counter() - start) / 60:.1f} min "
+               f"(Tune's experiment: {summary['tune']})")
     if summary["failed"] or summary["missing"]:
         for row in results.trials.itertuples():
-            if row.status != "complete":
+            if row.status not in ("complete", "stopped early"):
                 typer.secho(f"sweep: {row.run}: {row.status}", fg=typer.colors.RED, err=True)
         raise SystemExit(1)

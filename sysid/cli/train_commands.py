@@ -21,6 +21,7 @@ def train(
     threads: Optional[int] = typer.Option(None, "--threads", help="Override [training] threads (torch CPU threads; 0: one per core)."),
     resume: bool = typer.Option(False, "--resume", help="Continue an interrupted training from its checkpoint."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing run directory (all of it)."),
+    mlflow: Optional[str] = typer.Option(None, "--mlflow", help="Log the run to this MLflow tracking URI (a path: a file store): options, every epoch, metrics, the run directory."),
 ) -> None:
     """Train an MMG (identified), NN-only or hybrid model and write a run directory.
 
@@ -54,8 +55,21 @@ def train(
                    f"({sum(r.duration for r in runs):.0f} s of data), seed {exp.experiment.seed}")
     test_paths = expand_paths(test) if test else list(test_files(data).values())
     tests = [read_run(p) for p in test_paths]
-    result = run_experiment(exp, output, tests, runs, data, log=lambda m: typer.echo("  " + m), resume=resume,
-                            overwrite=overwrite)
+    tracker = tracked = None
+    if mlflow:
+        from sysid.tracking import EpochLogger, Tracker, config_params
+        tracker = Tracker(mlflow, exp.experiment.name)
+        tracked = tracker.start(output.name, config_params(exp.to_toml()),
+                                tags={"sysid.kind": "run", "sysid.output": str(output.resolve())})
+    try:
+        result = run_experiment(exp, output, tests, runs, data, log=lambda m: typer.echo("  " + m), resume=resume,
+                                overwrite=overwrite, on_epoch=EpochLogger(tracker, tracked) if tracker else None)
+    except BaseException:
+        if tracker is not None:
+            tracker.finish(tracked, status="FAILED")
+        raise
+    if tracker is not None:
+        tracker.finish(tracked, {"run": output}, "FAILED" if result.failure else "FINISHED")
     typer.echo(result.evaluation.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     if result.failure:
         typer.secho(f"train: FAILED: {result.failure}; the run in {output} is marked failed", fg=typer.colors.RED, err=True)
@@ -81,7 +95,9 @@ def reproduce(
     report: bool = typer.Option(True, "--report/--no-report", help="Write report.html and report.pdf too."),
     jobs: Optional[int] = typer.Option(None, "--jobs", help="Runs trained side by side, one worker process each (default: one per core)."),
     seeds: int = typer.Option(1, "--seeds", help="Train every learned model with N seeds (on Ray): cells are seed means ± std."),
-    address: Optional[str] = typer.Option(None, "--address", help="With --seeds: join this Ray cluster (default: a local Ray)."),
+    address: Optional[str] = typer.Option(None, "--address", help="With --seeds: join this Ray cluster (HOST:PORT or auto; default: RAY_ADDRESS, else a local Ray)."),
+    storage: Optional[str] = typer.Option(None, "--storage", help="With --seeds: Tune's experiment here (a shared path or a URI such as s3://bucket/dir) instead of OUTPUT/tune."),
+    mlflow: Optional[str] = typer.Option(None, "--mlflow", help="With --seeds: log every seed run to this MLflow tracking URI (a path: a file store)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output directory (all of it)."),
 ) -> None:
     """The whole protocol: MMG, NN-only and hybrid on D1 and D2; Tables 7/8 beside the paper's.
@@ -98,14 +114,21 @@ def reproduce(
         raise ConfigError(f"--jobs {jobs}: must be >= 1")
     if seeds < 1:
         raise ConfigError(f"--seeds {seeds}: must be >= 1")
+    cluster = False
     if seeds > 1:
-        from sysid.sweep.runner import import_ray
+        from sysid.sweep.connect import check_reachable, import_ray, ray_target
         import_ray()  # a clear error now if Ray is not installed
+        target = ray_target(address)
+        check_reachable(target)  # an address nobody answers at: one line in seconds, before any work
+        cluster = target.address is not None
+    if mlflow:
+        from sysid.tracking import Tracker
+        Tracker(mlflow, "sysid-reproduce")  # a store that cannot be used fails now
     check_target(output, overwrite)
     on_interrupt(f"nothing written to {output} (it is moved into place only when every run is done)")
     with staged_directory(output, "reproduction", overwrite) as staging:
-        summary = run_protocol(staging, data, only, log=typer.echo, jobs=jobs or cpu_cores(), seeds=seeds,
-                               address=address)
+        summary = run_protocol(staging, data, only, log=typer.echo, jobs=jobs or (None if cluster else cpu_cores()),
+                               seeds=seeds, address=address, storage=storage, mlflow=mlflow)
     for name in ("table7.md", "table8.md"):
         path = output / name
         if path.is_file():

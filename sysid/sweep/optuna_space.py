@@ -2,11 +2,11 @@
 trains every seed of one proposed configuration and reports their mean validation loss."""
 from __future__ import annotations
 
-import math
+from typing import Any
 
 from sysid.sweep.points import point_name
 from sysid.sweep.spec import SweepSpec
-from sysid.sweep.trial import TrialContext, run_trial
+from sysid.sweep.trial import TrialData, final_metrics, run_trial
 from sysid.sweep.plan import make_trial
 
 
@@ -43,15 +43,34 @@ def values_of(spec: SweepSpec, config: dict) -> dict:
     return values
 
 
+def config_of(spec: SweepSpec, values: dict[str, Any]) -> dict | None:
+    """The Tune config of a configuration ({"section.option": value}), the inverse of
+    `values_of`; None when a value lies outside the sweep's axes (another sweep's run)."""
+    config = {}
+    for axis in spec.axes:
+        value = values[axis.key]
+        if axis.distribution:
+            low, high = axis.bounds
+            if not low <= value <= high:
+                return None
+            config[_param(axis.key)] = value
+        elif value in axis.values:
+            config[_param(axis.key)] = axis.values.index(value)
+        else:
+            return None
+    return config
+
+
 def point_of(spec: SweepSpec, config: dict) -> str:
     return point_name(values_of(spec, config))
 
 
-def optuna_trainable(config: dict, spec: SweepSpec, context: TrialContext) -> None:
-    """Every seed of the proposed configuration, one after the other; reports the mean."""
+def optuna_trainable(config: dict, spec: SweepSpec, inbox: Any, data: TrialData) -> None:
+    """Every seed of the proposed configuration, one after the other (each reporting its
+    epochs); the last report is the mean validation loss over the seeds."""
     from ray import tune
 
+    holder = tune.get_context().get_trial_id()
     values = values_of(spec, config)
-    losses = [run_trial(make_trial(spec, values, seed), context)["val_loss"] for seed in spec.seeds]
-    finite = [v for v in losses if math.isfinite(v)]
-    tune.report({"val_loss": sum(finite) / len(finite) if len(finite) == len(losses) else math.inf})
+    rows = [run_trial(make_trial(spec, values, seed), inbox, data, holder, tune.report) for seed in spec.seeds]
+    tune.report(final_metrics(rows))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from sysid.sweep.points import point_name, sweep_points
+from sysid.sweep.points import point_name, sweep_points, unique_names
 from sysid.sweep.spec import SweepSpec
 from sysid.sweep.trial import TrialSpec
 
@@ -21,14 +21,9 @@ def make_trial(spec: SweepSpec, values: dict[str, Any], seed: int) -> TrialSpec:
 
 
 def sweep_trials(spec: SweepSpec) -> list[TrialSpec]:
-    """Grid or random sweeps: every point x seed, points in order, seeds inside."""
-    trials = [make_trial(spec, values, seed) for values in sweep_points(spec) for seed in spec.seeds]
-    paths = [t.path for t in trials]
-    if len(set(paths)) != len(paths):  # a random search that drew the same point twice
-        seen, unique = set(), []
-        for t in trials:
-            if t.path not in seen:
-                seen.add(t.path)
-                unique.append(t)
-        trials = unique
-    return trials
+    """Grid or random sweeps: every point x seed, points in order, seeds inside; a point
+    drawn twice by a random search is trained once."""
+    points = sweep_points(spec)
+    names = unique_names(points)
+    first = [values for i, values in enumerate(points) if names[i] not in names[:i]]
+    return [make_trial(spec, values, seed) for values in first for seed in spec.seeds]

@@ -2,8 +2,8 @@
 seeds (``points.csv``: mean, std, min, max of the validation loss), the chosen
 configuration (lowest mean validation loss over all its seeds) in ``summary.json``.
 
-Only complete run directories count; a trial without one is "missing" (never trained,
-interrupted) or "failed" (its error from Ray).
+Only complete run directories count; a trial without one is "stopped early" (by the
+sweep's scheduler), "failed" (its error from Ray) or "missing" (never trained, interrupted).
 """
 from __future__ import annotations
 
@@ -16,10 +16,14 @@ from pathlib import Path
 import pandas as pd
 
 from sysid.files import write_csv, write_text
+from sysid.sweep.inbox import complete_summary
 from sysid.sweep.plan import TRIALS_DIR
 from sysid.sweep.points import format_value
+from sysid.sweep.runner import Outcomes
 from sysid.sweep.spec import SweepSpec
-from sysid.sweep.trial import TrialSpec, complete_summary, result_row
+from sysid.sweep.trial import TrialSpec, result_row
+
+STOPPED = "stopped early"
 
 
 @dataclass
@@ -34,7 +38,8 @@ class SweepResults:
     def counts(self) -> dict[str, int]:
         status = self.trials["status"] if len(self.trials) else pd.Series([], dtype=str)
         return {"trials": len(self.trials), "complete": int((status == "complete").sum()),
-                "failed": int(status.str.startswith("failed").sum()), "missing": int((status == "missing").sum())}
+                "failed": int(status.str.startswith("failed").sum()), "missing": int((status == "missing").sum()),
+                "stopped_early": int(status.str.startswith(STOPPED).sum())}
 
 
 def _value(config: dict, key: str):
@@ -44,7 +49,8 @@ def _value(config: dict, key: str):
 
 
 def scanned_trials(spec: SweepSpec, out: Path) -> list[TrialSpec]:
-    """Trials found on disk (Optuna's points are only known from their run directories)."""
+    """Trials whose run directories are complete in `out` (for Optuna, which proposes its
+    points while it runs)."""
     found = []
     for run_dir in sorted((out / TRIALS_DIR).glob("*/seed*")):
         config_path = run_dir / "config.toml"
@@ -57,14 +63,17 @@ def scanned_trials(spec: SweepSpec, out: Path) -> list[TrialSpec]:
     return found
 
 
-def collect_results(spec: SweepSpec, out: Path, trials: list[TrialSpec], errors: dict[str, str]) -> SweepResults:
+def collect_results(spec: SweepSpec, out: Path, trials: list[TrialSpec], outcomes: Outcomes) -> SweepResults:
     """Read every trial's run directory into the results tables."""
     rows = []
     for trial in trials:
-        row = result_row(trial, complete_summary(out / trial.path), out / trial.path)
-        error = errors.get(trial.path) or errors.get(trial.point)
+        row = result_row(trial, complete_summary(out / trial.path))
+        error = outcomes.errors.get(trial.path) or outcomes.errors.get(trial.point)
+        stopped = outcomes.stopped.get(trial.path, outcomes.stopped.get(trial.point))
         if row["status"] == "missing" and error:
             row["status"] = f"failed: {error}"
+        elif row["status"] == "missing" and stopped is not None:
+            row["status"], row["epochs"] = STOPPED, stopped
         rows.append(row)
     table = pd.DataFrame(rows)
     if table.empty:
@@ -97,12 +106,13 @@ def _plain(value):
     return value.item() if hasattr(value, "item") else value
 
 
-def write_results(spec: SweepSpec, out: Path, results: SweepResults, seconds: float) -> dict:
-    """results.csv, points.csv and summary.json (each written atomically)."""
+def write_results(spec: SweepSpec, out: Path, results: SweepResults, seconds: float, extra: dict | None = None) -> dict:
+    """results.csv, points.csv and summary.json (each written atomically); `extra` joins
+    the summary (where Tune's experiment and the MLflow store are)."""
     write_csv(results.trials, out / "results.csv", float_format="%.6g")
     write_csv(results.points, out / "points.csv", float_format="%.6g")
     summary = {"name": spec.name, "base": str(spec.base_path), "search": spec.search,
                "seeds": list(spec.seeds), "objective": spec.objective, "keys": spec.keys,
-               **results.counts, "best": results.best, "seconds": seconds}
+               **results.counts, "best": results.best, "seconds": seconds, **(extra or {})}
     write_text(json.dumps(summary, indent=2, default=str), out / "summary.json")
     return summary

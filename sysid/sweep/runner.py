@@ -1,163 +1,228 @@
-"""Trials on Ray Tune: locally (Ray started in-process, one trial per core, one torch thread
-per trial) or on an existing cluster (``address``), with retries of crashed or killed trials
-and a progress line per event (done / running / failed, best validation loss so far).
+"""Trials on Ray Tune: on a local Ray of the sweep's own or on a cluster (`sysid.sweep.connect`),
+one CPU and one torch thread per trial, retries of crashed trials and of trials whose node
+was lost, an optional scheduler that stops poor trials early, and a progress line per
+event (done / running / failed / stopped early, best validation loss so far).
 
-Resuming needs nothing from Ray's own state for grid and random sweeps: a trial whose run
-directory is complete is not trained again, an interrupted one continues from its
-checkpoint (`sysid.sweep.trial`). Optuna's search state is restored from Ray's.
+Every trial reports its validation loss after every epoch and a last result marked
+``final`` (the run's objective). Tune's experiment state is kept where Ray users look for
+it (``{out}/tune`` or ``--storage``): ``tune.ExperimentAnalysis`` and
+``Tuner.restore(...).get_results()`` read every trial's per-epoch validation loss there.
+sysid itself never reads it back: a resumed sweep starts a new Tune experiment and learns
+what is done from its own verified run directories.
 """
 from __future__ import annotations
 
-import logging
 import math
-import os
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
 
 from sysid.errors import ConfigError
-from sysid.sweep.trial import TrialContext, TrialSpec, tune_trainable
-from sysid.sweep.trial_lock import remove_locks
+from sysid.sweep.connect import import_ray, start_ray
+from sysid.sweep.inbox import inbox_actor
+from sysid.sweep.spec import SchedulerSpec
+from sysid.sweep.trial import TrialData, TrialSpec, tune_trainable
 
-RAY_DIR = ".ray"   # Ray Tune's experiment state, inside the sweep's output directory
-INSTALL_HINT = "Ray is needed for sweeps and seed studies: pip install \"sysid[sweep]\" (ray[tune], optuna)"
-
-
-def import_ray():
-    """Ray and Ray Tune, quiet, or a clear error when they are not installed."""
-    os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
-    os.environ.setdefault("TUNE_DISABLE_AUTO_CALLBACK_LOGGERS", "1")
-    os.environ.setdefault("RAY_DEDUP_LOGS", "0")
-    os.environ.setdefault("TUNE_WARN_EXCESSIVE_EXPERIMENT_CHECKPOINT_SYNC_THRESHOLD_S", "600")
-    try:
-        import ray
-        from ray import tune
-    except ImportError:
-        raise ConfigError(INSTALL_HINT) from None
-    return ray, tune
+TUNE_DIR = "tune"   # Tune's experiment, inside the output directory unless --storage is given
 
 
-def start_ray(workers: int, address: str | None) -> bool:
-    """Connect to `address` or start a local Ray with `workers` CPUs; True if started here."""
-    ray, _ = import_ray()
-    # trial failures are reported by the progress lines and the results table, not tracebacks
-    for name in ("ray.tune", "ray.air", "ray.train"):
-        logging.getLogger(name).setLevel(logging.CRITICAL)
-    if ray.is_initialized():
-        return False
-    if address:
-        ray.init(address=address, log_to_driver=False, logging_level=logging.ERROR)
-    else:
-        ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False, logging_level=logging.ERROR,
-                 object_store_memory=200 * 1024**2, configure_logging=True)
-    return True
+@dataclass(frozen=True)
+class TuneStorage:
+    """Where Tune keeps its experiment: ``storage_path`` (a directory or a URI pyarrow
+    reads, e.g. s3://bucket/sweeps) and the experiment's ``name`` below it."""
+
+    storage_path: str
+    name: str = TUNE_DIR
+
+    @property
+    def experiment(self) -> str:
+        return f"{self.storage_path.rstrip('/')}/{self.name}"
 
 
-def progress_callback(total: int, names: Callable[[dict], str], log: Callable[[str], None], prefix: str = "sweep"):
-    """A Tune callback printing one line per trial event: counts and the best so far."""
+@dataclass
+class Outcomes:
+    """What Tune says of the trials it ended without a complete run: errors, and trials a
+    scheduler stopped early (with the epochs they reported), keyed by trial path or point."""
+
+    errors: dict[str, str] = field(default_factory=dict)
+    stopped: dict[str, int] = field(default_factory=dict)
+    configs: list[dict] = field(default_factory=list)   # every Tune trial's config
+
+
+def progress_callback(total: int, names: Callable[[dict], str], log: Callable[[str], None],
+                      inbox=None, prefix: str = "sweep"):
+    """A Tune callback printing one line per trial event with the counts (done, running,
+    failed, stopped early) and the best validation loss so far; it also releases the
+    inbox's claims of every Tune trial that ends."""
     _, tune = import_ray()
 
     class SweepProgress(tune.Callback):
         def __init__(self):
-            self.running, self.done, self.failed, self.retried = set(), 0, 0, 0
+            self.running, self.done, self.failed, self.stopped, self.retried = set(), 0, 0, 0, 0
             self.best = (math.inf, "")
 
         def _line(self, event: str) -> None:
             best = f"; best validation loss {self.best[0]:.5f} ({self.best[1]})" if math.isfinite(self.best[0]) else ""
-            log(f"{prefix}: {event} | {self.done}/{total} done, {len(self.running)} running, "
-                f"{self.failed} failed{f', {self.retried} retried' if self.retried else ''}{best}")
+            log(f"{prefix}: {event} | {self.done}/{total} done, {len(self.running)} running, {self.failed} failed, "
+                f"{self.stopped} stopped early{f', {self.retried} retried' if self.retried else ''}{best}")
+
+        def _ended(self, trial) -> None:
+            self.running.discard(trial.trial_id)
+            if inbox is not None:
+                inbox.release.remote(trial.trial_id)
 
         def on_trial_start(self, iteration, trials, trial, **info):
             self.running.add(trial.trial_id)
             self._line(f"started {names(trial.config)}")
 
         def on_trial_complete(self, iteration, trials, trial, **info):
-            self.running.discard(trial.trial_id)
+            self._ended(trial)
+            result = trial.last_result or {}
+            if not result.get("final"):
+                self.stopped += 1
+                self._line(f"stopped early {names(trial.config)} after {result.get('training_iteration', 0)} "
+                           f"epochs (validation loss {result.get('val_loss', math.nan):.5f})")
+                return
             self.done += 1
-            value = (trial.last_result or {}).get("val_loss", math.inf)
+            value = result.get("val_loss", math.inf)
             if value < self.best[0]:
                 self.best = (value, names(trial.config))
             self._line(f"done {names(trial.config)} (validation loss {value:.5f})")
 
         def on_trial_recover(self, iteration, trials, trial, **info):
             self.retried += 1
-            self._line(f"retrying {names(trial.config)} after a failure")
+            self._line(f"retrying {names(trial.config)} after a failure (a lost node or a crash)")
 
         def on_trial_error(self, iteration, trials, trial, **info):
-            self.running.discard(trial.trial_id)
+            self._ended(trial)
             self.failed += 1
             self._line(f"FAILED {names(trial.config)}")
 
     return SweepProgress()
 
 
-def _run_config(tune, storage: Path, max_retries: int, callback):
-    return tune.RunConfig(name="tune", storage_path=str(storage.resolve()), verbose=0, callbacks=[callback],
-                          failure_config=tune.FailureConfig(max_failures=max_retries),
-                          checkpoint_config=tune.CheckpointConfig(num_to_keep=1))
+def make_scheduler(spec: SchedulerSpec, horizon: int):
+    """Tune's scheduler for `spec` over trials of at most `horizon` epoch reports (None: none).
+
+    Time is Tune's ``training_iteration`` (one report per epoch); ``max_t`` lies one past
+    the horizon, so only a trial's last report (its final result) can reach it."""
+    if spec.kind == "none":
+        return None
+    from ray.tune.schedulers import ASHAScheduler, MedianStoppingRule
+
+    s = spec.as_dict()
+    if spec.kind == "asha":
+        max_t = max(horizon + 1, int(s["grace_period"]) + 1)
+        return ASHAScheduler(time_attr="training_iteration", metric="val_loss", mode="min", max_t=max_t,
+                             grace_period=int(s["grace_period"]), reduction_factor=float(s["reduction_factor"]),
+                             brackets=int(s["brackets"]))
+    return MedianStoppingRule(time_attr="training_iteration", metric="val_loss", mode="min",
+                              grace_period=float(s["grace_period"]),
+                              min_samples_required=int(s["min_samples_required"]))
 
 
-def run_trials(trials: list[TrialSpec], context: TrialContext, workers: int, address: str | None = None,
-               max_retries: int = 2, storage: Path | None = None,
-               log: Callable[[str], None] = print, prefix: str = "sweep") -> dict[str, str]:
-    """Run `trials` (one Tune trial each, one CPU each); trials already complete are reused.
-    Ray reuses a worker process for the next trial (data read once per process); results
-    do not depend on it (every trial seeds itself).
+def _run_config(tune, storage: TuneStorage, max_retries: int, callbacks: list):
+    return tune.RunConfig(name=storage.name, storage_path=storage.storage_path, verbose=0, callbacks=callbacks,
+                          failure_config=tune.FailureConfig(max_failures=max_retries))
 
-    Returns {trial path: error} for trials that failed after their retries.
-    """
-    ray, tune = import_ray()
-    started = start_ray(workers, address)
+
+@contextmanager
+def ray_session(out: Path, workers: int | None, address: str | None, log: Callable[[str], None]) -> Iterator:
+    """Ray started or joined for the sweep, and the sweep's inbox on this node; Ray is shut
+    down afterwards if this session started it."""
+    from sysid.sweep.connect import ray_target
+
+    ray, _ = import_ray()
+    local = ray_target(address).address is None
+    started = start_ray(workers or default_workers(), address, log)
     try:
-        storage = storage or Path(context.out) / RAY_DIR
-        trainable = tune.with_resources(tune.with_parameters(tune_trainable, trials=trials, context=context),
-                                        {"cpu": 1})
-        callback = progress_callback(len(trials), lambda c: trials[int(c["trial"])].path, log, prefix)
-        tuner = tune.Tuner(
-            trainable, param_space={"trial": tune.grid_search(list(range(len(trials))))},
-            tune_config=tune.TuneConfig(max_concurrent_trials=workers, reuse_actors=True),
-            run_config=_run_config(tune, storage, max_retries, callback))
-        grid = tuner.fit()
-        remove_locks(context.out)  # every trial is over
-        return {trials[int(r.config["trial"])].path: _error_text(r.error) for r in grid if r.error is not None}
+        inbox = inbox_actor(out.resolve())
+        yield inbox, (workers or default_workers()) if local else workers
     finally:
         if started:
             ray.shutdown()
 
 
-def run_optuna(spec, context: TrialContext, workers: int, address: str | None = None,
-               storage: Path | None = None, resume: bool = False,
-               log: Callable[[str], None] = print) -> dict[str, str]:
+def run_trials(trials: list[TrialSpec], out: Path, data: TrialData, session, max_retries: int = 2,
+               storage: TuneStorage | None = None, scheduler=None, callbacks: list = (),
+               log: Callable[[str], None] = print, prefix: str = "sweep") -> Outcomes:
+    """Run `trials` (one Tune trial each, one CPU each) in a `ray_session`; trials already
+    complete in `out` are reused. Returns what Tune ended without a complete run."""
+    _, tune = import_ray()
+    inbox, concurrency = session
+    storage = storage or TuneStorage(str(out.resolve()))
+    trainable = tune.with_resources(tune.with_parameters(tune_trainable, trials=trials, inbox=inbox, data=data),
+                                    {"cpu": 1})
+    progress = progress_callback(len(trials), lambda c: trials[int(c["trial"])].path, log, inbox, prefix)
+    tuner = tune.Tuner(
+        trainable, param_space=trial_space(tune, trials),
+        tune_config=tune.TuneConfig(max_concurrent_trials=concurrency, reuse_actors=True, scheduler=scheduler),
+        run_config=_run_config(tune, storage, max_retries, [progress, *callbacks]))
+    return _outcomes(tuner.fit(), lambda c: trials[int(c["trial"])].path)
+
+
+def _plain(value):
+    return list(value) if isinstance(value, tuple) else value
+
+
+def trial_space(tune, trials: list[TrialSpec]) -> dict:
+    """Tune's parameter space of a trial list: the trial's index (a grid over all of them)
+    and, filled in from it, its seed, run name and varied values (``section__option``),
+    so that Tune's tables and ``get_best_config`` show what a trial is."""
+    space = {"trial": tune.grid_search(list(range(len(trials)))),
+             "seed": tune.sample_from(lambda s: trials[s.config["trial"]].seed)}
+    if any(t.label for t in trials):
+        space["run"] = tune.sample_from(lambda s: trials[s.config["trial"]].label)
+    for key in trials[0].values if trials else ():
+        space[key.replace(".", "__")] = tune.sample_from(lambda s, k=key: _plain(trials[s.config["trial"]].values[k]))
+    return space
+
+
+def run_optuna(spec, out: Path, data: TrialData, session, storage: TuneStorage | None = None, scheduler=None,
+               callbacks: list = (), evaluated: list[tuple[dict, float]] = (), pending: list[dict] = (),
+               log: Callable[[str], None] = print) -> Outcomes:
     """Optuna's search (through Ray Tune): ``samples`` configurations, each trial training
-    every seed of the sweep and reporting their mean validation loss."""
-    ray, tune = import_ray()
+    every seed of the sweep and reporting their mean validation loss. A resumed search
+    starts from sysid's own record: `evaluated` (Tune config, mean validation loss) are
+    told to Optuna as done, `pending` (configurations with seeds left) are run first."""
+    _, tune = import_ray()
     try:
         from ray.tune.search.optuna import OptunaSearch
         import optuna  # noqa: F401
     except ImportError:
-        raise ConfigError(f"{spec.source}: search = \"optuna\" needs optuna: {INSTALL_HINT}") from None
+        raise ConfigError(f"{spec.source}: search = \"optuna\" needs optuna: pip install \"sysid[sweep]\"") from None
     from sysid.sweep.optuna_space import optuna_space, optuna_trainable, point_of
 
-    started = start_ray(workers, address)
-    try:
-        storage = storage or Path(context.out) / RAY_DIR
-        path = (storage / "tune").resolve()
-        trainable = tune.with_resources(tune.with_parameters(optuna_trainable, spec=spec, context=context), {"cpu": 1})
-        callback = progress_callback(spec.samples, lambda c: point_of(spec, c), log)
-        if resume and tune.Tuner.can_restore(str(path)):
-            tuner = tune.Tuner.restore(str(path), trainable, resume_errored=True)
-        else:
-            search = OptunaSearch(metric="val_loss", mode="min", seed=spec.search_seed)
-            tuner = tune.Tuner(
-                trainable, param_space=optuna_space(spec),
-                tune_config=tune.TuneConfig(search_alg=search, num_samples=spec.samples,
-                                            max_concurrent_trials=workers, reuse_actors=True),
-                run_config=_run_config(tune, storage, spec.max_retries, callback))
-        grid = tuner.fit()
-        remove_locks(context.out)  # every trial is over
-        return {point_of(spec, r.config): _error_text(r.error) for r in grid if r.error is not None}
-    finally:
-        if started:
-            ray.shutdown()
+    inbox, concurrency = session
+    storage = storage or TuneStorage(str(out.resolve()))
+    remaining = spec.samples - len(evaluated)
+    if remaining <= 0:
+        return Outcomes()
+    search = OptunaSearch(space=optuna_space(spec), metric="val_loss", mode="min", seed=spec.search_seed,
+                          points_to_evaluate=list(pending) or None)
+    for config, value in evaluated:
+        search.add_evaluated_point(config, value)
+    trainable = tune.with_resources(tune.with_parameters(optuna_trainable, spec=spec, inbox=inbox, data=data),
+                                    {"cpu": 1})
+    progress = progress_callback(remaining, lambda c: point_of(spec, c), log, inbox)
+    tuner = tune.Tuner(
+        trainable,
+        tune_config=tune.TuneConfig(search_alg=search, num_samples=remaining, max_concurrent_trials=concurrency,
+                                    reuse_actors=True, scheduler=scheduler),
+        run_config=_run_config(tune, storage, spec.max_retries, [progress, *callbacks]))
+    return _outcomes(tuner.fit(), lambda c: point_of(spec, c))
+
+
+def _outcomes(grid, key: Callable[[dict], str]) -> Outcomes:
+    outcomes = Outcomes()
+    for result in grid:
+        outcomes.configs.append(dict(result.config))
+        if result.error is not None:
+            outcomes.errors[key(result.config)] = _error_text(result.error)
+        elif not (result.metrics or {}).get("final"):
+            outcomes.stopped[key(result.config)] = int((result.metrics or {}).get("training_iteration", 0))
+    return outcomes
 
 
 def _error_text(error: BaseException) -> str:
@@ -168,4 +233,3 @@ def _error_text(error: BaseException) -> str:
 def default_workers() -> int:
     from sysid.device import cpu_cores
     return max(1, cpu_cores())
-

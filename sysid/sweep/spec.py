@@ -10,6 +10,11 @@ seeds = [0, 1, 2]        # every configuration is trained with each seed
 objective = "val_loss"   # validation multi-step loss, minimised (never a test file)
 max_retries = 2          # a trial that crashes or is killed is retried this often
 search_seed = 0          # seed of the random / optuna sampler
+scheduler = "asha"       # none | asha | median: Tune stops poor trials early
+
+[scheduler]              # the scheduler's settings (in epochs; each trial reports every epoch)
+grace_period = 2         # asha, median: epochs every trial runs before it can be stopped
+reduction_factor = 3     # asha: keep the best 1/3 at each rung
 
 [set]                    # options set in every trial (not varied)
 "training.objective_s" = 20.0
@@ -18,6 +23,9 @@ search_seed = 0          # seed of the random / optuna sampler
 "training.learning_rate" = [1e-3, 3e-3]              # grid: the values
 "network.hidden" = [[64, 64], [128, 128]]
 "training.lambda_F" = { loguniform = [1e-3, 1e-1] }   # random / optuna: a distribution
+
+[tracking]
+mlflow = "mlruns"        # log every trial to MLflow (a tracking URI; a path is a file store)
 ```
 
 Distributions: ``{ uniform = [low, high] }``, ``{ loguniform = [low, high] }``,
@@ -39,6 +47,13 @@ from sysid.errors import ConfigError
 from sysid.experiment import Experiment, load_experiment, parse_experiment
 
 SEARCHES = ("grid", "random", "optuna")
+SCHEDULERS = ("none", "asha", "median")
+# scheduler -> {setting: (default, smallest allowed, integer?)}; times in epochs
+SCHEDULER_SETTINGS = {
+    "none": {},
+    "asha": {"grace_period": (1, 1, True), "reduction_factor": (3.0, 1.0 + 1e-9, False), "brackets": (1, 1, True)},
+    "median": {"grace_period": (1, 1, True), "min_samples_required": (3, 1, True)},
+}
 OBJECTIVES = ("val_loss",)
 DISTRIBUTIONS = ("uniform", "loguniform", "randint", "choice")
 
@@ -62,6 +77,18 @@ class Axis:
 
 
 @dataclass(frozen=True)
+class SchedulerSpec:
+    """Tune's trial scheduler: ``kind`` (none | asha | median) and its settings (every
+    setting filled in; times in epochs, each trial reporting its validation loss every epoch)."""
+
+    kind: str = "none"
+    settings: tuple[tuple[str, float], ...] = ()
+
+    def as_dict(self) -> dict:
+        return dict(self.settings)
+
+
+@dataclass(frozen=True)
 class SweepSpec:
     """A validated sweep: the base experiment, the axes, the seeds and how to search."""
 
@@ -77,10 +104,24 @@ class SweepSpec:
     search_seed: int = 0
     source: str = ""
     text: str = ""                        # the sweep file as written (kept beside the results)
+    scheduler: SchedulerSpec = SchedulerSpec()
+    mlflow: str = ""                      # [tracking] mlflow: tracking URI or path ("" = no tracking)
 
     @property
     def keys(self) -> list[str]:
         return [a.key for a in self.axes]
+
+    @property
+    def most_epochs(self) -> int:
+        """The most epochs one seed of a trial can report (gradient identification plus
+        training, at the largest values the axes allow): the schedulers' horizon."""
+        def largest(key: str, base: int) -> int:
+            axis = next((a for a in self.axes if a.key == key), None)
+            if axis is None:
+                return int(base)
+            return int(max([axis.bounds[1]] if axis.distribution else list(axis.values)))
+        return largest("identify.epochs", self.base.identify.epochs) + largest("training.epochs",
+                                                                               self.base.training.epochs)
 
     def experiment(self, values: dict[str, Any], seed: int, name: str) -> Experiment:
         """The base experiment with `values` ({"section.option": value}) and `seed` set."""
@@ -156,15 +197,49 @@ def _check_axis_values(spec_src: str, axis: Axis, base: Experiment) -> None:
         apply_values(base, {axis.key: value}, base.experiment.seed, base.experiment.name, spec_src)
 
 
+def parse_scheduler(source: str, kind, table) -> SchedulerSpec:
+    """``[sweep] scheduler`` and the ``[scheduler]`` table to a `SchedulerSpec`."""
+    if kind not in SCHEDULERS:
+        raise ConfigError(f"{source}: [sweep] scheduler = {kind!r}: choose one of {', '.join(SCHEDULERS)}")
+    if not isinstance(table, dict):
+        raise ConfigError(f"{source}: [scheduler] must be a table of settings")
+    known = SCHEDULER_SETTINGS[kind]
+    for key in table:
+        if key not in known:
+            raise ConfigError(f"{source}: [scheduler] {key!r} is not a setting of scheduler {kind!r} "
+                              f"(known: {', '.join(known) or 'none'})")
+    settings = []
+    for key, (default, low, integer) in known.items():
+        value = table.get(key, default)
+        bad = isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or value < low or (integer and not float(value).is_integer())
+        if bad:
+            kind_of = "an integer" if integer else "a number"
+            bound = f">= {low:g}" if integer else f"> {math.floor(low):g}"
+            raise ConfigError(f"{source}: [scheduler] {key} must be {kind_of} {bound}, got {value!r}")
+        settings.append((key, int(value) if integer else float(value)))
+    return SchedulerSpec(kind, tuple(settings))
+
+
+def _tracking(source: str, table) -> str:
+    if not isinstance(table, dict) or set(table) - {"mlflow"}:
+        raise ConfigError(f"{source}: [tracking] holds one key, mlflow = \"URI or path\"")
+    value = table.get("mlflow", "")
+    if not isinstance(value, str):
+        raise ConfigError(f"{source}: [tracking] mlflow must be a tracking URI or a path, got {value!r}")
+    return value
+
+
 def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = None, text: str = "") -> SweepSpec:
     """A parsed sweep TOML document to a validated `SweepSpec`."""
-    unknown = set(doc) - {"sweep", "set", "vary"}
+    unknown = set(doc) - {"sweep", "set", "vary", "scheduler", "tracking"}
     if unknown:
-        raise ConfigError(f"{source}: unknown section(s) {sorted(unknown)} (known: sweep, set, vary)")
+        raise ConfigError(f"{source}: unknown section(s) {sorted(unknown)} "
+                          "(known: sweep, set, vary, scheduler, tracking)")
     table = doc.get("sweep")
     if not isinstance(table, dict):
         raise ConfigError(f"{source}: [sweep] is required (base, seeds, search)")
-    known = {"name", "base", "search", "samples", "seeds", "objective", "max_retries", "search_seed"}
+    known = {"name", "base", "search", "samples", "seeds", "objective", "max_retries", "search_seed", "scheduler"}
     for key in table:
         if key not in known:
             raise ConfigError(f"{source}: [sweep] unknown key {key!r} (known: {', '.join(sorted(known))})")
@@ -211,8 +286,12 @@ def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = Non
             raise ConfigError(f"{source}: [vary] {axis.key!r}: a {axis.distribution} distribution needs "
                               "search = \"random\" or \"optuna\" (grid search takes a list of values)")
         _check_axis_values(source, axis, base)
+    scheduler = parse_scheduler(source, table.get("scheduler", "none"), doc.get("scheduler", {}))
+    mlflow = _tracking(source, doc.get("tracking", {}))
+    if mlflow and not Path(mlflow).is_absolute() and "://" not in mlflow and not mlflow.startswith("file:"):
+        mlflow = str((directory or Path.cwd()) / mlflow)   # a path relative to the sweep file
     return SweepSpec(name, base, base_path, axes, tuple(seeds), search, ints["samples"], objective,
-                     ints["max_retries"], ints["search_seed"], source, text)
+                     ints["max_retries"], ints["search_seed"], source, text, scheduler, mlflow)
 
 
 def load_sweep(path: str | os.PathLike) -> SweepSpec:

@@ -8,35 +8,46 @@ Output directory::
     trials.log        journal: one JSON line per trial event (started, resumed, trained, reused)
     results.csv       one row per trial: varied values, seed, status, validation loss, epochs
     points.csv        one row per configuration: validation loss over its seeds
-    summary.json      counts, the chosen configuration and its runs
-    .ray/             Ray Tune's experiment state
+    summary.json      counts, the chosen configuration and its runs, where Tune's experiment is
+    tune/             Ray Tune's experiment (unless --storage puts it elsewhere):
+                      tune.ExperimentAnalysis reads every trial's per-epoch validation loss
+
+Order of work: everything is checked (sweep file, data, output path, Ray's address) and the
+data are read before anything is written; a sweep that fails before its first trial
+starts leaves no output behind.
 """
 from __future__ import annotations
 
+import math
 import os
 import shutil
 import time
+import tomllib
 from pathlib import Path
 from typing import Callable
 
 from sysid.errors import ConfigError, OutputError
+from sysid.experiment import parse_experiment
 from sysid.files import write_text
-from sysid.sweep.plan import sweep_trials
+from sysid.sweep.inbox import JOURNAL, complete_summary
+from sysid.sweep.plan import make_trial, sweep_trials
 from sysid.sweep.results import SweepResults, collect_results, scanned_trials, write_results
-from sysid.sweep.runner import default_workers, run_optuna, run_trials
+from sysid.sweep.runner import TuneStorage, make_scheduler, ray_session, run_optuna, run_trials
 from sysid.sweep.spec import SweepSpec
-from sysid.sweep.trial import TrialContext
+from sysid.sweep.trial import TrialSpec, read_trial_data
+
+MARKER = "sweep.toml"
 
 
-def prepare_output(spec: SweepSpec, out: Path, resume: bool, overwrite: bool) -> None:
-    """Refuse to mix sweeps: an existing output is continued only with `resume` (and the same
-    sweep file) or replaced with `overwrite` (only if it is a sweep's)."""
-    marker = out / "sweep.toml"
+def check_output(spec: SweepSpec, out: Path, resume: bool, overwrite: bool) -> None:
+    """Refuse to mix sweeps (nothing written): an existing output is continued only with
+    `resume` (and the same sweep file) or replaced with `overwrite` (only if it is a sweep's)."""
+    marker = out / MARKER
     if out.exists() and not out.is_dir():
         raise OutputError(f"{out}: exists and is not a directory; choose another output path")
     if resume:
         if not marker.is_file():
-            raise OutputError(f"{out}: no sweep to resume here (no sweep.toml); start it without --resume")
+            raise OutputError(f"{out}: no sweep to resume here (no {MARKER}); start it without --resume")
         if marker.read_text() != spec.text:
             raise ConfigError(f"{spec.source}: differs from {marker}, the sweep file this sweep was started "
                               "with; resume with that file, or start a new sweep in another directory")
@@ -46,36 +57,142 @@ def prepare_output(spec: SweepSpec, out: Path, resume: bool, overwrite: bool) ->
             raise OutputError(f"{out}: already exists; pass --resume to continue that sweep, --overwrite to "
                               "replace it, or choose another output path")
         if not marker.is_file():
-            raise OutputError(f"{out}: exists and is not a sweep's output (no sweep.toml); "
+            raise OutputError(f"{out}: exists and is not a sweep's output (no {MARKER}); "
                               "--overwrite only replaces sysid outputs")
+
+
+def write_output(spec: SweepSpec, out: Path, resume: bool) -> None:
+    """Start the output directory (a replaced sweep's files go first)."""
+    if resume:
+        return
+    if out.is_dir() and any(out.iterdir()):
         shutil.rmtree(out)
     out.mkdir(parents=True, exist_ok=True)
     write_text(spec.base.to_toml(), out / "base.toml")
-    write_text(spec.text, marker)
+    write_text(spec.text, out / MARKER)
+
+
+def _remove_unstarted(out: Path, existed: bool) -> None:
+    """After a failure before the first trial: remove what this sweep wrote."""
+    if (out / JOURNAL).exists() or not out.is_dir():
+        return
+    shutil.rmtree(out, ignore_errors=True)
+    if existed:
+        out.mkdir(exist_ok=True)  # the empty folder the user gave
+
+
+def optuna_history(spec: SweepSpec, out: Path) -> tuple[list[tuple[dict, float]], list[dict]]:
+    """What an Optuna sweep finished, from sysid's verified run directories (Tune's pickled
+    search state is never read): (Tune config, mean validation loss) of the configurations
+    with every seed complete, and the configurations with seeds left."""
+    from sysid.sweep.optuna_space import config_of
+
+    by_point: dict[str, list[TrialSpec]] = {}
+    for trial in scanned_trials(spec, out):
+        by_point.setdefault(trial.point, []).append(trial)
+    evaluated, pending = [], []
+    for point, trials in by_point.items():
+        config = config_of(spec, trials[0].values)
+        if config is None:
+            continue
+        losses = [(complete_summary(out / t.path) or {}).get("val_loss") for t in trials]
+        if set(spec.seeds) <= {t.seed for t in trials} and all(v is not None and math.isfinite(v) for v in losses):
+            evaluated.append((config, sum(losses) / len(losses)))
+        else:
+            pending.append(config)
+    return evaluated, pending
+
+
+def _experiments(spec: SweepSpec, trials: list[TrialSpec]):
+    return [spec.base] + [parse_experiment(tomllib.loads(t.config), spec.source) for t in trials]
 
 
 def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = None, address: str | None = None,
               resume: bool = False, overwrite: bool = False, data: str | os.PathLike | None = None,
-              log: Callable[[str], None] = print) -> tuple[SweepResults, dict]:
-    """Train every trial of `spec` (on Ray) into `out`; returns the results and summary."""
+              log: Callable[[str], None] = print, storage: str | None = None,
+              mlflow: str | None = None) -> tuple[SweepResults, dict]:
+    """Train every trial of `spec` (on Ray) into `out`; returns the results and summary.
+
+    `address` joins a Ray cluster (default: ``RAY_ADDRESS``, else a local Ray of the
+    sweep's own); `storage` puts Tune's experiment there (a path or URI) instead of
+    ``{out}/tune``; `mlflow` (or the sweep file's ``[tracking] mlflow``) logs the sweep."""
     from sysid.datasets import data_root
+    from sysid.sweep.optuna_space import point_of, values_of
 
     started = time.perf_counter()
     out = Path(out)
-    data = str(data_root(data))  # a clear error before Ray starts when the data are missing
-    prepare_output(spec, out, resume, overwrite)
-    workers = workers or default_workers()
-    context = TrialContext(str(out.resolve()), data, spec.source)
-    if spec.search == "optuna":
-        log(f"sweep {spec.name}: optuna, {spec.samples} configurations x {len(spec.seeds)} seeds, "
-            f"{workers} workers" + (f" on {address}" if address else ""))
-        errors = run_optuna(spec, context, workers, address, resume=resume, log=log)
-        trials = scanned_trials(spec, out)
-    else:
-        trials = sweep_trials(spec)
-        log(f"sweep {spec.name}: {spec.search}, {len(trials) // len(spec.seeds)} configurations x "
-            f"{len(spec.seeds)} seeds = {len(trials)} trials, {workers} workers" + (f" on {address}" if address else ""))
-        errors = run_trials(trials, context, workers, address, spec.max_retries, log=log)
-    results = collect_results(spec, out, trials, errors)
-    summary = write_results(spec, out, results, time.perf_counter() - started)
+    root = data_root(data)  # a clear error before Ray starts when the data are missing
+    check_output(spec, out, resume, overwrite)
+    planned = sweep_trials(spec) if spec.search != "optuna" else []
+    trial_data = read_trial_data(_experiments(spec, planned), root)
+    tracker = None
+    if mlflow or spec.mlflow:
+        from sysid.tracking import Tracker
+        tracker = Tracker(mlflow or spec.mlflow, spec.name)
+    tune_storage = TuneStorage(storage, spec.name) if storage else TuneStorage(str(out.resolve()))
+    scheduler = make_scheduler(spec.scheduler, spec.most_epochs * (len(spec.seeds) if spec.search == "optuna" else 1))
+    existed = out.is_dir()
+    where = f" on {address}" if address else (f" on {os.environ['RAY_ADDRESS']}" if os.environ.get("RAY_ADDRESS") else "")
+    try:
+        with ray_session(out, workers, address, log) as session:
+            write_output(spec, out, resume)
+            callbacks, parent = [], None
+            if spec.search == "optuna":
+                evaluated, pending = optuna_history(spec, out) if resume else ([], [])
+                if resume:
+                    log(f"sweep {spec.name}: optuna resumes from {len(evaluated)} finished configurations "
+                        f"({len(pending)} with seeds left) in {out / 'trials'}; Tune's saved search state is "
+                        "not read")
+                log(f"sweep {spec.name}: optuna, {spec.samples} configurations x {len(spec.seeds)} seeds{where}")
+
+                def run_dirs(config: dict) -> dict[str, str]:
+                    values = values_of(spec, config)
+                    return {f"seed{s}": make_trial(spec, values, s).path for s in spec.seeds}
+                if tracker is not None:
+                    callbacks, parent = _tracking(tracker, spec, out, lambda c: point_of(spec, c),
+                                                  lambda c: values_of(spec, c), run_dirs, log)
+                outcomes = run_optuna(spec, out, trial_data, session, tune_storage, scheduler, callbacks,
+                                      evaluated, pending, log)
+                found = {t.path: t for t in scanned_trials(spec, out)}
+                for config in outcomes.configs:  # trials Tune ended without a run (stopped, failed)
+                    for seed in spec.seeds:
+                        trial = make_trial(spec, values_of(spec, config), seed)
+                        found.setdefault(trial.path, trial)
+                trials = sorted(found.values(), key=lambda t: t.path)
+            else:
+                trials = planned
+                log(f"sweep {spec.name}: {spec.search}, {len(trials) // len(spec.seeds)} configurations x "
+                    f"{len(spec.seeds)} seeds = {len(trials)} trials{where}"
+                    + (f", scheduler {spec.scheduler.kind}" if spec.scheduler.kind != "none" else ""))
+                if tracker is not None:
+                    callbacks, parent = _tracking(tracker, spec, out, lambda c: trials[int(c["trial"])].path,
+                                                  lambda c: {**trials[int(c["trial"])].values,
+                                                             "seed": trials[int(c["trial"])].seed},
+                                                  lambda c: {"run": trials[int(c["trial"])].path}, log)
+                outcomes = run_trials(trials, out, trial_data, session, spec.max_retries, tune_storage, scheduler,
+                                      callbacks, log)
+    except BaseException:
+        if not resume:
+            _remove_unstarted(out, existed)
+        raise
+    results = collect_results(spec, out, trials, outcomes)
+    summary = write_results(spec, out, results, time.perf_counter() - started,
+                            {"tune": tune_storage.experiment, "scheduler": spec.scheduler.kind,
+                             "mlflow": tracker.uri if tracker else None})
+    if tracker is not None and parent is not None:
+        tracker.metrics(parent, {k: v for k, v in summary.items() if k in ("complete", "failed", "stopped_early")}
+                        | ({"best_val_loss": summary["best"]["val_loss_mean"]} if summary.get("best") else {}))
+        tracker.client.log_artifact(parent, str(out / "results.csv"))
+        tracker.finish(parent)
     return results, summary
+
+
+def _tracking(tracker, spec: SweepSpec, out: Path, names, params, run_dirs, log):
+    """The sweep's MLflow run and the callback logging its trials as child runs."""
+    from sysid.sweep.tracked import tracking_callback
+
+    parent = tracker.start(spec.name, {"search": spec.search, "samples": spec.samples, "seeds": list(spec.seeds),
+                                       "scheduler": spec.scheduler.kind, "base": str(spec.base_path),
+                                       "output": str(out.resolve()), **spec.scheduler.as_dict()},
+                           tags={"sysid.kind": "sweep"})
+    return [tracking_callback(tracker, parent, out.resolve(), names, params, run_dirs, log)], parent

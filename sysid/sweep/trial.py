@@ -1,31 +1,38 @@
 """One trial of a sweep: one configuration and seed trained into an ordinary run directory
 (`sysid.rundir`; ``sysid evaluate`` and ``sysid report`` read it).
 
-A trial whose run directory is already complete is not trained again; one interrupted
-mid-training continues from its checkpoint (`sysid.lifecycle.checkpoint_path`). Every
-training that finishes is written to the sweep's journal (``trials.log``, one JSON line
-per event), which is how a resumed sweep shows that no trial ran twice.
+A trial may run on any node: it needs nothing but the network. Its data come with it
+(`TrialData`, read once by the driver and shipped through Ray's object store); it trains in
+a temporary directory of its node, sends its training checkpoint to the driver's
+`RunInbox` after every epoch and, when done, its run directory, which the inbox verifies
+and moves into place. A trial whose run is already complete is not trained again (its
+epochs are reported from its history); one whose node was lost continues from the last
+checkpoint the inbox holds, on whichever node Ray gives it.
 """
 from __future__ import annotations
 
-import json
+import io
 import math
 import os
+import socket
+import tempfile
 import time
 import tomllib
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any, Callable
+from pathlib import Path, PurePosixPath
+from typing import Any, Callable, Iterable
 
-from sysid.data import read_run
+import torch
+
+from sysid.data import Run, read_run
 from sysid.datasets import test_files
-from sysid.errors import IncompleteOutputError
-from sysid.experiment import parse_experiment
+from sysid.errors import DataError
+from sysid.experiment import Experiment, parse_experiment
 from sysid.lifecycle import checkpoint_path, run_experiment, training_runs
-from sysid.rundir import verify_run_dir
-from sysid.sweep.trial_lock import trial_lock
+from sysid.sweep.inbox import COMPLETE, WAIT, complete_summary, pack_run  # noqa: F401 (complete_summary: API)
+from sysid.train import EpochReport
 
-JOURNAL = "trials.log"
+CLAIM_POLL_S = 2.0   # how often a trial waiting for another training of its run asks again
 
 
 @dataclass(frozen=True)
@@ -41,51 +48,64 @@ class TrialSpec:
     label: str = ""          # reproduce: the protocol run's name
 
 
+def data_key(exp: Experiment) -> tuple:
+    """What decides an experiment's training data: data set, files and rate."""
+    return (exp.experiment.dataset, tuple(exp.data.files), float(exp.data.rate))
+
+
 @dataclass(frozen=True)
-class TrialContext:
-    """Where trials write and read: the output directory and the data root."""
+class TrialData:
+    """The data every trial needs, read once on the driver: the test runs, and the training
+    runs of each `data_key`. ``root`` is the driver's data root (a trial whose data were not
+    shipped reads them there, which works only where that path exists)."""
 
-    out: str
-    data: str | None = None
-    source: str = "<sweep>"
+    tests: tuple[Run, ...]
+    training: dict = field(default_factory=dict)
+    root: str | None = None
+
+    def training_runs(self, exp: Experiment) -> list[Run]:
+        runs = self.training.get(data_key(exp))
+        if runs is not None:
+            return list(runs)
+        try:
+            return training_runs(exp, self.root)
+        except DataError as exc:
+            raise DataError(f"{exc} (on node {node_name()}: the sweep did not ship this configuration's "
+                            "training data)") from None
 
 
-def journal(out: str | os.PathLike, event: str, trial: TrialSpec, **extra: Any) -> None:
-    """Append one event line to the sweep's journal (one write on an O_APPEND file)."""
-    line = json.dumps({"event": event, "trial": trial.path, "time": time.time(), "pid": os.getpid(), **extra})
-    Path(out).mkdir(parents=True, exist_ok=True)
-    fd = os.open(Path(out) / JOURNAL, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
+def read_trial_data(experiments: Iterable[Experiment], root: str | os.PathLike | None) -> TrialData:
+    """Test runs and the training runs of every distinct `data_key` among `experiments`."""
+    training = {}
+    for exp in experiments:
+        if exp.needs_training and data_key(exp) not in training:
+            training[data_key(exp)] = tuple(training_runs(exp, root))
+    tests = tuple(read_run(p) for p in test_files(root).values())
+    return TrialData(tests, training, str(root) if root is not None else None)
+
+
+def node_name() -> str:
+    """This node: host name and, inside Ray, the first characters of its node id."""
+    name = socket.gethostname()
     try:
-        os.write(fd, (line + "\n").encode())
-    finally:
-        os.close(fd)
+        import ray
+        if ray.is_initialized():
+            name += ":" + ray.get_runtime_context().get_node_id()[:8]
+    except ImportError:
+        pass
+    return name
 
 
-def read_journal(out: str | os.PathLike) -> list[dict]:
-    """Every event of the journal (a torn last line, from a kill mid-write, is skipped)."""
-    path = Path(out) / JOURNAL
-    events = []
-    if path.is_file():
-        for line in path.read_text().splitlines():
-            try:
-                events.append(json.loads(line))
-            except json.JSONDecodeError:
-                continue
-    return events
+def call(inbox, method: str, *args, **kwargs):
+    """Call `method` of the driver's inbox: a Ray actor handle, or a `RunInbox` in-process."""
+    target = getattr(inbox, method)
+    if hasattr(target, "remote"):
+        import ray
+        return ray.get(target.remote(*args, **kwargs))
+    return target(*args, **kwargs)
 
 
-def complete_summary(run_dir: Path) -> dict | None:
-    """summary.json of a complete run directory, else None."""
-    if not (run_dir / "manifest.json").is_file():
-        return None
-    try:
-        verify_run_dir(run_dir)
-        return json.loads((run_dir / "summary.json").read_text())
-    except (IncompleteOutputError, OSError, json.JSONDecodeError):
-        return None
-
-
-def result_row(trial: TrialSpec, summary: dict | None, run_dir: Path) -> dict:
+def result_row(trial: TrialSpec, summary: dict | None) -> dict:
     """The results-table row of a trial (status "missing" when it has no complete run)."""
     row = {"point": trial.point, "seed": trial.seed, "run": trial.path, **trial.values}
     if trial.label:
@@ -100,47 +120,77 @@ def result_row(trial: TrialSpec, summary: dict | None, run_dir: Path) -> dict:
             "train_seconds": summary.get("train_seconds")}
 
 
-_CACHE: dict = {}
+def epoch_metrics(stage: str, epoch: int, train_loss: float, val_loss: float) -> dict:
+    """What a trial reports to Tune after every epoch (Tune counts ``training_iteration``)."""
+    return {"val_loss": float(val_loss), "train_loss": float(train_loss), "stage": stage, "epoch": int(epoch)}
 
 
-def _tests(data: str | None):
-    if "tests" not in _CACHE:
-        _CACHE["tests"] = [read_run(p) for p in test_files(data).values()]
-    return _CACHE["tests"]
+def _history_metrics(rows: list[dict], summary: dict | None = None) -> list[dict]:
+    """The epochs of a history (history.csv rows or a checkpoint's) as reported metrics;
+    Levenberg-Marquardt's one row is not an epoch and is left out."""
+    solver = ((summary or {}).get("identification") or {}).get("solver")
+    return [epoch_metrics(r["stage"], r["epoch"], r["train_loss"], r["val_loss"]) for r in rows
+            if not (r["stage"] == "identify" and solver == "levenberg_marquardt")]
 
 
-def run_trial(trial: TrialSpec, context: TrialContext, log: Callable[[str], None] = lambda m: None) -> dict:
-    """Train `trial` into its run directory unless it is complete; its results-table row.
-    One process at a time per trial (`sysid.sweep.trial_lock`)."""
-    with trial_lock(context.out, trial.path):
-        return _run_locked(trial, context, log)
+def _checkpoint_history(blob: bytes) -> list[dict]:
+    state = torch.load(io.BytesIO(blob), map_location="cpu", weights_only=True)
+    return list(state.get("history", [])) + list(state.get("stage_history", []))
 
 
-def _run_locked(trial: TrialSpec, context: TrialContext, log: Callable[[str], None]) -> dict:
-    run_dir = Path(context.out) / trial.path
-    summary = complete_summary(run_dir)
-    if summary is not None:
-        journal(context.out, "reused", trial)
-        return result_row(trial, summary, run_dir)
-    exp = parse_experiment(tomllib.loads(trial.config), f"{context.source} (trial {trial.path})")
-    resume = checkpoint_path(run_dir).is_file()
-    journal(context.out, "resumed" if resume else "started", trial)
-    key = (exp.experiment.dataset, exp.data.files, exp.data.rate)
-    if exp.needs_training and key not in _CACHE:
-        _CACHE[key] = training_runs(exp, context.data)
-    run_dir.parent.mkdir(parents=True, exist_ok=True)
-    result = run_experiment(exp, run_dir, _tests(context.data), _CACHE.get(key), context.data,
-                            progress=False, log=log, resume=resume, overwrite=run_dir.exists())
-    summary = json.loads((result.path / "summary.json").read_text())
-    journal(context.out, "trained", trial, val_loss=summary.get("val_loss"))
-    return result_row(trial, summary, run_dir)
+def run_trial(trial: TrialSpec, inbox, data: TrialData, holder: str = "local",
+              report: Callable[[dict], None] | None = None, log: Callable[[str], None] = lambda m: None) -> dict:
+    """Train `trial` unless its run is complete; its results-table row. Every epoch is
+    reported (`epoch_metrics`) and checkpointed to the inbox; the run directory is
+    delivered to the inbox when complete. `holder` names the Tune trial doing it."""
+    report = report or (lambda metrics: None)
+    node = node_name()
+    while (state := call(inbox, "claim", trial.path, holder)) == WAIT:
+        time.sleep(CLAIM_POLL_S)
+    if state == COMPLETE:
+        summary = call(inbox, "summary", trial.path)
+        for metrics in _history_metrics(call(inbox, "history", trial.path), summary):
+            report(metrics)
+        call(inbox, "journal", "reused", trial.path, node=node)
+        return result_row(trial, summary)
+    exp = parse_experiment(tomllib.loads(trial.config), f"sweep trial {trial.path}")
+    blob = call(inbox, "checkpoint", trial.path)
+    with tempfile.TemporaryDirectory(prefix="sysid-trial-") as scratch:
+        run_dir = Path(scratch) / PurePosixPath(trial.path).name
+        done: list[dict] = []
+        if blob is not None:
+            checkpoint_path(run_dir).write_bytes(blob)
+            done = _history_metrics(_checkpoint_history(blob))
+            for metrics in done:
+                report(metrics)
+        call(inbox, "journal", "resumed" if blob is not None else "started", trial.path, node=node,
+             **({"after_epochs": len(done)} if blob is not None else {}))
+
+        def on_epoch(epoch: EpochReport) -> None:
+            if epoch.checkpoint is not None:
+                call(inbox, "save_checkpoint", trial.path, holder, epoch.checkpoint.read_bytes())
+            report(epoch_metrics(epoch.stage, epoch.epoch, epoch.train_loss, epoch.val_loss))
+
+        runs = data.training_runs(exp) if exp.needs_training else None
+        run_experiment(exp, run_dir, data.tests, runs, data.root, progress=False, log=log,
+                       resume=blob is not None, on_epoch=on_epoch)
+        summary = call(inbox, "deliver", trial.path, holder, pack_run(run_dir), trial.config, node)
+    return result_row(trial, summary)
 
 
-def tune_trainable(config: dict, trials: list[TrialSpec], context: TrialContext) -> None:
+def final_metrics(rows: list[dict]) -> dict:
+    """A Tune trial's last report: the mean validation loss of its run(s) (inf if any
+    failed), the epochs, and ``final`` (a trial without it was stopped early)."""
+    values = [r["val_loss"] for r in rows]
+    ok = all(r["status"] == "complete" and math.isfinite(v) for r, v in zip(rows, values))
+    return {"val_loss": sum(values) / len(values) if ok else math.inf, "final": True, "failed": not ok,
+            "epochs": int(sum(int(r.get("epochs") or 0) for r in rows))}
+
+
+def tune_trainable(config: dict, trials: list[TrialSpec], inbox: Any, data: TrialData) -> None:
     """Ray Tune's function trainable: the trial at index ``config["trial"]``."""
     from ray import tune
 
-    row = run_trial(trials[int(config["trial"])], context)
-    value = row["val_loss"]
-    tune.report({"val_loss": value if math.isfinite(value) else math.inf,
-                 "epochs": int(row.get("epochs") or 0), "failed": row["status"] != "complete"})
+    holder = tune.get_context().get_trial_id()
+    row = run_trial(trials[int(config["trial"])], inbox, data, holder, tune.report)
+    tune.report(final_metrics([row]))

@@ -1,0 +1,203 @@
+"""Connecting to Ray the way Ray does, with one clear line when it cannot be done.
+
+Where trials run: ``--address`` (``HOST:PORT`` of a cluster's head, ``auto`` for the
+cluster ``ray start`` started on this machine), else ``RAY_ADDRESS``, else a fresh local
+Ray of this process's own (``ray.init(address="local")``): a local sweep never joins, or
+collides with, a cluster that happens to run on the machine.
+
+Failures before anything runs, each one line naming the address and what to do: Ray not
+installed; a host that does not resolve or a port where nothing listens (found in seconds
+by a TCP probe, instead of Ray's retries); a cluster that uses token authentication when
+no token is set (Ray's ``InvalidAuthToken``); no cluster for ``auto``.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import socket
+import tempfile
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Callable, Iterator
+
+from sysid.errors import ConfigError
+
+INSTALL_HINT = "Ray is needed for sweeps and seed studies: pip install \"sysid[sweep]\" (ray[tune], optuna)"
+PROBE_TIMEOUT_S = 5.0    # TCP connect to the cluster's head before Ray is asked to join it
+JOIN_RETRIES = 10        # Ray's attempts (about 1 s each) to reach the head's GCS
+AUTH_HINT = ("the cluster uses token authentication: set RAY_AUTH_MODE=token and the cluster's token in "
+             "RAY_AUTH_TOKEN (or RAY_AUTH_TOKEN_PATH naming a file holding it; default ~/.ray/auth_token)")
+
+
+def import_ray():
+    """Ray and Ray Tune, quiet, or a clear error when they are not installed."""
+    os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
+    os.environ.setdefault("RAY_DEDUP_LOGS", "0")
+    os.environ.setdefault("TUNE_WARN_EXCESSIVE_EXPERIMENT_CHECKPOINT_SYNC_THRESHOLD_S", "600")
+    try:
+        import ray
+        from ray import tune
+    except ImportError:
+        raise ConfigError(INSTALL_HINT) from None
+    return ray, tune
+
+
+@dataclass(frozen=True)
+class RayTarget:
+    """Where trials run: ``address`` None means a local Ray started by this process."""
+
+    address: str | None
+    source: str = "local"        # "--address" | "RAY_ADDRESS" | "local"
+
+    def describe(self) -> str:
+        return "a local Ray" if self.address is None else f"the Ray cluster at {self.address} ({self.source})"
+
+
+def ray_target(address: str | None) -> RayTarget:
+    """``--address``, else ``RAY_ADDRESS``, else local; refuses an empty or malformed one."""
+    if address is not None:
+        source = "--address"
+    elif os.environ.get("RAY_ADDRESS"):
+        address, source = os.environ["RAY_ADDRESS"], "RAY_ADDRESS"
+    else:
+        return RayTarget(None)
+    address = address.strip()
+    if address == "local":
+        return RayTarget(None)
+    if not address or (address != "auto" and "://" not in address and _host_port(address) is None):
+        raise ConfigError(f"{source} {address!r}: expected HOST:PORT of a Ray cluster's head (e.g. "
+                          "10.0.0.5:6379), auto (the cluster `ray start` started on this machine) or local")
+    return RayTarget(address, source)
+
+
+def _host_port(address: str) -> tuple[str, int] | None:
+    host, sep, port = address.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        return None
+    return host.strip("[]"), int(port)
+
+
+def check_reachable(target: RayTarget, timeout: float = PROBE_TIMEOUT_S) -> None:
+    """Refuse (one line, within `timeout` s) a HOST:PORT whose host does not resolve or
+    where nothing accepts a connection. ``auto`` and URIs (``ray://``) are left to Ray."""
+    if target.address is None or target.address == "auto" or "://" in target.address:
+        return
+    host, port = _host_port(target.address)
+    where = f"{target.source} {target.address}"
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    except (socket.gaierror, UnicodeError) as exc:
+        raise ConfigError(f"{where}: host {host!r} not found ({getattr(exc, 'strerror', None) or exc}); "
+                          "check the address of the cluster's head") from None
+    reason = "no answer"
+    for family, kind, proto, _, sockaddr in infos:
+        try:
+            with socket.socket(family, kind, proto) as sock:
+                sock.settimeout(timeout)
+                sock.connect(sockaddr)
+                return
+        except socket.timeout:
+            reason = f"no answer within {timeout:g} s"
+        except OSError as exc:
+            reason = exc.strerror or str(exc)
+    raise ConfigError(f"{where}: no Ray cluster reachable there ({reason}); start one with "
+                      f"`ray start --head --port {port}` on {host}, or check the address")
+
+
+@contextmanager
+def _quiet_stderr() -> Iterator[list[str]]:
+    """Send this process's stderr (Ray's C++ log lines) to a buffer; yields a list that
+    holds the captured text afterwards."""
+    captured: list[str] = []
+    try:
+        saved = os.dup(2)
+    except OSError:  # no stderr to redirect
+        yield captured
+        return
+    with tempfile.TemporaryFile(mode="w+b") as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield captured
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            captured.append(sink.read().decode(errors="replace"))
+
+
+@contextmanager
+def _env(**values: str) -> Iterator[None]:
+    old = {k: os.environ.get(k) for k in values}
+    os.environ.update(values)
+    try:
+        yield
+    finally:
+        for key, value in old.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+
+
+def _chain_text(exc: BaseException) -> str:
+    parts = []
+    while exc is not None and len(parts) < 8:
+        parts.append(f"{type(exc).__name__}: {exc}")
+        exc = exc.__cause__ or exc.__context__
+    return "\n".join(parts)
+
+
+def join_error(target: RayTarget, exc: BaseException, log_text: str = "") -> ConfigError:
+    """One line for a failed ``ray.init`` of `target`."""
+    text = _chain_text(exc) + "\n" + log_text
+    where = f"{target.source} {target.address}"
+    if "AuthenticationError" in text or "InvalidAuthToken" in text or "Unauthenticated" in text:
+        return ConfigError(f"{where}: the cluster refused the connection: {AUTH_HINT}")
+    if "Could not find any running Ray instance" in text:
+        return ConfigError(f"{where}: no Ray cluster runs on this machine (start one with `ray start --head`, "
+                           "or give its HOST:PORT)")
+    last = (str(exc).strip().splitlines() or [type(exc).__name__])[-1][:200]
+    return ConfigError(f"{where}: cannot join the Ray cluster ({last})")
+
+
+def running_cluster() -> str | None:
+    """The address of a Ray cluster `ray start` left running on this machine, if any."""
+    try:
+        from ray._private import services
+        address = services.find_bootstrap_address(None)
+        return address if address and address in services.find_gcs_addresses() else None
+    except Exception:  # a private API: no note rather than an error
+        return None
+
+
+def start_ray(workers: int, address: str | None, log: Callable[[str], None] = print) -> bool:
+    """Join the cluster `ray_target(address)` names, or start a local Ray with `workers`
+    CPUs; True if this call started or joined (the caller shuts it down)."""
+    ray, _ = import_ray()
+    target = ray_target(address)
+    # trial failures are reported by the progress lines and the results table, not tracebacks
+    for name in ("ray", "ray.tune", "ray.air", "ray.train"):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
+    if ray.is_initialized():
+        return False
+    if target.address is None:
+        other = running_cluster()
+        if other:
+            log(f"note: a Ray cluster runs on this machine ({other}); this run starts a local Ray of its own "
+                "(--address auto joins that cluster)")
+        ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False,
+                 logging_level=logging.ERROR, object_store_memory=200 * 1024**2, configure_logging=True)
+        return True
+    check_reachable(target)
+    with _env(RAY_gcs_server_port_wait_time_s=str(JOIN_RETRIES)), _quiet_stderr() as captured:
+        try:
+            ray.init(address=target.address, log_to_driver=False, logging_level=logging.ERROR)
+        except Exception as exc:  # Ray's ConnectionError/RuntimeError/AuthenticationError
+            failure = exc
+        else:
+            failure = None
+    if failure is not None:
+        if ray.is_initialized():
+            ray.shutdown()
+        raise join_error(target, failure, "".join(captured)) from None
+    return True
