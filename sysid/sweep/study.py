@@ -32,7 +32,7 @@ from sysid.files import write_text
 from sysid.sweep.inbox import JOURNAL, complete_summary
 from sysid.sweep.plan import make_trial, sweep_trials
 from sysid.sweep.results import SweepResults, collect_results, scanned_trials, write_results
-from sysid.sweep.runner import TuneStorage, make_scheduler, ray_session, run_optuna, run_trials
+from sysid.sweep.runner import Outcomes, TuneStorage, make_scheduler, ray_session, run_optuna, run_trials
 from sysid.sweep.spec import SweepSpec
 from sysid.sweep.trial import TrialSpec, read_trial_data
 
@@ -103,6 +103,10 @@ def optuna_history(spec: SweepSpec, out: Path) -> tuple[list[tuple[dict, float]]
     return evaluated, pending
 
 
+def _seed_dirs(spec: SweepSpec, values: dict) -> dict[str, str]:
+    return {f"seed{s}": make_trial(spec, values, s).path for s in spec.seeds}
+
+
 def _experiments(spec: SweepSpec, trials: list[TrialSpec]):
     return [spec.base] + [parse_experiment(tomllib.loads(t.config), spec.source) for t in trials]
 
@@ -133,37 +137,38 @@ def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = Non
     scheduler = make_scheduler(spec.scheduler, spec.most_epochs * (len(spec.seeds) if spec.search == "optuna" else 1))
     existed = out.is_dir()
     where = f" on {address}" if address else (f" on {os.environ['RAY_ADDRESS']}" if os.environ.get("RAY_ADDRESS") else "")
+    evaluated, pending = optuna_history(spec, out) if spec.search == "optuna" and resume else ([], [])
+    if spec.search == "optuna" and resume:
+        log(f"sweep {spec.name}: optuna resumes from {len(evaluated)} finished configurations "
+            f"({len(pending)} with seeds left) in {out / 'trials'}; Tune's saved search state is not read")
+    parent, outcomes = None, Outcomes()
     try:
-        with ray_session(out, workers, address, log) as session:
-            write_output(spec, out, resume)
-            callbacks, parent = [], None
-            if spec.search == "optuna":
-                evaluated, pending = optuna_history(spec, out) if resume else ([], [])
-                if resume:
-                    log(f"sweep {spec.name}: optuna resumes from {len(evaluated)} finished configurations "
-                        f"({len(pending)} with seeds left) in {out / 'trials'}; Tune's saved search state is "
-                        "not read")
-                log(f"sweep {spec.name}: optuna, {spec.samples} configurations x {len(spec.seeds)} seeds{where}")
-
-                def run_dirs(config: dict) -> dict[str, str]:
-                    values = values_of(spec, config)
-                    return {f"seed{s}": make_trial(spec, values, s).path for s in spec.seeds}
-                if tracker is not None:
-                    callbacks, parent = _tracking(tracker, spec, out, lambda c: point_of(spec, c),
-                                                  lambda c: values_of(spec, c), run_dirs, log)
-                outcomes = run_optuna(spec, out, trial_data, session, tune_storage, scheduler, callbacks,
-                                      evaluated, pending, log)
-                found = {t.path: t for t in scanned_trials(spec, out)}
-                for config in outcomes.configs:  # trials Tune ended without a run (stopped, failed)
-                    for seed in spec.seeds:
-                        trial = make_trial(spec, values_of(spec, config), seed)
-                        found.setdefault(trial.path, trial)
-                trials = sorted(found.values(), key=lambda t: t.path)
-            else:
-                trials = planned
-                log(f"sweep {spec.name}: {spec.search}, {len(trials) // len(spec.seeds)} configurations x "
-                    f"{len(spec.seeds)} seeds = {len(trials)} trials{where}"
-                    + (f", scheduler {spec.scheduler.kind}" if spec.scheduler.kind != "none" else ""))
+        if spec.search == "optuna":
+            log(f"sweep {spec.name}: optuna, {spec.samples} configurations x {len(spec.seeds)} seeds{where}")
+            if len(evaluated) < spec.samples:
+                with ray_session(out, workers, address, log) as session:
+                    write_output(spec, out, resume)
+                    callbacks = []
+                    if tracker is not None:
+                        callbacks, parent = _tracking(tracker, spec, out, lambda c: point_of(spec, c),
+                                                      lambda c: values_of(spec, c),
+                                                      lambda c: _seed_dirs(spec, values_of(spec, c)), log)
+                    outcomes = run_optuna(spec, out, trial_data, session, tune_storage, scheduler, callbacks,
+                                          evaluated, pending, log)
+            found = {t.path: t for t in scanned_trials(spec, out)}
+            for config in outcomes.configs:  # trials Tune ended without a run (stopped, failed)
+                for seed in spec.seeds:
+                    trial = make_trial(spec, values_of(spec, config), seed)
+                    found.setdefault(trial.path, trial)
+            trials = sorted(found.values(), key=lambda t: t.path)
+        else:
+            trials = planned
+            log(f"sweep {spec.name}: {spec.search}, {len(trials) // len(spec.seeds)} configurations x "
+                f"{len(spec.seeds)} seeds = {len(trials)} trials{where}"
+                + (f", scheduler {spec.scheduler.kind}" if spec.scheduler.kind != "none" else ""))
+            with ray_session(out, workers, address, log) as session:
+                write_output(spec, out, resume)
+                callbacks = []
                 if tracker is not None:
                     callbacks, parent = _tracking(tracker, spec, out, lambda c: trials[int(c["trial"])].path,
                                                   lambda c: {**trials[int(c["trial"])].values,
@@ -179,7 +184,7 @@ def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = Non
     summary = write_results(spec, out, results, time.perf_counter() - started,
                             {"tune": tune_storage.experiment, "scheduler": spec.scheduler.kind,
                              "mlflow": tracker.uri if tracker else None})
-    if tracker is not None and parent is not None:
+    if tracker is not None and parent is not None:  # the sweep's own run: counts, best, the results table
         tracker.metrics(parent, {k: v for k, v in summary.items() if k in ("complete", "failed", "stopped_early")}
                         | ({"best_val_loss": summary["best"]["val_loss_mean"]} if summary.get("best") else {}))
         tracker.client.log_artifact(parent, str(out / "results.csv"))
