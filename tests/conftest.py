@@ -32,7 +32,7 @@ def oracle_vectors(oracle_dir) -> pd.DataFrame:
 
 @pytest.fixture(scope="session")
 def dataset_dir() -> Path:
-    from sysid.datasets import data_dir
+    from sysid.data.datasets import data_dir
     try:
         return data_dir()
     except DataError as exc:

@@ -1,4 +1,4 @@
-"""Synthetic run and reproduction directories following `sysid.rundir`, for report tests.
+"""Synthetic run and reproduction directories following `sysid.runs.rundir`, for report tests.
 
 "Measured" runs are simulated with a perturbed MMG (no real data needed); the MMG runs
 predict with the bundled ship, NN and hybrid runs are made-up blends of the measurement
@@ -16,12 +16,12 @@ import pandas as pd
 import torch
 
 from sysid import MMG, integrate, load_ship
-from sysid.data import Run
-from sysid.evaluate import predict_windows
-from sysid.manifest import write_manifest
+from sysid.data.recordings import Run
+from sysid.evaluation.evaluate import predict_windows
+from sysid.store.manifest import write_manifest
 from sysid.mmg.wind import relative_wind
-from sysid.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
-from sysid.paper import COMPARISON_COLUMNS
+from sysid.evaluation.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
+from sysid.protocol.paper import COMPARISON_COLUMNS
 
 DEG = math.pi / 180.0
 SCENARIOS = {  # scenario -> (file stem, duration [s])
@@ -175,7 +175,7 @@ def write_run(out: Path, name: str, runs: dict[str, Run], horizons=(30, 100), se
 
 def write_reproduction(out: Path, scale: float = 1.0, names=tuple(RUNS)) -> Path:
     """A reproduction directory: runs/, comparison.csv, summary.json."""
-    from sysid.paper import paper_rmse
+    from sysid.protocol.paper import paper_rmse
     runs = measured_runs(scale)
     rows = []
     for i, name in enumerate(names):

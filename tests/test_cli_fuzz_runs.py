@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from cli_harness import BINARY, assert_refused, in_process, leftovers
-from sysid.manifest import MANIFEST, verify_manifest, write_manifest
+from sysid.store.manifest import MANIFEST, verify_manifest, write_manifest
 
 
 @pytest.fixture

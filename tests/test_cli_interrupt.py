@@ -9,7 +9,7 @@ import subprocess
 import pytest
 
 from cli_harness import Outcome, assert_refused, console_script, environment, leftovers, subprocess_run
-from sysid.manifest import verify_manifest
+from sysid.store.manifest import verify_manifest
 from test_cli_fuzz_runs import tiny_config
 
 

@@ -4,7 +4,7 @@ import pandas as pd
 import pytest
 
 from sysid.cli import run as main
-from sysid.data import read_run
+from sysid.data.recordings import read_run
 from sysid.errors import DataError, ShipDefinitionError
 
 # our column -> the oracle's (the lab's names: delta_rad, XH_SI, ...)
@@ -108,7 +108,7 @@ def test_trailing_empty_rows_are_dropped(dataset_dir, tmp_path):
 
 
 def test_dataset_checks_duplicates_and_frozen_gnss(dataset_dir):
-    from sysid.data import duplicate_runs
+    from sysid.data.recordings import duplicate_runs
     cut = read_run(dataset_dir / "turning" / "turn_cut_14-Sep-2020_15_58_08.csv")
     full = read_run(dataset_dir / "turning" / "turn_14-Sep-2020_15_58_08.csv")
     other = read_run(dataset_dir / "turning" / "turn_14-Oct-2020_14_56_07.csv")

@@ -16,18 +16,18 @@ import pytest
 import torch
 
 from sysid import MMG, integrate, load_ship
-from sysid import codegen_fixes
-from sysid.compiled import compiled_rollout_function, compiled_step, predict, rollout_package
-from sysid.correction import correction_inputs
-from sysid.experiment import parse_experiment
-from sysid.files import write_text
-from sysid.integrators import Integrator, Method
-from sysid.ood import KNNGate
-from sysid.models import build_model
-from sysid.manifest import write_manifest
-from sysid.rundir import load_model, save_model
-from sysid.integrators import run_steps
-from sysid.stepper import Step
+from sysid.fast import codegen_fixes
+from sysid.fast.compiled import compiled_rollout_function, compiled_step, predict, rollout_package
+from sysid.hybrid.correction import correction_inputs
+from sysid.config.experiment import parse_experiment
+from sysid.store.files import write_text
+from sysid.dynamics.integrators import Integrator, Method
+from sysid.hybrid.knn_gate import KNNGate
+from sysid.hybrid.force_models import build_model
+from sysid.store.manifest import write_manifest
+from sysid.runs.rundir import load_model, save_model
+from sysid.dynamics.integrators import run_steps
+from sysid.fast.stepper import Step
 
 STATE = ["x", "u", "y", "v", "psi", "r"]
 INPUTS = ["n_prop", "delta_rad", "wind_velo_true", "wind_dir_true"]
@@ -84,7 +84,7 @@ def test_no_torchdiffeq_internals_in_the_package():
 
 def test_classical_and_3_8_rules_are_fourth_order_on_an_analytic_case():
     """dx/dt = -x: one step of h gives exp(-h) to O(h^5) for both fourth-order rules."""
-    from sysid.integrators import STEP_RULES
+    from sysid.dynamics.integrators import STEP_RULES
     x = torch.ones(1, dtype=torch.float64)
     for method in (Method.RK4, Method.RK4_38):
         errors = [abs(float(STEP_RULES[method](lambda s: -s, x, h)) - torch.exp(torch.tensor(-h)).item())
@@ -146,7 +146,7 @@ def _loop_source(package: Path) -> str:
 
 
 def test_compiled_loop_allocates_only_what_its_kernels_use(hybrid_run, zigzag):
-    """The two wrapper fixes of `sysid.codegen_fixes`, read off the generated C++ of the
+    """The two wrapper fixes of `sysid.fast.codegen_fixes`, read off the generated C++ of the
     hybrid's RK4 loop (gate with its conds): every tensor the loop allocates is used by a
     kernel or handed on, and the loop's condition takes handles of only k and steps. The
     numbers are those of eager (test_compiled_prediction_equals_eager compiles this loop)."""
@@ -198,7 +198,7 @@ print(any(m == "sysid" or m.startswith("sysid.") for m in sys.modules))
 @pytest.mark.parametrize("portable", [False, True])
 def test_export_predicts_the_same_without_sysid(hybrid_run, zigzag, tmp_path, portable):
     from sysid.cli import run
-    from sysid.export import load_step
+    from sysid.fast.export import load_step
     run_dir, model = hybrid_run
     states, inputs = zigzag
     if not portable and compiled_step(model, "euler", 1.0, 1) is None:
@@ -223,7 +223,7 @@ def test_export_predicts_the_same_without_sysid(hybrid_run, zigzag, tmp_path, po
 
 
 def test_trajectory_stacks_the_forces_of_every_euler_step(hybrid_run, zigzag):
-    from sysid.dynamics import integrate_with_forces
+    from sysid.dynamics.equations import integrate_with_forces
     states, inputs = zigzag
     model = hybrid_run[1]
     traj = integrate_with_forces(model, states[0], inputs[:8], 1.0)
@@ -250,7 +250,7 @@ def test_compiled_batch_equals_eager(zigzag):
 
 def test_large_batches_run_in_padded_channels_first_chunks():
     """`_by_rows` feeds a function compiled for `rows` channels-first rows with any batch."""
-    from sysid.compiled import _by_rows
+    from sysid.fast.compiled import _by_rows
     calls = []
 
     def fn(xT, uT):  # stands for a compiled (6, rows), (4, rows) -> (6, rows) function
@@ -267,8 +267,8 @@ def test_large_batches_run_in_padded_channels_first_chunks():
 def test_lean_right_hand_side_is_the_breakdown_total_bit_for_bit(hybrid_run, zigzag):
     """Compiled steps sum X, Y, N as separate channels (no force breakdown): the same
     operations in the same order, so the same numbers, for MMG, hybrid and NN-only."""
-    from sysid.dynamics import derivative, lean_derivative
-    from sysid.models import CorrectedModel
+    from sysid.dynamics.equations import derivative, lean_derivative
+    from sysid.hybrid.force_models import CorrectedModel
     states, inputs = zigzag
     hybrid = hybrid_run[1]
     nn_only = CorrectedModel(hybrid.mmg, hybrid.correction_net, hybrid.gate, physics=False, gate_space="inputs")
@@ -281,7 +281,7 @@ def test_lean_right_hand_side_is_the_breakdown_total_bit_for_bit(hybrid_run, zig
 
 def test_packed_coefficients_give_the_same_forces(hybrid_run, zigzag):
     from sysid.mmg.coefficients import PackedCoefficients
-    from sysid.prepared import packed
+    from sysid.fast.prepared import packed
     states, inputs = zigzag
     hybrid = hybrid_run[1]
     fast = packed(hybrid)
@@ -296,8 +296,8 @@ def test_packed_coefficients_give_the_same_forces(hybrid_run, zigzag):
 def test_compiled_float32_rows_equal_eager(zigzag):
     """The batched float32 right-hand side (channels first, packed coefficients) agrees
     with eager float32 to float32 round-off."""
-    from sysid.compiled import compiled_derivative
-    from sysid.dynamics import derivative
+    from sysid.fast.compiled import compiled_derivative
+    from sysid.dynamics.equations import derivative
     states, inputs = zigzag
     model = MMG(load_ship("esso_osaka"), dtype=torch.float32)
     x, u = states[:8].float(), inputs[:8].float()
@@ -313,7 +313,7 @@ def test_compiled_functions_are_rebuilt_when_the_model_changes(hybrid_run):
     """The in-process memo of compiled functions keys on every parameter's and buffer's
     storage, version and shape, and on the scalar settings: a change to any of them
     (training in place, a refitted gate, the gate switched off) builds anew."""
-    from sysid.compiled import _memoized
+    from sysid.fast.compiled import _memoized
     model = hybrid_run[1]
     builds = []
 

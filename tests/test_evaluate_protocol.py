@@ -5,7 +5,7 @@ import pandas as pd
 import pytest
 
 from sysid.cli import run as main
-from sysid.datasets import TEST_FILES
+from sysid.data.datasets import TEST_FILES
 
 # scenario -> (30 s u v r, 100 s u v r) for X'vr = 0.4535 and -0.0081
 LAB = {

@@ -7,8 +7,8 @@ import stat
 import pandas as pd
 import pytest
 
-from sysid.files import write_csv, write_text
-from sysid.staging import staged_directory
+from sysid.store.files import write_csv, write_text
+from sysid.store.staging import staged_directory
 
 
 @pytest.fixture

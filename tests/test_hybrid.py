@@ -8,16 +8,16 @@ import pytest
 import torch
 
 from sysid import MMG, integrate, load_ship
-from sysid.correction import ForceCorrection
-from sysid.data import Run
+from sysid.hybrid.correction import ForceCorrection
+from sysid.data.recordings import Run
 from sysid.errors import CheckpointError, ConfigError, IncompleteOutputError
-from sysid.manifest import write_manifest
-from sysid.experiment import load_experiment, parse_experiment
-from sysid.models import CorrectedModel
-from sysid.ood import KNNGate
-from sysid.evaluate import evaluate_model
-from sysid.rundir import load_model, write_run
-from sysid.train import Trainer, output_penalty
+from sysid.store.manifest import write_manifest
+from sysid.config.experiment import load_experiment, parse_experiment
+from sysid.hybrid.force_models import CorrectedModel
+from sysid.hybrid.knn_gate import KNNGate
+from sysid.evaluation.evaluate import evaluate_model
+from sysid.runs.rundir import load_model, write_run
+from sysid.identify.trainer import Trainer, output_penalty
 
 ADDED_FORCE = torch.tensor([-1.5, 0.8, -0.6], dtype=torch.float64)  # X [N], Y [N], N [N m], body frame
 
@@ -236,7 +236,7 @@ def test_force_correction_is_the_papers_network_and_members_average():
 def test_val_loss_is_the_final_models_validation_loss_at_the_objective_horizon(trained):
     """summary.val_loss (the sweep objective): L_v of the final (gated) model on the
     validation windows; with objective_s, on validation windows of that many seconds."""
-    from sysid.train import multistep_loss, split_windows
+    from sysid.identify.trainer import multistep_loss, split_windows
     runs, trainer = trained
     exp = trainer.experiment
     t = exp.training

@@ -14,9 +14,9 @@ from benchmark_scripts import load_benchmark
 from sysid import load_ship
 from sysid.cli import run as sysid
 from sysid.errors import ConfigError
-from sysid.experiment import load_experiment, parse_experiment
+from sysid.config.experiment import load_experiment, parse_experiment
 from sysid.report.methods import estimator_text
-from sysid.rundir import load_model
+from sysid.runs.rundir import load_model
 
 from test_own_ship_end_to_end import write_processed_csv
 

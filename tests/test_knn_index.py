@@ -4,8 +4,8 @@ import math
 import pytest
 import torch
 
-from sysid.knn_index import IndexedGate, k_smallest_mean, k_smallest_means, leaf_partition, neighbourhood_groups
-from sysid.ood import KNNGate
+from sysid.fast.knn_index import IndexedGate, k_smallest_mean, k_smallest_means, leaf_partition, neighbourhood_groups
+from sysid.hybrid.knn_gate import KNNGate
 
 
 @pytest.fixture(scope="module")
@@ -129,7 +129,7 @@ class _Decision(torch.nn.Module):
 def test_compiled_index_decides_as_the_gate_scan(gate_and_queries):
     """The tiers compiled (AOTInductor, one row per call, as in a prediction) give the
     decisions of the gate's whole-bank scan, row by row; the scan tier compiled alone too."""
-    from sysid.compiled import compile_cached
+    from sysid.fast.compiled import compile_cached
     gate, queries = gate_and_queries
     index = IndexedGate(gate)
     fn = compile_cached(_Decision(index), (queries[:1],), "test-gate")

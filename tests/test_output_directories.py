@@ -1,5 +1,5 @@
-"""Staged output directories and their completeness manifests (`sysid.staging`,
-`sysid.manifest`): all-or-nothing, never stale, refused when incomplete or changed."""
+"""Staged output directories and their completeness manifests (`sysid.store.staging`,
+`sysid.store.manifest`): all-or-nothing, never stale, refused when incomplete or changed."""
 from __future__ import annotations
 
 import json
@@ -8,9 +8,9 @@ import os
 import pytest
 
 from sysid.errors import IncompleteOutputError, OutputError
-from sysid.files import write_text
-from sysid.manifest import MANIFEST, verify_manifest
-from sysid.staging import check_target, staged_directory
+from sysid.store.files import write_text
+from sysid.store.manifest import MANIFEST, verify_manifest
+from sysid.store.staging import check_target, staged_directory
 
 
 def fill(directory, names):

@@ -13,7 +13,7 @@ import torch
 
 from sysid import MMG, integrate, load_ship
 from sysid.cli import run as sysid
-from sysid.data import COLUMNS
+from sysid.data.recordings import COLUMNS
 from sysid.mmg.wind import relative_wind
 
 from test_ship_check import SCRATCH

@@ -1,4 +1,4 @@
-"""The processing bias measured by replaying the identified ship (`sysid.pipeline_replay`),
+"""The processing bias measured by replaying the identified ship (`sysid.identify.pipeline_replay`),
 against a known truth: KVLCC2 maneuvers simulated at 10 Hz, raw logs without noise, the
 prescribed preprocessing, hull derivatives identified with start states."""
 import math
@@ -8,9 +8,9 @@ import pytest
 
 from benchmark_scripts import load_benchmark
 from sysid import MMG, load_ship
-from sysid.pipeline_replay import noise_free, processed_windows, processing_bias, replay_run, STATE_COLUMNS
-from sysid.levenberg_marquardt import identify_levenberg_marquardt
-from sysid.uncertainty import velocity_weights
+from sysid.identify.pipeline_replay import noise_free, processed_windows, processing_bias, replay_run, STATE_COLUMNS
+from sysid.identify.levenberg_marquardt import identify_levenberg_marquardt
+from sysid.identify.uncertainty import velocity_weights
 
 NAMES = ["Y_v", "Y_r", "N_v", "N_r"]
 

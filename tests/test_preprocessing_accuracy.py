@@ -28,7 +28,7 @@ LAYOUT = SensorLayout()
 @pytest.fixture(scope="module")
 def data():
     try:
-        from sysid.datasets import data_dir
+        from sysid.data.datasets import data_dir
         return data_dir()
     except DataError as exc:
         pytest.skip(f"FRT-DS-ESSO dataset not available: {exc}")

@@ -15,7 +15,7 @@ from preprocessing import synth
 from preprocessing.pipeline import Pipeline, PreprocessSettings
 from preprocessing.schema import RawLogError
 from preprocessing.sensors import SensorLayout
-from sysid.manifest import verify_manifest
+from sysid.store.manifest import verify_manifest
 
 LAYOUT = SensorLayout()
 
@@ -195,7 +195,7 @@ def test_cli_failed_file_leaves_no_output(synthetic, tmp_path, capsys):
     processed = pd.read_csv(out / "good.csv")
     assert list(processed.columns)[:3] == ["t [s]", "x_position_mid [m]", "u_velo [m/s]"]
     assert len(processed.columns) == 13
-    from sysid.data import read_run                  # loads straight into training/evaluation
+    from sysid.data.recordings import read_run                  # loads straight into training/evaluation
     loaded = read_run(out / "good.csv")
     assert len(loaded) == len(processed) and loaded.dt == pytest.approx(1.0)
 

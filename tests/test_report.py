@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 from sysid.errors import CheckpointError, IncompleteOutputError
-from sysid.manifest import write_manifest
+from sysid.store.manifest import write_manifest
 from sysid.report import build_report
 from sysid.report.tables import format_rmse
 

@@ -2,7 +2,7 @@
 one process give the same tables."""
 import pandas as pd
 
-from sysid.reproduce import reproduce
+from sysid.protocol.reproduce import reproduce
 
 
 def test_parallel_workers_give_the_same_tables(dataset_dir, tmp_path):

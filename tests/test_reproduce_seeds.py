@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 import torch
 
-from sysid.ensemble import SeedEnsemble
-from sysid.seeds import seed_metrics
+from sysid.hybrid.ensemble import SeedEnsemble
+from sysid.protocol.seeds import seed_metrics
 
 
 def test_seed_metrics_are_means_and_sample_std():
@@ -27,10 +27,10 @@ def test_seed_metrics_are_means_and_sample_std():
 @pytest.mark.slow
 def test_reproduce_with_two_seeds(tmp_path, dataset_dir):
     pytest.importorskip("ray.tune")
-    from sysid.manifest import write_manifest
+    from sysid.store.manifest import write_manifest
     from sysid.report import build_report
-    from sysid.reproduce import reproduce
-    from sysid.rundir import load_model
+    from sysid.protocol.reproduce import reproduce
+    from sysid.runs.rundir import load_model
 
     out = tmp_path / "repro"
     tiny = {"training": {"epochs": 3, "warm_start_epochs": 3}, "evaluation": {"horizons": (30.0,)}}

@@ -3,9 +3,9 @@ import json
 
 import pytest
 
-from sysid.checkpoint import TrainingCheckpoint
+from sysid.identify.checkpoint import TrainingCheckpoint
 from sysid.cli import main, run as sysid
-from sysid.lifecycle import checkpoint_path
+from sysid.runs.lifecycle import checkpoint_path
 from tiny_experiment import tiny_experiment, tiny_test_file
 
 

@@ -4,7 +4,7 @@ import math
 import pytest
 
 from sysid.errors import ShipDefinitionError
-from sysid.ship import load_ship, parse_overrides
+from sysid.mmg.ship import load_ship, parse_overrides
 
 ROOT_TOML = "configs/ships/esso_osaka.toml"
 

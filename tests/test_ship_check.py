@@ -3,8 +3,8 @@ import pytest
 
 from sysid.cli import run
 from sysid.errors import ShipDefinitionError
-from sysid.ship import load_ship
-from sysid.ship_check import check_ship
+from sysid.mmg.ship import load_ship
+from sysid.mmg.ship_check import check_ship
 
 # a 4 m tanker model, every value invented for the test (the KVLCC2 derivatives)
 SCRATCH = """

@@ -7,7 +7,7 @@ import torch
 
 from sysid import MMG, integrate, load_ship
 from sysid.errors import ShipDefinitionError
-from sysid.ship import ships_dir
+from sysid.mmg.ship import ships_dir
 
 
 def _kvlcc2_edited(tmp_path, old, new):

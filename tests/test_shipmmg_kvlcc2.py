@@ -27,7 +27,7 @@ from scipy.interpolate import CubicSpline
 
 from sysid import MMG, load_ship, state_derivative
 from sysid.mmg.families import family
-from sysid.ship import ships_dir
+from sysid.mmg.ship import ships_dir
 
 shipmmg = pytest.importorskip(
     "shipmmg.mmg_3dof", reason="shipmmg not installed (a dev extra: pip install -e '.[dev]')")

@@ -1,4 +1,4 @@
-"""Identification by Levenberg-Marquardt (`sysid.levenberg_marquardt`), start states estimated
+"""Identification by Levenberg-Marquardt (`sysid.identify.levenberg_marquardt`), start states estimated
 or with a prior, against a known truth: KVLCC2 maneuvers simulated by Euler at 1 Hz (the
 identification model is then exactly right), hull derivatives from starts perturbed by 20-30 %."""
 
@@ -8,9 +8,9 @@ import torch
 
 from benchmark_scripts import load_benchmark
 from sysid import MMG, load_ship
-from sysid.levenberg_marquardt import (fit_uncertainty, identify_levenberg_marquardt, start_state_residuals,
+from sysid.identify.levenberg_marquardt import (fit_uncertainty, identify_levenberg_marquardt, start_state_residuals,
                                        start_state_uncertainty)
-from sysid.uncertainty import multistep_residuals
+from sysid.identify.uncertainty import multistep_residuals
 
 NAMES = ["R_0", "Y_v", "Y_r", "N_v", "N_r"]
 

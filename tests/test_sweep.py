@@ -113,7 +113,7 @@ def test_sweep_killed_part_way_resumes_without_training_a_trial_twice(tmp_path, 
     assert summary["best"]["val_loss_mean"] == pytest.approx(best, rel=1e-5)
 
     # every trial is an ordinary run directory
-    from sysid.rundir import load_model
+    from sysid.runs.rundir import load_model
     exp, model = load_model(out / table.run.iloc[0])
     assert exp.experiment.seed == table.seed.iloc[0] and exp.training.threads == 1
     # the sweep's report: objective against the keys, seed spread, the chosen configuration
@@ -149,7 +149,7 @@ run_trial(TrialSpec("trials/p/seed0", "p", 0, config), TrialContext(out, data, "
 def test_two_processes_on_one_trial_train_it_once(tmp_path, dataset_dir):
     """Optuna can propose a configuration twice while it trains: the second process waits
     for the first and reuses its run instead of training the same directory beside it."""
-    from sysid.datasets import data_root
+    from sysid.data.datasets import data_root
     from sysid.sweep.trial_lock import lock_path
     config = tiny_experiment(tmp_path / "t.toml", dataset_dir, seed=0, epochs=3, warm_start_epochs=2).read_text()
     out = tmp_path / "out"

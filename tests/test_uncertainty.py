@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from sysid import MMG, integrate, load_ship
-from sysid.uncertainty import coefficient_uncertainty, multistep_residuals, rollout
+from sysid.identify.uncertainty import coefficient_uncertainty, multistep_residuals, rollout
 
 NAMES = ["R_0", "Y_v", "Y_r", "N_v", "N_r"]
 
@@ -153,8 +153,8 @@ def test_rollout_is_the_integrators_scheme(method):
 def test_hybrid_model_with_a_silent_correction_gives_the_mmg_sigma():
     """The function takes any force model with `coefficients`: a hybrid whose FNN outputs
     zero (last layer zeroed, output mean 0) has exactly the MMG's uncertainty."""
-    from sysid.correction import ForceCorrection
-    from sysid.models import CorrectedModel
+    from sysid.hybrid.correction import ForceCorrection
+    from sysid.hybrid.force_models import CorrectedModel
     ship = load_ship("kvlcc2_l7")
     windows = _one_step_windows(ship, count=30)
     w = torch.tensor([1.0, 4.0, 100.0], dtype=torch.float64)
