@@ -56,8 +56,8 @@ def synth_raw(
     """Synthesise a raw 10 Hz log (and its truth) from a processed run."""
     from preprocessing import synth
     from preprocessing.schema import RawLogError
-    from sysid.files import write_csv
-    from sysid.ship import load_ship
+    from sysid.store.files import write_csv
+    from sysid.mmg.ship import load_ship
 
     layout = load_ship(ship).sensors
     kwargs = {}
@@ -104,8 +104,8 @@ def preprocess(
     """
     from preprocessing import pipeline
     from sysid.progress import progress
-    from sysid.ship import load_ship
-    from sysid.staging import check_target, staged_directory
+    from sysid.mmg.ship import load_ship
+    from sysid.store.staging import check_target, staged_directory
 
     if not (rate > 0 and math.isfinite(rate)):
         raise DataError(f"--rate {rate:g}: must be a number of Hz > 0 that divides 10 Hz")

@@ -7,7 +7,7 @@ A trial trains into a directory of its own node and hands its results to the dri
 - ``claim``: one training per trial at a time (Optuna may propose a configuration twice
   while the first still trains); a claim belongs to a Tune trial, whose retries take it over.
 - ``save_checkpoint`` / ``checkpoint``: the training checkpoint after every epoch, kept
-  beside the run directory it belongs to (`sysid.lifecycle.checkpoint_path`), so that a
+  beside the run directory it belongs to (`sysid.runs.lifecycle.checkpoint_path`), so that a
   trial whose node is lost resumes on another node, and ``--resume`` after a driver kill.
 - ``deliver``: the finished run directory as bytes (`pack_run`); unpacked beside its place,
   its manifest verified (every file's SHA-256) and its config compared with the trial's,
@@ -31,9 +31,9 @@ from pathlib import Path, PurePosixPath
 import pandas as pd
 
 from sysid.errors import IncompleteOutputError
-from sysid.files import atomic_path, directory_mode
-from sysid.lifecycle import checkpoint_path
-from sysid.rundir import verify_run_dir
+from sysid.store.files import atomic_path, directory_mode
+from sysid.runs.lifecycle import checkpoint_path
+from sysid.runs.rundir import verify_run_dir
 
 JOURNAL = "trials.log"
 

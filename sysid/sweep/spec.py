@@ -44,7 +44,7 @@ from pathlib import Path
 from typing import Any
 
 from sysid.errors import ConfigError
-from sysid.experiment import Experiment, load_experiment, parse_experiment
+from sysid.config.experiment import Experiment, load_experiment, parse_experiment
 
 SEARCHES = ("grid", "random", "optuna")
 SCHEDULERS = ("none", "asha", "median")

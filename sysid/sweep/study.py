@@ -4,7 +4,7 @@ Output directory::
 
     sweep.toml        the sweep file as given (a resumed sweep must match it)
     base.toml         the base experiment, every option resolved
-    trials/{point}/seed{k}/   one ordinary run directory per trial (`sysid.rundir`)
+    trials/{point}/seed{k}/   one ordinary run directory per trial (`sysid.runs.rundir`)
     trials.log        journal: one JSON line per trial event (started, resumed, trained, reused)
     results.csv       one row per trial: varied values, seed, status, validation loss, epochs
     points.csv        one row per configuration: validation loss over its seeds
@@ -27,8 +27,8 @@ from pathlib import Path
 from typing import Callable
 
 from sysid.errors import ConfigError, OutputError
-from sysid.experiment import parse_experiment
-from sysid.files import write_text
+from sysid.config.experiment import parse_experiment
+from sysid.store.files import write_text
 from sysid.sweep.inbox import JOURNAL, complete_summary
 from sysid.sweep.plan import make_trial, sweep_trials
 from sysid.sweep.results import SweepResults, collect_results, scanned_trials, write_results
@@ -120,7 +120,7 @@ def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = Non
     `address` joins a Ray cluster (default: ``RAY_ADDRESS``, else a local Ray of the
     sweep's own); `storage` puts Tune's experiment there (a path or URI) instead of
     ``{out}/tune``; `mlflow` (or the sweep file's ``[tracking] mlflow``) logs the sweep."""
-    from sysid.datasets import data_root
+    from sysid.data.datasets import data_root
     from sysid.sweep.optuna_space import point_of, values_of
 
     started = time.perf_counter()

@@ -1,5 +1,5 @@
 """One trial of a sweep: one configuration and seed trained into an ordinary run directory
-(`sysid.rundir`; ``sysid evaluate`` and ``sysid report`` read it).
+(`sysid.runs.rundir`; ``sysid evaluate`` and ``sysid report`` read it).
 
 A trial may run on any node: it needs nothing but the network. Its data come with it
 (`TrialData`, read once by the driver and shipped through Ray's object store); it trains in
@@ -24,13 +24,13 @@ from typing import Any, Callable, Iterable
 
 import torch
 
-from sysid.data import Run, read_run
-from sysid.datasets import test_files
+from sysid.data.recordings import Run, read_run
+from sysid.data.datasets import test_files
 from sysid.errors import DataError
-from sysid.experiment import Experiment, parse_experiment
-from sysid.lifecycle import checkpoint_path, run_experiment, training_runs
+from sysid.config.experiment import Experiment, parse_experiment
+from sysid.runs.lifecycle import checkpoint_path, run_experiment, training_runs
 from sysid.sweep.inbox import COMPLETE, WAIT, complete_summary, pack_run  # noqa: F401 (complete_summary: API)
-from sysid.train import EpochReport
+from sysid.identify.trainer import EpochReport
 
 CLAIM_POLL_S = 2.0   # how often a trial waiting for another training of its run asks again
 
