@@ -37,6 +37,8 @@ def sweep(
     start = time.perf_counter()
     if workers is not None and workers < 1:
         raise ConfigError(f"--workers {workers}: must be >= 1")
+    from sysid.sweep.connect import check_reachable, ray_target
+    check_reachable(ray_target(address))  # an address nobody answers at: one line in seconds, before any work
     spec = load_sweep(sweep_file)
     on_interrupt(f"finished trials are kept in {output}/trials; rerun with --resume to continue the sweep")
     results, summary = run_sweep(spec, output, workers, address, resume, overwrite, data,

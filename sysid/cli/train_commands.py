@@ -117,9 +117,9 @@ def reproduce(
     cluster = False
     if seeds > 1:
         from sysid.sweep.connect import check_reachable, import_ray, ray_target
-        import_ray()  # a clear error now if Ray is not installed
         target = ray_target(address)
         check_reachable(target)  # an address nobody answers at: one line in seconds, before any work
+        import_ray()  # a clear error now if Ray is not installed
         cluster = target.address is not None
     if mlflow:
         from sysid.tracking import Tracker
