@@ -50,8 +50,9 @@ def config_params(config_toml: str) -> dict[str, str]:
 
 
 def run_metrics(run_dir: Path) -> dict[str, float]:
-    """The final metrics of a run directory: its summary's numbers and the test RMSE of
-    every scenario and horizon (``rmse_u/Berthing/30s``)."""
+    """The final metrics of a run directory: its summary's numbers (the objective as
+    ``final_val_loss``; ``val_loss`` is the per-epoch history) and the test RMSE of every
+    scenario and horizon (``rmse_u/Berthing/30s``)."""
     import json
 
     summary = json.loads((run_dir / "summary.json").read_text())
@@ -59,7 +60,7 @@ def run_metrics(run_dir: Path) -> dict[str, float]:
     for key in ("val_loss", "epochs", "best_epoch", "train_seconds", "seconds", "mmg_val_loss", "warm_val_loss"):
         value = summary.get(key, (summary.get("training") or {}).get(key))
         if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
-            metrics[key] = float(value)
+            metrics["final_val_loss" if key == "val_loss" else key] = float(value)
     table = pd.read_csv(run_dir / "metrics.csv")
     for row in table.itertuples():
         for c in ("u", "v", "r"):
