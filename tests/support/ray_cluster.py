@@ -9,6 +9,7 @@ are private to the test, so no other Ray on the machine sees or is seen by it.
 """
 from __future__ import annotations
 
+import json
 import os
 import secrets
 import shutil
@@ -50,14 +51,16 @@ def group_alive(pgid: int) -> bool:
     return True
 
 
-def kill_group(pgid: int, wait_s: float = 20.0) -> None:
-    """SIGKILL a process group and wait until none of it is left."""
+def kill_group(proc: subprocess.Popen, wait_s: float = 20.0) -> None:
+    """SIGKILL the process group `proc` leads and wait until none of it is left (the
+    leader reaped here, the rest by init)."""
     try:
-        os.killpg(pgid, signal.SIGKILL)
+        os.killpg(proc.pid, signal.SIGKILL)
     except ProcessLookupError:
-        return
+        pass
+    proc.wait(timeout=wait_s)
     deadline = time.time() + wait_s
-    while group_alive(pgid) and time.time() < deadline:
+    while group_alive(proc.pid) and time.time() < deadline:
         time.sleep(0.2)
 
 
@@ -70,7 +73,7 @@ class LocalCluster:
         self.tmp = Path(tempfile.mkdtemp(prefix="sxr-", dir="/tmp"))  # short: Ray's socket paths
         (self.tmp / "home").mkdir()
         self.port = free_port()
-        self.groups: list[int] = []
+        self.groups: list[subprocess.Popen] = []
         self.workers: list[subprocess.Popen] = []
         self.token = secrets.token_hex(16)
         self.base_env = {**os.environ, "RAY_TMPDIR": str(self.tmp), "HOME": str(self.tmp / "home"),
@@ -83,9 +86,9 @@ class LocalCluster:
         self.address = None
 
     def _start(self, argv: list[str], env: dict, log: str) -> subprocess.Popen:
-        proc = subprocess.Popen(argv, env=env, start_new_session=True, stdout=open(self.tmp / log, "w"),
-                                stderr=subprocess.STDOUT)
-        self.groups.append(proc.pid)
+        with open(self.tmp / log, "w") as sink:  # the child keeps its own descriptor
+            proc = subprocess.Popen(argv, env=env, start_new_session=True, stdout=sink, stderr=subprocess.STDOUT)
+        self.groups.append(proc)
         return proc
 
     def start_head(self) -> str:
@@ -110,7 +113,7 @@ class LocalCluster:
         return proc
 
     def kill_worker(self, proc: subprocess.Popen) -> None:
-        kill_group(proc.pid)
+        kill_group(proc)
 
     def alive_nodes(self) -> int:
         probe = ("import ray, logging; ray.init(address=%r, logging_level=logging.ERROR, log_to_driver=False); "
@@ -118,6 +121,17 @@ class LocalCluster:
         out = subprocess.run([sys.executable, "-c", probe], env=self.env, capture_output=True, text=True, timeout=120)
         lines = out.stdout.strip().splitlines()
         return int(lines[-1]) if lines and lines[-1].isdigit() else 0
+
+    def worker_view(self, paths: list[Path]) -> tuple[str, list[bool]]:
+        """(node id, whether each path exists) as a task on a worker node sees it."""
+        probe = ("import json, os, ray, logging; ray.init(address=%r, logging_level=logging.ERROR, log_to_driver=False)\n"
+                 "@ray.remote(num_cpus=1)\n"
+                 "def look(paths):\n"
+                 "    return ray.get_runtime_context().get_node_id(), [os.path.exists(p) for p in paths]\n"
+                 "print(json.dumps(ray.get(look.remote(%r))))") % (self.address, [str(p) for p in paths])
+        out = subprocess.run([sys.executable, "-c", probe], env=self.env, capture_output=True, text=True, timeout=300)
+        node, seen = json.loads(out.stdout.strip().splitlines()[-1])
+        return node, seen
 
     def _wait_nodes(self, count: int, timeout: float = 180.0) -> None:
         deadline = time.time() + timeout
@@ -128,6 +142,6 @@ class LocalCluster:
         raise RuntimeError(f"the test cluster did not reach {count} nodes; see {self.tmp}/*.log")
 
     def stop(self) -> None:
-        for pgid in reversed(self.groups):
-            kill_group(pgid)
+        for proc in reversed(self.groups):
+            kill_group(proc)
         shutil.rmtree(self.tmp, ignore_errors=True)
