@@ -193,13 +193,17 @@ class RunInbox:
 
 
 def inbox_actor(out: str | os.PathLike):
-    """A `RunInbox` as a Ray actor on this (the driver's) node, using no CPU."""
+    """A `RunInbox` as a named Ray actor on this (the driver's) node, using no CPU; its
+    handle and name (trials find it by name, so nothing Tune saves holds a live handle)."""
+    import uuid
+
     import ray
     from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
     here = ray.get_runtime_context().get_node_id()
+    name = f"sysid-inbox-{uuid.uuid4().hex[:12]}"
     actor = ray.remote(RunInbox).options(
-        num_cpus=0, max_restarts=0,
+        name=name, num_cpus=0, max_restarts=0,
         scheduling_strategy=NodeAffinitySchedulingStrategy(node_id=here, soft=False)).remote(str(out))
     ray.get(actor.ready.remote())
-    return actor
+    return actor, name

@@ -51,10 +51,10 @@ class Outcomes:
 
 
 def progress_callback(total: int, names: Callable[[dict], str], log: Callable[[str], None],
-                      inbox=None, prefix: str = "sweep"):
+                      inbox: str | None = None, prefix: str = "sweep"):
     """A Tune callback printing one line per trial event with the counts (done, running,
     failed, stopped early) and the best validation loss so far; it also releases the
-    inbox's claims of every Tune trial that ends."""
+    claims of every Tune trial that ends in the inbox named `inbox`."""
     _, tune = import_ray()
 
     class SweepProgress(tune.Callback):
@@ -70,7 +70,8 @@ def progress_callback(total: int, names: Callable[[dict], str], log: Callable[[s
         def _ended(self, trial) -> None:
             self.running.discard(trial.trial_id)
             if inbox is not None:
-                inbox.release.remote(trial.trial_id)
+                import ray
+                ray.get_actor(inbox).release.remote(trial.trial_id)
 
         def on_trial_start(self, iteration, trials, trial, **info):
             self.running.add(trial.trial_id)
@@ -127,8 +128,18 @@ def _run_config(tune, storage: TuneStorage, max_retries: int, callbacks: list):
                           failure_config=tune.FailureConfig(max_failures=max_retries))
 
 
+@dataclass(frozen=True)
+class Session:
+    """A sweep's Ray: its inbox (actor handle, and the name trials find it by) and how
+    many trials run side by side (None: as many as the cluster has CPUs)."""
+
+    inbox: object
+    inbox_name: str
+    concurrency: int | None
+
+
 @contextmanager
-def ray_session(out: Path, workers: int | None, address: str | None, log: Callable[[str], None]) -> Iterator:
+def ray_session(out: Path, workers: int | None, address: str | None, log: Callable[[str], None]) -> Iterator[Session]:
     """Ray started or joined for the sweep, and the sweep's inbox on this node; Ray is shut
     down afterwards if this session started it."""
     from sysid.sweep.connect import ray_target
@@ -137,27 +148,27 @@ def ray_session(out: Path, workers: int | None, address: str | None, log: Callab
     local = ray_target(address).address is None
     started = start_ray(workers or default_workers(), address, log)
     try:
-        inbox = inbox_actor(out.resolve())
-        yield inbox, (workers or default_workers()) if local else workers
+        inbox, name = inbox_actor(out.resolve())
+        yield Session(inbox, name, (workers or default_workers()) if local else workers)
     finally:
         if started:
             ray.shutdown()
 
 
-def run_trials(trials: list[TrialSpec], out: Path, data: TrialData, session, max_retries: int = 2,
+def run_trials(trials: list[TrialSpec], out: Path, data: TrialData, session: Session, max_retries: int = 2,
                storage: TuneStorage | None = None, scheduler=None, callbacks: list = (),
                log: Callable[[str], None] = print, prefix: str = "sweep") -> Outcomes:
     """Run `trials` (one Tune trial each, one CPU each) in a `ray_session`; trials already
     complete in `out` are reused. Returns what Tune ended without a complete run."""
     _, tune = import_ray()
-    inbox, concurrency = session
     storage = storage or TuneStorage(str(out.resolve()))
-    trainable = tune.with_resources(tune.with_parameters(tune_trainable, trials=trials, inbox=inbox, data=data),
-                                    {"cpu": 1})
-    progress = progress_callback(len(trials), lambda c: trials[int(c["trial"])].path, log, inbox, prefix)
+    trainable = tune.with_resources(tune.with_parameters(tune_trainable, trials=trials, inbox=session.inbox_name,
+                                                         data=data), {"cpu": 1})
+    progress = progress_callback(len(trials), lambda c: trials[int(c["trial"])].path, log, session.inbox_name, prefix)
     tuner = tune.Tuner(
         trainable, param_space=trial_space(tune, trials),
-        tune_config=tune.TuneConfig(max_concurrent_trials=concurrency, reuse_actors=True, scheduler=scheduler),
+        tune_config=tune.TuneConfig(max_concurrent_trials=session.concurrency, reuse_actors=True,
+                                    scheduler=scheduler),
         run_config=_run_config(tune, storage, max_retries, [progress, *callbacks]))
     return _outcomes(tuner.fit(), lambda c: trials[int(c["trial"])].path)
 
@@ -179,7 +190,7 @@ def trial_space(tune, trials: list[TrialSpec]) -> dict:
     return space
 
 
-def run_optuna(spec, out: Path, data: TrialData, session, storage: TuneStorage | None = None, scheduler=None,
+def run_optuna(spec, out: Path, data: TrialData, session: Session, storage: TuneStorage | None = None, scheduler=None,
                callbacks: list = (), evaluated: list[tuple[dict, float]] = (), pending: list[dict] = (),
                log: Callable[[str], None] = print) -> Outcomes:
     """Optuna's search (through Ray Tune): ``samples`` configurations, each trial training
@@ -194,7 +205,6 @@ def run_optuna(spec, out: Path, data: TrialData, session, storage: TuneStorage |
         raise ConfigError(f"{spec.source}: search = \"optuna\" needs optuna: pip install \"sysid[sweep]\"") from None
     from sysid.sweep.optuna_space import optuna_space, optuna_trainable, point_of
 
-    inbox, concurrency = session
     storage = storage or TuneStorage(str(out.resolve()))
     remaining = spec.samples - len(evaluated)
     if remaining <= 0:
@@ -203,12 +213,13 @@ def run_optuna(spec, out: Path, data: TrialData, session, storage: TuneStorage |
                           points_to_evaluate=list(pending) or None)
     for config, value in evaluated:
         search.add_evaluated_point(config, value)
-    trainable = tune.with_resources(tune.with_parameters(optuna_trainable, spec=spec, inbox=inbox, data=data),
-                                    {"cpu": 1})
-    progress = progress_callback(remaining, lambda c: point_of(spec, c), log, inbox)
+    trainable = tune.with_resources(tune.with_parameters(optuna_trainable, spec=spec, inbox=session.inbox_name,
+                                                         data=data), {"cpu": 1})
+    progress = progress_callback(remaining, lambda c: point_of(spec, c), log, session.inbox_name)
     tuner = tune.Tuner(
         trainable,
-        tune_config=tune.TuneConfig(search_alg=search, num_samples=remaining, max_concurrent_trials=concurrency,
+        tune_config=tune.TuneConfig(search_alg=search, num_samples=remaining,
+                                    max_concurrent_trials=session.concurrency,
                                     reuse_actors=True, scheduler=scheduler),
         run_config=_run_config(tune, storage, spec.max_retries, [progress, *callbacks]))
     return _outcomes(tuner.fit(), lambda c: point_of(spec, c))

@@ -96,8 +96,17 @@ def node_name() -> str:
     return name
 
 
+_ACTORS: dict[str, Any] = {}
+
+
 def call(inbox, method: str, *args, **kwargs):
-    """Call `method` of the driver's inbox: a Ray actor handle, or a `RunInbox` in-process."""
+    """Call `method` of the driver's inbox: the name of its Ray actor, or a `RunInbox`
+    in-process."""
+    if isinstance(inbox, str):
+        import ray
+        if inbox not in _ACTORS:
+            _ACTORS[inbox] = ray.get_actor(inbox)
+        inbox = _ACTORS[inbox]
     target = getattr(inbox, method)
     if hasattr(target, "remote"):
         import ray

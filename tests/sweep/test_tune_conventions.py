@@ -75,6 +75,25 @@ def test_every_epoch_is_in_tune_experiment_analysis(sweeps):
 
 
 @pytest.mark.slow
+def test_tuner_restore_gets_the_results(sweeps):
+    import ray
+    from ray import tune
+
+    tmp, _ = sweeps
+    out = tmp / "plain"
+    ray.init(address="local", num_cpus=1, include_dashboard=False, log_to_driver=False)
+    try:
+        grid = tune.Tuner.restore(str(out / "tune"), trainable=lambda config: None).get_results()
+        best = grid.get_best_result(metric="val_loss", mode="min", scope="last")
+    finally:
+        ray.shutdown()
+    assert len(grid) == 2 and all(len(r.metrics_dataframe) == EPOCHS + 1 for r in grid)
+    summary = json.loads((out / "summary.json").read_text())
+    assert best.config["training__learning_rate"] == summary["best"]["values"]["training.learning_rate"]
+    assert best.metrics["val_loss"] == pytest.approx(summary["best"]["val_loss_mean"], rel=1e-12)
+
+
+@pytest.mark.slow
 def test_asha_stops_the_poor_trial_early_with_the_same_best(sweeps):
     from ray import tune
 
