@@ -34,7 +34,7 @@ def _sysid(args: list[str], dataset_dir: Path, cwd: Path) -> subprocess.Complete
 @pytest.fixture(scope="module")
 def sweeps(tmp_path_factory, dataset_dir):
     """The same two-configuration sweep without a scheduler (tracked in MLflow) and with
-    ASHA; one trial at a time, the good configuration first."""
+    ASHA (Tune's experiment in --storage); one trial at a time, the good configuration first."""
     pytest.importorskip("ray.tune")
     pytest.importorskip("mlflow")
     tmp = tmp_path_factory.mktemp("tune")
@@ -44,7 +44,7 @@ def sweeps(tmp_path_factory, dataset_dir):
     (tmp / "asha.toml").write_text(body.replace("seeds = [0]\n", "seeds = [0]\nscheduler = 'asha'\n")
                                    + "[scheduler]\ngrace_period = 1\nreduction_factor = 2\n")
     logs = {}
-    for name, extra in (("plain", ["--mlflow", str(tmp / "mlruns")]), ("asha", [])):
+    for name, extra in (("plain", ["--mlflow", str(tmp / "mlruns")]), ("asha", ["--storage", str(tmp / "store")])):
         logs[name] = _sysid(["sweep", str(tmp / f"{name}.toml"), "-o", str(tmp / name), "--workers", "1", *extra],
                             dataset_dir, tmp).stdout
     return tmp, logs
@@ -78,12 +78,13 @@ def test_every_epoch_is_in_tune_experiment_analysis(sweeps):
 def test_tuner_restore_gets_the_results(sweeps):
     import ray
     from ray import tune
+    from sysid.sweep.trial import tune_trainable
 
     tmp, _ = sweeps
     out = tmp / "plain"
     ray.init(address="local", num_cpus=1, include_dashboard=False, log_to_driver=False)
     try:
-        grid = tune.Tuner.restore(str(out / "tune"), trainable=lambda config: None).get_results()
+        grid = tune.Tuner.restore(str(out / "tune"), trainable=tune_trainable).get_results()
         best = grid.get_best_result(metric="val_loss", mode="min", scope="last")
     finally:
         ray.shutdown()
@@ -99,8 +100,9 @@ def test_asha_stops_the_poor_trial_early_with_the_same_best(sweeps):
 
     tmp, logs = sweeps
     epochs = {}
-    for name in ("plain", "asha"):
-        frames = tune.ExperimentAnalysis(str(tmp / name / "tune")).trial_dataframes.values()
+    assert json.loads((tmp / "asha" / "summary.json").read_text())["tune"] == str(tmp / "store" / "asha")
+    for name, where in (("plain", tmp / "plain" / "tune"), ("asha", tmp / "store" / "asha")):
+        frames = tune.ExperimentAnalysis(str(where)).trial_dataframes.values()
         epochs[name] = sum(int(f.epoch.notna().sum()) for f in frames)
     assert epochs["plain"] == 2 * EPOCHS and epochs["asha"] < epochs["plain"]
     plain, asha = (json.loads((tmp / n / "summary.json").read_text()) for n in ("plain", "asha"))
