@@ -200,7 +200,6 @@ def run_optuna(spec, out: Path, data: TrialData, session: Session, storage: Tune
     _, tune = import_ray()
     try:
         from ray.tune.search.optuna import OptunaSearch
-        import optuna  # noqa: F401
     except ImportError:
         raise ConfigError(f"{spec.source}: search = \"optuna\" needs optuna: pip install \"sysid[sweep]\"") from None
     from sysid.sweep.optuna_space import optuna_space, optuna_trainable, point_of
@@ -209,7 +208,12 @@ def run_optuna(spec, out: Path, data: TrialData, session: Session, storage: Tune
     remaining = spec.samples - len(evaluated)
     if remaining <= 0:
         return Outcomes()
-    search = OptunaSearch(space=optuna_space(spec), metric="val_loss", mode="min", seed=spec.search_seed,
+    import optuna
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    # a resumed search draws from a stream of its own: the sampler's first draws would
+    # otherwise repeat the configurations it is told are done
+    search = OptunaSearch(space=optuna_space(spec), metric="val_loss", mode="min",
+                          seed=spec.search_seed + len(evaluated) + len(pending),
                           points_to_evaluate=list(pending) or None)
     for config, value in evaluated:
         search.add_evaluated_point(config, value)

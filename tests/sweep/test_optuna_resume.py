@@ -71,3 +71,39 @@ def test_a_crafted_pickle_in_the_output_is_never_loaded(tmp_path, dataset_dir):
     assert len(said) == 1 and "1 finished configurations" in said[0]
     table = pd.read_csv(out / "results.csv")
     assert list(table.status) == ["complete"] and table["training.learning_rate"].iloc[0] == 0.002
+
+
+@pytest.mark.slow
+def test_an_optuna_sweep_resumed_on_ray_loads_no_pickle(tmp_path, dataset_dir):
+    """A finished Optuna sweep loses one configuration's run (as an interruption would leave
+    it) and Tune's state is replaced by crafted pickles: --resume trains the missing
+    configuration on Ray, tells Optuna the finished one, and runs no code from the folder."""
+    pytest.importorskip("optuna")
+    pytest.importorskip("ray.tune")
+    import shutil
+
+    tiny_experiment(tmp_path / "base.toml", dataset_dir, seed=0, epochs=2, warm_start_epochs=1)
+    sweep_file = tmp_path / "sweep.toml"
+    sweep_file.write_text("[sweep]\nbase = 'base.toml'\nsearch = 'optuna'\nsamples = 2\nseeds = [0]\n"
+                          "[vary]\n'training.learning_rate' = { loguniform = [1e-3, 1e-2] }\n")
+    out = tmp_path / "sweep"
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "SYSID_DATA": str(dataset_dir.parent)}
+    env.pop("RAY_ADDRESS", None)
+    first = subprocess.run([sys.executable, "-m", "sysid", "sweep", str(sweep_file), "-o", str(out), "--workers", "1"],
+                           capture_output=True, text=True, timeout=1200, env=env)
+    assert first.returncode == 0, first.stdout[-3000:] + first.stderr[-3000:]
+    runs = sorted((out / "trials").glob("*/seed0"))
+    assert len(runs) == 2
+    shutil.rmtree(runs[1].parent)
+    marker = tmp_path / "code-ran"
+    for path in (out / "tune").rglob("*.pkl"):
+        path.write_bytes(pickle.dumps(Touch(marker)))
+    assert list((out / "tune").glob("*.pkl"))  # Tune did keep pickles there
+    second = subprocess.run([sys.executable, "-m", "sysid", "sweep", str(sweep_file), "-o", str(out), "--resume",
+                             "--workers", "1"], capture_output=True, text=True, timeout=1200, env=env)
+    assert second.returncode == 0, second.stdout[-3000:] + second.stderr[-3000:]
+    assert not marker.exists()
+    assert "optuna resumes from 1 finished configurations" in second.stdout
+    table = pd.read_csv(out / "results.csv")
+    assert len(table) == 2 and set(table.status) == {"complete"}
+    assert runs[0].parent.name in set(table.point)  # the finished one is kept, one new one trained
