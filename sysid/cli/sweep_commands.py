@@ -45,7 +45,7 @@ def sweep(
                                  log=lambda m: typer.echo(m), storage=storage, mlflow=mlflow)
     if len(results.points):
         shown = results.points.head(10)
-        typer.echo(shown.to_string(index=False, float_format=lambda v: f"{v:.5f}"))
+        typer.echo(shown.to_string(index=False, float_format=lambda v: f"{v:.5g}"))
     best = summary.get("best")
     if best:
         spread = f" ± {best['val_loss_std']:.5f} (std over seeds)" if best.get("val_loss_std") is not None else ""

@@ -59,6 +59,10 @@ def check_output(spec: SweepSpec, out: Path, resume: bool, overwrite: bool) -> N
         if not marker.is_file():
             raise OutputError(f"{out}: exists and is not a sweep's output (no {MARKER}); "
                               "--overwrite only replaces sysid outputs")
+        for needed in (Path(spec.source), spec.base_path, Path.cwd()):
+            if needed.resolve().is_relative_to(out.resolve()):
+                raise OutputError(f"{out}: --overwrite would delete {needed}, which this sweep needs; "
+                                  "choose another output path")
 
 
 def write_output(spec: SweepSpec, out: Path, resume: bool) -> None:
