@@ -148,7 +148,15 @@ def ray_session(out: Path, workers: int | None, address: str | None, log: Callab
     local = ray_target(address).address is None
     started = start_ray(workers or default_workers(), address, log)
     try:
-        inbox, name = inbox_actor(out.resolve())
+        try:
+            inbox, name = inbox_actor(out.resolve())
+        except ray.exceptions.RayError as exc:  # e.g. this node's Ray workers run another sysid
+            reason = next((line.strip() for line in reversed(str(exc).splitlines()) if line.strip()), "")
+            raise ConfigError(f"{ray_target(address).describe()}: cannot run sysid's code on this node "
+                              f"({reason[:200]}); every node of the cluster needs the same sysid installed") from None
+        if not local and not ray.cluster_resources().get("CPU"):
+            log(f"note: {ray_target(address).describe()} has no CPU for trials yet; the trials wait for nodes "
+                "to join (Ctrl-C stops)")
         yield Session(inbox, name, (workers or default_workers()) if local else workers)
     finally:
         if started:
