@@ -180,3 +180,25 @@ def test_overwrite_never_deletes_the_sweep_file_it_reads(tmp_path, dataset_dir):
     with pytest.raises(OutputError, match="--overwrite would delete .*sweep.toml, which this sweep needs"):
         check_output(spec, tmp_path, resume=False, overwrite=True)
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+def test_a_sweep_failing_before_its_first_trial_leaves_no_output(tmp_path, dataset_dir, monkeypatch):
+    from contextlib import contextmanager
+    import sysid.sweep.study as study
+    from sysid.sweep.runner import Session
+
+    @contextmanager
+    def session(out, workers, address, log):  # Ray up, as far as the sweep can tell
+        yield Session(None, "inbox", 1)
+
+    def tune_fails(*args, **kwargs):
+        raise RuntimeError("Tune could not start")
+    monkeypatch.setattr(study, "ray_session", session)
+    monkeypatch.setattr(study, "run_trials", tune_fails)
+    spec = load_sweep(_sweep(tmp_path, dataset_dir, "[vary]\n'training.learning_rate' = [1e-3]\n"))
+    for out in (tmp_path / "new", tmp_path / "empty"):
+        if out.name == "empty":
+            out.mkdir()
+        with pytest.raises(RuntimeError, match="Tune could not start"):
+            study.run_sweep(spec, out, workers=1, data=dataset_dir.parent, log=lambda m: None)
+        assert (not out.exists()) if out.name == "new" else (out.is_dir() and not any(out.iterdir()))
