@@ -7,6 +7,7 @@ from typing import List, Optional
 
 import typer
 
+from sysid import logs
 from sysid.cli.app import app
 from sysid.cli.interrupts import on_interrupt
 
@@ -50,11 +51,11 @@ def train(
         if checkpoint.is_file() else ""))
     runs = training_runs(exp, data) if exp.needs_training else None
     if runs is not None:
-        typer.echo(f"train: {exp.experiment.model} model on {len(runs)} file(s) "
+        logs.info(f"train: {exp.experiment.model} model on {len(runs)} file(s) "
                    f"({sum(r.duration for r in runs):.0f} s of data), seed {exp.experiment.seed}")
     test_paths = expand_paths(test) if test else list(test_files(data).values())
     tests = [read_run(p) for p in test_paths]
-    result = run_experiment(exp, output, tests, runs, data, log=lambda m: typer.echo("  " + m), resume=resume,
+    result = run_experiment(exp, output, tests, runs, data, log=logs.indented(), resume=resume,
                             overwrite=overwrite)
     typer.echo(result.evaluation.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     if result.failure:
@@ -104,7 +105,7 @@ def reproduce(
     check_target(output, overwrite)
     on_interrupt(f"nothing written to {output} (it is moved into place only when every run is done)")
     with staged_directory(output, "reproduction", overwrite) as staging:
-        summary = run_protocol(staging, data, only, log=typer.echo, jobs=jobs or cpu_cores(), seeds=seeds,
+        summary = run_protocol(staging, data, only, log=logs.info, jobs=jobs or cpu_cores(), seeds=seeds,
                                address=address)
     for name in ("table7.md", "table8.md"):
         path = output / name

@@ -7,6 +7,7 @@ downsamples by taking every k-th sample from the first one (the protocol's t = 0
 """
 from __future__ import annotations
 
+import glob
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -147,12 +148,19 @@ def duplicate_runs(runs: Sequence[Run], tolerance: float = 1e-9) -> list[tuple[s
 
 
 def expand_paths(items: Iterable[str | os.PathLike]) -> list[Path]:
-    """Files and directories (searched recursively for *.csv) to a sorted file list."""
+    """Files, directories (searched recursively for *.csv) and glob patterns (``logs/*.csv``,
+    ``logs/**/*.csv``; matches sorted) to a file list."""
     out: list[Path] = []
     from sysid.store.manifest import has_manifest, verify_manifest
 
     for item in items:
         p = Path(item)
+        if not p.exists() and glob.has_magic(str(item)):
+            matches = sorted(Path(m) for m in glob.glob(str(item), recursive=True) if Path(m).is_file())
+            if not matches:
+                raise DataError(f"{item}: no file matches this pattern")
+            out += matches
+            continue
         if p.is_dir():
             if has_manifest(p):  # sysid preprocess output: refused when incomplete or changed
                 verify_manifest(p)

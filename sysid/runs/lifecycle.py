@@ -15,7 +15,7 @@ import pandas as pd
 import torch
 
 from sysid.identify.checkpoint import TrainingCheckpoint
-from sysid.data.recordings import Run, read_run
+from sysid.data.recordings import Run, expand_paths, read_run
 from sysid.data.datasets import training_files
 from sysid.device import compute_threads
 from sysid.errors import TrainingError
@@ -46,7 +46,7 @@ class RunResult:
 
 def training_runs(exp: Experiment, data: str | os.PathLike | None = None) -> list[Run]:
     """The experiment's training files (``[data] files`` or its data set), read and checked."""
-    files = [Path(f) for f in exp.data.files] if exp.data.files else training_files(exp.experiment.dataset, data)
+    files = expand_paths(exp.data.files) if exp.data.files else training_files(exp.experiment.dataset, data)
     return [read_run(f, exp.data.rate) for f in files]
 
 
