@@ -20,6 +20,7 @@ from sysid.cli import report_commands  # noqa: E402,F401
 from sysid.cli import preprocess_commands  # noqa: E402,F401
 from sysid.cli import train_commands  # noqa: E402,F401
 from sysid.cli import ship_commands  # noqa: E402,F401
+from sysid.cli import init_commands  # noqa: E402,F401
 from sysid.cli import export_commands  # noqa: E402,F401
 from sysid.cli import sweep_commands  # noqa: E402,F401
 
