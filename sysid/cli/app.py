@@ -27,7 +27,7 @@ def _print_version(value: bool) -> None:
 def common_options(
     version: bool = typer.Option(False, "--version", is_eager=True, callback=_print_version,
                                  help="Print sysid's version and exit."),
-    verbose: int = typer.Option(0, "-v", "--verbose", count=True,
+    verbose: int = typer.Option(0, "-v", "--verbose", count=True, show_default=False,
                                 help="More detail (every training epoch); any command, before or after its name."),
     quiet: bool = typer.Option(False, "-q", "--quiet",
                                help="Warnings and errors only, no progress; any command, before or after its name."),
