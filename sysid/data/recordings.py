@@ -1,6 +1,6 @@
 """Processed runs (the public FRT-DS-ESSO schema) at 1 Hz, checked, and cut into windows.
 
-A processed file has the header ``name [unit]`` of RAW_LOG_FORMAT.md's processed schema,
+A processed file has the header ``name [unit]`` of the processed schema (docs: input formats),
 at 10 Hz (public files) or 1 Hz (``sysid preprocess`` output). `read_run` drops trailing
 all-empty rows, rejects NaN inside the run, non-monotonic time and wrong units, and
 downsamples by taking every k-th sample from the first one (the protocol's t = 0, 1, 2 s).
@@ -179,7 +179,7 @@ def expand_paths(items: Iterable[str | os.PathLike]) -> list[Path]:
 
 def protocol_windows(n_samples: int, horizon: int) -> np.ndarray:
     """Start indices of consecutive, non-overlapping full windows of `horizon` samples
-    (k = 0 .. floor(N / H) - 1; BENCHMARK_PROTOCOL.md)."""
+    (k = 0 .. floor(N / H) - 1; docs: the paper's protocol, the metric)."""
     return np.arange(n_samples // horizon) * horizon
 
 
