@@ -51,6 +51,20 @@ KEYS: dict[tuple[str, str], KeyDoc] = {
                                        "minibatches): a run is a function of config, data and seed."),
     ("data", "files"): KeyDoc("", "Your processed logs to train on: files, directories (every .csv below) or "
                                   "glob patterns (`logs/*.csv`), relative to this config."),
+    # the [data] keys of the own-logs issue (train / validation / test / columns replace files)
+    ("data", "train"): KeyDoc("", "Your logs to train on: files, folders or glob patterns (`logs/*.csv`), "
+                                  "relative to this config. Leave `[experiment] dataset` out with them."),
+    ("data", "validation"): KeyDoc("", "Logs held back whole for validation (early stopping, the validation "
+                                       "loss); empty: `[training] val_fraction` of the training logs' blocks "
+                                       "(`validation = 0.3` sets that share)."),
+    ("data", "test"): KeyDoc("", "Logs the model is scored on beside its physics baseline, read only by "
+                                 "evaluation, never to train or to choose; a log in two of train, validation "
+                                 "and test is an error."),
+    ("data", "columns"): KeyDoc("per column", "Your logs' column names and units, per sysid channel (`t`, `x`, "
+                                              "`u`, `y`, `v`, `psi`, `r`, `n_prop`, `delta_rudder`, "
+                                              "`wind_velo_true`, `wind_dir_true`, ...), e.g. "
+                                              "`u = { column = \"STW\", unit = \"knots\" }`; a channel "
+                                              "without an entry reads the processed-log column."),
     ("data", "rate"): KeyDoc("Hz", "Sample rate the logs are read at (samples are taken, not averaged); "
                                    "the processed logs are 1 Hz."),
     ("data", "exclude_suspect"): KeyDoc("", "Leave out windows that touch a segment the preprocessing marked "
@@ -154,15 +168,23 @@ class KeyReference:
     @property
     def default_toml(self) -> str:
         """The default as written in a TOML file."""
-        value = self.default.value if isinstance(self.default, enum.Enum) else self.default
-        return config._toml_value(value)
+        return toml_value(self.default)
+
+
+def toml_value(value) -> str:
+    """A config value (an enum member, a table object) as written in a TOML file."""
+    if isinstance(value, enum.Enum):
+        value = value.value
+    if hasattr(value, "as_table"):  # a table of its own, e.g. [data.columns]
+        value = value.as_table()
+    return config._toml_value(value)
 
 
 def _type_name(hint) -> str:
     origin = typing.get_origin(hint)
     if origin in (tuple, list):
         return f"list of {_type_name(typing.get_args(hint)[0])}"
-    if origin is dict or hint is dict:
+    if origin is dict or hint is dict or hasattr(hint, "as_table"):
         return "table"
     if isinstance(hint, type) and issubclass(hint, enum.Enum):
         return "string (choice)"

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from sysid.config.experiment import _toml_value
-from sysid.config.reference import SECTIONS, config_keys
+from sysid.config.reference import SECTIONS, config_keys, toml_value
 from sysid.errors import ConfigError
 
 STANDARD_MODELS = {"hull": "standard", "propeller": "standard", "rudder": "standard"}
@@ -149,14 +149,34 @@ def ship_template(name: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _data_keys() -> set[str]:
+    from dataclasses import fields
+
+    from sysid.config.experiment import DataOptions
+    return {f.name for f in fields(DataOptions)}
+
+
 # keys `sysid init` sets for the user's project (others keep the typed config's default)
 def _project_values(name: str, ship_file: str) -> dict[tuple[str, str], object]:
-    return {("experiment", "name"): name, ("experiment", "model"): "hybrid",
-            ("experiment", "ship"): ship_file, ("data", "files"): ["logs/*.csv"]}
+    values = {("experiment", "name"): name, ("experiment", "model"): "hybrid", ("experiment", "ship"): ship_file}
+    if "train" in _data_keys():  # training and test logs named in the config
+        values.update({("data", "train"): ["logs/*.csv"], ("data", "test"): ["test/*.csv"]})
+    else:
+        values[("data", "files")] = ["logs/*.csv"]
+    return values
 
 
 # keys written commented out: they do not apply to a project of one's own ships and logs
 _COMMENTED = {("experiment", "dataset"), ("ensemble", "members")}
+# tables written as a commented example at the end of their section
+_EXAMPLE_TABLES = {("data", "columns"): [
+    "[data.columns]                              # your logs' names and units; the others: processed columns",
+    't = "time [s]"',
+    'u = { column = "STW", unit = "knots" }',
+    'psi = { column = "heading", unit = "deg" }',
+    'delta_rudder = { column = "rudder", unit = "deg" }',
+    'n_prop = { column = "shaft", unit = "rpm" }',
+]}
 
 
 def experiment_template(name: str, ship_file: str) -> str:
@@ -166,25 +186,33 @@ def experiment_template(name: str, ship_file: str) -> str:
     lines = [f"# Experiment config of {name}, written by `sysid init`: every key, with its default unless",
              "# said otherwise. Relative paths resolve against this file's folder. Reference of every key:",
              "# the docs' \"Config reference\" page.", ""]
-    section = None
+    section, deferred = None, []
     for ref in config_keys():
         if ref.section != section:
+            lines += deferred
+            deferred = []
             section = ref.section
             if lines[-1] != "":
                 lines.append("")
             lines += [f"[{section}]", *_comment(SECTIONS.get(section, ""))]
         unit = f" [{ref.unit}]" if ref.unit else ""
         choices = f" One of: {', '.join(ref.choices)}." if ref.choices else ""
+        key = (ref.section, ref.key)
+        if key in _EXAMPLE_TABLES:  # after the section's keys: a table header ends the section
+            deferred = _comment(f"{ref.key} ({ref.type}{unit}): {ref.meaning}{choices} For example:") + [
+                f"# {line}" for line in _EXAMPLE_TABLES[key]]
+            continue
         lines += _comment(f"{ref.key} ({ref.type}{unit}): {ref.meaning}{choices}")
-        value = values.get((ref.section, ref.key), ref.default)
-        text = f"{ref.key} = {_toml_value(getattr(value, 'value', value))}"
-        lines.append(f"# {text}" if (ref.section, ref.key) in _COMMENTED else text)
+        text = f"{ref.key} = {toml_value(values.get(key, ref.default))}"
+        lines.append(f"# {text}" if key in _COMMENTED else text)
+    lines += deferred
     return "\n".join(lines) + "\n"
 
 
 def next_steps(folder: str, ship_file: str, config_file: str) -> str:
     """What to do after `sysid init`, with the paths as the user gave them."""
     d = folder.rstrip("/") or "."
+    test_option = "" if "test" in _data_keys() else f" --test {d}/test"  # else [data] test names them
     return f"""Next steps
 1. Put the processed logs to train on (1 Hz, sysid's columns: see the docs, "Input formats")
    into {d}/logs/ and those to test on into {d}/test/; raw 10 Hz logs are preprocessed with
@@ -192,10 +220,10 @@ def next_steps(folder: str, ship_file: str, config_file: str) -> str:
 2. Replace the values in {d}/{ship_file} with your ship's (each line gives its unit and
    where the value comes from), then check it:
        sysid ship check {d}/{ship_file}
-3. Read {d}/{config_file}: every key is there with its default and meaning. [data] files
-   lists the training logs (files, folders or patterns, relative to the config).
+3. Read {d}/{config_file}: every key is there with its default and meaning. [data] lists
+   the training and test logs (files, folders or patterns, relative to the config).
 4. Train, evaluate on the test logs and write the report:
-       sysid train {d}/{config_file} -o {d}/runs/first --test {d}/test
+       sysid train {d}/{config_file} -o {d}/runs/first{test_option}
        sysid report {d}/runs/first -o {d}/reports/first
 """
 

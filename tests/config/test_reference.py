@@ -9,11 +9,17 @@ from sysid.config.reference import KEYS, SECTIONS, config_keys, markdown
 from sysid.config.templates import SENSOR_KEYS, SHIP_KEYS, STANDARD_MODELS
 from sysid.mmg.ship import _SENSOR_KEYS, active_parameters
 
+DATA_SPELLINGS = {("data", k) for k in ("files", "train", "validation", "test", "columns")}
+
 
 def test_every_config_key_is_documented_and_no_entry_is_left_over():
     typed = {(section.name, f.name) for section in dataclasses.fields(experiment.Experiment)
              if section.name != "source" for f in dataclasses.fields(getattr(experiment.Experiment(), section.name))}
-    assert typed == set(KEYS), f"undocumented: {sorted(typed - set(KEYS))}, stale: {sorted(set(KEYS) - typed)}"
+    assert typed <= set(KEYS), f"undocumented: {sorted(typed - set(KEYS))}"
+    # the one exception: [data] is documented in both spellings while the own-logs keys land
+    # (files, or train / validation / test / columns); any other entry must be a key
+    stale = set(KEYS) - typed
+    assert stale <= DATA_SPELLINGS and len(stale) in (0, 1, 4), f"stale: {sorted(stale)}"
     assert {s for s, _ in typed} == set(SECTIONS)
     assert all(doc.meaning.strip() for doc in KEYS.values())
 
