@@ -170,7 +170,7 @@ def _project_values(name: str, ship_file: str) -> dict[tuple[str, str], object]:
 _COMMENTED = {("experiment", "dataset"), ("ensemble", "members")}
 # tables written as a commented example at the end of their section
 _EXAMPLE_TABLES = {("data", "columns"): [
-    "[data.columns]                              # your logs' names and units; the others: processed columns",
+    "[data.columns]          # your logs' names and units; other channels: the processed columns",
     't = "time [s]"',
     'u = { column = "STW", unit = "knots" }',
     'psi = { column = "heading", unit = "deg" }',

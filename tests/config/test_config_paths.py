@@ -6,11 +6,13 @@ import shutil
 
 import numpy as np
 
-from sysid.config.experiment import load_experiment
+from sysid.config.experiment import DataOptions, load_experiment
 from sysid.data.recordings import read_run
 from sysid.runs.lifecycle import training_runs
 from sysid.sweep import load_sweep
 
+# the training-logs key of [data] (files, or train once the own-logs keys are in)
+TRAIN = "train" if "train" in DataOptions.__dataclass_fields__ else "files"
 LOGS = {"day1_turn.csv": "turning/turn_14-Oct-2020_14_08_51.csv",
         "day1_zigzag.csv": "zigzag/zigzag_31-Jul-2020_13_22_52.csv",
         "day2_berthing.csv": "berthing/berthing_12-Nov-2020_11_07_23.csv"}
@@ -23,7 +25,7 @@ def _project(tmp_path, dataset_dir):
         shutil.copy(dataset_dir / old, project / "logs" / new)
     shutil.copy(_bundled_ship(), project / "tanker.toml")
     (project / "experiment.toml").write_text(
-        '[experiment]\nmodel = "hybrid"\nship = "tanker.toml"\n[data]\nfiles = ["logs/day1_*.csv", "logs/day2_berthing.csv"]\n')
+        f'[experiment]\nmodel = "hybrid"\nship = "tanker.toml"\n[data]\n{TRAIN} = ["logs/day1_*.csv", "logs/day2_berthing.csv"]\n')
     return project
 
 
@@ -57,10 +59,10 @@ def test_sweep_values_resolve_against_the_sweep_file(tmp_path, dataset_dir, monk
     sweeps.mkdir()
     (sweeps / "s.toml").write_text('[sweep]\nbase = "../project/experiment.toml"\nseeds = [0]\n'
                                    '[set]\n"experiment.ship" = "../ships/other.toml"\n'
-                                   '[vary]\n"data.files" = [["../project/logs/day2_berthing.csv"]]\n')
+                                   f'[vary]\n"data.{TRAIN}" = [["../project/logs/day2_berthing.csv"]]\n')
     monkeypatch.chdir(tmp_path / "ships")
     spec = load_sweep(sweeps / "s.toml")
     assert spec.base.experiment.ship == str(tmp_path / "ships" / "other.toml")
-    trial = spec.experiment({"data.files": ("../project/logs/day2_berthing.csv",)}, 0, "t")
+    trial = spec.experiment({f"data.{TRAIN}": ("../project/logs/day2_berthing.csv",)}, 0, "t")
     assert trial.data.files == (str(project / "logs" / "day2_berthing.csv"),)
     assert trial.experiment.ship == str(tmp_path / "ships" / "other.toml")
