@@ -43,8 +43,9 @@ KEYS: dict[tuple[str, str], KeyDoc] = {
     ("experiment", "name"): KeyDoc("", "Name of the experiment, shown in logs, summary.json and reports."),
     ("experiment", "model"): KeyDoc("", "The model: `mmg` (the ship file's MMG, optionally identified), `nn` "
                                         "(an FNN alone, the paper's NN-only) or `hybrid` (MMG + FNN force correction)."),
-    ("experiment", "dataset"): KeyDoc("", "The paper's FRT-DS-ESSO training set `D1` or `D2`; used only when "
-                                          "`[data]` lists no files of your own."),
+    ("experiment", "dataset"): KeyDoc("", "The paper's FRT-DS-ESSO data set `D1` or `D2` (its training files, "
+                                          "and the paper's six test files); for your own logs, list them under "
+                                          "`[data]` instead."),
     ("experiment", "ship"): KeyDoc("", "A bundled ship by name (`esso_osaka`, `kvlcc2_l7`) or a ship file "
                                        "(`my_ship.toml`, relative to this config)."),
     ("experiment", "seed"): KeyDoc("", "Seed of every random choice (validation blocks, initial weights, "
