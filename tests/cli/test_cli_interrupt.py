@@ -56,6 +56,7 @@ def long_training(files, folder):
     return config
 
 
+@pytest.mark.slow
 def test_ctrl_c_while_training_exits_130_and_leaves_nothing(files, tmp_path):
     out = tmp_path / "run"
     proc = start("train", long_training(files, tmp_path), "-o", out, "--test", files["test"])
