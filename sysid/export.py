@@ -32,6 +32,7 @@ from torch import nn
 
 from sysid.compiled import (cached_package, export_program, load_package, package_metadata,
                             step_label, step_metadata)
+from sysid.files import atomic_path
 from sysid.integrators import Method, run_steps
 from sysid.prepared import prepared
 from sysid.stepper import Step
@@ -59,16 +60,16 @@ def export_model(model: nn.Module, path: str | Path, method: Method | str = Meth
         portable `torch.export` program.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     step = Step(prepared(model, batch), method, dt)
     examples = _examples(batch, dtype)
     metadata = step_metadata(model, method, dt, batch, dtype)
-    if compiled:
-        shutil.copyfile(cached_package(step, examples, step_label(method), metadata, log), path)
-    else:
-        metadata["format"] = "torch.export"
-        torch.export.save(export_program(step, examples), path,
-                          extra_files={METADATA_FILE: json.dumps(metadata)})
+    with atomic_path(path, ".pt2") as tmp:  # a link at `path` is replaced, never written through
+        if compiled:
+            shutil.copyfile(cached_package(step, examples, step_label(method), metadata, log), tmp)
+        else:
+            metadata["format"] = "torch.export"
+            torch.export.save(export_program(step, examples), tmp,
+                              extra_files={METADATA_FILE: json.dumps(metadata)})
     return path
 
 

@@ -6,6 +6,7 @@ from pathlib import Path
 import typer
 
 from sysid.cli.app import app
+from sysid.cli.outputs import claim
 
 
 @app.command()
@@ -18,6 +19,7 @@ def report(
     from sysid.report import build_report
 
     out = out or Path("reports") / source.resolve().name
+    claim(out, "report", [source], adds_to=source)
 
     def progress(message: str) -> None:
         if not quiet:
