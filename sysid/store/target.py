@@ -6,8 +6,10 @@ Refused (`OutputError`: exit 2, one line naming the output and the path at fault
 
 - an output that is one of the command's inputs (the same file under any name), holds one,
   or lies inside one (a data directory, a run directory read);
-- an output that is a symbolic link: writing it would replace the file the link points to,
-  which may be anywhere;
+- an output that is a symbolic link (the name ``-o`` gives, or a file written into a
+  report's folder): writing through it would replace the file it points to, or leave the
+  folder named for wherever it leads. Links in the folders above are the user's layout:
+  followed, and every check here sees where they lead;
 - a path inside a directory sysid sealed with a manifest (a run, a preprocessing output, a
   reproduction, a sweep): its files are listed and checked, nothing else writes there.
   A report is the one addition a command owns: ``report.html`` and ``report.pdf`` inside
@@ -136,10 +138,12 @@ class OutputTarget:
     def check(self) -> None:
         """Refuse this target if it is an input, holds one, lies in one or in a sealed
         directory, is a link, or exists and may not be replaced; create its parent."""
-        for path in self.written():
+        for path in dict.fromkeys([self.path, *self.written()]):
             self._check_link(path)
-            self._check_inputs(path)
+        for path in self.written():
+            self._check_inputs(path, same=True)
             self._check_sealed(path)
+            self._check_inputs(path, same=False)
         if self.kind is OutputKind.SWEEP:
             self._check_sweep()
         elif self.kind.sealed:
@@ -168,17 +172,19 @@ class OutputTarget:
         return (self.kind is OutputKind.REPORT and self.adds_to is not None
                 and self.adds_to.resolve() == directory and path.parent == directory)
 
-    def _check_inputs(self, path: Path) -> None:
+    def _check_inputs(self, path: Path, same: bool) -> None:
+        """`same`: refuse `path` if it is an input; else if it holds or lies inside one."""
         real = real_path(path)
         for given in self.inputs:
             source = given.resolve()
-            if real == source or (real.exists() and source.exists() and os.path.samefile(real, source)):
-                raise OutputError(f"{path}: is {given}, an input of this command; writing it would destroy "
-                                  "that input: choose another output path")
-            if _within(source, real):
+            if same:
+                if real == source or (real.exists() and source.exists() and os.path.samefile(real, source)):
+                    raise OutputError(f"{path}: is {given}, an input of this command; writing it would destroy "
+                                      "that input: choose another output path")
+            elif _within(source, real):
                 raise OutputError(f"{path}: holds {given}, an input of this command; choose an output path "
                                   "that holds none of its inputs")
-            if _within(real, source) and not self._owned(real, source):
+            elif _within(real, source) and not self._owned(real, source):
                 raise OutputError(f"{path}: lies inside {given}, an input of this command; choose an output "
                                   "path outside it")
 
