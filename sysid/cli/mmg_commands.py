@@ -31,7 +31,7 @@ def _check_positive(option: str, value: float, unit: str) -> None:
 
 
 def _check_integrator(integrator: str) -> None:
-    from sysid.dynamics import INTEGRATORS
+    from sysid.dynamics.equations import INTEGRATORS
 
     if integrator not in INTEGRATORS:
         raise DataError(f"--integrator {integrator!r}: choose one of {', '.join(INTEGRATORS)}")
@@ -39,7 +39,7 @@ def _check_integrator(integrator: str) -> None:
 
 def _model(ship: str, overrides: Optional[List[str]], quadrature: str):
     from sysid.mmg import MMG
-    from sysid.ship import load_ship, parse_overrides
+    from sysid.mmg.ship import load_ship, parse_overrides
 
     if quadrature not in ("exact", "simpson"):
         raise DataError(f"--quadrature {quadrature!r}: choose exact or simpson")
@@ -50,7 +50,7 @@ def force_columns(model, frame):
     """Force components, totals and state derivatives (SI) for rows of `FORCE_INPUTS`."""
     import pandas as pd
     import torch
-    from sysid.dynamics import state_derivative
+    from sysid.dynamics.equations import state_derivative
 
     values = torch.tensor(frame[FORCE_INPUTS].to_numpy(dtype=float), dtype=torch.float64)
     state, inputs = values[:, :6], values[:, 6:]
@@ -75,7 +75,7 @@ def _read_force_inputs(path: Path):
     non-UTF-8 or non-numeric file."""
     import numpy as np
     import pandas as pd
-    from sysid.csvfiles import read_csv_table
+    from sysid.data.csvfiles import read_csv_table
 
     frame = read_csv_table(path, f"a CSV with the header {' '.join(FORCE_INPUTS)}")
     missing = [c for c in FORCE_INPUTS if c not in frame.columns]
@@ -109,7 +109,7 @@ def forces(
     """MMG force components (hull, propeller, rudder, wind; X, Y, N) and state derivatives per row."""
     import numpy as np
     import pandas as pd
-    from sysid.files import write_float_csv
+    from sysid.store.files import write_float_csv
     from sysid.progress import progress
 
     start = time.perf_counter()
@@ -162,10 +162,10 @@ def simulate(
     import numpy as np
     import pandas as pd
     import torch
-    from sysid.compiled import predict
-    from sysid.data import read_run
-    from sysid.files import write_csv
-    from sysid.integrators import Integrator
+    from sysid.fast.compiled import predict
+    from sysid.data.recordings import read_run
+    from sysid.store.files import write_csv
+    from sysid.dynamics.integrators import Integrator
 
     _check_integrator(integrator)
     _check_positive("--rate", rate, "Hz")
@@ -220,10 +220,10 @@ def evaluate(
 ) -> None:
     """The protocol's windowed RMSE of u, v_m, r per file and horizon (MMG or a trained run)."""
     import pandas as pd
-    from sysid.data import expand_paths, read_run
-    from sysid.evaluate import evaluate_model
-    from sysid.files import write_csv
-    from sysid.integrators import Integrator
+    from sysid.data.recordings import expand_paths, read_run
+    from sysid.evaluation.evaluate import evaluate_model
+    from sysid.store.files import write_csv
+    from sysid.dynamics.integrators import Integrator
     from sysid.progress import progress
 
     _check_integrator(integrator)
@@ -232,7 +232,7 @@ def evaluate(
     start = time.perf_counter()
     claim(output, "file", [run_dir, *data, None if run_dir is not None else ship_file(ship)])
     if run_dir is not None:
-        from sysid.rundir import load_model
+        from sysid.runs.rundir import load_model
         exp, model = load_model(run_dir)
         label = f"{exp.experiment.model} run {run_dir}"
     else:

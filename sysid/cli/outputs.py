@@ -34,7 +34,7 @@ def ship_file(name_or_path: str | os.PathLike) -> Path | None:
     """The ship TOML a ``--ship`` option reads, or None when it names no ship (loading the
     ship says why)."""
     from sysid.errors import ShipDefinitionError
-    from sysid.ship import resolve_ship_path
+    from sysid.mmg.ship import resolve_ship_path
 
     try:
         return resolve_ship_path(name_or_path)
@@ -45,7 +45,7 @@ def ship_file(name_or_path: str | os.PathLike) -> Path | None:
 def experiment_inputs(exp, data: str | os.PathLike | None = None) -> list[Path]:
     """The files an experiment reads: its config, its ship, its training files (``[data]
     files``, or the dataset's data directory)."""
-    from sysid.datasets import data_dir
+    from sysid.data.datasets import data_dir
 
     paths = [Path(exp.source)] if exp.source and Path(exp.source).is_file() else []
     paths.append(ship_file(exp.experiment.ship))

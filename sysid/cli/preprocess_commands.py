@@ -58,8 +58,8 @@ def synth_raw(
     """Synthesise a raw 10 Hz log (and its truth) from a processed run."""
     from preprocessing import synth
     from preprocessing.schema import RawLogError
-    from sysid.files import write_csv
-    from sysid.ship import load_ship
+    from sysid.store.files import write_csv
+    from sysid.mmg.ship import load_ship
 
     layout = load_ship(ship).sensors
     truth_path = output.with_suffix(".truth.csv")
@@ -109,7 +109,7 @@ def preprocess(
     """
     from preprocessing import pipeline
     from sysid.progress import progress
-    from sysid.ship import load_ship
+    from sysid.mmg.ship import load_ship
 
     if not (rate > 0 and math.isfinite(rate)):
         raise DataError(f"--rate {rate:g}: must be a number of Hz > 0 that divides 10 Hz")

@@ -28,11 +28,11 @@ def train(
     The run directory is moved into place only when complete (with a manifest); an
     interrupted training leaves no run, only its checkpoint for --resume.
     """
-    from sysid.data import expand_paths, read_run
-    from sysid.datasets import test_files
+    from sysid.data.recordings import expand_paths, read_run
+    from sysid.data.datasets import test_files
     from sysid.errors import ConfigError
-    from sysid.experiment import load_experiment
-    from sysid.lifecycle import checkpoint_path, run_experiment, training_runs
+    from sysid.config.experiment import load_experiment
+    from sysid.runs.lifecycle import checkpoint_path, run_experiment, training_runs
 
     start = time.perf_counter()
     if epochs is not None and epochs < 0:
@@ -89,9 +89,9 @@ def reproduce(
     an interrupted reproduction leaves nothing behind.
     """
     from sysid.device import cpu_cores
-    from sysid.datasets import data_root
+    from sysid.data.datasets import data_root
     from sysid.errors import ConfigError
-    from sysid.reproduce import reproduce as run_protocol
+    from sysid.protocol.reproduce import reproduce as run_protocol
 
     if jobs is not None and jobs < 1:
         raise ConfigError(f"--jobs {jobs}: must be >= 1")

@@ -1,2 +1,3 @@
-"""Storage: where outputs go and how they are written (atomic files, staged and sealed
-directories, the output target every command checks)."""
+"""Storage: atomic files with the user's umask (`files`), completeness manifests
+(`manifest`), staged, all-or-nothing output directories (`staging`) and the output target
+every command checks and locks (`target`)."""

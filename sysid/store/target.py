@@ -15,7 +15,7 @@ Refused (`OutputError`: exit 2, one line naming the output and the path at fault
   A report is the one addition a command owns: ``report.html`` and ``report.pdf`` inside
   the directory it reports on (`OutputTarget.adds_to`);
 - an existing directory, unless ``--overwrite`` and it is a complete sysid output of the
-  same kind (`sysid.staging.check_replaceable`: sysid's manifest format, the same kind,
+  same kind (`sysid.store.staging.check_replaceable`: sysid's manifest format, the same kind,
   every listed file intact); a file sysid did not name itself (a truth file, a report)
   unless it is sysid's own or ``--overwrite`` says so;
 - an output another sysid process is writing: the first holds a lock file beside the
@@ -31,8 +31,8 @@ from pathlib import Path
 from typing import Iterable, Iterator
 
 from sysid.errors import IncompleteOutputError, OutputError
-from sysid.manifest import MANIFEST, read_manifest
-from sysid.staging import check_parent, check_target, staged_directory
+from sysid.store.manifest import MANIFEST, read_manifest
+from sysid.store.staging import check_parent, check_target, staged_directory
 
 try:
     import fcntl
@@ -238,7 +238,7 @@ class OutputTarget:
     @contextmanager
     def staged(self) -> Iterator[Path]:
         """A staging directory moved into place, sealed as `kind`, when the block ends
-        without an error (`sysid.staging.staged_directory`)."""
+        without an error (`sysid.store.staging.staged_directory`)."""
         with staged_directory(self.path, self.kind.value, self.overwrite, keep=self.inputs) as staging:
             yield staging
 

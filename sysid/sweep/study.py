@@ -5,7 +5,7 @@ Output directory::
     manifest.json     written when the sweep starts: sweep.toml and base.toml (kind "sweep")
     sweep.toml        the sweep file as given (a resumed sweep must match it)
     base.toml         the base experiment, every option resolved
-    trials/{point}/seed{k}/   one ordinary run directory per trial (`sysid.rundir`)
+    trials/{point}/seed{k}/   one ordinary run directory per trial (`sysid.runs.rundir`)
     trials.log        journal: one JSON line per trial event (started, resumed, trained, reused)
     results.csv       one row per trial: varied values, seed, status, validation loss, epochs
     points.csv        one row per configuration: validation loss over its seeds
@@ -21,9 +21,9 @@ from pathlib import Path
 from typing import Callable
 
 from sysid.errors import ConfigError, OutputError
-from sysid.files import write_text
-from sysid.manifest import write_manifest
-from sysid.staging import check_target
+from sysid.store.files import write_text
+from sysid.store.manifest import write_manifest
+from sysid.store.staging import check_target
 from sysid.sweep.plan import sweep_trials
 from sysid.sweep.results import SweepResults, collect_results, scanned_trials, write_results
 from sysid.sweep.runner import default_workers, run_optuna, run_trials
@@ -64,7 +64,7 @@ def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = Non
               resume: bool = False, overwrite: bool = False, data: str | os.PathLike | None = None,
               log: Callable[[str], None] = print) -> tuple[SweepResults, dict]:
     """Train every trial of `spec` (on Ray) into `out`; returns the results and summary."""
-    from sysid.datasets import data_root
+    from sysid.data.datasets import data_root
 
     started = time.perf_counter()
     out = Path(out)

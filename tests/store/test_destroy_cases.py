@@ -13,9 +13,9 @@ import pytest
 
 from cli_harness import assert_refused, console_script, environment, in_process, leftovers
 from preprocessing import synth
-from sysid.manifest import MANIFEST, verify_manifest, write_manifest
-from test_cli_fuzz_runs import tiny_config
-from test_preprocessing_bad_input import analytic_run
+from sysid.store.manifest import MANIFEST, verify_manifest
+from analytic_runs import analytic_run
+from tiny_experiment import tiny_config
 
 FOREIGN_MANIFEST = json.dumps({"name": "My App", "start_url": "/", "icons": []})
 
@@ -84,9 +84,9 @@ def processed_run(path):
 
 # -- single files onto the data they read ------------------------------------------------------
 def test_forces_output_onto_its_input(sysid, tmp_path):
-    from test_cli_fuzz_inputs import csv_text, force_rows
-    data = tmp_path / "states.csv"
-    data.write_text(csv_text(force_rows()))
+    data = tmp_path / "states.csv"  # plausible states of the 3 m model
+    pd.DataFrame({"x": [0.0, 1.0], "u": 0.5, "y": 0.0, "v": 0.01, "psi": 0.2, "r": 0.003, "n_prop": 10.0,
+                  "delta_rudder": 0.1, "wind_velo_true": 1.5, "wind_dir_true": 2.0}).to_csv(data, index=False)
     kept = Untouched(tmp_path)
     assert_refused(sysid("forces", data, "-o", data), 2, f"{data}: is {data}, an input of this command")
     kept.check()

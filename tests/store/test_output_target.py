@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from sysid.errors import OutputError
-from sysid.files import write_text
-from sysid.manifest import MANIFEST, write_manifest
+from sysid.store.files import write_text
+from sysid.store.manifest import MANIFEST, write_manifest
 from sysid.store.target import OutputKind, OutputTarget, exclusive_lock, real_path
 
 FOREIGN_MANIFEST = json.dumps({"name": "My App", "start_url": "/", "icons": []})

@@ -1,0 +1,1 @@
+"""Experiment configuration: TOML -> typed, validated `Experiment` (torch-free)."""
