@@ -20,24 +20,6 @@ def sysid(capsys):
     return lambda *args: in_process(capsys, *args)
 
 
-@pytest.fixture(scope="module")
-def files(dataset_dir):
-    berthing = dataset_dir / "berthing"
-    return {"train": berthing / "berthing_12-Nov-2020_11_07_23.csv",
-            "test": berthing / "berthing_12-Nov-2020_11_49_21.csv"}
-
-
-@pytest.fixture(scope="module")
-def trained(tmp_path_factory, files):
-    """A run directory written by `sysid train` (hybrid, with model.pt and knn.pt)."""
-    from sysid.cli import run
-    folder = tmp_path_factory.mktemp("trained")
-    config = folder / "tiny.toml"
-    config.write_text(tiny_config(files))
-    run(["train", str(config), "-o", str(folder / "run"), "--test", str(files["test"])])
-    return folder / "run"
-
-
 @pytest.fixture
 def run_copy(trained, tmp_path):
     copy = tmp_path / "run"
