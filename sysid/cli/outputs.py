@@ -18,8 +18,9 @@ def hold(target):
     return target
 
 
-def claim(path: str | os.PathLike, kind: str, inputs=(), overwrite: bool = False, **options):
-    """The command's output target, checked and held (`hold`)."""
+def claim(path: str | os.PathLike, kind, inputs=(), overwrite: bool = False, **options):
+    """The command's output target (`OutputTarget.checked`: `kind` an `OutputKind`), checked
+    and held (`hold`)."""
     from sysid.store.target import OutputTarget
 
     return hold(OutputTarget.checked(path, kind, inputs, overwrite, **options))

@@ -15,6 +15,7 @@ import typer
 from sysid.cli.app import app
 from sysid.cli.interrupts import on_interrupt
 from sysid.cli.outputs import claim, ship_file
+from sysid.store.target import OutputKind
 from sysid.errors import DataError
 
 ShipOption = typer.Option("esso_osaka", "--ship", help="Ship name (configs/ships/NAME.toml) or a ship TOML.")
@@ -64,8 +65,8 @@ def synth_raw(
     layout = load_ship(ship).sensors
     truth_path = output.with_suffix(".truth.csv")
     inputs = [processed, ship_file(ship)]
-    claim(output, "file", inputs)
-    claim(truth_path, "file", inputs, overwrite, companion=output)
+    claim(output, OutputKind.FILE, inputs)
+    claim(truth_path, OutputKind.FILE, inputs, overwrite, companion=output)
     kwargs = {}
     ref = _parse_latlon(reference)
     if ref is not None:
@@ -131,7 +132,7 @@ def preprocess(
     for p in raw:
         if not p.is_file():
             raise DataError(f"{p}: file not found")
-    target = claim(outdir, "preprocessing", [*raw, ship_file(ship)], overwrite)  # before any work
+    target = claim(outdir, OutputKind.PREPROCESSING, [*raw, ship_file(ship)], overwrite)  # before any work
     layout = load_ship(ship).sensors
     paths = [str(p) for p in raw]
     results = []

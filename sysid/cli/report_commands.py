@@ -7,6 +7,7 @@ import typer
 
 from sysid.cli.app import app
 from sysid.cli.outputs import claim
+from sysid.store.target import OutputKind
 
 
 @app.command()
@@ -19,7 +20,7 @@ def report(
     from sysid.report import build_report
 
     out = out or Path("reports") / source.resolve().name
-    claim(out, "report", [source], adds_to=source)
+    claim(out, OutputKind.REPORT, [source], adds_to=source)
 
     def progress(message: str) -> None:
         if not quiet:

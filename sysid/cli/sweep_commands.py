@@ -9,6 +9,7 @@ import typer
 
 from sysid.cli.app import app
 from sysid.cli.outputs import claim, experiment_inputs
+from sysid.store.target import OutputKind
 
 
 @app.command()
@@ -36,7 +37,7 @@ def sweep(
         raise ConfigError(f"--workers {workers}: must be >= 1")
     spec = load_sweep(sweep_file)
     inputs = [sweep_file, spec.base_path, *experiment_inputs(spec.base, data)]
-    claim(output, "sweep", inputs, overwrite, resume=resume)
+    claim(output, OutputKind.SWEEP, inputs, overwrite, resume=resume)
     on_interrupt(f"finished trials are kept in {output}/trials; rerun with --resume to continue the sweep")
     results, summary = run_sweep(spec, output, workers, address, resume, overwrite, data,
                                  log=lambda m: typer.echo(m))

@@ -10,6 +10,7 @@ import typer
 from sysid.cli.app import app
 from sysid.cli.interrupts import on_interrupt
 from sysid.cli.outputs import claim, experiment_inputs
+from sysid.store.target import OutputKind
 
 
 @app.command()
@@ -43,7 +44,8 @@ def train(
     if threads is not None:
         exp = exp.replace(training={"threads": threads})
     test_inputs = test or list(test_files(data).values())
-    claim(output, "run", [config, *experiment_inputs(exp, data), *test_inputs], overwrite)  # now, not after training
+    # a bad -o fails now, not after training
+    claim(output, OutputKind.RUN, [config, *experiment_inputs(exp, data), *test_inputs], overwrite)
     checkpoint = checkpoint_path(output)
     on_interrupt(lambda: f"nothing written to {output}" + (
         f"; the training checkpoint {checkpoint} is kept: rerun with --resume to continue"
@@ -100,7 +102,7 @@ def reproduce(
     if seeds > 1:
         from sysid.sweep.runner import import_ray
         import_ray()  # a clear error now if Ray is not installed
-    target = claim(output, "reproduction", [data_root(data)], overwrite)
+    target = claim(output, OutputKind.REPRODUCTION, [data_root(data)], overwrite)
     on_interrupt(f"nothing written to {output} (it is moved into place only when every run is done)")
     with target.staged() as staging:
         summary = run_protocol(staging, data, only, log=typer.echo, jobs=jobs or cpu_cores(), seeds=seeds,
