@@ -7,6 +7,8 @@ import typer
 
 from sysid import logs
 from sysid.cli.app import app
+from sysid.cli.outputs import claim
+from sysid.store.target import OutputKind
 from sysid.errors import DataError
 
 
@@ -36,6 +38,7 @@ def export(
     if dt <= 0 or batch < 1:
         raise DataError(f"--dt must be > 0 and --batch >= 1 (got {dt}, {batch})")
     dtype = torch.float32 if float32 else torch.float64
+    claim(output, OutputKind.FILE, [run_dir])
     exp, model = load_model(run_dir, dtype)
     export_model(model, output, method, dt, batch, dtype, compiled=not portable,
                  log=logs.indented())

@@ -7,6 +7,8 @@ import typer
 
 from sysid import logs
 from sysid.cli.app import app
+from sysid.cli.outputs import claim
+from sysid.store.target import OutputKind
 
 
 @app.command()
@@ -18,6 +20,7 @@ def report(
     from sysid.report import build_report
 
     out = out or Path("reports") / source.resolve().name
+    claim(out, OutputKind.REPORT, [source], adds_to=source)
     paths = build_report(source, out, logs.indented())
     typer.echo(f"report: {paths.html}")
     typer.echo(f"        {paths.pdf} ({paths.n_pages} pages, {paths.n_figures} figures, {paths.seconds:.1f} s)")

@@ -11,6 +11,7 @@ from sysid.config.experiment import load_experiment
 from sysid.config.reference import config_keys
 from sysid.mmg.ship import active_parameters, load_ship
 from sysid.mmg.ship_check import check_ship
+from sysid.store.manifest import write_manifest
 
 
 def test_init_writes_a_project_that_loads_from_another_working_directory(tmp_path, monkeypatch, capsys):
@@ -60,9 +61,23 @@ def test_init_refuses_an_existing_file_and_writes_nothing(tmp_path, capsys):
     project.mkdir()
     (project / "experiment.toml").write_text("mine\n")
     out = in_process(capsys, "init", project)
-    assert_refused(out, 1, str(project / "experiment.toml"), "never overwrites")
+    assert_refused(out, 2, str(project / "experiment.toml"), "never overwrites")
     assert (project / "experiment.toml").read_text() == "mine\n"
     assert sorted(p.name for p in project.iterdir()) == ["experiment.toml"]
+
+
+def test_init_refuses_a_link_and_a_sealed_run(tmp_path, capsys):
+    project = tmp_path / "p"
+    project.mkdir()
+    (tmp_path / "mine.toml").write_text("mine\n")
+    (project / "my_ship.toml").symlink_to(tmp_path / "mine.toml")
+    assert_refused(in_process(capsys, "init", project), 2, str(project / "my_ship.toml"))
+    assert (tmp_path / "mine.toml").read_text() == "mine\n"
+    run = tmp_path / "run"
+    run.mkdir()
+    write_manifest(run, "run")  # a directory sysid sealed: nothing else is written into it
+    out = in_process(capsys, "init", run / "inside")
+    assert out.code == 2 and not (run / "inside").exists(), out.err
 
 
 @pytest.mark.parametrize("name", ["../escape", "my ship", ""])
