@@ -141,15 +141,16 @@ KEYS: dict[tuple[str, str], KeyDoc] = {
                                         "averaged; empty: not an ensemble."),
 }
 
-# options whose values the parser checks against a fixed set (until they are enums)
+# options whose values the parser checks against a fixed set of strings; an option typed as an
+# enum takes its members instead (the tuples are read where the config still has them)
 _CHOICES: dict[tuple[str, str], tuple[str, ...]] = {
-    ("experiment", "model"): tuple(config.KINDS),
+    ("experiment", "model"): tuple(getattr(config, "KINDS", ())),
     ("experiment", "dataset"): ("D1", "D2"),
-    ("gate", "space"): tuple(config.GATE_SPACES),
-    ("identify", "solver"): tuple(config.SOLVERS),
+    ("gate", "space"): tuple(getattr(config, "GATE_SPACES", ())),
+    ("identify", "solver"): tuple(getattr(config, "SOLVERS", ())),
     ("identify", "stage"): ("before", "joint"),
-    ("identify", "start_states"): tuple(config.START_STATES),
-    ("evaluation", "integrator"): tuple(config.INTEGRATORS),
+    ("identify", "start_states"): tuple(getattr(config, "START_STATES", ())),
+    ("evaluation", "integrator"): tuple(getattr(config, "INTEGRATORS", ())),
     ("training", "dtype"): ("float32", "float64"),
 }
 
