@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import types
 import typing
 from dataclasses import dataclass, fields
 
@@ -174,7 +175,10 @@ class KeyReference:
 
 
 def toml_value(value) -> str:
-    """A config value (an enum member, a table object) as written in a TOML file."""
+    """A config value (an enum member, a table object) as written in a TOML file; None (an
+    optional choice left to its default) as the empty string."""
+    if value is None:
+        return '""'
     if isinstance(value, enum.Enum):
         value = value.value
     if hasattr(value, "as_table"):  # a table of its own, e.g. [data.columns]
@@ -182,7 +186,14 @@ def toml_value(value) -> str:
     return config._toml_value(value)
 
 
+def _optional_of(hint):
+    """``X | None`` to X (an optional option), anything else as it is."""
+    args = [a for a in typing.get_args(hint) if a is not type(None)]
+    return args[0] if typing.get_origin(hint) in (typing.Union, types.UnionType) and len(args) == 1 else hint
+
+
 def _type_name(hint) -> str:
+    hint = _optional_of(hint)
     origin = typing.get_origin(hint)
     if origin in (tuple, list):
         return f"list of {_type_name(typing.get_args(hint)[0])}"
@@ -212,7 +223,7 @@ def config_keys() -> list[KeyReference]:
     for section, options in sections():
         hints = typing.get_type_hints(options)
         for f in fields(options):
-            hint = hints[f.name]
+            hint = _optional_of(hints[f.name])
             doc = KEYS.get((section, f.name), KeyDoc("", ""))
             choices = tuple(m.value for m in hint) if isinstance(hint, type) and issubclass(hint, enum.Enum) \
                 else _CHOICES.get((section, f.name), ())
