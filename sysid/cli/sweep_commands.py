@@ -7,7 +7,10 @@ from typing import Optional
 
 import typer
 
+from sysid import logs
 from sysid.cli.app import app
+from sysid.cli.outputs import claim, experiment_inputs
+from sysid.store.target import OutputKind
 
 
 @app.command()
@@ -40,9 +43,11 @@ def sweep(
     from sysid.sweep.connect import check_reachable, ray_target
     check_reachable(ray_target(address))  # an address nobody answers at: one line in seconds, before any work
     spec = load_sweep(sweep_file)
+    inputs = [sweep_file, spec.base_path, *experiment_inputs(spec.base, data)]
+    claim(output, OutputKind.SWEEP, inputs, overwrite, resume=resume)
     on_interrupt(f"finished trials are kept in {output}/trials; rerun with --resume to continue the sweep")
     results, summary = run_sweep(spec, output, workers, address, resume, overwrite, data,
-                                 log=lambda m: typer.echo(m), storage=storage, mlflow=mlflow)
+                                 log=logs.info, storage=storage, mlflow=mlflow)
     if len(results.points):
         shown = results.points.head(10)
         typer.echo(shown.to_string(index=False, float_format=lambda v: f"{v:.5g}"))

@@ -2,6 +2,7 @@
 
 Output directory::
 
+    manifest.json     written when the sweep starts: sweep.toml and base.toml (kind "sweep")
     sweep.toml        the sweep file as given (a resumed sweep must match it)
     base.toml         the base experiment, every option resolved
     trials/{point}/seed{k}/   one ordinary run directory per trial (`sysid.runs.rundir`)
@@ -29,6 +30,8 @@ from typing import Callable
 from sysid.errors import ConfigError, OutputError
 from sysid.config.experiment import parse_experiment
 from sysid.store.files import write_text
+from sysid.store.manifest import write_manifest
+from sysid.store.staging import check_target
 from sysid.sweep.inbox import JOURNAL, complete_summary
 from sysid.sweep.plan import make_trial, sweep_trials
 from sysid.sweep.results import SweepResults, collect_results, scanned_trials, write_results
@@ -38,10 +41,13 @@ from sysid.sweep.trial import TrialSpec, read_trial_data
 
 MARKER = "sweep.toml"
 
+SWEEP_KIND = "sweep"  # the kind in the sweep directory's manifest
+
 
 def check_output(spec: SweepSpec, out: Path, resume: bool, overwrite: bool) -> None:
     """Refuse to mix sweeps (nothing written): an existing output is continued only with
-    `resume` (and the same sweep file) or replaced with `overwrite` (only if it is a sweep's)."""
+    `resume` (and the same sweep file) or replaced with `overwrite` (only if sysid sealed it
+    as a sweep, and it holds none of the sweep's inputs)."""
     marker = out / MARKER
     if out.exists() and not out.is_dir():
         raise OutputError(f"{out}: exists and is not a directory; choose another output path")
@@ -56,13 +62,7 @@ def check_output(spec: SweepSpec, out: Path, resume: bool, overwrite: bool) -> N
         if not overwrite:
             raise OutputError(f"{out}: already exists; pass --resume to continue that sweep, --overwrite to "
                               "replace it, or choose another output path")
-        if not marker.is_file():
-            raise OutputError(f"{out}: exists and is not a sweep's output (no {MARKER}); "
-                              "--overwrite only replaces sysid outputs")
-        for needed in (Path(spec.source), spec.base_path, Path.cwd()):
-            if needed.resolve().is_relative_to(out.resolve()):
-                raise OutputError(f"{out}: --overwrite would delete {needed}, which this sweep needs; "
-                                  "choose another output path")
+        check_target(out, overwrite, [spec.source, spec.base_path], SWEEP_KIND)
 
 
 def write_output(spec: SweepSpec, out: Path, resume: bool) -> None:
@@ -74,6 +74,7 @@ def write_output(spec: SweepSpec, out: Path, resume: bool) -> None:
     out.mkdir(parents=True, exist_ok=True)
     write_text(spec.base.to_toml(), out / "base.toml")
     write_text(spec.text, out / MARKER)
+    write_manifest(out, SWEEP_KIND)  # sealed as soon as it is made: sysid's from then on
 
 
 def _remove_unstarted(out: Path, existed: bool) -> None:

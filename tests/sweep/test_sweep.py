@@ -170,18 +170,6 @@ def test_two_trainings_of_one_trial_train_it_once(tmp_path, dataset_dir):
     assert (out / "trials" / "p" / "seed0" / "summary.json").is_file() and not inbox.claims
 
 
-def test_overwrite_never_deletes_the_sweep_file_it_reads(tmp_path, dataset_dir):
-    from sysid.errors import OutputError
-    from sysid.sweep.study import check_output
-
-    path = _sweep(tmp_path, dataset_dir, "[vary]\n'training.learning_rate' = [1e-3]\n")
-    spec = load_sweep(path)
-    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
-    with pytest.raises(OutputError, match="--overwrite would delete .*sweep.toml, which this sweep needs"):
-        check_output(spec, tmp_path, resume=False, overwrite=True)
-    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
-
-
 def test_a_sweep_failing_before_its_first_trial_leaves_no_output(tmp_path, dataset_dir, monkeypatch):
     from contextlib import contextmanager
     import sysid.sweep.study as study
