@@ -113,7 +113,7 @@ def test_a_local_sweep_beside_a_running_cluster_uses_its_own_ray(cluster, datase
     out = work / "beside_out"
     proc = _sysid(["sweep", str(path), "-o", str(out), "--workers", "1"], nodes.base_env, dataset_dir)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    note = [line for line in proc.stdout.splitlines() if line.startswith("note: a Ray cluster runs")]
+    note = [line for line in proc.stdout.splitlines() if "note: a Ray cluster runs" in line]
     assert len(note) == 1 and nodes.address.split(":")[1] in note[0]
     assert "2/2 trials complete" in proc.stdout
     assert _gcs_sessions(nodes.tmp) == before and nodes.alive_nodes() == alive  # its Ray gone, the cluster as it was
