@@ -112,8 +112,13 @@ class LocalCluster:
         self._wait_nodes(before + 1)
         return proc
 
-    def kill_worker(self, proc: subprocess.Popen) -> None:
+    def kill_worker(self, proc: subprocess.Popen, timeout: float = 180.0) -> None:
+        """Kill a worker node and wait until the cluster has declared it dead."""
+        before = self.alive_nodes()
         kill_group(proc)
+        deadline = time.time() + timeout
+        while self.alive_nodes() >= before and time.time() < deadline:
+            time.sleep(1.0)
 
     def alive_nodes(self) -> int:
         probe = ("import ray, logging; ray.init(address=%r, logging_level=logging.ERROR, log_to_driver=False); "
