@@ -103,14 +103,14 @@ def test_sweep_killed_part_way_resumes_without_training_a_trial_twice(tmp_path, 
     assert set(trained_before) <= reused
     table = pd.read_csv(out / "results.csv")
     assert len(table) == 4 and set(table.status) == {"complete"}
-    assert table.val_loss.map(math.isfinite).all()
+    assert table.val_loss_multistep.map(math.isfinite).all()
     assert sorted(table.seed) == [0, 0, 1, 1]
     summary = json.loads((out / "summary.json").read_text())
     points = pd.read_csv(out / "points.csv")
     assert summary["best"]["point"] == points.point.iloc[0]
-    assert summary["best"]["val_loss_mean"] == pytest.approx(points.val_loss_mean.min(), rel=1e-5)
-    best = table[table.point == summary["best"]["point"]].val_loss.mean()
-    assert summary["best"]["val_loss_mean"] == pytest.approx(best, rel=1e-5)
+    assert summary["best"]["val_loss_multistep_mean"] == pytest.approx(points.val_loss_multistep_mean.min(), rel=1e-5)
+    best = table[table.point == summary["best"]["point"]].val_loss_multistep.mean()
+    assert summary["best"]["val_loss_multistep_mean"] == pytest.approx(best, rel=1e-5)
 
     # every trial is an ordinary run directory
     from sysid.runs.rundir import load_model
@@ -135,7 +135,7 @@ def test_shipped_sweep_files_are_valid():
     assert files
     for path in files:
         spec = load_sweep(path)
-        assert spec.objective == "val_loss" and len(spec.seeds) >= 2 and sweep_trials(spec)
+        assert spec.objective == "val_loss_multistep" and len(spec.seeds) >= 2 and sweep_trials(spec)
 
 
 _TRAIN_ONE = """

@@ -16,7 +16,7 @@ def train(
     config: Path = typer.Argument(..., help="Experiment TOML (configs/experiments/*.toml)."),
     output: Path = typer.Option(..., "-o", "--output", help="Run directory to write (runs/NAME)."),
     data: Optional[Path] = typer.Option(None, "--data", help="Dataset root (default: SYSID_DATA or ../shared/data/frt-ds-esso)."),
-    test: Optional[List[Path]] = typer.Option(None, "--test", help="Files to evaluate on (default: the six test files)."),
+    test: Optional[List[Path]] = typer.Option(None, "--test", help="Logs to evaluate on, instead of the config's [data] test (default: [data] test; the paper's six test files only for dataset = D1/D2)."),
     epochs: Optional[int] = typer.Option(None, "--epochs", help="Override [training] epochs."),
     threads: Optional[int] = typer.Option(None, "--threads", help="Override [training] threads (torch CPU threads; 0: one per core)."),
     resume: bool = typer.Option(False, "--resume", help="Continue an interrupted training from its checkpoint."),
@@ -28,11 +28,10 @@ def train(
     interrupted training leaves no run, only its checkpoint for --resume.
     """
     from sysid.cli.interrupts import on_interrupt
-    from sysid.data.recordings import expand_paths, read_run
-    from sysid.data.datasets import test_files
+    from sysid.data.recordings import expand_paths
     from sysid.errors import ConfigError
     from sysid.config.experiment import load_experiment
-    from sysid.runs.lifecycle import checkpoint_path, run_experiment, training_runs
+    from sysid.runs.lifecycle import checkpoint_path, run_experiment, test_runs, training_runs, validation_runs
     from sysid.store.staging import check_target
 
     start = time.perf_counter()
@@ -43,20 +42,32 @@ def train(
         exp = exp.replace(training={"epochs": epochs})
     if threads is not None:
         exp = exp.replace(training={"threads": threads})
+    if test:
+        exp = exp.replace(data={"test": tuple(str(p.absolute()) for p in expand_paths(test))})
     check_target(output, overwrite)  # a bad -o fails now, not after training
     checkpoint = checkpoint_path(output)
     on_interrupt(lambda: f"nothing written to {output}" + (
         f"; the training checkpoint {checkpoint} is kept: rerun with --resume to continue"
         if checkpoint.is_file() else ""))
     runs = training_runs(exp, data) if exp.needs_training else None
+    validation = validation_runs(exp) if exp.needs_training else []
+    tests = test_runs(exp, data)
     if runs is not None:
-        typer.echo(f"train: {exp.experiment.model} model on {len(runs)} file(s) "
-                   f"({sum(r.duration for r in runs):.0f} s of data), seed {exp.experiment.seed}")
-    test_paths = expand_paths(test) if test else list(test_files(data).values())
-    tests = [read_run(p) for p in test_paths]
+        source = f"data set {exp.experiment.dataset}" if exp.experiment.dataset and not exp.data.train else "your logs"
+        typer.echo(f"train: {exp.experiment.model} model on {len(runs)} training log(s) from {source} "
+                   f"({sum(r.duration for r in runs):.0f} s of data), seed {exp.experiment.seed}; validation: "
+                   + (f"{len(validation)} log(s)" if validation else
+                      f"{exp.training.val_fraction:g} of every training log's {exp.training.block_s:g}-s blocks"))
+    if tests:
+        paper = not exp.data.test and exp.experiment.dataset
+        typer.echo(f"test: {len(tests)} log(s)" + (" (the paper's test files of data set "
+                                                  f"{exp.experiment.dataset})" if paper else ""))
+    else:
+        typer.echo("test: none (no [data] test in the config, no --test): scored on the validation windows only")
     result = run_experiment(exp, output, tests, runs, data, log=lambda m: typer.echo("  " + m), resume=resume,
-                            overwrite=overwrite)
-    typer.echo(result.evaluation.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+                            overwrite=overwrite, validation=validation)
+    if tests:
+        typer.echo(result.evaluation.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     if result.failure:
         typer.secho(f"train: FAILED: {result.failure}; the run in {output} is marked failed", fg=typer.colors.RED, err=True)
         raise SystemExit(1)
@@ -71,6 +82,11 @@ def train(
             steps.append(f"{t.epochs} epochs, best {t.best_epoch}")
         detail = f" ({', '.join(steps)}; {stops})"
     typer.echo(f"train: wrote {output} in {time.perf_counter() - start:.0f} s{detail}")
+    if result.verdict is not None:
+        if result.verdict.beats_baseline:
+            typer.echo("verdict: " + result.verdict.statement())
+        else:  # the last line, on stderr
+            typer.secho(result.verdict.warning(), fg=typer.colors.YELLOW, err=True)
 
 
 @app.command()

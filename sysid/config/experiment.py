@@ -4,9 +4,16 @@
 [experiment]
 name = "hybrid_D2"
 model = "hybrid"            # mmg | nn | hybrid
-dataset = "D2"              # D1 | D2 (the paper's), or files = [...] under [data]
-ship = "esso_osaka"
+dataset = "D2"              # D1 | D2: the paper's training and test files; or [data] train
+ship = "esso_osaka"         # a bundled ship, or a ship file (relative to this config)
 seed = 0
+
+[data]                      # your own logs instead of a paper data set (paths relative to
+train = ["logs/turn_*.csv"] # this config; files, directories or glob patterns)
+validation = 0.3            # files, or a fraction of the training files' 30-s blocks
+test = ["logs/zigzag_20.csv"]   # read only by evaluation; none: no test set
+[data.columns]              # your column names and units (sysid.data.columns)
+u = { column = "STW", unit = "knots" }
 
 [mmg]
 overrides = { X_vr = 0.4535 }
@@ -36,6 +43,8 @@ prior_weight = 0.0          # levenberg_marquardt: pull toward the ship file's v
 members = ["../hybrid_D2/seed0", "../hybrid_D2/seed1"]
 ```
 Every section and key is optional except ``[experiment] model``; unknown keys are errors.
+Every path (``ship``, ``[data] train / validation / test``) resolves against the folder of
+the config file that names it (`load_experiment`); a resolved config holds absolute paths.
 """
 from __future__ import annotations
 
@@ -47,6 +56,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+from sysid.data.columns import ColumnMap, parse_columns
 from sysid.dynamics.equations import INTEGRATORS
 from sysid.errors import ConfigError
 from sysid.identify.levenberg_marquardt import START_STATES
@@ -62,16 +72,29 @@ SOLVERS = ("gradient", "levenberg_marquardt")  # [identify] solver
 class ExperimentOptions:
     name: str = "experiment"
     model: str = "hybrid"
-    dataset: str = "D2"
+    dataset: str = ""              # "D1" | "D2": the paper's data (training and test); "": [data] train
     ship: str = "esso_osaka"
     seed: int = 0
 
 
 @dataclass(frozen=True)
 class DataOptions:
-    files: tuple[str, ...] = ()      # explicit training files instead of D1/D2
+    """Your own logs (instead of the paper's D1/D2): files, directories or glob patterns,
+    resolved against the config's folder. ``validation`` empty: the ``[training]
+    val_fraction`` of every training file's blocks; ``test`` empty (and no data set): no test
+    set. ``columns``: the logs' column names and units (`sysid.data.columns`)."""
+
+    train: tuple[str, ...] = ()      # training logs
+    validation: tuple[str, ...] = () # validation logs (whole files); empty: blocks of the training logs
+    test: tuple[str, ...] = ()       # test logs, read only by evaluation
+    columns: ColumnMap = ColumnMap()  # [data.columns]: channel = column or { column, unit }
     rate: float = 1.0                # Hz
     exclude_suspect: bool = True     # drop windows touching frozen-GNSS segments
+
+    @property
+    def files(self) -> tuple[str, ...]:
+        """The training logs (the older name of ``train``)."""
+        return self.train
 
 
 @dataclass(frozen=True)
@@ -103,7 +126,7 @@ class TrainingOptions:
     max_minutes: float = 0.0       # 0: off; > 0: a safety limit whose hit fails the run
     threads: int = 1               # torch intra-op threads; 0: one per core
     warm_start_epochs: int = 150   # one-step regression on the implied residual force
-    objective_s: float = 0.0       # horizon [s] of the final validation loss (summary val_loss); 0: T steps
+    objective_s: float = 0.0       # horizon [s] of val_loss_multistep (the run's validation loss); 0: T steps
     dtype: str = "float32"
     device: str = "auto"           # auto (CUDA when present) | cpu | cuda | cuda:N
 
@@ -191,7 +214,10 @@ class Experiment:
                 continue
             lines.append(f"[{section.name}]")
             for f in fields(getattr(self, section.name)):
-                lines.append(f"{f.name} = {_toml_value(getattr(getattr(self, section.name), f.name))}")
+                value = getattr(getattr(self, section.name), f.name)
+                if isinstance(value, ColumnMap):
+                    value = value.as_table()
+                lines.append(f"{f.name} = {_toml_value(value)}")
             lines.append("")
         return "\n".join(lines)
 
@@ -206,6 +232,8 @@ def _toml_value(value: Any) -> str:
     if isinstance(value, (list, tuple)):
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
     if isinstance(value, dict):
+        if not value:
+            return "{}"
         return "{ " + ", ".join(f"{k} = {_toml_value(v)}" for k, v in value.items()) + " }"
     raise TypeError(f"cannot write {value!r} as TOML")
 
@@ -217,7 +245,7 @@ _SECTIONS = {f.name: f.type for f in fields(Experiment) if f.name != "source"}
 
 
 # the element type of every list option
-_ELEMENT_TYPES = {("data", "files"): str, ("ensemble", "members"): str, ("network", "hidden"): int,
+_ELEMENT_TYPES = {("data", "train"): str, ("data", "validation"): str, ("data", "test"): str, ("ensemble", "members"): str, ("network", "hidden"): int,
                   ("identify", "parameters"): str, ("evaluation", "horizons"): float}
 _NAMES = {int: "an integer", float: "a finite number", str: "a string"}
 
@@ -272,6 +300,8 @@ def _coerce(section: str, opt_cls, table: dict, src: str):
         elif isinstance(default, dict):
             if not isinstance(value, dict):
                 raise ConfigError(f"{where}: expected a table, got {value!r}")
+        elif isinstance(default, ColumnMap):
+            value = parse_columns(value, src)
         out[key] = value
     return opt_cls(**out)
 
@@ -280,8 +310,14 @@ def _validate(exp: Experiment, src: str) -> None:
     e, t, g, i = exp.experiment, exp.training, exp.gate, exp.identify
     if e.model not in KINDS:
         raise ConfigError(f"{src}: [experiment] model = {e.model!r}: choose one of {', '.join(KINDS)}")
-    if not exp.data.files and e.dataset not in ("D1", "D2"):
-        raise ConfigError(f"{src}: [experiment] dataset = {e.dataset!r}: choose D1 or D2, or list [data] files")
+    if e.dataset not in ("", "D1", "D2"):
+        raise ConfigError(f"{src}: [experiment] dataset = {e.dataset!r}: choose D1 or D2 (the paper's data), "
+                          "or leave it out and list your logs in [data] train")
+    if exp.data.train and e.dataset:
+        raise ConfigError(f"{src}: [experiment] dataset = {e.dataset!r} and [data] train both name training "
+                          "data: keep one (dataset for the paper's D1/D2, [data] train for your logs)")
+    if exp.data.validation and not exp.data.train:
+        raise ConfigError(f"{src}: [data] validation files need [data] train files")
     checks = [
         (t.steps >= 1, "[training] steps must be >= 1"),
         (t.stride_s > 0, "[training] stride_s must be > 0"),
@@ -353,8 +389,13 @@ def _validate(exp: Experiment, src: str) -> None:
         raise ConfigError(f"{src}: [identify] parameters need an MMG part (model mmg or hybrid)")
 
 
-def parse_experiment(doc: dict, source: str = "<config>") -> Experiment:
-    """A parsed TOML document to a validated `Experiment`."""
+def parse_experiment(doc: dict, source: str = "<config>", base_dir: str | os.PathLike | None = None) -> Experiment:
+    """A parsed TOML document to a validated `Experiment`. Relative paths (``ship`` when it is
+    a file, ``[data] train / validation / test``) resolve against `base_dir` (the config's
+    folder; None: left as written, i.e. relative to the working directory)."""
+    doc = _normalized_data(doc, source)
+    if base_dir is not None:
+        doc = _resolved_paths(doc, Path(base_dir))
     unknown = set(doc) - set(_SECTIONS)
     if unknown:
         raise ConfigError(f"{source}: unknown section(s) {sorted(unknown)} (known: {', '.join(_SECTIONS)})")
@@ -369,8 +410,50 @@ def parse_experiment(doc: dict, source: str = "<config>") -> Experiment:
     return exp
 
 
+def _normalized_data(doc: dict, source: str) -> dict:
+    """``[data] files`` (the older name) as ``train``; ``validation = 0.3`` (a fraction) as
+    ``[training] val_fraction``."""
+    data = doc.get("data")
+    if not isinstance(data, dict):
+        return doc
+    data = dict(data)
+    if "files" in data:
+        if "train" in data:
+            raise ConfigError(f"{source}: [data] files and train both list training logs: keep train")
+        data["train"] = data.pop("files")
+    fraction = data.get("validation")
+    if isinstance(fraction, (int, float)) and not isinstance(fraction, bool):
+        training = dict(doc.get("training") or {})
+        if "val_fraction" in training and training["val_fraction"] != fraction:
+            raise ConfigError(f"{source}: [data] validation = {fraction!r} and [training] val_fraction = "
+                              f"{training['val_fraction']!r} disagree: keep one")
+        training["val_fraction"] = fraction
+        del data["validation"]
+        return {**doc, "data": data, "training": training}
+    return {**doc, "data": data}
+
+
+def _resolved_paths(doc: dict, base: Path) -> dict:
+    """The document with its relative paths resolved against `base` (globs kept)."""
+    def resolve(item):
+        return item if not isinstance(item, str) or Path(item).is_absolute() else os.path.normpath(base / item)
+
+    doc = dict(doc)
+    experiment = doc.get("experiment")
+    if isinstance(experiment, dict) and isinstance(experiment.get("ship"), str):
+        ship = experiment["ship"]
+        if ship.endswith(".toml") or "/" in ship or os.sep in ship:  # a file, not a bundled ship's name
+            doc["experiment"] = {**experiment, "ship": resolve(ship)}
+    data = doc.get("data")
+    if isinstance(data, dict):
+        doc["data"] = {**data, **{key: [resolve(i) for i in data[key]] for key in ("train", "validation", "test")
+                                  if isinstance(data.get(key), list)}}
+    return doc
+
+
 def load_experiment(path: str | os.PathLike) -> Experiment:
-    """Read and validate an experiment TOML; errors name the file and key."""
+    """Read and validate an experiment TOML; errors name the file and key; paths in it
+    resolve against its folder."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"{path}: config file not found")
@@ -382,7 +465,7 @@ def load_experiment(path: str | os.PathLike) -> Experiment:
     except UnicodeDecodeError:
         raise ConfigError(f"{path}: not UTF-8 text (binary, or another encoding such as UTF-16); "
                           "an experiment config is a UTF-8 TOML file") from None
-    return parse_experiment(doc, str(path))
+    return parse_experiment(doc, str(path), path.parent.absolute())
 
 
 def ship_overrides(exp: Experiment) -> dict[str, float]:

@@ -129,15 +129,15 @@ def sweep_items(source: ReportSource, top: int = 8) -> list[tuple[str, str]]:
                        f"seeds {s.get('seeds')}; base {s.get('base')}"),
              ("Trials", f"{s.get('complete')} of {s.get('trials')} complete, {s.get('failed')} failed, "
                         f"{s.get('missing')} missing; {_seconds(s.get('seconds'))}"),
-             ("Objective", "validation multi-step loss (validation blocks of the training files only; "
-                           "the test files never choose)")]
+             ("Objective", "val_loss_multistep, the validation multi-step loss of each trial's final model "
+                           "(validation windows only; the test files never choose)")]
     if best:
-        spread = f" ± {best['val_loss_std']:.5f} (std over seeds)" if best.get("val_loss_std") is not None else ""
-        items.append(("Chosen", f"{best['point']}: validation loss {best['val_loss_mean']:.5f}{spread}; "
+        spread = f" ± {best['val_loss_multistep_std']:.5f} (std over seeds)" if best.get("val_loss_multistep_std") is not None else ""
+        items.append(("Chosen", f"{best['point']}: val_loss_multistep {best['val_loss_multistep_mean']:.5f}{spread}; "
                                 f"runs {', '.join(best.get('runs', []))}"))
     for i, row in enumerate(sweep.points.head(top).itertuples(), 1):
-        std = getattr(row, "val_loss_std", float("nan"))
-        items.append((f"#{i}", f"{row.point}: {row.val_loss_mean:.5f}" + ("" if std != std else f" ± {std:.5f}")
+        std = getattr(row, "val_loss_multistep_std", float("nan"))
+        items.append((f"#{i}", f"{row.point}: {row.val_loss_multistep_mean:.5f}" + ("" if std != std else f" ± {std:.5f}")
                       + f" ({row.complete} of {row.seeds} seeds)"))
     return items
 

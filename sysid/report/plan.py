@@ -219,9 +219,10 @@ def _loss_figure(c: _Context) -> None:
     histories = [(_label(r), _colour(r, i), r.history, r.summary.get("best_epoch"))
                  for i, r in enumerate(c.runs) if r.history is not None and len(r.history)]
     if histories:
-        c.add("loss", "Training", "Training and validation loss",
-              "Training (solid) and validation (dashed) loss per epoch of every trained model; star: the "
-              "epoch whose weights were kept.", partial(F.loss_curves, histories, "Training and validation loss"),
+        c.add("loss", "Training", "Training and early-stopping loss",
+              "Training loss (solid) and early-stopping loss (dashed: L_v on the validation windows while "
+              "training, before the kNN gate exists; val_loss_multistep is that of the final, gated model) per "
+              "epoch of every trained model; star: the epoch whose weights were kept.", partial(F.loss_curves, histories, "Training and early-stopping loss"),
               True)
     else:
         c.plan.notes.append("Loss curves: skipped, no run has a history.csv (MMG-only runs are not trained)")
@@ -279,13 +280,13 @@ def _sweep_figures(source: ReportSource, plan: FigurePlan) -> None:
     chosen = (source.summary.get("best") or {}).get("point")
     seeds = len(source.summary.get("seeds") or [])
     plan.figures.append(FigureSpec(
-        "sweep_keys", "Sweep", "Validation loss against the varied keys",
-        "Validation loss (the sweep's objective; validation windows only, never the test files) of every "
+        "sweep_keys", "Sweep", "val_loss_multistep against the varied keys",
+        "val_loss_multistep (the sweep's objective; validation windows only, never the test files) of every "
         "trial against each varied option; grey: means; red circles: the chosen configuration.",
-        partial(SF.objective_by_key, sweep.trials, sweep.keys, chosen, "Validation loss against the varied keys")))
+        partial(SF.objective_by_key, sweep.trials, sweep.keys, chosen, "val_loss_multistep against the varied keys")))
     plan.figures.append(FigureSpec(
         "sweep_seeds", "Sweep", f"Spread over {seeds} seeds per configuration",
-        "Validation loss of each configuration over its seeds (box: spread; dots: single seeds), best mean "
+        "val_loss_multistep of each configuration over its seeds (box: spread; dots: single seeds), best mean "
         "first; red: the chosen configuration.",
         partial(SF.seed_spread, sweep.trials, sweep.points, chosen, f"Spread over {seeds} seeds per configuration")))
 

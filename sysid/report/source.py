@@ -177,7 +177,11 @@ def read_run_dir(path: Path) -> RunRecord:
     stems = metrics["file"].astype(str).map(lambda f: Path(f).stem)
     scenario = metrics["scenario"].where(metrics["scenario"].notna(), "").astype(str).str.strip()
     metrics["scenario"] = scenario.where(scenario != "", stems)
-    history = _read_table(path / "history.csv", ["epoch", "train_loss", "val_loss"], required=False)
+    history = _read_table(path / "history.csv", ["epoch", "train_loss"], required=False)
+    if history is not None:  # runs before val_loss_multistep named the per-epoch loss val_loss
+        history = history.rename(columns={"val_loss": "early_stopping_loss"})
+        if "early_stopping_loss" not in history.columns:
+            raise CheckpointError(f"{path / 'history.csv'}: missing column(s) ['early_stopping_loss']")
     model = str(summary.get("model", "mmg")).lower()
     if model not in MODEL_KINDS:
         raise CheckpointError(f"{path / 'summary.json'}: model {model!r} is not one of {MODEL_KINDS}")
@@ -249,8 +253,8 @@ def read_sweep(path: Path, quality: list[QualityReport]) -> ReportSource:
     """A sweep directory: its tables, summary and the chosen configuration's seed runs (the
     report's run figures and table show the chosen configuration's first seed)."""
     summary = read_json(path / "summary.json")
-    trials = _read_table(path / "results.csv", ["point", "seed", "run", "status", "val_loss"])
-    points = _read_table(path / "points.csv", ["point", "val_loss_mean"])
+    trials = _read_table(path / "results.csv", ["point", "seed", "run", "status", "val_loss_multistep"])
+    points = _read_table(path / "points.csv", ["point", "val_loss_multistep_mean"])
     keys = list(summary.get("keys") or [])
     best = summary.get("best") or {}
     chosen = [read_run_dir(path / run) for run in best.get("runs", [])]

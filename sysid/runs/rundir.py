@@ -6,8 +6,12 @@ A **run directory** (``sysid train CONFIG -o runs/NAME``)::
     config.toml        resolved experiment config (all defaults filled in)
     summary.json       {"name", "model": "mmg"|"nn"|"hybrid", "status": "complete"|"failed: ...",
                         "dataset": "D1"|"D2"|..., "ship", "seed", "created", "train_seconds",
-                        "epochs", "best_epoch", "val_loss" (validation multi-step loss of
-                        the final model), "stopped": {stage: "early stop"|"epoch limit"|...},
+                        "epochs", "best_epoch", "val_loss_multistep" (the run's validation
+                        loss, "val_loss_definition"), "verdict" (`BaselineVerdict.to_dict`:
+                        model vs physics baselines per split, horizon and channel) and
+                        "beats_baseline", "data" (the logs used: training source, every file
+                        with its SHA-256, test set "files"|"paper"|"none"),
+                        "stopped": {stage: "early stop"|"epoch limit"|...},
                         "n_train_windows", "n_val_windows", "versions": {...},
                         "mmg_overrides": {...}, "identified": {...}, "identified_initial": {...},
                         "identified_uncertainty": {names, estimate, std_error, correlation,
@@ -18,7 +22,8 @@ A **run directory** (``sysid train CONFIG -o runs/NAME``)::
     model.pt           state dict (torch.save of plain tensors; weights_only=True safe)
     standardization.json  input/output mean and std of the FNN (Eqs. 8, 10)
     knn.pt             {"bank": (N, 64) features, "threshold": (), "k": (), "alpha": ()}
-    history.csv        stage, epoch, train_loss, train_velocity, train_penalty, val_loss, seconds
+    history.csv        stage, epoch, train_loss, train_velocity, train_penalty, early_stopping_loss
+                       (L_v on the validation windows during training, before the kNN gate), seconds
     metrics.csv        `sysid.evaluation.evaluate.METRICS_COLUMNS`
     traces/            one CSV per (file, horizon): ``{file_stem}_h{H}.csv``, `TRACE_COLUMNS`
     manifest.json      written last: every other file with its SHA-256 (`sysid.store.manifest`)
@@ -62,6 +67,7 @@ from sysid.store.manifest import verify_manifest
 from sysid.mmg.model import MMG
 from sysid.hybrid.force_models import CorrectedModel, build_model
 from sysid.hybrid.knn_gate import KNNGate
+from sysid.identify.trainer import VAL_LOSS_DEFINITION
 from sysid.store.staging import staged_directory
 
 
@@ -176,19 +182,26 @@ def load_model(run_dir: str | os.PathLike, dtype: torch.dtype = torch.float64):
     return exp, model
 
 
-def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds: float | None = None) -> dict:
-    """summary.json of a run; `training` is the trainer's `TrainingSummary` (None if untrained)."""
+def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds: float | None = None,
+                verdict=None, data: dict | None = None) -> dict:
+    """summary.json of a run; `training` is the trainer's `TrainingSummary` (None if untrained),
+    `verdict` its `sysid.evaluation.verdict.BaselineVerdict`, `data` the logs it used
+    (`sysid.data.splits.provenance`)."""
     info = training.to_dict() if training is not None else {}
     return {
         "name": exp.experiment.name, "model": exp.experiment.model,
         "status": f"failed: {info.pop('failure')}" if info.get("failure") else "complete",
-        "dataset": "files" if exp.data.files else (exp.experiment.dataset if exp.needs_training else "-"),
+        "dataset": "files" if exp.data.train else (exp.experiment.dataset if exp.needs_training else "-"),
         "ship": exp.experiment.ship, "seed": exp.experiment.seed,
         "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "seconds": seconds,
         "train_seconds": info.pop("train_seconds", None),
         "epochs": info.pop("epochs", 0),
         "best_epoch": info.pop("best_epoch", None),
-        "val_loss": info.pop("val_loss", None),
+        "val_loss_multistep": info.pop("val_loss_multistep", None),
+        "val_loss_definition": VAL_LOSS_DEFINITION,
+        "verdict": verdict.to_dict() if verdict is not None else None,
+        "beats_baseline": verdict.beats_baseline if verdict is not None else None,
+        "data": data,
         "stopped": info.pop("stopped", {}),
         "n_train_windows": info.pop("n_train_windows", None),
         "n_val_windows": info.pop("n_val_windows", None),
@@ -204,7 +217,8 @@ def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds:
 
 def write_run(run_dir: str | os.PathLike, exp: Experiment, model, evaluation: Evaluation,
               history: pd.DataFrame | None = None, training=None,
-              seconds: float | None = None, overwrite: bool = False) -> Path:
+              seconds: float | None = None, overwrite: bool = False, verdict=None,
+              data: dict | None = None) -> Path:
     """Write a complete run directory (config, weights, kNN bank, history, metrics, traces).
 
     Staged (`sysid.store.staging`): the files go into a hidden directory beside `run_dir`, sealed
@@ -212,19 +226,30 @@ def write_run(run_dir: str | os.PathLike, exp: Experiment, model, evaluation: Ev
     `overwrite`, which replaces all of it.
     """
     with staged_directory(run_dir, "run", overwrite) as staging:
-        _write_run_files(staging, exp, model, evaluation, history, training, seconds)
+        _write_run_files(staging, exp, model, evaluation, history, training, seconds, verdict, data)
     return Path(run_dir)
 
 
+def _used_files(exp: Experiment, data: dict | None) -> Experiment:
+    """`exp` with ``[data]`` train / validation / test as the files used (globs and
+    directories expanded), so the run's config.toml names what it was made from."""
+    if not data or not exp.data.train:
+        return exp
+    listed = {key: tuple(f["file"] for f in data[key]) for key in ("train", "validation", "test")
+              if isinstance(data.get(key), list)}
+    return exp.replace(data=listed)
+
+
 def _write_run_files(run_dir: Path, exp: Experiment, model, evaluation: Evaluation,
-                     history: pd.DataFrame | None, training, seconds: float | None) -> Path:
-    write_text(exp.to_toml(), run_dir / "config.toml")
+                     history: pd.DataFrame | None, training, seconds: float | None, verdict=None,
+                     data: dict | None = None) -> Path:
+    write_text(_used_files(exp, data).to_toml(), run_dir / "config.toml")
     save_model(model, run_dir)
     if history is not None and len(history):
         write_csv(history, run_dir / "history.csv", float_format="%.6g")
     write_csv(evaluation.metrics, run_dir / "metrics.csv", float_format="%.6g")
     for name, frame in evaluation.traces.items():
         write_csv(frame, run_dir / "traces" / name, float_format="%.8g")
-    summary = run_summary(exp, evaluation, training, seconds)
+    summary = run_summary(exp, evaluation, training, seconds, verdict, data)
     write_text(json.dumps(summary, indent=2, default=str), run_dir / "summary.json")
     return run_dir

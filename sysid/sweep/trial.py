@@ -91,10 +91,10 @@ def result_row(trial: TrialSpec, summary: dict | None, run_dir: Path) -> dict:
     if trial.label:
         row["name"] = trial.label
     if summary is None:
-        return {**row, "status": "missing", "val_loss": math.nan}
-    val = summary.get("val_loss")
+        return {**row, "status": "missing", "val_loss_multistep": math.nan}
+    val = summary.get("val_loss_multistep", summary.get("val_loss"))  # runs before the rename: val_loss
     return {**row, "status": summary.get("status", "complete"),
-            "val_loss": float(val) if val is not None else math.nan,
+            "val_loss_multistep": float(val) if val is not None else math.nan,
             "epochs": summary.get("epochs"), "best_epoch": summary.get("best_epoch"),
             "stopped": "; ".join(f"{k}: {v}" for k, v in (summary.get("stopped") or {}).items()),
             "train_seconds": summary.get("train_seconds")}
@@ -132,7 +132,7 @@ def _run_locked(trial: TrialSpec, context: TrialContext, log: Callable[[str], No
     result = run_experiment(exp, run_dir, _tests(context.data), _CACHE.get(key), context.data,
                             progress=False, log=log, resume=resume, overwrite=run_dir.exists())
     summary = json.loads((result.path / "summary.json").read_text())
-    journal(context.out, "trained", trial, val_loss=summary.get("val_loss"))
+    journal(context.out, "trained", trial, val_loss_multistep=summary.get("val_loss_multistep"))
     return result_row(trial, summary, run_dir)
 
 
@@ -141,6 +141,6 @@ def tune_trainable(config: dict, trials: list[TrialSpec], context: TrialContext)
     from ray import tune
 
     row = run_trial(trials[int(config["trial"])], context)
-    value = row["val_loss"]
-    tune.report({"val_loss": value if math.isfinite(value) else math.inf,
+    value = row["val_loss_multistep"]
+    tune.report({"val_loss_multistep": value if math.isfinite(value) else math.inf,
                  "epochs": int(row.get("epochs") or 0), "failed": row["status"] != "complete"})
