@@ -56,7 +56,7 @@ def _write_runs(bench, out_dir, seed=0):
 def _config(path, files, start, **sections):
     """The own-ship example config (configs/experiments/own_ship_identified.toml) on these
     files, starting from `start` ([mmg] overrides), one 30-s horizon, `sections` changed."""
-    exp = load_experiment(EXAMPLE).replace(data={"files": tuple(str(f) for f in files)},
+    exp = load_experiment(EXAMPLE).replace(data={"train": tuple(str(f) for f in files)},
                                            mmg={"overrides": {k: float(v) for k, v in start.items()}},
                                            evaluation={"horizons": (30.0,)}, **sections)
     path.write_text(exp.to_toml())

@@ -29,6 +29,7 @@ from sysid.state import INPUTS, STATE
 # processed-schema header ("u_velo [m/s]") -> our channel name ("u"); one source: preprocessing.schema
 COLUMNS = {f"{name} [{unit}]": PROCESSED_CHANNEL[name] for name, unit in PROCESSED.items()}
 _LIMITS = PROCESSED_PLAUSIBLE_ABS
+GLOB = re.compile(r"[*?\[]")   # a path with one of these is a glob pattern
 
 
 @dataclass
@@ -181,7 +182,7 @@ def expand_paths(items: Iterable[str | os.PathLike], base: str | os.PathLike | N
         p = Path(item)
         if base is not None and not p.is_absolute():
             p = Path(base) / p
-        if _GLOB.search(str(item)):
+        if GLOB.search(str(item)):
             anchor = Path(p.anchor) if p.is_absolute() else Path()
             found = sorted(q for q in anchor.glob(str(p.relative_to(anchor) if p.is_absolute() else p))
                            if q.is_file() and not q.name.startswith("."))
@@ -203,9 +204,6 @@ def expand_paths(items: Iterable[str | os.PathLike], base: str | os.PathLike | N
         else:
             raise DataError(f"{p}: no such file or directory")
     return out
-
-
-_GLOB = re.compile(r"[*?\[]")
 
 
 def protocol_windows(n_samples: int, horizon: int) -> np.ndarray:

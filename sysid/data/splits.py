@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Sequence
 
 from sysid.data.datasets import TEST_FILES, test_files, training_files
-from sysid.data.recordings import Run, duplicate_runs, expand_paths
+from sysid.data.recordings import GLOB, Run, duplicate_runs, expand_paths
 from sysid.errors import ConfigError, DataError
 
 TRAINING, VALIDATION, TEST = "training", "validation", "test"
@@ -47,6 +47,16 @@ def file_sha256(path: str | os.PathLike) -> str:
     return digest.hexdigest()
 
 
+def config_paths(items: Sequence[str], key: str, source: str) -> tuple[Path, ...]:
+    """`expand_paths` of a config's ``[data] key`` list; a missing file is named with the key
+    and the config whose folder it was resolved against."""
+    for item in items:
+        if not GLOB.search(str(item)) and not Path(item).exists():
+            raise DataError(f"{item}: file not found ([data] {key} in {source or 'the config'}; relative "
+                            "paths are relative to the config file's folder)")
+    return tuple(expand_paths(items))
+
+
 def data_split(exp, data: str | os.PathLike | None = None) -> DataSplit:
     """The experiment's files (globs and directories expanded; paths in the config are
     already absolute, `sysid.config.experiment.load_experiment`), checked to be disjoint.
@@ -54,7 +64,7 @@ def data_split(exp, data: str | os.PathLike | None = None) -> DataSplit:
     d = exp.data
     dataset = exp.experiment.dataset
     if d.train:
-        source, train = "files", tuple(expand_paths(d.train))
+        source, train = "files", config_paths(d.train, "train", exp.source)
     elif dataset and exp.needs_training:
         source, train = dataset, tuple(training_files(dataset, data))
     elif exp.needs_training:
@@ -63,9 +73,9 @@ def data_split(exp, data: str | os.PathLike | None = None) -> DataSplit:
                           "for the paper's")
     else:
         source, train = ("-", ())
-    validation = tuple(expand_paths(d.validation)) if d.validation else ()
+    validation = config_paths(d.validation, "validation", exp.source)
     if d.test:
-        test, test_source = tuple(expand_paths(d.test)), "files"
+        test, test_source = config_paths(d.test, "test", exp.source), "files"
     elif dataset:
         test, test_source = tuple(test_files(data).values()), "paper"
     else:

@@ -32,6 +32,14 @@ VALIDATION, TEST = "validation", "test"
 MODEL_NAMES = {"mmg": "identified MMG", "nn": "NN-only model", "hybrid": "hybrid"}
 
 
+def percent_text(change: float) -> str:
+    """A relative change as "+20 %", "-3.4 %" (one decimal below 10 %), "-" when undefined."""
+    if not math.isfinite(change):
+        return "-"
+    pct = 100 * change
+    return f"{pct:+.1f} %" if abs(pct) < 10 else f"{pct:+.0f} %"
+
+
 @dataclass(frozen=True)
 class ChannelCell:
     """One channel at one horizon on one split: the model's RMSE and each baseline's
@@ -59,7 +67,7 @@ class ChannelCell:
     def text(self, baseline: str) -> str:
         """"u at 30 s: 0.0528 against 0.0377 m/s (+40 %)"."""
         return (f"{self.channel} at {self.horizon_s:g} s: {self.model:.4f} against {self.baselines[baseline]:.4f} "
-                f"{UNITS[self.channel]} ({100 * self.change(baseline):+.0f} %)")
+                f"{UNITS[self.channel]} ({percent_text(self.change(baseline))})")
 
 
 @dataclass(frozen=True)

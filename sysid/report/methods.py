@@ -7,6 +7,10 @@ import hashlib
 import platform
 from dataclasses import dataclass
 
+import tomllib
+from pathlib import Path
+
+from sysid.config.experiment import Experiment
 from sysid.identify.levenberg_marquardt import start_state_verdict
 from sysid.protocol.paper import run_label
 from sysid.report.quality import quality_rows
@@ -71,7 +75,8 @@ def run_rows(source: ReportSource) -> list[RunRow]:
             epochs = f"{est.get('iterations', '?')} Levenberg-Marquardt iterations" + (f" ({why})" if why else "")
         if str(s.get("status", "")).startswith("failed"):
             epochs += f" - {str(s['status']).upper()}"
-        rows.append(RunRow(run_label(run.name, run.model, run.dataset), run.model, run.dataset, epochs,
+        dataset = "your logs" if run.dataset == "files" else run.dataset
+        rows.append(RunRow(run_label(run.name, run.model, run.dataset), run.model, dataset, epochs,
                            "-" if run.model == "mmg" else _seconds(s.get("train_seconds")),
                            config_digest(run), str(s.get("created", "-"))))
     return rows
@@ -173,8 +178,9 @@ def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -
         ("Source", f"{source.path} ({SOURCE_KINDS[source.kind].format(n=len(runs), q=len(source.quality))})"),
         ("Ship", ship),
         ("Models", ", ".join(run_label(r.name, r.model, r.dataset) for r in runs)),
-        ("Training data sets", ", ".join(datasets) or "none (MMG only)"),
-        ("Test scenarios", ", ".join(scenarios)),
+        ("Training data sets", ", ".join(training_data_text(next(r for r in runs if r.dataset == d))
+                                         if d == "files" else d for d in datasets) or "none (MMG only)"),
+        ("Test scenarios", ", ".join(scenarios) or "none: no test logs (the verdict is on the validation windows)"),
         ("Configuration digest", ", ".join(f"{r.name}: {config_digest(r)}" for r in runs)),
         ("Software (runs)", ", ".join(f"{k} {'/'.join(sorted(v))}" for k, v in sorted(versions.items())) or "-"),
         ("Software (report)", ", ".join(f"{k} {v}" for k, v in software_versions().items())),
@@ -202,17 +208,6 @@ def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -
                                                   "Configuration digest", "Software (runs)", "Runs created",
                                                   "Training time", "Ship")]
     return items
-
-
-def _config_text(config: dict) -> str:
-    parts = []
-    for section, values in config.items():
-        if not isinstance(values, dict):
-            continue
-        pairs = [f"{k} = {v}" for k, v in _flatten(values)[:12]]
-        if pairs:
-            parts.append(f"[{section}] " + ", ".join(pairs))
-    return "; ".join(parts)
 
 
 def estimator_text(summary: dict) -> str:
@@ -262,7 +257,7 @@ def methods_paragraphs(source: ReportSource) -> list[str]:
             text += " MMG coefficients changed from the ship file: " + ", ".join(
                 f"{k} = {v}" for k, v in s["mmg_overrides"].items()) + "."
         if run.model != "mmg":
-            text += (f" Trained on data set {run.dataset} ({s.get('n_train_windows', '?')} training and "
+            text += (f" Trained on {training_data_text(run)} ({s.get('n_train_windows', '?')} training and "
                      f"{s.get('n_val_windows', '?')} validation windows) for {s.get('epochs', '?')} epochs; "
                      f"the weights of epoch {s.get('best_epoch', '?')} were kept "
                      f"(training time {_seconds(s.get('train_seconds'))}, seed {s.get('seed', '?')}).")
@@ -281,7 +276,50 @@ def methods_paragraphs(source: ReportSource) -> list[str]:
         if run.model == "hybrid" and s.get("gate"):
             scalars = {k: v for k, v in s["gate"].items() if not isinstance(v, (dict, list))}
             text += " OOD gate: " + ", ".join(f"{k} = {v}" for k, v in _flatten(scalars)) + "."
-        if run.config:
-            text += f" Configuration: {_config_text(run.config)}."
         out.append(text)
     return out
+
+
+def training_data_text(run: RunRecord) -> str:
+    """"data set D2", or "5 of your logs (a.csv, b.csv, ...)" from summary.json "data"."""
+    data = run.summary.get("data")
+    if isinstance(data, dict) and data.get("training") == "files":
+        names = [Path(str(f.get("file", ""))).name for f in data.get("train") or []]
+        return f"{len(names)} of your logs ({_names(names)})"
+    return f"data set {run.dataset}"
+
+
+def _names(names: list[str], first: int = 4) -> str:
+    return ", ".join(names[:first]) + (f" and {len(names) - first} more" if len(names) > first else "")
+
+
+def _setting_text(key: str, value) -> str:
+    if key in ("data.train", "data.validation", "data.test") and isinstance(value, list):
+        return f"{len(value)} logs: {_names([Path(str(v)).name for v in value])}" if value else "none"
+    if value == "" or value == {}:
+        return "none"
+    if key == "data.columns" and isinstance(value, dict):
+        return "; ".join(f"{ch}: {v}" if not isinstance(v, dict) else f"{ch}: {v.get('column')} [{v.get('unit')}]"
+                         for ch, v in value.items())
+    if isinstance(value, dict):
+        return ", ".join(f"{k} = {v}" for k, v in value.items()) or "{}"
+    if isinstance(value, list):
+        return "[" + ", ".join(str(v) for v in value) + "]"
+    return f"{value:.4g}" if isinstance(value, float) else str(value)
+
+
+def changed_settings(run: RunRecord) -> list[tuple[str, str, str]]:
+    """(section.key, value, default) where the run's resolved config.toml differs from the
+    defaults of `sysid.config.experiment.Experiment` (the name left out)."""
+    defaults = tomllib.loads(Experiment().to_toml())
+    rows = []
+    for section, values in run.config.items():
+        if not isinstance(values, dict):
+            continue
+        for key, value in values.items():
+            default = (defaults.get(section) or {}).get(key)
+            if (section, key) == ("experiment", "name") or value == default:
+                continue
+            name = f"{section}.{key}"
+            rows.append((name, _setting_text(name, value), "-" if default is None else _setting_text(name, default)))
+    return rows

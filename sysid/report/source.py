@@ -17,9 +17,11 @@ import pandas as pd
 from preprocessing.quality import QualityReport
 from sysid.errors import CheckpointError
 from sysid.config.experiment import KINDS as MODEL_KINDS
+from sysid.data.splits import PAPER_TEST_STEMS
 from sysid.evaluation.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
+from sysid.evaluation.verdict import BaselineVerdict, seed_mean_verdict
 from sysid.store.manifest import has_manifest, verify_manifest
-from sysid.runs.rundir import verify_run_dir
+from sysid.runs.rundir import BASELINE_METRICS_COLUMNS, verify_run_dir
 from sysid.protocol.seeds import seed_metrics
 
 
@@ -69,6 +71,27 @@ class RunRecord:
     history: pd.DataFrame | None
     _traces: dict = field(default_factory=dict, repr=False)
     seeds: list["RunRecord"] = field(default_factory=list)   # a seed group's runs (seed0 first)
+    baseline_metrics: pd.DataFrame | None = None  # the physics baselines on the test logs (BASELINE_METRICS_COLUMNS)
+
+    @property
+    def verdict(self) -> BaselineVerdict | None:
+        """The run against its physics baselines (summary.json "verdict"), or None."""
+        data = self.summary.get("verdict")
+        if not isinstance(data, dict):
+            return None
+        try:
+            return BaselineVerdict.from_dict(data)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise CheckpointError(f"{self.path / 'summary.json'}: malformed verdict ({exc})") from None
+
+    @property
+    def paper_protocol(self) -> bool:
+        """Trained on D1/D2 (or not trained) and tested on the paper's six test files."""
+        data = self.summary.get("data")
+        if isinstance(data, dict):
+            return data.get("test_set") == "paper" and data.get("training") in ("D1", "D2", "-")
+        stems = {Path(str(f)).stem for f in self.metrics["file"]}
+        return self.dataset in ("D1", "D2") or (self.dataset == "-" and stems == set(PAPER_TEST_STEMS))
 
     @property
     def model(self) -> str:
@@ -146,6 +169,21 @@ class ReportSource:
         return self.path.resolve().name
 
     @property
+    def paper_protocol(self) -> bool:
+        """A reproduction, or runs of the paper's protocol: only then the paper's values and
+        figure numbers appear in the report."""
+        return self.kind == "reproduction" or (bool(self.runs) and all(r.paper_protocol for r in self.runs))
+
+    @property
+    def verdict(self) -> BaselineVerdict | None:
+        """Page 1 of a run's or a sweep's report: the run's verdict, or the seed mean of the
+        chosen configuration's; None for a reproduction or runs without one."""
+        if self.kind == "sweep" and self.sweep is not None:
+            verdicts = [r.verdict for r in self.sweep.chosen]
+            return seed_mean_verdict(verdicts) if verdicts and all(verdicts) else None
+        return self.runs[0].verdict if self.kind == "run" and self.runs else None
+
+    @property
     def missing_runs(self) -> list[str]:
         """Protocol runs a reproduction left out (``sysid reproduce --only``): a partial one."""
         if self.kind != "reproduction":
@@ -185,8 +223,9 @@ def read_run_dir(path: Path) -> RunRecord:
     model = str(summary.get("model", "mmg")).lower()
     if model not in MODEL_KINDS:
         raise CheckpointError(f"{path / 'summary.json'}: model {model!r} is not one of {MODEL_KINDS}")
+    baselines = _read_table(path / "baseline_metrics.csv", BASELINE_METRICS_COLUMNS, required=False)
     return RunRecord(path.name, path, summary, config_text, config,
-                     metrics, history)
+                     metrics, history, baseline_metrics=baselines)
 
 
 def read_seed_group(path: Path) -> RunRecord:

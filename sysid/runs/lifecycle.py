@@ -144,15 +144,18 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
         else:
             model = build_model(exp)
         evaluation = evaluate_model(model, tests, exp.evaluation.horizons, exp.evaluation.integrator)
-        verdict = None
+        verdict, baseline_metrics = None, None
         if validation_scores is not None:
-            verdict = baseline_verdict(exp.experiment.model, validation_scores, horizon,
-                                       test_scores(exp, model, evaluation, tests))
+            scores = test_scores(exp, model, evaluation, tests)
+            verdict = baseline_verdict(exp.experiment.model, validation_scores, horizon, scores)
+            if scores:
+                baseline_metrics = pd.concat([m.assign(baseline=label) for label, m in scores.items()
+                                              if label != "model"], ignore_index=True)
     source = "files" if exp.data.train else (exp.experiment.dataset if exp.needs_training else "-")
     data_used = provenance(source, runs, validation, tests, exp.training.val_fraction, exp.training.block_s)
     seconds = time.perf_counter() - started
     path = write_run(out_dir, exp, model, evaluation, history, training, seconds, overwrite,
-                     verdict=verdict, data=data_used)
+                     verdict=verdict, data=data_used, baseline_metrics=baseline_metrics)
     if training is not None:
         TrainingCheckpoint(checkpoint_path(out_dir), exp.to_toml()).remove()
     return RunResult(path, exp, model, evaluation, history, training, seconds, verdict)

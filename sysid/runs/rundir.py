@@ -25,6 +25,8 @@ A **run directory** (``sysid train CONFIG -o runs/NAME``)::
     history.csv        stage, epoch, train_loss, train_velocity, train_penalty, early_stopping_loss
                        (L_v on the validation windows during training, before the kNN gate), seconds
     metrics.csv        `sysid.evaluation.evaluate.METRICS_COLUMNS`
+    baseline_metrics.csv  the physics baselines on the same test logs: "baseline" (its label,
+                       `sysid.evaluation.verdict`) + METRICS_COLUMNS; with a verdict and test logs
     traces/            one CSV per (file, horizon): ``{file_stem}_h{H}.csv``, `TRACE_COLUMNS`
     manifest.json      written last: every other file with its SHA-256 (`sysid.store.manifest`)
 
@@ -110,6 +112,7 @@ def _check_finite(tensors: dict, path: Path) -> None:
 
 
 RUN_FILES = ("config.toml", "summary.json", "metrics.csv")
+BASELINE_METRICS_COLUMNS = ["baseline"] + METRICS_COLUMNS  # the physics baselines on the same test logs
 
 
 def verify_run_dir(path: str | os.PathLike) -> dict:
@@ -218,7 +221,7 @@ def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds:
 def write_run(run_dir: str | os.PathLike, exp: Experiment, model, evaluation: Evaluation,
               history: pd.DataFrame | None = None, training=None,
               seconds: float | None = None, overwrite: bool = False, verdict=None,
-              data: dict | None = None) -> Path:
+              data: dict | None = None, baseline_metrics: pd.DataFrame | None = None) -> Path:
     """Write a complete run directory (config, weights, kNN bank, history, metrics, traces).
 
     Staged (`sysid.store.staging`): the files go into a hidden directory beside `run_dir`, sealed
@@ -226,7 +229,8 @@ def write_run(run_dir: str | os.PathLike, exp: Experiment, model, evaluation: Ev
     `overwrite`, which replaces all of it.
     """
     with staged_directory(run_dir, "run", overwrite) as staging:
-        _write_run_files(staging, exp, model, evaluation, history, training, seconds, verdict, data)
+        _write_run_files(staging, exp, model, evaluation, history, training, seconds, verdict, data,
+                         baseline_metrics)
     return Path(run_dir)
 
 
@@ -242,12 +246,14 @@ def _used_files(exp: Experiment, data: dict | None) -> Experiment:
 
 def _write_run_files(run_dir: Path, exp: Experiment, model, evaluation: Evaluation,
                      history: pd.DataFrame | None, training, seconds: float | None, verdict=None,
-                     data: dict | None = None) -> Path:
+                     data: dict | None = None, baseline_metrics: pd.DataFrame | None = None) -> Path:
     write_text(_used_files(exp, data).to_toml(), run_dir / "config.toml")
     save_model(model, run_dir)
     if history is not None and len(history):
         write_csv(history, run_dir / "history.csv", float_format="%.6g")
     write_csv(evaluation.metrics, run_dir / "metrics.csv", float_format="%.6g")
+    if baseline_metrics is not None and len(baseline_metrics):
+        write_csv(baseline_metrics[BASELINE_METRICS_COLUMNS], run_dir / "baseline_metrics.csv", float_format="%.6g")
     for name, frame in evaluation.traces.items():
         write_csv(frame, run_dir / "traces" / name, float_format="%.8g")
     summary = run_summary(exp, evaluation, training, seconds, verdict, data)
