@@ -31,7 +31,7 @@ def train(
     from sysid.data.recordings import expand_paths
     from sysid.errors import ConfigError
     from sysid.config.experiment import load_experiment
-    from sysid.runs.lifecycle import checkpoint_path, run_experiment, test_runs, training_runs, validation_runs
+    from sysid.runs.lifecycle import checkpoint_path, run_experiment, evaluation_runs, training_runs, validation_runs
     from sysid.store.staging import check_target
 
     start = time.perf_counter()
@@ -51,7 +51,7 @@ def train(
         if checkpoint.is_file() else ""))
     runs = training_runs(exp, data) if exp.needs_training else None
     validation = validation_runs(exp) if exp.needs_training else []
-    tests = test_runs(exp, data)
+    tests = evaluation_runs(exp, data)
     if runs is not None:
         source = f"data set {exp.experiment.dataset}" if exp.experiment.dataset and not exp.data.train else "your logs"
         typer.echo(f"train: {exp.experiment.model} model on {len(runs)} training log(s) from {source} "

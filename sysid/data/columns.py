@@ -122,7 +122,8 @@ class ColumnMap:
         The relative wind, when neither mapped nor present, is NaN here (`read_run`
         computes it from the state). Raises `DataError` naming the file, the column and
         the fix."""
-        out = {}
+        out, missing = {}, []
+        mapped = {s.channel for s in self.specs}
         where = f" ([data.columns] in {self.source})" if self.source and self.specs else ""
         for channel in CHANNELS:
             spec = self.spec(channel)
@@ -130,16 +131,11 @@ class ColumnMap:
                 out[channel] = np.full(len(frame), float(spec.constant))
                 continue
             if spec.column not in frame.columns:
-                if channel in RELATIVE_WIND and spec.channel not in {s.channel for s in self.specs}:
+                if channel in RELATIVE_WIND and channel not in mapped:  # computed by read_run
                     out[channel] = np.full(len(frame), np.nan)
-                    continue
-                mapped = channel in {s.channel for s in self.specs}
-                fix = (f"correct {channel} in [data.columns]{where}" if mapped else
-                       f"map a column of the file onto it in the config's [data.columns], e.g. "
-                       f"{channel} = {{ column = \"...\", unit = \"{SI_UNIT[channel]}\" }}")
-                raise DataError(f"{path}: no column {spec.column!r} for channel {channel} "
-                                f"(the file has {', '.join(map(repr, frame.columns[:16]))}"
-                                f"{', ...' if len(frame.columns) > 16 else ''}); {fix}")
+                else:
+                    missing.append(spec)
+                continue
             values = pd.to_numeric(frame[spec.column], errors="coerce")
             text = frame[spec.column].notna() & values.isna()
             if text.any():
@@ -153,6 +149,16 @@ class ColumnMap:
                 raise DataError(f"{path}: column {spec.column!r}: {str(exc).split(': ', 1)[-1]}; "
                                 f"set its unit in [data.columns]{where}") from None
             out[channel] = values.to_numpy(dtype=float) * factor
+        if missing:
+            first = missing[0]
+            fix = (f"correct {first.channel} in [data.columns]{where}" if first.channel in mapped else
+                   f"map the file's columns onto the channels in the config's [data.columns], e.g. "
+                   f"{first.channel} = {{ column = \"...\", unit = \"{SI_UNIT[first.channel]}\" }}")
+            listed = ", ".join(f"{s.column!r} for channel {s.channel}" for s in missing[:4])
+            more = f" and {len(missing) - 4} more" if len(missing) > 4 else ""
+            raise DataError(f"{path}: no column {listed}{more} (the file has "
+                            f"{', '.join(map(repr, frame.columns[:16]))}{', ...' if len(frame.columns) > 16 else ''})"
+                            f"; {fix}")
         return pd.DataFrame(out, index=frame.index)
 
     def describe(self, channel: str) -> str:

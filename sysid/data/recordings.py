@@ -9,8 +9,8 @@ units, and downsamples by taking every k-th sample from the first one (t = 0, 1,
 """
 from __future__ import annotations
 
+import glob
 import os
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable, Sequence
@@ -29,7 +29,6 @@ from sysid.state import INPUTS, STATE
 # processed-schema header ("u_velo [m/s]") -> our channel name ("u"); one source: preprocessing.schema
 COLUMNS = {f"{name} [{unit}]": PROCESSED_CHANNEL[name] for name, unit in PROCESSED.items()}
 _LIMITS = PROCESSED_PLAUSIBLE_ABS
-GLOB = re.compile(r"[*?\[]")   # a path with one of these is a glob pattern
 
 
 @dataclass
@@ -121,7 +120,7 @@ _UNIT_HINT = {"speed": "knots", "angle": "deg", "angular rate": "deg/s", "revolu
 
 def _relative_wind(frame: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
     """(U_A [m/s], gamma_A [rad]) at midship from the recorded state and true wind."""
-    c = {k: torch.as_tensor(frame[k].to_numpy(), dtype=torch.float64)
+    c = {k: torch.tensor(frame[k].to_numpy(), dtype=torch.float64)
          for k in ("u", "v", "psi", "wind_velo_true", "wind_dir_true")}
     wind = relative_wind(c["u"], c["v"], c["psi"], c["wind_velo_true"], c["wind_dir_true"])
     return wind[0].numpy(), wind[1].numpy()
@@ -170,26 +169,21 @@ def duplicate_runs(runs: Sequence[Run], tolerance: float = 1e-9) -> list[tuple[s
     return pairs
 
 
-def expand_paths(items: Iterable[str | os.PathLike], base: str | os.PathLike | None = None) -> list[Path]:
+def expand_paths(items: Iterable[str | os.PathLike]) -> list[Path]:
     """Files, directories (searched recursively for .csv and .parquet logs) and glob patterns
-    (``logs/zigzag_*.csv``, ``logs/**/*.parquet``) to a file list, in the order given (each
-    directory and pattern sorted). Relative items resolve against `base` (default: the
-    working directory)."""
+    (``logs/*.csv``, ``logs/**/*.parquet``; matches sorted) to a file list."""
     out: list[Path] = []
     from sysid.store.manifest import has_manifest, verify_manifest
 
     for item in items:
         p = Path(item)
-        if base is not None and not p.is_absolute():
-            p = Path(base) / p
-        if GLOB.search(str(item)):
-            anchor = Path(p.anchor) if p.is_absolute() else Path()
-            found = sorted(q for q in anchor.glob(str(p.relative_to(anchor) if p.is_absolute() else p))
-                           if q.is_file() and not q.name.startswith("."))
-            if not found:
-                raise DataError(f"{p}: the pattern matches no file")
-            out += found
-        elif p.is_dir():
+        if not p.exists() and glob.has_magic(str(item)):
+            matches = sorted(Path(m) for m in glob.glob(str(item), recursive=True) if Path(m).is_file())
+            if not matches:
+                raise DataError(f"{item}: no file matches this pattern")
+            out += matches
+            continue
+        if p.is_dir():
             if has_manifest(p):  # sysid preprocess output: refused when incomplete or changed
                 verify_manifest(p)
             # hidden entries are staging directories and temporaries of unfinished writes

@@ -9,6 +9,7 @@ files when the config names a paper data set, else there is none. A log in two o
 """
 from __future__ import annotations
 
+import glob
 import hashlib
 import os
 from dataclasses import dataclass
@@ -16,7 +17,7 @@ from pathlib import Path
 from typing import Sequence
 
 from sysid.data.datasets import TEST_FILES, test_files, training_files
-from sysid.data.recordings import GLOB, Run, duplicate_runs, expand_paths
+from sysid.data.recordings import Run, duplicate_runs, expand_paths
 from sysid.errors import ConfigError, DataError
 
 TRAINING, VALIDATION, TEST = "training", "validation", "test"
@@ -51,7 +52,7 @@ def config_paths(items: Sequence[str], key: str, source: str) -> tuple[Path, ...
     """`expand_paths` of a config's ``[data] key`` list; a missing file is named with the key
     and the config whose folder it was resolved against."""
     for item in items:
-        if not GLOB.search(str(item)) and not Path(item).exists():
+        if not glob.has_magic(str(item)) and not Path(item).exists():
             raise DataError(f"{item}: file not found ([data] {key} in {source or 'the config'}; relative "
                             "paths are relative to the config file's folder)")
     return tuple(expand_paths(items))

@@ -59,7 +59,7 @@ def validation_runs(exp: Experiment) -> list[Run]:
         if exp.data.validation else []
 
 
-def test_runs(exp: Experiment, data: str | os.PathLike | None = None) -> list[Run]:
+def evaluation_runs(exp: Experiment, data: str | os.PathLike | None = None) -> list[Run]:
     """The experiment's test logs: ``[data] test``, else the paper's six when it names a
     paper data set, else none. Read only to evaluate."""
     split = data_split(exp, data)
@@ -80,7 +80,7 @@ def physics_baselines(exp: Experiment, model: torch.nn.Module, dtype: torch.dtyp
     return out
 
 
-def test_scores(exp: Experiment, model: torch.nn.Module, evaluation: Evaluation,
+def scores_on_tests(exp: Experiment, model: torch.nn.Module, evaluation: Evaluation,
                 tests: Sequence[Run]) -> dict[str, pd.DataFrame] | None:
     """Metrics tables of the model (its `evaluation`) and of each physics baseline on the
     test logs (None without test logs)."""
@@ -146,7 +146,7 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
         evaluation = evaluate_model(model, tests, exp.evaluation.horizons, exp.evaluation.integrator)
         verdict, baseline_metrics = None, None
         if validation_scores is not None:
-            scores = test_scores(exp, model, evaluation, tests)
+            scores = scores_on_tests(exp, model, evaluation, tests)
             verdict = baseline_verdict(exp.experiment.model, validation_scores, horizon, scores)
             if scores:
                 baseline_metrics = pd.concat([m.assign(baseline=label) for label, m in scores.items()
