@@ -149,5 +149,18 @@ def reproduce(
     for name, why in summary.get("failed", {}).items():
         typer.secho(f"reproduce: run {name} FAILED: {why}", fg=typer.colors.RED, err=True)
     typer.echo(f"reproduce: {output} in {summary['seconds'] / 60:.1f} min")
+    _warn_below_baseline(output)
+
+
+def _warn_below_baseline(output: Path) -> None:
+    """A WARNING on stderr for every run of a reproduction that does not beat its physics
+    baseline (summary.json "beats_baseline" false)."""
+    import json
+
+    for path in sorted((output / "runs").glob("**/summary.json")):
+        summary = json.loads(path.read_text())
+        if summary.get("beats_baseline") is False:
+            name = path.parent.relative_to(output / "runs")
+            typer.secho(f"WARNING: run {name}: {summary['verdict']['statement']}", fg=typer.colors.YELLOW, err=True)
     if summary.get("failed"):
         raise SystemExit(1)

@@ -91,11 +91,6 @@ class DataOptions:
     rate: float = 1.0                # Hz
     exclude_suspect: bool = True     # drop windows touching frozen-GNSS segments
 
-    @property
-    def files(self) -> tuple[str, ...]:
-        """The training logs (the older name of ``train``)."""
-        return self.train
-
 
 @dataclass(frozen=True)
 class MMGOptions:

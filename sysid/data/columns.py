@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Mapping
 
 import numpy as np
@@ -103,10 +103,7 @@ class ColumnMap:
     schema's columns (`DEFAULT_COLUMNS`). `source` names the config in error messages."""
 
     specs: tuple[ColumnSpec, ...] = ()
-    source: str = ""
-
-    def __bool__(self) -> bool:
-        return bool(self.specs)
+    source: str = field(default="", compare=False)
 
     def spec(self, channel: str) -> ColumnSpec:
         mine = next((s for s in self.specs if s.channel == channel), None)

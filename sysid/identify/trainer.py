@@ -310,6 +310,7 @@ class Trainer:
         self.log = log
         self.checkpoint = TrainingCheckpoint(checkpoint, experiment.to_toml()) if checkpoint else None
         self.resume = resume
+        self._validation_runs: list[Run] = []   # fit's validation logs
 
     # -- building blocks -------------------------------------------------------------
     def _l2(self, model) -> torch.Tensor:

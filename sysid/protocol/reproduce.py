@@ -126,7 +126,7 @@ def _run_one(name: str, exp: Experiment, out: Path, data, progress: bool, log) -
         tests = _TRAINING_CACHE["tests"] = [read_run(p) for p in test_files(data).values()]
     train = None
     if exp.needs_training:
-        key = (exp.experiment.dataset, exp.data.files, exp.data.rate)
+        key = (exp.experiment.dataset, exp.data.train, exp.data.rate)
         if key not in _TRAINING_CACHE:
             _TRAINING_CACHE[key] = training_runs(exp, data)
         train = _TRAINING_CACHE[key]
@@ -139,7 +139,7 @@ def expected_cost(exp: Experiment) -> float:
     """Relative training cost of a run, to start the longest first (results do not depend
     on the order; the wall time does): hybrid > NN-only > identification, D2 about twice D1."""
     cost = {"hybrid": 5.0, "nn": 3.5, "mmg": 0.0}[exp.experiment.model] + 1.5 * bool(exp.identify.parameters)
-    return cost * (2.0 if exp.data.files or exp.experiment.dataset == "D2" else 1.0)
+    return cost * (2.0 if exp.data.train or exp.experiment.dataset == "D2" else 1.0)
 
 
 def _worker(name: str, exp: Experiment, out: Path, data) -> ProtocolRun:

@@ -125,7 +125,7 @@ def _run_locked(trial: TrialSpec, context: TrialContext, log: Callable[[str], No
     exp = parse_experiment(tomllib.loads(trial.config), f"{context.source} (trial {trial.path})")
     resume = checkpoint_path(run_dir).is_file()
     journal(context.out, "resumed" if resume else "started", trial)
-    key = (exp.experiment.dataset, exp.data.files, exp.data.rate)
+    key = (exp.experiment.dataset, exp.data.train, exp.data.rate)
     if exp.needs_training and key not in _CACHE:
         _CACHE[key] = training_runs(exp, context.data)
     run_dir.parent.mkdir(parents=True, exist_ok=True)
