@@ -178,9 +178,11 @@ def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -
         ("Source", f"{source.path} ({SOURCE_KINDS[source.kind].format(n=len(runs), q=len(source.quality))})"),
         ("Ship", ship),
         ("Models", ", ".join(run_label(r.name, r.model, r.dataset) for r in runs)),
-        ("Training data sets", ", ".join(training_data_text(next(r for r in runs if r.dataset == d))
-                                         if d == "files" else d for d in datasets) or "none (MMG only)"),
-        ("Test scenarios", ", ".join(scenarios) or "none: no test logs (the verdict is on the validation windows)"),
+        ("Training data sets" if source.paper_protocol else "Training data",
+         ", ".join(training_data_text(next(r for r in runs if r.dataset == d)) if d == "files" else d
+                   for d in datasets) or "none (MMG only)"),
+        ("Test scenarios" if source.paper_protocol else "Test logs",
+         ", ".join(scenarios) or "none: no test logs (the verdict is on the validation windows)"),
         ("Configuration digest", ", ".join(f"{r.name}: {config_digest(r)}" for r in runs)),
         ("Software (runs)", ", ".join(f"{k} {'/'.join(sorted(v))}" for k, v in sorted(versions.items())) or "-"),
         ("Software (report)", ", ".join(f"{k} {v}" for k, v in software_versions().items())),
@@ -204,7 +206,8 @@ def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -
                       f"{sum(r.segments for r in rows)} segments, {sum(r.dropped for r in rows)} dropped; gaps "
                       f"{sum(r.gaps_interpolated for r in rows)} interpolated, {sum(r.gaps_split for r in rows)} split"))
     if not runs:
-        items = [i for i in items if i[0] not in ("Models", "Training data sets", "Test scenarios",
+        items = [i for i in items if i[0] not in ("Models", "Training data sets", "Training data", "Test scenarios",
+                                                  "Test logs",
                                                   "Configuration digest", "Software (runs)", "Runs created",
                                                   "Training time", "Ship")]
     return items
@@ -295,7 +298,8 @@ def _names(names: list[str], first: int = 4) -> str:
 
 def _setting_text(key: str, value) -> str:
     if key in ("data.train", "data.validation", "data.test") and isinstance(value, list):
-        return f"{len(value)} logs: {_names([Path(str(v)).name for v in value])}" if value else "none"
+        return (f"{len(value)} log{'s' if len(value) > 1 else ''}: {_names([Path(str(v)).name for v in value])}"
+                if value else "none")
     if value == "" or value == {}:
         return "none"
     if key == "data.columns" and isinstance(value, dict):

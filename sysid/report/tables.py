@@ -263,4 +263,5 @@ def build_tables(source: ReportSource) -> list[RmseTable]:
         return []
     if source.kind == "reproduction":
         return reproduction_tables(source)
-    return [run_table(source.runs[0], source.paper_protocol)]
+    table = run_table(source.runs[0], source.paper_protocol)
+    return [table] if table.rows else []   # no test logs: no RMSE table (the verdict is on validation)

@@ -69,3 +69,19 @@ def test_a_bad_model_is_flagged_in_summary_on_stderr_and_on_page_one(dataset_dir
     assert html.index('id="verdict"') < html.index('id="summary"')
     for paper_words in ("better than the paper", "cf. Fig", "Figs. 10-12", "D2"):
         assert paper_words not in html and paper_words not in first, paper_words
+
+
+def test_without_test_logs_the_verdict_is_on_validation_and_says_so(dataset_dir, tmp_path, capsys):
+    config = tmp_path / "no_test.toml"
+    config.write_text(bad_config(tmp_path / "bad.toml", dataset_dir).read_text()
+                      .replace(f"test = [{json.dumps(str(dataset_dir / TEST))}]\n", "")
+                      .replace("epochs = 2", "epochs = 1"))
+    trained = in_process(capsys, "train", config, "-o", tmp_path / "run")
+    assert trained.code == 0, trained.err
+    assert "test: none (no [data] test in the config, no --test)" in trained.out
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["data"]["test_set"] == "none" and summary["data"]["test"] == []
+    verdict = BaselineVerdict.from_dict(summary["verdict"])
+    assert verdict.decided_on == "validation" and {c.split for c in verdict.cells} == {"validation"}
+    assert "on the validation windows (there is no test set)" in verdict.statement()
+    assert pd.read_csv(tmp_path / "run" / "metrics.csv").empty
