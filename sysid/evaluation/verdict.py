@@ -9,8 +9,9 @@ horizon on one split:
 - test: the benchmark protocol's windows of every test log at each evaluation horizon,
   RMSE pooled over every window point of every test log.
 
-The model *beats its baseline* when its RMSE is below every baseline's in every channel at
-every horizon of the deciding split: the test logs, or validation when there are none.
+On the deciding split (the test logs, or validation when there are none) the model *beats
+its baseline* when its RMSE is lower on average over the cells (geometric mean of the
+ratios, every channel and horizon alike) and no cell is more than 10 % (`MATERIAL`) worse.
 """
 from __future__ import annotations
 
@@ -30,6 +31,7 @@ SHIP_FILE_MMG = "MMG (ship file)"
 IDENTIFIED_MMG = "MMG (identified)"
 VALIDATION, TEST = "validation", "test"
 MODEL_NAMES = {"mmg": "identified MMG", "nn": "NN-only model", "hybrid": "hybrid"}
+MATERIAL = 0.10   # a cell this much worse than its baseline fails the verdict, whatever the average
 
 
 def percent_text(change: float) -> str:
@@ -98,8 +100,22 @@ class BaselineVerdict:
         return [(c, b) for c in self.deciding for b in self.baselines if c.worse_than(b)]
 
     @property
+    def material(self) -> list[tuple[ChannelCell, str]]:
+        """(cell, baseline) where the model is more than `MATERIAL` worse, on the deciding split."""
+        return [(c, b) for c, b in self.worse if c.change(b) > MATERIAL]
+
+    def mean_change(self, baseline: str) -> float:
+        """The model's RMSE against the baseline's over the deciding cells: the geometric mean
+        of the ratios, minus 1 (-0.3: 30 % lower on average; every channel weighs alike)."""
+        ratios = [c.model / c.baselines[baseline] for c in self.deciding if c.baselines[baseline] > 0]
+        return math.exp(float(np.mean(np.log(ratios)))) - 1.0 if ratios else math.nan
+
+    @property
     def beats_baseline(self) -> bool:
-        return bool(self.deciding) and not self.worse
+        """Lower RMSE than every baseline on average over the deciding cells, and no cell more
+        than `MATERIAL` worse."""
+        return (bool(self.deciding) and all(self.mean_change(b) < 0 for b in self.baselines)
+                and not self.material)
 
     @property
     def model_name(self) -> str:
@@ -113,34 +129,24 @@ class BaselineVerdict:
         cells = self.deciding
         if not cells:
             return f"No verdict: neither test logs nor validation windows gave the {self.model_name} a score."
+        average = "; ".join(f"{percent_text(abs(self.mean_change(b)))[1:]} {'lower' if self.mean_change(b) < 0 else 'higher'}"
+                            + (f" than {b}" if len(self.baselines) > 1 else "") for b in self.baselines)
+        average = f"RMSE {average} on average over the {len(cells)} cells (u, v_m, r at {_horizons(cells)} s)"
+        worse = sorted(self.worse, key=lambda cb: -cb[0].change(cb[1]))
+        listed = "; ".join(f"{c.text(b)}" + (f" vs {b}" if len(self.baselines) > 1 else "") for c, b in worse[:4])
+        listed += "; ..." if len(worse) > 4 else ""
         if self.beats_baseline:
-            changes = [c.change(b) for c in cells for b in self.baselines]
-            return (f"The {self.model_name}{spread} beats its physics baseline, {base}, on {where}: lower RMSE "
-                    f"in all {len(cells)} cells (u, v_m, r at {_horizons(cells)} s), by "
-                    f"{100 * -max(changes):.0f} to {100 * -min(changes):.0f} %.")
-        worst = sorted(self.worse, key=lambda cb: -cb[0].change(cb[1]))
-        n_cells = len({(c.horizon_s, c.channel) for c, _ in self.worse})
-        listed = "; ".join(f"{c.text(b)}" + (f" vs {b}" if len(self.baselines) > 1 else "") for c, b in worst[:4])
-        return (f"The {self.model_name}{spread} is WORSE than its physics baseline, {base}, on {where} in "
-                f"{n_cells} of {len(cells)} cells: {listed}{'; ...' if len(worst) > 4 else ''}. "
-                f"Use the baseline, or train and check again, before trusting this model.")
+            if not worse:
+                return f"The {self.model_name}{spread} beats its physics baseline, {base}, on {where}: {average}, " \
+                       "lower in every cell."
+            return (f"The {self.model_name}{spread} beats its physics baseline, {base}, on {where}: {average}; "
+                    f"not lower in {listed}, within the {100 * MATERIAL:.0f} % tolerance.")
+        return (f"The {self.model_name}{spread} is WORSE than its physics baseline, {base}, on {where}: {listed}; "
+                f"{average}. Use the baseline, or train and check again, before trusting this model.")
 
     def warning(self) -> str | None:
         """The WARNING line for stderr, or None when the model beats its baseline."""
         return None if self.beats_baseline else "WARNING: " + self.statement()
-
-    def rows(self) -> list[dict]:
-        """One dict per cell: split, horizon_s, channel, unit, model, model_std, each baseline
-        and the model's change against it [%]."""
-        out = []
-        for c in self.cells:
-            row = {"split": c.split, "horizon_s": c.horizon_s, "channel": c.channel, "unit": UNITS[c.channel],
-                   "model": c.model, "model_std": c.model_std}
-            for b in self.baselines:
-                row[b] = c.baselines[b]
-                row[f"change vs {b} [%]"] = 100 * c.change(b)
-            out.append(row)
-        return out
 
     def to_dict(self) -> dict:
         return {"model": self.model, "baselines": list(self.baselines), "decided_on": self.decided_on,

@@ -1,5 +1,5 @@
-"""A verdict, always: a deliberately bad hybrid (a 2-neuron network, 2 epochs, no warm start,
-no gate) trained on real logs ends with a WARNING on stderr, ``beats_baseline: false`` in
+"""A verdict, always: a deliberately bad hybrid (a 2-neuron network, 2 epochs at a learning rate
+of 0.5, no warm start, no gate) trained on real logs ends with a WARNING on stderr, ``beats_baseline: false`` in
 summary.json and the statement first on page 1 of its report; the verdict's numbers are
 those of the run's metrics and of the MMG evaluated on its own (``sysid evaluate --model mmg``)."""
 from __future__ import annotations
@@ -23,7 +23,7 @@ def bad_config(path, dataset_dir):
         f"[data]\ntrain = {json.dumps([str(dataset_dir / f) for f in TRAIN])}\n"
         f"test = [{json.dumps(str(dataset_dir / TEST))}]\n"
         "[network]\nhidden = [2]\n"
-        "[training]\nepochs = 2\nwarm_start_epochs = 0\nlearning_rate = 0.05\nbatch_size = 64\n"
+        "[training]\nepochs = 2\nwarm_start_epochs = 0\nlearning_rate = 0.5\nbatch_size = 64\n"
         "[gate]\nenabled = false\n[evaluation]\nhorizons = [30.0]\n")
     return path
 
@@ -51,8 +51,8 @@ def test_a_bad_model_is_flagged_in_summary_on_stderr_and_on_page_one(dataset_dir
     for channel, column in (("u", "rmse_u"), ("v_m", "rmse_v"), ("r", "rmse_r")):
         assert test[channel].model == pytest.approx(metrics[column], rel=1e-5)
         assert test[channel].baselines[SHIP_FILE_MMG] == pytest.approx(mmg[column], rel=1e-5)
-    worse = [c for c, _ in verdict.worse]
-    assert all(c.model >= c.baselines[SHIP_FILE_MMG] for c in worse)
+    # measured: 54-116 % worse than the MMG in every channel; the flag needs one cell 10 % worse
+    assert all(cell.model > 1.1 * cell.baselines[SHIP_FILE_MMG] for cell in test.values())
     # one validation loss: the log line, summary.json and the verdict say the same number; the
     # ship file's MMG on the same windows is the trainer's own MMG-only loss
     assert f"val_loss_multistep {summary['val_loss_multistep']:.5f}" in trained.out
