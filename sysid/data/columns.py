@@ -163,7 +163,8 @@ class ColumnMap:
         spec = self.spec(channel)
         if spec.constant is not None:
             return f"constant {spec.constant:g} {SI_UNIT[channel]}"
-        return f"column {spec.column!r} [{spec.resolved_unit}]"
+        named = _BRACKET.search(spec.column) and not spec.unit  # the unit is in the column's name
+        return f"column {spec.column!r}" if named else f"column {spec.column!r} [{spec.resolved_unit}]"
 
 
 def parse_columns(table: Any, source: str) -> ColumnMap:
