@@ -264,6 +264,9 @@ def methods_paragraphs(source: ReportSource) -> list[str]:
                      f"{s.get('n_val_windows', '?')} validation windows) for {s.get('epochs', '?')} epochs; "
                      f"the weights of epoch {s.get('best_epoch', '?')} were kept "
                      f"(training time {_seconds(s.get('train_seconds'))}, seed {s.get('seed', '?')}).")
+        if s.get("val_loss_multistep") is not None:
+            text += (f" val_loss_multistep {float(s['val_loss_multistep']):.5f}: the validation loss, L_v of the final "
+                     "model (kNN gate included) on the validation windows.")
         u = s.get("identified_uncertainty")
         if isinstance(u, dict) and u.get("names"):
             prior = s.get("identified_initial") or {}

@@ -46,6 +46,7 @@ def text_blocks(title: str, summary, rows, methods, quality, notes, verdict: Ver
         blocks += [("h2", "Verdict"), ("p", ("" if verdict.beats else "WARNING: ") + verdict.statement)]
         blocks += [("kv", f"{r[0]}, {r[1]} s, {r[2]}", " | ".join(f"{h} {v}" for h, v in zip(verdict.header[3:], r[3:])))
                    for r in verdict.rows]
+        blocks += [("small", verdict.losses)] if verdict.losses else []
     blocks += [("h2", "Summary")] + [("kv", k, str(v)) for k, v in summary]
     blocks += [("h2", "Runs")] * bool(rows) + [("kv", r.label, f"{r.model}, data set {r.dataset}, epochs {r.epochs}, "
                                                 f"training {r.train_time}, config {r.config_digest}, created {r.created}")

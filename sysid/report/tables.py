@@ -237,6 +237,7 @@ class VerdictTable:
     beats: bool
     header: list[str]
     rows: list[list[str]]
+    losses: str = ""   # "val_loss_multistep: hybrid 0.05772, MMG (ship file) 0.05870"
 
 
 def verdict_table(verdict: Verdict, model: str) -> VerdictTable:
@@ -255,7 +256,10 @@ def verdict_table(verdict: Verdict, model: str) -> VerdictTable:
             change = c.change(b)
             row += [format_rmse(c.baselines[b]), percent_text(change)]
         rows.append(row)
-    return VerdictTable(verdict.statement(), verdict.beats_baseline, header, rows)
+    losses = ", ".join(f"{model if k == 'model' else k} {v:.5f}" for k, v in verdict.val_loss_multistep.items()
+                       if math.isfinite(v))
+    return VerdictTable(verdict.statement(), verdict.beats_baseline, header, rows,
+                        f"val_loss_multistep (the validation loss, on the validation windows): {losses}" if losses else "")
 
 
 def build_tables(source: ReportSource) -> list[RmseTable]:

@@ -65,6 +65,8 @@ def test_a_bad_model_is_flagged_in_summary_on_stderr_and_on_page_one(dataset_dir
     first = PdfReader(tmp_path / "report" / "report.pdf").pages[0].extract_text()
     lines = [line for line in first.splitlines() if line.strip()]
     assert lines[1] == "Verdict" and lines[2].startswith("WARNING: The hybrid is WORSE than its physics baseline")
+    assert any(line.startswith("val_loss_multistep") and f"{summary['val_loss_multistep']:.5f}" in line
+               for line in lines)   # the same name and number as in the log and summary.json
     html = (tmp_path / "report" / "report.html").read_text()
     assert html.index('id="verdict"') < html.index('id="summary"')
     for paper_words in ("better than the paper", "cf. Fig", "Figs. 10-12", "D2"):
