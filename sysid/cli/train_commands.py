@@ -64,7 +64,9 @@ def train(
         typer.echo(f"test: {len(tests)} log(s)" + (" (the paper's test files of data set "
                                                   f"{exp.experiment.dataset})" if paper else ""))
     else:
-        typer.echo("test: none (no [data] test in the config, no --test): scored on the validation windows only")
+        typer.echo("test: none (no [data] test in the config, no --test): " + (
+            "scored on the validation windows only" if exp.needs_training else
+            "nothing to evaluate this MMG on; name test logs in [data] test or with --test"))
     result = run_experiment(exp, output, tests, runs, data, log=lambda m: typer.echo("  " + m), resume=resume,
                             overwrite=overwrite, validation=validation)
     if tests:
