@@ -7,6 +7,7 @@ from typing import List, Optional
 
 import typer
 
+from sysid import logs
 from sysid.cli.app import app
 from sysid.cli.interrupts import on_interrupt
 from sysid.cli.outputs import claim, experiment_inputs
@@ -55,19 +56,19 @@ def train(
     tests = evaluation_runs(exp, data)
     if runs is not None:
         source = f"data set {exp.experiment.dataset}" if exp.experiment.dataset and not exp.data.train else "your logs"
-        typer.echo(f"train: {exp.experiment.model} model on {len(runs)} training log(s) from {source} "
+        logs.info(f"train: {exp.experiment.model} model on {len(runs)} training log(s) from {source} "
                    f"({sum(r.duration for r in runs):.0f} s of data), seed {exp.experiment.seed}; validation: "
                    + (f"{len(validation)} log(s)" if validation else
                       f"{exp.training.val_fraction:g} of every training log's {exp.training.block_s:g}-s blocks"))
     if tests:
         paper = not exp.data.test and exp.experiment.dataset
-        typer.echo(f"test: {len(tests)} log(s)" + (" (the paper's test files of data set "
+        logs.info(f"test: {len(tests)} log(s)" + (" (the paper's test files of data set "
                                                   f"{exp.experiment.dataset})" if paper else ""))
     else:
-        typer.echo("test: none (no [data] test in the config, no --test): " + (
+        logs.info("test: none (no [data] test in the config, no --test): " + (
             "scored on the validation windows only" if exp.needs_training else
             "nothing to evaluate this MMG on; name test logs in [data] test or with --test"))
-    result = run_experiment(exp, output, tests, runs, data, log=lambda m: typer.echo("  " + m), resume=resume,
+    result = run_experiment(exp, output, tests, runs, data, log=logs.indented(), resume=resume,
                             overwrite=overwrite, validation=validation)
     if tests:
         typer.echo(result.evaluation.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
@@ -123,7 +124,7 @@ def reproduce(
     target = claim(output, OutputKind.REPRODUCTION, [data_root(data)], overwrite)
     on_interrupt(f"nothing written to {output} (it is moved into place only when every run is done)")
     with target.staged() as staging:
-        summary = run_protocol(staging, data, only, log=typer.echo, jobs=jobs or cpu_cores(), seeds=seeds,
+        summary = run_protocol(staging, data, only, log=logs.info, jobs=jobs or cpu_cores(), seeds=seeds,
                                address=address)
     for name in ("table7.md", "table8.md"):
         path = output / name

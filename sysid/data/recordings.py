@@ -202,7 +202,7 @@ def expand_paths(items: Iterable[str | os.PathLike]) -> list[Path]:
 
 def protocol_windows(n_samples: int, horizon: int) -> np.ndarray:
     """Start indices of consecutive, non-overlapping full windows of `horizon` samples
-    (k = 0 .. floor(N / H) - 1; BENCHMARK_PROTOCOL.md)."""
+    (k = 0 .. floor(N / H) - 1; docs: the paper's protocol, the metric)."""
     return np.arange(n_samples // horizon) * horizon
 
 
