@@ -1,6 +1,7 @@
 """``sysid train`` and ``sysid reproduce``."""
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 from typing import List, Optional
@@ -44,7 +45,7 @@ def train(
     if threads is not None:
         exp = exp.replace(training={"threads": threads})
     if test:
-        exp = exp.replace(data={"test": tuple(str(p.absolute()) for p in expand_paths(test))})
+        exp = exp.replace(data={"test": tuple(os.path.abspath(p) for p in expand_paths(test))})
     # a bad -o fails now, not after training
     claim(output, OutputKind.RUN, [config, *experiment_inputs(exp, data)], overwrite)
     checkpoint = checkpoint_path(output)
