@@ -42,14 +42,13 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import tomllib
 from dataclasses import dataclass, field, fields
-from pathlib import Path
 from typing import Any
 
 from sysid.config.choices import Choice, DType, GateSpace, Method, ModelKind, Solver, Stage, StartStates
 from sysid.errors import ConfigError
 from sysid.mmg.ship import parameter_name
+from sysid.store.toml_file import read_toml
 
 
 _CHOICE_TYPES: dict[str, type[Choice]] = {c.__name__: c for c in (DType, GateSpace, Method, ModelKind, Solver, Stage, StartStates)}
@@ -392,17 +391,7 @@ def parse_experiment(doc: dict, source: str = "<config>") -> Experiment:
 
 def load_experiment(path: str | os.PathLike) -> Experiment:
     """Read and validate an experiment TOML; errors name the file and key."""
-    path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"{path}: config file not found")
-    try:
-        with open(path, "rb") as fh:
-            doc = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML ({exc})") from None
-    except UnicodeDecodeError:
-        raise ConfigError(f"{path}: not UTF-8 text (binary, or another encoding such as UTF-16); "
-                          "an experiment config is a UTF-8 TOML file") from None
+    doc, _ = read_toml(path, "config file", ConfigError)
     return parse_experiment(doc, str(path))
 
 

@@ -24,7 +24,6 @@ import functools
 import hashlib
 import os
 import sys
-import tempfile
 import time
 import warnings
 import weakref
@@ -39,6 +38,7 @@ from sysid.config.choices import Method
 from sysid.dynamics.equations import check_shapes, eager_predict
 from sysid.dynamics.integrators import Integrator, IntegratorLike, run_steps
 from sysid.fast.prepared import prepared
+from sysid.store.files import atomic_path
 from sysid.state import INPUTS, STATE
 from sysid.fast.stepper import Derivative, Rollout, Step
 
@@ -145,20 +145,12 @@ def compile_package(program: torch.export.ExportedProgram, path: Path,
                     metadata: dict[str, str] | None = None, inductor_options: dict | None = None) -> Path:
     """AOTInductor-compile an exported program into the ``.pt2`` package `path` (atomic)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     options = dict(INDUCTOR_OPTIONS if inductor_options is None else inductor_options)
     if metadata:
         options["aot_inductor.metadata"] = {str(k): str(v) for k, v in metadata.items()}
-    fd, tmp = tempfile.mkstemp(suffix=".pt2", dir=path.parent)
-    os.close(fd)
-    try:
-        with warnings.catch_warnings(), codegen_fixes.subgraph_fixes():
-            warnings.simplefilter("ignore", FutureWarning)  # torch-internal deprecation notices
-            torch._inductor.aoti_compile_and_package(program, package_path=tmp, inductor_configs=options)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    with atomic_path(path, ".pt2") as tmp, warnings.catch_warnings(), codegen_fixes.subgraph_fixes():
+        warnings.simplefilter("ignore", FutureWarning)  # torch-internal deprecation notices
+        torch._inductor.aoti_compile_and_package(program, package_path=str(tmp), inductor_configs=options)
     return path
 
 
@@ -317,12 +309,8 @@ def step_label(method: Method) -> str:
 def step_metadata(model: nn.Module, method: Method, dt: float, batch: int,
                   dtype: torch.dtype) -> dict[str, str]:
     """What a user of an exported step needs to know: rule, dt, shapes, channels, units."""
-    from importlib.metadata import PackageNotFoundError, version
-    try:
-        sysid_version = version("sysid")
-    except PackageNotFoundError:
-        sysid_version = "unknown"
-    return {"sysid_version": sysid_version, "kind": getattr(model, "kind", "mmg"),
+    from sysid import __version__
+    return {"sysid_version": __version__, "kind": getattr(model, "kind", "mmg"),
             "method": method.value, "dt_s": repr(float(dt)), "batch": str(batch),
             "dtype": str(dtype).replace("torch.", ""), "state": ",".join(STATE), "inputs": ",".join(INPUTS),
             "units": "state x[m] u[m/s] y[m] v[m/s] psi[rad] r[rad/s]; inputs n_prop[rps] "

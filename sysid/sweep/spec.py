@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from sysid.errors import ConfigError
+from sysid.store.toml_file import read_toml
 from sysid.config.experiment import Experiment, load_experiment, parse_experiment
 
 SEARCHES = ("grid", "random", "optuna")
@@ -218,13 +219,5 @@ def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = Non
 def load_sweep(path: str | os.PathLike) -> SweepSpec:
     """Read and validate a sweep file; errors name the file and key."""
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"{path}: sweep file not found")
-    try:
-        text = path.read_text()
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML ({exc})") from None
-    except UnicodeDecodeError:
-        raise ConfigError(f"{path}: not UTF-8 text; a sweep file is a UTF-8 TOML file") from None
+    doc, text = read_toml(path, "sweep file", ConfigError)
     return parse_sweep(doc, str(path), path.resolve().parent, text)
