@@ -14,12 +14,11 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from sysid.data.recordings import read_run
-from sysid.data.datasets import TEST_FILES, data_root, test_files
+from sysid.data.datasets import TEST_FILES, data_root
 from sysid.errors import ConfigError
 from sysid.config.experiment import Experiment, load_experiment
 from sysid.store.files import write_csv, write_text
-from sysid.runs.lifecycle import run_experiment, training_runs
+from sysid.runs.lifecycle import cached_test_runs, cached_training_runs, run_experiment
 from sysid.protocol.paper import MODEL_LABELS, comparison_table, model_label
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
@@ -116,21 +115,10 @@ class ProtocolRun:
     seconds: float
 
 
-_TRAINING_CACHE: dict = {}
-
-
 def _run_one(name: str, exp: Experiment, out: Path, data, progress: bool, log) -> ProtocolRun:
     """One protocol run through `run_experiment` (in this process or a worker's)."""
-    tests = _TRAINING_CACHE.get("tests")
-    if tests is None:
-        tests = _TRAINING_CACHE["tests"] = [read_run(p) for p in test_files(data).values()]
-    train = None
-    if exp.needs_training:
-        key = (exp.experiment.dataset, exp.data.files, exp.data.rate)
-        if key not in _TRAINING_CACHE:
-            _TRAINING_CACHE[key] = training_runs(exp, data)
-        train = _TRAINING_CACHE[key]
-    result = run_experiment(exp, out / "runs" / name, tests, train, data, progress, log=log)
+    train = cached_training_runs(exp, data) if exp.needs_training else None
+    result = run_experiment(exp, out / "runs" / name, cached_test_runs(data), train, data, progress, log=log)
     return ProtocolRun(name, exp.experiment.model, exp.experiment.dataset if exp.needs_training else "-",
                        result.evaluation.metrics, result.evaluation.gate_off_share, result.failure, result.seconds)
 
@@ -156,8 +144,7 @@ def _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, d
     log(f"training {len(trained)} runs x {seeds} seeds = {len(trained) * seeds} trials on Ray, "
         f"{jobs} side by side" + (f" on {address}" if address else ""))
     groups = train_seeds({n: experiments[n] for n in ordered}, seeds, out, str(data_root(data)), jobs, address, log)
-    tests = _TRAINING_CACHE.get("tests") or [read_run(p) for p in test_files(data).values()]
-    _TRAINING_CACHE["tests"] = tests
+    tests = cached_test_runs(data)
     ensembles = []
     for name in trained:
         exp, group = experiments[name], groups[name]
