@@ -126,3 +126,10 @@ class DType(Choice):
     def what(cls) -> str:
         return "dtype"
 
+
+class Search(Choice):
+    """``[sweep] search``: how a sweep picks its configurations."""
+
+    GRID = "grid"        # every combination of the listed values
+    RANDOM = "random"    # seeded random draws
+    OPTUNA = "optuna"    # Optuna's sampler through Ray Tune

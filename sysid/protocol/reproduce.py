@@ -16,6 +16,7 @@ import pandas as pd
 
 from sysid.data.datasets import TEST_FILES, data_root
 from sysid.errors import ConfigError
+from sysid.config.choices import ModelKind
 from sysid.config.experiment import Experiment, load_experiment
 from sysid.store.files import write_csv, write_text
 from sysid.runs.lifecycle import cached_test_runs, cached_training_runs, run_experiment
@@ -126,7 +127,7 @@ def _run_one(name: str, exp: Experiment, out: Path, data, progress: bool, log) -
 def expected_cost(exp: Experiment) -> float:
     """Relative training cost of a run, to start the longest first (results do not depend
     on the order; the wall time does): hybrid > NN-only > identification, D2 about twice D1."""
-    cost = {"hybrid": 5.0, "nn": 3.5, "mmg": 0.0}[exp.experiment.model] + 1.5 * bool(exp.identify.parameters)
+    cost = {ModelKind.HYBRID: 5.0, ModelKind.NN: 3.5, ModelKind.MMG: 0.0}[exp.experiment.model] + 1.5 * bool(exp.identify.parameters)
     return cost * (2.0 if exp.data.files or exp.experiment.dataset == "D2" else 1.0)
 
 
@@ -150,7 +151,7 @@ def _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, d
         exp, group = experiments[name], groups[name]
         done[name] = ProtocolRun(name, exp.experiment.model, exp.experiment.dataset, group.metrics,
                                  group.gate_off_share, group.failure, group.seconds)
-        if exp.experiment.model != "mmg" and group.seeds:
+        if exp.experiment.model is not ModelKind.MMG and group.seeds:
             target, evaluation, _ = write_ensemble(name, exp, group, out, tests)
             done[target] = ProtocolRun(target, exp.experiment.model, exp.experiment.dataset, evaluation.metrics,
                                        evaluation.gate_off_share, None, 0.0)
@@ -178,7 +179,7 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
     experiments = {}
     for name in names:
         exp = protocol_experiment(name)
-        experiments[name] = exp.replace(**overrides) if overrides and exp.experiment.model != "mmg" else exp
+        experiments[name] = exp.replace(**overrides) if overrides and exp.experiment.model is not ModelKind.MMG else exp
     done: dict[str, ProtocolRun] = {}
     trained = [n for n in names if experiments[n].needs_training]
     ensembles: list[str] = []
