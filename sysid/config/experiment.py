@@ -51,7 +51,8 @@ from sysid.mmg.ship import parameter_name
 from sysid.store.toml_file import read_toml
 
 
-_CHOICE_TYPES: dict[str, type[Choice]] = {c.__name__: c for c in (DType, GateSpace, Method, ModelKind, Solver, Stage, StartStates)}
+_CHOICE_TYPES: dict[str, type[Choice]] = {
+    c.__name__: c for c in (DType, GateSpace, Method, ModelKind, Solver, Stage, StartStates)}
 
 
 def _choice_type(f: dataclasses.Field) -> type[Choice] | None:
