@@ -56,6 +56,7 @@ def long_training(files, folder):
     return config
 
 
+@pytest.mark.slow
 def test_ctrl_c_while_training_exits_130_and_leaves_nothing(files, tmp_path):
     out = tmp_path / "run"
     proc = start("train", long_training(files, tmp_path), "-o", out, "--test", files["test"])
@@ -95,7 +96,7 @@ def test_interrupt_while_writing_the_run_leaves_nothing_evaluate_or_report_accep
 def test_ctrl_c_in_a_parallel_preprocess_exits_130_without_worker_tracebacks(tmp_path):
     from preprocessing import synth
     from preprocessing.sensors import SensorLayout
-    from test_preprocessing_bad_input import analytic_run
+    from analytic_runs import analytic_run
 
     raw = synth.synthesise(analytic_run(300.0), SensorLayout(), synth.SynthSettings(seed=7)).raw
     logs = []
