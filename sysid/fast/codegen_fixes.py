@@ -21,7 +21,7 @@ wrapper methods for the duration of a compilation; each calls torch's own method
    read hidden from it (shown as non-tensors, which it skips), so it writes handles only
    for the others.
 
-The kernels are untouched, so the numbers are bit-identical (tests/test_compiled.py).
+The kernels are untouched, so the numbers are bit-identical (tests/fast/test_compiled.py).
 
 The fixes lean on the private names and behaviour of exactly the torch they were derived
 from (`TORCH_VERSION`); under any other torch `available()` is False and compilation runs
@@ -32,7 +32,7 @@ and gives handles only to the inputs a subgraph reads, or to move to another tor
 delete it, the ``codegen_fixes.subgraph_fixes()`` context in
 `sysid.fast.compiled.compile_package` and ``codegen_fixes.cache_tag()`` in
 `sysid.fast.compiled.fingerprint`; then
-``tests/test_compiled.py::test_compiled_loop_allocates_only_what_its_kernels_use`` (which
+``tests/fast/test_compiled.py::test_compiled_loop_allocates_only_what_its_kernels_use`` (which
 reads the generated loop) says whether torch alone now allocates only what its kernels use.
 """
 from __future__ import annotations

@@ -14,7 +14,7 @@ the propeller, beta_P = beta - x'_P r' (beta = atan2(-v_m, u), r' = r L / U):
 
 The paper is not on this machine: the formulas are written as the paper's from the
 authors' reading of it (equation numbers are not given for that reason); shipmmg's form
-is checked against shipmmg itself (tests/test_shipmmg_kvlcc2.py).
+is checked against shipmmg itself (tests/mmg/test_shipmmg_kvlcc2.py).
 
 Ahead motion and ahead revolutions (u > 0, n > 0) are the model's range; n = 0 gives zero
 thrust and J_P = 0.
