@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from sysid.data.datasets import TEST_FILES, data_root
+from sysid.bundled import bundled_dir
 from sysid.errors import ConfigError
 from sysid.config.choices import ModelKind
 from sysid.config.experiment import Experiment, load_experiment
@@ -22,7 +23,6 @@ from sysid.store.files import write_csv, write_text
 from sysid.runs.lifecycle import cached_test_runs, cached_training_runs, run_experiment
 from sysid.protocol.paper import MODEL_LABELS, comparison_table, model_label
 
-CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 # run name -> experiment config; labels and data sets come from the configs
 PROTOCOL = {
     "mmg_paper": "mmg_paper.toml",
@@ -41,7 +41,7 @@ def protocol_experiment(name: str) -> Experiment:
     """The experiment of a protocol run."""
     if name not in PROTOCOL:
         raise ConfigError(f"unknown protocol run {name!r}: choose from {', '.join(PROTOCOL)}")
-    return load_experiment(CONFIGS / "experiments" / PROTOCOL[name])
+    return load_experiment(bundled_dir("experiments") / PROTOCOL[name])
 
 
 def markdown_table(table: pd.DataFrame, horizon: int) -> str:
