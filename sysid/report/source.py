@@ -16,7 +16,7 @@ import pandas as pd
 
 from preprocessing.quality import QualityReport
 from sysid.errors import CheckpointError
-from sysid.config.experiment import KINDS as MODEL_KINDS
+from sysid.config.choices import ModelKind
 from sysid.data.splits import PAPER_TEST_STEMS
 from sysid.evaluation.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
 from sysid.evaluation.verdict import BaselineVerdict, seed_mean_verdict
@@ -194,7 +194,7 @@ class ReportSource:
 
 def _run_order(run: RunRecord) -> tuple:
     """MMG (paper X'vr first), NN, hybrid; data sets in order."""
-    return (MODEL_KINDS.index(run.model), run.name != "mmg_paper", run.dataset, run.name)
+    return (list(ModelKind).index(ModelKind(run.model)), run.name != "mmg_paper", run.dataset, run.name)
 
 
 def read_run_dir(path: Path) -> RunRecord:
@@ -221,8 +221,8 @@ def read_run_dir(path: Path) -> RunRecord:
         if "early_stopping_loss" not in history.columns:
             raise CheckpointError(f"{path / 'history.csv'}: missing column(s) ['early_stopping_loss']")
     model = str(summary.get("model", "mmg")).lower()
-    if model not in MODEL_KINDS:
-        raise CheckpointError(f"{path / 'summary.json'}: model {model!r} is not one of {MODEL_KINDS}")
+    if model not in ModelKind.offered():
+        raise CheckpointError(f"{path / 'summary.json'}: model {model!r} is not one of {ModelKind.listing()}")
     baselines = _read_table(path / "baseline_metrics.csv", BASELINE_METRICS_COLUMNS, required=False)
     return RunRecord(path.name, path, summary, config_text, config,
                      metrics, history, baseline_metrics=baselines)

@@ -17,6 +17,7 @@ import torch
 
 from sysid.identify.checkpoint import TrainingCheckpoint
 from sysid.data.recordings import Run, read_run
+from sysid.data.datasets import test_files
 from sysid.data.splits import TEST, TRAINING, VALIDATION, check_disjoint_runs, data_split, provenance
 from sysid.device import compute_threads
 from sysid.errors import TrainingError
@@ -93,6 +94,27 @@ def scores_on_tests(exp: Experiment, model: torch.nn.Module, evaluation: Evaluat
     return scores
 
 
+_READ: dict[tuple, list[Run]] = {}  # recordings read once per process (protocol runs and sweep trials share them)
+
+
+def cached_test_runs(data: str | os.PathLike | None = None) -> list[Run]:
+    """The protocol's six test recordings (`sysid.data.datasets.test_files`), read once per
+    process and data directory."""
+    key = ("tests", None if data is None else str(data))
+    if key not in _READ:
+        _READ[key] = [read_run(p) for p in test_files(data).values()]
+    return _READ[key]
+
+
+def cached_training_runs(exp: Experiment, data: str | os.PathLike | None = None) -> list[Run]:
+    """`training_runs`, read once per process for each training set (files or data set, rate)."""
+    key = ("training", None if data is None else str(data), exp.experiment.dataset, exp.data.train,
+           exp.data.columns, exp.data.rate)
+    if key not in _READ:
+        _READ[key] = training_runs(exp, data)
+    return _READ[key]
+
+
 def checkpoint_path(out_dir: str | os.PathLike) -> Path:
     """Where the training checkpoint of the run to be written at `out_dir` lives while it
     trains (beside it, hidden; removed once the run directory is complete)."""
@@ -147,7 +169,7 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
         verdict, baseline_metrics = None, None
         if validation_scores is not None:
             scores = scores_on_tests(exp, model, evaluation, tests)
-            verdict = baseline_verdict(exp.experiment.model, validation_scores, horizon, scores)
+            verdict = baseline_verdict(str(exp.experiment.model), validation_scores, horizon, scores)
             if scores:
                 baseline_metrics = pd.concat([m.assign(baseline=label) for label, m in scores.items()
                                               if label != "model"], ignore_index=True)
