@@ -125,18 +125,17 @@ def sweep_items(source: ReportSource, top: int = 8) -> list[tuple[str, str]]:
     """Readable lines of a sweep: what it varied, its trials, the chosen configuration and
     the best configurations by mean validation loss over their seeds."""
     sweep = source.sweep
-    s = sweep.summary
-    best = s.get("best") or {}
-    items = [("Sweep", f"{s.get('name')}: {s.get('search')} search over {', '.join(s.get('keys') or []) or '-'}; "
-                       f"seeds {s.get('seeds')}; base {s.get('base')}"),
-             ("Trials", f"{s.get('complete')} of {s.get('trials')} complete, {s.get('failed')} failed, "
-                        f"{s.get('missing')} missing; {_seconds(s.get('seconds'))}"),
+    s, best = sweep.summary, sweep.summary.best
+    items = [("Sweep", f"{s.name}: {s.search} search over {', '.join(s.keys) or '-'}; "
+                       f"seeds {list(s.seeds)}; base {s.base}"),
+             ("Trials", f"{s.complete} of {s.trials} complete, {s.failed} failed, "
+                        f"{s.missing} missing; {_seconds(s.seconds)}"),
              ("Objective", "validation multi-step loss (validation blocks of the training files only; "
                            "the test files never choose)")]
     if best:
-        spread = f" ± {best['val_loss_std']:.5f} (std over seeds)" if best.get("val_loss_std") is not None else ""
-        items.append(("Chosen", f"{best['point']}: validation loss {best['val_loss_mean']:.5f}{spread}; "
-                                f"runs {', '.join(best.get('runs', []))}"))
+        spread = f" ± {best.val_loss_std:.5f} (std over seeds)" if best.val_loss_std is not None else ""
+        items.append(("Chosen", f"{best.point}: validation loss {best.val_loss_mean:.5f}{spread}; "
+                                f"runs {', '.join(best.runs)}"))
     for i, row in enumerate(sweep.points.head(top).itertuples(), 1):
         std = getattr(row, "val_loss_std", float("nan"))
         items.append((f"#{i}", f"{row.point}: {row.val_loss_mean:.5f}" + ("" if std != std else f" ± {std:.5f}")

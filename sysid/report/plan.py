@@ -276,8 +276,8 @@ def _sweep_figures(source: ReportSource, plan: FigurePlan) -> None:
     from sysid.report import sweep_figures as SF
 
     sweep = source.sweep
-    chosen = (sweep.summary.get("best") or {}).get("point")
-    seeds = len(sweep.summary.get("seeds") or [])
+    chosen = sweep.summary.best.point if sweep.summary.best else None
+    seeds = len(sweep.summary.seeds)
     plan.figures.append(FigureSpec(
         "sweep_keys", "Sweep", "Validation loss against the varied keys",
         "Validation loss (the sweep's objective; validation windows only, never the test files) of every "

@@ -21,6 +21,7 @@ from sysid.runs.directory import RunDir, read_table
 from sysid.runs.records import read_json_object
 from sysid.runs.reproduction import Reproduction
 from sysid.runs.summary import RunSummary
+from sysid.sweep.summary import SweepSummary
 from sysid.protocol.seeds import seed_metrics
 
 
@@ -95,7 +96,7 @@ class SweepRecord:
     points: pd.DataFrame
     keys: list[str]
     chosen: list[RunRecord]
-    summary: dict    # the sweep's summary.json (`sysid.sweep.results.write_results`)
+    summary: SweepSummary
 
 
 @dataclass
@@ -204,10 +205,9 @@ def read_source(path) -> ReportSource:
 def read_sweep(path: Path, quality: list[QualityReport]) -> ReportSource:
     """A sweep directory: its tables, summary and the chosen configuration's seed runs (the
     report's run figures and table show the chosen configuration's first seed)."""
-    summary = read_json_object(path / "summary.json")
+    summary = SweepSummary.read(path / "summary.json")
     trials = read_table(path / "results.csv", ["point", "seed", "run", "status", "val_loss"])
     points = read_table(path / "points.csv", ["point", "val_loss_mean"])
-    keys = list(summary.get("keys") or [])
-    best = summary.get("best") or {}
-    chosen = [read_run_dir(path / run) for run in best.get("runs", [])]
+    keys = list(summary.keys)
+    chosen = [read_run_dir(path / run) for run in (summary.best.runs if summary.best else ())]
     return ReportSource(path, "sweep", chosen[:1], quality, SweepRecord(trials, points, keys, chosen, summary))
