@@ -2,11 +2,10 @@
 `sysid.sweep.results.write_results`, read by the CLI and the report."""
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from typing import Any
 
-from sysid.runs.records import JsonRecord, read_json_object
+from sysid.runs.records import JsonRecord
 
 
 @dataclass(frozen=True)
@@ -42,12 +41,3 @@ class SweepSummary(JsonRecord):
     best: ChosenPoint | None = None
     seconds: float | None = None
     extra: dict[str, Any] = field(default_factory=dict)
-
-    def to_text(self) -> str:
-        """The file's text, as `sysid sweep` writes it."""
-        return json.dumps(self.to_json(), indent=2, default=str)
-
-    @classmethod
-    def read(cls, path) -> "SweepSummary":
-        """A sweep's summary.json at `path`, parsed; `CheckpointError` naming the file and key."""
-        return cls.from_json(read_json_object(path), str(path))
