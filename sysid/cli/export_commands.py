@@ -6,6 +6,8 @@ from pathlib import Path
 import typer
 
 from sysid.cli.app import app
+from sysid.cli.outputs import claim
+from sysid.store.target import OutputKind
 from sysid.errors import DataError
 
 
@@ -35,6 +37,7 @@ def export(
     if dt <= 0 or batch < 1:
         raise DataError(f"--dt must be > 0 and --batch >= 1 (got {dt}, {batch})")
     dtype = torch.float32 if float32 else torch.float64
+    claim(output, OutputKind.FILE, [run_dir])
     exp, model = load_model(run_dir, dtype)
     export_model(model, output, method, dt, batch, dtype, compiled=not portable,
                  log=lambda m: typer.echo("  " + m))

@@ -9,6 +9,8 @@ from typing import List, Optional
 import typer
 
 from sysid.cli.app import app
+from sysid.cli.outputs import claim, ship_file
+from sysid.store.target import OutputKind
 from sysid.errors import DataError
 from sysid.state import FORCE, INPUTS, STATE, force_column
 
@@ -115,6 +117,7 @@ def forces(
     if chunk < 1:
         raise DataError(f"--chunk {chunk}: rows per batch must be >= 1")
     model = _model(ship, set_, quadrature)
+    claim(output, OutputKind.FILE, [input_csv, ship_file(ship)])
     numeric = _read_force_inputs(input_csv)
     parts = []
     bounds = range(0, len(numeric), chunk)
@@ -171,6 +174,7 @@ def simulate(
     if not math.isfinite(start):
         raise DataError(f"--start {start}: must be a finite time [s]")
     model = _model(ship, set_, quadrature)
+    claim(output, OutputKind.FILE, [log, ship_file(ship)])
     run = read_run(log, rate)
     i0 = int(np.argmin(np.abs(run.t - start)))
     if abs(run.t[i0] - start) > 0.5 * run.dt:
@@ -227,6 +231,7 @@ def evaluate(
     for h in horizon:
         _check_positive("--horizon", h, "s")
     start = time.perf_counter()
+    claim(output, OutputKind.FILE, [run_dir, *data, None if run_dir is not None else ship_file(ship)])
     if run_dir is not None:
         from sysid.runs.rundir import load_model
         exp, model = load_model(run_dir)
