@@ -43,12 +43,20 @@ def read_table(path: Path, columns: list[str], required: bool = True) -> pd.Data
     return frame
 
 
+def _file(name: str, what: str) -> property:
+    """A property: the path of `name` in the run directory."""
+    return property(lambda self: self.path / name, doc=f"{name}: {what}.")
+
+
 @dataclass(frozen=True)
 class RunDir:
     """A run directory at `path`: its files' paths, and their checked readers."""
 
     path: Path
     REQUIRED: ClassVar[tuple[str, ...]] = ("config.toml", "summary.json", "metrics.csv")
+
+    def __post_init__(self):
+        object.__setattr__(self, "path", Path(self.path))  # a str given is a Path here
 
     @classmethod
     def open(cls, path: str | os.PathLike) -> "RunDir":
@@ -72,49 +80,15 @@ class RunDir:
             return None
 
     # -- the files -----------------------------------------------------------------
-    @property
-    def config(self) -> Path:
-        """config.toml: the resolved experiment config."""
-        return self.path / "config.toml"
-
-    @property
-    def summary(self) -> Path:
-        """summary.json (`RunSummary`)."""
-        return self.path / "summary.json"
-
-    @property
-    def model(self) -> Path:
-        """model.pt: the state dict without the kNN bank (trained runs only)."""
-        return self.path / "model.pt"
-
-    @property
-    def knn(self) -> Path:
-        """knn.pt (`KnnBank`, hybrid and NN runs with a gate)."""
-        return self.path / "knn.pt"
-
-    @property
-    def standardization(self) -> Path:
-        """standardization.json: the FNN's input and output mean and std."""
-        return self.path / "standardization.json"
-
-    @property
-    def history(self) -> Path:
-        """history.csv: losses per stage and epoch (trained runs only)."""
-        return self.path / "history.csv"
-
-    @property
-    def metrics(self) -> Path:
-        """metrics.csv (`sysid.evaluation.evaluate.METRICS_COLUMNS`)."""
-        return self.path / "metrics.csv"
-
-    @property
-    def traces(self) -> Path:
-        """traces/: one CSV per (test file, horizon)."""
-        return self.path / "traces"
-
-    @property
-    def manifest(self) -> Path:
-        return self.path / MANIFEST
+    config = _file("config.toml", "the resolved experiment config")
+    summary = _file("summary.json", "`RunSummary`")
+    model = _file("model.pt", "the state dict without the kNN bank (trained runs only)")
+    knn = _file("knn.pt", "`KnnBank` (hybrid and NN runs with a gate)")
+    standardization = _file("standardization.json", "the FNN's input and output mean and std")
+    history = _file("history.csv", "losses per stage and epoch (trained runs only)")
+    metrics = _file("metrics.csv", "`sysid.evaluation.evaluate.METRICS_COLUMNS`")
+    traces = _file("traces", "one CSV per (test file, horizon)")
+    manifest = _file(MANIFEST, "every other file with its SHA-256, written last")
 
     def trace(self, file_stem: str, horizon_s: float) -> Path:
         """The trace of a test file at a horizon [s]."""

@@ -93,7 +93,7 @@ def save_model(model: torch.nn.Module, run_dir: Path) -> None:
         return
     if isinstance(model, SeedEnsemble):  # the members' run directories hold the weights
         return
-    run = RunDir(Path(run_dir))
+    run = RunDir(run_dir)
     save_tensors(model_state(model), run.model)
     if isinstance(model, CorrectedModel):
         net = model.correction_net
@@ -168,7 +168,7 @@ def write_run(run_dir: str | os.PathLike, exp: Experiment, model, evaluation: Ev
     `overwrite`, which replaces all of it.
     """
     with staged_directory(run_dir, "run", overwrite) as staging:
-        _write_run_files(RunDir(Path(staging)), exp, model, evaluation, history, training, seconds)
+        _write_run_files(RunDir(staging), exp, model, evaluation, history, training, seconds)
     return Path(run_dir)
 
 
