@@ -1,6 +1,6 @@
 """The preprocessing pipeline: raw 10 Hz log -> processed 1 Hz segments + quality report.
 
-Steps, in RAW_LOG_FORMAT.md's order: (1) read, validate, put on the 10 Hz grid, find gaps;
+Steps, in the order of the docs' input formats page: (1) read, validate, put on the 10 Hz grid, find gaps;
 (2) lat/lon -> local; (3) baseline check; (4) heading (FOG + two-antenna fusion, with
 gating); (5) midship position; (6) central difference; (7) Kalman/RTS on u, v_m;
 (8) FOG low-pass; (9) wind; (10) take samples at the output rate; (11) write (`writer`).
@@ -29,7 +29,7 @@ from preprocessing.sensors import SensorLayout
 
 @dataclass(frozen=True)
 class PreprocessSettings:
-    """Pipeline settings; defaults follow the paper (section 4.1) and RAW_LOG_FORMAT.md.
+    """Pipeline settings; defaults follow the paper (section 4.1).
 
     diff_dt : half-width of the central difference [s] (paper: 1.0).
     velocity_q : PSD of the white jerk driving the velocity model [m^2/s^5];

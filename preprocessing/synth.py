@@ -1,7 +1,8 @@
 """Raw 10 Hz logs with known truth, synthesised from a processed run.
 
-The truth follows RAW_LOG_FORMAT.md "How it is checked": from the run's t, u, v_m, r,
-actuators and true wind, psi is integrated from r (trapezoid, starting at the file's first
+The public processed files are not kinematically self-consistent (their u, v_m, r differ
+from the derivatives of their own x, y, psi), so the truth is built from the run's t, u, v_m,
+r, actuators and true wind: psi is integrated from r (trapezoid, starting at the file's first
 psi) and the midship position from (u, v_m) rotated by psi (starting at the file's first
 position); the relative wind is recomputed. Sensors are then placed by a `SensorLayout`
 and seeded noise is added.

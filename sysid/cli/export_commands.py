@@ -5,6 +5,7 @@ from pathlib import Path
 
 import typer
 
+from sysid import logs
 from sysid.cli.app import app
 from sysid.cli.outputs import claim
 from sysid.store.target import OutputKind
@@ -40,7 +41,7 @@ def export(
     claim(output, OutputKind.FILE, [run_dir])
     exp, model = load_model(run_dir, dtype)
     export_model(model, output, method, dt, batch, dtype, compiled=not portable,
-                 log=lambda m: typer.echo("  " + m))
+                 log=logs.indented())
     per_step, prediction = step_latency(load_step(output), 200 if portable else 2000)
     kind = "torch.export program" if portable else "AOTInductor package"
     typer.echo(f"export: {exp.experiment.model} model of {run_dir}, {method.value} dt {dt:g} s, batch {batch}, "

@@ -353,8 +353,40 @@ def _validate(exp: Experiment, src: str) -> None:
         raise ConfigError(f"{src}: [identify] parameters need an MMG part (model mmg or hybrid)")
 
 
-def parse_experiment(doc: dict, source: str = "<config>") -> Experiment:
-    """A parsed TOML document to a validated `Experiment`."""
+# options that name files: a relative path resolves against the directory of the file that
+# names it (the experiment config, or the sweep file that sets it); globs stay patterns
+_PATH_OPTIONS = {("data", "files")}
+
+
+def _is_ship_path(ship: str) -> bool:
+    """A ship given as a file (``my_ship.toml``, ``ships/a``), not a bundled name."""
+    return ship.endswith(".toml") or "/" in ship or os.sep in ship
+
+
+def _anchored(path: str, directory: Path) -> str:
+    return path if os.path.isabs(path) else os.path.normpath(os.path.join(directory, path))
+
+
+def resolve_paths(sections: dict, directory: Path) -> dict:
+    """Relative file options of parsed `sections` made absolute against `directory`."""
+    out = dict(sections)
+    ship = out["experiment"].ship
+    if _is_ship_path(ship):
+        out["experiment"] = dataclasses.replace(out["experiment"], ship=_anchored(ship, directory))
+    for section, key in _PATH_OPTIONS:
+        value = getattr(out[section], key)
+        resolved = tuple(_anchored(v, directory) for v in value) if isinstance(value, tuple) else (
+            _anchored(value, directory) if value else value)
+        out[section] = dataclasses.replace(out[section], **{key: resolved})
+    return out
+
+
+def parse_experiment(doc: dict, source: str = "<config>", directory: str | os.PathLike | None = None) -> Experiment:
+    """A parsed TOML document to a validated `Experiment`.
+
+    `directory`: where relative file options (``[experiment] ship`` as a file, ``[data]``
+    files) are anchored, the directory of the file that names them; None: left as given
+    (relative to the working directory)."""
     unknown = set(doc) - set(_SECTIONS)
     if unknown:
         raise ConfigError(f"{source}: unknown section(s) {sorted(unknown)} (known: {', '.join(_SECTIONS)})")
@@ -364,13 +396,16 @@ def parse_experiment(doc: dict, source: str = "<config>") -> Experiment:
                           + ("; the file is empty" if not doc else ""))
     sections = {name: _coerce(name, cls if isinstance(cls, type) else globals()[cls], doc.get(name, {}), source)
                 for name, cls in _SECTIONS.items()}
+    if directory is not None:
+        sections = resolve_paths(sections, Path(directory))
     exp = Experiment(**sections, source=source)
     _validate(exp, source)
     return exp
 
 
 def load_experiment(path: str | os.PathLike) -> Experiment:
-    """Read and validate an experiment TOML; errors name the file and key."""
+    """Read and validate an experiment TOML; errors name the file and key. Relative paths in it
+    resolve against the file's directory, wherever the command runs."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"{path}: config file not found")
@@ -382,7 +417,7 @@ def load_experiment(path: str | os.PathLike) -> Experiment:
     except UnicodeDecodeError:
         raise ConfigError(f"{path}: not UTF-8 text (binary, or another encoding such as UTF-16); "
                           "an experiment config is a UTF-8 TOML file") from None
-    return parse_experiment(doc, str(path))
+    return parse_experiment(doc, str(path), path.resolve().parent)
 
 
 def ship_overrides(exp: Experiment) -> dict[str, float]:

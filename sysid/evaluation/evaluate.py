@@ -1,4 +1,4 @@
-"""All evaluation: windowed predictions, the protocol's RMSE table (BENCHMARK_PROTOCOL.md)
+"""All evaluation: windowed predictions, the protocol's RMSE table (docs: the paper's protocol, the metric)
 and the per-step traces behind the report's figures.
 
 Every window of every file is integrated in one batched call: each window starts from the

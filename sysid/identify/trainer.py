@@ -27,6 +27,7 @@
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import os
 import random
@@ -54,6 +55,7 @@ from sysid.state import VELOCITY_INDEX
 from sysid.identify.uncertainty import coefficient_uncertainty
 
 VEL = list(VELOCITY_INDEX)
+_LOG = logging.getLogger(__name__)
 
 
 @dataclass
@@ -368,10 +370,13 @@ class Trainer:
         return epochs
 
     def _progress(self, bar, epoch: int, total: int, train_v: float, val_v: float, best_epoch: int) -> None:
+        line = f"  epoch {epoch}/{total}: training {train_v:.5f}, validation {val_v:.5f} (best at {best_epoch})"
         if hasattr(bar, "set_postfix"):
             bar.set_postfix(train=f"{train_v:.4f}", val=f"{val_v:.4f}", best=best_epoch)
         elif self.progress and (epoch % 10 == 0 or epoch == total):
-            self.log(f"  epoch {epoch}/{total}: training {train_v:.5f}, validation {val_v:.5f} (best at {best_epoch})")
+            self.log(line)
+        else:
+            _LOG.debug(line.strip())  # every epoch with ``sysid -v``
 
     def disjoint_windows(self, runs: Sequence[Run], dtype, device) -> WindowSet:
         """Windows of T+1 samples of the training part that share no sample (slid by T+1):
@@ -489,7 +494,10 @@ class Trainer:
         s_members = s.expand(net.members, *s.shape)
         opt = torch.optim.Adam(net.parameters(), lr=3e-3)
         gen = torch.Generator().manual_seed(self.experiment.experiment.seed + 2)
-        for _ in self._bar(range(t.warm_start_epochs), "warm start", t.warm_start_epochs, 0):
+        bar = self._bar(range(t.warm_start_epochs), "warm start", t.warm_start_epochs, 0)
+        if not hasattr(bar, "set_postfix"):
+            self.log(f"warm start: {t.warm_start_epochs} epochs of one-step regression on {len(s)} samples")
+        for epoch in bar:
             order = torch.randperm(len(s), generator=gen).to(device)
             for lo in range(0, len(s), 256):
                 idx = order[lo:lo + 256]
@@ -501,6 +509,10 @@ class Trainer:
             if not torch.isfinite(loss):
                 raise TrainingError(f"{self.experiment.source}: [training] the warm-start loss became "
                                     f"{loss.detach().item()}; no run written")
+            shown = self.progress and ((epoch + 1) % 25 == 0 or epoch + 1 == t.warm_start_epochs)
+            if not hasattr(bar, "set_postfix") and (shown or _LOG.isEnabledFor(logging.DEBUG)):
+                line = f"  warm start epoch {epoch + 1}/{t.warm_start_epochs}: loss {loss.item():.5f}"
+                self.log(line) if shown else _LOG.debug(line.strip())  # every epoch with ``sysid -v``
 
     def train(self, model: CorrectedModel, params, train: WindowSet, val: WindowSet, w_v, w_F) -> StageResult:
         """Stage 5: multi-step training of every FNN member (and joint MMG coefficients)."""

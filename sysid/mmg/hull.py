@@ -1,4 +1,4 @@
-"""Hull forces: Yoshimura's unified low-speed model (paper Eq. 26, MMG_SPEC §3).
+"""Hull forces: Yoshimura's unified low-speed model (paper Eq. 26; docs: MMG equations).
 
 Cross-flow drag integrals are evaluated in closed form (no quadrature), written so that
 no term cancels catastrophically when the yaw rate is small (float32 safe).

@@ -1,4 +1,4 @@
-"""Propeller forces in four quadrants (paper Eqs. 27-35, MMG_SPEC §4).
+"""Propeller forces in four quadrants (paper Eqs. 27-35; docs: MMG equations).
 
 Q1: n >= 0, u >= 0 (standard MMG thrust); Q2: n >= 0, u < 0 (thrust plus lateral
 polynomials in J_s); Q3/Q4: n < 0 (CMT reverse-rotation polynomials). n = 0 follows the

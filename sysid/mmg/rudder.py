@@ -1,4 +1,4 @@
-"""Rudder forces (paper Eqs. 36-48, MMG_SPEC §5).
+"""Rudder forces (paper Eqs. 36-48; docs: MMG equations).
 
 Longitudinal rudder inflow u_R has three branches: Yoshimura's low-speed form when
 n >= 0 and K_T > 0; Kitagawa's reverse-rotation form otherwise when u >= 0; and u_R = u

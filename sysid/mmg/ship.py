@@ -1,6 +1,6 @@
 """Ship definitions: a TOML file to a frozen, validated `Ship`.
 
-A ship TOML (``configs/ships/NAME.toml``) holds principal particulars, masses, one
+A ship TOML (a file, or a bundled ``sysid/configs/ships/NAME.toml`` by name) holds principal particulars, masses, one
 section per force component and the ``[sensors]`` table. Each of [hull], [propeller],
 [rudder] and the optional [wind] names its force-model family (``model = "standard"``;
 see `sysid.mmg.families`, the Esso Osaka's families when absent) and holds exactly the
@@ -20,6 +20,7 @@ from types import MappingProxyType
 from typing import Mapping
 
 from preprocessing.sensors import SensorLayout
+from sysid.bundled import bundled_dir
 from sysid.errors import ShipDefinitionError
 
 from sysid.mmg.families import COMPONENTS, DEFAULT_MODELS, FAMILIES, OPTIONAL_COMPONENTS
@@ -148,11 +149,8 @@ def _check_value(name: str, value: object, source: str,
 
 
 def ships_dir() -> Path:
-    """Directory of the bundled ship definitions (``$SYSID_CONFIGS/ships`` wins)."""
-    env = os.environ.get("SYSID_CONFIGS")
-    if env:
-        return Path(env) / "ships"
-    return Path(__file__).resolve().parents[2] / "configs" / "ships"
+    """Directory of the bundled ship definitions (package data; ``$SYSID_CONFIGS/ships`` wins)."""
+    return bundled_dir("ships")
 
 
 def resolve_ship_path(name_or_path: str | os.PathLike) -> Path:

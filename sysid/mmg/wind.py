@@ -1,4 +1,4 @@
-"""Wind forces: Fujiwara's regression (paper Eqs. 49-54, MMG_SPEC §6).
+"""Wind forces: Fujiwara's regression (paper Eqs. 49-54; docs: MMG equations).
 
 The input is the *true* wind (U_T, zeta: speed and the earth-frame direction it comes
 from, x0 towards y0); the relative wind is computed from the ship's current state, as the

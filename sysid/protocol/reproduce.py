@@ -15,6 +15,7 @@ import pandas as pd
 
 from sysid.data.recordings import read_run
 from sysid.data.datasets import TEST_FILES, data_root, test_files
+from sysid.bundled import bundled_dir
 from sysid.errors import ConfigError
 from sysid.config.experiment import Experiment, load_experiment
 from sysid.store.files import write_csv, write_text
@@ -22,7 +23,6 @@ from sysid.runs.lifecycle import run_experiment, training_runs
 from sysid.runs.reproduction import DatasetScore, Reproduction, Scorecard
 from sysid.protocol.paper import MODEL_LABELS, comparison_table, model_label
 
-CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 # run name -> experiment config; labels and data sets come from the configs
 PROTOCOL = {
     "mmg_paper": "mmg_paper.toml",
@@ -41,7 +41,7 @@ def protocol_experiment(name: str) -> Experiment:
     """The experiment of a protocol run."""
     if name not in PROTOCOL:
         raise ConfigError(f"unknown protocol run {name!r}: choose from {', '.join(PROTOCOL)}")
-    return load_experiment(CONFIGS / "experiments" / PROTOCOL[name])
+    return load_experiment(bundled_dir("experiments") / PROTOCOL[name])
 
 
 def markdown_table(table: pd.DataFrame, horizon: int) -> str:

@@ -5,6 +5,7 @@ sweep; the training data come from ``[data] files`` or the data set D1/D2.
 """
 from __future__ import annotations
 
+import glob
 import os
 import time
 from dataclasses import dataclass
@@ -15,7 +16,7 @@ import pandas as pd
 import torch
 
 from sysid.identify.checkpoint import TrainingCheckpoint
-from sysid.data.recordings import Run, read_run
+from sysid.data.recordings import Run, expand_paths, read_run
 from sysid.data.datasets import training_files
 from sysid.device import compute_threads
 from sysid.errors import TrainingError
@@ -46,7 +47,11 @@ class RunResult:
 
 def training_runs(exp: Experiment, data: str | os.PathLike | None = None) -> list[Run]:
     """The experiment's training files (``[data] files`` or its data set), read and checked."""
-    files = [Path(f) for f in exp.data.files] if exp.data.files else training_files(exp.experiment.dataset, data)
+    if not exp.data.files:
+        files = training_files(exp.experiment.dataset, data)
+    else:  # folders and patterns expanded; a plain file is read as named ("file not found" if missing)
+        files = [f for item in exp.data.files for f in (
+            expand_paths([item]) if glob.has_magic(item) or Path(item).is_dir() else [Path(item)])]
     return [read_run(f, exp.data.rate) for f in files]
 
 
