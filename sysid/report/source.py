@@ -15,7 +15,7 @@ import pandas as pd
 
 from preprocessing.quality import QualityReport
 from sysid.errors import CheckpointError
-from sysid.config.experiment import KINDS as MODEL_KINDS
+from sysid.config.choices import ModelKind
 from sysid.store.manifest import has_manifest, verify_manifest
 from sysid.runs.directory import RunDir, read_table
 from sysid.runs.records import read_json_object
@@ -126,7 +126,7 @@ class ReportSource:
 
 def _run_order(run: RunRecord) -> tuple:
     """MMG (paper X'vr first), NN, hybrid; data sets in order."""
-    return (MODEL_KINDS.index(run.model), run.name != "mmg_paper", run.dataset, run.name)
+    return (list(ModelKind).index(ModelKind(run.model)), run.name != "mmg_paper", run.dataset, run.name)
 
 
 def read_run_dir(path: Path) -> RunRecord:
@@ -139,8 +139,8 @@ def read_run_dir(path: Path) -> RunRecord:
     stems = metrics["file"].astype(str).map(lambda f: Path(f).stem)
     scenario = metrics["scenario"].where(metrics["scenario"].notna(), "").astype(str).str.strip()
     metrics["scenario"] = scenario.where(scenario != "", stems)
-    if summary.model.lower() not in MODEL_KINDS:
-        raise CheckpointError(f"{run.summary}: model {summary.model.lower()!r} is not one of {MODEL_KINDS}")
+    if summary.model.lower() not in ModelKind.offered():
+        raise CheckpointError(f"{run.summary}: model {summary.model.lower()!r} is not one of {ModelKind.listing()}")
     return RunRecord(run.path.name, run.path, summary, config_text, config, metrics, run.read_history())
 
 

@@ -35,10 +35,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sysid.config.choices import Search
 from sysid.errors import ConfigError
+from sysid.store.toml_file import read_toml
 from sysid.config.experiment import Experiment, load_experiment, parse_experiment
 
-SEARCHES = ("grid", "random", "optuna")
 OBJECTIVES = ("val_loss",)
 DISTRIBUTIONS = ("uniform", "loguniform", "randint", "choice")
 
@@ -70,7 +71,7 @@ class SweepSpec:
     base_path: Path
     axes: tuple[Axis, ...]
     seeds: tuple[int, ...] = (0,)
-    search: str = "grid"
+    search: Search = Search.GRID
     samples: int = 1
     objective: str = "val_loss"
     max_retries: int = 2
@@ -184,9 +185,10 @@ def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = Non
     if fixed:
         base = apply_values(base, {k: tuple(v) if isinstance(v, list) else v for k, v in fixed.items()},
                             base.experiment.seed, base.experiment.name, source, directory)
-    search = table.get("search", "grid")
-    if search not in SEARCHES:
-        raise ConfigError(f"{source}: [sweep] search = {search!r}: choose one of {', '.join(SEARCHES)}")
+    try:
+        search = Search.parse(table.get("search", "grid"), f"{source}: [sweep] search")
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
     objective = table.get("objective", "val_loss")
     if objective not in OBJECTIVES:
         raise ConfigError(f"{source}: [sweep] objective = {objective!r}: the objective is the validation "
@@ -209,7 +211,7 @@ def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = Non
         raise ConfigError(f"{source}: [vary] must be a table of \"section.option\" = values")
     axes = tuple(_axis(source, key, value, base) for key, value in vary.items())
     for axis in axes:
-        if search == "grid" and axis.distribution:
+        if search is Search.GRID and axis.distribution:
             raise ConfigError(f"{source}: [vary] {axis.key!r}: a {axis.distribution} distribution needs "
                               "search = \"random\" or \"optuna\" (grid search takes a list of values)")
         _check_axis_values(source, axis, base, directory)
@@ -220,13 +222,5 @@ def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = Non
 def load_sweep(path: str | os.PathLike) -> SweepSpec:
     """Read and validate a sweep file; errors name the file and key."""
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"{path}: sweep file not found")
-    try:
-        text = path.read_text()
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML ({exc})") from None
-    except UnicodeDecodeError:
-        raise ConfigError(f"{path}: not UTF-8 text; a sweep file is a UTF-8 TOML file") from None
+    doc, text = read_toml(path, "sweep file", ConfigError)
     return parse_sweep(doc, str(path), path.resolve().parent, text)
