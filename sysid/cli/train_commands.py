@@ -137,35 +137,32 @@ def reproduce(
                      f"(sysid report {output} -o {output} writes it)")
         paths = build_report(output, output)
         typer.echo(f"report: {paths.html} and {paths.pdf} ({paths.n_figures} figures, {paths.n_pages} pages)")
-    for key in ("scorecard", "scorecard_ensemble"):
-        card = dict(summary.get(key, {}))
-        baseline, model = card.pop("baseline", "MMG"), card.pop("model", "Hybrid")
-        if seeds > 1 and model == "Hybrid":
-            model = f"Hybrid (mean over {seeds} seeds)"
-        for ds, c in card.items():
-            worst = min(c["reduction_vs_mmg_30s_by_scenario"].values())
-            typer.echo(f"{ds}: {model} vs {baseline} at 30 s: {100 * c['reduction_vs_mmg_30s_mean']:.0f} % lower RMSE "
-                       f"on average (least {100 * worst:.0f} %); beats the paper's hybrid on "
-                       f"{c['cells_beating_paper_hybrid']}/{c['cells']} cells")
-    shares = summary.get("gate_off_share_random_30s", {})
+    for card in summary.scorecards:
+        model = f"Hybrid (mean over {seeds} seeds)" if seeds > 1 and card.model == "Hybrid" else card.model
+        for ds, c in card.datasets.items():
+            typer.echo(f"{ds}: {model} vs {card.baseline} at 30 s: {100 * c.reduction_vs_mmg_30s_mean:.0f} % lower RMSE "
+                       f"on average (least {100 * c.least_reduction_30s:.0f} %); beats the paper's hybrid on "
+                       f"{c.cells_beating_paper_hybrid}/{c.cells} cells")
+    shares = summary.gate_off_share_random_30s or {}
     if shares:
         typer.echo("kNN gate off on the Random test (30 s): " +
                    ", ".join(f"{k} {100 * v:.0f} %" for k, v in shares.items() if v is not None))
-    for name, why in summary.get("failed", {}).items():
+    for name, why in (summary.failed or {}).items():
         typer.secho(f"reproduce: run {name} FAILED: {why}", fg=typer.colors.RED, err=True)
-    typer.echo(f"reproduce: {output} in {summary['seconds'] / 60:.1f} min")
+    typer.echo(f"reproduce: {output} in {summary.seconds / 60:.1f} min")
     _warn_below_baseline(output)
+    if summary.failed:
+        raise SystemExit(1)
 
 
 def _warn_below_baseline(output: Path) -> None:
     """A WARNING on stderr for every run of a reproduction that does not beat its physics
-    baseline (summary.json "beats_baseline" false)."""
-    import json
+    baseline (`RunSummary.beats_baseline` false), with its verdict's statement."""
+    from sysid.runs.directory import RunDir
 
-    for path in sorted((output / "runs").glob("**/summary.json")):
-        summary = json.loads(path.read_text())
-        if summary.get("beats_baseline") is False:
-            name = path.parent.relative_to(output / "runs")
-            typer.secho(f"WARNING: run {name}: {summary['verdict']['statement']}", fg=typer.colors.YELLOW, err=True)
-    if summary.get("failed"):
-        raise SystemExit(1)
+    runs = output / "runs"
+    for path in sorted(runs.glob("**/summary.json")):
+        summary = RunDir(path.parent).read_summary()
+        if summary.beats_baseline is False and summary.verdict is not None:
+            typer.secho(f"WARNING: run {path.parent.relative_to(runs)}: {summary.verdict.statement}",
+                        fg=typer.colors.YELLOW, err=True)
