@@ -21,7 +21,7 @@ import pandas as pd
 from scipy.integrate import cumulative_trapezoid
 
 from preprocessing.quality import QualityReport
-from preprocessing import body_velocity, geodesy, gnss, gyro, resample, schema, smoothing, wind
+from preprocessing import anemometer, body_velocity, geodesy, gnss, gyro, resample, schema, smoothing
 from preprocessing.frames import wrap_pi
 from preprocessing.schema import RawLogError
 from preprocessing.sensors import SensorLayout
@@ -349,7 +349,7 @@ class Pipeline:
         # step 8: r = low-passed FOG minus the estimated bias
         r = gyro.lowpass(fog - bias, 1.0 / dt, s.cutoff, s.lowpass_order)
         # step 9: wind
-        ut, gt, ua, ga = wind.combine(
+        ut, gt, ua, ga = anemometer.combine(
             [(g["anemo_1_speed"], g["anemo_1_dir"]), (g["anemo_2_speed"], g["anemo_2_dir"])],
             u, v, r, psi, [lay.anemometer_1, lay.anemometer_2])
         # step 10: take samples
@@ -374,7 +374,7 @@ def process_file(path: str, layout: SensorLayout, settings: PreprocessSettings, 
     try:
         result = Pipeline(layout, settings).run(path)
         stem = os.path.splitext(os.path.basename(path))[0]
-        outputs = writer.write_run(outdir, stem, result.segments, result.report)
+        outputs = writer.write_segments(outdir, stem, result.segments, result.report)
         return {"file": str(path), "ok": True, "outputs": [str(p) for p in outputs],
                 "report": result.report}
     except RawLogError as exc:

@@ -20,7 +20,6 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
-import pandas as pd
 
 from sysid.errors import ConfigError
 
@@ -51,17 +50,18 @@ def config_params(config_toml: str) -> dict[str, str]:
 
 def run_metrics(run_dir: Path) -> dict[str, float]:
     """The final metrics of a run directory: its summary's numbers (the objective as
-    ``final_val_loss``; ``val_loss`` is the per-epoch history) and the test RMSE of every
+    ``final_val_loss``, `RunSummary.objective`; ``val_loss`` is the per-epoch history) and the test RMSE of every
     scenario and horizon (``rmse_u/Berthing/30s``)."""
-    import json
+    from sysid.runs.directory import RunDir
 
-    summary = json.loads((run_dir / "summary.json").read_text())
-    metrics = {}
-    for key in ("val_loss", "epochs", "best_epoch", "train_seconds", "seconds", "mmg_val_loss", "warm_val_loss"):
-        value = summary.get(key, (summary.get("training") or {}).get(key))
-        if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
-            metrics["final_val_loss" if key == "val_loss" else key] = float(value)
-    table = pd.read_csv(run_dir / "metrics.csv")
+    run = RunDir(run_dir)
+    summary = run.read_summary()
+    numbers = {"final_val_loss": summary.objective, "epochs": summary.epochs, "best_epoch": summary.best_epoch,
+               "train_seconds": summary.train_seconds, "seconds": summary.seconds,
+               "mmg_val_loss": summary.training.mmg_val_loss, "warm_val_loss": summary.training.warm_val_loss}
+    metrics = {key: float(value) for key, value in numbers.items()
+               if isinstance(value, (int, float)) and math.isfinite(value)}
+    table = run.read_metrics()
     for row in table.itertuples():
         for c in ("u", "v", "r"):
             value = getattr(row, f"rmse_{c}")

@@ -27,14 +27,14 @@ def export(
     kNN gate), loadable with torch alone; prints its latency."""
     import torch
 
+    from sysid.config.choices import Method
     from sysid.fast.export import export_model, load_step, step_latency
-    from sysid.dynamics.integrators import Method
     from sysid.runs.rundir import load_model
 
     try:
-        method = Method.parse(integrator)
+        method = Method.parse(integrator, "--integrator")  # every rule, the 3/8 one too
     except ValueError as exc:
-        raise DataError(f"--integrator: {exc}") from None
+        raise DataError(str(exc)) from None
     if dt <= 0 or batch < 1:
         raise DataError(f"--dt must be > 0 and --batch >= 1 (got {dt}, {batch})")
     dtype = torch.float32 if float32 else torch.float64

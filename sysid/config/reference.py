@@ -16,6 +16,7 @@ import typing
 from dataclasses import dataclass, fields
 
 from sysid.config import experiment as config
+from sysid.config.choices import Choice
 
 # section -> one sentence
 SECTIONS: dict[str, str] = {
@@ -142,17 +143,10 @@ KEYS: dict[tuple[str, str], KeyDoc] = {
                                         "averaged; empty: not an ensemble."),
 }
 
-# options whose values the parser checks against a fixed set of strings; an option typed as an
-# enum takes its members instead (the tuples are read where the config still has them)
+# options whose values the parser checks against a fixed set of strings without an enum; an
+# option typed as a `sysid.config.choices.Choice` takes the members a config may name
 _CHOICES: dict[tuple[str, str], tuple[str, ...]] = {
-    ("experiment", "model"): tuple(getattr(config, "KINDS", ())),
     ("experiment", "dataset"): ("D1", "D2"),
-    ("gate", "space"): tuple(getattr(config, "GATE_SPACES", ())),
-    ("identify", "solver"): tuple(getattr(config, "SOLVERS", ())),
-    ("identify", "stage"): ("before", "joint"),
-    ("identify", "start_states"): tuple(getattr(config, "START_STATES", ())),
-    ("evaluation", "integrator"): tuple(getattr(config, "INTEGRATORS", ())),
-    ("training", "dtype"): ("float32", "float64"),
 }
 
 
@@ -225,7 +219,7 @@ def config_keys() -> list[KeyReference]:
         for f in fields(options):
             hint = _optional_of(hints[f.name])
             doc = KEYS.get((section, f.name), KeyDoc("", ""))
-            choices = tuple(m.value for m in hint) if isinstance(hint, type) and issubclass(hint, enum.Enum) \
+            choices = tuple(m.value for m in hint.offered()) if isinstance(hint, type) and issubclass(hint, Choice) \
                 else _CHOICES.get((section, f.name), ())
             out.append(KeyReference(section, f.name, _type_name(hint), _default(f), doc.unit, doc.meaning, choices))
     return out

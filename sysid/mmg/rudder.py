@@ -14,23 +14,6 @@ import torch
 from sysid.mmg.guards import safe_atan2, safe_sqrt
 from sysid.mmg.propeller import PropellerState
 
-# name -> (section, low, high): the keys of the four-quadrant (low-speed) rudder family
-PARAMETERS: dict[str, tuple[str, float, float]] = {
-    "A_R": ("rudder", 1e-6, 1e3),       # m^2
-    "lambda_R": ("rudder", 0.1, 10.0),  # -, aspect ratio
-    "epsilon": ("rudder", 0.1, 5.0),
-    "k_x": ("rudder", 0.0, 5.0),
-    "k_xPR": ("rudder", 0.0, 5.0),
-    "C_PR": ("rudder", -5.0, 5.0),
-    "x_R": ("rudder", -1e3, 0.0),       # m
-    "l_R": ("rudder", -1e3, 1e3),       # m
-    "gamma_P": ("rudder", 0.0, 5.0),
-    "gamma_N": ("rudder", 0.0, 5.0),
-    "t_R": ("rudder", 0.0, 0.99),
-    "a_H": ("rudder", -1.0, 5.0),
-    "x_H": ("rudder", -1e3, 1e3),       # m
-}
-
 
 class RudderInflow(NamedTuple):
     u_R: torch.Tensor      # m/s, longitudinal inflow

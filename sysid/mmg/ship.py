@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -22,6 +21,7 @@ from typing import Mapping
 from preprocessing.sensors import SensorLayout
 from sysid.bundled import bundled_dir
 from sysid.errors import ShipDefinitionError
+from sysid.store.toml_file import read_toml
 
 from sysid.mmg.families import COMPONENTS, DEFAULT_MODELS, FAMILIES, OPTIONAL_COMPONENTS
 
@@ -179,11 +179,7 @@ def load_ship(name_or_path: str | os.PathLike = "esso_osaka",
     overrides : parameter values replacing the file's, e.g. ``{"Xvr": 0.4535}``.
     """
     path = resolve_ship_path(name_or_path)
-    try:
-        with open(path, "rb") as fh:
-            doc = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
-        raise ShipDefinitionError(f"{path}: not valid TOML ({exc})") from None
+    doc, _ = read_toml(path, "ship file", ShipDefinitionError)
     src = str(path)
     for section in doc:
         if section not in SECTIONS + ("ship", "sensors"):

@@ -2,7 +2,6 @@
 hybrid on D1 and D2, evaluated on the six test files, tables beside the paper's 7 and 8."""
 from __future__ import annotations
 
-import json
 import multiprocessing
 import os
 import time
@@ -14,13 +13,14 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from sysid.data.recordings import read_run
-from sysid.data.datasets import TEST_FILES, data_root, test_files
+from sysid.data.datasets import TEST_FILES, data_root
 from sysid.bundled import bundled_dir
 from sysid.errors import ConfigError
+from sysid.config.choices import ModelKind
 from sysid.config.experiment import Experiment, load_experiment
 from sysid.store.files import write_csv, write_text
-from sysid.runs.lifecycle import run_experiment, training_runs
+from sysid.runs.lifecycle import cached_test_runs, cached_training_runs, run_experiment
+from sysid.runs.reproduction import DatasetScore, Reproduction, Scorecard
 from sysid.protocol.paper import MODEL_LABELS, comparison_table, model_label
 
 # run name -> experiment config; labels and data sets come from the configs
@@ -72,10 +72,10 @@ def markdown_table(table: pd.DataFrame, horizon: int) -> str:
     return head + "\n".join(lines) + "\n"
 
 
-def scorecard(table: pd.DataFrame, baseline: str = "MMG", model: str = "Hybrid") -> dict:
+def scorecard(table: pd.DataFrame, baseline: str = "MMG", model: str = "Hybrid") -> Scorecard:
     """`model` (the hybrid; with seeds, its seed mean) against MMG-only with the same X'vr
     (`baseline` label) and against the paper's hybrid, cell by cell."""
-    out: dict = {"baseline": baseline, "model": model}
+    scores = {}
     for ds in ("D1", "D2"):
         hyb = table[(table.model == model) & (table.dataset == ds)].set_index(["scenario", "horizon_s"])
         mmg = table[(table.model == baseline) & (table.dataset == ds)].set_index(["scenario", "horizon_s"])
@@ -85,13 +85,12 @@ def scorecard(table: pd.DataFrame, baseline: str = "MMG", model: str = "Hybrid")
         paper_cols = ["paper_u", "paper_v", "paper_r"]
         ref = table[(table.model == "Hybrid") & (table.dataset == ds)].set_index(["scenario", "horizon_s"])
         beats = (hyb[cols].to_numpy() < ref.loc[hyb.index, paper_cols].to_numpy())
-        out[ds] = {
-            "reduction_vs_mmg_30s_by_scenario": {s: float(1 - at30.loc[s].mean()) for s in at30.index},
-            "reduction_vs_mmg_30s_mean": float(1 - at30.to_numpy().mean()),
-            "reduction_vs_mmg_100s_mean": float(1 - ratio.xs(100, level="horizon_s").to_numpy().mean()),
-            "cells_beating_paper_hybrid": int(beats.sum()), "cells": int(beats.size),
-        }
-    return out
+        scores[ds] = DatasetScore(
+            reduction_vs_mmg_30s_by_scenario={s: float(1 - at30.loc[s].mean()) for s in at30.index},
+            reduction_vs_mmg_30s_mean=float(1 - at30.to_numpy().mean()),
+            reduction_vs_mmg_100s_mean=float(1 - ratio.xs(100, level="horizon_s").to_numpy().mean()),
+            cells_beating_paper_hybrid=int(beats.sum()), cells=int(beats.size))
+    return Scorecard(baseline, model, **scores)
 
 
 def hybrid_baseline() -> str:
@@ -116,21 +115,10 @@ class ProtocolRun:
     seconds: float
 
 
-_TRAINING_CACHE: dict = {}
-
-
 def _run_one(name: str, exp: Experiment, out: Path, data, progress: bool, log) -> ProtocolRun:
     """One protocol run through `run_experiment` (in this process or a worker's)."""
-    tests = _TRAINING_CACHE.get("tests")
-    if tests is None:
-        tests = _TRAINING_CACHE["tests"] = [read_run(p) for p in test_files(data).values()]
-    train = None
-    if exp.needs_training:
-        key = (exp.experiment.dataset, exp.data.files, exp.data.rate)
-        if key not in _TRAINING_CACHE:
-            _TRAINING_CACHE[key] = training_runs(exp, data)
-        train = _TRAINING_CACHE[key]
-    result = run_experiment(exp, out / "runs" / name, tests, train, data, progress, log=log)
+    train = cached_training_runs(exp, data) if exp.needs_training else None
+    result = run_experiment(exp, out / "runs" / name, cached_test_runs(data), train, data, progress, log=log)
     return ProtocolRun(name, exp.experiment.model, exp.experiment.dataset if exp.needs_training else "-",
                        result.evaluation.metrics, result.evaluation.gate_off_share, result.failure, result.seconds)
 
@@ -138,8 +126,8 @@ def _run_one(name: str, exp: Experiment, out: Path, data, progress: bool, log) -
 def expected_cost(exp: Experiment) -> float:
     """Relative training cost of a run, to start the longest first (results do not depend
     on the order; the wall time does): hybrid > NN-only > identification, D2 about twice D1."""
-    cost = {"hybrid": 5.0, "nn": 3.5, "mmg": 0.0}[exp.experiment.model] + 1.5 * bool(exp.identify.parameters)
-    return cost * (2.0 if exp.data.files or exp.experiment.dataset == "D2" else 1.0)
+    cost = {ModelKind.HYBRID: 5.0, ModelKind.NN: 3.5, ModelKind.MMG: 0.0}[exp.experiment.model] + 1.5 * bool(exp.identify.parameters)
+    return cost * (2.0 if exp.data.train or exp.experiment.dataset == "D2" else 1.0)
 
 
 def _worker(name: str, exp: Experiment, out: Path, data) -> ProtocolRun:
@@ -158,14 +146,13 @@ def _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, d
         + (f"{jobs} side by side" if jobs else "one per CPU of the cluster") + (f" on {address}" if address else ""))
     groups = train_seeds({n: experiments[n] for n in ordered}, seeds, out, str(data_root(data)), jobs, address, log,
                          storage, mlflow)
-    tests = _TRAINING_CACHE.get("tests") or [read_run(p) for p in test_files(data).values()]
-    _TRAINING_CACHE["tests"] = tests
+    tests = cached_test_runs(data)
     ensembles = []
     for name in trained:
         exp, group = experiments[name], groups[name]
         done[name] = ProtocolRun(name, exp.experiment.model, exp.experiment.dataset, group.metrics,
                                  group.gate_off_share, group.failure, group.seconds)
-        if exp.experiment.model != "mmg" and group.seeds:
+        if exp.experiment.model is not ModelKind.MMG and group.seeds:
             target, evaluation, _ = write_ensemble(name, exp, group, out, tests)
             done[target] = ProtocolRun(target, exp.experiment.model, exp.experiment.dataset, evaluation.metrics,
                                        evaluation.gate_off_share, None, 0.0)
@@ -178,7 +165,7 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
               only: list[str] | None = None, progress: bool = True,
               overrides: dict | None = None, log: Callable[[str], None] = print,
               jobs: int = 1, seeds: int = 1, address: str | None = None, storage: str | None = None,
-              mlflow: str | None = None) -> dict:
+              mlflow: str | None = None) -> Reproduction:
     """Run the protocol; write runs/, comparison.csv, table7.md, table8.md, summary.json.
 
     `jobs` > 1 trains that many runs side by side in worker processes (each with its
@@ -195,7 +182,7 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
     experiments = {}
     for name in names:
         exp = protocol_experiment(name)
-        experiments[name] = exp.replace(**overrides) if overrides and exp.experiment.model != "mmg" else exp
+        experiments[name] = exp.replace(**overrides) if overrides and exp.experiment.model is not ModelKind.MMG else exp
     done: dict[str, ProtocolRun] = {}
     trained = [n for n in names if experiments[n].needs_training]
     ensembles: list[str] = []
@@ -231,21 +218,22 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
     write_csv(table, out / "comparison.csv", float_format="%.5f")
     for horizon, fname in ((30, "table7.md"), (100, "table8.md")):
         write_text(markdown_table(table, horizon), out / fname)
-    summary = {"seconds": time.perf_counter() - started, "runs": names, "failed": failed,
-               "protocol": list(PROTOCOL), "seeds": seeds}
+    card = card_ensemble = identified_cells = None
     if {"hybrid_D1", "hybrid_D2", "mmg_paper", "mmg_lab"} <= set(names):
-        summary["scorecard"] = scorecard(table, hybrid_baseline())
+        card = scorecard(table, hybrid_baseline())
         if {"hybrid_ensemble_D1", "hybrid_ensemble_D2"} <= set(names):
-            summary["scorecard_ensemble"] = scorecard(table, hybrid_baseline(), MODEL_LABELS["hybrid_ensemble"])
+            card_ensemble = scorecard(table, hybrid_baseline(), MODEL_LABELS["hybrid_ensemble"])
     if "hybrid_identified_D2" in names:
         hyb = table[(table.model == MODEL_LABELS["hybrid_identified"])]
         ref = table[(table.model == "Hybrid") & (table.dataset == "D2")].set_index(["scenario", "horizon_s"])
         ours = hyb.set_index(["scenario", "horizon_s"])[["rmse_u", "rmse_v", "rmse_r"]]
         paper = ref.loc[ours.index, ["paper_u", "paper_v", "paper_r"]].to_numpy()
-        summary["identified_hybrid_D2_cells_beating_paper_hybrid"] = [int((ours.to_numpy() < paper).sum()),
-                                                                      int(paper.size)]
+        identified_cells = (int((ours.to_numpy() < paper).sum()), int(paper.size))
     random_file = Path(TEST_FILES["Random"]).stem
-    summary["gate_off_share_random_30s"] = {
-        n: shares[n].get(f"{random_file}_h30.csv") for n in names if n.startswith("hybrid")}
-    write_text(json.dumps(summary, indent=2), out / "summary.json")
+    summary = Reproduction(
+        seconds=time.perf_counter() - started, runs=tuple(names), failed=failed, protocol=tuple(PROTOCOL),
+        seeds=seeds, scorecard=card, scorecard_ensemble=card_ensemble,
+        identified_hybrid_D2_cells_beating_paper_hybrid=identified_cells,
+        gate_off_share_random_30s={n: shares[n].get(f"{random_file}_h30.csv") for n in names if n.startswith("hybrid")})
+    write_text(summary.to_text(), out / "summary.json")
     return summary

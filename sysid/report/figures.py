@@ -104,20 +104,31 @@ def _signed_deg(angle_rad: np.ndarray) -> np.ndarray:
     return (np.asarray(angle_rad) * RAD2DEG + 180.0) % 360.0 - 180.0
 
 
+def _measured_relative_wind(frame: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+    """(U_A [m/s], gamma_A [rad]) seen by the recorded state: the trace's observed u, v_m,
+    psi and the true wind, through the MMG's relative wind (`sysid.mmg.wind`)."""
+    import torch
+
+    from sysid.mmg.wind import relative_wind
+
+    cols = ["obs_u", "obs_v", "obs_psi", "wind_velo_true", "wind_dir_true"]
+    wind = relative_wind(*torch.as_tensor(frame[cols].to_numpy(dtype=float)).unbind(-1))
+    return wind.U_A.numpy(), wind.gamma_A.numpy()
+
+
 def actuator_wind(traces: list[ModelTrace], start_s: float, title: str,
                   into: FigureBase | None = None) -> FigureBase:
     """Propeller speed [rps], rudder angle [deg] and the relative wind speed [m/s] and
     direction [deg] (Figs. 6, 8) in the window starting nearest `start_s`. The relative
     wind of each model is the one seen by its predicted state; "measured" uses the
     recorded state."""
-    from sysid.report.wind import measured_relative_wind
     fig = _canvas(into, TALL)
     axes = fig.subplots(4, 1, sharex=True)
     first = _window(traces[0].frame, start_s)
     t = first["t"].to_numpy()
     axes[0].plot(t, first["n_prop"], color=MEASURED, drawstyle="steps-post")
     axes[1].plot(t, first["delta_rudder"] * RAD2DEG, color=MEASURED, drawstyle="steps-post")
-    U_A, gamma_A = measured_relative_wind(first)
+    U_A, gamma_A = _measured_relative_wind(first)
     axes[2].plot(t, U_A, color=MEASURED, lw=1.6)
     axes[3].plot(t, _signed_deg(gamma_A), color=MEASURED, lw=1.6, ls="", marker=".", ms=3)
     for tr in traces:
@@ -335,8 +346,8 @@ def fnn_error_scatter(groups: list[tuple[str, str, pd.DataFrame]], title: str,
 
 def loss_curves(histories: list[tuple[str, str, pd.DataFrame, int | None]], title: str,
                 into: FigureBase | None = None) -> FigureBase:
-    """Training (solid) and validation (dashed) loss [-] per epoch, log scale; the best
-    epoch is marked. `histories` are (label, colour, history frame, best epoch)."""
+    """Training loss (solid) and early-stopping loss (dashed: L_v on the validation windows
+    during training, before the kNN gate) [-] per epoch, log scale; the best epoch is marked. `histories` are (label, colour, history frame, best epoch)."""
     fig = _canvas(into, (10.0, 4.6))
     ax = fig.subplots()
     positive, marked = True, set()
@@ -356,11 +367,11 @@ def loss_curves(histories: list[tuple[str, str, pd.DataFrame, int | None]], titl
                             xytext=(2, 0), textcoords="offset points", fontsize=7, color=colour,
                             ha="left", va="bottom", rotation=90)
         ax.plot(x, hist["train_loss"], color=colour, lw=1.3)
-        ax.plot(x, hist["val_loss"], color=colour, lw=1.3, ls="--")
-        positive &= bool((hist[["train_loss", "val_loss"]].to_numpy() > 0).all())
+        ax.plot(x, hist["early_stopping_loss"], color=colour, lw=1.3, ls="--")
+        positive &= bool((hist[["train_loss", "early_stopping_loss"]].to_numpy() > 0).all())
         hit = last & (hist["epoch"].to_numpy() == best)
         if best is not None and hit.any():
-            ax.plot(x[hit][0], hist["val_loss"].to_numpy()[hit][0], "*", color=colour, ms=9)
+            ax.plot(x[hit][0], hist["early_stopping_loss"].to_numpy()[hit][0], "*", color=colour, ms=9)
     if positive:
         ax.set_yscale("log")
     staged = any("stage" in h.columns and h["stage"].nunique() > 1 for _, _, h, _ in histories)
@@ -368,7 +379,7 @@ def loss_curves(histories: list[tuple[str, str, pd.DataFrame, int | None]], titl
     ax.set_ylabel("loss [-]")
     handles = [Line2D([], [], color=c, label=l) for l, c, _, _ in histories]
     handles += [Line2D([], [], color="grey", label="training"),
-                Line2D([], [], color="grey", ls="--", label="validation"),
+                Line2D([], [], color="grey", ls="--", label="early stopping (validation)"),
                 Line2D([], [], color="grey", marker="*", ls="", label="best epoch")]
     ax.legend(handles=handles, fontsize=8, ncol=2, loc="upper right")
     fig.suptitle(title, fontsize=10)

@@ -26,14 +26,16 @@ import shutil
 import tarfile
 import tempfile
 import time
+import tomllib
 from pathlib import Path, PurePosixPath
 
-import pandas as pd
 
 from sysid.errors import IncompleteOutputError
 from sysid.store.files import atomic_path, directory_mode
+from sysid.errors import CheckpointError
+from sysid.runs.directory import RunDir
 from sysid.runs.lifecycle import checkpoint_path
-from sysid.runs.rundir import verify_run_dir
+from sysid.runs.summary import RunSummary
 
 JOURNAL = "trials.log"
 
@@ -68,14 +70,12 @@ def unpack_run(blob: bytes, directory: Path) -> None:
                 shutil.copyfileobj(source, fh)
 
 
-def complete_summary(run_dir: Path) -> dict | None:
+def complete_summary(run_dir: Path) -> RunSummary | None:
     """summary.json of a complete run directory (manifest verified), else None."""
-    if not (run_dir / "manifest.json").is_file():
-        return None
+    run = RunDir.complete(run_dir)
     try:
-        verify_run_dir(run_dir)
-        return json.loads((run_dir / "summary.json").read_text())
-    except (IncompleteOutputError, OSError, json.JSONDecodeError):
+        return run.read_summary() if run is not None else None
+    except (CheckpointError, OSError):
         return None
 
 
@@ -101,6 +101,18 @@ def read_journal(out: str | os.PathLike) -> list[dict]:
             except json.JSONDecodeError:
                 continue
     return events
+
+
+USED_FILES = ("train", "validation", "test")  # [data] keys a run's config.toml lists as the files used
+
+
+def same_trial(written: dict, trial: dict) -> bool:
+    """Whether a run's config.toml (`written`) is its trial's resolved config (`trial`),
+    both as TOML tables: every option alike except the ``[data]`` file lists, which the run
+    writes as the files it used (globs expanded, the test logs named)."""
+    def options(doc: dict) -> dict:
+        return {**doc, "data": {k: v for k, v in doc.get("data", {}).items() if k not in USED_FILES}}
+    return options(written) == options(trial)
 
 
 class RunInbox:
@@ -134,13 +146,13 @@ class RunInbox:
         self.claims = {p: h for p, h in self.claims.items() if h != holder}
 
     # -- what a finished or interrupted trial left ---------------------------------------
-    def summary(self, path: str) -> dict | None:
+    def summary(self, path: str) -> RunSummary | None:
         return complete_summary(self._run_dir(path))
 
     def history(self, path: str) -> list[dict]:
         """The epochs of a complete run (history.csv rows; none for an untrained run)."""
-        file = self._run_dir(path) / "history.csv"
-        return pd.read_csv(file).to_dict("records") if file.is_file() else []
+        history = RunDir(self._run_dir(path)).read_history()
+        return history.to_dict("records") if history is not None else []
 
     def checkpoint(self, path: str) -> bytes | None:
         """The training checkpoint of an interrupted trial, as bytes (None: none)."""
@@ -156,7 +168,7 @@ class RunInbox:
         return True
 
     # -- the finished run ----------------------------------------------------------------
-    def deliver(self, path: str, holder: str, blob: bytes, config: str, node: str = "") -> dict:
+    def deliver(self, path: str, holder: str, blob: bytes, config: str, node: str = "") -> RunSummary:
         """Unpack a finished run next to its place, verify it, move it into place; its
         summary. A run already complete there is kept (the first delivery wins)."""
         target = self._run_dir(path)
@@ -165,16 +177,16 @@ class RunInbox:
         try:
             os.chmod(arriving, directory_mode())
             unpack_run(blob, arriving)
-            verify_run_dir(arriving)
-            if (arriving / "config.toml").read_text() != config:
+            run = RunDir.open(arriving)
+            if not same_trial(run.read_config(), tomllib.loads(config)):
                 raise IncompleteOutputError(f"{target}: the delivered run was trained with another config "
                                             "than its trial's; not kept")
-            summary = json.loads((arriving / "summary.json").read_text())
+            summary = run.read_summary()
             if complete_summary(target) is None:
                 if target.exists():  # an incomplete leftover (not sysid's move): set aside, never mixed in
                     os.rename(target, target.with_name(f".{target.name}.incomplete-{os.getpid()}-{time.time_ns()}"))
                 os.rename(arriving, target)
-                journal_line(self.out, "trained", path, node=node, val_loss=summary.get("val_loss"))
+                journal_line(self.out, "trained", path, node=node, val_loss_multistep=summary.val_loss_multistep)
             else:
                 summary = complete_summary(target)
         finally:

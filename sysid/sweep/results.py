@@ -7,20 +7,20 @@ sweep's scheduler), "failed" (its error from Ray) or "missing" (never trained, i
 """
 from __future__ import annotations
 
-import json
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
 
+from sysid.runs.directory import RunDir
 from sysid.store.files import write_csv, write_text
 from sysid.sweep.inbox import complete_summary
 from sysid.sweep.plan import TRIALS_DIR
 from sysid.sweep.points import format_value
 from sysid.sweep.runner import Outcomes
 from sysid.sweep.spec import SweepSpec
+from sysid.sweep.summary import ChosenPoint, SweepSummary
 from sysid.sweep.trial import TrialSpec, result_row
 
 STOPPED = "stopped early"
@@ -32,7 +32,7 @@ class SweepResults:
 
     trials: pd.DataFrame
     points: pd.DataFrame
-    best: dict | None
+    best: ChosenPoint | None
 
     @property
     def counts(self) -> dict[str, int]:
@@ -53,10 +53,9 @@ def scanned_trials(spec: SweepSpec, out: Path) -> list[TrialSpec]:
     points while it runs)."""
     found = []
     for run_dir in sorted((out / TRIALS_DIR).glob("*/seed*")):
-        config_path = run_dir / "config.toml"
-        if not config_path.is_file() or complete_summary(run_dir) is None:
+        if not RunDir(run_dir).config.is_file() or complete_summary(run_dir) is None:
             continue
-        config = tomllib.loads(config_path.read_text())
+        config = RunDir(run_dir).read_config()
         values = {key: _value(config, key) for key in spec.keys}
         found.append(TrialSpec(str(run_dir.relative_to(out)), run_dir.parent.name,
                                int(config["experiment"]["seed"]), "", values))
@@ -83,22 +82,21 @@ def collect_results(spec: SweepSpec, out: Path, trials: list[TrialSpec], outcome
     done = table[table.status == "complete"]
     points = []
     for point, group in table.groupby("point", sort=False):
-        ok = done[done.point == point]["val_loss"]
+        ok = done[done.point == point]["val_loss_multistep"]
         points.append({"point": point, **{k: group[k].iloc[0] for k in spec.keys},
                        "seeds": int(len(group)), "complete": int(len(ok)),
-                       "val_loss_mean": float(ok.mean()) if len(ok) else math.nan,
-                       "val_loss_std": float(ok.std(ddof=1)) if len(ok) > 1 else math.nan,
-                       "val_loss_min": float(ok.min()) if len(ok) else math.nan,
-                       "val_loss_max": float(ok.max()) if len(ok) else math.nan})
-    points_frame = pd.DataFrame(points).sort_values("val_loss_mean", kind="stable", na_position="last")
-    whole = points_frame[(points_frame.complete == points_frame.seeds) & points_frame.val_loss_mean.notna()]
+                       "val_loss_multistep_mean": float(ok.mean()) if len(ok) else math.nan,
+                       "val_loss_multistep_std": float(ok.std(ddof=1)) if len(ok) > 1 else math.nan,
+                       "val_loss_multistep_min": float(ok.min()) if len(ok) else math.nan,
+                       "val_loss_multistep_max": float(ok.max()) if len(ok) else math.nan})
+    points_frame = pd.DataFrame(points).sort_values("val_loss_multistep_mean", kind="stable", na_position="last")
+    whole = points_frame[(points_frame.complete == points_frame.seeds) & points_frame.val_loss_multistep_mean.notna()]
     best = None
     if len(whole):
         top = whole.iloc[0]
-        best = {"point": top.point, "values": {k: _plain(top[k]) for k in spec.keys},
-                "val_loss_mean": float(top.val_loss_mean),
-                "val_loss_std": None if math.isnan(top.val_loss_std) else float(top.val_loss_std),
-                "runs": list(done[done.point == top.point]["run"])}
+        best = ChosenPoint(top.point, {k: _plain(top[k]) for k in spec.keys}, float(top.val_loss_multistep_mean),
+                           None if math.isnan(top.val_loss_multistep_std) else float(top.val_loss_multistep_std),
+                           tuple(done[done.point == top.point]["run"]))
     return SweepResults(table, points_frame.reset_index(drop=True), best)
 
 
@@ -106,13 +104,14 @@ def _plain(value):
     return value.item() if hasattr(value, "item") else value
 
 
-def write_results(spec: SweepSpec, out: Path, results: SweepResults, seconds: float, extra: dict | None = None) -> dict:
-    """results.csv, points.csv and summary.json (each written atomically); `extra` joins
-    the summary (where Tune's experiment and the MLflow store are)."""
+def write_results(spec: SweepSpec, out: Path, results: SweepResults, seconds: float,
+                  tune: str | None = None, mlflow: str | None = None) -> SweepSummary:
+    """results.csv, points.csv and summary.json (each written atomically), with where
+    Tune's experiment (`tune`) and the MLflow store (`mlflow`) are."""
     write_csv(results.trials, out / "results.csv", float_format="%.6g")
     write_csv(results.points, out / "points.csv", float_format="%.6g")
-    summary = {"name": spec.name, "base": str(spec.base_path), "search": spec.search,
-               "seeds": list(spec.seeds), "objective": spec.objective, "keys": spec.keys,
-               **results.counts, "best": results.best, "seconds": seconds, **(extra or {})}
-    write_text(json.dumps(summary, indent=2, default=str), out / "summary.json")
+    summary = SweepSummary(spec.name, str(spec.base_path), spec.search, tuple(spec.seeds), spec.objective,
+                           tuple(spec.keys), **results.counts, best=results.best, seconds=seconds,
+                           scheduler=str(spec.scheduler.kind), tune=tune, mlflow=mlflow)
+    write_text(summary.to_text(), out / "summary.json")
     return summary

@@ -22,7 +22,7 @@ from sysid.errors import ConfigError
 from sysid.sweep.connect import import_ray, start_ray
 from sysid.sweep.inbox import inbox_actor
 from sysid.sweep.spec import SchedulerSpec
-from sysid.sweep.trial import TrialData, TrialSpec, tune_trainable
+from sysid.sweep.trial import OBJECTIVE, TrialData, TrialSpec, tune_trainable
 
 TUNE_DIR = "tune"   # Tune's experiment, inside the output directory unless --storage is given
 
@@ -63,7 +63,7 @@ def progress_callback(total: int, names: Callable[[dict], str], log: Callable[[s
             self.best = (math.inf, "")
 
         def _line(self, event: str) -> None:
-            best = f"; best validation loss {self.best[0]:.5f} ({self.best[1]})" if math.isfinite(self.best[0]) else ""
+            best = f"; best val_loss_multistep {self.best[0]:.5f} ({self.best[1]})" if math.isfinite(self.best[0]) else ""
             log(f"{prefix}: {event} | {self.done}/{total} done, {len(self.running)} running, {self.failed} failed, "
                 f"{self.stopped} stopped early{f', {self.retried} retried' if self.retried else ''}{best}")
 
@@ -83,13 +83,13 @@ def progress_callback(total: int, names: Callable[[dict], str], log: Callable[[s
             if not result.get("final"):
                 self.stopped += 1
                 self._line(f"stopped early {names(trial.config)} after {result.get('training_iteration', 0)} "
-                           f"epochs (validation loss {result.get('val_loss', math.nan):.5f})")
+                           f"epochs (val_loss_multistep {result.get(OBJECTIVE, math.nan):.5f})")
                 return
             self.done += 1
-            value = result.get("val_loss", math.inf)
+            value = result.get(OBJECTIVE, math.inf)
             if value < self.best[0]:
                 self.best = (value, names(trial.config))
-            self._line(f"done {names(trial.config)} (validation loss {value:.5f})")
+            self._line(f"done {names(trial.config)} (val_loss_multistep {value:.5f})")
 
         def on_trial_recover(self, iteration, trials, trial, **info):
             self.retried += 1
@@ -115,10 +115,10 @@ def make_scheduler(spec: SchedulerSpec, horizon: int):
     s = spec.as_dict()
     if spec.kind == "asha":
         max_t = max(horizon + 1, int(s["grace_period"]) + 1)
-        return ASHAScheduler(time_attr="training_iteration", metric="val_loss", mode="min", max_t=max_t,
+        return ASHAScheduler(time_attr="training_iteration", metric=OBJECTIVE, mode="min", max_t=max_t,
                              grace_period=int(s["grace_period"]), reduction_factor=float(s["reduction_factor"]),
                              brackets=int(s["brackets"]))
-    return MedianStoppingRule(time_attr="training_iteration", metric="val_loss", mode="min",
+    return MedianStoppingRule(time_attr="training_iteration", metric=OBJECTIVE, mode="min",
                               grace_period=float(s["grace_period"]),
                               min_samples_required=int(s["min_samples_required"]))
 
@@ -220,7 +220,7 @@ def run_optuna(spec, out: Path, data: TrialData, session: Session, storage: Tune
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     # a resumed search draws from a stream of its own: the sampler's first draws would
     # otherwise repeat the configurations it is told are done
-    search = OptunaSearch(space=optuna_space(spec), metric="val_loss", mode="min",
+    search = OptunaSearch(space=optuna_space(spec), metric=OBJECTIVE, mode="min",
                           seed=spec.search_seed + len(evaluated) + len(pending),
                           points_to_evaluate=list(pending) or None)
     for config, value in evaluated:

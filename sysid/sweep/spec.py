@@ -7,7 +7,7 @@ base = "../experiments/hybrid_D2.toml"   # experiment config (relative to this f
 search = "grid"          # grid | random | optuna
 samples = 8              # random / optuna: configurations drawn
 seeds = [0, 1, 2]        # every configuration is trained with each seed
-objective = "val_loss"   # validation multi-step loss, minimised (never a test file)
+objective = "val_loss_multistep"   # validation multi-step loss, minimised (never a test file)
 max_retries = 2          # a trial that crashes or is killed is retried this often
 search_seed = 0          # seed of the random / optuna sampler
 scheduler = "asha"       # none | asha | median: Tune stops poor trials early
@@ -43,10 +43,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sysid.config.choices import Search
 from sysid.errors import ConfigError
+from sysid.store.toml_file import read_toml
 from sysid.config.experiment import Experiment, load_experiment, parse_experiment
 
-SEARCHES = ("grid", "random", "optuna")
 SCHEDULERS = ("none", "asha", "median")
 # scheduler -> {setting: (default, smallest allowed, integer?)}; times in epochs
 SCHEDULER_SETTINGS = {
@@ -54,7 +55,7 @@ SCHEDULER_SETTINGS = {
     "asha": {"grace_period": (1, 1, True), "reduction_factor": (3.0, 1.0 + 1e-9, False), "brackets": (1, 1, True)},
     "median": {"grace_period": (1, 1, True), "min_samples_required": (3, 1, True)},
 }
-OBJECTIVES = ("val_loss",)
+OBJECTIVES = ("val_loss_multistep",)
 DISTRIBUTIONS = ("uniform", "loguniform", "randint", "choice")
 
 
@@ -97,9 +98,9 @@ class SweepSpec:
     base_path: Path
     axes: tuple[Axis, ...]
     seeds: tuple[int, ...] = (0,)
-    search: str = "grid"
+    search: Search = Search.GRID
     samples: int = 1
-    objective: str = "val_loss"
+    objective: str = "val_loss_multistep"
     max_retries: int = 2
     search_seed: int = 0
     source: str = ""
@@ -259,13 +260,15 @@ def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = Non
     if fixed:
         base = apply_values(base, {k: tuple(v) if isinstance(v, list) else v for k, v in fixed.items()},
                             base.experiment.seed, base.experiment.name, source, directory)
-    search = table.get("search", "grid")
-    if search not in SEARCHES:
-        raise ConfigError(f"{source}: [sweep] search = {search!r}: choose one of {', '.join(SEARCHES)}")
-    objective = table.get("objective", "val_loss")
+    try:
+        search = Search.parse(table.get("search", "grid"), f"{source}: [sweep] search")
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+    objective = table.get("objective", "val_loss_multistep")
+    objective = "val_loss_multistep" if objective == "val_loss" else objective  # its older name
     if objective not in OBJECTIVES:
         raise ConfigError(f"{source}: [sweep] objective = {objective!r}: the objective is the validation "
-                          "loss (val_loss); test files are never used to choose")
+                          "loss (val_loss_multistep); test files are never used to choose")
     seeds = table.get("seeds", [base.experiment.seed])
     if (not isinstance(seeds, list) or not seeds or any(isinstance(s, bool) or not isinstance(s, int) or s < 0
                                                        for s in seeds) or len(set(seeds)) != len(seeds)):
@@ -284,7 +287,7 @@ def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = Non
         raise ConfigError(f"{source}: [vary] must be a table of \"section.option\" = values")
     axes = tuple(_axis(source, key, value, base) for key, value in vary.items())
     for axis in axes:
-        if search == "grid" and axis.distribution:
+        if search is Search.GRID and axis.distribution:
             raise ConfigError(f"{source}: [vary] {axis.key!r}: a {axis.distribution} distribution needs "
                               "search = \"random\" or \"optuna\" (grid search takes a list of values)")
         _check_axis_values(source, axis, base, directory)
@@ -299,13 +302,5 @@ def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = Non
 def load_sweep(path: str | os.PathLike) -> SweepSpec:
     """Read and validate a sweep file; errors name the file and key."""
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"{path}: sweep file not found")
-    try:
-        text = path.read_text()
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML ({exc})") from None
-    except UnicodeDecodeError:
-        raise ConfigError(f"{path}: not UTF-8 text; a sweep file is a UTF-8 TOML file") from None
+    doc, text = read_toml(path, "sweep file", ConfigError)
     return parse_sweep(doc, str(path), path.resolve().parent, text)

@@ -27,6 +27,7 @@ import tomllib
 from pathlib import Path
 from typing import Callable
 
+from sysid.config.choices import Search
 from sysid.errors import ConfigError, OutputError
 from sysid.config.experiment import parse_experiment
 from sysid.store.files import write_text
@@ -35,6 +36,7 @@ from sysid.store.staging import check_target
 from sysid.sweep.inbox import JOURNAL, complete_summary
 from sysid.sweep.plan import make_trial, sweep_trials
 from sysid.sweep.results import SweepResults, collect_results, scanned_trials, write_results
+from sysid.sweep.summary import SweepSummary
 from sysid.sweep.runner import Outcomes, TuneStorage, make_scheduler, ray_session, run_optuna, run_trials
 from sysid.sweep.spec import SweepSpec
 from sysid.sweep.trial import TrialSpec, read_trial_data
@@ -100,8 +102,9 @@ def optuna_history(spec: SweepSpec, out: Path) -> tuple[list[tuple[dict, float]]
         config = config_of(spec, trials[0].values)
         if config is None:
             continue
-        losses = [(complete_summary(out / t.path) or {}).get("val_loss") for t in trials]
-        if set(spec.seeds) <= {t.seed for t in trials} and all(v is not None and math.isfinite(v) for v in losses):
+        summaries = [complete_summary(out / t.path) for t in trials]
+        losses = [s.objective if s is not None else math.nan for s in summaries]
+        if set(spec.seeds) <= {t.seed for t in trials} and all(math.isfinite(v) for v in losses):
             evaluated.append((config, sum(losses) / len(losses)))
         else:
             pending.append(config)
@@ -119,7 +122,7 @@ def _experiments(spec: SweepSpec, trials: list[TrialSpec]):
 def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = None, address: str | None = None,
               resume: bool = False, overwrite: bool = False, data: str | os.PathLike | None = None,
               log: Callable[[str], None] = print, storage: str | None = None,
-              mlflow: str | None = None) -> tuple[SweepResults, dict]:
+              mlflow: str | None = None) -> tuple[SweepResults, SweepSummary]:
     """Train every trial of `spec` (on Ray) into `out`; returns the results and summary.
 
     `address` joins a Ray cluster (default: ``RAY_ADDRESS``, else a local Ray of the
@@ -132,23 +135,23 @@ def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = Non
     out = Path(out)
     root = data_root(data)  # a clear error before Ray starts when the data are missing
     check_output(spec, out, resume, overwrite)
-    planned = sweep_trials(spec) if spec.search != "optuna" else []
+    planned = sweep_trials(spec) if spec.search is not Search.OPTUNA else []
     trial_data = read_trial_data(_experiments(spec, planned), root)
     tracker = None
     if mlflow or spec.mlflow:
         from sysid.tracking import Tracker
         tracker = Tracker(mlflow or spec.mlflow, spec.name)
     tune_storage = TuneStorage(storage, spec.name) if storage else TuneStorage(str(out.resolve()))
-    scheduler = make_scheduler(spec.scheduler, spec.most_epochs * (len(spec.seeds) if spec.search == "optuna" else 1))
+    scheduler = make_scheduler(spec.scheduler, spec.most_epochs * (len(spec.seeds) if spec.search is Search.OPTUNA else 1))
     existed = out.is_dir()
     where = f" on {address}" if address else (f" on {os.environ['RAY_ADDRESS']}" if os.environ.get("RAY_ADDRESS") else "")
-    evaluated, pending = optuna_history(spec, out) if spec.search == "optuna" and resume else ([], [])
-    if spec.search == "optuna" and resume:
+    evaluated, pending = optuna_history(spec, out) if spec.search is Search.OPTUNA and resume else ([], [])
+    if spec.search is Search.OPTUNA and resume:
         log(f"sweep {spec.name}: optuna resumes from {len(evaluated)} finished configurations "
             f"({len(pending)} with seeds left) in {out / 'trials'}; Tune's saved search state is not read")
     parent, outcomes = None, Outcomes()
     try:
-        if spec.search == "optuna":
+        if spec.search is Search.OPTUNA:
             log(f"sweep {spec.name}: optuna, {spec.samples} configurations x {len(spec.seeds)} seeds{where}")
             if len(evaluated) < spec.samples:
                 with ray_session(out, workers, address, log) as session:
@@ -187,11 +190,11 @@ def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = Non
         raise
     results = collect_results(spec, out, trials, outcomes)
     summary = write_results(spec, out, results, time.perf_counter() - started,
-                            {"tune": tune_storage.experiment, "scheduler": spec.scheduler.kind,
-                             "mlflow": tracker.uri if tracker else None})
+                            tune=tune_storage.experiment, mlflow=tracker.uri if tracker else None)
     if tracker is not None and parent is not None:  # the sweep's own run: counts, best, the results table
-        tracker.metrics(parent, {k: v for k, v in summary.items() if k in ("complete", "failed", "stopped_early")}
-                        | ({"best_val_loss": summary["best"]["val_loss_mean"]} if summary.get("best") else {}))
+        tracker.metrics(parent, {"complete": summary.complete, "failed": summary.failed,
+                                 "stopped_early": summary.stopped_early}
+                        | ({"best_val_loss": summary.best.val_loss_multistep_mean} if summary.best else {}))
         tracker.client.log_artifact(parent, str(out / "results.csv"))
         tracker.finish(parent)
     return results, summary

@@ -29,9 +29,12 @@ from sysid.data.datasets import test_files
 from sysid.errors import DataError
 from sysid.config.experiment import Experiment, parse_experiment
 from sysid.runs.lifecycle import checkpoint_path, run_experiment, training_runs
+from sysid.runs.summary import RunSummary
 from sysid.sweep.inbox import COMPLETE, WAIT, complete_summary, pack_run  # noqa: F401 (complete_summary: API)
+from sysid.identify.checkpoint import CheckpointState
 from sysid.identify.trainer import EpochReport
 
+OBJECTIVE = "val_loss_multistep"  # the metric trials report and sweeps rank by (`RunSummary.objective`)
 CLAIM_POLL_S = 2.0   # how often a trial waiting for another training of its run asks again
 
 
@@ -49,8 +52,9 @@ class TrialSpec:
 
 
 def data_key(exp: Experiment) -> tuple:
-    """What decides an experiment's training data: data set, files and rate."""
-    return (exp.experiment.dataset, tuple(exp.data.files), float(exp.data.rate))
+    """What decides an experiment's training data: data set, ``[data] train`` logs, their
+    columns and rate (as `sysid.runs.lifecycle.cached_training_runs`)."""
+    return (exp.experiment.dataset, tuple(exp.data.train), exp.data.columns, float(exp.data.rate))
 
 
 @dataclass(frozen=True)
@@ -114,37 +118,38 @@ def call(inbox, method: str, *args, **kwargs):
     return target(*args, **kwargs)
 
 
-def result_row(trial: TrialSpec, summary: dict | None) -> dict:
+def result_row(trial: TrialSpec, summary: RunSummary | None) -> dict:
     """The results-table row of a trial (status "missing" when it has no complete run)."""
     row = {"point": trial.point, "seed": trial.seed, "run": trial.path, **trial.values}
     if trial.label:
         row["name"] = trial.label
     if summary is None:
-        return {**row, "status": "missing", "val_loss": math.nan}
-    val = summary.get("val_loss")
-    return {**row, "status": summary.get("status", "complete"),
-            "val_loss": float(val) if val is not None else math.nan,
-            "epochs": summary.get("epochs"), "best_epoch": summary.get("best_epoch"),
-            "stopped": "; ".join(f"{k}: {v}" for k, v in (summary.get("stopped") or {}).items()),
-            "train_seconds": summary.get("train_seconds")}
+        return {**row, "status": "missing", OBJECTIVE: math.nan}
+    return {**row, "status": summary.status, OBJECTIVE: summary.objective,
+            "epochs": summary.epochs, "best_epoch": summary.best_epoch, "stopped": summary.stopped_text,
+            "train_seconds": summary.train_seconds}
 
 
 def epoch_metrics(stage: str, epoch: int, train_loss: float, val_loss: float) -> dict:
-    """What a trial reports to Tune after every epoch (Tune counts ``training_iteration``)."""
-    return {"val_loss": float(val_loss), "train_loss": float(train_loss), "stage": stage, "epoch": int(epoch)}
+    """What a trial reports to Tune after every epoch (Tune counts ``training_iteration``):
+    the epoch's early-stopping validation loss, also under the objective's name so that
+    schedulers compare epochs on the one metric (the last report carries the run's
+    ``val_loss_multistep``, `final_metrics`)."""
+    return {OBJECTIVE: float(val_loss), "early_stopping_loss": float(val_loss), "train_loss": float(train_loss),
+            "stage": stage, "epoch": int(epoch)}
 
 
-def _history_metrics(rows: list[dict], summary: dict | None = None) -> list[dict]:
-    """The epochs of a history (history.csv rows or a checkpoint's) as reported metrics;
+def _history_metrics(rows: list[dict], summary: RunSummary | None = None) -> list[dict]:
+    """The epochs of a history (`RunDir.read_history` rows or a checkpoint's) as reported metrics;
     Levenberg-Marquardt's one row is not an epoch and is left out."""
-    solver = ((summary or {}).get("identification") or {}).get("solver")
-    return [epoch_metrics(r["stage"], r["epoch"], r["train_loss"], r["val_loss"]) for r in rows
+    solver = summary.identification.solver if summary is not None and summary.identification is not None else None
+    return [epoch_metrics(r["stage"], r["epoch"], r["train_loss"], r["early_stopping_loss"]) for r in rows
             if not (r["stage"] == "identify" and solver == "levenberg_marquardt")]
 
 
-def _checkpoint_history(blob: bytes) -> list[dict]:
-    state = torch.load(io.BytesIO(blob), map_location="cpu", weights_only=True)
-    return list(state.get("history", [])) + list(state.get("stage_history", []))
+def _checkpoint_history(blob: bytes, source: str) -> list[dict]:
+    state = CheckpointState.from_state_dict(torch.load(io.BytesIO(blob), map_location="cpu", weights_only=True), source)
+    return list(state.history) + list(state.stage_history)
 
 
 def run_trial(trial: TrialSpec, inbox, data: TrialData, holder: str = "local",
@@ -169,7 +174,7 @@ def run_trial(trial: TrialSpec, inbox, data: TrialData, holder: str = "local",
         done: list[dict] = []
         if blob is not None:
             checkpoint_path(run_dir).write_bytes(blob)
-            done = _history_metrics(_checkpoint_history(blob))
+            done = _history_metrics(_checkpoint_history(blob, f"the checkpoint of trial {trial.path}"))
             for metrics in done:
                 report(metrics)
         call(inbox, "journal", "resumed" if blob is not None else "started", trial.path, node=node,
@@ -190,9 +195,9 @@ def run_trial(trial: TrialSpec, inbox, data: TrialData, holder: str = "local",
 def final_metrics(rows: list[dict]) -> dict:
     """A Tune trial's last report: the mean validation loss of its run(s) (inf if any
     failed), the epochs, and ``final`` (a trial without it was stopped early)."""
-    values = [r["val_loss"] for r in rows]
+    values = [r[OBJECTIVE] for r in rows]
     ok = all(r["status"] == "complete" and math.isfinite(v) for r, v in zip(rows, values))
-    return {"val_loss": sum(values) / len(values) if ok else math.inf, "final": True, "failed": not ok,
+    return {OBJECTIVE: sum(values) / len(values) if ok else math.inf, "final": True, "failed": not ok,
             "epochs": int(sum(int(r.get("epochs") or 0) for r in rows))}
 
 

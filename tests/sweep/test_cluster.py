@@ -164,6 +164,6 @@ def test_a_node_lost_mid_sweep_is_replaced_and_no_trial_restarts(cluster, datase
     alone = run_experiment(exp, work / "alone", [read_run(tiny_test_file(dataset_dir))], progress=False,
                            log=lambda m: None)
     delivered = json.loads((out / trial.path / "summary.json").read_text())
-    assert delivered["val_loss"] == pytest.approx(alone.training.val_loss, rel=1e-9)
+    assert delivered["val_loss_multistep"] == pytest.approx(alone.training.val_loss_multistep, rel=1e-9)
     assert delivered["epochs"] == alone.training.epochs
 

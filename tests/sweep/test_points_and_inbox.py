@@ -3,7 +3,6 @@ inbox accepts a run directory only complete, unchanged and with its trial's conf
 from __future__ import annotations
 
 import io
-import json
 import tarfile
 
 import pandas as pd
@@ -71,7 +70,9 @@ def _tamper(blob: bytes, name: str, data: bytes) -> bytes:
 
 
 def test_the_inbox_keeps_only_complete_unchanged_runs_of_their_trial(tmp_path, dataset_dir):
-    from sysid.runs.rundir import load_model, verify_run_dir
+    from sysid.runs.directory import RunDir
+    from sysid.runs.rundir import load_model
+    from sysid.runs.summary import RunSummary
 
     run, config = _run_dir(tmp_path, dataset_dir)
     blob = pack_run(run)
@@ -100,12 +101,13 @@ def test_the_inbox_keeps_only_complete_unchanged_runs_of_their_trial(tmp_path, d
     assert inbox.save_checkpoint(path, "tune-a", b"epoch 1") is True and inbox.checkpoint(path) == b"epoch 1"
     summary = inbox.deliver(path, "tune-a", blob, config, node="n1")
     placed = out / "trials" / "p" / "seed0"
-    verify_run_dir(placed)
-    assert summary == json.loads((run / "summary.json").read_text())
+    RunDir.open(placed)  # the manifest verified
+    assert summary == RunSummary.read(run / "summary.json")
     assert inbox.checkpoint(path) is None and inbox.claim(path, "tune-b") == COMPLETE
     assert sorted((p.relative_to(placed).as_posix() for p in placed.rglob("*") if p.is_file())) == \
         sorted(p.relative_to(run).as_posix() for p in run.rglob("*") if p.is_file())
     _, model = load_model(placed)
     assert model is not None
     assert [e["event"] for e in read_journal(out)] == ["trained"]
-    assert [r["val_loss"] for r in inbox.history(path)] == list(pd.read_csv(run / "history.csv").val_loss)
+    assert [r["early_stopping_loss"] for r in inbox.history(path)] == \
+        list(pd.read_csv(run / "history.csv").early_stopping_loss)

@@ -65,12 +65,12 @@ def test_every_epoch_is_in_tune_experiment_analysis(sweeps):
         run = out / "trials" / f"learning_rate={trial.config['training__learning_rate']!r}" / "seed0"
         history = pd.read_csv(run / "history.csv")
         epochs = frames[trial.trial_id].dropna(subset=["epoch"])
-        assert list(epochs.val_loss) == pytest.approx(list(history.val_loss), rel=CSV)
+        assert list(epochs.val_loss_multistep) == pytest.approx(list(history.early_stopping_loss), rel=CSV)
         assert list(epochs.training_iteration) == list(range(1, len(history) + 1))
         final = frames[trial.trial_id].final.fillna(False).astype(bool)
-        assert final.sum() == 1 and frames[trial.trial_id][final].val_loss.iloc[0] == pytest.approx(
-            json.loads((run / "summary.json").read_text())["val_loss"], rel=1e-12)
-    best = analysis.get_best_config(metric="val_loss", mode="min", scope="last")
+        assert final.sum() == 1 and frames[trial.trial_id][final].val_loss_multistep.iloc[0] == pytest.approx(
+            json.loads((run / "summary.json").read_text())["val_loss_multistep"], rel=1e-12)
+    best = analysis.get_best_config(metric="val_loss_multistep", mode="min", scope="last")
     assert best["training__learning_rate"] == summary["best"]["values"]["training.learning_rate"]
 
 
@@ -85,13 +85,13 @@ def test_tuner_restore_gets_the_results(sweeps):
     ray.init(address="local", num_cpus=1, include_dashboard=False, log_to_driver=False)
     try:
         grid = tune.Tuner.restore(str(out / "tune"), trainable=tune_trainable).get_results()
-        best = grid.get_best_result(metric="val_loss", mode="min", scope="last")
+        best = grid.get_best_result(metric="val_loss_multistep", mode="min", scope="last")
     finally:
         ray.shutdown()
     assert len(grid) == 2 and all(len(r.metrics_dataframe) == EPOCHS + 1 for r in grid)
     summary = json.loads((out / "summary.json").read_text())
     assert best.config["training__learning_rate"] == summary["best"]["values"]["training.learning_rate"]
-    assert best.metrics["val_loss"] == pytest.approx(summary["best"]["val_loss_mean"], rel=1e-12)
+    assert best.metrics["val_loss_multistep"] == pytest.approx(summary["best"]["val_loss_multistep_mean"], rel=1e-12)
 
 
 @pytest.mark.slow
@@ -107,7 +107,7 @@ def test_asha_stops_the_poor_trial_early_with_the_same_best(sweeps):
     assert epochs["plain"] == 2 * EPOCHS and epochs["asha"] < epochs["plain"]
     plain, asha = (json.loads((tmp / n / "summary.json").read_text()) for n in ("plain", "asha"))
     assert asha["best"]["point"] == plain["best"]["point"] == f"learning_rate={GOOD!r}"
-    assert asha["best"]["val_loss_mean"] == plain["best"]["val_loss_mean"]
+    assert asha["best"]["val_loss_multistep_mean"] == plain["best"]["val_loss_multistep_mean"]
     assert (asha["complete"], asha["stopped_early"]) == (1, 1) and (plain["complete"], plain["stopped_early"]) == (2, 0)
     table = pd.read_csv(tmp / "asha" / "results.csv").set_index("point")
     assert table.loc[f"learning_rate={POOR!r}", "status"] == "stopped early"
@@ -133,9 +133,9 @@ def test_the_sweep_and_its_trials_are_one_mlflow_experiment(sweeps, monkeypatch)
         run = out / child["tags.mlflow.runName"]
         history = pd.read_csv(run / "history.csv")
         logged = sorted(client.get_metric_history(child.run_id, "val_loss"), key=lambda m: m.step)
-        assert [m.value for m in logged] == pytest.approx(list(history.val_loss), rel=CSV)
+        assert [m.value for m in logged] == pytest.approx(list(history.early_stopping_loss), rel=CSV)
         summary = json.loads((run / "summary.json").read_text())
-        assert client.get_run(child.run_id).data.metrics["final_val_loss"] == pytest.approx(summary["val_loss"], rel=1e-12)
+        assert client.get_run(child.run_id).data.metrics["final_val_loss"] == pytest.approx(summary["val_loss_multistep"], rel=1e-12)
         metrics = pd.read_csv(run / "metrics.csv").iloc[0]
         key = f"rmse_u/{metrics.scenario}/{metrics.horizon_s:g}s"
         assert client.get_run(child.run_id).data.metrics[key] == pytest.approx(metrics.rmse_u, rel=CSV)
@@ -157,7 +157,7 @@ def test_a_trained_run_is_logged_to_mlflow(tmp_path, dataset_dir, monkeypatch):
     runs = mlflow.search_runs(experiment_names=["tiny"])
     assert len(runs) == 1 and runs.status.iloc[0] == "FINISHED" and runs["tags.mlflow.runName"].iloc[0] == "run"
     summary = json.loads((run / "summary.json").read_text())
-    assert runs["metrics.final_val_loss"].iloc[0] == pytest.approx(summary["val_loss"], rel=1e-12)
+    assert runs["metrics.final_val_loss"].iloc[0] == pytest.approx(summary["val_loss_multistep"], rel=1e-12)
     resolved = tomllib.loads((run / "config.toml").read_text())
     assert runs["params.training.learning_rate"].iloc[0] == str(resolved["training"]["learning_rate"])
     assert runs["params.experiment.seed"].iloc[0] == "0"

@@ -6,6 +6,7 @@ figure is drawn; a figure whose data is missing is replaced by a note saying why
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Callable
@@ -26,6 +27,7 @@ SERIES_WINDOWS = [("Zigzag 30/30", 0.0), ("Random", 500.0)]              # Figs.
 TRAJECTORY_SCENARIOS = ["Turning 20", "Zigzag 30/30", "Random"]          # Figs. 10-12
 KNN_SCENARIOS = ["Turning 20", "Random"]                                 # Figs. 13-16
 FORCE_SCENARIOS = ["Turning 20", "Zigzag 30/30"]                         # Figs. 17-20
+_PAPER_POINTER = re.compile(r"\s*\(cf\. [^)]*\)")   # " (cf. Figs. 10-12)" in a caption
 
 
 @dataclass
@@ -106,13 +108,17 @@ class _Context:
     fig_dataset: str | None
     short: int | None           # horizon [s] of the 30 s figures
     long: int | None            # horizon [s] of the 100 s figures
+    paper: bool = True          # a paper protocol: captions point to the paper's figures
 
     @property
     def trained_on(self) -> str:
-        return f" (trained models: {self.fig_dataset})" if self.fig_dataset else ""
+        return f" (trained models: {self.fig_dataset})" if self.fig_dataset in ("D1", "D2") else ""
 
     def add(self, key: str, section: str, title: str, caption: str, factory, ok) -> None:
-        """Plan the figure, or note why it is skipped (`caption` then says why)."""
+        """Plan the figure, or note why it is skipped (`caption` then says why); outside a
+        paper protocol without the pointers to the paper's figures."""
+        if not self.paper:
+            caption = _PAPER_POINTER.sub("", caption)
         if ok:
             self.plan.figures.append(FigureSpec(key, section, title, caption, factory))
         else:
@@ -165,7 +171,8 @@ def _trajectory_figures(c: _Context, ship_size: tuple[float, float] | None) -> N
 def _gate_figures(c: _Context) -> None:
     """Figs. 13-16: kNN distance of every hybrid run, 30 s."""
     if not c.hybrids:
-        c.plan.notes.append("kNN distance (Figs. 13-16): skipped, no hybrid run in the source")
+        c.plan.notes.append("kNN distance" + (" (Figs. 13-16)" if c.paper else "") + ": skipped, no hybrid run "
+                            "in the source")
         return
     for scenario in _pick(KNN_SCENARIOS, c.scenarios):
         for run in c.hybrids:
@@ -216,12 +223,13 @@ def _force_figures(c: _Context) -> None:
 
 
 def _loss_figure(c: _Context) -> None:
-    histories = [(_label(r), _colour(r, i), r.history, r.summary.get("best_epoch"))
+    histories = [(_label(r), _colour(r, i), r.history, r.summary.best_epoch)
                  for i, r in enumerate(c.runs) if r.history is not None and len(r.history)]
     if histories:
-        c.add("loss", "Training", "Training and validation loss",
-              "Training (solid) and validation (dashed) loss per epoch of every trained model; star: the "
-              "epoch whose weights were kept.", partial(F.loss_curves, histories, "Training and validation loss"),
+        c.add("loss", "Training", "Training and early-stopping loss",
+              "Training loss (solid) and early-stopping loss (dashed: L_v on the validation windows while "
+              "training, before the kNN gate exists; val_loss_multistep is that of the final, gated model) per "
+              "epoch of every trained model; star: the epoch whose weights were kept.", partial(F.loss_curves, histories, "Training and early-stopping loss"),
               True)
     else:
         c.plan.notes.append("Loss curves: skipped, no run has a history.csv (MMG-only runs are not trained)")
@@ -230,20 +238,20 @@ def _loss_figure(c: _Context) -> None:
 def _uncertainty_figures(c: _Context) -> None:
     """Identified coefficients with ± 2 sigma beside their prior, and their correlations."""
     for run in c.runs:
-        u = run.summary.get("identified_uncertainty")
-        if not isinstance(u, dict) or not u.get("names"):
+        u = run.summary.identified_uncertainty
+        if u is None or not u.names:
             continue
-        names = list(u["names"])
-        prior_map = run.summary.get("identified_initial") or {}
+        names = list(u.names)
+        prior_map = run.summary.identified_initial
         prior = [prior_map.get(n) for n in names] if all(n in prior_map for n in names) else []
-        two_sigma = [None if s is None else 2.0 * s for s in u.get("std_error", [])]
+        two_sigma = [None if s is None else 2.0 * s for s in u.std_error]
         title = f"Identified coefficients of {_label(run)}"
         c.add(f"identified_{run.name}", "Identification", title,
               "Estimates with ± 2 standard errors from the curvature of the multi-step loss (Jacobian of "
               "the residuals on disjoint training windows, windows as independent clusters), beside the "
               f"ship file's values; right: correlations of the estimates. Estimator: {estimator_text(run.summary)}.",
-              partial(F.identified_coefficients, names, u.get("estimate", []), two_sigma, prior,
-                      u.get("correlation", []), title), True)
+              partial(F.identified_coefficients, names, list(u.estimate), two_sigma, prior,
+                      [list(row) for row in u.correlation], title), True)
 
 
 def _seed_figures(c: _Context) -> None:
@@ -259,7 +267,7 @@ def _seed_figures(c: _Context) -> None:
             rows = []
             for record in run.seeds:
                 m = record.metrics[(record.metrics.horizon_s - c.short).abs() < 0.5]
-                rows.append(m.assign(seed=record.summary.get("seed")))
+                rows.append(m.assign(seed=record.summary.seed))
             models.append(F.SeedSpread(_label(run), _colour(run, i), pd.concat(rows, ignore_index=True)))
         scenarios = list(dict.fromkeys(s for m in models for s in m.rmse.scenario.astype(str)))
         paper = {s: paper_rmse(s, "hybrid", dataset, c.short) for s in scenarios}
@@ -276,16 +284,16 @@ def _sweep_figures(source: ReportSource, plan: FigurePlan) -> None:
     from sysid.report import sweep_figures as SF
 
     sweep = source.sweep
-    chosen = (source.summary.get("best") or {}).get("point")
-    seeds = len(source.summary.get("seeds") or [])
+    chosen = sweep.summary.best.point if sweep.summary.best else None
+    seeds = len(sweep.summary.seeds)
     plan.figures.append(FigureSpec(
-        "sweep_keys", "Sweep", "Validation loss against the varied keys",
-        "Validation loss (the sweep's objective; validation windows only, never the test files) of every "
+        "sweep_keys", "Sweep", "val_loss_multistep against the varied keys",
+        "val_loss_multistep (the sweep's objective; validation windows only, never the test files) of every "
         "trial against each varied option; grey: means; red circles: the chosen configuration.",
-        partial(SF.objective_by_key, sweep.trials, sweep.keys, chosen, "Validation loss against the varied keys")))
+        partial(SF.objective_by_key, sweep.trials, sweep.keys, chosen, "val_loss_multistep against the varied keys")))
     plan.figures.append(FigureSpec(
         "sweep_seeds", "Sweep", f"Spread over {seeds} seeds per configuration",
-        "Validation loss of each configuration over its seeds (box: spread; dots: single seeds), best mean "
+        "val_loss_multistep of each configuration over its seeds (box: spread; dots: single seeds), best mean "
         "first; red: the chosen configuration.",
         partial(SF.seed_spread, sweep.trials, sweep.points, chosen, f"Spread over {seeds} seeds per configuration")))
 
@@ -302,7 +310,7 @@ def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> 
         c = _Context(plan, runs, list(dict.fromkeys(s for r in runs for s in r.scenarios())),
                      [r for r in runs if r.model == "mmg" or r.dataset == fig_dataset],
                      [r for r in runs if r.model == "hybrid"], fig_dataset,
-                     _horizon(runs, 30, short=True), _horizon(runs, 100, short=False))
+                     _horizon(runs, 30, short=True), _horizon(runs, 100, short=False), source.paper_protocol)
         _error_figures(c)
         _series_figures(c)
         _trajectory_figures(c, ship_size)
