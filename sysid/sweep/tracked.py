@@ -42,7 +42,9 @@ def tracking_callback(tracker: Tracker, parent: str, out: Path, names: Callable[
         def on_trial_result(self, iteration, trials, trial, result, **info):
             run = self.runs.get(trial.trial_id)
             if run is not None and not result.get("final"):
-                values = {k: result[k] for k in ("val_loss", "train_loss") if k in result}
+                # MLflow's per-epoch names, as `sysid.tracking.EpochLogger` logs a training
+                values = {name: result[k] for name, k in (("val_loss", "early_stopping_loss"), ("train_loss", "train_loss"))
+                          if k in result}
                 self._safely("logging an epoch", lambda: tracker.metrics(run, values, int(result["training_iteration"])))
 
         def on_trial_complete(self, iteration, trials, trial, **info):
