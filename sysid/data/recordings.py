@@ -43,6 +43,8 @@ class Run:
     U_A [m/s], gamma_A [rad] as recorded.
     dt : sample period [s]; issues : data-quality findings (gaps, frozen GNSS, ...);
     suspect : (t_start, t_end) [s] intervals of frozen GNSS or time gaps.
+    sha256 : SHA-256 of the source file when known (a run shipped to a node without the
+    file carries it); None: hashed from `path` when needed.
     """
 
     name: str
@@ -54,6 +56,7 @@ class Run:
     dt: float
     issues: list[str] = field(default_factory=list)
     suspect: list[tuple[float, float]] = field(default_factory=list)
+    sha256: str | None = None
 
     def __len__(self) -> int:
         return len(self.t)

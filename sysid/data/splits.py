@@ -130,7 +130,7 @@ def provenance(source: str, train: Sequence[Run], validation: Sequence[Run], tes
     data came from ("files", "D1", "D2", "-"), every log with its SHA-256, how validation
     was drawn and which test set it was ("files", "paper" or "none")."""
     def files(runs):
-        return [{"file": str(r.path), "sha256": file_sha256(r.path)} for r in runs]
+        return [{"file": str(r.path), "sha256": r.sha256 or file_sha256(r.path)} for r in runs]
 
     stems = {r.path.stem for r in test}
     validation_text = files(validation) if validation else (

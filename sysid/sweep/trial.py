@@ -11,6 +11,7 @@ checkpoint the inbox holds, on whichever node Ray gives it.
 """
 from __future__ import annotations
 
+import dataclasses
 import io
 import math
 import os
@@ -26,6 +27,7 @@ import torch
 
 from sysid.data.recordings import Run, read_run
 from sysid.data.datasets import test_files
+from sysid.data.splits import file_sha256
 from sysid.errors import DataError
 from sysid.config.experiment import Experiment, parse_experiment
 from sysid.runs.lifecycle import checkpoint_path, run_experiment, training_runs
@@ -80,11 +82,14 @@ class TrialData:
 
 def read_trial_data(experiments: Iterable[Experiment], root: str | os.PathLike | None) -> TrialData:
     """Test runs and the training runs of every distinct `data_key` among `experiments`."""
+    def hashed(runs) -> tuple[Run, ...]:  # the files' SHA-256 travel with them (the run's provenance)
+        return tuple(dataclasses.replace(r, sha256=r.sha256 or file_sha256(r.path)) for r in runs)
+
     training = {}
     for exp in experiments:
         if exp.needs_training and data_key(exp) not in training:
-            training[data_key(exp)] = tuple(training_runs(exp, root))
-    tests = tuple(read_run(p) for p in test_files(root).values())
+            training[data_key(exp)] = hashed(training_runs(exp, root))
+    tests = hashed(read_run(p) for p in test_files(root).values())
     return TrialData(tests, training, str(root) if root is not None else None)
 
 

@@ -57,7 +57,7 @@ def _sysid(args, env, dataset_dir, **kwargs):
 
 
 def test_runs_trained_where_nothing_is_shared_arrive_complete(cluster, dataset_dir):
-    from sysid.runs.rundir import verify_run_dir
+    from sysid.runs.directory import RunDir
 
     nodes, work = cluster
     worker, seen = nodes.worker_view([work, dataset_dir / "berthing", tiny_test_file(dataset_dir)])
@@ -70,7 +70,7 @@ def test_runs_trained_where_nothing_is_shared_arrive_complete(cluster, dataset_d
     events = read_journal(out)
     assert {e["node"].rsplit(":", 1)[1] for e in events} == {worker[:8]}  # trained on the worker node
     for run in sorted((out / "trials").glob("*/seed0")):
-        verify_run_dir(run)
+        RunDir.open(run)  # the manifest verified
         metrics = work / f"{run.parent.name}.csv"
         ev = _sysid(["evaluate", str(run), "--data", str(tiny_test_file(dataset_dir)), "--horizon", "30",
                      "-o", str(metrics)], nodes.env, dataset_dir)
