@@ -21,9 +21,10 @@ from sysid.cli import train_commands  # noqa: E402,F401
 from sysid.cli import ship_commands  # noqa: E402,F401
 from sysid.cli import export_commands  # noqa: E402,F401
 from sysid.cli import sweep_commands  # noqa: E402,F401
+from sysid.cli import maneuver_commands  # noqa: E402,F401
 
 
-MULTI_VALUE_OPTIONS = ("--data",)
+MULTI_VALUE_OPTIONS = ("--data", "--turning", "--zigzag")
 
 
 def expand_multi_value(argv: list[str]) -> list[str]:

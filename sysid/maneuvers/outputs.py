@@ -13,7 +13,9 @@
 """
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -23,6 +25,7 @@ from sysid.maneuvers.base import ManeuverResult
 from sysid.maneuvers.criteria import Criterion, criteria_for
 from sysid.maneuvers.indices import INDEX_COLUMNS
 from sysid.state import INPUTS, STATE
+from sysid.store.files import write_csv, write_text
 
 MOSTLY_OUTSIDE = 0.5  # gate off on more than this share of the steps: "mostly outside the training data"
 CRITERION_COLUMNS = ("maneuver", "index", "value", "limit", "ratio", "limit_ratio", "met", "rule")
@@ -88,3 +91,37 @@ def trajectory_table(results: Sequence[ManeuverResult]) -> pd.DataFrame:
             frame["rudder_angle"] = own.rudder
             parts.append(frame)
     return pd.concat(parts, ignore_index=True)
+
+
+def summary_document(subject_label: str, kind: str, ship, conditions, sources: dict[str, str],
+                     results: Sequence[ManeuverResult], compiled: bool, seconds: float, spread: str = "") -> dict:
+    """summary.json of a maneuvers directory: the model, the ship's dimensions and scale,
+    every condition with where it came from, per maneuver the kNN gate's off share."""
+    L, B = float(ship["L_pp"]), float(ship["B"])
+    scale = ship.maneuvering.get("scale")
+    return {
+        "model": subject_label, "kind": kind, "ship": ship.name, "ship_file": ship.source,
+        "L_pp_m": L, "B_m": B, "scale": scale,
+        "L_over_U_s": L / conditions.speed,
+        "L_over_U_full_scale_s": None if scale is None else L / conditions.speed * math.sqrt(scale),
+        "conditions": {"speed_m_s": conditions.speed, "rps": conditions.rps, "rudder_rate_deg_s": conditions.rudder_rate,
+                       "dt_s": conditions.dt, "duration_s": conditions.duration,
+                       "wind_speed_m_s": conditions.wind_speed,
+                       "wind_direction_deg": math.degrees(conditions.wind_direction),
+                       "integrator": conditions.method.value},
+        "sources": dict(sources), "compiled": compiled, "seconds": seconds,
+        "spread": spread, "n_members": len(results[0].members) if results else 0,
+        "maneuvers": [r.maneuver.name for r in results],
+        "gate_off_share": {r.maneuver.name: r.gate_off_share for r in results},
+    }
+
+
+def write_maneuvers(directory, results: Sequence[ManeuverResult], ship, conditions, summary: dict) -> None:
+    """indices.csv, criteria.csv, trajectories.csv and summary.json into `directory` (a
+    staging directory: `sysid.store.staging.staged_directory`)."""
+    directory = Path(directory)
+    L, scale = float(ship["L_pp"]), ship.maneuvering.get("scale")
+    write_csv(indices_table(results, L, conditions.speed, scale), directory / "indices.csv", float_format="%.6g")
+    write_csv(criteria_table(results, L, conditions.speed, scale), directory / "criteria.csv", float_format="%.6g")
+    write_csv(trajectory_table(results), directory / "trajectories.csv", float_format="%.10g")
+    write_text(json.dumps(summary, indent=2), directory / "summary.json")

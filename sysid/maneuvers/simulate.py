@@ -18,7 +18,7 @@ import torch
 from torch import nn
 
 from sysid.dynamics.integrators import Method
-from sysid.maneuvers.any_model import ManeuverModel
+from sysid.maneuvers.any_model import ManeuverModel, ship_of
 from sysid.maneuvers.base import Conditions, Maneuver, ManeuverError, ManeuverResult, check_number
 from sysid.maneuvers.closed_loop import compiled_loop, run_compiled, run_eager
 from sysid.maneuvers.controllers import initial_orders, order_parameters
@@ -82,6 +82,13 @@ def default_conditions(model: nn.Module, ship: Ship, *, speed: float | None = No
     return Conditions(speed, rps, rudder_rate, dt, duration, wind_speed, wind_direction, method), sources
 
 
+def ahead_only(model: nn.Module) -> bool:
+    """True when the model's propeller force is the standard MMG family's, which holds for
+    ahead motion only (no astern thrust): a crash stop needs a four-quadrant propeller (or
+    a learned force, NN-only)."""
+    return getattr(model, "kind", "mmg") != "nn" and ship_of(model).models.get("propeller") != "four_quadrant"
+
+
 def gate_off_share(model: nn.Module, states: torch.Tensor, inputs: torch.Tensor) -> float | None:
     """Share of the rows (states (N, 6), inputs (N, 4)) at which the model's kNN gate
     switches its FNN off; None for a model without a gate."""
@@ -126,6 +133,10 @@ def simulate_maneuvers(model: nn.Module, maneuvers: Sequence[Maneuver], conditio
     """
     if not maneuvers:
         return []
+    if any(m.kind == "crash_stop" for m in maneuvers) and ahead_only(model):
+        raise ManeuverError(f"crash stop: the propeller model {ship_of(model).models.get('propeller')!r} of "
+                            f"{ship_of(model).name} is for ahead motion only (no astern thrust); a crash stop needs "
+                            "a four-quadrant propeller")
     dtype = torch.float64
     x0 = torch.zeros(len(maneuvers), 6, dtype=dtype)
     x0[:, 1] = conditions.speed
