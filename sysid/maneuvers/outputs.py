@@ -121,7 +121,7 @@ def write_maneuvers(directory, results: Sequence[ManeuverResult], ship, conditio
     staging directory: `sysid.store.staging.staged_directory`)."""
     directory = Path(directory)
     L, scale = float(ship["L_pp"]), ship.maneuvering.get("scale")
-    write_csv(indices_table(results, L, conditions.speed, scale), directory / "indices.csv", float_format="%.6g")
-    write_csv(criteria_table(results, L, conditions.speed, scale), directory / "criteria.csv", float_format="%.6g")
+    write_csv(indices_table(results, L, conditions.speed, scale), directory / "indices.csv", float_format="%.8g")
+    write_csv(criteria_table(results, L, conditions.speed, scale), directory / "criteria.csv", float_format="%.8g")
     write_csv(trajectory_table(results), directory / "trajectories.csv", float_format="%.10g")
     write_text(json.dumps(summary, indent=2), directory / "summary.json")

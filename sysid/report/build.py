@@ -7,6 +7,7 @@ page and as vector graphics into the PDF.
 from __future__ import annotations
 
 import datetime as _dt
+import json
 import os
 import time
 from dataclasses import dataclass, field
@@ -71,6 +72,15 @@ def _placeholder(message: str, into=None):
     return fig
 
 
+def is_maneuvers_directory(path: str | os.PathLike) -> bool:
+    """Whether `path` is the output of ``sysid maneuver`` (its manifest says so)."""
+    manifest = Path(path) / "manifest.json"
+    try:
+        return manifest.is_file() and json.loads(manifest.read_text()).get("kind") == "maneuvers"
+    except (OSError, ValueError):
+        return False
+
+
 def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
                  progress: Callable[[str], None] | None = None) -> ReportPaths:
     """Write ``out_dir/report.html`` and ``out_dir/report.pdf`` for a run directory or a
@@ -79,6 +89,9 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
     started = time.perf_counter()
     say = progress or (lambda message: None)
     out_dir = Path(out_dir)
+    if is_maneuvers_directory(source_dir):  # sysid maneuver's output has a report of its own
+        from sysid.report.maneuver_report import build_maneuver_report
+        return build_maneuver_report(source_dir, out_dir)
     source = read_source(source_dir)
     say(f"read {source.kind} {source.path} ({len(source.runs)} run{'s' if len(source.runs) != 1 else ''})")
     size = ship_size(source)
