@@ -34,6 +34,7 @@ from sysid.maneuvers.any_model import load_maneuver_model
 from sysid.maneuvers.base import Maneuver, Side, TurningCircle, ZigZag
 from sysid.maneuvers.indices import INDEX_COLUMNS, KIND_INDICES, Track, maneuver_indices
 from sysid.maneuvers.simulate import gate_off_share
+from sysid.store.files import write_csv
 
 RECORD_COLUMNS = ["scenario", "file", "maneuver", "model", "n_members", *INDEX_COLUMNS,
                   *(f"{c}_std" for c in INDEX_COLUMNS), "gate_off_share"]
@@ -166,3 +167,15 @@ def run_models(run_dirs: Mapping[str, str | os.PathLike]) -> dict[str, list[nn.M
         subject = load_maneuver_model(Path(path))
         out[label] = [m for _, m in subject.members] if subject.spread == "seeds" else [subject.model]
     return out
+
+
+RECORD_FILE = "maneuver_indices.csv"
+
+
+def write_record_comparison(out_dir: str | os.PathLike, run_dirs: Mapping[str, str | os.PathLike],
+                            data: str | os.PathLike | None = None, method: IntegratorLike = "euler") -> Path:
+    """``out_dir/maneuver_indices.csv``: `record_comparison` of the protocol's turning and
+    zig-zag test runs (1 Hz) and the models of `run_dirs` (label -> run directory or folder
+    of seed run directories)."""
+    frame = record_comparison(run_models(run_dirs), recorded_test_runs(data), method)
+    return write_csv(frame, Path(out_dir) / RECORD_FILE, float_format="%.6g")

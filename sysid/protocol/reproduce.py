@@ -20,7 +20,8 @@ from sysid.errors import ConfigError
 from sysid.config.experiment import Experiment, load_experiment
 from sysid.store.files import write_csv, write_text
 from sysid.runs.lifecycle import run_experiment, training_runs
-from sysid.protocol.paper import MODEL_LABELS, comparison_table, model_label
+from sysid.maneuvers.recorded import RECORD_FILE, write_record_comparison
+from sysid.protocol.paper import MODEL_LABELS, comparison_table, model_label, run_label
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 # run name -> experiment config; labels and data sets come from the configs
@@ -242,5 +243,16 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
     random_file = Path(TEST_FILES["Random"]).stem
     summary["gate_off_share_random_30s"] = {
         n: shares[n].get(f"{random_file}_h30.csv") for n in names if n.startswith("hybrid")}
+    _recorded_maneuvers(out, runs, data, log)
     write_text(json.dumps(summary, indent=2), out / "summary.json")
     return summary
+
+
+def _recorded_maneuvers(out: Path, runs: list[ProtocolRun], data, log: Callable[[str], None]) -> None:
+    """maneuver_indices.csv: the recorded turning and zig-zag test runs' IMO indices beside
+    every finished model's prediction of them (`sysid.maneuvers.recorded`)."""
+    started = time.perf_counter()
+    done = {run_label(r.name, r.kind, r.dataset): out / "runs" / r.name for r in runs if not r.failure}
+    write_record_comparison(out, done, data)
+    log(f"{RECORD_FILE}: indices of the recorded turning and zig-zag runs beside {len(done)} models' predictions "
+        f"({time.perf_counter() - started:.0f} s)")

@@ -7,10 +7,10 @@ page and as vector graphics into the PDF.
 from __future__ import annotations
 
 import datetime as _dt
-import json
 import os
 import time
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Callable
 
@@ -30,6 +30,8 @@ from sysid.report.plan import figure_plan  # noqa: E402
 from sysid.report.quality import quality_rows  # noqa: E402
 from sysid.report.source import ReportSource, read_source  # noqa: E402
 from sysid.report.tables import build_tables  # noqa: E402
+from sysid.report.maneuver_tables import record_plain_table  # noqa: E402
+from sysid.report.plain_tables import table_figure  # noqa: E402
 
 STYLE = {"font.size": 9, "axes.titlesize": 9, "axes.labelsize": 9, "axes.grid": True,
          "grid.alpha": 0.3, "grid.linewidth": 0.5, "legend.fontsize": 8, "lines.linewidth": 1.2,
@@ -72,15 +74,6 @@ def _placeholder(message: str, into=None):
     return fig
 
 
-def is_maneuvers_directory(path: str | os.PathLike) -> bool:
-    """Whether `path` is the output of ``sysid maneuver`` (its manifest says so)."""
-    manifest = Path(path) / "manifest.json"
-    try:
-        return manifest.is_file() and json.loads(manifest.read_text()).get("kind") == "maneuvers"
-    except (OSError, ValueError):
-        return False
-
-
 def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
                  progress: Callable[[str], None] | None = None) -> ReportPaths:
     """Write ``out_dir/report.html`` and ``out_dir/report.pdf`` for a run directory or a
@@ -89,13 +82,11 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
     started = time.perf_counter()
     say = progress or (lambda message: None)
     out_dir = Path(out_dir)
-    if is_maneuvers_directory(source_dir):  # sysid maneuver's output has a report of its own
-        from sysid.report.maneuver_report import build_maneuver_report
-        return build_maneuver_report(source_dir, out_dir)
     source = read_source(source_dir)
     say(f"read {source.kind} {source.path} ({len(source.runs)} run{'s' if len(source.runs) != 1 else ''})")
     size = ship_size(source)
     tables = build_tables(source)
+    plain = [record_plain_table(source.maneuver_indices)] if source.maneuver_indices is not None else []
     plan = figure_plan(source, size)
     notes = list(plan.notes)
     if size is None and source.runs:
@@ -109,7 +100,7 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
     quality = quality_rows(source.quality)
     text_pages = paginate(text_lines(text_blocks(title, summary, rows, methods, quality, notes)))
     split_tables = [(t, table_pages(t)) for t in tables]
-    total = len(text_pages) + sum(len(p) for _, p in split_tables) + len(plan.figures)
+    total = len(text_pages) + sum(len(p) for _, p in split_tables) + len(plain) + len(plan.figures)
 
     html_figures: list[HtmlFigure] = []
     pdf_path = out_dir / "report.pdf"
@@ -121,7 +112,9 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
             for i, page_rows in enumerate(pages):
                 part = f" (part {i + 1} of {len(pages)})" if len(pages) > 1 else ""
                 pdf.add_table(table, page_rows, part)
-        say(f"tables: {len(tables)}; drawing {len(plan.figures)} figures")
+        for table in plain:
+            pdf.add_figure(partial(table_figure, table), tuple(table_figure(table).get_size_inches()), table.title)
+        say(f"tables: {len(tables) + len(plain)}; drawing {len(plan.figures)} figures")
         for number, spec in enumerate(plan.figures, 1):
             try:
                 fig = spec.factory()
@@ -145,7 +138,7 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
         summary=summary,
         runs=[{"row": row, "colour": model_colour(r.name, r.model, r.dataset, i)}
               for i, (row, r) in enumerate(zip(rows, source.runs))],
-        methods=methods, tables=tables, figures=html_figures, notes=notes, quality=quality,
+        methods=methods, tables=tables, plain_tables=plain, figures=html_figures, notes=notes, quality=quality,
         version=sysid.__version__, source=str(source.path), built=built)
     html_path = write_text(html, out_dir / "report.html")
     return ReportPaths(html_path, pdf_path, len(html_figures), n_pages, notes,

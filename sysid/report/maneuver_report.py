@@ -23,15 +23,11 @@ from sysid.report import maneuver_figures as MF
 from sysid.report.build import STYLE, ReportPaths
 from sysid.report.html import HtmlFigure, figure_svg
 from sysid.report.pdf import PdfReport, paginate, pdf_style, text_lines
-from sysid.report.plain_tables import PlainTable, number, table_figure
+from sysid.report.maneuver_tables import criteria_plain_table, indices_plain_table
+from sysid.report.plain_tables import table_figure
 from sysid.store.files import atomic_path, write_text
 from sysid.store.manifest import verify_manifest
 
-INDEX_LABELS = {"advance_m": "advance [m]", "transfer_m": "transfer [m]", "tactical_diameter_m": "tactical diam. [m]",
-                "steady_turning_diameter_m": "steady diam. [m]", "speed_loss_ratio": "speed loss [-]",
-                "initial_turning_distance_m": "initial turning [m]", "first_overshoot_deg": "1st overshoot [deg]",
-                "second_overshoot_deg": "2nd overshoot [deg]", "head_reach_m": "head reach [m]",
-                "track_reach_m": "track reach [m]"}
 _ENV = jinja2.Environment(loader=jinja2.PackageLoader("sysid.report", "templates"),
                           autoescape=jinja2.select_autoescape(["html", "j2"]))
 
@@ -45,43 +41,6 @@ def _read(directory: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame, pd.DataFra
     except (OSError, ValueError) as exc:
         raise CheckpointError(f"{directory}: not a readable maneuvers directory ({exc})") from None
     return (summary, *frames)
-
-
-def indices_plain_table(indices: pd.DataFrame) -> PlainTable:
-    """Indices per maneuver (± the members' standard deviation) and the kNN gate's share."""
-    shown = [c for c in INDEX_LABELS if c in indices and indices[c].notna().any()]
-    gate = indices["gate_off_share"].notna().any() if "gate_off_share" in indices else False
-    rows, marks = [], []
-    for r in indices.itertuples(index=False):
-        d = r._asdict()
-        cells = [d["maneuver"]] + [number(d[c], 4, d.get(f"{c}_std")) for c in shown]
-        mark = [""] * len(cells)
-        if gate:
-            share = d["gate_off_share"]
-            cells.append("" if pd.isna(share) else f"{100 * share:.0f} %" + (" (mostly outside)" if share > 0.5 else ""))
-            mark.append("not-met" if not pd.isna(share) and share > 0.5 else "")
-        rows.append(cells)
-        marks.append(mark)
-    columns = ["maneuver"] + [INDEX_LABELS[c] for c in shown] + (["kNN gate off"] if gate else [])
-    spread = "n_members" in indices and indices["n_members"].notna().any()
-    note = ("Empty: not applicable or not reached in the run. ± : standard deviation over the members. "
-            if spread else "Empty: not applicable or not reached in the run. ")
-    if gate:
-        note += "kNN gate off: share of the steps at which the FNN is switched off (outside the training data)."
-    return PlainTable("indices", "Maneuver indices", columns, rows, marks, note)
-
-
-def criteria_plain_table(criteria: pd.DataFrame) -> PlainTable:
-    """Every IMO criterion: value, limit, in L (lengths) or deg (angles), met or not."""
-    rows, marks = [], []
-    for r in criteria.itertuples(index=False):
-        unit = "deg" if r.index.endswith("_deg") else "L"
-        rows.append([r.maneuver, r.rule, number(r.value, 4), number(r.limit, 4), f"{number(r.ratio, 3)} {unit}",
-                     r.met])
-        marks.append(["", "", "", "", "", {"met": "met", "not met": "not-met"}.get(r.met, "muted")])
-    return PlainTable("criteria", "IMO MSC.137(76) criteria", ["maneuver", "criterion", "value", "limit",
-                                                                "value in L or deg", "verdict"], rows, marks,
-                      "Lengths in m and as multiples of L = L_pp (Froude-invariant); overshoot angles in deg.")
 
 
 def _summary_items(s: dict) -> list[tuple[str, str]]:
@@ -103,6 +62,15 @@ def _summary_items(s: dict) -> list[tuple[str, str]]:
     if s.get("n_members"):
         items.append(("Spread", f"over {s['n_members']} {s.get('spread', 'members')}"))
     return items
+
+
+def is_maneuvers_directory(path: str | os.PathLike) -> bool:
+    """Whether `path` is the output of ``sysid maneuver`` (its manifest says so)."""
+    manifest = Path(path) / "manifest.json"
+    try:
+        return manifest.is_file() and json.loads(manifest.read_text()).get("kind") == "maneuvers"
+    except (OSError, ValueError):
+        return False
 
 
 def build_maneuver_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike | None = None) -> ReportPaths:
@@ -157,6 +125,6 @@ def build_maneuver_report(source_dir: str | os.PathLike, out_dir: str | os.PathL
         pdf.close()
     html = _ENV.get_template("maneuvers.html.j2").render(
         title=title, subtitle=f"Standard maneuvers (IMO MSC.137(76)) - built {built}", summary=items,
-        warnings=warnings, tables=tables, figures=figures, version=sysid.__version__, source=str(source), built=built)
+        warnings=warnings, plain_tables=tables, figures=figures, version=sysid.__version__, source=str(source), built=built)
     html_path = write_text(html, out / "report.html")
     return ReportPaths(html_path, out / "report.pdf", len(figures), pages, [], time.perf_counter() - started)

@@ -140,6 +140,7 @@ class ReportSource:
     summary: dict
     quality: list[QualityReport] = field(default_factory=list)  # preprocessing *.report.json
     sweep: SweepRecord | None = None
+    maneuver_indices: pd.DataFrame | None = None  # a reproduction's maneuver_indices.csv (recorded vs predicted)
 
     @property
     def title(self) -> str:
@@ -232,7 +233,8 @@ def read_source(path) -> ReportSource:
         summary = read_json(path / "summary.json") if (path / "summary.json").exists() else {}
         runs = sorted((read_run_dir(p) if (p / "manifest.json").is_file() or (p / "summary.json").is_file()
                        else read_seed_group(p) for p in run_dirs), key=_run_order)
-        return ReportSource(path, "reproduction", runs, summary, quality)
+        indices = _read_table(path / "maneuver_indices.csv", ["scenario", "maneuver", "model"], required=False)
+        return ReportSource(path, "reproduction", runs, summary, quality, maneuver_indices=indices)
     if (path / "sweep.toml").is_file() and (path / "results.csv").is_file():
         return read_sweep(path, quality)
     if (path / "summary.json").exists() or (path / "metrics.csv").exists():
