@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import pandas as pd
@@ -10,6 +11,8 @@ import pytest
 from sysid.errors import DataError
 
 ROOT = Path(__file__).resolve().parents[1]
+# helpers shared by tests (harnesses, synthetic runs, tiny experiments), imported by name
+sys.path.insert(0, str(Path(__file__).resolve().parent / "support"))
 
 
 def _shared() -> Path:

@@ -11,7 +11,7 @@ from cli_harness import BINARY, assert_refused, in_process, leftovers
 from preprocessing import synth
 from preprocessing.sensors import SensorLayout
 from sysid.store.manifest import verify_manifest
-from test_preprocessing_bad_input import analytic_run
+from analytic_runs import analytic_run
 
 FORCE_COLUMNS = ["x", "u", "y", "v", "psi", "r", "n_prop", "delta_rudder", "wind_velo_true", "wind_dir_true"]
 

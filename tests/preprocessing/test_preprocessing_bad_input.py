@@ -17,23 +17,9 @@ from preprocessing.schema import RawLogError
 from preprocessing.sensors import SensorLayout
 from sysid.store.manifest import verify_manifest
 
+from analytic_runs import analytic_run
+
 LAYOUT = SensorLayout()
-
-
-def analytic_run(seconds: float = 120.0) -> pd.DataFrame:
-    t = np.round(np.arange(0.0, seconds + 1e-9, 0.1), 6)
-    w = 2 * np.pi / 40.0
-    run = pd.DataFrame({c: np.zeros_like(t) for c in synth.schema.PROCESSED})
-    run["t"] = t
-    run["u_velo"] = 0.5 + 0.05 * np.sin(w * t)
-    run["vm_velo"] = 0.02 * np.sin(w * t)
-    run["r_angvelo"] = 0.03 * np.sin(w * t)
-    run["psi_hat"] = 0.3
-    run["n_prop"] = 10.0
-    run["delta_rudder"] = 0.1 * np.sin(w * t)
-    run["wind_velo_true"] = 2.0 + 0.2 * np.sin(0.3 * t)
-    run["wind_dir_true"] = 1.0 + 0.1 * np.sin(0.2 * t)
-    return run
 
 
 @pytest.fixture(scope="module")

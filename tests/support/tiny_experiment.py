@@ -26,3 +26,16 @@ def tiny_experiment(path: Path, dataset_dir: Path, *, seed: int, epochs: int, wa
 def tiny_test_file(dataset_dir: Path) -> Path:
     """The berthing run the tiny experiment is evaluated on."""
     return dataset_dir / "berthing" / TEST_FILE
+
+
+def tiny_config(files, **sections) -> str:
+    """A hybrid that trains in seconds on one file; `sections` replace or add keys."""
+    doc = {"experiment": {"name": "'fuzz'", "model": "'hybrid'", "seed": "1"},
+           "data": {"files": json.dumps([str(files["train"])])},
+           "network": {"hidden": "[8]"},
+           "training": {"epochs": "1", "warm_start_epochs": "2", "batch_size": "64", "max_minutes": "1.0"},
+           "gate": {"k": "3", "space": "'inputs'"},
+           "evaluation": {"horizons": "[30.0]"}}
+    for name, keys in sections.items():
+        doc.setdefault(name, {}).update(keys)
+    return "".join(f"[{name}]\n" + "".join(f"{k} = {v}\n" for k, v in keys.items()) for name, keys in doc.items())

@@ -10,7 +10,7 @@ import pytest
 
 from cli_harness import Outcome, assert_refused, console_script, environment, leftovers, subprocess_run
 from sysid.store.manifest import verify_manifest
-from test_cli_fuzz_runs import tiny_config
+from tiny_experiment import tiny_config
 
 
 @pytest.fixture(scope="module")

@@ -130,7 +130,7 @@ def test_sweep_killed_part_way_resumes_without_training_a_trial_twice(tmp_path, 
 
 def test_shipped_sweep_files_are_valid():
     from pathlib import Path
-    root = Path(__file__).resolve().parents[1] / "configs" / "sweeps"
+    root = Path(__file__).resolve().parents[2] / "configs" / "sweeps"
     files = sorted(root.glob("*.toml"))
     assert files
     for path in files:

@@ -13,10 +13,9 @@ import torch
 
 from sysid import MMG, integrate, load_ship
 from sysid.cli import run as sysid
-from sysid.data.recordings import COLUMNS
-from sysid.mmg.wind import relative_wind
 
-from test_ship_check import SCRATCH
+from processed_runs import write_processed_csv
+from scratch_ship import SCRATCH
 
 TRUTH = {"Y_v": -0.36, "N_r": -0.055}  # the ship file says -0.315, -0.049
 
@@ -35,19 +34,6 @@ def _write_runs(ship_path, out_dir):
         states = integrate(model, x0, torch.tensor(inputs), 1.0, "rk4").numpy()
         paths.append(write_processed_csv(out_dir / f"{name}.csv", t, states, inputs))
     return paths
-
-
-def write_processed_csv(path, t, states, inputs):
-    """A processed run (the dataset's columns) from t (N,) [s], states (N, 6) and inputs
-    (N, 4); the relative wind computed from them. Returns `path`."""
-    rel = torch.stack(relative_wind(*(torch.tensor(c) for c in (states[:, 1], states[:, 3], states[:, 4],
-                                                                 inputs[:, 2], inputs[:, 3]))), -1).numpy()
-    values = {"t": t, "x": states[:, 0], "u": states[:, 1], "y": states[:, 2], "v": states[:, 3],
-              "psi": states[:, 4], "r": states[:, 5], "n_prop": inputs[:, 0], "delta_rudder": inputs[:, 1],
-              "wind_velo_relative": rel[:, 0], "wind_dir_relative": rel[:, 1],
-              "wind_velo_true": inputs[:, 2], "wind_dir_true": inputs[:, 3]}
-    pd.DataFrame({column: values[short] for column, short in COLUMNS.items()}).to_csv(path, index=False)
-    return path
 
 
 @pytest.mark.slow

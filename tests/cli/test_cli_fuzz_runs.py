@@ -11,6 +11,7 @@ import pytest
 import torch
 
 from cli_harness import BINARY, assert_refused, in_process, leftovers
+from tiny_experiment import tiny_config
 from sysid.store.manifest import MANIFEST, verify_manifest, write_manifest
 
 
@@ -24,19 +25,6 @@ def files(dataset_dir):
     berthing = dataset_dir / "berthing"
     return {"train": berthing / "berthing_12-Nov-2020_11_07_23.csv",
             "test": berthing / "berthing_12-Nov-2020_11_49_21.csv"}
-
-
-def tiny_config(files, **sections) -> str:
-    """A hybrid that trains in seconds on one file; `sections` replace or add keys."""
-    doc = {"experiment": {"name": "'fuzz'", "model": "'hybrid'", "seed": "1"},
-           "data": {"files": json.dumps([str(files["train"])])},
-           "network": {"hidden": "[8]"},
-           "training": {"epochs": "1", "warm_start_epochs": "2", "batch_size": "64", "max_minutes": "1.0"},
-           "gate": {"k": "3", "space": "'inputs'"},
-           "evaluation": {"horizons": "[30.0]"}}
-    for name, keys in sections.items():
-        doc.setdefault(name, {}).update(keys)
-    return "".join(f"[{name}]\n" + "".join(f"{k} = {v}\n" for k, v in keys.items()) for name, keys in doc.items())
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,5 @@
 """Hybrid identification: penalty, kNN gate, run artefacts, training on a synthetic ship
 with a known added force (ground truth)."""
-import math
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +12,6 @@ from sysid.data.recordings import Run
 from sysid.errors import CheckpointError, ConfigError, IncompleteOutputError
 from sysid.store.manifest import write_manifest
 from sysid.config.experiment import load_experiment, parse_experiment
-from sysid.hybrid.force_models import CorrectedModel
 from sysid.hybrid.knn_gate import KNNGate
 from sysid.evaluation.evaluate import evaluate_model
 from sysid.runs.rundir import load_model, write_run
@@ -180,7 +178,7 @@ def test_bad_configs_give_one_clear_error(tmp_path, text, message):
 
 
 def test_paper_configs_are_valid():
-    root = Path(__file__).resolve().parents[1] / "configs" / "experiments"
+    root = Path(__file__).resolve().parents[2] / "configs" / "experiments"
     names = {p.stem for p in root.glob("*.toml")}
     assert {"mmg_paper", "mmg_lab", "nn_D1", "nn_D2", "hybrid_D1", "hybrid_D2"} <= names
     for path in root.glob("*.toml"):

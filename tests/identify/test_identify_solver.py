@@ -18,11 +18,11 @@ from sysid.config.experiment import load_experiment, parse_experiment
 from sysid.report.methods import estimator_text
 from sysid.runs.rundir import load_model
 
-from test_own_ship_end_to_end import write_processed_csv
+from processed_runs import write_processed_csv
 
 NAMES = ["Y_v", "Y_r", "N_v", "N_r"]
 ESSO_PARAMETERS = ["X_vr", "Y_v", "Y_r", "N_v", "N_r"]
-EXAMPLE = Path(__file__).resolve().parents[1] / "configs" / "experiments" / "own_ship_identified.toml"
+EXAMPLE = Path(__file__).resolve().parents[2] / "configs" / "experiments" / "own_ship_identified.toml"
 ESSO_LM = EXAMPLE.with_name("mmg_identified_lm_D2.toml")
 
 
