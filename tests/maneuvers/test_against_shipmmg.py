@@ -19,17 +19,14 @@ overshoot of the 10/10 differs from this one by 12 %, so it is not the reference
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 pytest.importorskip("shipmmg.mmg_3dof", reason="shipmmg not installed (a dev extra: pip install -e '.[dev]')")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import shipmmg.mmg_3dof as shipmmg  # noqa: E402
 
-from test_shipmmg_kvlcc2 import NPS, U0, _ship_like_shipmmg, _shipmmg_params  # noqa: E402
+from shipmmg_kvlcc2 import NPS, U0, ship_like_shipmmg, shipmmg_params  # noqa: E402
 
 from sysid import MMG  # noqa: E402
 from sysid.maneuvers import Conditions, Side, TurningCircle, ZigZag, simulate_maneuvers  # noqa: E402
@@ -44,7 +41,7 @@ def _legs(ship, rudder_deg: float, check_deg: float | None, side: float) -> tupl
     """(t (T,), states (T, 6) x u y v psi r, rudder (T,) [rad]) of shipmmg under the
     rate-limited rudder, reversed on the grid when the heading reaches the check angle
     (never for `check_deg` None)."""
-    basic, man = _shipmmg_params(ship)
+    basic, man = shipmmg_params(ship)
     t = np.arange(int(round(DURATION / DT)) + 1) * DT
     states, rudder = np.zeros((len(t), 6)), np.zeros(len(t))
     start, order, angle = 0, side, 0.0
@@ -74,7 +71,7 @@ def _legs(ship, rudder_deg: float, check_deg: float | None, side: float) -> tupl
 
 @pytest.fixture(scope="module")
 def ship(tmp_path_factory):
-    return _ship_like_shipmmg(tmp_path_factory.mktemp("kvlcc2"), x_G=0.0)
+    return ship_like_shipmmg(tmp_path_factory.mktemp("kvlcc2"), x_G=0.0)
 
 
 @pytest.fixture(scope="module")

@@ -5,17 +5,15 @@ from __future__ import annotations
 
 import json
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from cli_harness import assert_refused, in_process  # noqa: E402
 
 from sysid.maneuvers import INDEX_COLUMNS  # noqa: E402
+from sysid.mmg.ship import ships_dir  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +76,7 @@ def test_bad_options_are_one_clear_line_and_nothing_written(tmp_path, capsys, ar
 
 
 def test_missing_approach_speed_names_the_ship_file_and_the_fix(tmp_path, capsys):
-    text = Path("configs/ships/kvlcc2_l7.toml").read_text().replace("approach_speed = 1.17248", "")
+    text = (ships_dir() / "kvlcc2_l7.toml").read_text().replace("approach_speed = 1.17248", "")
     ship = tmp_path / "ship.toml"
     ship.write_text(text)
     outcome = in_process(capsys, "maneuver", ship, "-o", tmp_path / "out", "--eager")

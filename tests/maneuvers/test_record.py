@@ -4,14 +4,11 @@ the reproduction's report shows that table."""
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from synthetic_rundir import write_reproduction  # noqa: E402
 
 from sysid import MMG, load_ship  # noqa: E402
