@@ -6,13 +6,14 @@ its start) and takes one step of the integration rule (`sysid.dynamics.integrato
 the model's right-hand side (`sysid.fast.stepper.Derivative`). `ClosedLoopRollout` runs up
 to `CAPACITY` such steps in one `while_loop`, writing each step's state, controller state
 and inputs into a record in place (as `sysid.fast.stepper.Rollout` does for recorded
-inputs); the step dt, the start time and the maneuver's parameters are inputs, so one
+inputs, and the kNN gate's decision at its start); the step dt, the start time and the maneuver's parameters are inputs, so one
 compiled package serves every maneuver, dt and duration of a model.
 """
 from __future__ import annotations
 
 import functools
 import hashlib
+import math
 import sys
 from pathlib import Path
 from typing import Callable
@@ -28,13 +29,14 @@ from sysid.fast.stepper import Derivative
 from sysid.maneuvers.controllers import COLUMNS, ManeuverOrders
 
 CAPACITY = 512  # steps per call of the compiled loop
-RECORD = 6 + 2 + 4  # per step: state after it, controller state after it, inputs held over it
+RECORD = 6 + 2 + 4 + 1  # per step: state after it, controller state after it, inputs held over it, gate on
 _compiled: dict[str, Callable | None] = {}
 
 
 class ClosedLoopStep(nn.Module):
     """``forward(state (B, 6), orders (B, 2), parameters (B, P), t (), dt ())`` -> (state
-    after the step (B, 6), orders after it (B, 2), inputs held over it (B, 4))."""
+    after the step (B, 6), orders after it (B, 2), inputs held over it (B, 4), the kNN
+    gate's decision at the step's start (B, 1): 1 on, 0 off, NaN for a model without a gate)."""
 
     def __init__(self, force_model: nn.Module, method: Method | str):
         super().__init__()
@@ -45,7 +47,10 @@ class ClosedLoopStep(nn.Module):
     def forward(self, state, orders, parameters, t, dt):
         inputs, after = self.orders(state, orders, parameters, t, dt)
         following = STEP_RULES[self.method](lambda x: self.derivative(x, inputs), state, dt)
-        return following, after, inputs
+        decide = getattr(self.derivative.force_model, "gate_decision", None)
+        on = decide(state, inputs) if decide is not None else None
+        gate = torch.full_like(state[:, :1], math.nan) if on is None else on.to(state.dtype)[:, None]
+        return following, after, inputs, gate
 
 
 class ClosedLoopRollout(nn.Module):
@@ -71,8 +76,8 @@ class ClosedLoopRollout(nn.Module):
             return k < steps
 
         def advance(k, x, o):
-            x, o, u = self.step(x, o, parameters, t0 + k.to(x.dtype) * dt, dt)
-            record.index_copy_(0, k.reshape(1), torch.cat((x, o, u), -1)[None])  # in place, as in Rollout
+            x, o, u, g = self.step(x, o, parameters, t0 + k.to(x.dtype) * dt, dt)
+            record.index_copy_(0, k.reshape(1), torch.cat((x, o, u, g), -1)[None])  # in place, as in Rollout
             return k + 1, x, o
 
         last = while_loop(more, advance, (k0, x0, orders0))[1]
@@ -98,8 +103,8 @@ def run_eager(model: nn.Module, x0: torch.Tensor, orders0: torch.Tensor, paramet
     x, o = x0, orders0
     with torch.no_grad():
         for k in range(steps):
-            x, o, u = step(x, o, parameters, dt_t * k, dt_t)
-            out[k] = torch.cat((x, o, u), -1)
+            x, o, u, g = step(x, o, parameters, dt_t * k, dt_t)
+            out[k] = torch.cat((x, o, u, g), -1)
     return out
 
 

@@ -103,9 +103,10 @@ def gate_off_share(model: nn.Module, states: torch.Tensor, inputs: torch.Tensor)
     return off / total if total else None
 
 
-def _results(model: nn.Module, maneuvers: Sequence[Maneuver], conditions: Conditions, x0: torch.Tensor,
-             record: torch.Tensor, label: str) -> list[ManeuverResult]:
-    """`ManeuverResult`s from a record (steps, B, `RECORD`) of closed-loop steps from x0 (B, 6)."""
+def _results(maneuvers: Sequence[Maneuver], conditions: Conditions, x0: torch.Tensor, record: torch.Tensor,
+             label: str) -> list[ManeuverResult]:
+    """`ManeuverResult`s from a record (steps, B, `RECORD`) of closed-loop steps from x0 (B, 6);
+    the kNN gate's off share is over the steps' start states."""
     steps = record.shape[0]
     states = torch.cat((x0[None], record[..., :6]))
     rudder = torch.cat((torch.zeros_like(x0[None, :, 0]), record[..., 6]))
@@ -115,7 +116,8 @@ def _results(model: nn.Module, maneuvers: Sequence[Maneuver], conditions: Condit
     for b, maneuver in enumerate(maneuvers):
         s, r, u = states[:, b].numpy(), rudder[:, b].numpy(), held[:, b].numpy()
         indices = maneuver_indices(maneuver, Track.of(t, s), r)
-        share = gate_off_share(model, states[:-1, b], held[:-1, b])
+        on = record[:, b, 12]
+        share = None if torch.isnan(on).any() else float((on < 0.5).double().mean())
         out.append(ManeuverResult(maneuver, t, s, r, u, indices, share, label))
     return out
 
@@ -148,7 +150,7 @@ def simulate_maneuvers(model: nn.Module, maneuvers: Sequence[Maneuver], conditio
     else:
         record = torch.cat([run_compiled(loop, x0[b:b + 1], orders[b:b + 1], parameters[b:b + 1], conditions.steps,
                                          conditions.dt) for b in range(len(maneuvers))], 1)
-    return _results(model, maneuvers, conditions, x0, record, label)
+    return _results(maneuvers, conditions, x0, record, label)
 
 
 def run_maneuvers(subject: ManeuverModel, maneuvers: Sequence[Maneuver], conditions: Conditions, *,

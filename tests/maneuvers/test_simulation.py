@@ -19,6 +19,7 @@ from sysid.maneuvers import (Conditions, CrashStop, ManeuverError, ManeuverModel
                              default_conditions, run_maneuvers, simulate_maneuvers, straight_running_rps)
 from sysid.maneuvers.controllers import rate_limited
 from sysid.maneuvers.outputs import indices_table
+from sysid.maneuvers.simulate import gate_off_share
 from sysid.maneuvers.straight import surge_acceleration
 from sysid.mmg.wind import relative_wind
 
@@ -84,6 +85,8 @@ def test_gate_share_says_a_maneuver_runs_outside_the_training_data():
     np.testing.assert_allclose(ours.states, theirs.states, rtol=0, atol=1e-12)  # F_NN = 0: the MMG's motion
     assert theirs.gate_off_share is None
     assert ours.gate_off_share > 0.9  # the turn leaves straight running within seconds
+    scan = gate_off_share(hybrid, torch.tensor(ours.states[:-1]), torch.tensor(ours.inputs[:-1]))
+    assert ours.gate_off_share == scan  # the loop's decisions are the gate's own scan's
     row = indices_table([ours], float(ship["L_pp"]), U0, None).iloc[0]
     assert bool(row["mostly_outside"]) and row["gate_off_share"] == ours.gate_off_share
 
