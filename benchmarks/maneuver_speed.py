@@ -41,7 +41,6 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     if args.cold:
         os.environ["SYSID_CACHE"] = tempfile.mkdtemp(prefix="sysid-cache-")
-    os.environ.setdefault("SYSID_COMPILE", "1")
 
     from sysid.maneuvers import (CrashStop, TurningCircle, ZigZag, default_conditions, load_maneuver_model,
                                  simulate_maneuvers)
@@ -54,7 +53,10 @@ def main() -> None:
           f"({sources['rps']}), {conditions.duration:g} s at dt {conditions.dt:g} s = {conditions.steps} RK4 steps, "
           f"{args.threads} thread(s), torch {torch.__version__}")
 
+    from sysid.maneuvers.closed_loop import compiled_loop
     start = time.perf_counter()
+    if compiled_loop(subject.model, conditions.method) is None:
+        raise SystemExit("the compiled loop is unavailable (SYSID_COMPILE=0, or no C++ compiler): nothing to time")
     simulate_maneuvers(subject.model, maneuvers[:1], conditions, compiled=True)
     print(f"compiled loop {'compiled' if args.cold else 'compiled or loaded from the cache'} and first maneuver: "
           f"{time.perf_counter() - start:.1f} s (once per model and rule)")
