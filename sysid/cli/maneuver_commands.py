@@ -90,9 +90,9 @@ def maneuver(
                                            "NN-only, hybrid, ensemble) or folder of seed run directories."),
     output: Path = typer.Option(..., "-o", "--output", help="Directory to write (indices.csv, criteria.csv, "
                                                              "trajectories.csv, summary.json, report.html/.pdf)."),
-    turning: Optional[List[str]] = typer.Option(None, "--turning", help="Turning circle, rudder angle [deg] (several)."),
-    zigzag: Optional[List[str]] = typer.Option(None, "--zigzag", help="Zig-zag RUDDER/CHECK [deg], e.g. 10/10 (several)."),
-    crash_stop: bool = typer.Option(False, "--crash-stop", help="Crash stop: full astern (minus the approach revolutions)."),
+    turning: Optional[List[str]] = typer.Option(None, "--turning", help="Turning circle, rudder [deg] (several)."),
+    zigzag: Optional[List[str]] = typer.Option(None, "--zigzag", help="Zig-zag RUDDER/CHECK [deg], e.g. 10/10."),
+    crash_stop: bool = typer.Option(False, "--crash-stop", help="Crash stop: minus the approach revolutions."),
     side: str = typer.Option("both", "--side", help="Side of the first rudder order: port, starboard or both."),
     speed: Optional[float] = typer.Option(None, "--speed", help="Approach speed U0 [m/s] (default: the ship file's)."),
     rps: Optional[float] = typer.Option(None, "--rps", help="Propeller revolutions [rps] (default: those holding U0)."),
@@ -100,7 +100,7 @@ def maneuver(
                                                 "file's, or 2.32 deg/s at full scale Froude-scaled)."),
     dt: float = typer.Option(0.1, "--dt", help="Integration step [s]."),
     duration: Optional[float] = typer.Option(None, "--duration", help="Time after the execute [s] (default: 80 L/U0)."),
-    wind: Optional[str] = typer.Option(None, "--wind", help="True wind SPEED,DIRECTION [m/s, deg from] (default: calm)."),
+    wind: Optional[str] = typer.Option(None, "--wind", help="True wind SPEED,DIRECTION [m/s, deg from]; calm."),
     integrator: str = typer.Option("rk4", "--integrator", help="rk4 (classical) or euler."),
     compiled: bool = typer.Option(True, "--compiled/--eager", help="Compiled loop (compiled once per model, cached) "
                                                                    "or the eager step."),

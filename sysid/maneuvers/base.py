@@ -17,6 +17,7 @@ import numpy as np
 
 from sysid.dynamics.integrators import Method
 from sysid.errors import SysidError
+from sysid.maneuvers.indices import ManeuverIndices
 
 
 class ManeuverError(SysidError):
@@ -194,7 +195,7 @@ class ManeuverResult:
     states: np.ndarray
     rudder: np.ndarray
     inputs: np.ndarray
-    indices: "object" = None
+    indices: ManeuverIndices | None = None
     gate_off_share: float | None = None
     model: str = ""
     members: list["ManeuverResult"] = field(default_factory=list)

@@ -5,9 +5,10 @@ compiled loop (cached on disk, compiled once per model and integration rule).
 its start) and takes one step of the integration rule (`sysid.dynamics.integrators`) on
 the model's right-hand side (`sysid.fast.stepper.Derivative`). `ClosedLoopRollout` runs up
 to `CAPACITY` such steps in one `while_loop`, writing each step's state, controller state
-and inputs into a record in place (as `sysid.fast.stepper.Rollout` does for recorded
-inputs, and the kNN gate's decision at its start); the step dt, the start time and the maneuver's parameters are inputs, so one
-compiled package serves every maneuver, dt and duration of a model.
+and inputs, and the kNN gate's decision at its start, into a record in place (as
+`sysid.fast.stepper.Rollout` does for recorded inputs); the step dt, the start time and the
+maneuver's parameters are inputs, so one compiled package serves every maneuver, dt and
+duration of a model.
 """
 from __future__ import annotations
 

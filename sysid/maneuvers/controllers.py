@@ -85,8 +85,9 @@ class ManeuverOrders(nn.Module):
         side = torch.where(reverse, -side, side)
         mean, end = rate_limited(angle, side * p[:, RUDDER], p[:, RATE] * dt)
         reversal = p[:, REVERSAL]
-        ramp = torch.where(reversal > 0, ((t + 0.5 * dt) / torch.where(reversal > 0, reversal, torch.ones_like(reversal)))
-                           .clamp(0.0, 1.0), torch.ones_like(reversal))
+        ramping = reversal > 0
+        share = ((t + 0.5 * dt) / torch.where(ramping, reversal, torch.ones_like(reversal))).clamp(0.0, 1.0)
+        ramp = torch.where(ramping, share, torch.ones_like(reversal))  # at mid-step: the mean over a linear ramp
         rps = p[:, RPS_AHEAD] + ramp * (p[:, RPS_ORDER] - p[:, RPS_AHEAD])
         inputs = torch.stack((rps, mean, p[:, WIND_SPEED], p[:, WIND_DIRECTION]), -1)
         return inputs, torch.stack((end, side), -1)

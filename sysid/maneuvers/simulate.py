@@ -56,7 +56,7 @@ def default_conditions(model: nn.Module, ship: Ship, *, speed: float | None = No
     sources = {}
     if speed is None:
         if "approach_speed" not in ship.maneuvering:
-            raise ManeuverError(f"{ship.source or ship.name}: no approach speed: give --speed, or "
+            raise ManeuverError(f"{ship.source or ship.name}: no approach speed: give --speed (speed= in Python), or "
                                 "approach_speed [m/s] in the ship file's [maneuvering] table")
         speed, sources["speed"] = float(ship.maneuvering["approach_speed"]), "ship file [maneuvering] approach_speed"
     else:
@@ -65,7 +65,8 @@ def default_conditions(model: nn.Module, ship: Ship, *, speed: float | None = No
     check_number("wind speed", wind_speed, "m/s", low=0.0)
     check_number("wind direction", wind_direction, "rad")
     if rps is None:
-        rps, sources["rps"] = straight_running_rps(model, speed, wind_speed, wind_direction), "straight running of the model"
+        rps = straight_running_rps(model, speed, wind_speed, wind_direction)
+        sources["rps"] = "straight running of the model"
     else:
         sources["rps"] = "given"
     if rudder_rate is None:

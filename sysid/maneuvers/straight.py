@@ -30,7 +30,8 @@ def surge_acceleration(model: nn.Module, speed: float, rps: np.ndarray, wind_spe
     n = torch.as_tensor(np.atleast_1d(rps), dtype=dtype)
     state = torch.zeros(len(n), 6, dtype=dtype)
     state[:, 1] = speed
-    inputs = torch.stack((n, torch.zeros_like(n), torch.full_like(n, wind_speed), torch.full_like(n, wind_direction)), -1)
+    wind = (torch.full_like(n, wind_speed), torch.full_like(n, wind_direction))
+    inputs = torch.stack((n, torch.zeros_like(n), *wind), -1)
     with torch.no_grad():
         return derivative(model, state, inputs)[:, 1].double().numpy()
 

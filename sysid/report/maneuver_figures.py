@@ -27,18 +27,23 @@ def _by_maneuver(frame: pd.DataFrame, main: str) -> list[tuple[str, pd.DataFrame
     return out
 
 
-def tracks(frame: pd.DataFrame, main: str, L: float, B: float, title: str, into: FigureBase | None = None) -> FigureBase:
+def _kind(name: str) -> str:
+    """turning, zigzag or crash (from a maneuver's name)."""
+    return "crash" if name.startswith("crash") else name.split("_")[0]
+
+
+def tracks(frame: pd.DataFrame, main: str, L: float, B: float, title: str,
+           into: FigureBase | None = None) -> FigureBase:
     """Earth-frame tracks (x0 north up, y0 east right [m]) of every maneuver, one panel per
     kind, the hull outline at `OUTLINES` instants; members (ensemble, seeds) as thin lines."""
     groups = _by_maneuver(frame, main)
-    kinds = list(dict.fromkeys(name.split("_")[0] if not name.startswith("crash") else "crash" for name, _, _ in groups))
+    kinds = list(dict.fromkeys(_kind(name) for name, _, _ in groups))
     fig = _canvas(into, (10.0, 5.2))
     axes = np.atleast_1d(fig.subplots(1, len(kinds)))
     outline = ship_outline(L, B)
     handles = []
     for i, (name, own, members) in enumerate(groups):
-        kind = name.split("_")[0] if not name.startswith("crash") else "crash"
-        ax = axes[kinds.index(kind)]
+        ax = axes[kinds.index(_kind(name))]
         colour = COLOURS[i % len(COLOURS)]
         for m in members:
             ax.plot(m["y"], m["x"], color=colour, lw=0.5, alpha=0.35)

@@ -86,13 +86,14 @@ def build_maneuver_report(source_dir: str | os.PathLike, out_dir: str | os.PathL
     for name in indices["maneuver"]:
         if name.startswith("zigzag"):
             checks[name] = float(name.split("_")[2])
-    specs = [("tracks", "Tracks", f"Midship tracks of every maneuver from the execute at the origin, approach along "
-              f"x0; members of the ensemble or seeds as thin lines",
+    specs = [("tracks", "Tracks", "Midship tracks of every maneuver from the execute at the origin, approach along "
+              "x0; members of the ensemble or seeds as thin lines",
               partial(MF.tracks, traj, main, L, B, f"Tracks of {main}"))]
-    for kind, words in (("turning", "turning circles"), ("zigzag", "zig-zags")):
+    for kind, words, extra in (("turning", "turning circles", "speed U [m/s] on the right axis"),
+                               ("zigzag", "zig-zags", "dashed: check angles")):
         if indices["maneuver"].str.startswith(kind).any():
-            specs.append((kind, f"Heading and rudder, {words}", f"Heading change and rudder angle over time from the "
-                          f"execute{'; speed U [m/s] on the right axis' if kind == 'turning' else '; dashed: check angles'}",
+            specs.append((kind, f"Heading and rudder, {words}",
+                          f"Heading change and rudder angle over time from the execute; {extra}",
                           partial(MF.heading_rudder, traj, main, kind, checks if kind == "zigzag" else {},
                                   f"Heading and rudder, {words} of {main}")))
     if (indices["maneuver"] == "crash_stop").any():
@@ -125,6 +126,7 @@ def build_maneuver_report(source_dir: str | os.PathLike, out_dir: str | os.PathL
         pdf.close()
     html = _ENV.get_template("maneuvers.html.j2").render(
         title=title, subtitle=f"Standard maneuvers (IMO MSC.137(76)) - built {built}", summary=items,
-        warnings=warnings, plain_tables=tables, figures=figures, version=sysid.__version__, source=str(source), built=built)
+        warnings=warnings, plain_tables=tables, figures=figures, version=sysid.__version__, source=str(source),
+        built=built)
     html_path = write_text(html, out / "report.html")
     return ReportPaths(html_path, out / "report.pdf", len(figures), pages, [], time.perf_counter() - started)

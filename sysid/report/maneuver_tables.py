@@ -28,7 +28,8 @@ def indices_plain_table(indices: pd.DataFrame) -> PlainTable:
         mark = [""] * len(cells)
         if gate:
             share = d["gate_off_share"]
-            cells.append("" if pd.isna(share) else f"{100 * share:.0f} %" + (" (mostly outside)" if share > 0.5 else ""))
+            outside = " (mostly outside)" if share > 0.5 else ""
+            cells.append("" if pd.isna(share) else f"{100 * share:.0f} %{outside}")
             mark.append("not-met" if not pd.isna(share) and share > 0.5 else "")
         rows.append(cells)
         marks.append(mark)

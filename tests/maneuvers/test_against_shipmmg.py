@@ -76,7 +76,8 @@ def ship(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def ours(ship):
-    maneuvers = [TurningCircle(35.0, Side.STARBOARD), TurningCircle(35.0, Side.PORT), ZigZag(10.0, 10.0), ZigZag(20.0, 20.0)]
+    maneuvers = [TurningCircle(35.0, Side.STARBOARD), TurningCircle(35.0, Side.PORT), ZigZag(10.0, 10.0),
+                 ZigZag(20.0, 20.0)]
     results = simulate_maneuvers(MMG(ship), maneuvers, Conditions(U0, NPS, RATE, DT, DURATION))
     return {r.maneuver.name: r for r in results}
 

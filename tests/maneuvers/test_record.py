@@ -18,7 +18,8 @@ from sysid.report import build_report  # noqa: E402
 from sysid.store.manifest import write_manifest  # noqa: E402
 
 # the dataset README's table: file -> (n [rps], rudder [deg]); zig-zags +-A
-README = {"Turning 20": ("turn_14-Oct-2020_14_56_07", 10.0, -20.0), "Turning 35": ("turn_14-Sep-2020_14_50_41", 8.0, 35.0),
+README = {"Turning 20": ("turn_14-Oct-2020_14_56_07", 10.0, -20.0),
+          "Turning 35": ("turn_14-Sep-2020_14_50_41", 8.0, 35.0),
           "Zigzag 20/20": ("zigzag_31-Jul-2020_13_04_24", 16.67, 20.0),
           "Zigzag 30/30": ("zigzag_31-Jul-2020_13_14_21", 16.67, 30.0)}
 
