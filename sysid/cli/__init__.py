@@ -7,9 +7,11 @@ from __future__ import annotations
 import sys
 
 import typer
+import typer.main
 
-from sysid.errors import OutputError, SysidError
+from sysid.errors import SysidError
 from sysid.cli.interrupts import interrupt_note
+from sysid.cli.outputs import release
 
 from sysid.cli.app import app  # noqa: E402
 
@@ -19,6 +21,7 @@ from sysid.cli import report_commands  # noqa: E402,F401
 from sysid.cli import preprocess_commands  # noqa: E402,F401
 from sysid.cli import train_commands  # noqa: E402,F401
 from sysid.cli import ship_commands  # noqa: E402,F401
+from sysid.cli import init_commands  # noqa: E402,F401
 from sysid.cli import export_commands  # noqa: E402,F401
 from sysid.cli import sweep_commands  # noqa: E402,F401
 from sysid.cli import maneuver_commands  # noqa: E402,F401
@@ -44,13 +47,39 @@ def expand_multi_value(argv: list[str]) -> list[str]:
     return out
 
 
+COMMON_OPTIONS = ("-v", "-vv", "-vvv", "--verbose", "-q", "--quiet")
+
+
+def common_options_first(argv: list[str]) -> list[str]:
+    """``sysid train CFG -v`` to ``sysid -v train CFG``: the options every command takes
+    (`sysid.cli.app.common_options`) belong to the application, wherever they are written
+    (up to a ``--``)."""
+    end = argv.index("--") if "--" in argv else len(argv)
+    common = [a for a in argv[:end] if a in COMMON_OPTIONS]
+    return common + [a for a in argv[:end] if a not in COMMON_OPTIONS] + argv[end:]
+
+
+def _with_epilog(command) -> None:
+    """Every command's help ends by naming the options every command takes."""
+    from sysid.cli.app import EPILOG
+    for sub in getattr(command, "commands", {}).values():
+        sub.epilog = sub.epilog or EPILOG
+        _with_epilog(sub)
+
+
 INTERRUPTED = 130  # the shell's code for a job stopped by Ctrl-C (128 + SIGINT)
 
 
 def run(argv: list[str]) -> None:
     """Run a subcommand; `SysidError` and `KeyboardInterrupt` propagate (for tests and
     embedding)."""
-    code = app(args=expand_multi_value(list(argv)), standalone_mode=False)
+    command = typer.main.get_command(app)
+    _with_epilog(command)
+    try:
+        code = command(args=common_options_first(expand_multi_value(list(argv))), prog_name="sysid",
+                       standalone_mode=False)
+    finally:
+        release()  # the output locks the command took
     # typer >= 0.29 turns Ctrl-C into Exit(130) and, outside standalone mode, returns the code
     if code == INTERRUPTED:
         raise KeyboardInterrupt
@@ -73,9 +102,11 @@ def _is_abort(exc: BaseException) -> bool:
 def main(argv: list[str] | None = None) -> None:
     """Console entry point: one clear line on bad input, no traceback.
 
-    Exit codes: 0 success; 2 usage error or bad input (file and field named); 1 an output
-    problem (`OutputError`, an unwritable path) or an unexpected error; 130 interrupted (Ctrl-C). ``--traceback`` shows the
-    Python traceback of an unexpected error.
+    Exit codes: 0 success; 2 usage error, bad input (file and field named) or a refused
+    output (`OutputError`: an input, a sealed or foreign directory, a link, an unwritable
+    path, another sysid writing it); 1 a failure while writing (`OSError`) or an unexpected
+    error; 130 interrupted (Ctrl-C). ``--traceback`` shows the Python traceback of an
+    unexpected error.
     """
     args = list(sys.argv[1:] if argv is None else argv)
     show_traceback = TRACEBACK_FLAG in args
@@ -84,7 +115,7 @@ def main(argv: list[str] | None = None) -> None:
         run(args)
     except SysidError as exc:
         typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
-        sys.exit(1 if isinstance(exc, OutputError) else 2)
+        sys.exit(2)
     except (typer.Exit, SystemExit) as exc:
         code = getattr(exc, "exit_code", getattr(exc, "code", 0))
         sys.exit(code or 0)

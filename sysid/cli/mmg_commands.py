@@ -9,6 +9,8 @@ from typing import List, Optional
 import typer
 
 from sysid.cli.app import app
+from sysid.cli.outputs import claim, ship_file
+from sysid.store.target import OutputKind
 from sysid.errors import DataError
 from sysid.state import FORCE, INPUTS, STATE, force_column
 
@@ -29,11 +31,15 @@ def _check_positive(option: str, value: float, unit: str) -> None:
         raise DataError(f"{option} {value:g}: must be a finite number > 0 [{unit}]")
 
 
-def _check_integrator(integrator: str) -> None:
-    from sysid.dynamics.equations import INTEGRATORS
+def _integrator(name: str, compiled: bool):
+    """The `Integrator` an ``--integrator`` (and ``--compiled``) option names; exit 2 otherwise."""
+    from sysid.config.choices import Method
+    from sysid.dynamics.integrators import Integrator
 
-    if integrator not in INTEGRATORS:
-        raise DataError(f"--integrator {integrator!r}: choose one of {', '.join(INTEGRATORS)}")
+    try:
+        return Integrator(Method.parse(name, "--integrator", offered_only=True), compiled)
+    except ValueError as exc:
+        raise DataError(str(exc)) from None
 
 
 def _model(ship: str, overrides: Optional[List[str]], quadrature: str):
@@ -115,6 +121,7 @@ def forces(
     if chunk < 1:
         raise DataError(f"--chunk {chunk}: rows per batch must be >= 1")
     model = _model(ship, set_, quadrature)
+    claim(output, OutputKind.FILE, [input_csv, ship_file(ship)])
     numeric = _read_force_inputs(input_csv)
     parts = []
     bounds = range(0, len(numeric), chunk)
@@ -163,14 +170,14 @@ def simulate(
     from sysid.fast.compiled import predict
     from sysid.data.recordings import read_run
     from sysid.store.files import write_csv
-    from sysid.dynamics.integrators import Integrator
 
-    _check_integrator(integrator)
+    chosen = _integrator(integrator, compiled)
     _check_positive("--rate", rate, "Hz")
     _check_positive("--horizon", horizon, "s")
     if not math.isfinite(start):
         raise DataError(f"--start {start}: must be a finite time [s]")
     model = _model(ship, set_, quadrature)
+    claim(output, OutputKind.FILE, [log, ship_file(ship)])
     run = read_run(log, rate)
     i0 = int(np.argmin(np.abs(run.t - start)))
     if abs(run.t[i0] - start) > 0.5 * run.dt:
@@ -183,7 +190,7 @@ def simulate(
     x0 = torch.as_tensor(run.states[i0], dtype=torch.float64)
     inputs = torch.as_tensor(run.inputs[sl], dtype=torch.float64)
     with torch.no_grad():
-        pred = predict(model, x0, inputs, run.dt, Integrator(integrator, compiled))
+        pred = predict(model, x0, inputs, run.dt, chosen)
         forces = model(pred, inputs)
     out = pd.DataFrame({"t": run.t[sl], "t_rel": run.t[sl] - run.t[i0]})
     for j, name in enumerate(STATE):
@@ -198,7 +205,7 @@ def simulate(
         out[f"obs_{name}"] = run.states[sl, j]
     write_csv(out, output, float_format="%.17g")
     err = np.sqrt(((out[["u", "v", "r"]].to_numpy() - out[["obs_u", "obs_v", "obs_r"]].to_numpy()) ** 2).mean(0))
-    typer.echo(f"simulate: {run.name} from t = {run.t[i0]:.1f} s, {steps} {integrator} steps of {run.dt:g} s -> {output}\n"
+    typer.echo(f"simulate: {run.name} from t = {run.t[i0]:.1f} s, {steps} {chosen.method} steps of {run.dt:g} s -> {output}\n"
                f"  RMSE vs record: u {err[0]:.4f} m/s, v_m {err[1]:.4f} m/s, r {err[2]:.4f} rad/s")
 
 
@@ -220,13 +227,13 @@ def evaluate(
     from sysid.data.recordings import expand_paths, read_run
     from sysid.evaluation.evaluate import evaluate_model
     from sysid.store.files import write_csv
-    from sysid.dynamics.integrators import Integrator
     from sysid.progress import progress
 
-    _check_integrator(integrator)
+    chosen = _integrator(integrator, compiled)
     for h in horizon:
         _check_positive("--horizon", h, "s")
     start = time.perf_counter()
+    claim(output, OutputKind.FILE, [run_dir, *data, None if run_dir is not None else ship_file(ship)])
     if run_dir is not None:
         from sysid.runs.rundir import load_model
         exp, model = load_model(run_dir)
@@ -239,7 +246,7 @@ def evaluate(
         label = f"MMG ({model.ship.name}, overrides: {overrides})"
     files = expand_paths(data)
     runs = [read_run(f) for f in progress(files, desc="reading", unit="files", quiet=len(files) < 4)]
-    table = evaluate_model(model, runs, horizon, Integrator(integrator, compiled), traces=False).metrics
+    table = evaluate_model(model, runs, horizon, chosen, traces=False).metrics
     empty = [h for h in horizon if not table[table.horizon_s == h].n_windows.sum()]
     if empty:
         longest = max(r.duration for r in runs)

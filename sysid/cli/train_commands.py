@@ -7,8 +7,11 @@ from typing import List, Optional
 
 import typer
 
+from sysid import logs
 from sysid.cli.app import app
 from sysid.cli.interrupts import on_interrupt
+from sysid.cli.outputs import claim, experiment_inputs
+from sysid.store.target import OutputKind
 
 
 @app.command()
@@ -27,13 +30,11 @@ def train(
     The run directory is moved into place only when complete (with a manifest); an
     interrupted training leaves no run, only its checkpoint for --resume.
     """
-    from sysid.cli.interrupts import on_interrupt
     from sysid.data.recordings import expand_paths, read_run
     from sysid.data.datasets import test_files
     from sysid.errors import ConfigError
     from sysid.config.experiment import load_experiment
     from sysid.runs.lifecycle import checkpoint_path, run_experiment, training_runs
-    from sysid.store.staging import check_target
 
     start = time.perf_counter()
     if epochs is not None and epochs < 0:
@@ -43,18 +44,19 @@ def train(
         exp = exp.replace(training={"epochs": epochs})
     if threads is not None:
         exp = exp.replace(training={"threads": threads})
-    check_target(output, overwrite)  # a bad -o fails now, not after training
+    test_inputs = test or list(test_files(data).values())
+    # a bad -o fails now, not after training
+    claim(output, OutputKind.RUN, [config, *experiment_inputs(exp, data), *test_inputs], overwrite)
     checkpoint = checkpoint_path(output)
     on_interrupt(lambda: f"nothing written to {output}" + (
         f"; the training checkpoint {checkpoint} is kept: rerun with --resume to continue"
         if checkpoint.is_file() else ""))
     runs = training_runs(exp, data) if exp.needs_training else None
     if runs is not None:
-        typer.echo(f"train: {exp.experiment.model} model on {len(runs)} file(s) "
+        logs.info(f"train: {exp.experiment.model} model on {len(runs)} file(s) "
                    f"({sum(r.duration for r in runs):.0f} s of data), seed {exp.experiment.seed}")
-    test_paths = expand_paths(test) if test else list(test_files(data).values())
-    tests = [read_run(p) for p in test_paths]
-    result = run_experiment(exp, output, tests, runs, data, log=lambda m: typer.echo("  " + m), resume=resume,
+    tests = [read_run(p) for p in (expand_paths(test) if test else test_inputs)]
+    result = run_experiment(exp, output, tests, runs, data, log=logs.indented(), resume=resume,
                             overwrite=overwrite)
     typer.echo(result.evaluation.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     if result.failure:
@@ -90,9 +92,9 @@ def reproduce(
     an interrupted reproduction leaves nothing behind.
     """
     from sysid.device import cpu_cores
+    from sysid.data.datasets import data_root
     from sysid.errors import ConfigError
     from sysid.protocol.reproduce import reproduce as run_protocol
-    from sysid.store.staging import check_target, staged_directory
 
     if jobs is not None and jobs < 1:
         raise ConfigError(f"--jobs {jobs}: must be >= 1")
@@ -101,10 +103,10 @@ def reproduce(
     if seeds > 1:
         from sysid.sweep.runner import import_ray
         import_ray()  # a clear error now if Ray is not installed
-    check_target(output, overwrite)
+    target = claim(output, OutputKind.REPRODUCTION, [data_root(data)], overwrite)
     on_interrupt(f"nothing written to {output} (it is moved into place only when every run is done)")
-    with staged_directory(output, "reproduction", overwrite) as staging:
-        summary = run_protocol(staging, data, only, log=typer.echo, jobs=jobs or cpu_cores(), seeds=seeds,
+    with target.staged() as staging:
+        summary = run_protocol(staging, data, only, log=logs.info, jobs=jobs or cpu_cores(), seeds=seeds,
                                address=address)
     for name in ("table7.md", "table8.md"):
         path = output / name

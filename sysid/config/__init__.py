@@ -1,1 +1,2 @@
-"""Experiment configuration: TOML -> typed, validated `Experiment` (torch-free)."""
+"""Configuration, torch-free: the closed choices as enums (`choices`) and experiment TOML ->
+typed, validated `Experiment` (`experiment`)."""

@@ -32,9 +32,11 @@ from torch import nn
 
 from sysid.fast.compiled import (cached_package, export_program, load_package, package_metadata,
                             step_label, step_metadata)
-from sysid.dynamics.integrators import Method, run_steps
+from sysid.config.choices import Method
+from sysid.dynamics.integrators import run_steps
 from sysid.fast.prepared import prepared
 from sysid.fast.stepper import Step
+from sysid.store.files import atomic_path
 
 METADATA_FILE = "sysid.json"  # the metadata inside a portable export (extra file)
 
@@ -43,7 +45,7 @@ def _examples(batch: int, dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tenso
     return torch.zeros(batch, 6, dtype=dtype), torch.zeros(batch, 4, dtype=dtype)
 
 
-def export_model(model: nn.Module, path: str | Path, method: Method | str = Method.EULER,
+def export_model(model: nn.Module, path: str | Path, method: Method = Method.EULER,
                  dt: float = 1.0, batch: int = 1, dtype: torch.dtype = torch.float64,
                  compiled: bool = True, log: Callable[[str], None] | None = None) -> Path:
     """Write one integration step of `model` to the ``.pt2`` file `path`.
@@ -59,16 +61,16 @@ def export_model(model: nn.Module, path: str | Path, method: Method | str = Meth
         portable `torch.export` program.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     step = Step(prepared(model, batch), method, dt)
     examples = _examples(batch, dtype)
     metadata = step_metadata(model, method, dt, batch, dtype)
-    if compiled:
-        shutil.copyfile(cached_package(step, examples, step_label(method), metadata, log), path)
-    else:
-        metadata["format"] = "torch.export"
-        torch.export.save(export_program(step, examples), path,
-                          extra_files={METADATA_FILE: json.dumps(metadata)})
+    with atomic_path(path, ".pt2") as tmp:  # a link at `path` is replaced, never written through
+        if compiled:
+            shutil.copyfile(cached_package(step, examples, step_label(method), metadata, log), tmp)
+        else:
+            metadata["format"] = "torch.export"
+            torch.export.save(export_program(step, examples), tmp,
+                              extra_files={METADATA_FILE: json.dumps(metadata)})
     return path
 
 
