@@ -108,23 +108,27 @@ def maneuver(
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output directory (all of it)."),
 ) -> None:
     """Turning circles, zig-zags and a crash stop of any model: IMO indices and criteria, trajectories, report."""
-    from sysid.dynamics.integrators import Method
+    from sysid.config.choices import Method
     from sysid.maneuvers import default_conditions, load_maneuver_model, run_maneuvers
     from sysid.maneuvers.outputs import MOSTLY_OUTSIDE, summary_document, write_maneuvers
     from sysid.maneuvers.simulate import ahead_only
-    from sysid.store.staging import check_target, staged_directory
+    from sysid.cli.outputs import claim, ship_file
+    from sysid.store.target import OutputKind
 
     start = time.perf_counter()
     for option, value in (("--speed", speed), ("--rps", rps), ("--rudder-rate", rudder_rate), ("--dt", dt),
                           ("--duration", duration)):
         _check(option, value)
-    if integrator not in ("rk4", "euler"):
-        raise _error(f"--integrator {integrator!r}: choose rk4 or euler")
+    try:
+        method = Method.parse(integrator, "--integrator", offered_only=True)
+    except ValueError as exc:
+        raise _error(str(exc)) from None
     if duration is not None and duration / dt > MAX_STEPS:
         raise _error(f"--duration {duration:g} s at --dt {dt:g} s: {duration / dt:.0f} steps, more than {MAX_STEPS}")
     wind_speed, wind_direction = parse_wind(wind)
     maneuvers = parse_maneuvers(turning or [], zigzag or [], crash_stop, side)
-    check_target(output, overwrite, keep=[model])  # a bad -o fails now
+    source = model if model.is_dir() else ship_file(model)  # what the command reads
+    target = claim(output, OutputKind.MANEUVERS, [source], overwrite)  # a bad -o fails now
     subject = load_maneuver_model(model)
     if not (turning or zigzag or crash_stop) and ahead_only(subject.model):
         maneuvers = [m for m in maneuvers if m.kind != "crash_stop"]
@@ -133,7 +137,7 @@ def maneuver(
     conditions, sources = default_conditions(subject.model, subject.ship, speed=speed, rps=rps,
                                              rudder_rate=rudder_rate, dt=dt, duration=duration,
                                              wind_speed=wind_speed, wind_direction=wind_direction,
-                                             method=Method.parse(integrator))
+                                             method=method)
     if conditions.steps > MAX_STEPS:
         raise _error(f"duration {conditions.duration:g} s at --dt {dt:g} s: {conditions.steps} steps, "
                      f"more than {MAX_STEPS}")
@@ -149,7 +153,7 @@ def maneuver(
     seconds = time.perf_counter() - simulated
     summary = summary_document(subject.label, subject.kind, subject.ship, conditions, sources, results, compiled,
                                seconds, subject.spread)
-    with staged_directory(output, "maneuvers", overwrite, keep=[model]) as staging:
+    with target.staged() as staging:
         write_maneuvers(staging, results, subject.ship, conditions, summary)
         if report:
             from sysid.report.maneuver_report import build_maneuver_report

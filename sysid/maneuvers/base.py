@@ -8,14 +8,13 @@ is at the origin, heading 0 (along x0), in straight running at the approach spee
 """
 from __future__ import annotations
 
-import enum
 import math
 from dataclasses import dataclass, field
 from typing import ClassVar, Union
 
 import numpy as np
 
-from sysid.dynamics.integrators import Method
+from sysid.config.choices import Choice, Method
 from sysid.errors import SysidError
 from sysid.maneuvers.indices import ManeuverIndices
 
@@ -24,7 +23,7 @@ class ManeuverError(SysidError):
     """A maneuver cannot be set up: a bad option, no approach speed, no straight running."""
 
 
-class Side(str, enum.Enum):
+class Side(Choice):
     """Side of the first rudder order."""
 
     STARBOARD = "starboard"
@@ -36,13 +35,12 @@ class Side(str, enum.Enum):
         return 1.0 if self is Side.STARBOARD else -1.0
 
     @classmethod
-    def parse(cls, value: "Side | str") -> "Side":
-        if isinstance(value, cls):
-            return value
+    def of(cls, value: "Side | str") -> "Side":
+        """`Side.parse` with `ManeuverError` (one line) for anything else."""
         try:
-            return cls(str(value))
-        except ValueError:
-            raise ManeuverError(f"side {value!r}: choose starboard or port") from None
+            return cls.parse(value, "side")
+        except ValueError as exc:
+            raise ManeuverError(str(exc)) from None
 
 
 def check_number(what: str, value: float, unit: str, positive: bool = False, low: float | None = None) -> float:
@@ -77,7 +75,7 @@ class TurningCircle:
 
     def __post_init__(self):
         object.__setattr__(self, "rudder_deg", _check_angle("turning rudder angle", self.rudder_deg))
-        object.__setattr__(self, "side", Side.parse(self.side))
+        object.__setattr__(self, "side", Side.of(self.side))
 
     @property
     def name(self) -> str:
@@ -99,7 +97,7 @@ class ZigZag:
     def __post_init__(self):
         object.__setattr__(self, "rudder_deg", _check_angle("zig-zag rudder angle", self.rudder_deg))
         object.__setattr__(self, "check_deg", _check_angle("zig-zag check angle", self.check_deg, 180.0))
-        object.__setattr__(self, "side", Side.parse(self.side))
+        object.__setattr__(self, "side", Side.of(self.side))
 
     @property
     def name(self) -> str:
@@ -162,7 +160,10 @@ class Conditions:
     method: Method = Method.RK4
 
     def __post_init__(self):
-        object.__setattr__(self, "method", Method.parse(self.method))
+        try:
+            object.__setattr__(self, "method", Method.parse(self.method, "integrator"))
+        except ValueError as exc:
+            raise ManeuverError(str(exc)) from None
         for what, value, unit, positive in (
                 ("approach speed", self.speed, "m/s", True), ("propeller revolutions", self.rps, "rps", False),
                 ("rudder rate", self.rudder_rate, "deg/s", True), ("time step", self.dt, "s", True),

@@ -105,7 +105,7 @@ def build_maneuver_report(source_dir: str | os.PathLike, out_dir: str | os.PathL
     warnings = [f"{r.maneuver}: kNN gate off on {100 * r.gate_off_share:.0f} % of the steps: the maneuver runs "
                 "mostly outside the training data" for r in indices.itertuples(index=False)
                 if "gate_off_share" in indices and not pd.isna(r.gate_off_share) and r.gate_off_share > 0.5]
-    title = f"sysid maneuvers: {main}"
+    title = f"sysid maneuvers report: {main}"
     built = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     items = _summary_items(summary)
     text = paginate(text_lines([("h1", title), ("h2", "Summary")] + [("kv", k, v) for k, v in items]
