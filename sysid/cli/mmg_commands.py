@@ -234,10 +234,12 @@ def evaluate(
         _check_positive("--horizon", h, "s")
     start = time.perf_counter()
     claim(output, OutputKind.FILE, [run_dir, *data, None if run_dir is not None else ship_file(ship)])
+    columns = None
     if run_dir is not None:
         from sysid.runs.rundir import load_model
         exp, model = load_model(run_dir)
         label = f"{exp.experiment.model} run {run_dir}"
+        columns = exp.data.columns  # the logs' column names and units, as in training
     else:
         if model_kind != "mmg":
             raise DataError(f"--model {model_kind!r}: give a run directory for trained models, or --model mmg")
@@ -245,7 +247,7 @@ def evaluate(
         overrides = ", ".join(f"{k}={v:g}" for k, v in model.ship.overrides.items()) or "none"
         label = f"MMG ({model.ship.name}, overrides: {overrides})"
     files = expand_paths(data)
-    runs = [read_run(f) for f in progress(files, desc="reading", unit="files", quiet=len(files) < 4)]
+    runs = [read_run(f, columns=columns) for f in progress(files, desc="reading", unit="files", quiet=len(files) < 4)]
     table = evaluate_model(model, runs, horizon, chosen, traces=False).metrics
     empty = [h for h in horizon if not table[table.horizon_s == h].n_windows.sum()]
     if empty:
