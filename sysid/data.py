@@ -23,7 +23,9 @@ from sysid.state import INPUTS, STATE
 
 # processed-schema header ("u_velo [m/s]") -> our channel name ("u"); one source: preprocessing.schema
 COLUMNS = {f"{name} [{unit}]": PROCESSED_CHANNEL[name] for name, unit in PROCESSED.items()}
+HEADER = {channel: header for header, channel in COLUMNS.items()}
 _LIMITS = PROCESSED_PLAUSIBLE_ABS
+_UNIT_HINTS = {"[rad]": " (degrees?)", "[rad/s]": " (deg/s?)"}
 
 
 @dataclass
@@ -89,11 +91,19 @@ def read_run(path: str | os.PathLike, rate: float = 1.0) -> Run:
     for name, limit in _LIMITS.items():
         peak = np.abs(frame[name].to_numpy()).max()
         if peak > limit:
-            raise DataError(f"{path}: column {name!r} reaches {peak:.4g}, beyond {limit}: wrong units?")
+            hint = next((h for unit, h in _UNIT_HINTS.items() if HEADER[name].endswith(unit)), "")
+            raise DataError(f"{path}: column {name!r} ({HEADER[name]}) reaches {peak:.4g}, beyond "
+                            f"±{limit:.4g}: wrong units{hint}?")
     period = float(np.median(steps))
-    stride = max(1, int(round(1.0 / rate / period)))
+    stride = int(round(1.0 / rate / period))
+    if stride < 1 or abs(stride * period * rate - 1.0) > 1e-3:
+        raise DataError(f"{path}: rate {rate:g} Hz is not a whole number of this file's {period:g}-s samples "
+                        f"per step; choose a rate that divides {1.0 / period:g} Hz")
     issues, suspect = _quality_issues(t, values, period)
     sel = values[::stride]
+    if len(sel) < 2:
+        raise DataError(f"{path}: rate {rate:g} Hz leaves {len(sel)} sample of this {t[-1] - t[0]:.0f}-s run; "
+                        "choose a higher rate")
     return Run(
         name=path.stem, path=path, t=sel[:, 0],
         states=sel[:, [frame.columns.get_loc(c) for c in list(STATE)]],

@@ -15,11 +15,12 @@ import pandas as pd
 import torch
 
 from sysid.checkpoint import TrainingCheckpoint
+from sysid.config.checks import threads
 from sysid.data import Run, read_run
 from sysid.datasets import training_files
 from sysid.device import compute_threads
-from sysid.errors import TrainingError
-from sysid.evaluate import Evaluation, evaluate_model
+from sysid.errors import ConfigError, TrainingError
+from sysid.evaluate import Evaluation, evaluate_model, short_runs
 from sysid.experiment import Experiment
 from sysid.models import build_model
 from sysid.rundir import write_run
@@ -57,6 +58,19 @@ def checkpoint_path(out_dir: str | os.PathLike) -> Path:
     return out_dir.parent / f".{out_dir.name}.checkpoint.pt"
 
 
+def check_experiment_fits(exp: Experiment, tests: Sequence[Run]) -> None:
+    """The config's resources and horizons against this machine and these test runs."""
+    source = exp.source or "config"
+    threads(f"{source}: [training] threads =", exp.training.threads, ConfigError)
+    name = f"{source}: [evaluation] horizons"
+    short = short_runs(tests, exp.evaluation.horizons, name, ConfigError)
+    if short:
+        run, h = short[0]
+        raise ConfigError(f"{name}: the test file {run.path} holds {len(run)} samples ({run.duration:.0f} s), "
+                          f"fewer than one {h:g}-s window, so its metrics would be empty; choose shorter "
+                          "horizons or other test files (nothing trained)")
+
+
 def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[Run],
                    train_runs: Sequence[Run] | None = None, data: str | os.PathLike | None = None,
                    progress: bool = True, log: Callable[[str], None] = print,
@@ -68,8 +82,11 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
     (`checkpoint_path`); `resume` continues from it to the same model an uninterrupted run
     gives. A run whose wall-clock safety limit was hit is written with its failure in
     summary.json (``result.failure``). The run directory is written complete or not at all;
-    an existing one is replaced only with `overwrite`.
+    an existing one is replaced only with `overwrite`. Threads beyond this machine's cores,
+    or horizons that are not whole samples or longer than a test file, are a `ConfigError`
+    before any training.
     """
+    check_experiment_fits(exp, tests)
     started = time.perf_counter()
     history, training = None, None
     with compute_threads(exp.training.threads):

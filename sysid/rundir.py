@@ -97,10 +97,67 @@ def _load_tensors(path: Path):
 
 
 def _check_finite(tensors: dict, path: Path) -> None:
-    """Refuse weights holding NaN or inf (a diverged training): they predict nothing."""
+    """Refuse weights holding NaN or inf (a diverged training): they predict nothing; and
+    standard deviations (``*_std``, the FNN's scaling) that are not > 0."""
     for key, value in tensors.items():
         if isinstance(value, torch.Tensor) and value.is_floating_point() and not torch.isfinite(value).all():
             raise CheckpointError(f"{path}: {key} holds NaN or inf values (a diverged training); train the run again")
+        if key.endswith("_std") and isinstance(value, torch.Tensor) and not bool((value > 0).all()):
+            raise CheckpointError(f"{path}: {key} holds a standard deviation <= 0 (the FNN would divide by it); "
+                                  "train the run again")
+
+
+def gate_features(exp: Experiment) -> int:
+    """Width F of the vectors the run's kNN gate compares: the FNN's last hidden layer
+    (space "features") or its standardised inputs (space "inputs")."""
+    return len(INPUT_NAMES) if exp.gate.space == "inputs" else exp.network.hidden[-1]
+
+
+KNN_FIELDS = ("bank", "threshold", "train_distances", "k", "alpha")
+
+
+def read_knn_bank(path: str | os.PathLike, exp: Experiment | None = None) -> dict[str, torch.Tensor]:
+    """knn.pt checked against its own contract, whether or not a manifest vouches for it.
+
+    bank (N, F) finite with N >= k >= 1 (F = `gate_features` of `exp` when given, and k
+    and alpha those of its ``[gate]``); threshold and alpha finite scalars, threshold >= 0,
+    0 < alpha < 1; train_distances (N,) finite and >= 0. `CheckpointError` names the file
+    and the field at fault.
+    """
+    path = Path(path)
+    knn = _load_tensors(path)
+
+    def bad(what: str) -> CheckpointError:
+        return CheckpointError(f"{path}: {what}; the kNN bank is broken: train the run again")
+
+    if not isinstance(knn, dict) or any(not isinstance(knn.get(f), torch.Tensor) for f in KNN_FIELDS):
+        raise bad(f"not a kNN bank (expected tensors {', '.join(KNN_FIELDS)})")
+    _check_finite(knn, path)
+    bank, k, alpha = knn["bank"], knn["k"], knn["alpha"]
+    features = gate_features(exp) if exp is not None else None
+    if bank.dim() != 2 or not bank.is_floating_point():
+        raise bad(f"bank has shape {tuple(bank.shape)}, expected (N, {features or 'F'}) floats")
+    if features is not None and bank.shape[1] != features:
+        turned = " (transposed?)" if bank.shape[0] == features else ""
+        raise bad(f"bank has shape {tuple(bank.shape)}, expected (N, {features}) for [gate] space = "
+                  f"{exp.gate.space!r}{turned}")
+    if bank.shape[0] == 0:
+        raise bad("bank is empty (0 training features)")
+    for name in ("threshold", "k", "alpha"):
+        if knn[name].numel() != 1:
+            raise bad(f"{name} has shape {tuple(knn[name].shape)}, expected a single number")
+    if k.is_floating_point() or not 1 <= int(k) <= bank.shape[0]:
+        raise bad(f"k = {k.item()} for a bank of {bank.shape[0]} features (need 1 <= k <= {bank.shape[0]})")
+    if not 0.0 < float(alpha) < 1.0 or float(knn["threshold"]) < 0:
+        raise bad(f"alpha = {float(alpha):g}, threshold = {float(knn['threshold']):g} "
+                  "(need 0 < alpha < 1 and threshold >= 0)")
+    if tuple(knn["train_distances"].shape) != (bank.shape[0],) or bool((knn["train_distances"] < 0).any()):
+        raise bad(f"train_distances has shape {tuple(knn['train_distances'].shape)}, expected "
+                  f"({bank.shape[0]},) distances >= 0")
+    if exp is not None and (int(k), float(alpha)) != (exp.gate.k, exp.gate.alpha):
+        raise bad(f"k = {int(k)}, alpha = {float(alpha):g} differ from config.toml's [gate] "
+                  f"k = {exp.gate.k}, alpha = {exp.gate.alpha:g}")
+    return knn
 
 
 RUN_FILES = ("config.toml", "summary.json", "metrics.csv")
@@ -163,15 +220,10 @@ def load_model(run_dir: str | os.PathLike, dtype: torch.dtype = torch.float64):
     except RuntimeError as exc:
         raise CheckpointError(f"{run_dir / 'model.pt'}: does not fit the config's model ({str(exc)[:300]})") from None
     if isinstance(model, CorrectedModel) and exp.gate.enabled:
-        knn = _load_tensors(run_dir / "knn.pt")
-        if isinstance(knn, dict):
-            _check_finite(knn, run_dir / "knn.pt")
-        try:
-            gate = KNNGate(int(knn["k"]), float(knn["alpha"]), knn["bank"].shape[1], dtype)
-            gate.bank, gate.threshold = knn["bank"].to(dtype), knn["threshold"].to(dtype)
-            gate.train_distances = knn["train_distances"].to(dtype)
-        except (KeyError, TypeError, IndexError, AttributeError) as exc:
-            raise CheckpointError(f"{run_dir / 'knn.pt'}: malformed kNN bank ({exc})") from None
+        knn = read_knn_bank(run_dir / "knn.pt", exp)
+        gate = KNNGate(int(knn["k"]), float(knn["alpha"]), knn["bank"].shape[1], dtype)
+        gate.bank, gate.threshold = knn["bank"].to(dtype), knn["threshold"].reshape(()).to(dtype)
+        gate.train_distances = knn["train_distances"].to(dtype)
         model.gate, model.gate_enabled = gate, True
     return exp, model
 

@@ -9,7 +9,7 @@ import sys
 import typer
 
 from sysid.errors import OutputError, SysidError
-from sysid.cli.interrupts import interrupt_note
+from sysid.cli.interrupts import interrupt_note, interruptible
 
 from sysid.cli.app import app  # noqa: E402
 
@@ -80,7 +80,8 @@ def main(argv: list[str] | None = None) -> None:
     show_traceback = TRACEBACK_FLAG in args
     args = [a for a in args if a != TRACEBACK_FLAG]
     try:
-        run(args)
+        with interruptible():
+            run(args)
     except SysidError as exc:
         typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
         sys.exit(1 if isinstance(exc, OutputError) else 2)

@@ -24,6 +24,7 @@ def export(
     kNN gate), loadable with torch alone; prints its latency."""
     import torch
 
+    from sysid.config import checks
     from sysid.export import export_model, load_step, step_latency
     from sysid.integrators import Method
     from sysid.rundir import load_model
@@ -32,8 +33,8 @@ def export(
         method = Method.parse(integrator)
     except ValueError as exc:
         raise DataError(f"--integrator: {exc}") from None
-    if dt <= 0 or batch < 1:
-        raise DataError(f"--dt must be > 0 and --batch >= 1 (got {dt}, {batch})")
+    checks.STEP.check("--dt", dt)
+    checks.BATCH.check("--batch", batch)
     dtype = torch.float32 if float32 else torch.float64
     exp, model = load_model(run_dir, dtype)
     export_model(model, output, method, dt, batch, dtype, compiled=not portable,

@@ -28,6 +28,7 @@ def train(
     interrupted training leaves no run, only its checkpoint for --resume.
     """
     from sysid.cli.interrupts import on_interrupt
+    from sysid.config import checks
     from sysid.data import expand_paths, read_run
     from sysid.datasets import test_files
     from sysid.errors import ConfigError
@@ -38,6 +39,8 @@ def train(
     start = time.perf_counter()
     if epochs is not None and epochs < 0:
         raise ConfigError(f"--epochs {epochs}: must be >= 0")
+    if threads is not None:
+        checks.threads("--threads", threads)
     exp = load_experiment(config)
     if epochs is not None:
         exp = exp.replace(training={"epochs": epochs})
@@ -89,15 +92,14 @@ def reproduce(
     The output directory is moved into place only when every run is done (with a manifest);
     an interrupted reproduction leaves nothing behind.
     """
-    from sysid.device import cpu_cores
-    from sysid.errors import ConfigError
+    from sysid.config import checks
+    from sysid.config.checks import cpu_cores
     from sysid.reproduce import reproduce as run_protocol
     from sysid.staging import check_target, staged_directory
 
-    if jobs is not None and jobs < 1:
-        raise ConfigError(f"--jobs {jobs}: must be >= 1")
-    if seeds < 1:
-        raise ConfigError(f"--seeds {seeds}: must be >= 1")
+    if jobs is not None:
+        checks.workers("--jobs", jobs, cluster=address)
+    checks.POSITIVE_COUNT.check("--seeds", seeds)
     if seeds > 1:
         from sysid.sweep.runner import import_ray
         import_ray()  # a clear error now if Ray is not installed

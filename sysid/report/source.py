@@ -19,7 +19,7 @@ from sysid.errors import CheckpointError
 from sysid.experiment import KINDS as MODEL_KINDS
 from sysid.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
 from sysid.manifest import has_manifest, verify_manifest
-from sysid.rundir import verify_run_dir
+from sysid.rundir import read_knn_bank, verify_run_dir
 from sysid.seeds import seed_metrics
 
 
@@ -82,15 +82,12 @@ class RunRecord:
 
     @property
     def gate_threshold(self) -> float | None:
-        """kNN threshold of the OOD gate (summary.json "gate", else knn.pt), or None."""
+        """kNN threshold of the OOD gate (summary.json "gate", else knn.pt), or None; a
+        knn.pt that breaks its contract is a `CheckpointError` (`read_knn_bank`)."""
         gate = self.summary.get("gate") or {}
         value = gate.get("threshold") if isinstance(gate, dict) else None
-        if value is None and (self.path / "knn.pt").is_file():
-            try:
-                import torch
-                value = float(torch.load(self.path / "knn.pt", weights_only=True)["threshold"])
-            except Exception:  # noqa: BLE001 - an unreadable bank only costs the threshold line
-                value = None
+        if value is None and (self.path / "knn.pt").is_file():  # checked like any load of it
+            value = float(read_knn_bank(self.path / "knn.pt")["threshold"])
         try:
             value = float(value) if value is not None else None
         except (TypeError, ValueError):
