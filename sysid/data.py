@@ -91,9 +91,9 @@ def read_run(path: str | os.PathLike, rate: float = 1.0) -> Run:
     for name, limit in _LIMITS.items():
         peak = np.abs(frame[name].to_numpy()).max()
         if peak > limit:
-            hint = next((h for unit, h in _UNIT_HINTS.items() if HEADER[name].endswith(unit)), "")
-            raise DataError(f"{path}: column {name!r} ({HEADER[name]}) reaches {peak:.4g}, beyond "
-                            f"±{limit:.4g}: wrong units{hint}?")
+            hint = next((h for unit, h in _UNIT_HINTS.items() if HEADER[name].endswith(unit)), "?")
+            raise DataError(f"{path}: column {name!r} reaches {peak:.4g}, beyond ±{limit:.4g} "
+                            f"(header '{HEADER[name]}'): wrong units{hint}")
     period = float(np.median(steps))
     stride = int(round(1.0 / rate / period))
     if stride < 1 or abs(stride * period * rate - 1.0) > 1e-3:

@@ -2,11 +2,11 @@
 stopped and has exited before the call returns, so nothing writes on into an output that
 the caller then removes.
 
-The workers ignore SIGINT (a terminal sends it to the whole process group): only the main
-process acts on it. It notes the signal in a flag, checked between short waits (an
-exception raised by the handler itself can land while the pool starts a worker, where
-Python swallows it), then cancels the work not started, terminates the workers, waits for
-them to exit and raises `KeyboardInterrupt`.
+The workers never act on SIGINT (a terminal sends it to the whole process group): they
+start with it blocked and then ignore it. The main process notes it in a flag, checked
+between short waits (an exception raised by the handler itself can land while the pool
+starts a worker, where Python swallows it), then cancels the work not started,
+terminates the workers, waits for them to exit and raises `KeyboardInterrupt`.
 """
 from __future__ import annotations
 
@@ -46,15 +46,23 @@ def in_workers(work: Callable[[Item], Result], items: Sequence[Item], workers: i
     `on_result` as it arrives. Ctrl-C raises `KeyboardInterrupt` and an error in a worker
     propagates, both only once every worker has exited."""
     stopped: list[int] = []
-    in_main = threading.current_thread() is threading.main_thread()  # signals reach the main thread only
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if in_main else None  # workers start ignoring it
+    in_main = threading.current_thread() is threading.main_thread()  # where Python runs signal handlers
+    if in_main:
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: stopped.append(signum))
+    # while the workers start, SIGINT waits (blocked, not lost): they inherit the block and
+    # keep it, so only this process sees a Ctrl-C, once it is unblocked below
+    blocking = in_main and hasattr(signal, "pthread_sigmask")
+    if blocking:
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     pool = ProcessPoolExecutor(max_workers=max(1, min(workers, len(items))), mp_context=context,
                                initializer=_ignore_interrupts)
     finished = False
     try:
-        pending = {pool.submit(work, item) for item in items}  # starts the workers
-        if in_main:
-            signal.signal(signal.SIGINT, lambda signum, frame: stopped.append(signum))
+        try:
+            pending = {pool.submit(work, item) for item in items}  # starts the workers
+        finally:
+            if blocking:
+                signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
         results = []
         while pending and not stopped:
             done, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)

@@ -16,7 +16,7 @@ import pandas as pd
 
 from preprocessing.quality import QualityReport
 from sysid.errors import CheckpointError
-from sysid.experiment import KINDS as MODEL_KINDS
+from sysid.experiment import KINDS as MODEL_KINDS, load_experiment
 from sysid.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
 from sysid.manifest import has_manifest, verify_manifest
 from sysid.rundir import read_knn_bank, verify_run_dir
@@ -87,7 +87,7 @@ class RunRecord:
         gate = self.summary.get("gate") or {}
         value = gate.get("threshold") if isinstance(gate, dict) else None
         if value is None and (self.path / "knn.pt").is_file():  # checked like any load of it
-            value = float(read_knn_bank(self.path / "knn.pt")["threshold"])
+            value = float(read_knn_bank(self.path / "knn.pt", load_experiment(self.path / "config.toml"))["threshold"])
         try:
             value = float(value) if value is not None else None
         except (TypeError, ValueError):
