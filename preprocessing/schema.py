@@ -50,8 +50,9 @@ PROCESSED_CHANNEL = {
     "wind_velo_true": "wind_velo_true", "wind_dir_true": "wind_dir_true",
 }
 # plausibility limits of a processed run (channel names, SI); beyond means wrong units. A
-# heading beyond one turn either way is degrees (processed headings are wrapped); 3 rad/s
-# (172 deg/s) is six times the fastest turn of a ship model (< 0.5 rad/s)
+# heading beyond one turn either way is degrees (processed headings are wrapped) unless it
+# changes at the yaw rate (unwrapped radians, `sysid.data.read_run`); 3 rad/s (172 deg/s) is
+# six times the fastest turn of a ship model (< 0.5 rad/s)
 PROCESSED_PLAUSIBLE_ABS = {"u": 20.0, "v": 20.0, "psi": 2 * np.pi, "r": 3.0, "delta_rudder": 1.6,
                            "wind_dir_true": 7.0, "wind_dir_relative": 7.0, "n_prop": 200.0, "wind_velo_true": 60.0}
 

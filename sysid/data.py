@@ -90,6 +90,8 @@ def read_run(path: str | os.PathLike, rate: float = 1.0) -> Run:
                         f"(t = {t[row]})")
     for name, limit in _LIMITS.items():
         peak = np.abs(frame[name].to_numpy()).max()
+        if name == "psi" and peak > limit and _turns_at_yaw_rate(t, frame["psi"].to_numpy(), frame["r"].to_numpy()):
+            continue  # an unwrapped heading in radians (a simulated turn): it changes at r
         if peak > limit:
             hint = next((h for unit, h in _UNIT_HINTS.items() if HEADER[name].endswith(unit)), "?")
             raise DataError(f"{path}: column {name!r} reaches {peak:.4g}, beyond ±{limit:.4g} "
@@ -111,6 +113,17 @@ def read_run(path: str | os.PathLike, rate: float = 1.0) -> Run:
         relative_wind=sel[:, [frame.columns.get_loc("wind_velo_relative"),
                               frame.columns.get_loc("wind_dir_relative")]],
         dt=period * stride, issues=issues, suspect=suspect)
+
+
+def _turns_at_yaw_rate(t: np.ndarray, psi: np.ndarray, r: np.ndarray) -> bool:
+    """Whether heading psi changes at the yaw rate r [rad/s], as an unwrapped heading in
+    radians does, and not 57 times faster (degrees): the least-squares factor between
+    dpsi/dt and r, over steps without a wrap, lies within a factor 2 of 1."""
+    dpsi = np.diff(psi)
+    keep = np.abs(dpsi) < np.pi
+    rate, r_mid = dpsi[keep] / np.diff(t)[keep], 0.5 * (r[1:] + r[:-1])[keep]
+    power = float(r_mid @ r_mid)
+    return power > 0 and 0.5 < float(rate @ r_mid) / power < 2.0
 
 
 def _quality_issues(t: np.ndarray, values: np.ndarray, period: float):

@@ -119,8 +119,8 @@ KNN_FIELDS = ("bank", "threshold", "train_distances", "k", "alpha")
 def read_knn_bank(path: str | os.PathLike, exp: Experiment | None = None) -> dict[str, torch.Tensor]:
     """knn.pt checked against its own contract, whether or not a manifest vouches for it.
 
-    bank (N, F) finite with N >= k >= 1 (F = `gate_features` of `exp` when given, and k
-    and alpha those of its ``[gate]``); threshold and alpha finite scalars, threshold >= 0,
+    bank (N, F) finite with N >= k >= 1 (F = `gate_features` of `exp` when given);
+    threshold, k and alpha single numbers, threshold >= 0,
     0 < alpha < 1; train_distances (N,) finite and >= 0. `CheckpointError` names the file
     and the field at fault.
     """
@@ -154,9 +154,6 @@ def read_knn_bank(path: str | os.PathLike, exp: Experiment | None = None) -> dic
     if tuple(knn["train_distances"].shape) != (bank.shape[0],) or bool((knn["train_distances"] < 0).any()):
         raise bad(f"train_distances has shape {tuple(knn['train_distances'].shape)}, expected "
                   f"({bank.shape[0]},) distances >= 0")
-    if exp is not None and (int(k), float(alpha)) != (exp.gate.k, exp.gate.alpha):
-        raise bad(f"k = {int(k)}, alpha = {float(alpha):g} differ from config.toml's [gate] "
-                  f"k = {exp.gate.k}, alpha = {exp.gate.alpha:g}")
     return knn
 
 

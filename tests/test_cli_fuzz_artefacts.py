@@ -50,10 +50,6 @@ def _alpha_one(knn):
     knn["alpha"] = torch.tensor(1.5, dtype=torch.float64)
 
 
-def _k_not_the_configs(knn):
-    knn["k"] = torch.tensor(2)
-
-
 def _no_distances(knn):
     del knn["train_distances"]
 
@@ -64,7 +60,6 @@ BANK_CASES = {  # name -> (edit, what the error line says; {n}: the bank's size,
     "k larger than the bank": (_k_huge, "knn.pt: k = 100000 for a bank of {n} features (need 1 <= k <= {n})"),
     "NaN in the bank": (_nan, "knn.pt: bank holds NaN or inf values"),
     "alpha 1.5": (_alpha_one, "knn.pt: alpha = 1.5"),
-    "k not the config's": (_k_not_the_configs, "knn.pt: k = 2, alpha = 0.9995 differ from config.toml's [gate] k = 3"),
     "a field missing": (_no_distances, "knn.pt: not a kNN bank (expected tensors bank, threshold, train_distances"),
 }
 

@@ -176,6 +176,27 @@ def test_degrees_are_refused_alike_by_evaluate_and_train(sysid, files, tmp_path,
     assert len(set(lines)) == 1 and f"{bad}: " in lines[0]
 
 
+def test_an_unwrapped_heading_in_radians_is_no_unit_error(sysid, dataset_dir, tmp_path):
+    """A heading past one turn that changes at the yaw rate (a continuous heading) is read
+    as it is: the same metrics as the wrapped file (u, v_m and r do not see the wrap)."""
+    wrapped = dataset_dir / "turning" / "turn_14-Oct-2020_14_56_07.csv"
+    frame = pd.read_csv(wrapped)
+    psi = frame["psi_hat [rad]"]
+    frame.loc[psi.notna(), "psi_hat [rad]"] = np.unwrap(psi.dropna().to_numpy())  # down to -8.3 rad
+    assert frame["psi_hat [rad]"].abs().max() > 2 * np.pi
+    unwrapped = tmp_path / "turn_14-Oct-2020_14_56_07.csv"
+    frame.to_csv(unwrapped, index=False)
+    tables = []
+    for path, out in ((wrapped, tmp_path / "a.csv"), (unwrapped, tmp_path / "b.csv")):
+        done = sysid("evaluate", "--data", path, "--horizon", "30", "-o", out)
+        assert done.code == 0 and "warning" not in done.err, done.err
+        tables.append(pd.read_csv(out))
+    pd.testing.assert_frame_equal(*tables, rtol=1e-9)
+    degrees = _converted(unwrapped, tmp_path, "psi_hat [rad]", 180 / np.pi)  # the same turn in degrees
+    assert_refused(sysid("evaluate", "--data", degrees, "--horizon", "30", "-o", tmp_path / "c.csv"), 2,
+                   "column 'psi' reaches", "wrong units (degrees?)")
+
+
 def test_simulate_rate_that_is_no_whole_sample_or_leaves_one_row(sysid, files, tmp_path):
     out = tmp_path / "sim.csv"
     assert_refused(sysid("simulate", "--log", files["test"], "--start", "10", "--horizon", "20", "--rate", "3", "-o", out),
