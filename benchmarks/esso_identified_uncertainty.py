@@ -19,9 +19,9 @@ import numpy as np
 import torch
 
 from sysid import MMG, load_ship
-from sysid.data import duplicate_runs, read_run, sliding_windows, stack_windows, window_touches
-from sysid.datasets import training_files
-from sysid.uncertainty import coefficient_uncertainty, velocity_weights
+from sysid.data.recordings import duplicate_runs, read_run, sliding_windows, stack_windows, window_touches
+from sysid.data.datasets import training_files
+from sysid.identify.uncertainty import coefficient_uncertainty, velocity_weights
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from identification_kvlcc2 import identify  # noqa: E402

@@ -6,7 +6,7 @@ each second, RK4 with dt = 1 s, so the identification model can be exactly right
 noise is added to the recorded u, v_m, r (processed 1 Hz states; this benchmark does not go
 through raw 10 Hz logs and `sysid preprocess`). The records are cut into non-overlapping
 windows; the hull derivatives are identified from starts perturbed by 20-30 % (random sign)
-by the package's Levenberg-Marquardt on the multi-step residuals (`sysid.levenberg_marquardt`,
+by the package's Levenberg-Marquardt on the multi-step residuals (`sysid.identify.levenberg_marquardt`,
 start states recorded), and each estimate gets its sigma from `coefficient_uncertainty`.
 Over many noise seeds the script prints, per coefficient, the truth, the mean estimate,
 the mean sigma, the spread of the estimates and how often truth lies inside +- 2 sigma
@@ -27,8 +27,8 @@ import numpy as np
 import torch
 
 from sysid import MMG, integrate, load_ship
-from sysid.levenberg_marquardt import identify_levenberg_marquardt
-from sysid.uncertainty import coefficient_uncertainty
+from sysid.identify.levenberg_marquardt import identify_levenberg_marquardt
+from sysid.identify.uncertainty import coefficient_uncertainty
 
 SHIP = "kvlcc2_l7"
 U0, NPS = 2.29 * 0.512, 17.95        # m/s, rps: shipmmg's example operating point
@@ -112,7 +112,7 @@ def windows_from(records, window: int, noise=NOISE, seed: int = 0) -> SimpleName
 def identify(ship, windows, names, start: dict[str, float], weights, iterations: int = 40,
              method: str = "rk4") -> tuple[dict[str, float], int]:
     """Levenberg-Marquardt on the multi-step residuals from `start`, every window integrated
-    from its recorded first sample (`sysid.levenberg_marquardt`, ``start_states="recorded"``);
+    from its recorded first sample (`sysid.identify.levenberg_marquardt`, ``start_states="recorded"``);
     returns the estimate and the number of iterations taken."""
     fit = identify_levenberg_marquardt(MMG(ship.with_overrides(start, "start")), windows, names, weights, method,
                                        start_states="recorded", iterations=iterations)

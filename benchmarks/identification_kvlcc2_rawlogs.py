@@ -11,12 +11,12 @@ Unlike the 1 Hz benchmark, the noise here has passed through the preprocessing's
 
 ``--bias replay`` (default) then subtracts the processing's deterministic bias, measured by
 replaying the identified model under the logged 10 Hz inputs through noise-free raw logs and
-the same pipeline and identifying again (`sysid.pipeline_replay`); ``--bias none`` keeps the
+the same pipeline and identifying again (`sysid.identify.pipeline_replay`); ``--bias none`` keeps the
 estimate as identified.
 
 ``--start estimated`` (default) fits each window's start state (u, v_m, r) along with the
 coefficients, the recorded first sample being one more measurement of it
-(`sysid.levenberg_marquardt`); ``--start recorded`` integrates every window from its recorded first
+(`sysid.identify.levenberg_marquardt`); ``--start recorded`` integrates every window from its recorded first
 sample as if it were exact (the multi-step loss of training; biased here, see
 benchmarks/identification_results.md).
 
@@ -39,9 +39,9 @@ import torch
 from preprocessing.synth import SynthSettings
 from sysid import MMG, integrate, load_ship
 from sysid.mmg.wind import relative_wind
-from sysid.pipeline_replay import noise_free, processed_windows, processing_bias
-from sysid.levenberg_marquardt import fit_uncertainty, identify_levenberg_marquardt
-from sysid.uncertainty import velocity_weights
+from sysid.identify.pipeline_replay import noise_free, processed_windows, processing_bias
+from sysid.identify.levenberg_marquardt import fit_uncertainty, identify_levenberg_marquardt
+from sysid.identify.uncertainty import velocity_weights
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import identification_kvlcc2 as onehz  # noqa: E402

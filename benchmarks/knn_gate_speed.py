@@ -13,7 +13,7 @@ import time
 
 import torch
 
-from sysid.ood import KNNGate
+from sysid.hybrid.knn_gate import KNNGate
 
 
 def per_call(fn, seconds: float = 0.5) -> float:

@@ -1,7 +1,7 @@
 """Speed of the batched MMG right-hand side and of predictions, on this machine's CPU.
 
 Prints rows per second of forces + state derivative at batch 1, 64, 4096, 65536 (float32,
-float64), the time of one 100 s Euler prediction of one ship (eager and compiled, `sysid.compiled`),
+float64), the time of one 100 s Euler prediction of one ship (eager and compiled, `sysid.fast.compiled`),
 and of all 30 s protocol windows of the six test files in one batch, with ratios to the
 lab's numpy simulator as once measured (PERFORMANCE_NOTES.md: ~11 k rows/s batched,
 ~1.5 k rows/s single, 0.15-0.19 s per 100 s RK4 prediction). For the lab's simulator run
@@ -17,7 +17,7 @@ import time
 import torch
 
 from sysid import MMG, integrate, load_ship, predict, state_derivative
-from sysid.integrators import Integrator
+from sysid.dynamics.integrators import Integrator
 
 LAB_BATCHED_ROWS_PER_S = 11e3
 LAB_SINGLE_ROWS_PER_S = 1.5e3
@@ -91,9 +91,9 @@ def main() -> None:
 
     print("\n3. All 30 s protocol windows of the six test files in one batch (Euler, float64)")
     try:
-        from sysid.data import read_run
-        from sysid.datasets import test_files
-        from sysid.evaluate import predict_windows
+        from sysid.data.recordings import read_run
+        from sysid.data.datasets import test_files
+        from sysid.evaluation.evaluate import predict_windows
         runs = [read_run(p) for p in test_files().values()]
         n_windows = sum(len(r) // 30 for r in runs)
         per = time_call(lambda: predict_windows(model, runs, 30), 1.0, 20)

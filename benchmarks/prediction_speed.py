@@ -113,8 +113,8 @@ def training_samples(bank: int):
     """(states, inputs, label) of the kNN bank: the D2 training files' samples (up to
     `bank`) when the dataset is present, else random rows (a harder, unstructured bank)."""
     try:
-        from sysid.data import read_run
-        from sysid.datasets import training_files
+        from sysid.data.recordings import read_run
+        from sysid.data.datasets import training_files
         runs = [read_run(f) for f in training_files("D2")]
         states = torch.tensor(np.concatenate([r.states for r in runs]))[:bank]
         inputs = torch.tensor(np.concatenate([r.inputs for r in runs]))[:bank]
@@ -129,11 +129,11 @@ def training_samples(bank: int):
 def models(bank: int, runs: list[str]):
     """(label, model) pairs: MMG, NN-only and hybrid with gates, or the given run directories."""
     from sysid import MMG, load_ship
-    from sysid.correction import ForceCorrection, correction_inputs
-    from sysid.models import CorrectedModel
-    from sysid.ood import KNNGate
+    from sysid.hybrid.correction import ForceCorrection, correction_inputs
+    from sysid.hybrid.force_models import CorrectedModel
+    from sysid.hybrid.knn_gate import KNNGate
     if runs:
-        from sysid.rundir import load_model
+        from sysid.runs.rundir import load_model
         return [(f"run {r}", load_model(r)[1]) for r in runs]
     out = [("MMG", MMG(load_ship("esso_osaka")))]
     states, inputs, source = training_samples(bank)
@@ -177,7 +177,7 @@ def main() -> None:
         os.environ["SYSID_CACHE"] = tempfile.mkdtemp(prefix="sysid-cache-")
     torch.set_num_threads(args.threads)
     from sysid import MMG, load_ship
-    from sysid.compiled import cache_dir
+    from sysid.fast.compiled import cache_dir
 
     lab = load_lab()
     x0_np, inputs_np, case = recorded_case()
@@ -199,8 +199,8 @@ def main() -> None:
 
 
 def single_call(mmg, x0_np, inputs_np, lab, repeats: int) -> None:
-    from sysid.compiled import compiled_derivative
-    from sysid.dynamics import derivative
+    from sysid.fast.compiled import compiled_derivative
+    from sysid.dynamics.equations import derivative
     print("1. One right-hand-side call on one state (float64)")
     x1 = torch.tensor(x0_np)[None]
     u1 = torch.tensor(inputs_np[0])[None]
@@ -218,8 +218,8 @@ def single_call(mmg, x0_np, inputs_np, lab, repeats: int) -> None:
 
 def batched(lab, thread_counts: list[int]) -> None:
     from sysid import MMG, load_ship
-    from sysid.compiled import compiled_derivative
-    from sysid.dynamics import derivative
+    from sysid.fast.compiled import compiled_derivative
+    from sysid.dynamics.equations import derivative
     print("\n2. Batched right-hand side, rows per second (ours float32, lab float64 numpy)")
     before = torch.get_num_threads()
     m32 = MMG(load_ship("esso_osaka"), dtype=torch.float32)
@@ -246,7 +246,7 @@ def batched(lab, thread_counts: list[int]) -> None:
 
 def predictions(args, x0_np, inputs_np, lab, mmg) -> None:
     from sysid import integrate, predict
-    from sysid.integrators import Integrator
+    from sysid.dynamics.integrators import Integrator
     print("\n3. One 100 s prediction at dt 1 s (101 states), one ship, float64")
     x0 = torch.tensor(x0_np)
     inputs = torch.tensor(inputs_np)

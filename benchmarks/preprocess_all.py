@@ -46,15 +46,15 @@ def _synth_one(args):
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--data", default=None, help="dataset root (default: sysid.datasets)")
+    ap.add_argument("--data", default=None, help="dataset root (default: sysid.data.datasets)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--clean", action="store_true",
                     help="noise-free raw logs: the method's floor against the public runs' content")
     args = ap.parse_args()
-    from sysid.datasets import data_dir
-    from sysid.ship import load_ship
+    from sysid.data.datasets import data_dir
+    from sysid.mmg.ship import load_ship
     files = sorted(data_dir(args.data).glob("*/*.csv"))
-    from sysid.data import read_run
+    from sysid.data.recordings import read_run
     sources = {f.stem: read_run(f, rate=10.0) for f in files}
     suspect = {k: r.suspect for k, r in sources.items()}
     layout = load_ship("esso_osaka").sensors
@@ -115,7 +115,7 @@ def main() -> int:
     if away:
         still = {c.split("_away")[0]: [f for f in table.index[table[c] >= BOUNDS[c.split("_away")[0]]]]
                  for c in away}
-        print("scored also away from the public files' own GNSS freezes (sysid.data): over the bound:",
+        print("scored also away from the public files' own GNSS freezes (sysid.data.recordings): over the bound:",
               {c: v for c, v in still.items() if v} or "none")
     hours = samples / 10 / 3600
     print(f"\n{len(results)} files, {samples} raw samples ({hours:.2f} h at 10 Hz): synthesis "

@@ -13,13 +13,13 @@ import time
 
 import torch
 
-from sysid.datasets import data_root
+from sysid.data.datasets import data_root
 from sysid.errors import DataError
-from sysid.experiment import load_experiment
-from sysid.lifecycle import training_runs
-from sysid.models import CorrectedModel, PerMember, build_mmg
-from sysid.correction import ForceCorrection
-from sysid.train import Trainer, multistep_loss, split_windows
+from sysid.config.experiment import load_experiment
+from sysid.runs.lifecycle import training_runs
+from sysid.hybrid.force_models import CorrectedModel, PerMember, build_mmg
+from sysid.hybrid.correction import ForceCorrection
+from sysid.identify.trainer import Trainer, multistep_loss, split_windows
 
 CONFIGS = {"D1": "configs/experiments/hybrid_D1.toml", "D2": "configs/experiments/hybrid_D2.toml"}
 

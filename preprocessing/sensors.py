@@ -1,7 +1,7 @@
 """Sensor layout on the hull: where the antennas, anemometers and gyro sit.
 
 Body frame from midship, x to the bow, y to starboard, metres. The layout is a value
-object; `sysid.ship` builds one from a ship definition's ``[sensors]`` table, so this
+object; `sysid.mmg.ship` builds one from a ship definition's ``[sensors]`` table, so this
 package never imports `sysid`.
 """
 from __future__ import annotations

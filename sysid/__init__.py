@@ -3,8 +3,8 @@
 One obvious entry point per task: `load_ship` for a ship definition, `MMG` for the force
 model, `integrate` for (differentiable) trajectories, `predict` for fast predictions
 (``predict(model, x0, inputs, dt, Integrator("rk4", compiled=True))``);
-`sysid.lifecycle.run_experiment` trains, evaluates and writes one experiment (``sysid
-train``), `sysid.reproduce.reproduce` the paper's protocol.
+`sysid.runs.lifecycle.run_experiment` trains, evaluates and writes one experiment (``sysid
+train``), `sysid.protocol.reproduce.reproduce` the paper's protocol.
 
 Layers, each importing only those before it: `state`, `ship`, `mmg`, `integrators` →
 `dynamics`, `correction`, `ood` → `stepper`, `knn_index` → `prepared` → `compiled` → `export`;
@@ -21,11 +21,11 @@ import importlib
 __version__ = "0.1.0"
 
 _HOME = {
-    "Ship": "sysid.ship", "load_ship": "sysid.ship",
+    "Ship": "sysid.mmg.ship", "load_ship": "sysid.mmg.ship",
     "MMG": "sysid.mmg", "ForceBreakdown": "sysid.mmg",
-    "ShipDynamics": "sysid.dynamics", "integrate": "sysid.dynamics",
-    "predict": "sysid.compiled", "Integrator": "sysid.integrators", "Method": "sysid.integrators",
-    "state_derivative": "sysid.dynamics", "body_acceleration": "sysid.dynamics",
+    "ShipDynamics": "sysid.dynamics.equations", "integrate": "sysid.dynamics.equations",
+    "predict": "sysid.fast.compiled", "Integrator": "sysid.dynamics.integrators", "Method": "sysid.dynamics.integrators",
+    "state_derivative": "sysid.dynamics.equations", "body_acceleration": "sysid.dynamics.equations",
 }
 
 __all__ = ["Ship", "load_ship", "MMG", "ForceBreakdown", "ShipDynamics", "integrate", "predict", "Integrator", "Method",

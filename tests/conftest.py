@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import pandas as pd
@@ -10,6 +11,8 @@ import pytest
 from sysid.errors import DataError
 
 ROOT = Path(__file__).resolve().parents[1]
+# helpers shared by tests (harnesses, synthetic runs, tiny experiments), imported by name
+sys.path.insert(0, str(Path(__file__).resolve().parent / "support"))
 
 
 def _shared() -> Path:
@@ -32,7 +35,7 @@ def oracle_vectors(oracle_dir) -> pd.DataFrame:
 
 @pytest.fixture(scope="session")
 def dataset_dir() -> Path:
-    from sysid.datasets import data_dir
+    from sysid.data.datasets import data_dir
     try:
         return data_dir()
     except DataError as exc:

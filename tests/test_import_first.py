@@ -8,8 +8,8 @@ import sys
 import pytest
 
 
-@pytest.mark.parametrize("module", ["sysid.ship", "sysid.mmg.families", "sysid.mmg.coefficients",
-                                    "sysid.experiment"])
+@pytest.mark.parametrize("module", ["sysid.mmg.ship", "sysid.mmg.families", "sysid.mmg.coefficients",
+                                    "sysid.config.experiment"])
 def test_module_imports_as_the_first_import(module):
     done = subprocess.run([sys.executable, "-c", f"import {module}"], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr.strip().splitlines()[-1:]

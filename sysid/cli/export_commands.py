@@ -24,10 +24,10 @@ def export(
     kNN gate), loadable with torch alone; prints its latency."""
     import torch
 
+    from sysid.fast.export import export_model, load_step, step_latency
+    from sysid.dynamics.integrators import Method
+    from sysid.runs.rundir import load_model
     from sysid.config import checks
-    from sysid.export import export_model, load_step, step_latency
-    from sysid.integrators import Method
-    from sysid.rundir import load_model
 
     try:
         method = Method.parse(integrator)

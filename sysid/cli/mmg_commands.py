@@ -24,7 +24,7 @@ CompiledOption = typer.Option(False, "--compiled",
 
 
 def _check_integrator(integrator: str) -> None:
-    from sysid.dynamics import INTEGRATORS
+    from sysid.dynamics.equations import INTEGRATORS
 
     if integrator not in INTEGRATORS:
         raise DataError(f"--integrator {integrator!r}: choose one of {', '.join(INTEGRATORS)}")
@@ -32,7 +32,7 @@ def _check_integrator(integrator: str) -> None:
 
 def _model(ship: str, overrides: Optional[List[str]], quadrature: str):
     from sysid.mmg import MMG
-    from sysid.ship import load_ship, parse_overrides
+    from sysid.mmg.ship import load_ship, parse_overrides
 
     if quadrature not in ("exact", "simpson"):
         raise DataError(f"--quadrature {quadrature!r}: choose exact or simpson")
@@ -43,7 +43,7 @@ def force_columns(model, frame):
     """Force components, totals and state derivatives (SI) for rows of `FORCE_INPUTS`."""
     import pandas as pd
     import torch
-    from sysid.dynamics import state_derivative
+    from sysid.dynamics.equations import state_derivative
 
     values = torch.tensor(frame[FORCE_INPUTS].to_numpy(dtype=float), dtype=torch.float64)
     state, inputs = values[:, :6], values[:, 6:]
@@ -68,7 +68,7 @@ def _read_force_inputs(path: Path):
     non-UTF-8 or non-numeric file."""
     import numpy as np
     import pandas as pd
-    from sysid.csvfiles import read_csv_table
+    from sysid.data.csvfiles import read_csv_table
 
     frame = read_csv_table(path, f"a CSV with the header {' '.join(FORCE_INPUTS)}")
     missing = [c for c in FORCE_INPUTS if c not in frame.columns]
@@ -102,8 +102,8 @@ def forces(
     """MMG force components (hull, propeller, rudder, wind; X, Y, N) and state derivatives per row."""
     import numpy as np
     import pandas as pd
+    from sysid.store.files import write_float_csv
     from sysid.config import checks
-    from sysid.files import write_float_csv
     from sysid.progress import progress
 
     start = time.perf_counter()
@@ -154,11 +154,11 @@ def simulate(
     import numpy as np
     import pandas as pd
     import torch
-    from sysid.compiled import predict
+    from sysid.fast.compiled import predict
+    from sysid.data.recordings import read_run
+    from sysid.store.files import write_csv
+    from sysid.dynamics.integrators import Integrator
     from sysid.config import checks
-    from sysid.data import read_run
-    from sysid.files import write_csv
-    from sysid.integrators import Integrator
 
     _check_integrator(integrator)
     checks.RATE.check("--rate", rate)
@@ -211,11 +211,11 @@ def evaluate(
 ) -> None:
     """The protocol's windowed RMSE of u, v_m, r per file and horizon (MMG or a trained run)."""
     import pandas as pd
+    from sysid.data.recordings import expand_paths, read_run
+    from sysid.evaluation.evaluate import evaluate_model, short_runs
+    from sysid.store.files import write_csv
+    from sysid.dynamics.integrators import Integrator
     from sysid.config import checks
-    from sysid.data import expand_paths, read_run
-    from sysid.evaluate import evaluate_model, short_runs
-    from sysid.files import write_csv
-    from sysid.integrators import Integrator
     from sysid.progress import progress
 
     _check_integrator(integrator)
@@ -223,7 +223,7 @@ def evaluate(
         checks.DURATION.check("--horizon", h)
     start = time.perf_counter()
     if run_dir is not None:
-        from sysid.rundir import load_model
+        from sysid.runs.rundir import load_model
         exp, model = load_model(run_dir)
         label = f"{exp.experiment.model} run {run_dir}"
     else:

@@ -56,9 +56,9 @@ def synth_raw(
     """Synthesise a raw 10 Hz log (and its truth) from a processed run."""
     from preprocessing import synth
     from preprocessing.schema import RawLogError
+    from sysid.store.files import write_csv
+    from sysid.mmg.ship import load_ship
     from sysid.config import checks
-    from sysid.files import write_csv
-    from sysid.ship import load_ship
 
     checks.COUNT.check("--seed", seed)
     checks.NOISE.check("--gnss-noise", gnss_noise)
@@ -112,8 +112,8 @@ def preprocess(
     from preprocessing import pipeline
     from sysid.config import checks
     from sysid.progress import progress
-    from sysid.ship import load_ship
-    from sysid.staging import check_target, staged_directory
+    from sysid.mmg.ship import load_ship
+    from sysid.store.staging import check_target, staged_directory
     from sysid.workers import in_workers
 
     checks.RATE.check("--rate", rate)

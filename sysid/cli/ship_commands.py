@@ -13,7 +13,7 @@ app.add_typer(ship_app, name="ship")
 def check(ship: str = typer.Argument(..., help="Ship TOML file or bundled ship name.")) -> None:
     """Validate FILE and print derived quantities (non-dimensional masses, course stability,
     propeller and rudder geometry) and warnings; exit code 2 with one line on bad input."""
-    from sysid.ship import load_ship  # with the force models, torch: only when the command runs
-    from sysid.ship_check import check_ship
+    from sysid.mmg.ship import load_ship  # with the force models, torch: only when the command runs
+    from sysid.mmg.ship_check import check_ship
 
     typer.echo(check_ship(load_ship(ship)).text())

@@ -28,13 +28,13 @@ def train(
     interrupted training leaves no run, only its checkpoint for --resume.
     """
     from sysid.cli.interrupts import on_interrupt
+    from sysid.data.recordings import expand_paths, read_run
+    from sysid.data.datasets import test_files
     from sysid.config import checks
-    from sysid.data import expand_paths, read_run
-    from sysid.datasets import test_files
     from sysid.errors import ConfigError
-    from sysid.experiment import load_experiment
-    from sysid.lifecycle import checkpoint_path, run_experiment, training_runs
-    from sysid.staging import check_target
+    from sysid.config.experiment import load_experiment
+    from sysid.runs.lifecycle import checkpoint_path, run_experiment, training_runs
+    from sysid.store.staging import check_target
 
     start = time.perf_counter()
     if epochs is not None and epochs < 0:
@@ -92,10 +92,10 @@ def reproduce(
     The output directory is moved into place only when every run is done (with a manifest);
     an interrupted reproduction leaves nothing behind.
     """
+    from sysid.device import cpu_cores
+    from sysid.protocol.reproduce import reproduce as run_protocol
+    from sysid.store.staging import check_target, staged_directory
     from sysid.config import checks
-    from sysid.config.checks import cpu_cores
-    from sysid.reproduce import reproduce as run_protocol
-    from sysid.staging import check_target, staged_directory
 
     if jobs is not None:
         checks.workers("--jobs", jobs, cluster=address)

@@ -1,8 +1,8 @@
 """The MMG model in torch: one module per force component, `MMG` sums them.
 
-The names below load on first use: `sysid.ship` imports `sysid.mmg.families` while
-`sysid.mmg.coefficients` imports `sysid.ship`, so this package must not import its
-modules eagerly (else ``import sysid.ship`` as a program's first import is a circle).
+The names below load on first use: `sysid.mmg.ship` imports `sysid.mmg.families` while
+`sysid.mmg.coefficients` imports `sysid.mmg.ship`, so this package must not import its
+modules eagerly (else ``import sysid.mmg.ship`` as a program's first import is a circle).
 """
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import importlib
 
 _HOME = {
     "Coefficients": "coefficients", "crossflow_integrals": "hull", "hull_force": "hull",
-    "MMG": "breakdown", "ForceBreakdown": "breakdown",
+    "MMG": "model", "ForceBreakdown": "model",
     "PropellerState": "propeller", "propeller_force": "propeller", "propeller_inflow": "propeller",
     "RudderInflow": "rudder", "rudder_force": "rudder", "rudder_inflow": "rudder",
     "RelativeWind": "wind", "relative_wind": "wind", "wind_force": "wind",

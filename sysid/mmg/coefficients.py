@@ -13,7 +13,7 @@ from typing import Iterable, Mapping
 import torch
 from torch import nn
 
-from sysid.ship import Ship, parameter_name
+from sysid.mmg.ship import Ship, parameter_name
 from sysid.errors import ShipDefinitionError
 
 

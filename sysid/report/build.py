@@ -20,7 +20,7 @@ matplotlib.use("Agg")
 from matplotlib import rc_context  # noqa: E402
 
 import sysid  # noqa: E402
-from sysid.files import atomic_path, write_text  # noqa: E402
+from sysid.store.files import atomic_path, write_text  # noqa: E402
 from sysid.report.html import HtmlFigure, figure_svg, render_html  # noqa: E402
 from sysid.report.methods import methods_paragraphs, run_rows, summary_items  # noqa: E402
 from sysid.report.palette import model_colour  # noqa: E402
@@ -53,7 +53,7 @@ class ReportPaths:
 
 def ship_size(source: ReportSource) -> tuple[float, float] | None:
     """(L_pp, B) [m] of the runs' ship, or None when its definition cannot be loaded."""
-    from sysid.ship import load_ship
+    from sysid.mmg.ship import load_ship
     name = next((r.summary.get("ship") for r in source.runs if r.summary.get("ship")), None)
     if not name:
         return None
@@ -74,7 +74,7 @@ def _placeholder(message: str, into=None):
 def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
                  progress: Callable[[str], None] | None = None) -> ReportPaths:
     """Write ``out_dir/report.html`` and ``out_dir/report.pdf`` for a run directory or a
-    reproduction directory (`sysid.rundir`). Raises `CheckpointError` naming the missing
+    reproduction directory (`sysid.runs.rundir`). Raises `CheckpointError` naming the missing
     or corrupt file."""
     started = time.perf_counter()
     say = progress or (lambda message: None)

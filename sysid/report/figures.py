@@ -1,6 +1,6 @@
 """The report's figures (the paper's Figs. 3-21 and the loss curves), one function each.
 
-Every function takes plain data (trace frames, `sysid.evaluate.TRACE_COLUMNS`, with a label
+Every function takes plain data (trace frames, `sysid.evaluation.evaluate.TRACE_COLUMNS`, with a label
 and a colour per model) and returns a matplotlib `Figure` built without pyplot (no global
 state). Units follow the traces: positions [m], velocities [m/s], angles shown in degrees,
 forces [N], moments [N m].

@@ -7,8 +7,8 @@ import hashlib
 import platform
 from dataclasses import dataclass
 
-from sysid.levenberg_marquardt import start_state_verdict
-from sysid.paper import run_label
+from sysid.identify.levenberg_marquardt import start_state_verdict
+from sysid.protocol.paper import run_label
 from sysid.report.quality import quality_rows
 from sysid.report.source import ReportSource, RunRecord
 

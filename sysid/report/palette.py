@@ -1,4 +1,4 @@
-"""One colour per model, the same in every figure and table of a report (labels: `sysid.paper`).
+"""One colour per model, the same in every figure and table of a report (labels: `sysid.protocol.paper`).
 
 Measured data is black; MMG blues, NN oranges, hybrid greens (the darker shade for D2, the
 data set the paper's figures use). Force components have their own fixed colours.

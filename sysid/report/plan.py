@@ -14,10 +14,10 @@ import pandas as pd
 from matplotlib.figure import FigureBase
 
 from sysid.report import figures as F
-from sysid.paper import run_label
+from sysid.protocol.paper import run_label
 from sysid.report.methods import estimator_text
 from sysid.report.palette import model_colour
-from sysid.paper import scenario_key
+from sysid.protocol.paper import scenario_key
 from sysid.report.quality import FILES_PER_FIGURE, quality_timeline
 from sysid.report.source import ReportSource, RunRecord
 
@@ -248,7 +248,7 @@ def _uncertainty_figures(c: _Context) -> None:
 
 def _seed_figures(c: _Context) -> None:
     """The spread over seeds of every learned model's short-horizon RMSE, per data set."""
-    from sysid.paper import paper_rmse
+    from sysid.protocol.paper import paper_rmse
 
     groups = [r for r in c.runs if r.seeds]
     if not groups or not c.short:

@@ -1,4 +1,4 @@
-"""Reading a run directory or a reproduction directory (layout: `sysid.rundir`).
+"""Reading a run directory or a reproduction directory (layout: `sysid.runs.rundir`).
 
 Every file the report needs is checked when it is read; a missing or corrupt file raises
 `CheckpointError` naming it, and a run or reproduction whose manifest is missing or disagrees
@@ -16,11 +16,11 @@ import pandas as pd
 
 from preprocessing.quality import QualityReport
 from sysid.errors import CheckpointError
-from sysid.experiment import KINDS as MODEL_KINDS, load_experiment
-from sysid.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
-from sysid.manifest import has_manifest, verify_manifest
-from sysid.rundir import read_knn_bank, verify_run_dir
-from sysid.seeds import seed_metrics
+from sysid.config.experiment import KINDS as MODEL_KINDS, load_experiment
+from sysid.evaluation.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
+from sysid.store.manifest import has_manifest, verify_manifest
+from sysid.runs.rundir import read_knn_bank, verify_run_dir
+from sysid.protocol.seeds import seed_metrics
 
 
 
@@ -157,7 +157,7 @@ def _run_order(run: RunRecord) -> tuple:
 
 
 def read_run_dir(path: Path) -> RunRecord:
-    """A run directory (`sysid.rundir`), checked."""
+    """A run directory (`sysid.runs.rundir`), checked."""
     path = Path(path)
     verify_run_dir(path)
     summary = read_json(path / "summary.json")
@@ -184,7 +184,7 @@ def read_run_dir(path: Path) -> RunRecord:
 
 def read_seed_group(path: Path) -> RunRecord:
     """``runs/{name}/seed{k}/`` of ``sysid reproduce --seeds N``: one record whose metrics are
-    the seed means with their spread (`sysid.seeds.seed_metrics`); summary, history and
+    the seed means with their spread (`sysid.protocol.seeds.seed_metrics`); summary, history and
     traces are those of its first seed."""
     seed_dirs = sorted((p for p in path.iterdir() if p.is_dir() and p.name.startswith("seed")),
                        key=lambda p: (len(p.name), p.name))

@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from sysid.paper import SCENARIO_ORDER, comparison_table, model_label, paper_rmse, run_label, scenario_key
+from sysid.protocol.paper import SCENARIO_ORDER, comparison_table, model_label, paper_rmse, run_label, scenario_key
 from sysid.report.palette import model_colour
 from sysid.report.source import ReportSource, RunRecord
 
@@ -141,7 +141,7 @@ def _mark_best(rows: list[TableRow]) -> None:
 
 
 def reproduction_tables(source: ReportSource) -> list[RmseTable]:
-    """Tables 7 and 8 (one per horizon) from `sysid.paper.comparison_table`: rows scenario x
+    """Tables 7 and 8 (one per horizon) from `sysid.protocol.paper.comparison_table`: rows scenario x
     model, column groups the data sets."""
     runs = source.runs
     datasets = tuple(sorted({r.dataset for r in runs if r.dataset not in ("-", "files")})) or ("D1", "D2")

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from sysid.files import write_csv, write_text
+from sysid.store.files import write_csv, write_text
 from sysid.sweep.plan import TRIALS_DIR
 from sysid.sweep.points import format_value
 from sysid.sweep.spec import SweepSpec

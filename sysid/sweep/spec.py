@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from sysid.errors import ConfigError
-from sysid.experiment import Experiment, load_experiment, parse_experiment
+from sysid.config.experiment import Experiment, load_experiment, parse_experiment
 
 SEARCHES = ("grid", "random", "optuna")
 OBJECTIVES = ("val_loss",)

@@ -4,7 +4,7 @@ Output directory::
 
     sweep.toml        the sweep file as given (a resumed sweep must match it)
     base.toml         the base experiment, every option resolved
-    trials/{point}/seed{k}/   one ordinary run directory per trial (`sysid.rundir`)
+    trials/{point}/seed{k}/   one ordinary run directory per trial (`sysid.runs.rundir`)
     trials.log        journal: one JSON line per trial event (started, resumed, trained, reused)
     results.csv       one row per trial: varied values, seed, status, validation loss, epochs
     points.csv        one row per configuration: validation loss over its seeds
@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Callable
 
 from sysid.errors import ConfigError, OutputError
-from sysid.files import write_text
+from sysid.store.files import write_text
 from sysid.sweep.plan import sweep_trials
 from sysid.sweep.results import SweepResults, collect_results, scanned_trials, write_results
 from sysid.sweep.runner import default_workers, run_optuna, run_trials
@@ -58,7 +58,7 @@ def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = Non
               resume: bool = False, overwrite: bool = False, data: str | os.PathLike | None = None,
               log: Callable[[str], None] = print) -> tuple[SweepResults, dict]:
     """Train every trial of `spec` (on Ray) into `out`; returns the results and summary."""
-    from sysid.datasets import data_root
+    from sysid.data.datasets import data_root
 
     started = time.perf_counter()
     out = Path(out)

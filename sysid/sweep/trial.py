@@ -1,8 +1,8 @@
 """One trial of a sweep: one configuration and seed trained into an ordinary run directory
-(`sysid.rundir`; ``sysid evaluate`` and ``sysid report`` read it).
+(`sysid.runs.rundir`; ``sysid evaluate`` and ``sysid report`` read it).
 
 A trial whose run directory is already complete is not trained again; one interrupted
-mid-training continues from its checkpoint (`sysid.lifecycle.checkpoint_path`). Every
+mid-training continues from its checkpoint (`sysid.runs.lifecycle.checkpoint_path`). Every
 training that finishes is written to the sweep's journal (``trials.log``, one JSON line
 per event), which is how a resumed sweep shows that no trial ran twice.
 """
@@ -17,12 +17,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from sysid.data import read_run
-from sysid.datasets import test_files
+from sysid.data.recordings import read_run
+from sysid.data.datasets import test_files
 from sysid.errors import IncompleteOutputError
-from sysid.experiment import parse_experiment
-from sysid.lifecycle import checkpoint_path, run_experiment, training_runs
-from sysid.rundir import verify_run_dir
+from sysid.config.experiment import parse_experiment
+from sysid.runs.lifecycle import checkpoint_path, run_experiment, training_runs
+from sysid.runs.rundir import verify_run_dir
 from sysid.sweep.trial_lock import trial_lock
 
 JOURNAL = "trials.log"

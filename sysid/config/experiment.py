@@ -1,0 +1,392 @@
+"""Experiment configs: a TOML file to typed, validated, frozen options.
+
+```toml
+[experiment]
+name = "hybrid_D2"
+model = "hybrid"            # mmg | nn | hybrid
+dataset = "D2"              # D1 | D2 (the paper's), or files = [...] under [data]
+ship = "esso_osaka"
+seed = 0
+
+[mmg]
+overrides = { X_vr = 0.4535 }
+
+[network]                   # paper Table 6
+hidden = [64, 64]
+
+[training]                  # paper Eqs. 13-17; weights are means over windows and steps
+steps = 5                   # T, Euler steps of the multi-step loss
+stride_s = 2.0              # windows slid by 2 s
+val_fraction = 0.3          # last 30 % of each file's time axis
+...
+
+[gate]                      # paper section 3.4.3
+k = 10
+alpha = 0.9995
+
+[identify]                  # beyond the paper: identification of MMG coefficients
+parameters = ["X_vr", "Y_v"]
+bounds = { X_vr = [-1.0, 1.0] }
+stage = "before"            # before (then the FNN on the identified MMG) | joint
+solver = "gradient"         # gradient (Adam epochs) | levenberg_marquardt (sigma shown honest)
+start_states = "estimated"  # levenberg_marquardt: estimated (default) | recorded
+prior_weight = 0.0          # levenberg_marquardt: pull toward the ship file's values (0: none)
+
+[ensemble]                  # a mean-of-seeds ensemble: these trained runs, forces averaged
+members = ["../hybrid_D2/seed0", "../hybrid_D2/seed1"]
+```
+Every section and key is optional except ``[experiment] model``; unknown keys are errors.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import tomllib
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+from sysid.dynamics.equations import INTEGRATORS
+from sysid.errors import ConfigError
+from sysid.identify.levenberg_marquardt import START_STATES
+from sysid.mmg.ship import parameter_name
+
+
+KINDS = ("mmg", "nn", "hybrid")         # MMG-only, NN-only, hybrid MMG + FNN
+GATE_SPACES = ("features", "inputs")    # where the kNN gate measures distances
+SOLVERS = ("gradient", "levenberg_marquardt")  # [identify] solver
+
+
+@dataclass(frozen=True)
+class ExperimentOptions:
+    name: str = "experiment"
+    model: str = "hybrid"
+    dataset: str = "D2"
+    ship: str = "esso_osaka"
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class DataOptions:
+    files: tuple[str, ...] = ()      # explicit training files instead of D1/D2
+    rate: float = 1.0                # Hz
+    exclude_suspect: bool = True     # drop windows touching frozen-GNSS segments
+
+
+@dataclass(frozen=True)
+class MMGOptions:
+    overrides: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class NetworkOptions:
+    hidden: tuple[int, ...] = (64, 64)
+    members: int = 1               # networks averaged (1 = the paper's single FNN)
+
+
+@dataclass(frozen=True)
+class TrainingOptions:
+    steps: int = 5
+    stride_s: float = 2.0
+    val_fraction: float = 0.3
+    block_s: float = 30.0          # validation blocks of this length, drawn per file
+    batch_size: int = 128
+    epochs: int = 400
+    learning_rate: float = 1e-3
+    lr_factor: float = 1.0         # learning rate x factor after lr_patience epochs without progress (1: constant)
+    lr_patience: int = 10
+    lambda_v: float = 1.0
+    lambda_F: float = 1e-3
+    lambda_L2: float = 1e-6
+    patience: int = 40
+    max_minutes: float = 0.0       # 0: off; > 0: a safety limit whose hit fails the run
+    threads: int = 1               # torch intra-op threads; 0: one per core
+    warm_start_epochs: int = 150   # one-step regression on the implied residual force
+    objective_s: float = 0.0       # horizon [s] of the final validation loss (summary val_loss); 0: T steps
+    dtype: str = "float32"
+    device: str = "auto"           # auto (CUDA when present) | cpu | cuda | cuda:N
+
+
+@dataclass(frozen=True)
+class GateOptions:
+    enabled: bool = True
+    k: int = 10
+    alpha: float = 0.9995
+    space: str = "features"   # features (paper: last hidden activations) | inputs (standardised s)
+
+
+@dataclass(frozen=True)
+class IdentifyOptions:
+    """How MMG coefficients are identified (`sysid.identify.trainer.Trainer.identify`).
+
+    solver : "gradient" (Adam epochs on the multi-step loss, early stopping; `epochs`,
+        `learning_rate`) or "levenberg_marquardt" (least squares on disjoint training
+        windows, `sysid.identify.levenberg_marquardt`; `iterations`, `start_states`, `prior_weight`).
+    start_states : "estimated" (each window's start (u, v_m, r) fitted too; the default for
+        levenberg_marquardt, the estimator whose sigma was shown honest) or "recorded"
+        (windows start from their recorded first sample; gradient's only way).
+    prior_weight : lambda >= 0 of the residuals sqrt(lambda) (theta - prior) / |prior| toward
+        the values identification starts from (ship file with [mmg] overrides);
+        levenberg_marquardt only, 0 = none.
+    """
+
+    parameters: tuple[str, ...] = ()
+    bounds: dict = field(default_factory=dict)
+    stage: str = "before"
+    epochs: int = 60
+    learning_rate: float = 2e-2
+    solver: str = "gradient"
+    start_states: str = ""          # "": estimated for levenberg_marquardt, recorded for gradient
+    prior_weight: float = 0.0
+    iterations: int = 40            # levenberg_marquardt's iteration limit
+
+    def __post_init__(self):
+        if not self.start_states:
+            resolved = "estimated" if self.solver == "levenberg_marquardt" else "recorded"
+            object.__setattr__(self, "start_states", resolved)
+
+
+@dataclass(frozen=True)
+class EvaluationOptions:
+    horizons: tuple[float, ...] = (30.0, 100.0)
+    integrator: str = "euler"
+
+
+@dataclass(frozen=True)
+class EnsembleOptions:
+    members: tuple[str, ...] = ()   # run directories (relative to this run's) whose forces are averaged
+
+
+@dataclass(frozen=True)
+class Experiment:
+    experiment: ExperimentOptions = ExperimentOptions()
+    data: DataOptions = DataOptions()
+    mmg: MMGOptions = MMGOptions()
+    network: NetworkOptions = NetworkOptions()
+    training: TrainingOptions = TrainingOptions()
+    gate: GateOptions = GateOptions()
+    identify: IdentifyOptions = IdentifyOptions()
+    evaluation: EvaluationOptions = EvaluationOptions()
+    ensemble: EnsembleOptions = EnsembleOptions()
+    source: str = ""
+
+    @property
+    def needs_training(self) -> bool:
+        """False for an MMG-only model with nothing to identify (it is used as defined)."""
+        return not (self.experiment.model == "mmg" and not self.identify.parameters)
+
+    def replace(self, **sections: dict) -> "Experiment":
+        """A copy with some options changed: ``exp.replace(training={"epochs": 2})``."""
+        changes = {}
+        for name, values in sections.items():
+            changes[name] = dataclasses.replace(getattr(self, name), **values)
+        return dataclasses.replace(self, **changes)
+
+    def to_toml(self) -> str:
+        """The resolved config as TOML (every default filled in)."""
+        lines = []
+        for section in fields(self):
+            if section.name == "source":
+                continue
+            lines.append(f"[{section.name}]")
+            for f in fields(getattr(self, section.name)):
+                lines.append(f"{f.name} = {_toml_value(getattr(getattr(self, section.name), f.name))}")
+            lines.append("")
+        return "\n".join(lines)
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return repr(value)
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{k} = {_toml_value(v)}" for k, v in value.items()) + " }"
+    raise TypeError(f"cannot write {value!r} as TOML")
+
+
+MAX_WIDTH = 4096     # hidden layer width
+MAX_MEMBERS = 64     # networks in an ensemble
+
+_SECTIONS = {f.name: f.type for f in fields(Experiment) if f.name != "source"}
+
+
+# the element type of every list option
+_ELEMENT_TYPES = {("data", "files"): str, ("ensemble", "members"): str, ("network", "hidden"): int,
+                  ("identify", "parameters"): str, ("evaluation", "horizons"): float}
+_NAMES = {int: "an integer", float: "a finite number", str: "a string"}
+
+
+def _list_element(where: str, item: Any, kind: type):
+    """One element of a list option, checked against its type (ints are numbers too)."""
+    ok = (not isinstance(item, bool)) and (
+        isinstance(item, kind) or (kind is float and isinstance(item, int)))
+    if ok and kind is float:
+        ok = math.isfinite(item)
+    if not ok:
+        raise ConfigError(f"{where}: every element must be {_NAMES[kind]}, got {item!r}")
+    return float(item) if kind is float else item
+
+
+def _number_pair(where: str, value: Any) -> None:
+    if not (isinstance(value, list) and len(value) == 2 and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+            and value[0] < value[1]):
+        raise ConfigError(f"{where} must be [low, high], two finite numbers with low < high, got {value!r}")
+
+
+def _coerce(section: str, opt_cls, table: dict, src: str):
+    if not isinstance(table, dict):
+        raise ConfigError(f"{src}: [{section}] must be a table")
+    known = {f.name: f for f in fields(opt_cls)}
+    out = {}
+    for key, value in table.items():
+        if key not in known:
+            raise ConfigError(f"{src}: [{section}] unknown key {key!r} (known: {', '.join(known)})")
+        default = getattr(opt_cls(), key)
+        where = f"{src}: [{section}] {key}"
+        if isinstance(default, bool):
+            if not isinstance(value, bool):
+                raise ConfigError(f"{where}: expected true/false, got {value!r}")
+        elif isinstance(default, int):
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise ConfigError(f"{where}: expected an integer, got {value!r}")
+        elif isinstance(default, float):
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ConfigError(f"{where}: expected a number, got {value!r}")
+            if not math.isfinite(value):
+                raise ConfigError(f"{where}: expected a finite number, got {value!r}")
+            value = float(value)
+        elif isinstance(default, str):
+            if not isinstance(value, str):
+                raise ConfigError(f"{where}: expected a string, got {value!r}")
+        elif isinstance(default, tuple):
+            if not isinstance(value, list):
+                raise ConfigError(f"{where}: expected a list, got {value!r}")
+            value = tuple(_list_element(where, item, _ELEMENT_TYPES[(section, key)]) for item in value)
+        elif isinstance(default, dict):
+            if not isinstance(value, dict):
+                raise ConfigError(f"{where}: expected a table, got {value!r}")
+        out[key] = value
+    return opt_cls(**out)
+
+
+def _validate(exp: Experiment, src: str) -> None:
+    e, t, g, i = exp.experiment, exp.training, exp.gate, exp.identify
+    if e.model not in KINDS:
+        raise ConfigError(f"{src}: [experiment] model = {e.model!r}: choose one of {', '.join(KINDS)}")
+    if not exp.data.files and e.dataset not in ("D1", "D2"):
+        raise ConfigError(f"{src}: [experiment] dataset = {e.dataset!r}: choose D1 or D2, or list [data] files")
+    checks = [
+        (t.steps >= 1, "[training] steps must be >= 1"),
+        (t.stride_s > 0, "[training] stride_s must be > 0"),
+        (0.0 < t.val_fraction < 1.0, "[training] val_fraction must be in (0, 1)"),
+        (t.block_s > 0, "[training] block_s must be > 0"),
+        (t.batch_size >= 1, "[training] batch_size must be >= 1"),
+        (t.epochs >= 0, "[training] epochs must be >= 0"),
+        (t.learning_rate > 0, "[training] learning_rate must be > 0"),
+        (0 < t.lr_factor <= 1, "[training] lr_factor must be in (0, 1]"),
+        (t.lr_patience >= 0, "[training] lr_patience must be >= 0"),
+        (min(t.lambda_v, t.lambda_F, t.lambda_L2) >= 0, "[training] lambdas must be >= 0"),
+        (t.patience >= 1, "[training] patience must be >= 1"),
+        (t.objective_s >= 0, "[training] objective_s must be >= 0 (0: the training steps T)"),
+        (t.max_minutes >= 0, "[training] max_minutes must be >= 0 (0: no wall-clock limit)"),
+        (t.threads >= 0, "[training] threads must be >= 0 (0: one per core)"),
+        (t.dtype in ("float32", "float64"), "[training] dtype must be float32 or float64"),
+        (t.device == "auto" or t.device == "cpu" or t.device.startswith("cuda"),
+         "[training] device must be auto, cpu or cuda[:N]"),
+        (g.k >= 1, "[gate] k must be >= 1"),
+        (0.0 < g.alpha < 1.0, "[gate] alpha must be in (0, 1)"),
+        (g.space in GATE_SPACES, f"[gate] space must be one of {', '.join(GATE_SPACES)}"),
+        (i.stage in ("before", "joint"), "[identify] stage must be before or joint"),
+        (i.solver in SOLVERS, f"[identify] solver = {i.solver!r}: choose one of {', '.join(SOLVERS)}"),
+        (i.start_states in START_STATES,
+         f"[identify] start_states = {i.start_states!r}: choose one of {', '.join(START_STATES)}"),
+        (i.solver == "levenberg_marquardt" or i.start_states == "recorded",
+         f"[identify] start_states = {i.start_states!r} needs solver = \"levenberg_marquardt\" "
+         "(gradient identification integrates every window from its recorded start)"),
+        (i.prior_weight >= 0, "[identify] prior_weight must be >= 0 (0: no prior)"),
+        (i.solver == "levenberg_marquardt" or i.prior_weight == 0,
+         "[identify] prior_weight needs solver = \"levenberg_marquardt\""),
+        (i.iterations >= 1, "[identify] iterations must be >= 1"),
+        (i.solver == "gradient" or i.stage == "before",
+         "[identify] solver = \"levenberg_marquardt\" identifies the MMG alone: stage \"joint\" (with "
+         "the FNN) needs solver = \"gradient\""),
+        (i.solver == "gradient" or bool(i.parameters),
+         "[identify] solver = \"levenberg_marquardt\" needs parameters to identify"),
+        (e.seed >= 0, f"[experiment] seed = {e.seed}: must be >= 0"),
+        (len(exp.evaluation.horizons) > 0, "[evaluation] horizons must list at least one horizon [s]"),
+        (all(h > 0 for h in exp.evaluation.horizons), "[evaluation] horizons must be > 0"),
+        (all(w <= MAX_WIDTH for w in exp.network.hidden), f"[network] hidden widths must be <= {MAX_WIDTH}"),
+        (exp.network.members <= MAX_MEMBERS, f"[network] members must be <= {MAX_MEMBERS}"),
+        (t.steps <= 10_000, "[training] steps must be <= 10000"),
+        (exp.evaluation.integrator in INTEGRATORS,
+         f"[evaluation] integrator must be one of {', '.join(INTEGRATORS)}"),
+        (all(w >= 1 for w in exp.network.hidden) and exp.network.hidden, "[network] hidden must list widths >= 1"),
+        (exp.data.rate > 0, "[data] rate must be > 0"),
+        (exp.network.members >= 1, "[network] members must be >= 1"),
+    ]
+    for ok, message in checks:
+        if not ok:
+            raise ConfigError(f"{src}: {message}")
+    try:
+        for key in exp.mmg.overrides:
+            parameter_name(key, f"{src}: [mmg] overrides")
+        for key in i.parameters:
+            parameter_name(key, f"{src}: [identify] parameters")
+        for key, value in exp.mmg.overrides.items():
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ConfigError(f"{src}: [mmg] overrides.{key} must be a finite number, got {value!r}")
+        for key, bound in i.bounds.items():
+            parameter_name(key, f"{src}: [identify] bounds")
+            _number_pair(f"{src}: [identify] bounds.{key}", bound)
+    except ConfigError:
+        raise
+    except Exception as exc:  # ShipDefinitionError on unknown names
+        raise ConfigError(str(exc)) from None
+    if e.model == "nn" and i.parameters:
+        raise ConfigError(f"{src}: [identify] parameters need an MMG part (model mmg or hybrid)")
+
+
+def parse_experiment(doc: dict, source: str = "<config>") -> Experiment:
+    """A parsed TOML document to a validated `Experiment`."""
+    unknown = set(doc) - set(_SECTIONS)
+    if unknown:
+        raise ConfigError(f"{source}: unknown section(s) {sorted(unknown)} (known: {', '.join(_SECTIONS)})")
+    experiment = doc.get("experiment")
+    if not isinstance(experiment, dict) or "model" not in experiment:
+        raise ConfigError(f"{source}: [experiment] model is required (mmg, nn or hybrid)"
+                          + ("; the file is empty" if not doc else ""))
+    sections = {name: _coerce(name, cls if isinstance(cls, type) else globals()[cls], doc.get(name, {}), source)
+                for name, cls in _SECTIONS.items()}
+    exp = Experiment(**sections, source=source)
+    _validate(exp, source)
+    return exp
+
+
+def load_experiment(path: str | os.PathLike) -> Experiment:
+    """Read and validate an experiment TOML; errors name the file and key."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"{path}: config file not found")
+    try:
+        with open(path, "rb") as fh:
+            doc = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML ({exc})") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: not UTF-8 text (binary, or another encoding such as UTF-16); "
+                          "an experiment config is a UTF-8 TOML file") from None
+    return parse_experiment(doc, str(path))
+
+
+def ship_overrides(exp: Experiment) -> dict[str, float]:
+    """[mmg] overrides with canonical parameter names."""
+    return {parameter_name(k): float(v) for k, v in exp.mmg.overrides.items()}
+
+

@@ -1,0 +1,226 @@
+"""Processed runs (the public FRT-DS-ESSO schema) at 1 Hz, checked, and cut into windows.
+
+A processed file has the header ``name [unit]`` of RAW_LOG_FORMAT.md's processed schema,
+at 10 Hz (public files) or 1 Hz (``sysid preprocess`` output). `read_run` drops trailing
+all-empty rows, rejects NaN inside the run, non-monotonic time and wrong units, and
+downsamples by taking every k-th sample from the first one (the protocol's t = 0, 1, 2 s).
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+import pandas as pd
+import torch
+
+from preprocessing.schema import PROCESSED, PROCESSED_CHANNEL, PROCESSED_PLAUSIBLE_ABS
+from sysid.data.csvfiles import read_csv_table
+from sysid.errors import DataError
+from sysid.state import INPUTS, STATE
+
+# processed-schema header ("u_velo [m/s]") -> our channel name ("u"); one source: preprocessing.schema
+COLUMNS = {f"{name} [{unit}]": PROCESSED_CHANNEL[name] for name, unit in PROCESSED.items()}
+HEADER = {channel: header for header, channel in COLUMNS.items()}
+_LIMITS = PROCESSED_PLAUSIBLE_ABS
+_UNIT_HINTS = {"[rad]": " (degrees?)", "[rad/s]": " (deg/s?)"}
+
+
+@dataclass
+class Run:
+    """One processed run at a uniform rate.
+
+    Attributes
+    ----------
+    name : file stem; path : source file.
+    t : (N,) time [s]; states : (N, 6) x, u, y, v, psi, r; inputs : (N, 4) n_prop [rps],
+    delta_rudder [rad], wind_velo_true [m/s], wind_dir_true [rad]; relative_wind : (N, 2)
+    U_A [m/s], gamma_A [rad] as recorded.
+    dt : sample period [s]; issues : data-quality findings (gaps, frozen GNSS, ...);
+    suspect : (t_start, t_end) [s] intervals of frozen GNSS or time gaps.
+    """
+
+    name: str
+    path: Path
+    t: np.ndarray
+    states: np.ndarray
+    inputs: np.ndarray
+    relative_wind: np.ndarray
+    dt: float
+    issues: list[str] = field(default_factory=list)
+    suspect: list[tuple[float, float]] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0]) if len(self.t) else 0.0
+
+
+def read_run(path: str | os.PathLike, rate: float = 1.0) -> Run:
+    """Read and check a processed run, downsampled to `rate` [Hz] by taking samples."""
+    path = Path(path)
+    if not (rate > 0 and np.isfinite(rate)):
+        raise DataError(f"{path}: rate {rate} Hz: must be > 0")
+    frame = read_csv_table(path, "a processed run with the header 'name [unit]'")
+    missing = [c for c in COLUMNS if c not in frame.columns]
+    if missing:
+        raise DataError(f"{path}: missing column(s) {missing}")
+    frame = frame[list(COLUMNS)].rename(columns=COLUMNS)
+    # trailing all-empty rows (zigzag 13_50_28 ends with 327 of them) are dropped
+    values = frame.to_numpy(dtype=float)
+    filled = ~np.isnan(values[:, 1:]).all(axis=1)
+    last = int(np.nonzero(filled)[0][-1]) + 1 if filled.any() else 0
+    frame, values = frame.iloc[:last], values[:last]
+    if len(frame) < 2:
+        raise DataError(f"{path}: fewer than two data rows")
+    bad = ~np.isfinite(values)
+    if bad.any():
+        row, col = np.argwhere(bad)[0]
+        raise DataError(f"{path}: column {frame.columns[col]!r} is NaN/inf at data row {row + 2} "
+                        f"({int(bad.any(axis=1).sum())} bad rows)")
+    t = values[:, 0]
+    steps = np.diff(t)
+    if (steps <= 0).any():
+        row = int(np.argmax(steps <= 0)) + 1
+        raise DataError(f"{path}: column 't' is not strictly increasing at data row {row + 2} "
+                        f"(t = {t[row]})")
+    for name, limit in _LIMITS.items():
+        peak = np.abs(frame[name].to_numpy()).max()
+        if name == "psi" and peak > limit and _turns_at_yaw_rate(t, frame["psi"].to_numpy(), frame["r"].to_numpy()):
+            continue  # an unwrapped heading in radians (a simulated turn): it changes at r
+        if peak > limit:
+            hint = next((h for unit, h in _UNIT_HINTS.items() if HEADER[name].endswith(unit)), "?")
+            raise DataError(f"{path}: column {name!r} reaches {peak:.4g}, beyond ±{limit:.4g} "
+                            f"(header '{HEADER[name]}'): wrong units{hint}")
+    period = float(np.median(steps))
+    stride = int(round(1.0 / rate / period))
+    if stride < 1 or abs(stride * period * rate - 1.0) > 1e-3:
+        raise DataError(f"{path}: rate {rate:g} Hz is not a whole number of this file's {period:g}-s samples "
+                        f"per step; choose a rate that divides {1.0 / period:g} Hz")
+    issues, suspect = _quality_issues(t, values, period)
+    sel = values[::stride]
+    if len(sel) < 2:
+        raise DataError(f"{path}: rate {rate:g} Hz leaves {len(sel)} sample of this {t[-1] - t[0]:.0f}-s run; "
+                        "choose a higher rate")
+    return Run(
+        name=path.stem, path=path, t=sel[:, 0],
+        states=sel[:, [frame.columns.get_loc(c) for c in list(STATE)]],
+        inputs=sel[:, [frame.columns.get_loc(c) for c in list(INPUTS)]],
+        relative_wind=sel[:, [frame.columns.get_loc("wind_velo_relative"),
+                              frame.columns.get_loc("wind_dir_relative")]],
+        dt=period * stride, issues=issues, suspect=suspect)
+
+
+def _turns_at_yaw_rate(t: np.ndarray, psi: np.ndarray, r: np.ndarray) -> bool:
+    """Whether heading psi changes at the yaw rate r [rad/s], as an unwrapped heading in
+    radians does, and not 57 times faster (degrees): the least-squares factor between
+    dpsi/dt and r, over steps without a wrap, lies within a factor 2 of 1."""
+    dpsi = np.diff(psi)
+    keep = np.abs(dpsi) < np.pi
+    rate, r_mid = dpsi[keep] / np.diff(t)[keep], 0.5 * (r[1:] + r[:-1])[keep]
+    power = float(r_mid @ r_mid)
+    return power > 0 and 0.5 < float(rate @ r_mid) / power < 2.0
+
+
+def _quality_issues(t: np.ndarray, values: np.ndarray, period: float):
+    """Gaps in time and frozen GNSS (position and heading constant for >= 1 s):
+    messages and (t_start, t_end) intervals."""
+    issues, suspect = [], []
+    steps = np.diff(t)
+    for i in np.nonzero(steps > 1.5 * period)[0]:
+        issues.append(f"time gap of {steps[i]:.2f} s at t = {t[i]:.1f} s")
+        suspect.append((float(t[i]), float(t[i + 1])))
+    frozen = (np.diff(values[:, 1]) == 0) & (np.diff(values[:, 5]) == 0)  # x and psi unchanged
+    run_len = max(2, int(round(1.0 / period)))
+    i = 0
+    while i < len(frozen):
+        if frozen[i]:
+            j = i
+            while j < len(frozen) and frozen[j]:
+                j += 1
+            if j - i >= run_len:
+                issues.append(f"GNSS frozen for {t[j] - t[i]:.1f} s at t = {t[i]:.1f} s")
+                suspect.append((float(t[i]), float(t[j])))
+            i = j
+        else:
+            i += 1
+    return issues, suspect
+
+
+def duplicate_runs(runs: Sequence[Run], tolerance: float = 1e-9) -> list[tuple[str, str]]:
+    """Pairs (copy, original) where one run's samples are the start of another's.
+
+    ``turn_cut_14-Sep-2020_15_58_08`` is the first 286.8 s of ``turn_14-Sep-2020_15_58_08``;
+    a window-level split would otherwise put copies in training and validation.
+    """
+    pairs = []
+    for a in runs:
+        for b in runs:
+            if a is b or len(a) > len(b) or (len(a) == len(b) and a.name > b.name):
+                continue
+            n = len(a)
+            if np.allclose(a.states, b.states[:n], atol=tolerance) and \
+                    np.allclose(a.inputs, b.inputs[:n], atol=tolerance):
+                pairs.append((a.name, b.name))
+    return pairs
+
+
+def expand_paths(items: Iterable[str | os.PathLike]) -> list[Path]:
+    """Files and directories (searched recursively for *.csv) to a sorted file list."""
+    out: list[Path] = []
+    from sysid.store.manifest import has_manifest, verify_manifest
+
+    for item in items:
+        p = Path(item)
+        if p.is_dir():
+            if has_manifest(p):  # sysid preprocess output: refused when incomplete or changed
+                verify_manifest(p)
+            # hidden entries are staging directories and temporaries of unfinished writes
+            found = sorted(q for q in p.rglob("*.csv") if not q.name.endswith(".truth.csv")
+                           and not any(part.startswith(".") for part in q.relative_to(p).parts))
+            if not found:
+                raise DataError(f"{p}: directory holds no .csv files")
+            out += found
+        elif p.is_file():
+            out.append(p)
+        else:
+            raise DataError(f"{p}: no such file or directory")
+    return out
+
+
+def protocol_windows(n_samples: int, horizon: int) -> np.ndarray:
+    """Start indices of consecutive, non-overlapping full windows of `horizon` samples
+    (k = 0 .. floor(N / H) - 1; BENCHMARK_PROTOCOL.md)."""
+    return np.arange(n_samples // horizon) * horizon
+
+
+def sliding_windows(n_samples: int, length: int, stride: int) -> np.ndarray:
+    """Start indices of windows of `length` samples slid by `stride` samples."""
+    if n_samples < length:
+        return np.zeros(0, dtype=int)
+    return np.arange(0, n_samples - length + 1, stride)
+
+
+def window_touches(run: Run, starts: np.ndarray, length: int, margin_s: float = 1.0) -> np.ndarray:
+    """(W,) True where a window [t_start, t_end] comes within `margin_s` of a suspect interval."""
+    hit = np.zeros(len(starts), dtype=bool)
+    if not len(starts):
+        return hit
+    t0 = run.t[starts]
+    t1 = run.t[np.minimum(starts + length - 1, len(run) - 1)]
+    for a, b in run.suspect:
+        hit |= (t1 >= a - margin_s) & (t0 <= b + margin_s)
+    return hit
+
+
+def stack_windows(run: Run, starts: np.ndarray, length: int, dtype=torch.float64,
+                  device: str | torch.device = "cpu") -> tuple[torch.Tensor, torch.Tensor]:
+    """States (length, W, 6) and inputs (length, W, 4) of the windows at `starts`."""
+    idx = starts[None, :] + np.arange(length)[:, None]  # (length, W)
+    states = torch.as_tensor(run.states[idx], dtype=dtype, device=device)
+    inputs = torch.as_tensor(run.inputs[idx], dtype=dtype, device=device)
+    return states, inputs

@@ -1,0 +1,196 @@
+"""Equations of motion (paper Eqs. 1, 4) and their integration.
+
+`ShipDynamics` is the right-hand side f(t, x) of the 3-DOF maneuvering equations for any
+force model (MMG, NN-only, hybrid) with zero-order-hold inputs; `integrate` runs many
+trajectories at once, differentiably, with the rule a `Method` names: torchdiffeq's public
+`odeint` (Euler, the 3/8 rule; plain backprop, no adjoint) or a plain step loop (classical
+RK4, which torchdiffeq's public names lack). Compiled prediction: `sysid.fast.compiled.predict`.
+
+Time inside torchdiffeq is counted in steps (tau = t / dt), so step k's input is
+``inputs[floor(tau)]`` exactly, also at the perturbed end point of a Runge-Kutta step.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import torch
+from torch import nn
+from torchdiffeq import odeint
+
+from sysid.dynamics.integrators import Integrator, IntegratorLike, Method, rollout
+from sysid.mmg.model import ForceBreakdown
+
+_ODEINT_NAME = {Method.EULER: "euler", Method.RK4_38: "rk4"}  # torchdiffeq's public names
+INTEGRATORS = ("euler", "rk4")  # what configs and the CLI offer: the paper's and the lab's
+
+
+def acceleration_channels(u, v, r, X, Y, N, c):
+    """(u_dot, v_dot, r_dot), each (...,), from Eq. (4) for u, v [m/s], r [rad/s] and
+    X, Y [N], N [N m], each (...,); `c` provides m, m_x, m_y, I_zz_J_zz [kg, kg m^2], x_G [m]."""
+    m, xG = c.m, c.x_G
+    mxG = m * xG
+    u_dot = (X + (m + c.m_y) * v * r + mxG * r * r) / (m + c.m_x)
+    # [[m+m_y, x_G m], [x_G m, I+J+x_G^2 m]] (v_dot, r_dot) = (Y - (m+m_x) u r, N - x_G m u r)
+    a11, a12, a22 = m + c.m_y, mxG, c.I_zz_J_zz + xG * xG * m
+    b1 = Y - (m + c.m_x) * u * r
+    b2 = N - mxG * u * r
+    det = a11 * a22 - a12 * a12
+    v_dot = (a22 * b1 - a12 * b2) / det
+    r_dot = (a11 * b2 - a12 * b1) / det
+    return u_dot, v_dot, r_dot
+
+
+def body_acceleration(state: torch.Tensor, force: torch.Tensor, c) -> torch.Tensor:
+    """(u_dot, v_dot, r_dot) (..., 3) from Eq. (4).
+
+    state (..., 6) = (x, u, y, v, psi, r); force (..., 3) = (X, Y, N) [N, N, N m];
+    `c` provides m, m_x, m_y, I_zz_J_zz [kg, kg m^2] and x_G [m].
+    """
+    return torch.stack(acceleration_channels(state[..., 1], state[..., 3], state[..., 5], *force.unbind(-1), c), -1)
+
+
+def required_force(state: torch.Tensor, acceleration: torch.Tensor, c) -> torch.Tensor:
+    """(X, Y, N) (..., 3) [N, N, N m] that produces `acceleration` = (u_dot, v_dot, r_dot)
+    in Eq. (4): the inverse of `body_acceleration`."""
+    u, v, r = state[..., 1], state[..., 3], state[..., 5]
+    du, dv, dr = acceleration.unbind(-1)
+    m, xG = c.m, c.x_G
+    X = (m + c.m_x) * du - (m + c.m_y) * v * r - xG * m * r * r
+    Y = (m + c.m_y) * dv + (m + c.m_x) * u * r + xG * m * dr
+    N = (c.I_zz_J_zz + xG * xG * m) * dr + xG * m * (dv + u * r)
+    return torch.stack((X, Y, N), -1)
+
+
+def derivative_channels(state: torch.Tensor, force, c) -> tuple[torch.Tensor, ...]:
+    """(x_dot, u_dot, y_dot, v_dot, psi_dot, r_dot), each (...,), Eqs. (1) and (4), from
+    state (..., 6) and force = (X, Y, N), each (...,) [N, N, N m]."""
+    u, v, psi, r = state[..., 1], state[..., 3], state[..., 4], state[..., 5]
+    u_dot, v_dot, r_dot = acceleration_channels(u, v, r, *force, c)
+    cos_psi, sin_psi = torch.cos(psi), torch.sin(psi)
+    x_dot = u * cos_psi - v * sin_psi
+    y_dot = u * sin_psi + v * cos_psi
+    return x_dot, u_dot, y_dot, v_dot, r, r_dot
+
+
+def state_derivative(state: torch.Tensor, force: torch.Tensor, c) -> torch.Tensor:
+    """dx/dt (..., 6) = (x_dot, u_dot, y_dot, v_dot, psi_dot, r_dot), Eqs. (1) and (4)."""
+    return torch.stack(derivative_channels(state, force.unbind(-1), c), -1)
+
+
+def derivative(force_model: nn.Module, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
+    """dx/dt (..., 6) of any force model at state (..., 6) with inputs (..., 4)."""
+    return state_derivative(state, force_model(state, inputs).total, force_model.coefficients)
+
+
+def lean_derivative(force_model: nn.Module, state: torch.Tensor, inputs: torch.Tensor, dim: int = -1) -> torch.Tensor:
+    """`derivative` through the model's ``force_channels`` (X, Y, N as separate tensors, no
+    force breakdown) where it has one: the same numbers with fewer, larger operations
+    (what compiled steps run). dx/dt is stacked along `dim` (0: channels first, (6, ...))."""
+    channels = getattr(force_model, "force_channels", None)
+    force = channels(state, inputs)[0] if channels is not None else force_model(state, inputs).total.unbind(-1)
+    return torch.stack(derivative_channels(state, force, force_model.coefficients), dim)
+
+
+class ShipDynamics(nn.Module):
+    """Right-hand side f(tau, x) with zero-order-hold inputs, in step time tau = t / dt.
+
+    Parameters
+    ----------
+    force_model : module mapping (state (..., 6), inputs (..., 4)) to a `ForceBreakdown`;
+        it carries ``coefficients`` with the mass terms.
+    inputs : (T, ..., 4) inputs; step k uses ``inputs[k]``.
+    dt : step length [s].
+    record : optional list; each call appends the `ForceBreakdown` it computed.
+    """
+
+    def __init__(self, force_model: nn.Module, inputs: torch.Tensor, dt: float, record: list | None = None):
+        super().__init__()
+        self.record = record
+        self.force_model = force_model
+        self.inputs = inputs
+        self.dt = float(dt)
+
+    def derivative(self, state: torch.Tensor, inputs: torch.Tensor) -> tuple[torch.Tensor, ForceBreakdown]:
+        forces = self.force_model(state, inputs)
+        if self.record is not None:
+            self.record.append(forces)
+        return state_derivative(state, forces.total, self.force_model.coefficients), forces
+
+    def forward(self, tau: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
+        k = min(max(int(tau), 0), self.inputs.shape[0] - 1)  # tau >= 0: int() is floor
+        return self.dt * self.derivative(state, self.inputs[k])[0]
+
+
+def check_shapes(x0: torch.Tensor, inputs: torch.Tensor) -> None:
+    """ValueError unless x0 is (..., 6) and inputs (T, ..., 4) with the same batch shape."""
+    if x0.shape[-1:] != (6,) or inputs.shape[-1:] != (4,) or inputs.shape[1:-1] != x0.shape[:-1]:
+        raise ValueError(f"inputs {tuple(inputs.shape)} do not match x0 {tuple(x0.shape)}: "
+                         "expected x0 (*batch, 6) and inputs (T, *batch, 4)")
+
+
+def integrate(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
+              method: IntegratorLike = Method.EULER, *, record: list | None = None) -> torch.Tensor:
+    """Predict trajectories from x0 with recorded inputs held over each step.
+
+    Parameters
+    ----------
+    force_model : MMG, NN-only or hybrid force model.
+    x0 : (..., 6) initial states (any batch shape).
+    inputs : (T, ..., 4) inputs on the time grid; step k (t_k -> t_k+1) uses inputs[k],
+        the last row is not used.
+    dt : grid step [s].
+    method : an `Integrator`, or a `Method` or its name: "euler" (the paper's), "rk4"
+        (classical, the lab simulator's) or "rk4_3/8" (torchdiffeq's own rk4).
+        (A compiled `Integrator` is for `sysid.fast.compiled.predict`, which has no gradient.)
+    record : a list to which each right-hand-side call appends its `ForceBreakdown`; with
+        "euler" that is one entry per step, at the states the step started from
+        (`integrate_with_forces` returns them stacked instead).
+
+    Returns
+    -------
+    (T, ..., 6) states at t_0 .. t_{T-1}; row 0 is x0.
+    """
+    integrator = Integrator.of(method)
+    check_shapes(x0, inputs)
+    if integrator.compiled:
+        raise ValueError("integrate is the differentiable path: predict with a compiled "
+                         "integrator through sysid.fast.compiled.predict")
+    rhs = ShipDynamics(force_model, inputs, dt, record)
+    if integrator.method not in _ODEINT_NAME:  # classical RK4: a plain step loop
+        return rollout(lambda x, u: rhs.derivative(x, u)[0], x0, inputs, dt, integrator.method)
+    tau = torch.arange(inputs.shape[0], dtype=x0.dtype, device=x0.device)
+    options = {"perturb": True} if integrator.method is not Method.EULER else None
+    return odeint(rhs, x0, tau, method=_ODEINT_NAME[integrator.method], options=options)
+
+
+@dataclass
+class Trajectory:
+    """Predicted states (T, ..., 6) and the forces of every right-hand-side call, stacked:
+    a `ForceBreakdown` of (S, ..., 3) tensors (S = T - 1 with Euler: the forces at the
+    state each step started from)."""
+
+    states: torch.Tensor
+    forces: ForceBreakdown
+
+
+def stack_forces(calls: list[ForceBreakdown]) -> ForceBreakdown:
+    """One `ForceBreakdown` whose fields stack those of `calls` along a new first axis."""
+    stacked = {}
+    for f in fields(ForceBreakdown):
+        values = [getattr(c, f.name) for c in calls]
+        stacked[f.name] = None if any(v is None for v in values) else torch.stack(values)
+    return ForceBreakdown(**stacked)
+
+
+def integrate_with_forces(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
+                          method: IntegratorLike = Method.EULER) -> Trajectory:
+    """`integrate` (not compiled) that also returns every call's forces, stacked.
+
+    The training loss uses it with Euler: states from torchdiffeq's `odeint`, F_NN and
+    F_MMG of each step for the output penalty (paper Eq. 17).
+    """
+    record: list[ForceBreakdown] = []
+    states = integrate(force_model, x0, inputs, dt, Integrator.of(method).method, record=record)
+    if not record:
+        raise ValueError("no steps: inputs need at least two rows")
+    return Trajectory(states, stack_forces(record))

@@ -1,0 +1,1 @@
+"""Evaluation: windowed open-loop predictions, one metrics schema, traces."""

@@ -1,0 +1,171 @@
+"""All evaluation: windowed predictions, the protocol's RMSE table (BENCHMARK_PROTOCOL.md)
+and the per-step traces behind the report's figures.
+
+Every window of every file is integrated in one batched call: each window starts from the
+recorded state at its first sample, runs H-1 Euler steps of dt = 1 s with the recorded
+inputs held over each step, and is scored at its H points (first included) on u, v_m, r,
+pooled over the windows of a file.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import pandas as pd
+import torch
+from torch import nn
+
+from sysid.data.recordings import Run, protocol_windows, stack_windows
+from sysid.data.datasets import TEST_FILES
+from sysid.fast.compiled import predict
+from sysid.config.checks import whole_samples
+from sysid.errors import DataError
+from sysid.dynamics.integrators import IntegratorLike
+from sysid.state import FORCE, FORCE_COMPONENTS, INPUTS, STATE, VELOCITY_INDEX
+
+# one row per file and horizon; RMSE of u, v_m [m/s] and r [rad/s]
+METRICS_COLUMNS = ["scenario", "file", "horizon_s", "n_windows", "rmse_u", "rmse_v", "rmse_r"]
+# one row per window step of a trace (see `trace_frame`)
+TRACE_COLUMNS = (
+    ["window", "t", "t_rel"]
+    + [f"obs_{c}" for c in STATE]
+    + [f"pred_{c}" for c in STATE]
+    + list(INPUTS) + ["wind_velo_relative", "wind_dir_relative"]  # relative wind of the predicted state
+    + [f"{a}{key}" for key in FORCE_COMPONENTS.values() for a in FORCE]  # N, N m
+    + ["knn_distance", "gate_on"]  # NaN / 1 where the model has no gate
+)
+SCENARIO_OF = {Path(v).stem: k for k, v in TEST_FILES.items()}
+
+
+@dataclass
+class WindowPrediction:
+    """Predictions of all windows of one file at one horizon.
+
+    observed, predicted : (H, W, 6) states; inputs : (H, W, 4); starts : (W,) sample
+    indices of the windows; t : (H, W) time [s].
+    """
+
+    run: Run
+    horizon: int
+    starts: np.ndarray
+    t: np.ndarray
+    observed: torch.Tensor
+    predicted: torch.Tensor
+    inputs: torch.Tensor
+
+    def metrics_row(self, horizon_s: float) -> dict:
+        """A `METRICS_COLUMNS` row (NaN RMSE without windows); the scenario is the
+        protocol's name of a test file, else empty."""
+        rmse = self.rmse() if len(self.starts) else np.full(3, np.nan)
+        return {"scenario": SCENARIO_OF.get(self.run.name, ""), "file": self.run.name,
+                "horizon_s": horizon_s, "n_windows": len(self.starts),
+                "rmse_u": rmse[0], "rmse_v": rmse[1], "rmse_r": rmse[2]}
+
+    def rmse(self) -> np.ndarray:
+        """Pooled RMSE of (u [m/s], v_m [m/s], r [rad/s]) over every window point."""
+        idx = list(VELOCITY_INDEX)
+        err = (self.predicted[..., idx] - self.observed[..., idx]).reshape(-1, 3)
+        return torch.sqrt((err**2).mean(0)).detach().cpu().numpy()
+
+
+def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
+                    method: IntegratorLike = "euler", dtype=torch.float64,
+                    device: str | torch.device = "cpu") -> list[WindowPrediction]:
+    """Predict the protocol windows of every run in one batched integration."""
+    chunks, meta = [], []
+    dt = None
+    for run in runs:
+        if dt is None:
+            dt = run.dt
+        elif abs(run.dt - dt) > 1e-9:
+            raise DataError(f"{run.path}: sample period {run.dt} s differs from {dt} s of the other files")
+        H = whole_samples("horizon", horizon_s, run.dt, DataError)
+        starts = protocol_windows(len(run), H)
+        meta.append((run, H, starts))
+        if len(starts):
+            chunks.append(stack_windows(run, starts, H, dtype, device))
+    if not meta:
+        return []
+    if chunks:
+        observed = torch.cat([c[0] for c in chunks], 1)
+        inputs = torch.cat([c[1] for c in chunks], 1)
+        predicted = predict(model, observed[0], inputs, dt, method)
+    out, col = [], 0
+    for run, H, starts in meta:
+        W = len(starts)
+        sl = slice(col, col + W)
+        col += W
+        t = run.t[starts[None, :] + np.arange(H)[:, None]] if W else np.zeros((H, 0))
+        if W:
+            out.append(WindowPrediction(run, H, starts, t, observed[:, sl], predicted[:, sl], inputs[:, sl]))
+        else:
+            empty = torch.zeros(H, 0, 6, dtype=dtype)
+            out.append(WindowPrediction(run, H, starts, t, empty, empty, torch.zeros(H, 0, 4, dtype=dtype)))
+    return out
+
+
+def short_runs(runs: Sequence[Run], horizons: Sequence[float], name: str = "--horizon",
+               error: type[Exception] = DataError) -> list[tuple[Run, float]]:
+    """(run, horizon [s]) pairs where the run holds fewer samples than one window: their
+    metrics rows would be empty. Every horizon must be a whole number of every run's
+    samples (else `error` naming `name`)."""
+    return [(run, h) for h in horizons for run in runs if len(run) < whole_samples(name, h, run.dt, error)]
+
+
+@dataclass
+class Evaluation:
+    """Metrics (`METRICS_COLUMNS`), traces (file name -> `TRACE_COLUMNS` frame) and the
+    share of steps on which the kNN gate switched the FNN off, per trace."""
+
+    metrics: pd.DataFrame
+    traces: dict[str, pd.DataFrame]
+    gate_off_share: dict[str, float]
+
+
+def trace_name(file_stem: str, horizon_s: float) -> str:
+    """File name of a trace: ``{file_stem}_h{H}.csv``."""
+    safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", file_stem)
+    return f"{safe}_h{int(round(horizon_s))}.csv"
+
+
+def trace_frame(model: nn.Module, pred: WindowPrediction) -> pd.DataFrame:
+    """Per-step table of one file's windows: record, prediction, inputs, forces, gate."""
+    H, W = pred.predicted.shape[:2]
+    with torch.no_grad():
+        f = model(pred.predicted, pred.inputs)
+    cols: dict[str, np.ndarray] = {
+        "window": np.repeat(np.arange(W)[None, :], H, 0), "t": pred.t,
+        "t_rel": pred.t - pred.t[:1]}
+    for j, c in enumerate(STATE):
+        cols[f"obs_{c}"] = pred.observed[..., j].numpy()
+        cols[f"pred_{c}"] = pred.predicted[..., j].numpy()
+    for j, c in enumerate(INPUTS):
+        cols[c] = pred.inputs[..., j].numpy()
+    cols["wind_velo_relative"] = f.relative_wind[..., 0].numpy()
+    cols["wind_dir_relative"] = f.relative_wind[..., 1].numpy()
+    for component, key in FORCE_COMPONENTS.items():
+        for j, a in enumerate(FORCE):
+            cols[f"{a}{key}"] = getattr(f, component)[..., j].numpy()
+    cols["knn_distance"] = f.ood_distance.numpy() if f.ood_distance is not None else np.full((H, W), np.nan)
+    cols["gate_on"] = f.gate_on.numpy().astype(int) if f.gate_on is not None else np.ones((H, W), dtype=int)
+    # rows ordered window by window, then time
+    frame = pd.DataFrame({k: np.asarray(v).T.reshape(-1) for k, v in cols.items()})
+    return frame[TRACE_COLUMNS]
+
+
+def evaluate_model(model: nn.Module, runs: Sequence[Run], horizons: Sequence[float],
+                   method: IntegratorLike = "euler", traces: bool = True) -> Evaluation:
+    """The protocol's windowed RMSE per file and horizon, with per-step traces."""
+    rows, frames, shares = [], {}, {}
+    for horizon in horizons:
+        for pred in predict_windows(model, runs, horizon, method):
+            rows.append(pred.metrics_row(horizon))
+            if traces and len(pred.starts):
+                frame = trace_frame(model, pred)
+                name = trace_name(pred.run.name, horizon)
+                frames[name] = frame
+                shares[name] = float(1.0 - frame["gate_on"].mean())
+    return Evaluation(pd.DataFrame(rows, columns=METRICS_COLUMNS), frames, shares)

@@ -1,0 +1,153 @@
+"""Export a trained model for real-time use: one integration step as a ``.pt2`` file.
+
+The file holds ``step(state (B, 6), inputs (B, 4)) -> state dt later`` of an MMG, NN-only
+or hybrid model, kNN gate included, with the integration rule and dt fixed. It loads with
+torch alone (no sysid, no training code):
+
+- compiled (default): an AOTInductor package, native code, about 15-40 us per step::
+
+      step = torch._inductor.aoti_load_package("model.pt2")
+      x = step(x, u)                      # contiguous tensors; step.get_metadata(): dt, units
+
+- portable (``compiled=False``): a `torch.export` program, any platform and later torch,
+  eager speed::
+
+      step = torch.export.load("model.pt2").module()
+      x = step(x, u)                      # torch.export.load(p, extra_files={"sysid.json": ""})
+
+`load_step` opens either kind; `ExportedStep.predict` rolls one out over recorded inputs.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import time
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import torch
+from torch import nn
+
+from sysid.fast.compiled import (cached_package, export_program, load_package, package_metadata,
+                            step_label, step_metadata)
+from sysid.dynamics.integrators import Method, run_steps
+from sysid.fast.prepared import prepared
+from sysid.fast.stepper import Step
+from sysid.errors import DataError
+
+METADATA_FILE = "sysid.json"  # the metadata inside a portable export (extra file)
+
+
+def _examples(batch: int, dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor]:
+    return torch.zeros(batch, 6, dtype=dtype), torch.zeros(batch, 4, dtype=dtype)
+
+
+PROBE_STEPS = 100
+PROBE_SPEED = 20.0  # m/s; no ship model goes faster (`preprocessing.schema.PROCESSED_PLAUSIBLE_ABS`)
+
+
+def straight_run(batch: int, dtype: torch.dtype, steps: int = PROBE_STEPS) -> tuple[torch.Tensor, torch.Tensor]:
+    """A plain run to probe a step with: x0 (B, 6) ahead at 0.4 m/s, and inputs (steps + 1,
+    B, 4) held: 10 rps, rudder 0.1 rad, true wind 1 m/s from 0.5 rad."""
+    x = torch.tensor([[0.0, 0.4, 0.0, 0.0, 0.0, 0.0]], dtype=dtype).expand(batch, 6).contiguous()
+    u = torch.tensor([[10.0, 0.1, 1.0, 0.5]], dtype=dtype).expand(steps + 1, batch, 4).contiguous()
+    return x, u
+
+
+def check_step_stable(step: Callable, batch: int, dtype: torch.dtype, method: Method, dt: float) -> None:
+    """`DataError` when `PROBE_STEPS` steps of the straight run leave every ship's speed
+    (non-finite, or beyond `PROBE_SPEED`): the explicit step is unstable at this dt."""
+    x, u = straight_run(batch, dtype)
+    with torch.no_grad():
+        speed = run_steps(step, x, u)[..., [1, 3]].abs().amax()
+    if not bool(speed <= PROBE_SPEED):  # NaN too
+        raise DataError(f"--dt {dt:g} s ({method.value}): {PROBE_STEPS} steps of a straight run at 0.4 m/s "
+                        f"reach a speed of {float(speed):.3g} m/s: explicit steps this long are unstable "
+                        "for this model; choose a shorter --dt (nothing written)")
+
+
+def export_model(model: nn.Module, path: str | Path, method: Method | str = Method.EULER,
+                 dt: float = 1.0, batch: int = 1, dtype: torch.dtype = torch.float64,
+                 compiled: bool = True, log: Callable[[str], None] | None = None) -> Path:
+    """Write one integration step of `model` to the ``.pt2`` file `path`.
+
+    Parameters
+    ----------
+    model : MMG, NN-only or hybrid force model (CPU), kNN gate included (as an
+        `IndexedGate`: the same decisions from a pruned scan; coefficients packed, `sysid.fast.prepared`).
+    method, dt : the step rule and its length [s] (the paper's: Euler, 1 s).
+    batch : number of ships per call (shapes are fixed at export).
+    dtype : float64 (as evaluated) or float32.
+    compiled : AOTInductor package (native, fast; same torch and platform to load) or a
+        portable `torch.export` program.
+    """
+    path = Path(path)
+    step = Step(prepared(model, batch), method, dt)
+    check_step_stable(step, batch, dtype, step.method, dt)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    examples = _examples(batch, dtype)
+    metadata = step_metadata(model, method, dt, batch, dtype)
+    if compiled:
+        shutil.copyfile(cached_package(step, examples, step_label(method), metadata, log), path)
+    else:
+        metadata["format"] = "torch.export"
+        torch.export.save(export_program(step, examples), path,
+                          extra_files={METADATA_FILE: json.dumps(metadata)})
+    return path
+
+
+def is_compiled_package(path: str | Path) -> bool:
+    """True for an AOTInductor package, False for a `torch.export` program."""
+    with zipfile.ZipFile(path) as z:
+        return any("aotinductor" in name for name in z.namelist())
+
+
+@dataclass
+class ExportedStep:
+    """An exported step loaded back: ``step(x (B, 6), u (B, 4))``, its metadata, `predict`."""
+
+    step: Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
+    metadata: dict[str, str]
+
+    @property
+    def dt(self) -> float:
+        return float(self.metadata["dt_s"])
+
+    def __call__(self, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
+        return self.step(state, inputs)
+
+    def predict(self, x0: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
+        """States (T, B, 6) from x0 (B, 6) and inputs (T, B, 4) held over each step."""
+        with torch.no_grad():
+            return run_steps(self.step, x0, inputs)
+
+
+def load_step(path: str | Path) -> ExportedStep:
+    """Load a file written by `export_model` (either kind)."""
+    if is_compiled_package(path):
+        return ExportedStep(load_package(path), package_metadata(path))
+    extra = {METADATA_FILE: ""}
+    program = torch.export.load(str(path), extra_files=extra)
+    return ExportedStep(program.module(), json.loads(extra[METADATA_FILE] or "{}"))
+
+
+def step_latency(exported: ExportedStep, calls: int = 2000) -> tuple[float, float]:
+    """(median seconds per step call, seconds per 100-step prediction) at the exported shape."""
+    batch = int(exported.metadata.get("batch", 1))
+    dtype = getattr(torch, exported.metadata.get("dtype", "float64"))
+    x, inputs = straight_run(batch, dtype)
+    u = inputs[0]
+    times = []
+    with torch.no_grad():
+        exported(x, u)
+        for _ in range(calls):
+            start = time.perf_counter()
+            exported(x, u)
+            times.append(time.perf_counter() - start)
+        start = time.perf_counter()
+        exported.predict(x, inputs)
+        prediction = time.perf_counter() - start
+    times.sort()
+    return times[len(times) // 2], prediction

@@ -1,0 +1,256 @@
+"""The kNN gate's decision from a leaf index of the bank: what compiled steps use.
+
+A step needs only the decision d_kNN(z) <= threshold of `sysid.hybrid.knn_gate.KNNGate`, not the
+distance. `IndexedGate` partitions the bank into leaves of at most `leaf` points
+(recursive median splits along each node's widest principal direction) and decides in up
+to three tiers, each only where the one before leaves the decision open:
+
+1. an upper bound from the neighbourhood of the leaf whose centre is nearest to z (that
+   leaf and its `probe` - 1 nearest leaves, precomputed): its points fall into k
+   disjoint groups (slot s of a leaf in group s mod k), and the mean over groups of the
+   distance to each group's nearest point is the mean distance to k distinct bank
+   points, so at least d_kNN(z). At or below the threshold: on. One nearest-centre
+   search and one minimum per group, contiguous over each leaf's points, so compiled
+   code runs it as a few vectorized loops with few buffers; in distribution it decides
+   almost every row;
+2. bounds from the `boxes` leaves nearest to z by their bounding boxes (each leaf's
+   coordinate-wise minimum and maximum, a lower bound on the distance to any of its
+   points): the mean distance to the k nearest points among them is an upper bound, and
+   with every other point at least L away (the next box's bound) the mean of
+   min(n_i, L) over their k smallest distances n_i is a lower bound (the whole bank's
+   i-th nearest distance is below L only if the i nearest all lie in the chosen leaves).
+   Upper bound at or below the threshold: on; lower bound above it: off. Both equal
+   d_kNN when L is past the k-th distance. In more than `BOX_DIMENSIONS` coordinates
+   (the 64 features), where boxes bound loosely, tier 2 is exact instead: the mean
+   distance from the k leaves whose nearest point is nearest (they hold the k nearest
+   points of the bank);
+3. the gate's own scan (`KNNGate.distance`, a matrix product), for rows tier 2 leaves
+   open (bounds either side of the threshold, or within round-off of it).
+
+A margin (relative, plus a bound on the round-off of `KNNGate`'s own |q|^2 + |b|^2 - 2 q.b)
+keeps round-off from deciding in tiers 1 and 2, so the decision always equals `KNNGate`'s.
+Tiers 2 and 3 run under `torch.cond`, only when some row needs them. Tier 1 is
+elementwise operations and min reductions only, which compiled code fuses into a few
+vectorized loops; tier 2 finds the nearest boxes and the k smallest distances by partial
+sorts (`torch.topk`: 31 us per call of the compiled gate against 45 us by passes of argmin
+and min, measured side by side on a recorded zigzag's stage inputs). The distance returned
+is the tier-1 upper bound, the tier-2 upper bound, or the scan's.
+"""
+from __future__ import annotations
+
+import copy
+import math
+
+import torch
+from torch import nn
+
+from sysid.hybrid.knn_gate import KNNGate, nearest_distances
+
+
+def k_smallest_means(d2: torch.Tensor, k: int, cap: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(mean of sqrt of the k smallest of d2 (B, M) [squared distances] along dim 1, the
+    same mean with each value first capped at cap (B,)), each (B,); +inf with fewer than k
+    finite values. One partial sort (`torch.topk`), smallest first."""
+    if d2.shape[1] < k:
+        inf = torch.full(d2.shape[:1], math.inf, dtype=d2.dtype, device=d2.device)
+        return inf, inf
+    near = torch.topk(d2.clamp_min(0.0), k, dim=1, largest=False, sorted=True).values  # (B, k)
+    return near.sqrt().mean(1), torch.minimum(near, cap[:, None]).sqrt().mean(1)
+
+
+def k_smallest_mean(d2: torch.Tensor, k: int) -> torch.Tensor:
+    """Mean of sqrt of the k smallest of d2 (B, M) [squared distances] along dim 1, (B,);
+    +inf with fewer than k finite values."""
+    return k_smallest_means(d2, k, torch.full(d2.shape[:1], math.inf, dtype=d2.dtype, device=d2.device))[0]
+
+
+def leaf_partition(points: torch.Tensor, leaf: int) -> list[torch.Tensor]:
+    """Index sets (each <= `leaf` rows) of `points` (N, F) by recursive median splits
+    along the principal direction of each node."""
+    out, todo = [], [torch.arange(points.shape[0])]
+    while todo:
+        idx = todo.pop()
+        if idx.numel() <= leaf:
+            out.append(idx)
+            continue
+        p = points[idx] - points[idx].mean(0)
+        direction = torch.linalg.svd(p[: 4096], full_matrices=False).Vh[0]  # (F,)
+        order = torch.argsort(p @ direction)
+        half = idx.numel() // 2
+        todo += [idx[order[:half]], idx[order[half:]]]
+    return out
+
+
+def smallest_leaves(values: torch.Tensor, n: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The n leaves (B, n) with the smallest of values (B, C) per row (one partial sort,
+    `torch.topk`), and the smallest value of the other leaves (B,) (+inf where none is left).
+    No slicing of the sort's output: inside a `torch.cond` AOTInductor would run the slice
+    through its slow proxy executor."""
+    chosen = torch.topk(values, n, dim=1, largest=False, sorted=True).indices  # (B, n)
+    taken = (torch.arange(values.shape[1], device=values.device) == chosen[:, :, None]).any(1)  # (B, C)
+    return chosen, torch.where(taken, math.inf, values).amin(1)
+
+
+BOX_DIMENSIONS = 16  # up to this many coordinates tier 2 searches the nearest boxes (in 64, boxes bound loosely)
+
+
+def _squared_distances(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """sum over the coordinates (dim -2 of both) of (a - b)^2, broadcast; in up to
+    `BOX_DIMENSIONS` coordinates as a sum of one elementwise term per coordinate (see
+    `IndexedGate._upper`)."""
+    features = max(a.shape[-2], b.shape[-2])
+    if features > BOX_DIMENSIONS:
+        return (a - b).pow(2).sum(-2)
+    return sum((a.select(-2, f if a.shape[-2] > 1 else 0) - b.select(-2, f if b.shape[-2] > 1 else 0)).pow(2)
+               for f in range(features))
+
+
+class IndexedGate(nn.Module):
+    """Drop-in for a fitted `KNNGate` in compiled steps: same decision, leaf-pruned scan.
+
+    Parameters
+    ----------
+    gate : the fitted gate (bank (N, F), k, threshold); shared, not copied.
+    leaf : points per leaf (at most).
+    probe : leaves in a tier-1 neighbourhood (a leaf and its nearest leaves by centre).
+    boxes : leaves searched in tier 2 (those with the nearest bounding boxes).
+    margin : relative margin below which bounds do not decide (the exact scan does).
+    """
+
+    def __init__(self, gate: KNNGate, leaf: int = 64, probe: int = 8, boxes: int = 16, margin: float | None = None):
+        super().__init__()
+        self.gate = gate
+        self.k = gate.k
+        bank = gate.bank.detach()
+        dtype = bank.dtype
+        leaves = leaf_partition(bank.double(), leaf)
+        size = math.ceil(max(len(i) for i in leaves) / self.k) * self.k  # slots per leaf: k groups of size / k
+        self.probe = min(probe, len(leaves))
+        self.boxes = min(boxes, len(leaves))
+        self.by_boxes = bank.shape[1] <= BOX_DIMENSIONS  # tier 2 by boxes, else by every leaf's minimum
+        far = (torch.finfo(dtype).max / (4 * bank.shape[1])) ** 0.5  # padding: far, d^2 still finite
+        points = torch.full((len(leaves), size, bank.shape[1]), far, dtype=dtype)
+        centres = torch.zeros(len(leaves), bank.shape[1], dtype=torch.float64)
+        for j, idx in enumerate(leaves):
+            members = bank[idx]
+            points[j, : len(idx)] = members
+            centres[j] = members.double().mean(0)
+        eps = torch.finfo(dtype).eps
+        self.margin = float(margin if margin is not None else 1e4 * eps)
+        self.rounding = 2.0 * (bank.shape[1] + 4) * eps
+        self.register_buffer("bank_sq", (bank * bank).sum(1))  # as KNNGate computes it
+        self.register_buffer("scan_bank", bank.clone())  # the gate's bank, as a buffer of this module
+        self.register_buffer("bank_sq_max", self.bank_sq.max())
+        self.register_buffer("points_t", points.transpose(1, 2).contiguous())  # (C, F, S)
+        self.register_buffer("centres_t", centres.to(dtype).T.contiguous())  # (F, C)
+        self.register_buffer("neighbours", torch.cdist(centres, centres).argsort(1)[:, : self.probe])  # (C, probe)
+        self.register_buffer("box_low_t", torch.stack([bank[i].amin(0) for i in leaves], 1))  # (F, C)
+        self.register_buffer("box_high_t", torch.stack([bank[i].amax(0) for i in leaves], 1))  # (F, C)
+
+    @property
+    def threshold(self) -> torch.Tensor:
+        return self.gate.threshold
+
+    @property
+    def bank(self) -> torch.Tensor:
+        return self.gate.bank
+
+    def _upper(self, z: torch.Tensor) -> torch.Tensor:
+        """Upper bound (B,) of the mean k-nearest distance of z (B, F) (tier 1): the mean
+        over k groups of points of the nearest leaf's neighbourhood (slot s of every leaf
+        in group s mod k) of the distance to each group's nearest point: k distinct bank
+        points (`neighbourhood_groups` lists them).
+
+        In up to `BOX_DIMENSIONS` coordinates the sums over them are written out term by
+        term: elementwise expressions, which compiled code can fold into the loops that
+        reduce them (it does for the argmin over the (B, C) squared centre distances: one
+        row, one allocation of 2 kB fewer per call)."""
+        nearest = _squared_distances(z[:, :, None], self.centres_t).argmin(1)  # (B,) nearest centre
+        points = self.points_t[self.neighbours[nearest]]  # (B, probe, F, S), S contiguous
+        d2 = _squared_distances(z[:, None, :, None], points)  # (B, probe, S) squared
+        groups = d2.reshape(d2.shape[0], -1, self.k)  # (B, probe S / k, k): group = slot mod k
+        return groups.amin(1).clamp_min(0.0).sqrt().mean(1)
+
+    def box_bounds(self, z: torch.Tensor) -> torch.Tensor:
+        """Squared lower bound (B, C) of the distance from z (B, F) to any point of each
+        leaf: the squared distance to the leaf's bounding box."""
+        z = z[:, :, None]
+        outside = (self.box_low_t - z).clamp_min(0.0) + (z - self.box_high_t).clamp_min(0.0)  # one is 0
+        return outside.pow(2).sum(1)
+
+    def _box_bounds_tier(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(upper, lower) bounds (B,) of the mean k-nearest distance of z (B, F) (tier 2),
+        from the points of the `boxes` leaves with the nearest bounding boxes; both are
+        d_kNN when no other box is nearer than the k-th of those points."""
+        chosen, rest = smallest_leaves(self.box_bounds(z), self.boxes)  # rest (B,) squared: every point
+        # outside the chosen leaves is at least this far
+        points = self.points_t[chosen]  # (B, boxes, F, S)
+        d2 = (z[:, None, :, None] - points).pow(2).sum(2)  # (B, boxes, S) squared
+        return k_smallest_means(d2.flatten(1), self.k, rest)
+
+    def _nearest_leaves_tier(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """d_kNN (B,) of z (B, F), twice (upper = lower bound; tier 2 in many dimensions,
+        where boxes bound loosely): exact, from the points of the k leaves whose nearest
+        point to z is nearest (they hold the k nearest points of the bank)."""
+        d2 = (z[:, None, :, None] - self.points_t).pow(2).sum(2)  # (B, C, S) squared
+        leaf_min = d2.amin(2)  # (B, C)
+        chosen = smallest_leaves(leaf_min, min(self.k, leaf_min.shape[1]))[0]  # (B, k)
+        near = d2.gather(1, chosen[:, :, None].expand(-1, -1, d2.shape[2]))  # (B, k, S)
+        d = k_smallest_mean(near.flatten(1), self.k)
+        return d, d
+
+    def forward(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(distance, in_distribution) for z (..., F), as `KNNGate.forward` decides."""
+        flat = z.detach().reshape(-1, z.shape[-1]).to(self.points_t.dtype)
+        upper = self._upper(flat)
+        threshold = self.gate.threshold
+        # |q|^2 + |b|^2 - 2 q.b, as KNNGate computes d^2, is off by at most about
+        # 2 (F + 4) eps (|q|^2 + |b|^2), so its distances by at most the root of that
+        err = (self.rounding * ((flat * flat).sum(1) + self.bank_sq_max)).sqrt()  # (B,)
+        tol = self.margin * threshold.abs() + err
+        on = upper <= threshold - tol
+        k = min(self.k, self.bank_sq.shape[0])
+
+        def bounded(flat, upper, threshold, tol):  # tier 2, and tier 3 where it leaves rows open
+            near, lower = (self._box_bounds_tier if self.by_boxes else self._nearest_leaves_tier)(flat)
+
+            def gate_scan(flat, near, threshold, tol):  # KNNGate.distance, exactly (tier 3)
+                scan = nearest_distances(flat, self.scan_bank, self.bank_sq, k).mean(1)
+                return scan, scan <= threshold
+
+            def decided(flat, near, threshold, tol):
+                return near.clone(), near <= threshold - tol
+
+            open_rows = (near > threshold - tol) & (lower <= threshold + tol)
+            return torch.cond(open_rows.any(), gate_scan, decided, (flat, near, threshold, tol))
+
+        def neighbourhood(flat, upper, threshold, tol):
+            return upper.clone(), upper <= threshold - tol
+
+        d, admitted = torch.cond((~on).any(), bounded, neighbourhood, (flat, upper, threshold, tol))
+        return d.reshape(z.shape[:-1]), admitted.reshape(z.shape[:-1])
+
+
+def neighbourhood_groups(index: "IndexedGate", leaf: int) -> list[torch.Tensor]:
+    """The k point groups of leaf `leaf`'s tier-1 neighbourhood, as flat slot numbers
+    (leaf * S + slot) into `IndexedGate.points_t`: slot s of every neighbouring leaf is in
+    group s mod k (padding slots included). For checks; `IndexedGate._upper` takes the
+    groups' minima by a reshape."""
+    size = index.points_t.shape[2]
+    slots = (index.neighbours[leaf][:, None] * size + torch.arange(size)).reshape(-1)
+    return [slots[g::index.k] for g in range(index.k)]
+
+
+MAX_INDEXED_BATCH = 256  # beyond it the whole-bank scan (one matrix product) is as quick
+
+
+def with_indexed_gate(model: nn.Module, batch: int) -> nn.Module:
+    """`model` with its fitted kNN gate replaced by an `IndexedGate` (a shallow copy; the
+    model itself is untouched), or `model` when it has no gate or the batch is large."""
+    gate = getattr(model, "gate", None)
+    if not isinstance(gate, KNNGate) or gate.bank.shape[0] <= gate.k or batch > MAX_INDEXED_BATCH:
+        return model
+    fast = copy.copy(model)
+    fast._modules = dict(model._modules)
+    fast._modules["gate"] = IndexedGate(gate)
+    return fast

@@ -1,0 +1,39 @@
+"""A force model prepared for compilation: the same numbers, shaped for compiled code.
+
+`prepared(model, batch)` returns a shallow copy (the model itself is untouched) whose MMG
+coefficients are packed into one tensor (`sysid.mmg.coefficients.PackedCoefficients`: one
+constant instead of about a hundred, which a compiled loop would otherwise pass on every
+step) and whose fitted kNN gate is an `IndexedGate` (`sysid.fast.knn_index.with_indexed_gate`).
+"""
+from __future__ import annotations
+
+import copy
+
+from torch import nn
+
+from sysid.fast.knn_index import with_indexed_gate
+from sysid.mmg.model import MMG
+from sysid.mmg.coefficients import Coefficients, PackedCoefficients
+
+
+def _with_module(module: nn.Module, name: str, replacement: nn.Module) -> nn.Module:
+    """A shallow copy of `module` with its submodule `name` replaced."""
+    out = copy.copy(module)
+    out._modules = dict(module._modules)
+    out._modules[name] = replacement
+    return out
+
+
+def packed(model: nn.Module) -> nn.Module:
+    """`model` (an MMG, or a model holding one as ``mmg``) with packed coefficients."""
+    if isinstance(model, MMG) and isinstance(model.coefficients, Coefficients):
+        return _with_module(model, "coefficients", PackedCoefficients(model.coefficients))
+    mmg = getattr(model, "mmg", None)
+    if isinstance(mmg, MMG):
+        return _with_module(model, "mmg", packed(mmg))
+    return model
+
+
+def prepared(model: nn.Module, batch: int) -> nn.Module:
+    """`model` ready to compile for `batch` rows: packed coefficients, indexed kNN gate."""
+    return packed(with_indexed_gate(model, batch))

@@ -1,0 +1,100 @@
+"""One integration step of a force model as a module, and the step loop around it.
+
+`Step` maps (state (B, 6), inputs (B, 4)) to the state one step of dt later with the
+inputs held (Euler, classical RK4 or the 3/8 rule of `sysid.dynamics.integrators`): the unit that
+`sysid.fast.compiled` compiles and `sysid.fast.export` exports. `Derivative` is the bare right-hand
+side dx/dt (B, 6). `sysid.dynamics.integrators.run_steps` runs a step over recorded inputs;
+`Rollout` runs up to a fixed number of steps inside one module (a `while_loop`), so a
+compiled prediction is one native call instead of one per step.
+
+Both evaluate the right-hand side through `sysid.dynamics.equations.lean_derivative` (the model's
+force channels, no force breakdown). Numbers: `Step` with Euler is bit-identical to
+torchdiffeq's Euler in `sysid.dynamics.equations.integrate` (x + dt f(x)); the Runge-Kutta rules
+agree to round-off.
+"""
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from torch._higher_order_ops.while_loop import while_loop
+
+from sysid.dynamics.equations import lean_derivative
+from sysid.dynamics.integrators import STEP_RULES, Method
+
+
+class Derivative(nn.Module):
+    """dx/dt (B, 6) of a force model at states (B, 6) with inputs (B, 4).
+
+    ``channels_first=True``: states (6, B), inputs (4, B), dx/dt (6, B) instead; each
+    channel is then contiguous, which lets compiled code vectorize over the batch.
+    """
+
+    def __init__(self, force_model: nn.Module, channels_first: bool = False):
+        super().__init__()
+        self.force_model = force_model
+        self.channels_first = channels_first
+
+    def forward(self, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
+        if self.channels_first:
+            return lean_derivative(self.force_model, state.T, inputs.T, 0)
+        return lean_derivative(self.force_model, state, inputs)
+
+
+class Step(nn.Module):
+    """x_{k+1} (B, 6) from x_k (B, 6) and inputs_k (B, 4) held over one step.
+
+    Parameters
+    ----------
+    force_model : MMG, NN-only or hybrid model (with its kNN gate).
+    method : the step rule.
+    dt : step length [s].
+    channels_first : states (6, B) and inputs (4, B) instead (see `Derivative`).
+    """
+
+    def __init__(self, force_model: nn.Module, method: Method | str, dt: float, channels_first: bool = False):
+        super().__init__()
+        self.force_model = force_model
+        self.method = Method.parse(method)
+        self.dt = float(dt)
+        self.channels_first = channels_first
+
+    def forward(self, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
+        rule = STEP_RULES[self.method]
+        if self.channels_first:
+            u = inputs.T
+            return rule(lambda x: lean_derivative(self.force_model, x.T, u, 0), state, self.dt).contiguous()
+        return rule(lambda x: lean_derivative(self.force_model, x, inputs), state, self.dt)
+
+
+class Rollout(nn.Module):
+    """Up to `capacity` steps of a `Step` in one call, as one `while_loop`.
+
+    ``forward(x0, inputs, steps)``: x0 (B, 6) (or (6, B) for a channels-first step),
+    inputs (capacity, B, 4) (or (capacity, 4, B)), steps () int64 <= capacity, the number
+    of steps to take (step k holds inputs[k]). Returns the states after steps 1..steps,
+    (capacity, B, 6) (or (capacity, 6, B)), rows from `steps` on zero, and the last state.
+    The loop writes each state into the record in place (a record carried through the
+    loop would be copied, and allocated anew, on every step).
+    """
+
+    def __init__(self, step: Step, capacity: int):
+        super().__init__()
+        self.step = step
+        self.capacity = int(capacity)
+
+    def forward(self, x0: torch.Tensor, inputs: torch.Tensor, steps: torch.Tensor) -> torch.Tensor:
+        states = torch.zeros((self.capacity, *x0.shape), dtype=x0.dtype, device=x0.device)
+        k0 = torch.zeros((), dtype=torch.int64, device=x0.device)
+
+        def more(k, x):
+            return k < steps
+
+        def advance(k, x):
+            at = k.reshape(1)
+            x = self.step(x, inputs.index_select(0, at)[0])
+            states.index_copy_(0, at, x[None])  # in place: the record is not carried (no copy per step)
+            return k + 1, x
+
+        last = while_loop(more, advance, (k0, x0))[1]
+        return states, last  # the last state keeps the loop (and its writes) in the program

@@ -1,0 +1,150 @@
+"""Force models behind one interface, and the one factory that builds them from a config.
+
+A force model maps (state (..., 6), inputs (..., 4)) to a `ForceBreakdown` [N, N, N m] and
+carries ``coefficients`` (the mass terms of the equations of motion), so integration,
+training, evaluation and plots never ask which one they hold: `MMG` (physics only),
+`CorrectedModel` with ``physics=False`` (NN-only) or ``physics=True`` (hybrid).
+"""
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+import torch
+from torch import nn
+
+from sysid.hybrid.correction import ForceCorrection, correction_inputs
+from sysid.config.experiment import GATE_SPACES, Experiment, ship_overrides
+from sysid.mmg.coefficients import Coefficients
+from sysid.mmg.model import MMG, ForceBreakdown
+from sysid.mmg.wind import relative_wind
+from sysid.hybrid.knn_gate import KNNGate
+from sysid.mmg.ship import load_ship
+
+
+@runtime_checkable
+class ForceModel(Protocol):
+    """What integration, training and evaluation need of a model."""
+
+    coefficients: Coefficients
+
+    def __call__(self, state: torch.Tensor, inputs: torch.Tensor) -> ForceBreakdown: ...
+
+
+class CorrectedModel(nn.Module):
+    """F = F_MMG + gate * F_NN (hybrid) or F = gate * F_NN (NN-only, ``physics=False``).
+
+    Parameters
+    ----------
+    mmg : the physical model (for NN-only it still supplies masses and relative wind).
+    correction : the FNN term.
+    gate : optional kNN OOD gate; F_NN is zeroed where the input is out of distribution.
+    physics : include F_MMG (hybrid) or not (NN-only).
+    gate_space : where the gate measures kNN distances: "features" (the paper's: the 64
+        activations before the output layer) or "inputs" (the standardised input s-bar).
+    """
+
+    def __init__(self, mmg: MMG, correction: ForceCorrection, gate: KNNGate | None = None,
+                 physics: bool = True, gate_space: str = "features"):
+        super().__init__()
+        if gate_space not in GATE_SPACES:
+            raise ValueError(f"gate space {gate_space!r}: choose one of {', '.join(GATE_SPACES)}")
+        self.mmg = mmg
+        self.correction_net = correction
+        self.gate = gate
+        self.physics = physics
+        self.gate_space = gate_space
+        self.gate_enabled = gate is not None
+
+    def gate_coordinates(self, s: torch.Tensor, z: torch.Tensor | None = None) -> torch.Tensor:
+        """The vectors the kNN gate compares: features z (..., 64) or standardised s (..., 9)."""
+        if self.gate_space == "inputs":
+            net = self.correction_net
+            return (s.to(net.input_mean.dtype) - net.input_mean) / net.input_std
+        return self.correction_net.features(s) if z is None else z
+
+    @property
+    def coefficients(self):
+        return self.mmg.coefficients
+
+    @property
+    def kind(self) -> str:
+        return "hybrid" if self.physics else "nn"
+
+    def _correction(self, state: torch.Tensor, inputs: torch.Tensor, relative_wind: torch.Tensor,
+                    per_member: bool = False):
+        """(F_NN (..., 3) with the gate applied, kNN distance or None, gate decision or None)."""
+        s = correction_inputs(state, inputs, relative_wind)
+        f_nn, z = self.correction_net.evaluate(s, per_member=per_member)
+        f_nn = f_nn.to(state.dtype)
+        if self.gate is not None and self.gate_enabled and self.gate.bank.shape[0] > 0:
+            distance, on = self.gate(self.gate_coordinates(s, z))
+            return torch.where(on[..., None], f_nn, torch.zeros_like(f_nn)), distance.to(state.dtype), on
+        return f_nn, None, None
+
+    def forward(self, state: torch.Tensor, inputs: torch.Tensor, per_member: bool = False) -> ForceBreakdown:
+        """Forces at state (..., 6) with inputs (..., 4); with `per_member` (training) the
+        leading axis of both is the FNN's K members and F_NN is each member's own."""
+        if self.physics:
+            forces = self.mmg(state, inputs)
+        else:
+            wind = relative_wind(state[..., 1], state[..., 3], state[..., 4], inputs[..., 2], inputs[..., 3])
+            rel = torch.stack(wind, -1)
+            zero = torch.zeros(state.shape[:-1] + (3,), dtype=state.dtype, device=state.device)
+            forces = ForceBreakdown(zero, zero, zero, zero, zero, rel)
+        f_nn, distance, on = self._correction(state, inputs, forces.relative_wind, per_member)
+        if on is not None:
+            forces.ood_distance, forces.gate_on = distance, on
+        forces.correction = f_nn
+        return forces
+
+    def force_channels(self, state: torch.Tensor, inputs: torch.Tensor):
+        """(X, Y, N) of F_MMG + F_NN (hybrid) or F_NN (NN-only), each (...,) [N, N, N m],
+        and the relative wind: `forward`'s total without its (..., 3) stacks."""
+        if self.physics:
+            total, wind = self.mmg.force_channels(state, inputs)
+        else:
+            total, wind = None, relative_wind(state[..., 1], state[..., 3], state[..., 4],
+                                              inputs[..., 2], inputs[..., 3])
+        f_nn = self._correction(state, inputs, torch.stack(wind, -1))[0].unbind(-1)
+        if total is None:  # 0 + F_NN = F_NN
+            return f_nn, wind
+        return tuple(t + f for t, f in zip(total, f_nn)), wind
+
+
+class PerMember(nn.Module):
+    """A `CorrectedModel` whose K FNN members each predict their own copy of the batch:
+    inputs and states (K, ..., ·), forces (K, ..., 3). Used by training only."""
+
+    def __init__(self, model: CorrectedModel):
+        super().__init__()
+        self.model = model
+
+    @property
+    def coefficients(self):
+        return self.model.coefficients
+
+    def forward(self, state: torch.Tensor, inputs: torch.Tensor) -> ForceBreakdown:
+        return self.model(state, inputs, per_member=True)
+
+
+def build_mmg(exp: Experiment, dtype: torch.dtype = torch.float64) -> MMG:
+    """The experiment's MMG: its ship with ``[mmg] overrides``; the ``[identify]``
+    parameters trainable within their bounds."""
+    ship = load_ship(exp.experiment.ship, ship_overrides(exp))
+    identify = list(exp.identify.parameters)
+    bounds = {k: tuple(v) for k, v in exp.identify.bounds.items() if k in identify}
+    return MMG(ship, trainable=identify, bounds=bounds or None, dtype=dtype)
+
+
+def build_model(exp: Experiment, dtype: torch.dtype = torch.float64) -> nn.Module:
+    """An untrained model with the experiment's structure (MMG, NN-only or hybrid)."""
+    mmg = build_mmg(exp, dtype)
+    if exp.experiment.model == "mmg":
+        return mmg
+    net = ForceCorrection(exp.network.hidden, dtype, exp.network.members)
+    return CorrectedModel(mmg, net, None, physics=exp.experiment.model == "hybrid", gate_space=exp.gate.space)
+
+
+def correction_of(model: nn.Module) -> ForceCorrection | None:
+    """The FNN term of a model, or None for MMG-only."""
+    return model.correction_net if isinstance(model, CorrectedModel) else None

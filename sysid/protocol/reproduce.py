@@ -1,0 +1,248 @@
+"""The whole benchmark protocol in one call: MMG-only (paper's and lab's X'vr), NN-only and
+hybrid on D1 and D2, evaluated on the six test files, tables beside the paper's 7 and 8."""
+from __future__ import annotations
+
+import functools
+import json
+import multiprocessing
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pandas as pd
+
+from sysid.data.recordings import read_run
+from sysid.data.datasets import TEST_FILES, data_root, test_files
+from sysid.errors import ConfigError
+from sysid.config.experiment import Experiment, load_experiment
+from sysid.store.files import write_csv, write_text
+from sysid.runs.lifecycle import run_experiment, training_runs
+from sysid.protocol.paper import MODEL_LABELS, comparison_table, model_label
+from sysid.workers import in_workers
+
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+# run name -> experiment config; labels and data sets come from the configs
+PROTOCOL = {
+    "mmg_paper": "mmg_paper.toml",
+    "mmg_lab": "mmg_lab.toml",
+    "nn_D1": "nn_D1.toml",
+    "nn_D2": "nn_D2.toml",
+    "hybrid_D1": "hybrid_D1.toml",
+    "hybrid_D2": "hybrid_D2.toml",
+    # beyond the paper: hull coefficients identified by gradient, alone and under the FNN
+    "mmg_identified_D2": "mmg_identified_D2.toml",
+    "hybrid_identified_D2": "hybrid_identified_D2.toml",
+}
+
+
+def protocol_experiment(name: str) -> Experiment:
+    """The experiment of a protocol run."""
+    if name not in PROTOCOL:
+        raise ConfigError(f"unknown protocol run {name!r}: choose from {', '.join(PROTOCOL)}")
+    return load_experiment(CONFIGS / "experiments" / PROTOCOL[name])
+
+
+def markdown_table(table: pd.DataFrame, horizon: int) -> str:
+    """The paper's layout: ours (paper) per cell, u v_m r for D1 and D2."""
+    t = table[table.horizon_s == horizon]
+    seeds = int(t["n_seeds"].max()) if "n_seeds" in t and len(t) else 1
+    spread = f" Learned models: mean ± std over {seeds} seeds." if seeds > 1 else ""
+    head = (f"RMSE [m/s, m/s, rad/s] of {horizon}-s predictions: ours (paper). Table "
+            f"{7 if horizon == 30 else 8} of the paper.{spread}\n\n"
+            "| test | model | D1 u | D1 v_m | D1 r | D2 u | D2 v_m | D2 r |\n|---|---|---|---|---|---|---|---|\n")
+    lines = []
+    for scenario in dict.fromkeys(t.scenario):
+        for model in dict.fromkeys(t.model):
+            if t[(t.scenario == scenario) & (t.model == model)].empty:
+                continue
+            cells = []
+            for ds in ("D1", "D2"):
+                row = t[(t.scenario == scenario) & (t.model == model) & (t.dataset == ds)]
+                for c in ("u", "v", "r"):
+                    if row.empty:
+                        cells.append("–")
+                        continue
+                    ours, ref = row[f"rmse_{c}"].iloc[0], row[f"paper_{c}"].iloc[0]
+                    spread = row[f"std_{c}"].iloc[0] if f"std_{c}" in row else np.nan
+                    cells.append(f"{ours:.4f}" + ("" if np.isnan(spread) else f" ± {spread:.4f}")
+                                 + ("" if np.isnan(ref) else f" ({ref:.4f})"))
+            lines.append(f"| {scenario} | {model} | " + " | ".join(cells) + " |")
+    return head + "\n".join(lines) + "\n"
+
+
+def scorecard(table: pd.DataFrame, baseline: str = "MMG", model: str = "Hybrid") -> dict:
+    """`model` (the hybrid; with seeds, its seed mean) against MMG-only with the same X'vr
+    (`baseline` label) and against the paper's hybrid, cell by cell."""
+    out: dict = {"baseline": baseline, "model": model}
+    for ds in ("D1", "D2"):
+        hyb = table[(table.model == model) & (table.dataset == ds)].set_index(["scenario", "horizon_s"])
+        mmg = table[(table.model == baseline) & (table.dataset == ds)].set_index(["scenario", "horizon_s"])
+        cols = ["rmse_u", "rmse_v", "rmse_r"]
+        ratio = hyb[cols] / mmg.loc[hyb.index, cols]
+        at30 = ratio.xs(30, level="horizon_s")
+        paper_cols = ["paper_u", "paper_v", "paper_r"]
+        ref = table[(table.model == "Hybrid") & (table.dataset == ds)].set_index(["scenario", "horizon_s"])
+        beats = (hyb[cols].to_numpy() < ref.loc[hyb.index, paper_cols].to_numpy())
+        out[ds] = {
+            "reduction_vs_mmg_30s_by_scenario": {s: float(1 - at30.loc[s].mean()) for s in at30.index},
+            "reduction_vs_mmg_30s_mean": float(1 - at30.to_numpy().mean()),
+            "reduction_vs_mmg_100s_mean": float(1 - ratio.xs(100, level="horizon_s").to_numpy().mean()),
+            "cells_beating_paper_hybrid": int(beats.sum()), "cells": int(beats.size),
+        }
+    return out
+
+
+def hybrid_baseline() -> str:
+    """Label of the MMG-only run whose MMG the protocol's hybrid corrects (same overrides)."""
+    hybrid = protocol_experiment("hybrid_D2").mmg.overrides
+    for name in ("mmg_paper", "mmg_lab"):
+        if protocol_experiment(name).mmg.overrides == hybrid:
+            return model_label(name, "mmg")
+    return MODEL_LABELS["mmg_paper"]
+
+
+@dataclass
+class ProtocolRun:
+    """What the protocol keeps of one finished run."""
+
+    name: str
+    kind: str
+    dataset: str          # "-" for an MMG used as defined
+    metrics: pd.DataFrame
+    gate_off_share: dict
+    failure: str | None
+    seconds: float
+
+
+_TRAINING_CACHE: dict = {}
+
+
+def _run_one(name: str, exp: Experiment, out: Path, data, progress: bool, log) -> ProtocolRun:
+    """One protocol run through `run_experiment` (in this process or a worker's)."""
+    tests = _TRAINING_CACHE.get("tests")
+    if tests is None:
+        tests = _TRAINING_CACHE["tests"] = [read_run(p) for p in test_files(data).values()]
+    train = None
+    if exp.needs_training:
+        key = (exp.experiment.dataset, exp.data.files, exp.data.rate)
+        if key not in _TRAINING_CACHE:
+            _TRAINING_CACHE[key] = training_runs(exp, data)
+        train = _TRAINING_CACHE[key]
+    result = run_experiment(exp, out / "runs" / name, tests, train, data, progress, log=log)
+    return ProtocolRun(name, exp.experiment.model, exp.experiment.dataset if exp.needs_training else "-",
+                       result.evaluation.metrics, result.evaluation.gate_off_share, result.failure, result.seconds)
+
+
+def expected_cost(exp: Experiment) -> float:
+    """Relative training cost of a run, to start the longest first (results do not depend
+    on the order; the wall time does): hybrid > NN-only > identification, D2 about twice D1."""
+    cost = {"hybrid": 5.0, "nn": 3.5, "mmg": 0.0}[exp.experiment.model] + 1.5 * bool(exp.identify.parameters)
+    return cost * (2.0 if exp.data.files or exp.experiment.dataset == "D2" else 1.0)
+
+
+def _worker(name: str, experiments: dict[str, Experiment], out: Path, data) -> ProtocolRun:
+    """A worker process: its lines are prefixed with the run's name."""
+    return _run_one(name, experiments[name], out, data, True, lambda m: print(f"[{name}] {m.strip()}", flush=True))
+
+
+def _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, done) -> list[str]:
+    """Learned runs with `seeds` seeds on Ray into `done`; their ensembles' names."""
+    from sysid.data.datasets import data_root
+    from sysid.protocol.seed_runs import train_seeds, write_ensemble
+
+    ordered = sorted(trained, key=lambda n: -expected_cost(experiments[n]))  # longest first
+    log(f"training {len(trained)} runs x {seeds} seeds = {len(trained) * seeds} trials on Ray, "
+        f"{jobs} side by side" + (f" on {address}" if address else ""))
+    groups = train_seeds({n: experiments[n] for n in ordered}, seeds, out, str(data_root(data)), jobs, address, log)
+    tests = _TRAINING_CACHE.get("tests") or [read_run(p) for p in test_files(data).values()]
+    _TRAINING_CACHE["tests"] = tests
+    ensembles = []
+    for name in trained:
+        exp, group = experiments[name], groups[name]
+        done[name] = ProtocolRun(name, exp.experiment.model, exp.experiment.dataset, group.metrics,
+                                 group.gate_off_share, group.failure, group.seconds)
+        if exp.experiment.model != "mmg" and group.seeds:
+            target, evaluation, _ = write_ensemble(name, exp, group, out, tests)
+            done[target] = ProtocolRun(target, exp.experiment.model, exp.experiment.dataset, evaluation.metrics,
+                                       evaluation.gate_off_share, None, 0.0)
+            ensembles.append(target)
+            log(f"[{target}] mean of {len(group.seeds)} seeds' networks evaluated")
+    return ensembles
+
+
+def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
+              only: list[str] | None = None, progress: bool = True,
+              overrides: dict | None = None, log: Callable[[str], None] = print,
+              jobs: int = 1, seeds: int = 1, address: str | None = None) -> dict:
+    """Run the protocol; write runs/, comparison.csv, table7.md, table8.md, summary.json.
+
+    `jobs` > 1 trains that many runs side by side in worker processes (each with its
+    config's ``[training] threads``, 1 by default): the results do not depend on it. Ctrl-C
+    (`KeyboardInterrupt`) ends every worker before it propagates (`sysid.workers`).
+    `seeds` > 1 trains every learned run with that many seeds on Ray (`jobs` trials side by
+    side, or on the cluster at `address`): cells are seed means with their spread, and each
+    network's mean-of-seeds ensemble is a model row of its own (`sysid.protocol.seed_runs`).
+    """
+    started = time.perf_counter()
+    out = Path(out_dir)
+    data_root(data)  # clear error before any work when the data is missing
+    names = only or list(PROTOCOL)
+    experiments = {}
+    for name in names:
+        exp = protocol_experiment(name)
+        experiments[name] = exp.replace(**overrides) if overrides and exp.experiment.model != "mmg" else exp
+    done: dict[str, ProtocolRun] = {}
+    trained = [n for n in names if experiments[n].needs_training]
+    ensembles: list[str] = []
+    if seeds > 1 and trained:
+        ensembles = _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, done)
+    elif jobs > 1 and len(trained) > 1:
+        log(f"training {len(trained)} runs in {min(jobs, len(trained))} worker processes")
+
+        def finished(run: ProtocolRun) -> None:
+            done[run.name] = run
+            log(f"[{run.name}] done in {run.seconds:.0f} s" + (f"; FAILED: {run.failure}" if run.failure else ""))
+
+        longest_first = sorted(trained, key=lambda n: -expected_cost(experiments[n]))
+        work = functools.partial(_worker, experiments=experiments, out=out, data=data)
+        in_workers(work, longest_first, jobs, multiprocessing.get_context("spawn"), finished)
+    for i, name in enumerate(names, 1):
+        if name in done:
+            continue
+        exp = experiments[name]
+        dataset = exp.experiment.dataset if exp.needs_training else "D1+D2"
+        log(f"[{i}/{len(names)}] {name}: {model_label(name, exp.experiment.model, dataset)} on {dataset}")
+        run = done[name] = _run_one(name, exp, out, data, progress, lambda m: log("    " + m))
+        if run.failure:
+            log(f"    FAILED: {run.failure}")
+        log(f"    done in {run.seconds:.0f} s")
+    names = names + ensembles
+    runs = [done[n] for n in names]
+    results = [(r.name, r.kind, r.dataset, r.metrics) for r in runs]
+    shares = {r.name: r.gate_off_share for r in runs}
+    failed = {r.name: r.failure for r in runs if r.failure}
+    table = comparison_table(results)
+    write_csv(table, out / "comparison.csv", float_format="%.5f")
+    for horizon, fname in ((30, "table7.md"), (100, "table8.md")):
+        write_text(markdown_table(table, horizon), out / fname)
+    summary = {"seconds": time.perf_counter() - started, "runs": names, "failed": failed,
+               "protocol": list(PROTOCOL), "seeds": seeds}
+    if {"hybrid_D1", "hybrid_D2", "mmg_paper", "mmg_lab"} <= set(names):
+        summary["scorecard"] = scorecard(table, hybrid_baseline())
+        if {"hybrid_ensemble_D1", "hybrid_ensemble_D2"} <= set(names):
+            summary["scorecard_ensemble"] = scorecard(table, hybrid_baseline(), MODEL_LABELS["hybrid_ensemble"])
+    if "hybrid_identified_D2" in names:
+        hyb = table[(table.model == MODEL_LABELS["hybrid_identified"])]
+        ref = table[(table.model == "Hybrid") & (table.dataset == "D2")].set_index(["scenario", "horizon_s"])
+        ours = hyb.set_index(["scenario", "horizon_s"])[["rmse_u", "rmse_v", "rmse_r"]]
+        paper = ref.loc[ours.index, ["paper_u", "paper_v", "paper_r"]].to_numpy()
+        summary["identified_hybrid_D2_cells_beating_paper_hybrid"] = [int((ours.to_numpy() < paper).sum()),
+                                                                      int(paper.size)]
+    random_file = Path(TEST_FILES["Random"]).stem
+    summary["gate_off_share_random_30s"] = {
+        n: shares[n].get(f"{random_file}_h30.csv") for n in names if n.startswith("hybrid")}
+    write_text(json.dumps(summary, indent=2), out / "summary.json")
+    return summary

@@ -1,0 +1,95 @@
+"""Protocol runs trained with N seeds on Ray (``sysid reproduce --seeds N``): each learned
+run becomes ``runs/{name}/seed{k}/`` (ordinary run directories), its metrics the mean over
+the seeds with their spread (`sysid.protocol.seeds`), and the networks' mean-of-seeds ensemble a run
+of its own, ``runs/{variant}_ensemble_{dataset}/`` (`sysid.hybrid.ensemble`)."""
+from __future__ import annotations
+
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Sequence
+
+import pandas as pd
+
+from sysid.data.recordings import Run
+from sysid.evaluation.evaluate import evaluate_model
+from sysid.config.experiment import Experiment
+from sysid.protocol.paper import run_variant
+from sysid.runs.rundir import load_model, write_run
+from sysid.protocol.seeds import seed_metrics
+from sysid.hybrid.ensemble import SeedEnsemble
+from sysid.sweep.runner import run_trials
+from sysid.sweep.trial import TrialContext, TrialSpec, complete_summary
+
+
+@dataclass
+class SeedGroup:
+    """One protocol run's seeds: seed-mean metrics, mean gate-off shares, failures, and
+    ``seconds``: the sum of its seed runs' own times (trials run side by side, so this is
+    the compute time of the group, not a share of the wall clock)."""
+
+    name: str
+    seeds: list[int]
+    metrics: pd.DataFrame
+    gate_off_share: dict
+    failure: str | None
+    seconds: float
+
+
+def seed_trials(experiments: dict[str, Experiment], seeds: int) -> list[TrialSpec]:
+    """Every learned run x seed (the config's seed, +1, ...), one torch thread each."""
+    trials = []
+    for name, exp in experiments.items():
+        for k in range(seeds):
+            seed = exp.experiment.seed + k
+            config = exp.replace(experiment={"seed": seed}, training={"threads": 1}).to_toml()
+            trials.append(TrialSpec(f"runs/{name}/seed{seed}", name, seed, config, label=name))
+    return trials
+
+
+def train_seeds(experiments: dict[str, Experiment], seeds: int, out: Path, data: str, workers: int,
+                address: str | None = None, log: Callable[[str], None] = print) -> dict[str, SeedGroup]:
+    """Train the learned runs with `seeds` seeds each on Ray; their `SeedGroup`s."""
+    trials = seed_trials(experiments, seeds)
+    with tempfile.TemporaryDirectory(prefix="sysid-ray-") as storage:
+        errors = run_trials(trials, TrialContext(str(out.resolve()), data, "sysid reproduce"), workers, address,
+                            max_retries=1, storage=Path(storage), log=log, prefix="seeds")
+    groups = {}
+    for name in experiments:
+        frames, shares, failures, used, seconds = [], [], [], [], 0.0
+        for trial in (t for t in trials if t.label == name):
+            summary = complete_summary(out / trial.path)
+            if summary is None:
+                failures.append(f"seed {trial.seed}: {errors.get(trial.path, 'no complete run')}")
+                continue
+            if summary.get("status", "complete") != "complete":
+                failures.append(f"seed {trial.seed}: {summary['status']}")
+            frames.append(pd.read_csv(out / trial.path / "metrics.csv"))
+            shares.append((summary.get("gate") or {}).get("off_share") or {})
+            used.append(trial.seed)
+            seconds += float(summary.get("seconds") or 0.0)
+        metrics = seed_metrics(frames) if frames else pd.DataFrame()
+        mean_share = {k: sum(s.get(k, 0.0) for s in shares) / len(shares) for k in (shares[0] if shares else {})}
+        groups[name] = SeedGroup(name, used, metrics, mean_share, "; ".join(failures) or None, seconds)
+    return groups
+
+
+def ensemble_name(name: str, dataset: str) -> str:
+    """hybrid_D1 -> hybrid_ensemble_D1."""
+    return f"{run_variant(name, dataset)}_ensemble_{dataset}"
+
+
+def write_ensemble(name: str, exp: Experiment, group: SeedGroup, out: Path, tests: Sequence[Run]):
+    """The mean-of-seeds ensemble of a learned run, evaluated and written as a run directory
+    whose ``[ensemble] members`` point at the seeds' run directories."""
+    started = time.perf_counter()
+    members = [load_model(out / "runs" / name / f"seed{seed}")[1] for seed in group.seeds]
+    model = SeedEnsemble(members)
+    evaluation = evaluate_model(model, tests, exp.evaluation.horizons, exp.evaluation.integrator)
+    target = ensemble_name(name, exp.experiment.dataset)
+    ens = exp.replace(experiment={"name": target},
+                      ensemble={"members": tuple(f"../{name}/seed{seed}" for seed in group.seeds)})
+    path = write_run(out / "runs" / target, ens, model, evaluation, seconds=time.perf_counter() - started)
+    return target, evaluation, path
+

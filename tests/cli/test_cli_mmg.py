@@ -1,0 +1,117 @@
+"""The `sysid forces`, `simulate` and `evaluate` commands, and their errors on bad input."""
+import numpy as np
+import pandas as pd
+import pytest
+
+from sysid.cli import run as main
+from sysid.data.recordings import read_run
+from sysid.errors import DataError, ShipDefinitionError
+
+# our column -> the oracle's (the lab's names: delta_rad, XH_SI, ...)
+OUT = {**{f"{a}{k}": f"{a}{k}_SI" for k in "HPRA" for a in "XYN"}, **{a: f"{a}_SI" for a in "XYN"},
+       **{d: d for d in ("x_dot", "u_dot", "y_dot", "v_dot", "psi_dot", "r_dot")}}
+
+
+def _oracle_input(oracle_dir, tmp_path):
+    """The oracle's vectors with our input names (its delta_rad is our delta_rudder)."""
+    path = tmp_path / "oracle_in.csv"
+    pd.read_csv(oracle_dir / "mmg_vectors_public.csv").rename(columns={"delta_rad": "delta_rudder"}).to_csv(path, index=False)
+    return path
+
+
+def test_forces_command_matches_the_oracle(oracle_dir, tmp_path):
+    out = tmp_path / "forces.csv"
+    main(["forces", "--ship", "esso_osaka", "--quadrature", "simpson",
+          str(_oracle_input(oracle_dir, tmp_path)), "-o", str(out)])
+    ours, ref = pd.read_csv(out), pd.read_csv(oracle_dir / "mmg_vectors_public.csv")
+    assert len(ours) == len(ref)
+    for col, ref_col in OUT.items():
+        err = np.abs(ours[col].to_numpy() - ref[ref_col].to_numpy())
+        assert (err <= np.maximum(1e-9, 1e-6 * np.abs(ref[ref_col].to_numpy()))).all(), col
+
+
+def test_simulate_command_reproduces_the_oracle_trajectory(oracle_dir, dataset_dir, tmp_path):
+    ref = pd.read_csv(oracle_dir / "traj_zigzag_dt1p0.csv")  # zigzag 13_14_21 from t = 15 s
+    out = tmp_path / "sim.csv"
+    main(["simulate", "--ship", "esso_osaka", "--log", str(dataset_dir / ref.source[0]),
+          "--start", "15", "--horizon", "100", "--integrator", "rk4", "--quadrature", "simpson",
+          "-o", str(out)])
+    sim = pd.read_csv(out)
+    assert len(sim) == 101
+    cols = ["x", "u", "y", "v", "psi", "r"]
+    assert np.abs(sim[cols].to_numpy() - ref[cols].to_numpy()).max() < 1e-6
+    assert np.abs(sim[[f"obs_{c}" for c in cols]].to_numpy() - ref[[f"obs_{c}" for c in cols]].to_numpy()).max() < 1e-12
+
+
+def _forces_input(tmp_path, frame):
+    path = tmp_path / "in.csv"
+    frame.to_csv(path, index=False)
+    return path
+
+
+def test_forces_missing_column_and_nan(oracle_vectors, tmp_path):
+    cols = ["x", "u", "y", "v", "psi", "r", "n_prop", "delta_rudder", "wind_velo_true", "wind_dir_true"]
+    frame = oracle_vectors.rename(columns={"delta_rad": "delta_rudder"})[cols].head(5).copy()
+    out = tmp_path / "out.csv"
+    with pytest.raises(DataError, match=r"in.csv: missing column\(s\) \['delta_rudder'\]"):
+        main(["forces", str(_forces_input(tmp_path, frame.drop(columns="delta_rudder"))), "-o", str(out)])
+    frame.loc[3, "r"] = np.nan
+    with pytest.raises(DataError, match="in.csv: column 'r' is not a finite number at data row 5"):
+        main(["forces", str(_forces_input(tmp_path, frame)), "-o", str(out)])
+    assert not out.exists()  # nothing half-written
+    with pytest.raises(ShipDefinitionError, match="unknown ship 'nope'"):
+        main(["forces", "--ship", "nope", str(_forces_input(tmp_path, frame)), "-o", str(out)])
+    with pytest.raises(ShipDefinitionError, match="C_D = -1.0 is out of range"):
+        main(["forces", "--set", "C_D=-1", str(_forces_input(tmp_path, frame)), "-o", str(out)])
+
+
+def test_console_script_prints_one_clear_error(tmp_path):
+    import subprocess, sys
+    proc = subprocess.run([sys.executable, "-c", "from sysid.cli import main; main()", "evaluate",
+                           "--data", str(tmp_path / "missing.csv"), "-o", str(tmp_path / "m.csv")],
+                          capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == f"error: {tmp_path / 'missing.csv'}: no such file or directory"
+
+
+def _processed(dataset_dir, tmp_path, edit):
+    src = dataset_dir / "zigzag" / "zigzag_31-Jul-2020_13_14_21.csv"
+    frame = pd.read_csv(src).head(300)
+    edit(frame)
+    path = tmp_path / "run.csv"
+    frame.to_csv(path, index=False)
+    return path
+
+
+def test_processed_run_errors_name_file_and_field(dataset_dir, tmp_path):
+    def nan(f): f.loc[120, "r_angvelo [rad/s]"] = np.nan
+    with pytest.raises(DataError, match=r"run.csv: column 'r' is NaN/inf at data row 122"):
+        read_run(_processed(dataset_dir, tmp_path, nan))
+
+    def backwards(f): f.loc[50, "t [s]"] = 1.0
+    with pytest.raises(DataError, match=r"run.csv: column 't' is not strictly increasing"):
+        read_run(_processed(dataset_dir, tmp_path, backwards))
+
+    def degrees(f): f["delta_rudder [rad]"] = np.degrees(f["delta_rudder [rad]"])
+    with pytest.raises(DataError, match=r"run.csv: column 'delta_rudder' reaches .* wrong units"):
+        read_run(_processed(dataset_dir, tmp_path, degrees))
+
+    def renamed(f): f.columns = [("u" if c == "u_velo [m/s]" else c) for c in f.columns]
+    with pytest.raises(DataError, match=r"run.csv: missing column\(s\) \['u_velo \[m/s\]'\]"):
+        read_run(_processed(dataset_dir, tmp_path, renamed))
+
+
+def test_trailing_empty_rows_are_dropped(dataset_dir, tmp_path):
+    def trailing(f): f.loc[290:, [c for c in f.columns if c != "t [s]"]] = np.nan
+    run = read_run(_processed(dataset_dir, tmp_path, trailing))
+    assert run.t[-1] == pytest.approx(28.0) and len(run) == 29  # rows 0..289 at 10 Hz, every 10th
+
+
+def test_dataset_checks_duplicates_and_frozen_gnss(dataset_dir):
+    from sysid.data.recordings import duplicate_runs
+    cut = read_run(dataset_dir / "turning" / "turn_cut_14-Sep-2020_15_58_08.csv")
+    full = read_run(dataset_dir / "turning" / "turn_14-Sep-2020_15_58_08.csv")
+    other = read_run(dataset_dir / "turning" / "turn_14-Oct-2020_14_56_07.csv")
+    assert duplicate_runs([cut, full, other]) == [(cut.name, full.name)]
+    frozen = read_run(dataset_dir / "turning" / "turn_14-Oct-2020_14_08_51.csv")
+    assert any("GNSS frozen" in s and "t = 20" in s for s in frozen.issues), frozen.issues

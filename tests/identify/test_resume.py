@@ -1,0 +1,56 @@
+"""Interrupted training continues to the same model: `sysid train --resume`."""
+import json
+
+import pytest
+
+from sysid.identify.checkpoint import TrainingCheckpoint
+from sysid.cli import main, run as sysid
+from sysid.runs.lifecycle import checkpoint_path
+from tiny_experiment import tiny_experiment, tiny_test_file
+
+
+def _config(tmp_path, dataset_dir):
+    config = tiny_experiment(tmp_path / "tiny.toml", dataset_dir, seed=5, epochs=6, warm_start_epochs=5)
+    return config, tiny_test_file(dataset_dir)
+
+
+def test_interrupted_training_resumes_to_the_same_metrics(dataset_dir, tmp_path, monkeypatch, capsys):
+    config, test_file = _config(tmp_path, dataset_dir)
+    sysid(["train", str(config), "-o", str(tmp_path / "whole"), "--test", str(test_file)])
+    whole = (tmp_path / "whole" / "metrics.csv").read_text()
+
+    saves = {"n": 0}
+    original = TrainingCheckpoint.save
+
+    def save_then_interrupt(self, **state):
+        original(self, **state)
+        saves["n"] += 1
+        if saves["n"] == 3:  # Ctrl-C right after epoch 3 was checkpointed
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(TrainingCheckpoint, "save", save_then_interrupt)
+    out = tmp_path / "parted"
+    with pytest.raises(SystemExit) as stop:
+        main(["train", str(config), "-o", str(out), "--test", str(test_file)])
+    assert stop.value.code == 130
+    err = capsys.readouterr().err
+    assert "interrupted:" in err and "--resume" in err and str(checkpoint_path(out)) in err
+    assert not out.exists() and checkpoint_path(out).is_file()
+    monkeypatch.setattr(TrainingCheckpoint, "save", original)
+
+    sysid(["train", str(config), "-o", str(out), "--test", str(test_file), "--resume"])
+    assert "resumed after epoch 3" in capsys.readouterr().out
+    assert (out / "metrics.csv").read_text() == whole
+    assert not checkpoint_path(out).exists()  # removed once the run is complete
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "complete" and summary["epochs"] == 6
+    assert summary["stopped"] == {"train": "epoch limit"}
+
+
+def test_resume_refuses_another_configs_checkpoint(dataset_dir, tmp_path, monkeypatch):
+    from sysid.errors import CheckpointError
+    config, test_file = _config(tmp_path, dataset_dir)
+    out = tmp_path / "run"
+    TrainingCheckpoint(checkpoint_path(out), "[experiment]\nname = 'other'\n").save(stage="train", epoch=1)
+    with pytest.raises(CheckpointError, match="made with another config"):
+        sysid(["train", str(config), "-o", str(out), "--test", str(test_file), "--resume"])

@@ -1,0 +1,234 @@
+"""Bad raw logs: each gets one clear error (file, column, row) or a logged repair.
+
+Uses a small analytic run (no dataset needed): 120 s at 10 Hz, ahead at ~0.5 m/s with a
+gentle sinusoidal yaw, wind 2 m/s.
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from preprocessing import synth
+from preprocessing.pipeline import Pipeline, PreprocessSettings
+from preprocessing.schema import RawLogError
+from preprocessing.sensors import SensorLayout
+from sysid.store.manifest import verify_manifest
+
+from analytic_runs import analytic_run
+
+LAYOUT = SensorLayout()
+
+
+@pytest.fixture(scope="module")
+def synthetic():
+    return synth.synthesise(analytic_run(), LAYOUT, synth.SynthSettings(seed=2))
+
+
+@pytest.fixture
+def raw(synthetic):
+    return synthetic.raw.copy()
+
+
+def run(raw, **settings):
+    return Pipeline(LAYOUT, PreprocessSettings(**settings)).run(raw, name="log.csv")
+
+
+def error_of(raw, **settings) -> str:
+    with pytest.raises(RawLogError) as info:
+        run(raw, **settings)
+    return str(info.value)
+
+
+def test_clean_log_matches_truth(synthetic, raw):
+    out = run(raw)
+    s = synth.score(out.segments, synthetic.truth)
+    assert s["psi_deg"] < 0.3 and s["u"] < 5e-3 and s["r"] < 1e-3
+    assert out.report.repairs == []
+
+
+def test_missing_column(raw):
+    msg = error_of(raw.drop(columns=["anemo_2_dir [rad]"]))
+    assert "log.csv" in msg and "anemo_2_dir" in msg and "missing" in msg
+
+
+def test_misnamed_column(raw):
+    msg = error_of(raw.rename(columns={"fog_yaw_rate [rad/s]": "fog_yawrate [rad/s]"}))
+    assert "fog_yaw_rate" in msg and "misnamed" in msg and "fog_yawrate" in msg
+
+
+def test_missing_gnss_column(raw):
+    msg = error_of(raw.drop(columns=["gnss_aft_y [m]"]))
+    assert "gnss_aft_y" in msg and "missing" in msg
+
+
+def test_wrong_unit_header(raw):
+    msg = error_of(raw.rename(columns={"n_prop [rps]": "n_prop [rpm]"}))
+    assert "n_prop" in msg and "rpm" in msg
+
+
+def test_degree_header_is_converted_and_logged(synthetic, raw):
+    raw["fog_yaw_rate [rad/s]"] = np.degrees(raw["fog_yaw_rate [rad/s]"])
+    out = run(raw.rename(columns={"fog_yaw_rate [rad/s]": "fog_yaw_rate [deg/s]"}))
+    assert any("fog_yaw_rate" in r and "deg/s" in r for r in out.report.repairs)
+    assert synth.score(out.segments, synthetic.truth)["r"] < 1e-3
+
+
+def test_degrees_in_radian_fog_column(raw):
+    raw["fog_yaw_rate [rad/s]"] = np.degrees(raw["fog_yaw_rate [rad/s]"])
+    msg = error_of(raw)
+    assert "fog_yaw_rate" in msg and "degrees" in msg
+
+
+def test_degrees_in_radian_rudder_column(raw):
+    raw["delta_rudder [rad]"] = np.degrees(raw["delta_rudder [rad]"])
+    msg = error_of(raw)
+    assert "delta_rudder" in msg and "row" in msg and "degrees" in msg
+
+
+def test_degrees_in_radian_wind_column(raw):
+    raw["anemo_1_dir [rad]"] = np.degrees(raw["anemo_1_dir [rad]"])
+    assert "anemo_1_dir" in error_of(raw)
+
+
+def test_text_in_numeric_column(raw):
+    raw["n_prop [rps]"] = raw["n_prop [rps]"].astype(object)
+    raw.loc[41, "n_prop [rps]"] = "ten"
+    msg = error_of(raw)
+    assert "n_prop" in msg and "row 42" in msg
+
+
+def test_time_going_backwards(raw):
+    raw.loc[500, "t [s]"] = raw.loc[498, "t [s]"]
+    msg = error_of(raw)
+    assert "column t" in msg and "row 501" in msg
+
+
+def test_repeated_time_with_other_values(raw):
+    dup = raw.iloc[[300]].copy()
+    dup["n_prop [rps]"] = 3.0
+    bad = pd.concat([raw.iloc[:301], dup, raw.iloc[301:]], ignore_index=True)
+    msg = error_of(bad)
+    assert "column t" in msg and "row 302" in msg
+
+
+def test_exact_duplicate_rows_are_dropped_and_logged(synthetic, raw):
+    bad = pd.concat([raw.iloc[:301], raw.iloc[[300, 300]], raw.iloc[301:]], ignore_index=True)
+    out = run(bad)
+    assert any("duplicate" in r for r in out.report.repairs)
+    assert synth.score(out.segments, synthetic.truth)["u"] < 5e-3
+
+
+def test_time_in_milliseconds(raw):
+    raw["t [s]"] = raw["t [s]"] * 1000.0
+    assert "median step" in error_of(raw)
+
+
+def test_short_nan_burst_interpolated_long_one_splits(synthetic, raw):
+    raw.loc[200:204, "fog_yaw_rate [rad/s]"] = np.nan          # 0.5 s
+    raw.loc[600:629, "anemo_1_speed [m/s]"] = np.nan           # 3 s
+    out = run(raw)
+    gaps = {g.channel: g for g in out.report.gaps}
+    assert gaps["fog_yaw_rate"].action == "interpolated"
+    assert gaps["anemo_1_speed"].action == "split"
+    assert len(out.segments) == 2
+    s = synth.score(out.segments, synthetic.truth, dropouts=[(60.0, 62.9)])
+    assert s["r"] < 1e-3 and s["wind_speed"] < 0.05
+
+
+def test_all_nan_channel(raw):
+    raw["anemo_2_speed [m/s]"] = np.nan
+    assert "anemo_2_speed" in error_of(raw)
+
+
+def test_swapped_antennas_error_and_repair(synthetic, raw):
+    cols = ["gnss_fore_x [m]", "gnss_fore_y [m]", "gnss_aft_x [m]", "gnss_aft_y [m]"]
+    swapped = raw.copy()
+    swapped[cols] = raw[[cols[2], cols[3], cols[0], cols[1]]].to_numpy()
+    msg = error_of(swapped)
+    assert "swapped" in msg and "gnss_fore" in msg
+    out = run(swapped, swapped_antennas="repair")
+    assert out.report.swapped_antennas is True
+    assert synth.score(out.segments, synthetic.truth)["psi_deg"] < 0.3
+
+
+def test_baseline_never_matches(raw):
+    with pytest.raises(RawLogError, match="gnss_baseline"):
+        Pipeline(SensorLayout(gnss_fore=(1.0, 0.0), gnss_aft=(-1.0, 0.0), gnss_baseline=2.0)).run(raw)
+
+
+def test_cli_failed_file_leaves_no_output(synthetic, tmp_path, capsys):
+    from sysid.cli import main
+    good = tmp_path / "good.csv"
+    bad = tmp_path / "bad.csv"
+    synthetic.raw.to_csv(good, index=False)
+    broken = synthetic.raw.copy()
+    broken.loc[700, "t [s]"] = 0.0
+    broken.to_csv(bad, index=False)
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as info:
+        main(["preprocess", str(good), str(bad), "--ship", "esso_osaka", "-o", str(out), "--jobs", "2"])
+    assert info.value.code == 1
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["good.csv", "good.report.json", "manifest.json"]  # complete, sealed
+    assert sorted(verify_manifest(out, "preprocessing")["files"]) == ["good.csv", "good.report.json"]
+    err = capsys.readouterr().err
+    assert "bad.csv" in err and "column t" in err and "row 701" in err
+    report = json.loads((out / "good.report.json").read_text())
+    assert report["outputs"] == ["good.csv"]
+    processed = pd.read_csv(out / "good.csv")
+    assert list(processed.columns)[:3] == ["t [s]", "x_position_mid [m]", "u_velo [m/s]"]
+    assert len(processed.columns) == 13
+    from sysid.data.recordings import read_run                  # loads straight into training/evaluation
+    loaded = read_run(out / "good.csv")
+    assert len(loaded) == len(processed) and loaded.dt == pytest.approx(1.0)
+
+
+def test_cli_synth_raw_writes_truth(tmp_path, capsys):
+    from sysid.cli import main
+    src = tmp_path / "run.csv"
+    run_df = analytic_run(60.0)
+    run_df.columns = [f"{c} [{u}]" for c, u in synth.schema.PROCESSED.items()]
+    run_df.to_csv(src, index=False)
+    raw = tmp_path / "raw.csv"
+    main(["synth-raw", str(src), "-o", str(raw), "--seed", "4", "--outliers", "3",
+          "--dropout", "20:2", "--latlon"])
+    assert "3 outlier(s)" in capsys.readouterr().out
+    df = pd.read_csv(raw)
+    assert "gnss_aft_lon [deg]" in df.columns and df["gnss_aft_lon [deg]"].isna().sum() == 20
+    assert (tmp_path / "raw.truth.csv").is_file()
+
+
+def test_poor_gnss_fix_rejected(synthetic, raw):
+    raw["gnss_fore_fix"] = 4
+    raw["gnss_aft_fix"] = 4
+    raw.loc[300:304, "gnss_aft_fix"] = 5                          # RTK float for 0.5 s
+    out = run(raw)
+    assert out.report.fix_rejected == 5
+    assert len(out.segments) == 1
+    assert synth.score(out.segments, synthetic.truth)["pos"] < 0.02
+
+
+def test_heading_offset_and_offcentre_antennas():
+    layout = SensorLayout(gnss_fore=(1.0, 0.3), gnss_aft=(-1.3, 0.3), gnss_baseline=2.3,
+                          heading_offset=0.05, anemometer_1=(0.5, 0.2))
+    res = synth.synthesise(analytic_run(), layout, synth.SynthSettings(seed=1))
+    s = synth.score(Pipeline(layout).run(res.raw).segments, res.truth)
+    assert s["psi_deg"] < 0.3 and s["pos"] < 0.02 and s["wind_speed"] < 0.05
+
+
+def test_empty_rows_dropped_and_logged(synthetic, raw, tmp_path):
+    path = tmp_path / "log.csv"
+    raw.to_csv(path, index=False)
+    with open(path, "a") as fh:
+        fh.write("," * (len(raw.columns) - 1) + "\n" + "," * (len(raw.columns) - 1) + "\n")
+    out = Pipeline(LAYOUT).run(path)
+    assert any("empty row" in r for r in out.report.repairs)
+    assert synth.score(out.segments, synthetic.truth)["u"] < 5e-3
+
+
+def test_no_gnss_at_all(raw):
+    raw[["gnss_fore_x [m]", "gnss_aft_x [m]"]] = np.nan
+    assert "no usable GNSS fix" in error_of(raw)

@@ -1,0 +1,163 @@
+"""Sweeps: sweep files are checked before anything runs; a tiny sweep on local Ray is
+killed part-way, resumed, and no trial is trained twice."""
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pandas as pd
+import pytest
+
+from sysid.errors import ConfigError
+
+from sysid.sweep import load_sweep
+from sysid.sweep.plan import sweep_trials
+from sysid.sweep.points import point_name, sweep_points
+from sysid.sweep.trial import read_journal
+from tiny_experiment import tiny_experiment
+
+
+def _base(tmp_path, dataset_dir) -> str:
+    return tiny_experiment(tmp_path / "base.toml", dataset_dir, seed=0, epochs=4, warm_start_epochs=3).name
+
+
+def _sweep(tmp_path, dataset_dir, body: str) -> object:
+    path = tmp_path / "sweep.toml"
+    path.write_text(f"[sweep]\nbase = '{_base(tmp_path, dataset_dir)}'\n" + body)
+    return path
+
+
+@pytest.mark.parametrize("body, message", [
+    ("[vary]\n'training.learning_rat' = [1e-3]\n", "'training.learning_rat': not an experiment option"),
+    ("[vary]\n'training.learning_rate' = [1e-3, -1.0]\n", "learning_rate must be > 0"),
+    ("[vary]\n'training.learning_rate' = { loguniform = [1e-4, 1e-2] }\n", "needs search = \"random\""),
+    ("search = 'random'\n[vary]\n'training.lambda_F' = { loguniform = [0.0, 1.0] }\n", "low > 0"),
+    ("seeds = [0, 0]\n", "seeds must be a list of distinct integers"),
+    ("objective = 'test_rmse'\n", "never used to choose"),
+    ("[vary]\n'experiment.seed' = [1, 2]\n", "set seeds with [sweep] seeds"),
+])
+def test_bad_sweep_files_name_the_file_and_key(tmp_path, dataset_dir, body, message):
+    path = _sweep(tmp_path, dataset_dir, body)
+    with pytest.raises(ConfigError) as err:
+        load_sweep(path)
+    assert str(path) in str(err.value) and message in str(err.value)
+
+
+def test_grid_and_random_points(tmp_path, dataset_dir):
+    grid = load_sweep(_sweep(tmp_path, dataset_dir, "seeds = [0, 3]\n[vary]\n'training.learning_rate' = [1e-3, 3e-3]\n"
+                                                   "'network.hidden' = [[64, 64], [128, 128]]\n"))
+    trials = sweep_trials(grid)
+    assert len(trials) == 8 and {t.seed for t in trials} == {0, 3}
+    assert trials[0].path == "trials/learning_rate=0.001,hidden=64x64/seed0"
+    assert "hidden = [128, 128]" in trials[-1].config and "seed = 3" in trials[-1].config
+    assert "threads = 1" in trials[0].config  # one torch thread per trial
+    rand = load_sweep(_sweep(tmp_path, dataset_dir, "search = 'random'\nsamples = 5\nsearch_seed = 7\n[vary]\n"
+                                                   "'training.lambda_F' = { loguniform = [1e-3, 1e-1] }\n"))
+    a, b = sweep_points(rand), sweep_points(rand)
+    assert a == b and len(a) == 5  # the same draws on every run: resumable
+    values = [p["training.lambda_F"] for p in a]
+    assert all(1e-3 <= v <= 1e-1 for v in values) and len(set(values)) == 5
+    assert point_name({"training.lambda_F": 0.0123456}) == "lambda_F=0.01235"
+
+
+def _sysid(*args, **kwargs):
+    return subprocess.Popen([sys.executable, "-m", "sysid", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, **kwargs)
+
+
+@pytest.mark.slow
+def test_sweep_killed_part_way_resumes_without_training_a_trial_twice(tmp_path, dataset_dir):
+    pytest.importorskip("ray.tune")
+    path = _sweep(tmp_path, dataset_dir, "seeds = [0, 1]\nmax_retries = 1\n[vary]\n"
+                                         "'training.learning_rate' = [1e-3, 3e-3]\n")
+    out = tmp_path / "sweep"
+    env = {**os.environ, "SYSID_DATA": str(dataset_dir.parent)}
+    first = _sysid("sweep", str(path), "-o", str(out), "--workers", "2", env=env, start_new_session=True)
+    deadline = time.time() + 300
+    while time.time() < deadline and first.poll() is None:
+        if any(e["event"] == "trained" for e in read_journal(out)):
+            break
+        time.sleep(0.5)
+    assert first.poll() is None, first.communicate()[0][-2000:]
+    os.killpg(first.pid, signal.SIGKILL)  # the whole sweep, Ray's workers too
+    first.wait()
+    trained_before = [e["trial"] for e in read_journal(out) if e["event"] == "trained"]
+    assert 1 <= len(trained_before) < 4
+    assert not (out / "results.csv").exists()
+
+    second = _sysid("sweep", str(path), "-o", str(out), "--resume", "--workers", "2", env=env)
+    log = second.communicate(timeout=600)[0]
+    assert second.returncode == 0, log[-3000:]
+    assert "4/4 trials complete" in log
+    assert not (out / ".locks").exists()  # the runner removes the trial locks when all are over
+
+    events = read_journal(out)
+    trained = [e["trial"] for e in events if e["event"] == "trained"]
+    assert sorted(trained) == sorted(set(trained)) and len(trained) == 4  # none twice
+    reused = {e["trial"] for e in events if e["event"] == "reused"}
+    assert set(trained_before) <= reused
+    table = pd.read_csv(out / "results.csv")
+    assert len(table) == 4 and set(table.status) == {"complete"}
+    assert table.val_loss.map(math.isfinite).all()
+    assert sorted(table.seed) == [0, 0, 1, 1]
+    summary = json.loads((out / "summary.json").read_text())
+    points = pd.read_csv(out / "points.csv")
+    assert summary["best"]["point"] == points.point.iloc[0]
+    assert summary["best"]["val_loss_mean"] == pytest.approx(points.val_loss_mean.min(), rel=1e-5)
+    best = table[table.point == summary["best"]["point"]].val_loss.mean()
+    assert summary["best"]["val_loss_mean"] == pytest.approx(best, rel=1e-5)
+
+    # every trial is an ordinary run directory
+    from sysid.runs.rundir import load_model
+    exp, model = load_model(out / table.run.iloc[0])
+    assert exp.experiment.seed == table.seed.iloc[0] and exp.training.threads == 1
+    # the sweep's report: objective against the keys, seed spread, the chosen configuration
+    from sysid.report import build_report
+    html = build_report(out, tmp_path / "report").html.read_text()
+    assert "Validation loss against the varied keys" in html and "Spread over 2 seeds" in html
+    assert "Chosen" in html and summary["best"]["point"] in html
+    # the resumed sweep refuses another sweep file
+    path.write_text(path.read_text().replace("3e-3", "5e-3"))
+    again = _sysid("sweep", str(path), "-o", str(out), "--resume", env=env)
+    text = again.communicate(timeout=120)[0]
+    assert again.returncode == 2 and "differs from" in text
+
+
+def test_shipped_sweep_files_are_valid():
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[2] / "configs" / "sweeps"
+    files = sorted(root.glob("*.toml"))
+    assert files
+    for path in files:
+        spec = load_sweep(path)
+        assert spec.objective == "val_loss" and len(spec.seeds) >= 2 and sweep_trials(spec)
+
+
+_TRAIN_ONE = """
+import json, sys
+from sysid.sweep.trial import TrialContext, TrialSpec, run_trial
+out, config, data = json.loads(sys.argv[1])
+run_trial(TrialSpec("trials/p/seed0", "p", 0, config), TrialContext(out, data, "test"))
+"""
+
+
+def test_two_processes_on_one_trial_train_it_once(tmp_path, dataset_dir):
+    """Optuna can propose a configuration twice while it trains: the second process waits
+    for the first and reuses its run instead of training the same directory beside it."""
+    from sysid.data.datasets import data_root
+    from sysid.sweep.trial_lock import lock_path
+    config = tiny_experiment(tmp_path / "t.toml", dataset_dir, seed=0, epochs=3, warm_start_epochs=2).read_text()
+    out = tmp_path / "out"
+    args = json.dumps([str(out), config, str(data_root())])
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    procs = [subprocess.Popen([sys.executable, "-c", _TRAIN_ONE, args], env=env) for _ in range(2)]
+    assert [p.wait(timeout=600) for p in procs] == [0, 0]
+    events = sorted(e["event"] for e in read_journal(out))
+    assert events == ["reused", "started", "trained"]
+    assert (out / "trials" / "p" / "seed0" / "summary.json").is_file()
+    assert lock_path(out, "trials/p/seed0").parent.name == ".locks"
