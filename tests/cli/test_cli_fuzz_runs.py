@@ -10,39 +10,10 @@ import shutil
 import pytest
 import torch
 
-from cli_harness import BINARY, assert_refused, in_process, leftovers
+from cli_fixtures import files, run_copy, sysid, trained  # noqa: F401 (fixtures)
+from cli_harness import BINARY, assert_refused, leftovers
 from tiny_experiment import tiny_config
 from sysid.store.manifest import MANIFEST, verify_manifest, write_manifest
-
-
-@pytest.fixture
-def sysid(capsys):
-    return lambda *args: in_process(capsys, *args)
-
-
-@pytest.fixture(scope="module")
-def files(dataset_dir):
-    berthing = dataset_dir / "berthing"
-    return {"train": berthing / "berthing_12-Nov-2020_11_07_23.csv",
-            "test": berthing / "berthing_12-Nov-2020_11_49_21.csv"}
-
-
-@pytest.fixture(scope="module")
-def trained(tmp_path_factory, files):
-    """A run directory written by `sysid train` (hybrid, with model.pt and knn.pt)."""
-    from sysid.cli import run
-    folder = tmp_path_factory.mktemp("trained")
-    config = folder / "tiny.toml"
-    config.write_text(tiny_config(files))
-    run(["train", str(config), "-o", str(folder / "run"), "--test", str(files["test"])])
-    return folder / "run"
-
-
-@pytest.fixture
-def run_copy(trained, tmp_path):
-    copy = tmp_path / "run"
-    shutil.copytree(trained, copy)
-    return copy
 
 
 # -- train: configs -----------------------------------------------------------------------
