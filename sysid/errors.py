@@ -32,8 +32,10 @@ class IncompleteOutputError(SysidError):
 
 
 class OutputError(SysidError):
-    """An output cannot be written where asked: the target exists (and ``--overwrite`` was
-    not given), is a file, or its directory cannot be created or written."""
+    """An output cannot or must not be written where asked (`sysid.store.target`): it exists
+    (without ``--overwrite``, or is not a complete sysid output of its kind), is an input or
+    holds or lies in one, is a link, lies in a sealed directory, another sysid is writing
+    it, or its directory cannot be created or written."""
 
 
 class TrainingError(SysidError):

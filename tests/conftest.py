@@ -40,3 +40,18 @@ def dataset_dir() -> Path:
         return data_dir()
     except DataError as exc:
         pytest.skip(f"real dataset unavailable: {exc}")
+
+
+@pytest.fixture(scope="session")
+def files(dataset_dir) -> dict[str, Path]:
+    """The tiny experiment's training and test berthing runs (`tiny_experiment.tiny_files`)."""
+    from tiny_experiment import tiny_files
+    return tiny_files(dataset_dir)
+
+
+@pytest.fixture(scope="session")
+def trained(tmp_path_factory, files) -> Path:
+    """A run directory written by `sysid train` (tiny hybrid, with model.pt and knn.pt);
+    tests copy it before changing it."""
+    from tiny_experiment import train_tiny_run
+    return train_tiny_run(tmp_path_factory.mktemp("trained"), files)

@@ -8,8 +8,9 @@ import sys
 
 import typer
 
-from sysid.errors import OutputError, SysidError
+from sysid.errors import SysidError
 from sysid.cli.interrupts import interrupt_note, interruptible
+from sysid.cli.outputs import release
 
 from sysid.cli.app import app  # noqa: E402
 
@@ -49,7 +50,10 @@ INTERRUPTED = 130  # the shell's code for a job stopped by Ctrl-C (128 + SIGINT)
 def run(argv: list[str]) -> None:
     """Run a subcommand; `SysidError` and `KeyboardInterrupt` propagate (for tests and
     embedding)."""
-    code = app(args=expand_multi_value(list(argv)), standalone_mode=False)
+    try:
+        code = app(args=expand_multi_value(list(argv)), standalone_mode=False)
+    finally:
+        release()  # the output locks the command took
     # typer >= 0.29 turns Ctrl-C into Exit(130) and, outside standalone mode, returns the code
     if code == INTERRUPTED:
         raise KeyboardInterrupt
@@ -72,9 +76,11 @@ def _is_abort(exc: BaseException) -> bool:
 def main(argv: list[str] | None = None) -> None:
     """Console entry point: one clear line on bad input, no traceback.
 
-    Exit codes: 0 success; 2 usage error or bad input (file and field named); 1 an output
-    problem (`OutputError`, an unwritable path) or an unexpected error; 130 interrupted (Ctrl-C). ``--traceback`` shows the
-    Python traceback of an unexpected error.
+    Exit codes: 0 success; 2 usage error, bad input (file and field named) or a refused
+    output (`OutputError`: an input, a sealed or foreign directory, a link, an unwritable
+    path, another sysid writing it); 1 a failure while writing (`OSError`) or an unexpected
+    error; 130 interrupted (Ctrl-C). ``--traceback`` shows the Python traceback of an
+    unexpected error.
     """
     args = list(sys.argv[1:] if argv is None else argv)
     show_traceback = TRACEBACK_FLAG in args
@@ -84,7 +90,7 @@ def main(argv: list[str] | None = None) -> None:
             run(args)
     except SysidError as exc:
         typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
-        sys.exit(1 if isinstance(exc, OutputError) else 2)
+        sys.exit(2)
     except (typer.Exit, SystemExit) as exc:
         code = getattr(exc, "exit_code", getattr(exc, "code", 0))
         sys.exit(code or 0)

@@ -6,6 +6,8 @@ from pathlib import Path
 import typer
 
 from sysid.cli.app import app
+from sysid.cli.outputs import claim
+from sysid.store.target import OutputKind
 from sysid.errors import DataError
 
 
@@ -36,6 +38,7 @@ def export(
     checks.STEP.check("--dt", dt)
     checks.BATCH.check("--batch", batch)
     dtype = torch.float32 if float32 else torch.float64
+    claim(output, OutputKind.FILE, [run_dir])
     exp, model = load_model(run_dir, dtype)
     export_model(model, output, method, dt, batch, dtype, compiled=not portable,
                  log=lambda m: typer.echo("  " + m))

@@ -8,6 +8,8 @@ from typing import List, Optional
 import typer
 
 from sysid.cli.app import app
+from sysid.cli.outputs import claim, ship_file
+from sysid.store.target import OutputKind
 from sysid.errors import DataError
 from sysid.state import FORCE, INPUTS, STATE, force_column
 
@@ -109,6 +111,7 @@ def forces(
     start = time.perf_counter()
     checks.POSITIVE_COUNT.check("--chunk", chunk)
     model = _model(ship, set_, quadrature)
+    claim(output, OutputKind.FILE, [input_csv, ship_file(ship)])
     numeric = _read_force_inputs(input_csv)
     parts = []
     bounds = range(0, len(numeric), chunk)
@@ -165,6 +168,7 @@ def simulate(
     checks.DURATION.check("--horizon", horizon)
     checks.TIME.check("--start", start)
     model = _model(ship, set_, quadrature)
+    claim(output, OutputKind.FILE, [log, ship_file(ship)])
     run = read_run(log, rate)
     i0 = int(np.argmin(np.abs(run.t - start)))
     if abs(run.t[i0] - start) > 0.5 * run.dt:
@@ -222,6 +226,7 @@ def evaluate(
     for h in horizon:
         checks.DURATION.check("--horizon", h)
     start = time.perf_counter()
+    claim(output, OutputKind.FILE, [run_dir, *data, None if run_dir is not None else ship_file(ship)])
     if run_dir is not None:
         from sysid.runs.rundir import load_model
         exp, model = load_model(run_dir)

@@ -10,6 +10,8 @@ import typer
 
 from sysid.cli.app import app
 from sysid.cli.interrupts import on_interrupt
+from sysid.cli.outputs import claim, ship_file
+from sysid.store.target import OutputKind
 from sysid.errors import DataError
 
 ShipOption = typer.Option("esso_osaka", "--ship", help="Ship name (configs/ships/NAME.toml) or a ship TOML.")
@@ -52,6 +54,7 @@ def synth_raw(
     latlon: bool = typer.Option(False, "--latlon", help="Write WGS-84 lat/lon fixes instead of local x/y."),
     reference: Optional[str] = typer.Option(None, "--reference", help="LAT,LON [deg] of the local origin (--latlon)."),
     ship: str = ShipOption,
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing truth file OUTPUT.truth.csv too."),
 ) -> None:
     """Synthesise a raw 10 Hz log (and its truth) from a processed run."""
     from preprocessing import synth
@@ -65,6 +68,10 @@ def synth_raw(
     checks.NOISE.check("--gnss-correlated", gnss_correlated)
     checks.COUNT.check("--outliers", outliers)
     layout = load_ship(ship).sensors
+    truth_path = output.with_suffix(".truth.csv")
+    inputs = [processed, ship_file(ship)]
+    claim(output, OutputKind.FILE, inputs)
+    claim(truth_path, OutputKind.FILE, inputs, overwrite, companion=output)
     kwargs = {}
     ref = _parse_latlon(reference)
     if ref is not None:
@@ -82,7 +89,6 @@ def synth_raw(
     except (RawLogError, OSError) as exc:
         raise DataError(str(exc)) from None
     write_csv(result.raw, output)
-    truth_path = output.with_suffix(".truth.csv")
     truth = result.truth.copy()
     truth.columns = [f"{c} [{synth.schema.PROCESSED[c]}]" for c in truth.columns]
     write_csv(truth, truth_path)
@@ -113,7 +119,6 @@ def preprocess(
     from sysid.config import checks
     from sysid.progress import progress
     from sysid.mmg.ship import load_ship
-    from sysid.store.staging import check_target, staged_directory
     from sysid.workers import in_workers
 
     checks.RATE.check("--rate", rate)
@@ -133,13 +138,13 @@ def preprocess(
     for p in raw:
         if not p.is_file():
             raise DataError(f"{p}: file not found")
-    check_target(outdir, overwrite, keep=raw)  # before any work
+    target = claim(outdir, OutputKind.PREPROCESSING, [*raw, ship_file(ship)], overwrite)  # before any work
     layout = load_ship(ship).sensors
     paths = [str(p) for p in raw]
     results = []
     start = time.perf_counter()
     on_interrupt(f"nothing written to {outdir} (it is moved into place only when every file is done)")
-    with staged_directory(outdir, "preprocessing", overwrite, keep=raw) as staging:
+    with target.staged() as staging:
         bar = progress(total=len(paths), unit="files", desc="preprocess")
         if jobs > 1 and len(paths) > 1:
             work = functools.partial(pipeline.process_file, layout=layout, settings=settings, outdir=str(staging))

@@ -6,6 +6,8 @@ from pathlib import Path
 import typer
 
 from sysid.cli.app import app
+from sysid.cli.outputs import claim
+from sysid.store.target import OutputKind
 
 
 @app.command()
@@ -18,6 +20,7 @@ def report(
     from sysid.report import build_report
 
     out = out or Path("reports") / source.resolve().name
+    claim(out, OutputKind.REPORT, [source], adds_to=source)
 
     def progress(message: str) -> None:
         if not quiet:

@@ -8,6 +8,8 @@ from typing import Optional
 import typer
 
 from sysid.cli.app import app
+from sysid.cli.outputs import claim, experiment_inputs
+from sysid.store.target import OutputKind
 
 
 @app.command()
@@ -34,6 +36,8 @@ def sweep(
     if workers is not None:
         checks.workers("--workers", workers, cluster=address)
     spec = load_sweep(sweep_file)
+    inputs = [sweep_file, spec.base_path, *experiment_inputs(spec.base, data)]
+    claim(output, OutputKind.SWEEP, inputs, overwrite, resume=resume)
     on_interrupt(f"finished trials are kept in {output}/trials; rerun with --resume to continue the sweep")
     results, summary = run_sweep(spec, output, workers, address, resume, overwrite, data,
                                  log=lambda m: typer.echo(m))

@@ -9,6 +9,8 @@ import typer
 
 from sysid.cli.app import app
 from sysid.cli.interrupts import on_interrupt
+from sysid.cli.outputs import claim, experiment_inputs
+from sysid.store.target import OutputKind
 
 
 @app.command()
@@ -27,14 +29,12 @@ def train(
     The run directory is moved into place only when complete (with a manifest); an
     interrupted training leaves no run, only its checkpoint for --resume.
     """
-    from sysid.cli.interrupts import on_interrupt
     from sysid.data.recordings import expand_paths, read_run
     from sysid.data.datasets import test_files
     from sysid.config import checks
     from sysid.errors import ConfigError
     from sysid.config.experiment import load_experiment
     from sysid.runs.lifecycle import checkpoint_path, run_experiment, training_runs
-    from sysid.store.staging import check_target
 
     start = time.perf_counter()
     if epochs is not None and epochs < 0:
@@ -46,7 +46,9 @@ def train(
         exp = exp.replace(training={"epochs": epochs})
     if threads is not None:
         exp = exp.replace(training={"threads": threads})
-    check_target(output, overwrite)  # a bad -o fails now, not after training
+    test_inputs = test or list(test_files(data).values())
+    # a bad -o fails now, not after training
+    claim(output, OutputKind.RUN, [config, *experiment_inputs(exp, data), *test_inputs], overwrite)
     checkpoint = checkpoint_path(output)
     on_interrupt(lambda: f"nothing written to {output}" + (
         f"; the training checkpoint {checkpoint} is kept: rerun with --resume to continue"
@@ -55,8 +57,7 @@ def train(
     if runs is not None:
         typer.echo(f"train: {exp.experiment.model} model on {len(runs)} file(s) "
                    f"({sum(r.duration for r in runs):.0f} s of data), seed {exp.experiment.seed}")
-    test_paths = expand_paths(test) if test else list(test_files(data).values())
-    tests = [read_run(p) for p in test_paths]
+    tests = [read_run(p) for p in (expand_paths(test) if test else test_inputs)]
     result = run_experiment(exp, output, tests, runs, data, log=lambda m: typer.echo("  " + m), resume=resume,
                             overwrite=overwrite)
     typer.echo(result.evaluation.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
@@ -93,8 +94,8 @@ def reproduce(
     an interrupted reproduction leaves nothing behind.
     """
     from sysid.device import cpu_cores
+    from sysid.data.datasets import data_root
     from sysid.protocol.reproduce import reproduce as run_protocol
-    from sysid.store.staging import check_target, staged_directory
     from sysid.config import checks
 
     if jobs is not None:
@@ -103,9 +104,9 @@ def reproduce(
     if seeds > 1:
         from sysid.sweep.runner import import_ray
         import_ray()  # a clear error now if Ray is not installed
-    check_target(output, overwrite)
+    target = claim(output, OutputKind.REPRODUCTION, [data_root(data)], overwrite)
     on_interrupt(f"nothing written to {output} (it is moved into place only when every run is done)")
-    with staged_directory(output, "reproduction", overwrite) as staging:
+    with target.staged() as staging:
         summary = run_protocol(staging, data, only, log=typer.echo, jobs=jobs or cpu_cores(), seeds=seeds,
                                address=address)
     for name in ("table7.md", "table8.md"):

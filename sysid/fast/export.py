@@ -35,6 +35,7 @@ from sysid.fast.compiled import (cached_package, export_program, load_package, p
 from sysid.dynamics.integrators import Method, run_steps
 from sysid.fast.prepared import prepared
 from sysid.fast.stepper import Step
+from sysid.store.files import atomic_path
 from sysid.errors import DataError
 
 METADATA_FILE = "sysid.json"  # the metadata inside a portable export (extra file)
@@ -86,15 +87,15 @@ def export_model(model: nn.Module, path: str | Path, method: Method | str = Meth
     path = Path(path)
     step = Step(prepared(model, batch), method, dt)
     check_step_stable(step, batch, dtype, step.method, dt)
-    path.parent.mkdir(parents=True, exist_ok=True)
     examples = _examples(batch, dtype)
     metadata = step_metadata(model, method, dt, batch, dtype)
-    if compiled:
-        shutil.copyfile(cached_package(step, examples, step_label(method), metadata, log), path)
-    else:
-        metadata["format"] = "torch.export"
-        torch.export.save(export_program(step, examples), path,
-                          extra_files={METADATA_FILE: json.dumps(metadata)})
+    with atomic_path(path, ".pt2") as tmp:  # a link at `path` is replaced, never written through
+        if compiled:
+            shutil.copyfile(cached_package(step, examples, step_label(method), metadata, log), tmp)
+        else:
+            metadata["format"] = "torch.export"
+            torch.export.save(export_program(step, examples), tmp,
+                              extra_files={METADATA_FILE: json.dumps(metadata)})
     return path
 
 

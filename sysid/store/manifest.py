@@ -49,12 +49,15 @@ def _listed_files(directory: Path) -> list[Path]:
 def write_manifest(directory: str | os.PathLike, kind: str) -> Path:
     """List every file of `directory` (relative path, bytes, SHA-256) in ``manifest.json``.
 
-    `kind` names what the directory is ("run", "preprocessing", "reproduction") so a reader
-    can refuse the wrong one.
+    `kind` names what the directory is ("run", "preprocessing", "reproduction", "sweep") so a
+    reader can refuse the wrong one; the version of sysid that wrote it is recorded beside.
     """
+    from sysid import __version__
+
     directory = Path(directory)
     files = {p.relative_to(directory).as_posix(): _entry(p) for p in _listed_files(directory)}
-    doc = {"format": FORMAT, "kind": kind, "written": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "files": files}
+    doc = {"format": FORMAT, "kind": kind, "sysid": __version__, "written": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+           "files": files}
     return write_text(json.dumps(doc, indent=1), directory / MANIFEST)
 
 

@@ -2,6 +2,7 @@
 
 Output directory::
 
+    manifest.json     written when the sweep starts: sweep.toml and base.toml (kind "sweep")
     sweep.toml        the sweep file as given (a resumed sweep must match it)
     base.toml         the base experiment, every option resolved
     trials/{point}/seed{k}/   one ordinary run directory per trial (`sysid.runs.rundir`)
@@ -21,16 +22,22 @@ from typing import Callable
 
 from sysid.errors import ConfigError, OutputError
 from sysid.store.files import write_text
+from sysid.store.manifest import write_manifest
+from sysid.store.staging import check_target
 from sysid.sweep.plan import sweep_trials
 from sysid.sweep.results import SweepResults, collect_results, scanned_trials, write_results
 from sysid.sweep.runner import default_workers, run_optuna, run_trials
 from sysid.sweep.spec import SweepSpec
 from sysid.sweep.trial import TrialContext
 
+SWEEP_KIND = "sweep"  # the kind in the sweep directory's manifest
+
 
 def prepare_output(spec: SweepSpec, out: Path, resume: bool, overwrite: bool) -> None:
     """Refuse to mix sweeps: an existing output is continued only with `resume` (and the same
-    sweep file) or replaced with `overwrite` (only if it is a sweep's)."""
+    sweep file) or replaced with `overwrite` (only if sysid sealed it as a sweep). A new sweep
+    directory is sealed (``manifest.json`` of kind "sweep", listing its sweep and base files)
+    as soon as it is made: it is sysid's from then on."""
     marker = out / "sweep.toml"
     if out.exists() and not out.is_dir():
         raise OutputError(f"{out}: exists and is not a directory; choose another output path")
@@ -45,13 +52,12 @@ def prepare_output(spec: SweepSpec, out: Path, resume: bool, overwrite: bool) ->
         if not overwrite:
             raise OutputError(f"{out}: already exists; pass --resume to continue that sweep, --overwrite to "
                               "replace it, or choose another output path")
-        if not marker.is_file():
-            raise OutputError(f"{out}: exists and is not a sweep's output (no sweep.toml); "
-                              "--overwrite only replaces sysid outputs")
+        check_target(out, overwrite, [spec.source, spec.base_path], SWEEP_KIND)
         shutil.rmtree(out)
     out.mkdir(parents=True, exist_ok=True)
     write_text(spec.base.to_toml(), out / "base.toml")
     write_text(spec.text, marker)
+    write_manifest(out, SWEEP_KIND)
 
 
 def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = None, address: str | None = None,

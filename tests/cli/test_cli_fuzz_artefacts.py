@@ -10,7 +10,7 @@ import json
 import pytest
 import torch
 
-from cli_fixtures import files, run_copy, sysid, trained  # noqa: F401 (fixtures)
+from cli_fixtures import run_copy, sysid  # noqa: F401 (fixtures)
 from cli_harness import assert_refused
 from sysid.store.manifest import write_manifest
 

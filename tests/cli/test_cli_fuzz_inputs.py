@@ -1,5 +1,6 @@
 """Fuzzing `sysid forces`, `simulate`, `evaluate --model mmg` and `preprocess` with bad
-inputs, bad options and bad output paths: every case exits 1 or 2 with one error line
+inputs, bad options and bad output paths: every case exits 2 (1 for a file that fails in
+preprocessing) with one error line
 naming the file or option, no traceback, and nothing partial or stale left behind."""
 from __future__ import annotations
 
@@ -88,7 +89,7 @@ def test_forces_output_that_cannot_be_written(sysid, tmp_path, where):
     if where == "an existing directory":
         out.mkdir()
     outcome = sysid("forces", src, "-o", out)
-    assert_refused(outcome, 1)
+    assert_refused(outcome, 2)
     assert str(out).split("/")[-2] in outcome.error_lines[0] or str(out) in outcome.error_lines[0]
     assert leftovers(tmp_path) == []
 
@@ -238,7 +239,7 @@ def test_preprocess_output_that_cannot_be_written(sysid, raw_logs, tmp_path, whe
     (tmp_path / "taken").write_text("a file")
     out = {"a file": tmp_path / "taken", "under /proc": "/proc/sysid-fuzz",
            "below a file": tmp_path / "taken" / "processed"}[where]
-    line = assert_refused(sysid("preprocess", raw_logs / "run.csv", "-o", out), 1)
+    line = assert_refused(sysid("preprocess", raw_logs / "run.csv", "-o", out), 2)
     assert str(out) in line
     assert (tmp_path / "taken").read_text() == "a file" and leftovers(tmp_path) == []
 
@@ -248,7 +249,7 @@ def test_preprocess_rerun_is_refused_or_replaces_everything(sysid, raw_logs, tmp
     first = sysid("preprocess", raw_logs / "holed" / "run.csv", "-o", out)
     assert first.code == 0, first.err
     assert {"run_seg1.csv", "run_seg2.csv"} <= set(verify_manifest(out)["files"])
-    assert_refused(sysid("preprocess", raw_logs / "run.csv", "-o", out), 1, "already exists", "--overwrite")
+    assert_refused(sysid("preprocess", raw_logs / "run.csv", "-o", out), 2, "already exists", "--overwrite")
     assert (out / "run_seg2.csv").is_file()  # refused: the old output is untouched
     again = sysid("preprocess", raw_logs / "run.csv", "-o", out, "--overwrite")
     assert again.code == 0, again.err
@@ -261,11 +262,11 @@ def test_preprocess_overwrite_never_deletes_inputs_or_foreign_folders(sysid, raw
     mine = tmp_path / "thesis"
     mine.mkdir()
     (mine / "chapter1.tex").write_text("text")
-    assert_refused(sysid("preprocess", raw_logs / "run.csv", "-o", mine, "--overwrite"), 1, "not written by sysid")
+    assert_refused(sysid("preprocess", raw_logs / "run.csv", "-o", mine, "--overwrite"), 2, "not written by sysid")
     out = tmp_path / "processed"
     assert sysid("preprocess", raw_logs / "run.csv", "-o", out).code == 0
     inside = out / "run.csv"
-    assert_refused(sysid("preprocess", inside, "-o", out, "--overwrite"), 1, "would delete")
+    assert_refused(sysid("preprocess", inside, "-o", out, "--overwrite"), 2, f"{out}: holds {inside}, an input")
     assert inside.is_file() and (mine / "chapter1.tex").is_file()
 
 

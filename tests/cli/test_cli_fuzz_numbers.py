@@ -9,12 +9,18 @@ import pandas as pd
 import pytest
 
 from analytic_runs import analytic_run
-from cli_fixtures import files, sysid, trained  # noqa: F401 (fixtures)
+from cli_fixtures import sysid  # noqa: F401 (fixtures)
 from cli_harness import assert_refused, leftovers
 from preprocessing import synth
 from preprocessing.sensors import SensorLayout
 from sysid.config.checks import cpu_cores
 from tiny_experiment import tiny_config
+
+
+@pytest.fixture(scope="module")
+def zigzag(dataset_dir):
+    """A 140-s zigzag test run (10 Hz): heading -1.01..0.55 rad, yaw rate up to 0.112 rad/s."""
+    return dataset_dir / "zigzag" / "zigzag_31-Jul-2020_13_04_24.csv"
 
 
 # -- synth-raw -----------------------------------------------------------------------------
@@ -113,9 +119,9 @@ def test_training_horizon_longer_than_the_test_file_is_refused_before_training(s
     assert "epoch" not in outcome.out and leftovers(tmp_path) == []
 
 
-def test_evaluate_states_a_file_too_short_for_a_horizon(sysid, files, tmp_path):
+def test_evaluate_states_a_file_too_short_for_a_horizon(sysid, files, zigzag, tmp_path):
     out = tmp_path / "m.csv"
-    outcome = sysid("evaluate", "--data", files["test"], files["zigzag"], "--horizon", "30", "--horizon", "135", "-o", out)
+    outcome = sysid("evaluate", "--data", files["test"], zigzag, "--horizon", "30", "--horizon", "135", "-o", out)
     assert outcome.code == 0, outcome.err
     warnings = [line for line in outcome.err.splitlines() if line.startswith("warning:")]
     assert len(warnings) == 1 and "berthing_12-Nov-2020_11_49_21.csv: 128 samples" in warnings[0]
@@ -139,8 +145,8 @@ def _converted(source, folder, column, factor):
     ("psi_hat [rad]", "psi", "6.283", "degrees?"),   # one turn either way
     ("r_angvelo [rad/s]", "r", "3", "deg/s?"),       # 172 deg/s
 ], ids=["heading in degrees", "yaw rate in deg/s"])
-def test_degrees_are_refused_alike_by_evaluate_and_train(sysid, files, tmp_path, column, channel, limit, hint):
-    bad = _converted(files["zigzag"], tmp_path, column, 180 / np.pi)
+def test_degrees_are_refused_alike_by_evaluate_and_train(sysid, files, zigzag, tmp_path, column, channel, limit, hint):
+    bad = _converted(zigzag, tmp_path, column, 180 / np.pi)
     peak = np.abs(pd.read_csv(bad)[column]).max()  # the zigzag's largest heading / yaw rate, now in degrees
     says = f"column '{channel}' reaches {peak:.4g}, beyond ±{limit} (header '{column}'): wrong units ({hint})"
     out, run = tmp_path / "m.csv", tmp_path / "run"

@@ -13,7 +13,7 @@ import pytest
 from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 
-from cli_fixtures import files, sysid, trained  # noqa: F401 (fixtures)
+from cli_fixtures import sysid  # noqa: F401 (fixtures)
 from cli_harness import leftovers
 from tiny_experiment import tiny_config
 

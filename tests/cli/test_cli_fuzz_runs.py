@@ -1,6 +1,6 @@
 """Fuzzing `sysid train`, `evaluate RUN`, `report` and `reproduce`: bad experiment configs,
 bad output paths, diverging training, and run or reproduction directories that are
-incomplete, changed after writing or hold a broken model. Every case exits 1 or 2 with one
+incomplete, changed after writing or hold a broken model. Every case exits 2 with one
 error line naming the file and field, no traceback, and no run left behind."""
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import shutil
 import pytest
 import torch
 
-from cli_fixtures import files, run_copy, sysid, trained  # noqa: F401 (fixtures)
+from cli_fixtures import run_copy, sysid  # noqa: F401 (fixtures)
 from cli_harness import BINARY, assert_refused, leftovers
 from tiny_experiment import tiny_config
 from sysid.store.manifest import MANIFEST, verify_manifest, write_manifest
@@ -76,7 +76,7 @@ def test_train_refuses_an_output_it_cannot_write_before_training(sysid, files, t
     out = {"existing run": tmp_path / "old", "a file": tmp_path / "taken", "under /proc": "/proc/sysid-fuzz-run",
            "below a file": tmp_path / "taken" / "run"}[where]
     outcome = sysid("train", config, "-o", out, "--test", files["test"])
-    line = assert_refused(outcome, 1, str(out))
+    line = assert_refused(outcome, 2, str(out))
     assert "train:" not in outcome.out  # refused before any training
     if where == "existing run":
         assert "--overwrite" in line
@@ -200,7 +200,7 @@ def test_reproduce_refuses_an_output_it_cannot_write(sysid, dataset_dir, tmp_pat
     (tmp_path / "old" / "keep.txt").write_text("old work")
     out = {"existing output": tmp_path / "old", "a file": tmp_path / "taken", "under /proc": "/proc/sysid-fuzz-rep"}[where]
     outcome = sysid("reproduce", "-o", out, "--only", "mmg_paper", "--no-report", "--data", dataset_dir)
-    assert_refused(outcome, 1, str(out))
+    assert_refused(outcome, 2, str(out))
     assert "[1/1]" not in outcome.out and (tmp_path / "old" / "keep.txt").is_file()
     assert leftovers(tmp_path) == []
 
@@ -221,7 +221,7 @@ def test_partial_reproduction_is_complete_on_disk_and_says_partial_on_page_one(s
     assert "runs/mmg_paper/manifest.json" in listed and "comparison.csv" in listed
     assert sorted(p.name for p in (out / "runs").iterdir()) == ["mmg_paper"]
     again = sysid("reproduce", "-o", out, "--only", "mmg_paper", "--no-report", "--data", dataset_dir)
-    assert_refused(again, 1, "already exists")
+    assert_refused(again, 2, "already exists")
 
     report = sysid("report", out, "-o", tmp_path / "report", "--quiet")
     assert report.code == 0, report.err
@@ -237,6 +237,6 @@ def test_partial_reproduction_is_complete_on_disk_and_says_partial_on_page_one(s
 def test_report_output_that_cannot_be_written(sysid, trained, tmp_path, where):
     (tmp_path / "taken").write_text("a file")
     out = {"under /proc": "/proc/sysid-fuzz-report", "below a file": tmp_path / "taken" / "report"}[where]
-    line = assert_refused(sysid("report", trained, "-o", out, "--quiet"), 1)
+    line = assert_refused(sysid("report", trained, "-o", out, "--quiet"), 2)
     assert "sysid-fuzz-report" in line or "taken" in line
     assert leftovers(tmp_path) == [] and (tmp_path / "taken").read_text() == "a file"

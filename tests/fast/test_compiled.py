@@ -29,6 +29,8 @@ from sysid.runs.rundir import load_model, save_model
 from sysid.dynamics.integrators import run_steps
 from sysid.fast.stepper import Step
 
+pytestmark = pytest.mark.slow  # every test here compiles (minutes on a cold cache)
+
 STATE = ["x", "u", "y", "v", "psi", "r"]
 INPUTS = ["n_prop", "delta_rad", "wind_velo_true", "wind_dir_true"]
 

@@ -30,6 +30,7 @@ def test_leaves_cover_the_bank_once_and_respect_the_size():
     assert torch.equal(torch.sort(torch.cat(leaves)).values, torch.arange(1000))
 
 
+@pytest.mark.slow
 def test_decisions_equal_the_whole_bank_scan(gate_and_queries):
     gate, queries = gate_and_queries
     index = IndexedGate(gate, leaf=64, probe=8)
@@ -126,6 +127,7 @@ class _Decision(torch.nn.Module):
         return torch.where(on, d, -d)
 
 
+@pytest.mark.slow
 def test_compiled_index_decides_as_the_gate_scan(gate_and_queries):
     """The tiers compiled (AOTInductor, one row per call, as in a prediction) give the
     decisions of the gate's whole-bank scan, row by row; the scan tier compiled alone too."""

@@ -104,6 +104,7 @@ def test_knn_threshold_is_the_alpha_quantile_of_leave_one_out_distances():
     np.testing.assert_allclose(gate.distance(q).numpy(), dq, rtol=1e-10)
 
 
+@pytest.mark.slow
 def test_gate_returns_the_mmg_force_exactly_far_outside(trained):
     runs, trainer = trained
     model = trainer.model_.double()
@@ -116,6 +117,7 @@ def test_gate_returns_the_mmg_force_exactly_far_outside(trained):
     assert float(f.correction[0].detach().abs().sum()) > 0
 
 
+@pytest.mark.slow
 def test_two_epochs_on_a_synthetic_ship_recover_the_added_force(trained):
     runs, trainer = trained
     info, hist = trainer.summary_, trainer.history_
@@ -131,6 +133,7 @@ def test_two_epochs_on_a_synthetic_ship_recover_the_added_force(trained):
     np.testing.assert_allclose(f_nn.numpy(), ADDED_FORCE.numpy(), rtol=0.35)
 
 
+@pytest.mark.slow
 def test_saved_run_reloads_to_identical_predictions(trained, tmp_path):
     runs, trainer = trained
     model = trainer.model_.double()
@@ -185,6 +188,7 @@ def test_paper_configs_are_valid():
         load_experiment(path)
 
 
+@pytest.mark.slow
 def test_gradient_identification_recovers_a_perturbed_coefficient():
     """Data from a ship whose N_r differs from the definition; identify N_r and N_v back."""
     rng = np.random.default_rng(1)
@@ -231,6 +235,7 @@ def test_force_correction_is_the_papers_network_and_members_average():
     torch.testing.assert_close(per_member, torch.stack(by_hand))
 
 
+@pytest.mark.slow
 def test_val_loss_is_the_final_models_validation_loss_at_the_objective_horizon(trained):
     """summary.val_loss (the sweep objective): L_v of the final (gated) model on the
     validation windows; with objective_s, on validation windows of that many seconds."""

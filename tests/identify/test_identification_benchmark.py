@@ -14,6 +14,7 @@ def bench():
     return load_benchmark("identification_kvlcc2")
 
 
+@pytest.mark.slow
 def test_linear_derivatives_recovered_from_perturbed_starts(bench):
     ship = load_ship(bench.SHIP)
     names = ["Y_v", "Y_r", "N_v", "N_r"]

@@ -63,6 +63,7 @@ def _config(path, files, start, **sections):
     return path
 
 
+@pytest.mark.slow
 def test_levenberg_marquardt_run_covers_the_truth_within_two_sigma(bench, runs, tmp_path):
     ship = load_ship(bench.SHIP)
     truth = np.array([ship[n] for n in NAMES])
@@ -96,6 +97,7 @@ def test_levenberg_marquardt_run_covers_the_truth_within_two_sigma(bench, runs, 
     assert "within the ± 2σ" in said
 
 
+@pytest.mark.slow
 def test_hybrid_identifies_its_mmg_by_levenberg_marquardt_before_the_network(bench, runs, tmp_path):
     ship = load_ship(bench.SHIP)
     train, test = runs
@@ -144,6 +146,7 @@ def test_start_states_default_to_the_solver_and_are_written_resolved():
     assert 'start_states = "estimated"' in lm.to_toml()
 
 
+@pytest.mark.slow
 def test_start_state_check_flags_the_esso_osaka_model_error(dataset_dir, tmp_path):
     """Real data, where the Esso Osaka MMG does not fit exactly: free start states take up
     part of the model error, so the two start-state treatments disagree far beyond the

@@ -37,6 +37,7 @@ def test_replay_of_the_true_ship_reproduces_its_record(records):
             np.testing.assert_allclose(again[column], run[column], rtol=0, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_subtracting_the_replayed_bias_recovers_the_truth_from_noise_free_logs(records):
     ship = load_ship("kvlcc2_l7")
     truth = np.array([ship[n] for n in NAMES])

@@ -47,6 +47,7 @@ def test_noise_free_windows_give_the_truth_and_the_true_start_states(bench, reco
     assert fit.cost < 1e-12
 
 
+@pytest.mark.slow
 def test_noisy_windows_cover_the_truth_and_the_start_states_move_towards_it(bench, records):
     noise = (0.004, 0.003, 0.0008)
     clean = bench.windows_from(records, 10, (0.0, 0.0, 0.0), 0).states[0][:, [1, 3, 5]]
@@ -81,6 +82,7 @@ def test_profile_jacobian_equals_the_schur_complement(bench, records):
     assert float((step[:p].abs() / theta.abs()).max()) < 1e-5
 
 
+@pytest.mark.slow
 def test_a_prior_pulls_the_estimate_and_its_information_enters_sigma(bench, records):
     """With prior_weight lambda the fit minimises data + lambda sum ((theta - prior)/|prior|)^2:
     its gradient is zero there; a huge lambda keeps the prior; and the Gauss-Newton sigma is

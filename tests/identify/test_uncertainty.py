@@ -73,6 +73,7 @@ def test_gauss_newton_errors_equal_least_squares_in_the_linear_case():
     ("gauss_newton", (0.01, 0.02, 0.001)),  # weights 1/noise^2: white weighted residuals
     ("sandwich", (0.002, 0.005, 0.0003)),   # other weights: only the sandwich stays honest
 ])
+@pytest.mark.slow
 def test_sigma_is_honest_over_noise_seeds(covariance, noise):
     """Least squares from each seed's noisy windows: for every coefficient the spread of the
     estimates around the truth matches the predicted sigma, and +-2 sigma covers the truth

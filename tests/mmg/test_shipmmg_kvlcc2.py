@@ -116,6 +116,7 @@ def _zigzag(ship, duration=80.0):
     return time, delta, np.full_like(time, NPS)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("maneuver", ["turning35", "zigzag10"])
 def test_trajectories_agree_with_shipmmg(tmp_path, maneuver):
     ship = _ship_like_shipmmg(tmp_path, x_G=0.0)

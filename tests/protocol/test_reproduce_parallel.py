@@ -1,10 +1,12 @@
 """The protocol's results are a function of config, data and seed: side-by-side workers and
 one process give the same tables."""
 import pandas as pd
+import pytest
 
 from sysid.protocol.reproduce import reproduce
 
 
+@pytest.mark.slow
 def test_parallel_workers_give_the_same_tables(dataset_dir, tmp_path):
     tiny = {"training": {"epochs": 2, "warm_start_epochs": 3, "batch_size": 512}}
     names = ["mmg_lab", "nn_D1", "hybrid_D1"]

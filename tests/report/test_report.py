@@ -121,6 +121,7 @@ def reproduction_report(reproduction, tmp_path_factory):
     return build_report(reproduction, out)
 
 
+@pytest.mark.slow
 def test_reproduction_html_tables_equal_metrics(reproduction, reproduction_report):
     paths = reproduction_report
     assert not [n for n in paths.notes if "failed" in n], paths.notes
@@ -142,12 +143,14 @@ def test_reproduction_html_tables_equal_metrics(reproduction, reproduction_repor
         assert word in html, word
 
 
+@pytest.mark.slow
 def test_reproduction_pdf_numbered_with_table_values(reproduction, reproduction_report):
     values = [v for d in (reproduction / "runs").iterdir() for v in _metrics_values(d)]
     _check_pdf(reproduction_report.pdf, values)
     assert reproduction_report.n_pages == len(pypdf.PdfReader(str(reproduction_report.pdf)).pages)
 
 
+@pytest.mark.slow
 def test_single_run_report(tmp_path, small_runs):
     runs = small_runs
     run_dir = write_run(tmp_path / "hybrid_D2", "hybrid_D2", runs)
@@ -198,6 +201,7 @@ def test_missing_and_corrupt_inputs_name_the_file(tmp_path, reproduction):
     assert not (tmp_path / "out" / "report.html").exists()
 
 
+@pytest.mark.slow
 def test_cli_report(tmp_path, small_runs, capsys):
     from sysid.cli import main
     run_dir = write_run(tmp_path / "mmg_paper", "mmg_paper", dict(list(small_runs.items())[:1]), horizons=(30,))

@@ -1,7 +1,7 @@
 """Running `sysid` as a user does and judging how it fails, for the CLI fuzz tests.
 
 `Outcome` is one command's exit code and output; `assert_refused` is the contract every bad
-input must meet: exit 1 or 2, exactly one error line that names the file or option at
+input must meet: its exit code (2 for bad input and refused outputs), exactly one error line that names the file or option at
 fault, no traceback, and nothing partial or stale left where the output was asked for.
 """
 from __future__ import annotations

@@ -39,3 +39,19 @@ def tiny_config(files, **sections) -> str:
     for name, keys in sections.items():
         doc.setdefault(name, {}).update(keys)
     return "".join(f"[{name}]\n" + "".join(f"{k} = {v}\n" for k, v in keys.items()) for name, keys in doc.items())
+
+
+def tiny_files(dataset_dir: Path) -> dict[str, Path]:
+    """The one berthing run `tiny_config` trains on and the one it is tested on."""
+    berthing = dataset_dir / "berthing"
+    return {"train": berthing / TRAIN_FILES[0], "test": berthing / TEST_FILE}
+
+
+def train_tiny_run(folder: Path, files: dict[str, Path]) -> Path:
+    """``sysid train`` of `tiny_config` into ``folder/run`` (hybrid: model.pt, knn.pt); the
+    run directory."""
+    from sysid.cli import run
+    config = folder / "tiny.toml"
+    config.write_text(tiny_config(files))
+    run(["train", str(config), "-o", str(folder / "run"), "--test", str(files["test"])])
+    return folder / "run"

@@ -146,6 +146,7 @@ run_trial(TrialSpec("trials/p/seed0", "p", 0, config), TrialContext(out, data, "
 """
 
 
+@pytest.mark.slow
 def test_two_processes_on_one_trial_train_it_once(tmp_path, dataset_dir):
     """Optuna can propose a configuration twice while it trains: the second process waits
     for the first and reuses its run instead of training the same directory beside it."""

@@ -1,0 +1,57 @@
+"""Each command's output target (`sysid.store.target.OutputTarget`): what the command
+reads, collected from its options (the output must be none of these paths, hold none, lie
+in none), and the target's lock, held until the command ends (`hold`, released by
+`sysid.cli.run` whatever the outcome)."""
+from __future__ import annotations
+
+import os
+from contextlib import ExitStack
+from pathlib import Path
+
+_held = ExitStack()
+
+
+def hold(target):
+    """Lock `target` (`OutputTarget.lock`: a second sysid on it is refused) until the
+    running command ends; returns it."""
+    _held.enter_context(target.lock())
+    return target
+
+
+def claim(path: str | os.PathLike, kind, inputs=(), overwrite: bool = False, **options):
+    """The command's output target (`OutputTarget.checked`: `kind` an `OutputKind`), checked
+    and held (`hold`)."""
+    from sysid.store.target import OutputTarget
+
+    return hold(OutputTarget.checked(path, kind, inputs, overwrite, **options))
+
+
+def release() -> None:
+    """Release every lock the command took (its lock files removed)."""
+    _held.close()
+
+
+def ship_file(name_or_path: str | os.PathLike) -> Path | None:
+    """The ship TOML a ``--ship`` option reads, or None when it names no ship (loading the
+    ship says why)."""
+    from sysid.errors import ShipDefinitionError
+    from sysid.mmg.ship import resolve_ship_path
+
+    try:
+        return resolve_ship_path(name_or_path)
+    except ShipDefinitionError:
+        return None
+
+
+def experiment_inputs(exp, data: str | os.PathLike | None = None) -> list[Path]:
+    """The files an experiment reads: its config, its ship, its training files (``[data]
+    files``, or the dataset's data directory)."""
+    from sysid.data.datasets import data_dir
+
+    paths = [Path(exp.source)] if exp.source and Path(exp.source).is_file() else []
+    paths.append(ship_file(exp.experiment.ship))
+    if exp.data.files:
+        paths += [Path(f) for f in exp.data.files]
+    elif exp.needs_training:
+        paths.append(data_dir(data))
+    return [p for p in paths if p is not None]
