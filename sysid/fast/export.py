@@ -78,7 +78,8 @@ def export_model(model: nn.Module, path: str | Path, method: Method | str = Meth
     ----------
     model : MMG, NN-only or hybrid force model (CPU), kNN gate included (as an
         `IndexedGate`: the same decisions from a pruned scan; coefficients packed, `sysid.fast.prepared`).
-    method, dt : the step rule and its length [s] (the paper's: Euler, 1 s).
+    method, dt : the step rule and its length [s] (the paper's: Euler, 1 s); a dt at which
+        the step runs a straight run off is refused (`check_step_stable`, `DataError`).
     batch : number of ships per call (shapes are fixed at export).
     dtype : float64 (as evaluated) or float32.
     compiled : AOTInductor package (native, fast; same torch and platform to load) or a
