@@ -1,6 +1,6 @@
 """The preprocessing pipeline: raw 10 Hz log -> processed 1 Hz segments + quality report.
 
-Steps, in RAW_LOG_FORMAT.md's order: (1) read, validate, put on the 10 Hz grid, find gaps;
+Steps, in the order of the docs' input formats page: (1) read, validate, put on the 10 Hz grid, find gaps;
 (2) lat/lon -> local; (3) baseline check; (4) heading (FOG + two-antenna fusion, with
 gating); (5) midship position; (6) central difference; (7) Kalman/RTS on u, v_m;
 (8) FOG low-pass; (9) wind; (10) take samples at the output rate; (11) write (`writer`).
@@ -21,7 +21,7 @@ import pandas as pd
 from scipy.integrate import cumulative_trapezoid
 
 from preprocessing.quality import QualityReport
-from preprocessing import body_velocity, geodesy, gnss, gyro, resample, schema, smoothing, wind
+from preprocessing import anemometer, body_velocity, geodesy, gnss, gyro, resample, schema, smoothing
 from preprocessing.frames import wrap_pi
 from preprocessing.schema import RawLogError
 from preprocessing.sensors import SensorLayout
@@ -29,7 +29,7 @@ from preprocessing.sensors import SensorLayout
 
 @dataclass(frozen=True)
 class PreprocessSettings:
-    """Pipeline settings; defaults follow the paper (section 4.1) and RAW_LOG_FORMAT.md.
+    """Pipeline settings; defaults follow the paper (section 4.1).
 
     diff_dt : half-width of the central difference [s] (paper: 1.0).
     velocity_q : PSD of the white jerk driving the velocity model [m^2/s^5];
@@ -358,7 +358,7 @@ class Pipeline:
         # step 8: r = low-passed FOG minus the estimated bias
         r = gyro.lowpass(fog - bias, 1.0 / dt, s.cutoff, s.lowpass_order)
         # step 9: wind
-        ut, gt, ua, ga = wind.combine(
+        ut, gt, ua, ga = anemometer.combine(
             [(g["anemo_1_speed"], g["anemo_1_dir"]), (g["anemo_2_speed"], g["anemo_2_dir"])],
             u, v, r, psi, [lay.anemometer_1, lay.anemometer_2])
         # step 10: take samples
@@ -383,7 +383,7 @@ def process_file(path: str, layout: SensorLayout, settings: PreprocessSettings, 
     try:
         result = Pipeline(layout, settings).run(path)
         stem = os.path.splitext(os.path.basename(path))[0]
-        outputs = writer.write_run(outdir, stem, result.segments, result.report)
+        outputs = writer.write_segments(outdir, stem, result.segments, result.report)
         return {"file": str(path), "ok": True, "outputs": [str(p) for p in outputs],
                 "report": result.report}
     except RawLogError as exc:

@@ -1,6 +1,6 @@
 """The per-run quality report of preprocessing: what was found and decided, typed.
 
-Built by `pipeline.Pipeline.run`, written as ``STEM.report.json`` by `writer.write_run`,
+Built by `pipeline.Pipeline.run`, written as ``STEM.report.json`` by `writer.write_segments`,
 read back with `QualityReport.from_json` (by ``sysid report`` and the CLI summary). Times
 in s from the log's start; angles in rad.
 """

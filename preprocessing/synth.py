@@ -1,7 +1,8 @@
 """Raw 10 Hz logs with known truth, synthesised from a processed run.
 
-The truth follows RAW_LOG_FORMAT.md "How it is checked": from the run's t, u, v_m, r,
-actuators and true wind, psi is integrated from r (trapezoid, starting at the file's first
+The public processed files are not kinematically self-consistent (their u, v_m, r differ
+from the derivatives of their own x, y, psi), so the truth is built from the run's t, u, v_m,
+r, actuators and true wind: psi is integrated from r (trapezoid, starting at the file's first
 psi) and the midship position from (u, v_m) rotated by psi (starting at the file's first
 position); the relative wind is recomputed. Sensors are then placed by a `SensorLayout`
 and seeded noise is added.
@@ -15,7 +16,7 @@ import pandas as pd
 from scipy.integrate import cumulative_trapezoid
 from scipy.signal import lfilter
 
-from preprocessing import geodesy, gnss, schema, wind
+from preprocessing import anemometer, geodesy, gnss, schema
 from preprocessing.frames import body_to_earth, flow_velocity, wrap_pi, wrap_2pi
 from preprocessing.sensors import SensorLayout
 
@@ -83,7 +84,7 @@ def truth_from_processed(run: pd.DataFrame) -> pd.DataFrame:
     x = run["x_position_mid"].iloc[0] + cumulative_trapezoid(ex, t, initial=0.0)
     y = run["y_position_mid"].iloc[0] + cumulative_trapezoid(ey, t, initial=0.0)
     ut, gt = run["wind_velo_true"].to_numpy(float), run["wind_dir_true"].to_numpy(float)
-    ua, ga = wind.apparent_at(*flow_velocity(ut, gt), u, v, r, psi, (0.0, 0.0))
+    ua, ga = anemometer.apparent_at(*flow_velocity(ut, gt), u, v, r, psi, (0.0, 0.0))
     out = pd.DataFrame({
         "t": t, "x_position_mid": x, "u_velo": u, "y_position_mid": y, "vm_velo": v,
         "psi_hat": wrap_pi(psi), "r_angvelo": r, "n_prop": run["n_prop"].to_numpy(float),
@@ -149,7 +150,7 @@ def synthesise(run: pd.DataFrame, layout: SensorLayout, settings: SynthSettings 
     wvx, wvy = flow_velocity(ut, gt)
     anemo = {}
     for k, pos in ((1, layout.anemometer_1), (2, layout.anemometer_2)):
-        sp, di = wind.apparent_at(wvx, wvy, u, v, r, psi, pos)
+        sp, di = anemometer.apparent_at(wvx, wvy, u, v, r, psi, pos)
         anemo[f"anemo_{k}_speed"] = np.maximum(sp + rng.normal(0, settings.anemo_speed_noise, n), 0.0)
         anemo[f"anemo_{k}_dir"] = wrap_2pi(di + rng.normal(0, settings.anemo_dir_noise, n))
 

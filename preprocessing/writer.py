@@ -41,7 +41,7 @@ def segment_paths(outdir: Path, stem: str, count: int) -> list[Path]:
     return [outdir / f"{stem}_seg{i + 1}.csv" for i in range(count)]
 
 
-def write_run(outdir, stem: str, segments: list[pd.DataFrame], report: QualityReport) -> list[Path]:
+def write_segments(outdir, stem: str, segments: list[pd.DataFrame], report: QualityReport) -> list[Path]:
     """Write the segments (processed-schema header ``name [unit]``) and the JSON report."""
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)

@@ -6,10 +6,11 @@ model, `integrate` for (differentiable) trajectories, `predict` for fast predict
 `sysid.runs.lifecycle.run_experiment` trains, evaluates and writes one experiment (``sysid
 train``), `sysid.protocol.reproduce.reproduce` the paper's protocol.
 
-Layers, each importing only those before it: `state`, `ship`, `mmg`, `integrators` →
-`dynamics`, `correction`, `ood` → `stepper`, `knn_index` → `prepared` → `compiled` → `export`;
-`experiment`, `models` → `data` → `train` → `evaluate` → `rundir` → `lifecycle` → `paper`,
-`reproduce` → `report` → `cli`.
+Subpackages in layers, each importing only those before it (tests/test_import_graph.py):
+`store` (files, manifests), `mmg` (ship files, force families, the force model) → `config`
+(the closed choices and experiment configs, torch-free) → `dynamics`, `hybrid`, `data` →
+`identify` → `evaluation` → `runs` → `sweep` → `protocol` → `report` → `cli`; `fast` (the
+compiled path and export) is loaded only by the CLI and by a compiled prediction.
 
 The names are loaded on first use, so ``import sysid`` (and ``sysid --help``) does not pay
 for torch.
@@ -24,7 +25,7 @@ _HOME = {
     "Ship": "sysid.mmg.ship", "load_ship": "sysid.mmg.ship",
     "MMG": "sysid.mmg", "ForceBreakdown": "sysid.mmg",
     "ShipDynamics": "sysid.dynamics.equations", "integrate": "sysid.dynamics.equations",
-    "predict": "sysid.fast.compiled", "Integrator": "sysid.dynamics.integrators", "Method": "sysid.dynamics.integrators",
+    "predict": "sysid.fast.compiled", "Integrator": "sysid.dynamics.integrators", "Method": "sysid.config.choices",
     "state_derivative": "sysid.dynamics.equations", "body_acceleration": "sysid.dynamics.equations",
 }
 

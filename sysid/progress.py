@@ -1,17 +1,18 @@
 """Progress of long loops that reads well wherever it goes: a redrawn bar on a terminal, and
-in a file or a pipe a plain line at the start, every few seconds, and at the end (no
-carriage-return redraws filling a log)."""
+in a file or a pipe a plain time-stamped line at the start, every few seconds, and at the end
+(no carriage-return redraws filling a log); nothing with ``-q`` (`sysid.logs`)."""
 from __future__ import annotations
 
 import sys
 import time
 from typing import Iterable, Iterator, TextIO
 
+from sysid import logs
+
 
 def on_terminal(stream: TextIO | None = None) -> bool:
     """Whether progress goes to an interactive terminal (stderr by default)."""
-    stream = stream or sys.stderr
-    return bool(getattr(stream, "isatty", lambda: False)())
+    return logs.on_terminal(stream or sys.stderr)
 
 
 class LineProgress:
@@ -29,7 +30,7 @@ class LineProgress:
         self._line(f"{self.n}/{self.total} {unit}" if self.total is not None else "started")
 
     def _line(self, text: str) -> None:
-        print(f"{self.desc}: {text}", file=self.stream, flush=True)
+        print(logs.stamp(f"{self.desc}: {text}", self.stream), file=self.stream, flush=True)
 
     def update(self, n: int = 1) -> None:
         self.n += n
@@ -53,7 +54,9 @@ class LineProgress:
 
 def progress(iterable: Iterable | None = None, *, total: int | None = None, desc: str = "", unit: str = "it",
              quiet: bool = False):
-    """A tqdm bar on a terminal, `LineProgress` otherwise; nothing at all when `quiet`."""
+    """A tqdm bar on a terminal, `LineProgress` otherwise; nothing at all when `quiet` (or
+    the command runs with ``-q``)."""
+    quiet = quiet or logs.is_quiet()
     if on_terminal() or quiet:
         from tqdm import tqdm
         return tqdm(iterable, total=total, desc=desc, unit=unit, disable=quiet, leave=False)

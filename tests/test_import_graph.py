@@ -1,8 +1,12 @@
-"""The package's import graph: no circle anywhere (module-level or inside functions), and the
-data flow stays one way: preprocessing -> data -> models -> train -> evaluate -> report."""
+"""The package's import graph: no circle anywhere (module-level or inside functions), none
+between subpackages, and the data flow stays one way: preprocessing -> data -> models ->
+train -> evaluate -> report. Training, evaluation and run directories do not load the
+compiled path (`sysid.fast`); the config is read without torch."""
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -14,18 +18,32 @@ def _module_name(path: Path) -> str:
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
-def import_graph() -> dict[str, set[str]]:
-    """module -> the project modules it imports (any depth in the file)."""
+def _imports(tree: ast.AST):
+    """(import node, executed when the module is imported) for every import in the file:
+    those inside a function body run only when it is called."""
+    todo = [(tree, False)]
+    while todo:
+        node, deferred = todo.pop()
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            yield node, not deferred
+        inner = deferred or isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda))
+        todo += [(child, inner) for child in ast.iter_child_nodes(node)]
+
+
+def import_edges() -> tuple[dict[str, dict[str, bool]], dict[str, dict[str, bool]]]:
+    """module -> {project module it imports: at import time?} and module -> {outside
+    top-level package it imports (torch, numpy, ...): at import time?}."""
     files = {_module_name(p): p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")}
-    graph: dict[str, set[str]] = {}
+    graph: dict[str, dict[str, bool]] = {}
+    outside: dict[str, dict[str, bool]] = {}
     for name, path in files.items():
         is_package = path.name == "__init__.py"
-        edges = set()
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        edges, external = {}, {}
+        for node, at_import in _imports(ast.parse(path.read_text(), str(path))):
             targets = []
             if isinstance(node, ast.Import):
                 targets = [a.name for a in node.names]
-            elif isinstance(node, ast.ImportFrom):
+            else:
                 base = node.module or ""
                 if node.level:
                     anchor = name.split(".")[: len(name.split(".")) - node.level + (1 if is_package else 0)]
@@ -33,12 +51,55 @@ def import_graph() -> dict[str, set[str]]:
                 # a submodule, or a name defined in `base` itself (an edge to base, parents too)
                 targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in files else base for a in node.names]
             for target in targets:
+                if target.split(".")[0] not in PACKAGES:
+                    top = target.split(".")[0]
+                    external[top] = external.get(top, False) or at_import
+                    continue
                 while target and target not in files:
                     target = target.rpartition(".")[0]
                 if target and target != name:
-                    edges.add(target)
-        graph[name] = edges
-    return graph
+                    edges[target] = edges.get(target, False) or at_import
+        graph[name], outside[name] = edges, external
+    return graph, outside
+
+
+def import_graph() -> dict[str, set[str]]:
+    """module -> the project modules it imports (any depth in the file)."""
+    return {name: set(edges) for name, edges in import_edges()[0].items()}
+
+
+def import_time_graph() -> dict[str, set[str]]:
+    """module -> the project modules importing it imports (function bodies left out)."""
+    return {name: {t for t, now in edges.items() if now} for name, edges in import_edges()[0].items()}
+
+
+def package_of(module: str) -> str:
+    """The unit a module belongs to: its subpackage of sysid (``sysid.mmg``), a top-level
+    module of sysid as itself (``sysid.errors``), or its top-level package."""
+    parts = module.split(".")
+    if parts[0] == "sysid" and len(parts) > 1 and (ROOT / "sysid" / parts[1]).is_dir():
+        return ".".join(parts[:2])
+    return module if parts[0] == "sysid" else parts[0]
+
+
+def package_graph() -> dict[str, set[str]]:
+    """subpackage -> the subpackages its modules import (any depth in the file)."""
+    out: dict[str, set[str]] = {}
+    for module, targets in import_graph().items():
+        here = package_of(module)
+        out.setdefault(here, set()).update(package_of(t) for t in targets if package_of(t) != here)
+    return out
+
+
+def reached(graph: dict[str, set[str]], start: str) -> set[str]:
+    """Every module `start` imports, directly or through others."""
+    seen, todo = set(), [start]
+    while todo:
+        node = todo.pop()
+        if node not in seen:
+            seen.add(node)
+            todo += graph.get(node, ())
+    return seen - {start}
 
 
 def _cycle(graph: dict[str, set[str]]) -> list[str] | None:
@@ -105,3 +166,59 @@ def test_no_two_modules_named_alike():
     for a in names:
         for b in names:
             assert a == b or not (a.startswith(b) and len(a) - len(b) <= 3 and len(b) >= 4), (a, b)
+
+
+def test_no_circle_between_subpackages():
+    cycle = _cycle(package_graph())
+    assert cycle is None, " -> ".join(cycle)
+
+
+def test_package_graph_sees_known_edges():
+    packages = package_graph()
+    assert "sysid.mmg" in packages["sysid.dynamics"] and "sysid.config" in packages["sysid.hybrid"]
+    assert "sysid.dynamics" not in packages["sysid.mmg"]
+
+
+FAST_FREE = ("sysid.identify", "sysid.evaluation", "sysid.runs")
+
+
+def test_training_evaluation_and_runs_do_not_load_the_compiled_path():
+    graph, now = import_graph(), import_time_graph()
+    for module in graph:
+        if not module.startswith(FAST_FREE):
+            continue
+        loaded = {m for m in reached(now, module) if m.startswith("sysid.fast")}
+        assert not loaded, f"importing {module} imports {sorted(loaded)}"
+        direct = {m for m in graph[module] if m.startswith("sysid.fast")}
+        # evaluation imports it inside the function that predicts, when compiled is asked for
+        allowed = {"sysid.fast.compiled"} if module == "sysid.evaluation.evaluate" else set()
+        assert direct <= allowed, f"{module} imports {sorted(direct - allowed)}"
+
+
+def test_training_evaluation_and_runs_import_without_the_compiled_path():
+    modules = ["sysid.identify.trainer", "sysid.evaluation.evaluate", "sysid.runs.lifecycle", "sysid.runs.rundir"]
+    code = (f"import sys; import {', '.join(modules)}; "
+            "print(sorted(m for m in sys.modules if m.startswith('sysid.fast')))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert done.returncode == 0, done.stderr.strip().splitlines()[-1:]
+    assert done.stdout.strip() == "[]"
+    assert "sysid.identify.trainer" in import_graph()  # the names above exist
+
+
+def test_config_imports_no_torch():
+    """Through the graph: no module `import sysid.config.*` runs imports torch; and a fresh
+    process that imports the config module (and reads a config) has not loaded torch."""
+    graph, outside = import_edges()
+    now = import_time_graph()
+    for module in (m for m in graph if m.startswith("sysid.config")):
+        heavy = {m for m in reached(now, module) | {module}
+                 if any(outside[m].get(pkg) for pkg in ("torch", "torchdiffeq"))}
+        assert not heavy, f"importing {module} imports torch through {sorted(heavy)}"
+    config = ROOT / "configs" / "experiments" / "hybrid_D2.toml"
+    code = ("import sys; from sysid.config.experiment import load_experiment; "
+            f"load_experiment({str(config)!r}); print(sorted(m for m in sys.modules if m.split('.')[0] == 'torch'))")
+    done = subprocess.run([sys.executable, "-X", "importtime", "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert done.returncode == 0, done.stderr.strip().splitlines()[-1:]
+    assert done.stdout.strip() == "[]"
+    timed = [line.rsplit("|", 1)[-1].strip() for line in done.stderr.splitlines() if line.startswith("import time:")]
+    assert "sysid.config.experiment" in timed and "torch" not in timed

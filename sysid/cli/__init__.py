@@ -7,6 +7,7 @@ from __future__ import annotations
 import sys
 
 import typer
+import typer.main
 
 from sysid.errors import SysidError
 from sysid.cli.interrupts import interrupt_note, interruptible
@@ -20,6 +21,7 @@ from sysid.cli import report_commands  # noqa: E402,F401
 from sysid.cli import preprocess_commands  # noqa: E402,F401
 from sysid.cli import train_commands  # noqa: E402,F401
 from sysid.cli import ship_commands  # noqa: E402,F401
+from sysid.cli import init_commands  # noqa: E402,F401
 from sysid.cli import export_commands  # noqa: E402,F401
 from sysid.cli import sweep_commands  # noqa: E402,F401
 
@@ -44,14 +46,37 @@ def expand_multi_value(argv: list[str]) -> list[str]:
     return out
 
 
+COMMON_OPTIONS = ("-v", "-vv", "-vvv", "--verbose", "-q", "--quiet")
+
+
+def common_options_first(argv: list[str]) -> list[str]:
+    """``sysid train CFG -v`` to ``sysid -v train CFG``: the options every command takes
+    (`sysid.cli.app.common_options`) belong to the application, wherever they are written
+    (up to a ``--``)."""
+    end = argv.index("--") if "--" in argv else len(argv)
+    common = [a for a in argv[:end] if a in COMMON_OPTIONS]
+    return common + [a for a in argv[:end] if a not in COMMON_OPTIONS] + argv[end:]
+
+
+def _with_epilog(command) -> None:
+    """Every command's help ends by naming the options every command takes."""
+    from sysid.cli.app import EPILOG
+    for sub in getattr(command, "commands", {}).values():
+        sub.epilog = sub.epilog or EPILOG
+        _with_epilog(sub)
+
+
 INTERRUPTED = 130  # the shell's code for a job stopped by Ctrl-C (128 + SIGINT)
 
 
 def run(argv: list[str]) -> None:
     """Run a subcommand; `SysidError` and `KeyboardInterrupt` propagate (for tests and
     embedding)."""
+    command = typer.main.get_command(app)
+    _with_epilog(command)
     try:
-        code = app(args=expand_multi_value(list(argv)), standalone_mode=False)
+        code = command(args=common_options_first(expand_multi_value(list(argv))), prog_name="sysid",
+                       standalone_mode=False)
     finally:
         release()  # the output locks the command took
     # typer >= 0.29 turns Ctrl-C into Exit(130) and, outside standalone mode, returns the code

@@ -5,6 +5,7 @@ from pathlib import Path
 
 import typer
 
+from sysid import logs
 from sysid.cli.app import app
 from sysid.cli.outputs import claim
 from sysid.store.target import OutputKind
@@ -26,22 +27,22 @@ def export(
     kNN gate), loadable with torch alone; prints its latency."""
     import torch
 
+    from sysid.config.choices import Method
     from sysid.fast.export import export_model, load_step, step_latency
-    from sysid.dynamics.integrators import Method
     from sysid.runs.rundir import load_model
     from sysid.config import checks
 
     try:
-        method = Method.parse(integrator)
+        method = Method.parse(integrator, "--integrator")  # every rule, the 3/8 one too
     except ValueError as exc:
-        raise DataError(f"--integrator: {exc}") from None
+        raise DataError(str(exc)) from None
     checks.STEP.check("--dt", dt)
     checks.BATCH.check("--batch", batch)
     dtype = torch.float32 if float32 else torch.float64
     claim(output, OutputKind.FILE, [run_dir])
     exp, model = load_model(run_dir, dtype)
     export_model(model, output, method, dt, batch, dtype, compiled=not portable,
-                 log=lambda m: typer.echo("  " + m))
+                 log=logs.indented())
     per_step, prediction = step_latency(load_step(output), 200 if portable else 2000)
     kind = "torch.export program" if portable else "AOTInductor package"
     typer.echo(f"export: {exp.experiment.model} model of {run_dir}, {method.value} dt {dt:g} s, batch {batch}, "

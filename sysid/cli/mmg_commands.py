@@ -25,11 +25,15 @@ CompiledOption = typer.Option(False, "--compiled",
                               help="Compiled step (native code, cached on disk; first use compiles, about a minute).")
 
 
-def _check_integrator(integrator: str) -> None:
-    from sysid.dynamics.equations import INTEGRATORS
+def _integrator(name: str, compiled: bool):
+    """The `Integrator` an ``--integrator`` (and ``--compiled``) option names; exit 2 otherwise."""
+    from sysid.config.choices import Method
+    from sysid.dynamics.integrators import Integrator
 
-    if integrator not in INTEGRATORS:
-        raise DataError(f"--integrator {integrator!r}: choose one of {', '.join(INTEGRATORS)}")
+    try:
+        return Integrator(Method.parse(name, "--integrator", offered_only=True), compiled)
+    except ValueError as exc:
+        raise DataError(str(exc)) from None
 
 
 def _model(ship: str, overrides: Optional[List[str]], quadrature: str):
@@ -160,10 +164,9 @@ def simulate(
     from sysid.fast.compiled import predict
     from sysid.data.recordings import read_run
     from sysid.store.files import write_csv
-    from sysid.dynamics.integrators import Integrator
     from sysid.config import checks
 
-    _check_integrator(integrator)
+    chosen = _integrator(integrator, compiled)
     checks.RATE.check("--rate", rate)
     checks.DURATION.check("--horizon", horizon)
     checks.TIME.check("--start", start)
@@ -181,7 +184,7 @@ def simulate(
     x0 = torch.as_tensor(run.states[i0], dtype=torch.float64)
     inputs = torch.as_tensor(run.inputs[sl], dtype=torch.float64)
     with torch.no_grad():
-        pred = predict(model, x0, inputs, run.dt, Integrator(integrator, compiled))
+        pred = predict(model, x0, inputs, run.dt, chosen)
         forces = model(pred, inputs)
     out = pd.DataFrame({"t": run.t[sl], "t_rel": run.t[sl] - run.t[i0]})
     for j, name in enumerate(STATE):
@@ -196,7 +199,7 @@ def simulate(
         out[f"obs_{name}"] = run.states[sl, j]
     write_csv(out, output, float_format="%.17g")
     err = np.sqrt(((out[["u", "v", "r"]].to_numpy() - out[["obs_u", "obs_v", "obs_r"]].to_numpy()) ** 2).mean(0))
-    typer.echo(f"simulate: {run.name} from t = {run.t[i0]:.1f} s, {steps} {integrator} steps of {run.dt:g} s -> {output}\n"
+    typer.echo(f"simulate: {run.name} from t = {run.t[i0]:.1f} s, {steps} {chosen.method} steps of {run.dt:g} s -> {output}\n"
                f"  RMSE vs record: u {err[0]:.4f} m/s, v_m {err[1]:.4f} m/s, r {err[2]:.4f} rad/s")
 
 
@@ -218,11 +221,10 @@ def evaluate(
     from sysid.data.recordings import expand_paths, read_run
     from sysid.evaluation.evaluate import evaluate_model, short_runs
     from sysid.store.files import write_csv
-    from sysid.dynamics.integrators import Integrator
     from sysid.config import checks
     from sysid.progress import progress
 
-    _check_integrator(integrator)
+    chosen = _integrator(integrator, compiled)
     for h in horizon:
         checks.DURATION.check("--horizon", h)
     start = time.perf_counter()
@@ -248,7 +250,7 @@ def evaluate(
     for run, h in short:
         typer.secho(f"warning: {run.path}: {len(run)} samples ({run.duration:.0f} s), fewer than one {h:g}-s "
                     "window: its metrics row is empty (n_windows 0)", fg=typer.colors.YELLOW, err=True)
-    table = evaluate_model(model, runs, horizon, Integrator(integrator, compiled), traces=False).metrics
+    table = evaluate_model(model, runs, horizon, chosen, traces=False).metrics
     write_csv(table, output, float_format="%.6g")
     with pd.option_context("display.width", 120, "display.float_format", "{:.5f}".format):
         typer.echo(table.to_string(index=False))

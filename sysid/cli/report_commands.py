@@ -5,6 +5,7 @@ from pathlib import Path
 
 import typer
 
+from sysid import logs
 from sysid.cli.app import app
 from sysid.cli.outputs import claim
 from sysid.store.target import OutputKind
@@ -14,19 +15,13 @@ from sysid.store.target import OutputKind
 def report(
     source: Path = typer.Argument(..., help="Run directory (sysid train) or reproduction directory (sysid reproduce)."),
     out: Path = typer.Option(None, "-o", "--out", help="Output directory [default: reports/<source name>]."),
-    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress output."),
 ) -> None:
     """Write an accuracy report (self-contained HTML and page-numbered PDF) for a run or a reproduction."""
     from sysid.report import build_report
 
     out = out or Path("reports") / source.resolve().name
     claim(out, OutputKind.REPORT, [source], adds_to=source)
-
-    def progress(message: str) -> None:
-        if not quiet:
-            typer.echo(f"  {message}")
-
-    paths = build_report(source, out, progress)
+    paths = build_report(source, out, logs.indented())
     typer.echo(f"report: {paths.html}")
     typer.echo(f"        {paths.pdf} ({paths.n_pages} pages, {paths.n_figures} figures, {paths.seconds:.1f} s)")
     for note in paths.notes:

@@ -7,6 +7,7 @@ from typing import Optional
 
 import typer
 
+from sysid import logs
 from sysid.cli.app import app
 from sysid.cli.outputs import claim, experiment_inputs
 from sysid.store.target import OutputKind
@@ -40,7 +41,7 @@ def sweep(
     claim(output, OutputKind.SWEEP, inputs, overwrite, resume=resume)
     on_interrupt(f"finished trials are kept in {output}/trials; rerun with --resume to continue the sweep")
     results, summary = run_sweep(spec, output, workers, address, resume, overwrite, data,
-                                 log=lambda m: typer.echo(m))
+                                 log=logs.info)
     if len(results.points):
         shown = results.points.head(10)
         typer.echo(shown.to_string(index=False, float_format=lambda v: f"{v:.5f}"))

@@ -7,6 +7,7 @@ from typing import List, Optional
 
 import typer
 
+from sysid import logs
 from sysid.cli.app import app
 from sysid.cli.interrupts import on_interrupt
 from sysid.cli.outputs import claim, experiment_inputs
@@ -55,10 +56,10 @@ def train(
         if checkpoint.is_file() else ""))
     runs = training_runs(exp, data) if exp.needs_training else None
     if runs is not None:
-        typer.echo(f"train: {exp.experiment.model} model on {len(runs)} file(s) "
+        logs.info(f"train: {exp.experiment.model} model on {len(runs)} file(s) "
                    f"({sum(r.duration for r in runs):.0f} s of data), seed {exp.experiment.seed}")
     tests = [read_run(p) for p in (expand_paths(test) if test else test_inputs)]
-    result = run_experiment(exp, output, tests, runs, data, log=lambda m: typer.echo("  " + m), resume=resume,
+    result = run_experiment(exp, output, tests, runs, data, log=logs.indented(), resume=resume,
                             overwrite=overwrite)
     typer.echo(result.evaluation.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     if result.failure:
@@ -107,7 +108,7 @@ def reproduce(
     target = claim(output, OutputKind.REPRODUCTION, [data_root(data)], overwrite)
     on_interrupt(f"nothing written to {output} (it is moved into place only when every run is done)")
     with target.staged() as staging:
-        summary = run_protocol(staging, data, only, log=typer.echo, jobs=jobs or cpu_cores(), seeds=seeds,
+        summary = run_protocol(staging, data, only, log=logs.info, jobs=jobs or cpu_cores(), seeds=seeds,
                                address=address)
     for name in ("table7.md", "table8.md"):
         path = output / name

@@ -42,26 +42,45 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from sysid.dynamics.equations import INTEGRATORS
+from sysid.config.choices import Choice, DType, GateSpace, Method, ModelKind, Solver, Stage, StartStates
 from sysid.errors import ConfigError
-from sysid.identify.levenberg_marquardt import START_STATES
 from sysid.mmg.ship import parameter_name
+from sysid.store.toml_file import read_toml
 
 
-KINDS = ("mmg", "nn", "hybrid")         # MMG-only, NN-only, hybrid MMG + FNN
-GATE_SPACES = ("features", "inputs")    # where the kNN gate measures distances
-SOLVERS = ("gradient", "levenberg_marquardt")  # [identify] solver
+_CHOICE_TYPES: dict[str, type[Choice]] = {
+    c.__name__: c for c in (DType, GateSpace, Method, ModelKind, Solver, Stage, StartStates)}
+
+
+def _choice_type(f: dataclasses.Field) -> type[Choice] | None:
+    """The `Choice` an option field holds (its annotation's first type), or None."""
+    return _CHOICE_TYPES.get(str(f.type).split(" | ")[0])
+
+
+class _Options:
+    """A section of options: values given as strings for choice fields (by Python callers)
+    become their enums here, so that every `Experiment` holds enums."""
+
+    def __post_init__(self):
+        for f in fields(self):
+            kind, value = _choice_type(f), getattr(self, f.name)
+            if kind is None or value is None or isinstance(value, kind):
+                continue
+            if value == "" and f.default is None:  # "" for an optional choice: its default
+                value = None
+            else:
+                value = kind.parse(value, f.name, offered_only=True)
+            object.__setattr__(self, f.name, value)
 
 
 @dataclass(frozen=True)
-class ExperimentOptions:
+class ExperimentOptions(_Options):
     name: str = "experiment"
-    model: str = "hybrid"
+    model: ModelKind = ModelKind.HYBRID
     dataset: str = "D2"
     ship: str = "esso_osaka"
     seed: int = 0
@@ -86,7 +105,7 @@ class NetworkOptions:
 
 
 @dataclass(frozen=True)
-class TrainingOptions:
+class TrainingOptions(_Options):
     steps: int = 5
     stride_s: float = 2.0
     val_fraction: float = 0.3
@@ -104,20 +123,20 @@ class TrainingOptions:
     threads: int = 1               # torch intra-op threads; 0: one per core
     warm_start_epochs: int = 150   # one-step regression on the implied residual force
     objective_s: float = 0.0       # horizon [s] of the final validation loss (summary val_loss); 0: T steps
-    dtype: str = "float32"
+    dtype: DType = DType.FLOAT32
     device: str = "auto"           # auto (CUDA when present) | cpu | cuda | cuda:N
 
 
 @dataclass(frozen=True)
-class GateOptions:
+class GateOptions(_Options):
     enabled: bool = True
     k: int = 10
     alpha: float = 0.9995
-    space: str = "features"   # features (paper: last hidden activations) | inputs (standardised s)
+    space: GateSpace = GateSpace.FEATURES  # features (paper: last hidden activations) | inputs (standardised s)
 
 
 @dataclass(frozen=True)
-class IdentifyOptions:
+class IdentifyOptions(_Options):
     """How MMG coefficients are identified (`sysid.identify.trainer.Trainer.identify`).
 
     solver : "gradient" (Adam epochs on the multi-step loss, early stopping; `epochs`,
@@ -133,24 +152,25 @@ class IdentifyOptions:
 
     parameters: tuple[str, ...] = ()
     bounds: dict = field(default_factory=dict)
-    stage: str = "before"
+    stage: Stage = Stage.BEFORE
     epochs: int = 60
     learning_rate: float = 2e-2
-    solver: str = "gradient"
-    start_states: str = ""          # "": estimated for levenberg_marquardt, recorded for gradient
+    solver: Solver = Solver.GRADIENT
+    start_states: StartStates | None = None  # None: estimated for levenberg_marquardt, recorded for gradient
     prior_weight: float = 0.0
     iterations: int = 40            # levenberg_marquardt's iteration limit
 
     def __post_init__(self):
-        if not self.start_states:
-            resolved = "estimated" if self.solver == "levenberg_marquardt" else "recorded"
+        super().__post_init__()
+        if self.start_states is None:
+            resolved = StartStates.ESTIMATED if self.solver is Solver.LEVENBERG_MARQUARDT else StartStates.RECORDED
             object.__setattr__(self, "start_states", resolved)
 
 
 @dataclass(frozen=True)
-class EvaluationOptions:
+class EvaluationOptions(_Options):
     horizons: tuple[float, ...] = (30.0, 100.0)
-    integrator: str = "euler"
+    integrator: Method = Method.EULER
 
 
 @dataclass(frozen=True)
@@ -174,7 +194,7 @@ class Experiment:
     @property
     def needs_training(self) -> bool:
         """False for an MMG-only model with nothing to identify (it is used as defined)."""
-        return not (self.experiment.model == "mmg" and not self.identify.parameters)
+        return not (self.experiment.model is ModelKind.MMG and not self.identify.parameters)
 
     def replace(self, **sections: dict) -> "Experiment":
         """A copy with some options changed: ``exp.replace(training={"epochs": 2})``."""
@@ -250,7 +270,17 @@ def _coerce(section: str, opt_cls, table: dict, src: str):
             raise ConfigError(f"{src}: [{section}] unknown key {key!r} (known: {', '.join(known)})")
         default = getattr(opt_cls(), key)
         where = f"{src}: [{section}] {key}"
-        if isinstance(default, bool):
+        choice = _choice_type(known[key])
+        if choice is not None:
+            if not isinstance(value, str):
+                raise ConfigError(f"{where}: expected a string, one of {choice.listing()}; got {value!r}")
+            if value == "" and known[key].default is None:  # "" for an optional choice: its default
+                continue
+            try:
+                value = choice.parse(value, where, offered_only=True)
+            except ValueError as exc:
+                raise ConfigError(str(exc)) from None
+        elif isinstance(default, bool):
             if not isinstance(value, bool):
                 raise ConfigError(f"{where}: expected true/false, got {value!r}")
         elif isinstance(default, int):
@@ -278,8 +308,6 @@ def _coerce(section: str, opt_cls, table: dict, src: str):
 
 def _validate(exp: Experiment, src: str) -> None:
     e, t, g, i = exp.experiment, exp.training, exp.gate, exp.identify
-    if e.model not in KINDS:
-        raise ConfigError(f"{src}: [experiment] model = {e.model!r}: choose one of {', '.join(KINDS)}")
     if not exp.data.files and e.dataset not in ("D1", "D2"):
         raise ConfigError(f"{src}: [experiment] dataset = {e.dataset!r}: choose D1 or D2, or list [data] files")
     checks = [
@@ -297,27 +325,21 @@ def _validate(exp: Experiment, src: str) -> None:
         (t.objective_s >= 0, "[training] objective_s must be >= 0 (0: the training steps T)"),
         (t.max_minutes >= 0, "[training] max_minutes must be >= 0 (0: no wall-clock limit)"),
         (t.threads >= 0, "[training] threads must be >= 0 (0: one per core)"),
-        (t.dtype in ("float32", "float64"), "[training] dtype must be float32 or float64"),
         (t.device == "auto" or t.device == "cpu" or t.device.startswith("cuda"),
          "[training] device must be auto, cpu or cuda[:N]"),
         (g.k >= 1, "[gate] k must be >= 1"),
         (0.0 < g.alpha < 1.0, "[gate] alpha must be in (0, 1)"),
-        (g.space in GATE_SPACES, f"[gate] space must be one of {', '.join(GATE_SPACES)}"),
-        (i.stage in ("before", "joint"), "[identify] stage must be before or joint"),
-        (i.solver in SOLVERS, f"[identify] solver = {i.solver!r}: choose one of {', '.join(SOLVERS)}"),
-        (i.start_states in START_STATES,
-         f"[identify] start_states = {i.start_states!r}: choose one of {', '.join(START_STATES)}"),
-        (i.solver == "levenberg_marquardt" or i.start_states == "recorded",
-         f"[identify] start_states = {i.start_states!r} needs solver = \"levenberg_marquardt\" "
+        (i.solver is Solver.LEVENBERG_MARQUARDT or i.start_states is StartStates.RECORDED,
+         f"[identify] start_states = '{i.start_states}' needs solver = \"levenberg_marquardt\" "
          "(gradient identification integrates every window from its recorded start)"),
         (i.prior_weight >= 0, "[identify] prior_weight must be >= 0 (0: no prior)"),
-        (i.solver == "levenberg_marquardt" or i.prior_weight == 0,
+        (i.solver is Solver.LEVENBERG_MARQUARDT or i.prior_weight == 0,
          "[identify] prior_weight needs solver = \"levenberg_marquardt\""),
         (i.iterations >= 1, "[identify] iterations must be >= 1"),
-        (i.solver == "gradient" or i.stage == "before",
+        (i.solver is Solver.GRADIENT or i.stage is Stage.BEFORE,
          "[identify] solver = \"levenberg_marquardt\" identifies the MMG alone: stage \"joint\" (with "
          "the FNN) needs solver = \"gradient\""),
-        (i.solver == "gradient" or bool(i.parameters),
+        (i.solver is Solver.GRADIENT or bool(i.parameters),
          "[identify] solver = \"levenberg_marquardt\" needs parameters to identify"),
         (e.seed >= 0, f"[experiment] seed = {e.seed}: must be >= 0"),
         (len(exp.evaluation.horizons) > 0, "[evaluation] horizons must list at least one horizon [s]"),
@@ -325,8 +347,8 @@ def _validate(exp: Experiment, src: str) -> None:
         (all(w <= MAX_WIDTH for w in exp.network.hidden), f"[network] hidden widths must be <= {MAX_WIDTH}"),
         (exp.network.members <= MAX_MEMBERS, f"[network] members must be <= {MAX_MEMBERS}"),
         (t.steps <= 10_000, "[training] steps must be <= 10000"),
-        (exp.evaluation.integrator in INTEGRATORS,
-         f"[evaluation] integrator must be one of {', '.join(INTEGRATORS)}"),
+        (exp.evaluation.integrator in Method.offered(),
+         f"[evaluation] integrator must be one of {Method.listing()}"),
         (all(w >= 1 for w in exp.network.hidden) and exp.network.hidden, "[network] hidden must list widths >= 1"),
         (exp.data.rate > 0, "[data] rate must be > 0"),
         (exp.network.members >= 1, "[network] members must be >= 1"),
@@ -349,12 +371,44 @@ def _validate(exp: Experiment, src: str) -> None:
         raise
     except Exception as exc:  # ShipDefinitionError on unknown names
         raise ConfigError(str(exc)) from None
-    if e.model == "nn" and i.parameters:
+    if e.model is ModelKind.NN and i.parameters:
         raise ConfigError(f"{src}: [identify] parameters need an MMG part (model mmg or hybrid)")
 
 
-def parse_experiment(doc: dict, source: str = "<config>") -> Experiment:
-    """A parsed TOML document to a validated `Experiment`."""
+# options that name files: a relative path resolves against the directory of the file that
+# names it (the experiment config, or the sweep file that sets it); globs stay patterns
+_PATH_OPTIONS = {("data", "files")}
+
+
+def _is_ship_path(ship: str) -> bool:
+    """A ship given as a file (``my_ship.toml``, ``ships/a``), not a bundled name."""
+    return ship.endswith(".toml") or "/" in ship or os.sep in ship
+
+
+def _anchored(path: str, directory: Path) -> str:
+    return path if os.path.isabs(path) else os.path.normpath(os.path.join(directory, path))
+
+
+def resolve_paths(sections: dict, directory: Path) -> dict:
+    """Relative file options of parsed `sections` made absolute against `directory`."""
+    out = dict(sections)
+    ship = out["experiment"].ship
+    if _is_ship_path(ship):
+        out["experiment"] = dataclasses.replace(out["experiment"], ship=_anchored(ship, directory))
+    for section, key in _PATH_OPTIONS:
+        value = getattr(out[section], key)
+        resolved = tuple(_anchored(v, directory) for v in value) if isinstance(value, tuple) else (
+            _anchored(value, directory) if value else value)
+        out[section] = dataclasses.replace(out[section], **{key: resolved})
+    return out
+
+
+def parse_experiment(doc: dict, source: str = "<config>", directory: str | os.PathLike | None = None) -> Experiment:
+    """A parsed TOML document to a validated `Experiment`.
+
+    `directory`: where relative file options (``[experiment] ship`` as a file, ``[data]``
+    files) are anchored, the directory of the file that names them; None: left as given
+    (relative to the working directory)."""
     unknown = set(doc) - set(_SECTIONS)
     if unknown:
         raise ConfigError(f"{source}: unknown section(s) {sorted(unknown)} (known: {', '.join(_SECTIONS)})")
@@ -364,25 +418,19 @@ def parse_experiment(doc: dict, source: str = "<config>") -> Experiment:
                           + ("; the file is empty" if not doc else ""))
     sections = {name: _coerce(name, cls if isinstance(cls, type) else globals()[cls], doc.get(name, {}), source)
                 for name, cls in _SECTIONS.items()}
+    if directory is not None:
+        sections = resolve_paths(sections, Path(directory))
     exp = Experiment(**sections, source=source)
     _validate(exp, source)
     return exp
 
 
 def load_experiment(path: str | os.PathLike) -> Experiment:
-    """Read and validate an experiment TOML; errors name the file and key."""
+    """Read and validate an experiment TOML; errors name the file and key. Relative paths in it
+    resolve against the file's directory, wherever the command runs."""
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"{path}: config file not found")
-    try:
-        with open(path, "rb") as fh:
-            doc = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML ({exc})") from None
-    except UnicodeDecodeError:
-        raise ConfigError(f"{path}: not UTF-8 text (binary, or another encoding such as UTF-16); "
-                          "an experiment config is a UTF-8 TOML file") from None
-    return parse_experiment(doc, str(path))
+    doc, _ = read_toml(path, "config file", ConfigError)
+    return parse_experiment(doc, str(path), path.resolve().parent)
 
 
 def ship_overrides(exp: Experiment) -> dict[str, float]:

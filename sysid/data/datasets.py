@@ -2,7 +2,7 @@
 
 The data is never part of the project. It is found, in order: the path given,
 ``$SYSID_DATA``, or ``../shared/data/frt-ds-esso`` from the working directory or from the
-project root. The protocol (shared/spec/BENCHMARK_PROTOCOL.md) names the files.
+project root. The paper's Tables 4 and 5 name the files (docs: the paper's protocol).
 """
 from __future__ import annotations
 

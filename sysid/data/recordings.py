@@ -1,12 +1,13 @@
 """Processed runs (the public FRT-DS-ESSO schema) at 1 Hz, checked, and cut into windows.
 
-A processed file has the header ``name [unit]`` of RAW_LOG_FORMAT.md's processed schema,
+A processed file has the header ``name [unit]`` of the processed schema (docs: input formats),
 at 10 Hz (public files) or 1 Hz (``sysid preprocess`` output). `read_run` drops trailing
 all-empty rows, rejects NaN inside the run, non-monotonic time and wrong units, and
 downsamples by taking every k-th sample from the first one (the protocol's t = 0, 1, 2 s).
 """
 from __future__ import annotations
 
+import glob
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -170,12 +171,19 @@ def duplicate_runs(runs: Sequence[Run], tolerance: float = 1e-9) -> list[tuple[s
 
 
 def expand_paths(items: Iterable[str | os.PathLike]) -> list[Path]:
-    """Files and directories (searched recursively for *.csv) to a sorted file list."""
+    """Files, directories (searched recursively for *.csv) and glob patterns (``logs/*.csv``,
+    ``logs/**/*.csv``; matches sorted) to a file list."""
     out: list[Path] = []
     from sysid.store.manifest import has_manifest, verify_manifest
 
     for item in items:
         p = Path(item)
+        if not p.exists() and glob.has_magic(str(item)):
+            matches = sorted(Path(m) for m in glob.glob(str(item), recursive=True) if Path(m).is_file())
+            if not matches:
+                raise DataError(f"{item}: no file matches this pattern")
+            out += matches
+            continue
         if p.is_dir():
             if has_manifest(p):  # sysid preprocess output: refused when incomplete or changed
                 verify_manifest(p)
@@ -194,7 +202,7 @@ def expand_paths(items: Iterable[str | os.PathLike]) -> list[Path]:
 
 def protocol_windows(n_samples: int, horizon: int) -> np.ndarray:
     """Start indices of consecutive, non-overlapping full windows of `horizon` samples
-    (k = 0 .. floor(N / H) - 1; BENCHMARK_PROTOCOL.md)."""
+    (k = 0 .. floor(N / H) - 1; docs: the paper's protocol, the metric)."""
     return np.arange(n_samples // horizon) * horizon
 
 

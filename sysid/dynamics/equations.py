@@ -4,7 +4,8 @@
 force model (MMG, NN-only, hybrid) with zero-order-hold inputs; `integrate` runs many
 trajectories at once, differentiably, with the rule a `Method` names: torchdiffeq's public
 `odeint` (Euler, the 3/8 rule; plain backprop, no adjoint) or a plain step loop (classical
-RK4, which torchdiffeq's public names lack). Compiled prediction: `sysid.fast.compiled.predict`.
+RK4, which torchdiffeq's public names lack); `eager_predict` is the same without gradient.
+Compiled prediction: `sysid.fast.compiled.predict` (which falls back to `eager_predict`).
 
 Time inside torchdiffeq is counted in steps (tau = t / dt), so step k's input is
 ``inputs[floor(tau)]`` exactly, also at the perturbed end point of a Runge-Kutta step.
@@ -21,7 +22,6 @@ from sysid.dynamics.integrators import Integrator, IntegratorLike, Method, rollo
 from sysid.mmg.model import ForceBreakdown
 
 _ODEINT_NAME = {Method.EULER: "euler", Method.RK4_38: "rk4"}  # torchdiffeq's public names
-INTEGRATORS = ("euler", "rk4")  # what configs and the CLI offer: the paper's and the lab's
 
 
 def acceleration_channels(u, v, r, X, Y, N, c):
@@ -161,6 +161,15 @@ def integrate(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt
     tau = torch.arange(inputs.shape[0], dtype=x0.dtype, device=x0.device)
     options = {"perturb": True} if integrator.method is not Method.EULER else None
     return odeint(rhs, x0, tau, method=_ODEINT_NAME[integrator.method], options=options)
+
+
+def eager_predict(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
+                  method: IntegratorLike = Method.EULER) -> torch.Tensor:
+    """States (T, ..., 6) predicted from x0 (..., 6) with inputs (T, ..., 4), no gradient:
+    `integrate` under ``torch.no_grad()``. A compiled `Integrator` is refused here (it is
+    `sysid.fast.compiled.predict`'s)."""
+    with torch.no_grad():
+        return integrate(force_model, x0, inputs, dt, method)
 
 
 @dataclass

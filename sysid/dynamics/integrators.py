@@ -1,6 +1,6 @@
 """The integrator choice, typed, and the fixed-step rules it names.
 
-`Method` names the rule: explicit Euler (the paper's), classical RK4 (1/6, 1/3, 1/3, 1/6,
+`Method` (`sysid.config.choices`) names the rule: explicit Euler (the paper's), classical RK4 (1/6, 1/3, 1/3, 1/6,
 the lab simulator's) or torchdiffeq's own "rk4" (the 3/8 rule). `Integrator` adds how the
 steps are run: through torchdiffeq's public `odeint` (differentiable; training), or the
 same rule as one compiled function per step (`compiled=True`; inference, see
@@ -12,32 +12,14 @@ state x (..., 6) and of one right-hand side f(x) -> dx/dt (..., 6), step length 
 """
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass
 from typing import Callable, Union
 
 import torch
 
-Derivative = Callable[[torch.Tensor], torch.Tensor]
+from sysid.config.choices import Method
 
-
-class Method(str, enum.Enum):
-    """Fixed-step integration rule (value = the name used in configs and on the CLI)."""
-
-    EULER = "euler"      # the paper's; torchdiffeq "euler"
-    RK4 = "rk4"          # classical RK4, the lab simulator's
-    RK4_38 = "rk4_3/8"   # torchdiffeq "rk4" (Kutta's 3/8 rule)
-
-    @classmethod
-    def parse(cls, value: "Method | str") -> "Method":
-        """A `Method` from itself or its name; ValueError naming the choices otherwise."""
-        if isinstance(value, cls):
-            return value
-        try:
-            return cls(str(value))
-        except ValueError:
-            choices = ", ".join(m.value for m in cls)
-            raise ValueError(f"integrator {value!r}: choose one of {choices}") from None
+RightHandSide = Callable[[torch.Tensor], torch.Tensor]  # f(x (..., 6)) -> dx/dt (..., 6)
 
 
 @dataclass(frozen=True)
@@ -66,12 +48,12 @@ class Integrator:
 IntegratorLike = Union[Integrator, Method, str]
 
 
-def euler_step(f: Derivative, x: torch.Tensor, dt: float) -> torch.Tensor:
+def euler_step(f: RightHandSide, x: torch.Tensor, dt: float) -> torch.Tensor:
     """x + dt f(x)."""
     return x + dt * f(x)
 
 
-def rk4_step(f: Derivative, x: torch.Tensor, dt: float) -> torch.Tensor:
+def rk4_step(f: RightHandSide, x: torch.Tensor, dt: float) -> torch.Tensor:
     """Classical fourth-order Runge-Kutta step (weights 1/6, 1/3, 1/3, 1/6)."""
     half = 0.5 * dt
     k1 = f(x)
@@ -81,7 +63,7 @@ def rk4_step(f: Derivative, x: torch.Tensor, dt: float) -> torch.Tensor:
     return x + (k1 + 2.0 * (k2 + k3) + k4) * (dt / 6.0)
 
 
-def rk4_38_step(f: Derivative, x: torch.Tensor, dt: float) -> torch.Tensor:
+def rk4_38_step(f: RightHandSide, x: torch.Tensor, dt: float) -> torch.Tensor:
     """Kutta's 3/8-rule fourth-order step (torchdiffeq's "rk4")."""
     third = dt / 3.0
     k1 = f(x)
@@ -91,17 +73,17 @@ def rk4_38_step(f: Derivative, x: torch.Tensor, dt: float) -> torch.Tensor:
     return x + (k1 + 3.0 * (k2 + k3) + k4) * (dt / 8.0)
 
 
-STEP_RULES: dict[Method, Callable[[Derivative, torch.Tensor, float], torch.Tensor]] = {
+STEP_RULES: dict[Method, Callable[[RightHandSide, torch.Tensor, float], torch.Tensor]] = {
     Method.EULER: euler_step, Method.RK4: rk4_step, Method.RK4_38: rk4_38_step}
 
 
 def rollout(rhs: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], x0: torch.Tensor,
-            inputs: torch.Tensor, dt: float, method: "Method | str") -> torch.Tensor:
+            inputs: torch.Tensor, dt: float, method: Method) -> torch.Tensor:
     """States (T, ..., 6) from x0 (..., 6) and inputs (T, ..., 4) by a plain step loop.
 
     `rhs(state, inputs) -> dx/dt`; step k holds inputs[k]; row 0 is x0.
     """
-    rule = STEP_RULES[Method.parse(method)]
+    rule = STEP_RULES[method]
     states = [x0]
     for k in range(inputs.shape[0] - 1):
         u = inputs[k]

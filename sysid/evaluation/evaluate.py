@@ -1,4 +1,4 @@
-"""All evaluation: windowed predictions, the protocol's RMSE table (BENCHMARK_PROTOCOL.md)
+"""All evaluation: windowed predictions, the protocol's RMSE table (docs: the paper's protocol, the metric)
 and the per-step traces behind the report's figures.
 
 Every window of every file is integrated in one batched call: each window starts from the
@@ -20,10 +20,11 @@ from torch import nn
 
 from sysid.data.recordings import Run, protocol_windows, stack_windows
 from sysid.data.datasets import TEST_FILES
-from sysid.fast.compiled import predict
+from sysid.config.choices import Method
+from sysid.dynamics.equations import eager_predict
+from sysid.dynamics.integrators import Integrator, IntegratorLike
 from sysid.config.checks import whole_samples
 from sysid.errors import DataError
-from sysid.dynamics.integrators import IntegratorLike
 from sysid.state import FORCE, FORCE_COMPONENTS, INPUTS, STATE, VELOCITY_INDEX
 
 # one row per file and horizon; RMSE of u, v_m [m/s] and r [rad/s]
@@ -72,9 +73,14 @@ class WindowPrediction:
 
 
 def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
-                    method: IntegratorLike = "euler", dtype=torch.float64,
+                    method: IntegratorLike = Method.EULER, dtype=torch.float64,
                     device: str | torch.device = "cpu") -> list[WindowPrediction]:
-    """Predict the protocol windows of every run in one batched integration."""
+    """Predict the protocol windows of every run in one batched integration (compiled
+    when `method` is a compiled `Integrator`: only then is `sysid.fast` imported)."""
+    integrator = Integrator.of(method)
+    predict = eager_predict
+    if integrator.compiled:
+        from sysid.fast.compiled import predict
     chunks, meta = [], []
     dt = None
     for run in runs:
@@ -92,7 +98,7 @@ def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
     if chunks:
         observed = torch.cat([c[0] for c in chunks], 1)
         inputs = torch.cat([c[1] for c in chunks], 1)
-        predicted = predict(model, observed[0], inputs, dt, method)
+        predicted = predict(model, observed[0], inputs, dt, integrator)
     out, col = [], 0
     for run, H, starts in meta:
         W = len(starts)
@@ -157,7 +163,7 @@ def trace_frame(model: nn.Module, pred: WindowPrediction) -> pd.DataFrame:
 
 
 def evaluate_model(model: nn.Module, runs: Sequence[Run], horizons: Sequence[float],
-                   method: IntegratorLike = "euler", traces: bool = True) -> Evaluation:
+                   method: IntegratorLike = Method.EULER, traces: bool = True) -> Evaluation:
     """The protocol's windowed RMSE per file and horizon, with per-step traces."""
     rows, frames, shares = [], {}, {}
     for horizon in horizons:

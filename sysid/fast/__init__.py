@@ -1,4 +1,4 @@
 """The fast path: ahead-of-time compiled steps and rollouts (`compiled`), a model prepared for
 compilation (`prepared`, `stepper`, `knn_index`), two fixes to AOTInductor's wrapper
-(`codegen_fixes`) and portable `.pt2` exports (`export`). Training and evaluation never
-import it."""
+(`codegen_fixes`) and portable `.pt2` exports (`export`). Training and run directories never
+import it; evaluation only when a compiled prediction is asked for (``--compiled``)."""

@@ -1,7 +1,7 @@
 """Two fixes to AOTInductor's C++ wrapper code for subgraphs, applied while sysid compiles.
 
 A compiled rollout runs its steps as a `while_loop` whose body holds the kNN gate's `cond`s.
-AOTInductor's C++ wrapper (torch 2.13) inlines each of these subgraphs where it runs, and
+AOTInductor's C++ wrapper (torch 2.13.0) inlines each of these subgraphs where it runs, and
 on every pass of the loop it:
 
 1. allocates every buffer of the subgraph, even those the subgraph's fused kernels keep
@@ -12,12 +12,28 @@ on every pass of the loop it:
    The loop's condition (k < steps) took all 25 inputs of the hybrid's loop.
 
 Each allocation is a few calls to malloc and free. Together they took about half the time
-of a compiled 100 s MMG prediction (measured with perf). `subgraph_fixes()` patches the
-two wrapper methods for the duration of a compilation: the memory planner also drops the
-subgraphs' removed buffers, and a subgraph gets handles only for the inputs it uses. The
-kernels are untouched, so the numbers are bit-identical (tests/test_compiled.py). Only
-torch versions where this was checked (`TESTED_TORCH`) are patched; elsewhere compilation
-runs as torch ships it, slower but the same.
+of a compiled 100 s MMG prediction (measured with perf). `subgraph_fixes()` wraps the two
+wrapper methods for the duration of a compilation; each calls torch's own method:
+
+1. ``PythonWrapperCodegen.memory_plan_reuse`` runs with the subgraphs' removed buffers added
+   to the graph's list (their names carry the subgraph's prefix, so they cannot clash);
+2. ``CppWrapperCpu.codegen_subgraph_prefix`` runs with the inputs the subgraph does not
+   read hidden from it (shown as non-tensors, which it skips), so it writes handles only
+   for the others.
+
+The kernels are untouched, so the numbers are bit-identical (tests/fast/test_compiled.py).
+
+The fixes lean on the private names and behaviour of exactly the torch they were derived
+from (`TORCH_VERSION`); under any other torch `available()` is False and compilation runs
+as torch ships it: slower, the same numbers.
+
+To drop this module (once torch plans a subgraph's buffers against its own removed buffers
+and gives handles only to the inputs a subgraph reads, or to move to another torch):
+delete it, the ``codegen_fixes.subgraph_fixes()`` context in
+`sysid.fast.compiled.compile_package` and ``codegen_fixes.cache_tag()`` in
+`sysid.fast.compiled.fingerprint`; then
+``tests/fast/test_compiled.py::test_compiled_loop_allocates_only_what_its_kernels_use`` (which
+reads the generated loop) says whether torch alone now allocates only what its kernels use.
 """
 from __future__ import annotations
 
@@ -26,13 +42,14 @@ from typing import Iterator
 
 import torch
 
-TESTED_TORCH = ("2.13",)  # major.minor versions whose wrapper code these fixes were checked on
-VERSION = "1"  # part of the compile cache key: packages built with and without differ
+TORCH_VERSION = "2.13.0"  # the torch whose wrapper code these fixes were derived from and checked on
+VERSION = "2"  # part of the compile cache key: packages built with and without differ
 
 
 def available() -> bool:
-    """True where the fixes apply: a tested torch with the two wrapper methods they replace."""
-    if ".".join(torch.__version__.split(".")[:2]) not in TESTED_TORCH:
+    """True where the fixes apply: exactly `TORCH_VERSION` (any local build tag such as
+    ``+cpu``) with the wrapper methods and classes they wrap."""
+    if torch.__version__.split("+")[0] != TORCH_VERSION:
         return False
     try:
         from torch._inductor.codegen import cpp_wrapper_cpu, wrapper
@@ -47,6 +64,12 @@ def cache_tag() -> str:
     return f"codegen-fixes-{VERSION}" if available() else "codegen-fixes-none"
 
 
+def _read_inputs(graph) -> set[str]:
+    """Names of the subgraph inputs (placeholders) that some node of `graph` reads."""
+    return {graph.qualify_name(node.target) for node in graph.module.graph.nodes
+            if node.op == "placeholder" and node.users}
+
+
 @contextlib.contextmanager
 def subgraph_fixes() -> Iterator[None]:
     """Within the block, AOTInductor's C++ wrapper drops the subgraphs' unused allocations
@@ -54,7 +77,6 @@ def subgraph_fixes() -> Iterator[None]:
     if not available():
         yield
         return
-    from torch._inductor import ir
     from torch._inductor.codegen import cpp_wrapper_cpu, wrapper
     from torch._inductor.virtualized import V
 
@@ -62,8 +84,6 @@ def subgraph_fixes() -> Iterator[None]:
     subgraph_prefix = cpp_wrapper_cpu.CppWrapperCpu.codegen_subgraph_prefix
 
     def memory_plan_reuse(self):
-        # plan with the subgraphs' removed buffers too (their names carry the subgraph's
-        # prefix, so they cannot clash with the main graph's)
         removed = V.graph.removed_buffers
         for line in self.lines:
             if isinstance(line, wrapper.EnterSubgraphLine):
@@ -75,17 +95,14 @@ def subgraph_fixes() -> Iterator[None]:
             V.graph.removed_buffers = kept
 
     def codegen_subgraph_prefix(self, subgraph, outer_inputs, outer_outputs):
-        # as torch's, for the inputs the subgraph reads only
         graph = subgraph.graph
-        used = {graph.qualify_name(node.target) for node in graph.module.graph.nodes
-                if node.op == "placeholder" and node.users}
-        assert len(graph.graph_inputs) == len(outer_inputs)
-        for (inner, value), outer in zip(graph.graph_inputs.items(), outer_inputs):
-            if not isinstance(value, ir.TensorBox) or inner not in used:
-                continue
-            self.writeline(f"AtenTensorHandle {inner}_handle;")
-            self.writeline(f"AOTI_TORCH_ERROR_CODE_CHECK(aoti_torch_assign_tensors_out({outer}, &{inner}_handle));")
-            self.writeline(f"RAIIAtenTensorHandle {inner}({inner}_handle);")
+        read = _read_inputs(graph)
+        inputs = graph.graph_inputs
+        graph.graph_inputs = {name: value if name in read else None for name, value in inputs.items()}
+        try:
+            return subgraph_prefix(self, subgraph, outer_inputs, outer_outputs)
+        finally:
+            graph.graph_inputs = inputs
 
     wrapper.PythonWrapperCodegen.memory_plan_reuse = memory_plan_reuse
     cpp_wrapper_cpu.CppWrapperCpu.codegen_subgraph_prefix = codegen_subgraph_prefix

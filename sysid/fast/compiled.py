@@ -24,7 +24,6 @@ import functools
 import hashlib
 import os
 import sys
-import tempfile
 import time
 import warnings
 import weakref
@@ -35,9 +34,11 @@ import torch
 from torch import nn
 
 from sysid.fast import codegen_fixes
-from sysid.dynamics.equations import check_shapes, integrate
-from sysid.dynamics.integrators import Integrator, IntegratorLike, Method, run_steps
+from sysid.config.choices import Method
+from sysid.dynamics.equations import check_shapes, eager_predict
+from sysid.dynamics.integrators import Integrator, IntegratorLike, run_steps
 from sysid.fast.prepared import prepared
+from sysid.store.files import atomic_path
 from sysid.state import INPUTS, STATE
 from sysid.fast.stepper import Derivative, Rollout, Step
 
@@ -144,20 +145,12 @@ def compile_package(program: torch.export.ExportedProgram, path: Path,
                     metadata: dict[str, str] | None = None, inductor_options: dict | None = None) -> Path:
     """AOTInductor-compile an exported program into the ``.pt2`` package `path` (atomic)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     options = dict(INDUCTOR_OPTIONS if inductor_options is None else inductor_options)
     if metadata:
         options["aot_inductor.metadata"] = {str(k): str(v) for k, v in metadata.items()}
-    fd, tmp = tempfile.mkstemp(suffix=".pt2", dir=path.parent)
-    os.close(fd)
-    try:
-        with warnings.catch_warnings(), codegen_fixes.subgraph_fixes():
-            warnings.simplefilter("ignore", FutureWarning)  # torch-internal deprecation notices
-            torch._inductor.aoti_compile_and_package(program, package_path=tmp, inductor_configs=options)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    with atomic_path(path, ".pt2") as tmp, warnings.catch_warnings(), codegen_fixes.subgraph_fixes():
+        warnings.simplefilter("ignore", FutureWarning)  # torch-internal deprecation notices
+        torch._inductor.aoti_compile_and_package(program, package_path=str(tmp), inductor_configs=options)
     return path
 
 
@@ -233,9 +226,10 @@ _SCALARS = (bool, int, float, str, type(None))
 
 
 def _scalar_options(model: nn.Module) -> tuple:
-    """The scalar attributes of every submodule (gate space, k, physics, quadrature, ...):
+    """The scalar attributes of every submodule (gate space, k, physics, quadrature, ...;
+    enum members such as the gate space are strings):
     the cheap part of `_options`, enough to tell a live model's settings apart."""
-    return tuple((id(sub), tuple((k, v) for k, v in vars(sub).items() if type(v) in _SCALARS and k != "training"))
+    return tuple((id(sub), tuple((k, v) for k, v in vars(sub).items() if isinstance(v, _SCALARS) and k != "training"))
                  for sub in model.modules())
 
 
@@ -249,14 +243,13 @@ def _memoized(model: nn.Module, key: tuple, build: Callable[[], Compiled | None]
     return table[key]
 
 
-def compiled_step(model: nn.Module, method: Method | str, dt: float, batch: int,
+def compiled_step(model: nn.Module, method: Method, dt: float, batch: int,
                   dtype: torch.dtype = torch.float64, device: str | torch.device = "cpu") -> Compiled | None:
     """Compiled ``step(x (batch, 6), u (batch, 4)) -> x_next``, or None (use eager).
 
     Batches above one are compiled channels first (vectorized over the batch), batches
     above `CHUNK_ROWS` as chunks of it; the callable takes and gives (batch, ·) all the same.
     """
-    method = Method.parse(method)
     rows = min(batch, CHUNK_ROWS)
 
     def build():
@@ -310,32 +303,27 @@ def _by_rows(fn: Compiled | None, rows: int, batch: int) -> Compiled | None:
 
 
 def step_label(method: Method) -> str:
-    return f"step-{Method.parse(method).name.lower()}"
+    return f"step-{method.name.lower()}"
 
 
-def step_metadata(model: nn.Module, method: Method | str, dt: float, batch: int,
+def step_metadata(model: nn.Module, method: Method, dt: float, batch: int,
                   dtype: torch.dtype) -> dict[str, str]:
     """What a user of an exported step needs to know: rule, dt, shapes, channels, units."""
-    from importlib.metadata import PackageNotFoundError, version
-    try:
-        sysid_version = version("sysid")
-    except PackageNotFoundError:
-        sysid_version = "unknown"
-    return {"sysid_version": sysid_version, "kind": getattr(model, "kind", "mmg"),
-            "method": Method.parse(method).value, "dt_s": repr(float(dt)), "batch": str(batch),
+    from sysid import __version__
+    return {"sysid_version": __version__, "kind": getattr(model, "kind", "mmg"),
+            "method": method.value, "dt_s": repr(float(dt)), "batch": str(batch),
             "dtype": str(dtype).replace("torch.", ""), "state": ",".join(STATE), "inputs": ",".join(INPUTS),
             "units": "state x[m] u[m/s] y[m] v[m/s] psi[rad] r[rad/s]; inputs n_prop[rps] "
                      "delta_rudder[rad] wind_velo_true[m/s] wind_dir_true[rad, from]",
             "signature": "step(state (batch, 6), inputs (batch, 4)) -> state after dt"}
 
 
-def compiled_rollout_function(model: nn.Module, method: Method | str, dt: float, batch: int,
+def compiled_rollout_function(model: nn.Module, method: Method, dt: float, batch: int,
                               dtype: torch.dtype = torch.float64, device: str | torch.device = "cpu"
                               ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor] | None:
     """Compiled ``f(x0 (batch, 6), inputs (T, batch, 4)) -> states (T, batch, 6)`` (row 0
     is x0), or None (use `compiled_step`, or eager). Up to `ROLLOUT_STEPS` steps run in one
     native call (a `sysid.fast.stepper.Rollout`): no Python between steps."""
-    method = Method.parse(method)
     if batch > ROLLOUT_ROWS:
         return None
 
@@ -355,11 +343,11 @@ def _rollout(model: nn.Module, method: Method, dt: float, batch: int, dtype: tor
     return roll, (x0, inputs, steps), f"rollout-{method.name.lower()}"
 
 
-def rollout_package(model: nn.Module, method: Method | str, dt: float, batch: int = 1,
+def rollout_package(model: nn.Module, method: Method, dt: float, batch: int = 1,
                     dtype: torch.dtype = torch.float64, device: str | torch.device = "cpu") -> Path:
     """Path of the AOTInductor package behind `compiled_rollout_function` (from the disk
     cache, or compiled now; raises where compilation fails): for inspection."""
-    return cached_package(*_rollout(model, Method.parse(method), dt, batch, dtype, device),
+    return cached_package(*_rollout(model, method, dt, batch, dtype, device),
                           options=_options_for(batch))
 
 
@@ -386,7 +374,7 @@ def _chunked_rollout(fn: Compiled, channels_first: bool) -> Callable[[torch.Tens
 
 
 def compiled_rollout(model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
-                     method: Method | str = Method.EULER) -> torch.Tensor:
+                     method: Method = Method.EULER) -> torch.Tensor:
     """States (T, ..., 6) from x0 (..., 6) and inputs (T, ..., 4), no gradient.
 
     Up to `ROLLOUT_ROWS` ships: compiled rollouts of up to `ROLLOUT_STEPS` steps per call
@@ -412,11 +400,11 @@ def predict(model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
     """States (T, ..., 6) predicted from x0 (..., 6) with inputs (T, ..., 4), no gradient.
 
     `method` as for `sysid.dynamics.equations.integrate`; ``Integrator(rule, compiled=True)`` runs
-    the compiled step (`compiled_rollout`), anything else `integrate` without gradient.
+    the compiled step (`compiled_rollout`), anything else the eager
+    `sysid.dynamics.equations.eager_predict`.
     """
     integrator = Integrator.of(method)
-    if integrator.compiled:
-        check_shapes(x0, inputs)
-        return compiled_rollout(model, x0, inputs, dt, integrator.method)
-    with torch.no_grad():
-        return integrate(model, x0, inputs, dt, integrator.method)
+    if not integrator.compiled:
+        return eager_predict(model, x0, inputs, dt, integrator)
+    check_shapes(x0, inputs)
+    return compiled_rollout(model, x0, inputs, dt, integrator.method)

@@ -32,7 +32,8 @@ from torch import nn
 
 from sysid.fast.compiled import (cached_package, export_program, load_package, package_metadata,
                             step_label, step_metadata)
-from sysid.dynamics.integrators import Method, run_steps
+from sysid.config.choices import Method
+from sysid.dynamics.integrators import run_steps
 from sysid.fast.prepared import prepared
 from sysid.fast.stepper import Step
 from sysid.store.files import atomic_path
@@ -69,7 +70,7 @@ def check_step_stable(step: Callable, batch: int, dtype: torch.dtype, method: Me
                         "for this model; choose a shorter --dt (nothing written)")
 
 
-def export_model(model: nn.Module, path: str | Path, method: Method | str = Method.EULER,
+def export_model(model: nn.Module, path: str | Path, method: Method = Method.EULER,
                  dt: float = 1.0, batch: int = 1, dtype: torch.dtype = torch.float64,
                  compiled: bool = True, log: Callable[[str], None] | None = None) -> Path:
     """Write one integration step of `model` to the ``.pt2`` file `path`.

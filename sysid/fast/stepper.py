@@ -17,10 +17,9 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from torch._higher_order_ops.while_loop import while_loop
-
+from sysid.config.choices import Method
 from sysid.dynamics.equations import lean_derivative
-from sysid.dynamics.integrators import STEP_RULES, Method
+from sysid.dynamics.integrators import STEP_RULES
 
 
 class Derivative(nn.Module):
@@ -52,10 +51,10 @@ class Step(nn.Module):
     channels_first : states (6, B) and inputs (4, B) instead (see `Derivative`).
     """
 
-    def __init__(self, force_model: nn.Module, method: Method | str, dt: float, channels_first: bool = False):
+    def __init__(self, force_model: nn.Module, method: Method, dt: float, channels_first: bool = False):
         super().__init__()
         self.force_model = force_model
-        self.method = Method.parse(method)
+        self.method = method
         self.dt = float(dt)
         self.channels_first = channels_first
 
@@ -96,5 +95,5 @@ class Rollout(nn.Module):
             states.index_copy_(0, at, x[None])  # in place: the record is not carried (no copy per step)
             return k + 1, x
 
-        last = while_loop(more, advance, (k0, x0))[1]
+        last = torch.while_loop(more, advance, (k0, x0))[1]
         return states, last  # the last state keeps the loop (and its writes) in the program

@@ -13,7 +13,8 @@ import torch
 from torch import nn
 
 from sysid.hybrid.correction import ForceCorrection, correction_inputs
-from sysid.config.experiment import GATE_SPACES, Experiment, ship_overrides
+from sysid.config.choices import GateSpace, ModelKind
+from sysid.config.experiment import Experiment, ship_overrides
 from sysid.mmg.coefficients import Coefficients
 from sysid.mmg.model import MMG, ForceBreakdown
 from sysid.mmg.wind import relative_wind
@@ -39,25 +40,23 @@ class CorrectedModel(nn.Module):
     correction : the FNN term.
     gate : optional kNN OOD gate; F_NN is zeroed where the input is out of distribution.
     physics : include F_MMG (hybrid) or not (NN-only).
-    gate_space : where the gate measures kNN distances: "features" (the paper's: the 64
-        activations before the output layer) or "inputs" (the standardised input s-bar).
+    gate_space : where the gate measures kNN distances: features (the paper's: the 64
+        activations before the output layer) or inputs (the standardised input s-bar).
     """
 
     def __init__(self, mmg: MMG, correction: ForceCorrection, gate: KNNGate | None = None,
-                 physics: bool = True, gate_space: str = "features"):
+                 physics: bool = True, gate_space: GateSpace | str = GateSpace.FEATURES):
         super().__init__()
-        if gate_space not in GATE_SPACES:
-            raise ValueError(f"gate space {gate_space!r}: choose one of {', '.join(GATE_SPACES)}")
         self.mmg = mmg
         self.correction_net = correction
         self.gate = gate
         self.physics = physics
-        self.gate_space = gate_space
+        self.gate_space = GateSpace.parse(gate_space)
         self.gate_enabled = gate is not None
 
     def gate_coordinates(self, s: torch.Tensor, z: torch.Tensor | None = None) -> torch.Tensor:
         """The vectors the kNN gate compares: features z (..., 64) or standardised s (..., 9)."""
-        if self.gate_space == "inputs":
+        if self.gate_space is GateSpace.INPUTS:
             net = self.correction_net
             return (s.to(net.input_mean.dtype) - net.input_mean) / net.input_std
         return self.correction_net.features(s) if z is None else z
@@ -67,8 +66,8 @@ class CorrectedModel(nn.Module):
         return self.mmg.coefficients
 
     @property
-    def kind(self) -> str:
-        return "hybrid" if self.physics else "nn"
+    def kind(self) -> ModelKind:
+        return ModelKind.HYBRID if self.physics else ModelKind.NN
 
     def _correction(self, state: torch.Tensor, inputs: torch.Tensor, relative_wind: torch.Tensor,
                     per_member: bool = False):
@@ -139,10 +138,10 @@ def build_mmg(exp: Experiment, dtype: torch.dtype = torch.float64) -> MMG:
 def build_model(exp: Experiment, dtype: torch.dtype = torch.float64) -> nn.Module:
     """An untrained model with the experiment's structure (MMG, NN-only or hybrid)."""
     mmg = build_mmg(exp, dtype)
-    if exp.experiment.model == "mmg":
+    if exp.experiment.model is ModelKind.MMG:
         return mmg
     net = ForceCorrection(exp.network.hidden, dtype, exp.network.members)
-    return CorrectedModel(mmg, net, None, physics=exp.experiment.model == "hybrid", gate_space=exp.gate.space)
+    return CorrectedModel(mmg, net, None, physics=exp.experiment.model is ModelKind.HYBRID, gate_space=exp.gate.space)
 
 
 def correction_of(model: nn.Module) -> ForceCorrection | None:

@@ -6,6 +6,7 @@ only, so that ``torch.load(..., weights_only=True)`` reads it.
 """
 from __future__ import annotations
 
+import enum
 import os
 from pathlib import Path
 
@@ -18,7 +19,10 @@ VERSION = 1
 
 
 def plain(value):
-    """`value` with numpy scalars turned into Python numbers (weights_only-safe)."""
+    """`value` with numpy scalars turned into Python numbers and enum members into their
+    values (weights_only-safe)."""
+    if isinstance(value, enum.Enum):
+        return value.value
     if isinstance(value, dict):
         return {k: plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):

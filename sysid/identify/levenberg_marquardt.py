@@ -60,12 +60,11 @@ import torch
 from torch import nn
 from torch.func import jacfwd
 
+from sysid.config.choices import Method, StartStates
 from sysid.state import VELOCITY_INDEX
 from sysid.identify.uncertainty import (CoefficientUncertainty, coefficient_uncertainty, multistep_residuals,
                                uncertainty_from_jacobian, velocity_weights)
 
-START_STATES = ("estimated", "recorded")
-OTHER_START_STATES = {"estimated": "recorded", "recorded": "estimated"}
 CHECK_LIMIT = 2.0  # |difference| / sigma beyond which the two start-state treatments disagree
 
 
@@ -76,7 +75,7 @@ class LevenbergMarquardtFit:
     coefficients : name -> estimate (physical units).
     start : (W, 3) (u, v_m, r) each window starts from [m/s, m/s, rad/s]: estimated, or the
         recorded first samples.
-    start_states : "estimated" or "recorded".
+    start_states : estimated or recorded.
     iterations : Levenberg-Marquardt iterations taken.
     cost : final sum of squared weighted residuals (start measurements and prior included).
     stopped : "converged" (no coefficient, nor start state, moved by more than the tolerance),
@@ -86,14 +85,14 @@ class LevenbergMarquardtFit:
 
     coefficients: dict[str, float]
     start: torch.Tensor
-    start_states: str
+    start_states: StartStates
     iterations: int
     cost: float
     stopped: str
 
 
 def start_state_residuals(model: nn.Module, windows, names: Sequence[str], weights: torch.Tensor | None = None,
-                          method: str = "euler"):
+                          method: Method = Method.EULER):
     """The stacked residual function (theta (p,), start (W, 3)) -> e (T + 1, W, 3), theta now
     and the recorded start (W, 3). e[0] is the start measurement's residual, e[1:] the
     multi-step residuals of `sysid.identify.uncertainty.multistep_residuals` from `start`. Arguments
@@ -111,12 +110,10 @@ def start_state_residuals(model: nn.Module, windows, names: Sequence[str], weigh
     return residuals, theta, recorded
 
 
-def _residual_function(model, windows, names, weights, method, start_states: str):
+def _residual_function(model, windows, names, weights, method: Method, start_states: StartStates):
     """(theta, start) -> e, theta now, recorded start (W, 3); with recorded starts e is the
     plain multi-step residual (T, W, 3) and `start` is not used."""
-    if start_states not in START_STATES:
-        raise ValueError(f"start_states {start_states!r}: choose one of {', '.join(START_STATES)}")
-    if start_states == "estimated":
+    if start_states is StartStates.ESTIMATED:
         return start_state_residuals(model, windows, names, weights, method)
     multistep, theta = multistep_residuals(model, windows, names, weights, method)
     return (lambda th, start: multistep(th)), theta, windows.states[0][..., list(VELOCITY_INDEX)]
@@ -181,8 +178,8 @@ def prior_information(prior: Mapping[str, float], names: Sequence[str], weight: 
 
 
 def identify_levenberg_marquardt(model: nn.Module, windows, names: Sequence[str],
-                                 weights: torch.Tensor | None = None, method: str = "euler",
-                                 start_states: str = "estimated", prior: Mapping[str, float] | None = None,
+                                 weights: torch.Tensor | None = None, method: Method = Method.EULER,
+                                 start_states: StartStates | str = StartStates.ESTIMATED, prior: Mapping[str, float] | None = None,
                                  prior_weight: float = 0.0, iterations: int = 40,
                                  tolerance: float = 1e-7) -> LevenbergMarquardtFit:
     """Levenberg-Marquardt over the coefficients `names` (from the model's current values)
@@ -194,7 +191,7 @@ def identify_levenberg_marquardt(model: nn.Module, windows, names: Sequence[str]
         windows (the sigma's sandwich treats them as independent).
     weights : (3,) w_v for (u, v_m, r) [s^2/m^2, s^2/m^2, s^2], default `velocity_weights`
         (also the start measurement's weights).
-    method : integrator, "euler" (as training) or "rk4", one step per sample.
+    method : integrator, Euler (as training) or classical RK4, one step per sample.
     prior, prior_weight : values {name: value} and weight lambda >= 0 of the prior residuals
         (module docstring); the prior defaults to the model's current values.
     Stops when no coefficient moves by more than `tolerance` relative (and no start state by
@@ -202,7 +199,8 @@ def identify_levenberg_marquardt(model: nn.Module, windows, names: Sequence[str]
     `iterations`.
     """
     names = tuple(names)
-    estimated = start_states == "estimated"
+    start_states = StartStates.parse(start_states)  # a Python caller may name it
+    estimated = start_states is StartStates.ESTIMATED
     residuals, theta, recorded = _residual_function(model, windows, names, weights, method, start_states)
     start = recorded.clone()
     scale = recorded.pow(2).mean(0).sqrt().clamp_min(1e-6)          # (3,) channel RMS
@@ -241,7 +239,7 @@ def identify_levenberg_marquardt(model: nn.Module, windows, names: Sequence[str]
 
 
 def start_state_uncertainty(model: nn.Module, windows, names: Sequence[str], start: torch.Tensor,
-                            weights: torch.Tensor | None = None, method: str = "euler",
+                            weights: torch.Tensor | None = None, method: Method = Method.EULER,
                             covariance: str = "sandwich", threshold: float = 0.5,
                             rcond: float = 1e-10, penalty: np.ndarray | None = None) -> CoefficientUncertainty:
     """Sigma of the coefficients `names` (the model's current values, e.g. set from a
@@ -257,7 +255,7 @@ def start_state_uncertainty(model: nn.Module, windows, names: Sequence[str], sta
 
 
 def fit_uncertainty(model: nn.Module, windows, names: Sequence[str], fit: LevenbergMarquardtFit,
-                    weights: torch.Tensor | None = None, method: str = "euler", covariance: str = "sandwich",
+                    weights: torch.Tensor | None = None, method: Method = Method.EULER, covariance: str = "sandwich",
                     prior: Mapping[str, float] | None = None, prior_weight: float = 0.0) -> CoefficientUncertainty:
     """Sigma of a `LevenbergMarquardtFit` as it was identified: `model` carries the fitted
     coefficients; the start states as in the fit (estimated: profiled out; recorded:
@@ -266,7 +264,7 @@ def fit_uncertainty(model: nn.Module, windows, names: Sequence[str], fit: Levenb
     if prior_weight and prior is None:
         raise ValueError("prior_weight > 0: give the prior values the fit was regularised toward")
     penalty = prior_information(prior, names, prior_weight) if prior_weight else None
-    if fit.start_states == "estimated":
+    if fit.start_states is StartStates.ESTIMATED:
         return start_state_uncertainty(model, windows, names, fit.start, weights, method, covariance,
                                        penalty=penalty)
     return coefficient_uncertainty(model, windows, names, weights, method, covariance, penalty=penalty)
@@ -276,14 +274,14 @@ def fit_uncertainty(model: nn.Module, windows, names: Sequence[str], fit: Levenb
 class StartStateCheck:
     """The configured fit beside the same fit with the other start-state treatment.
 
-    start_states : the other treatment ("recorded" or "estimated").
+    start_states : the other treatment (recorded or estimated).
     coefficients : name -> its estimate.
     difference_sigma : name -> (other - configured) / sigma of the configured estimate
         (nan where that sigma is not finite).
     agrees : every |difference_sigma| <= `CHECK_LIMIT`.
     """
 
-    start_states: str
+    start_states: StartStates
     coefficients: dict[str, float]
     difference_sigma: dict[str, float]
 
@@ -300,7 +298,7 @@ class StartStateCheck:
 
     def as_dict(self) -> dict:
         name, value = self.largest
-        return {"start_states": self.start_states, "coefficients": dict(self.coefficients),
+        return {"start_states": self.start_states.value, "coefficients": dict(self.coefficients),
                 "difference_sigma": {k: (v if math.isfinite(v) else None) for k, v in self.difference_sigma.items()},
                 "largest": name, "largest_sigma": value if math.isfinite(value) else None,
                 "limit_sigma": CHECK_LIMIT, "agrees": self.agrees}
@@ -321,14 +319,14 @@ def start_state_verdict(check: Mapping) -> str:
 
 
 def start_state_check(model: nn.Module, windows, names: Sequence[str], fit: LevenbergMarquardtFit,
-                      sigma: Sequence[float], weights: torch.Tensor | None = None, method: str = "euler",
+                      sigma: Sequence[float], weights: torch.Tensor | None = None, method: Method = Method.EULER,
                       prior: Mapping[str, float] | None = None, prior_weight: float = 0.0,
                       iterations: int = 40) -> StartStateCheck:
     """Fit `names` again with the other start-state treatment than `fit`'s, from the values
     `model` carries (those `fit` started from; left unchanged), with the same windows,
     weights, integrator and prior; compare with `fit` in units of its `sigma` (p,)."""
     other = identify_levenberg_marquardt(model, windows, names, weights, method,
-                                         OTHER_START_STATES[fit.start_states], prior, prior_weight, iterations)
+                                         fit.start_states.other, prior, prior_weight, iterations)
     difference = {}
     for name, s in zip(names, sigma):
         s = float("nan") if s is None else float(s)

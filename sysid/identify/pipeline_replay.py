@@ -78,7 +78,7 @@ def processed_windows(truths: dict[str, pd.DataFrame], layout: SensorLayout, win
         for i, (name, truth) in enumerate(truths.items()):
             raw = synthesise(truth, layout, settings(i)).raw
             result = Pipeline(layout).run(raw, name)
-            for path in writer.write_run(tmp, name, result.segments, result.report):
+            for path in writer.write_segments(tmp, name, result.segments, result.report):
                 if path.suffix != ".csv":
                     continue
                 processed = read_run(path)

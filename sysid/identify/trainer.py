@@ -27,6 +27,7 @@
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import os
 import random
@@ -46,6 +47,7 @@ from sysid.data.recordings import Run, duplicate_runs, sliding_windows, stack_wi
 from sysid.device import resolve_device
 from sysid.dynamics.equations import integrate, integrate_with_forces, required_force
 from sysid.errors import ConfigError, DataError, TrainingError
+from sysid.config.choices import DType, Method, ModelKind, Solver, Stage, StartStates
 from sysid.config.experiment import Experiment
 from sysid.identify.levenberg_marquardt import (fit_uncertainty, identify_levenberg_marquardt, start_state_check,
                                       start_state_verdict)
@@ -55,6 +57,7 @@ from sysid.state import VELOCITY_INDEX
 from sysid.identify.uncertainty import coefficient_uncertainty
 
 VEL = list(VELOCITY_INDEX)
+_LOG = logging.getLogger(__name__)
 
 
 @dataclass
@@ -243,9 +246,9 @@ def multistep_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor
         states = states.unsqueeze(1).expand(states.shape[0], k, *states.shape[1:])
         inputs = inputs.unsqueeze(1).expand(inputs.shape[0], k, *inputs.shape[1:])
     if w_F is None:
-        pred = integrate(model, states[0], inputs, batch.dt, "euler")
+        pred = integrate(model, states[0], inputs, batch.dt, Method.EULER)
     else:
-        trajectory = integrate_with_forces(model, states[0], inputs, batch.dt, "euler")
+        trajectory = integrate_with_forces(model, states[0], inputs, batch.dt, Method.EULER)
         pred, forces = trajectory.states, trajectory.forces
     err = pred[1:, ..., VEL] - states[1:, ..., VEL]
     loss_v = ((err * err) * w_v).sum(-1).mean()
@@ -369,10 +372,13 @@ class Trainer:
         return epochs
 
     def _progress(self, bar, epoch: int, total: int, train_v: float, val_v: float, best_epoch: int) -> None:
+        line = f"  epoch {epoch}/{total}: training {train_v:.5f}, validation {val_v:.5f} (best at {best_epoch})"
         if hasattr(bar, "set_postfix"):
             bar.set_postfix(train=f"{train_v:.4f}", val=f"{val_v:.4f}", best=best_epoch)
         elif self.progress and (epoch % 10 == 0 or epoch == total):
-            self.log(f"  epoch {epoch}/{total}: training {train_v:.5f}, validation {val_v:.5f} (best at {best_epoch})")
+            self.log(line)
+        else:
+            _LOG.debug(line.strip())  # every epoch with ``sysid -v``
 
     def disjoint_windows(self, runs: Sequence[Run], dtype, device) -> WindowSet:
         """Windows of T+1 samples of the training part that share no sample (slid by T+1):
@@ -397,8 +403,8 @@ class Trainer:
 
     def _gradient_estimator(self, stage: StageResult, joint: bool) -> dict:
         """What identified the coefficients with ``solver = "gradient"`` (for the summary)."""
-        return {"solver": "gradient", "start_states": "recorded", "epochs": len(stage.history),
-                "stage": "joint with the FNN" if joint else "before", "integrator": "euler",
+        return {"solver": Solver.GRADIENT.value, "start_states": StartStates.RECORDED.value, "epochs": len(stage.history),
+                "stage": "joint with the FNN" if joint else Stage.BEFORE.value, "integrator": Method.EULER.value,
                 "covariance": "sandwich"}
 
     def _coefficients(self, mmg) -> dict[str, float]:
@@ -444,13 +450,13 @@ class Trainer:
         model = build_mmg(self.experiment, torch.float64).to(device)   # float64: identification's precision
         prior = self._coefficients(model)
         weights = w_v.to(torch.float64)
-        fit = identify_levenberg_marquardt(model, windows, names, weights, "euler", ident.start_states, prior,
+        fit = identify_levenberg_marquardt(model, windows, names, weights, Method.EULER, ident.start_states, prior,
                                            ident.prior_weight, ident.iterations)
         model.coefficients.assign(fit.coefficients)
-        result = fit_uncertainty(model, windows, names, fit, weights, "euler", prior=prior,
+        result = fit_uncertainty(model, windows, names, fit, weights, Method.EULER, prior=prior,
                                  prior_weight=ident.prior_weight)
         check = start_state_check(build_mmg(self.experiment, torch.float64).to(device), windows, names, fit,
-                                  result.std_error, weights, "euler", prior, ident.prior_weight, ident.iterations)
+                                  result.std_error, weights, Method.EULER, prior, ident.prior_weight, ident.iterations)
         with torch.no_grad():
             mmg.coefficients.assign(check.coefficients)
             check_val = float(multistep_loss(mmg, val, w_v)[0])
@@ -463,9 +469,9 @@ class Trainer:
         self._log_start_state_check(check, val_v, check_val)
         row = {"stage": "identify", "epoch": fit.iterations, "train_loss": train_v, "train_velocity": train_v,
                "train_penalty": 0.0, "val_loss": val_v, "seconds": time.perf_counter() - started}
-        estimator = {"solver": "levenberg_marquardt", "start_states": ident.start_states,
+        estimator = {"solver": Solver.LEVENBERG_MARQUARDT.value, "start_states": ident.start_states.value,
                      "prior_weight": ident.prior_weight, "iterations": fit.iterations, "windows": len(windows),
-                     "integrator": "euler", "covariance": result.method,
+                     "integrator": Method.EULER.value, "covariance": result.method,
                      "start_state_check": {**check.as_dict(), "val_loss": check_val}}
         return (StageResult([row], fit.iterations, val_v, fit.stopped), self._log_uncertainty(result), estimator)
 
@@ -490,7 +496,10 @@ class Trainer:
         s_members = s.expand(net.members, *s.shape)
         opt = torch.optim.Adam(net.parameters(), lr=3e-3)
         gen = torch.Generator().manual_seed(self.experiment.experiment.seed + 2)
-        for _ in self._bar(range(t.warm_start_epochs), "warm start", t.warm_start_epochs, 0):
+        bar = self._bar(range(t.warm_start_epochs), "warm start", t.warm_start_epochs, 0)
+        if not hasattr(bar, "set_postfix"):
+            self.log(f"warm start: {t.warm_start_epochs} epochs of one-step regression on {len(s)} samples")
+        for epoch in bar:
             order = torch.randperm(len(s), generator=gen).to(device)
             for lo in range(0, len(s), 256):
                 idx = order[lo:lo + 256]
@@ -502,6 +511,10 @@ class Trainer:
             if not torch.isfinite(loss):
                 raise TrainingError(f"{self.experiment.source}: [training] the warm-start loss became "
                                     f"{loss.detach().item()}; no run written")
+            shown = self.progress and ((epoch + 1) % 25 == 0 or epoch + 1 == t.warm_start_epochs)
+            if not hasattr(bar, "set_postfix") and (shown or _LOG.isEnabledFor(logging.DEBUG)):
+                line = f"  warm start epoch {epoch + 1}/{t.warm_start_epochs}: loss {loss.item():.5f}"
+                self.log(line) if shown else _LOG.debug(line.strip())  # every epoch with ``sysid -v``
 
     def train(self, model: CorrectedModel, params, train: WindowSet, val: WindowSet, w_v, w_F) -> StageResult:
         """Stage 5: multi-step training of every FNN member (and joint MMG coefficients)."""
@@ -538,19 +551,19 @@ class Trainer:
         exp = self.experiment
         t, kind = exp.training, exp.experiment.model
         seed_everything(exp.experiment.seed)
-        dtype = torch.float32 if t.dtype == "float32" else torch.float64
+        dtype = torch.float32 if t.dtype is DType.FLOAT32 else torch.float64
         device = resolve_device(t.device)
         started = time.perf_counter()
         self._deadline = started + 60.0 * t.max_minutes if t.max_minutes > 0 else math.inf
         self._resume = self.checkpoint.load() if self.checkpoint is not None and self.resume else None
         train, val, samples, report = self.split(runs, dtype, device)
-        if kind != "mmg" and exp.gate.enabled and exp.gate.k > len(samples[0]):
+        if kind is not ModelKind.MMG and exp.gate.enabled and exp.gate.k > len(samples[0]):
             raise ConfigError(f"{exp.source or 'experiment'}: [gate] k = {exp.gate.k}: more neighbours than "
                               f"the {len(samples[0])} training samples the gate's bank holds")
         # velocity weights w_v: inverse variance of the recorded velocities
         w_v = 1.0 / train.states[:, :, VEL].reshape(-1, 3).var(0)
         identify = bool(exp.identify.parameters)
-        joint = exp.identify.stage == "joint"
+        joint = exp.identify.stage is Stage.JOINT
         mmg = build_mmg(exp, dtype).to(device)
         summary = TrainingSummary(len(train), len(val), report, str(device))
         self._summary, self._history = summary, []
@@ -560,8 +573,8 @@ class Trainer:
             self._history = list(self._resume["history"])
         if identify and not summary.identified_initial:
             summary.identified_initial = self._coefficients(mmg)
-        if identify and (kind == "mmg" or not joint) and resumed_in != "train":
-            if exp.identify.solver == "levenberg_marquardt":
+        if identify and (kind is ModelKind.MMG or not joint) and resumed_in != "train":
+            if exp.identify.solver is Solver.LEVENBERG_MARQUARDT:
                 stage, uncertainty, estimator = self.identify_least_squares(mmg, runs, train, val, w_v, device)
             else:
                 stage = self.identify(mmg, train, val, w_v)
@@ -575,9 +588,9 @@ class Trainer:
         if identify and not joint:
             mmg.requires_grad_(False)
         model = mmg
-        if kind != "mmg" and summary.failure is None:
+        if kind is not ModelKind.MMG and summary.failure is None:
             net = ForceCorrection(exp.network.hidden, dtype, exp.network.members).to(device)
-            model = CorrectedModel(mmg, net, None, physics=(kind == "hybrid"), gate_space=exp.gate.space)
+            model = CorrectedModel(mmg, net, None, physics=(kind is ModelKind.HYBRID), gate_space=exp.gate.space)
             if resumed_in != "train":
                 with torch.no_grad():
                     summary.mmg_val_loss = float(multistep_loss(mmg, val, w_v)[0])
@@ -595,7 +608,7 @@ class Trainer:
             params = list(net.parameters()) + (list(mmg.parameters()) if identify and joint else [])
             if resumed_in == "train":  # buffers (standardisation) first: w_F depends on them
                 PerMember(model).load_state_dict(self._resume["model"])
-            w_F = 1.0 / net.output_std if kind == "hybrid" else None
+            w_F = 1.0 / net.output_std if kind is ModelKind.HYBRID else None
             stage = self.train(model, params, train, val, w_v, w_F)
             self._history += stage.history
             summary.stopped["train"] = stage.stopped

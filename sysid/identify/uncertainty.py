@@ -2,7 +2,7 @@
 undetermined directions from the curvature of the multi-step loss.
 
 The residuals are those of the multi-step velocity loss the coefficients were identified
-with: every window is integrated (`rollout`, the schemes of `sysid.dynamics.equations.integrate`)
+with: every window is integrated (`rollout`, the rules of `sysid.dynamics.integrators`)
 from its recorded first state with its recorded inputs,
 and r = sqrt(w_v) * (predicted - recorded) for (u, v_m, r) at every later step. With J =
 d r / d theta (by forward-mode `torch.func.jacfwd`, theta the coefficients' physical
@@ -31,7 +31,9 @@ import torch
 from torch import nn
 from torch.func import functional_call, jacfwd
 
-from sysid.dynamics.equations import state_derivative
+from sysid.config.choices import Method
+from sysid.dynamics import integrators
+from sysid.dynamics.equations import derivative
 from sysid.mmg.coefficients import raw_value
 from sysid.state import VELOCITY_INDEX
 
@@ -100,34 +102,19 @@ class CoefficientUncertainty:
         return "\n".join(rows)
 
 
-def rollout(model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float, method: str = "euler") -> torch.Tensor:
+def rollout(model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
+            method: Method = Method.EULER) -> torch.Tensor:
     """Fixed-step prediction (T, ..., 6) from x0 (..., 6) with inputs (T, ..., 4) held over
-    each step: the same schemes as `sysid.dynamics.equations.integrate` ("euler", classical "rk4"),
-    written out so forward-mode transforms (`torch.func.jacfwd`) can pass through it."""
-    if method not in ("euler", "rk4"):
-        raise ValueError(f"integrator {method!r}: choose euler or rk4")
-    out, x = [x0], x0
-    for k in range(inputs.shape[0] - 1):
-        held = inputs[k]
-
-        def f(s):
-            return state_derivative(s, model(s, held).total, model.coefficients)
-        if method == "euler":
-            x = x + dt * f(x)
-        else:
-            k1 = f(x)
-            k2 = f(x + 0.5 * dt * k1)
-            k3 = f(x + 0.5 * dt * k2)
-            k4 = f(x + dt * k3)
-            x = x + dt / 6.0 * (k1 + 2.0 * (k2 + k3) + k4)
-        out.append(x)
-    return torch.stack(out)
+    each step: the step loop of `sysid.dynamics.integrators.rollout` (no torchdiffeq), so
+    forward-mode transforms (`torch.func.jacfwd`) pass through it; the same numbers as
+    `sysid.dynamics.equations.integrate` with Euler or classical RK4."""
+    return integrators.rollout(lambda s, u: derivative(model, s, u), x0, inputs, dt, method)
 
 
 class _Rollout(nn.Module):
     """Wraps a force model so `functional_call` can swap its coefficients for a whole rollout."""
 
-    def __init__(self, model: nn.Module, method: str):
+    def __init__(self, model: nn.Module, method: Method):
         super().__init__()
         self.model = model
         self.method = method
@@ -151,7 +138,7 @@ def velocity_weights(states: torch.Tensor) -> torch.Tensor:
 
 
 def multistep_residuals(model: nn.Module, windows, names: Sequence[str], weights: torch.Tensor | None = None,
-                        method: str = "euler") -> tuple[Callable[..., torch.Tensor], torch.Tensor]:
+                        method: Method = Method.EULER) -> tuple[Callable[..., torch.Tensor], torch.Tensor]:
     """The residual function theta -> r (T, W, 3) of the multi-step loss, and theta now.
 
     The function also takes an optional ``start`` (W, 3): the (u, v_m, r) each window starts
@@ -163,7 +150,7 @@ def multistep_residuals(model: nn.Module, windows, names: Sequence[str], weights
         (e.g. the training `WindowSet`); T = L - 1 predicted steps.
     names : coefficient names (canonical, e.g. ``"Y_v"``) that theta holds.
     weights : (3,) w_v, default `velocity_weights` of the windows.
-    method : integrator ("euler" as in training, or "rk4").
+    method : integrator (Euler as in training, or classical RK4).
     """
     coefficients = model.coefficients
     prefix = _coefficient_prefix(model)
@@ -197,7 +184,7 @@ def multistep_residuals(model: nn.Module, windows, names: Sequence[str], weights
 
 
 def coefficient_uncertainty(model: nn.Module, windows, names: Sequence[str], weights: torch.Tensor | None = None,
-                            method: str = "euler", covariance: str = "sandwich", threshold: float = 0.5,
+                            method: Method = Method.EULER, covariance: str = "sandwich", threshold: float = 0.5,
                             rcond: float = 1e-10, penalty: np.ndarray | None = None) -> CoefficientUncertainty:
     """Standard errors, correlations and undetermined directions of `names`.
 

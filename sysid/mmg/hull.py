@@ -1,4 +1,4 @@
-"""Hull forces: Yoshimura's unified low-speed model (paper Eq. 26, MMG_SPEC §3).
+"""Hull forces: Yoshimura's unified low-speed model (paper Eq. 26; docs: MMG equations).
 
 Cross-flow drag integrals are evaluated in closed form (no quadrature), written so that
 no term cancels catastrophically when the yaw rate is small (float32 safe).
@@ -12,20 +12,6 @@ import torch
 from sysid.mmg.guards import SPEED_GUARD, safe_atan2, safe_div
 
 SIMPSON_POINTS = 100  # the lab simulator's sample count
-
-# name -> (section, low, high): the keys of the Yoshimura low-speed hull family
-PARAMETERS: dict[str, tuple[str, float, float]] = {
-    "X_0F": ("hull", -1.0, 0.0),   # -, resistance coefficient, ahead
-    "X_0A": ("hull", -1.0, 0.0),   # -, resistance coefficient, astern
-    "X_vr": ("hull", -2.0, 2.0),
-    "Y_v": ("hull", -5.0, 5.0),
-    "Y_r": ("hull", -5.0, 5.0),
-    "N_v": ("hull", -5.0, 5.0),
-    "N_r": ("hull", -5.0, 5.0),
-    "C_D": ("hull", 0.0, 5.0),     # -, cross-flow drag coefficient
-    "C_rY": ("hull", 0.0, 10.0),   # -, cross-flow correction, force
-    "C_rN": ("hull", 0.0, 10.0),   # -, cross-flow correction, moment
-}
 
 
 def simpson_avg_weights(points: int = SIMPSON_POINTS) -> torch.Tensor:

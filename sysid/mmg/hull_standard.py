@@ -16,22 +16,13 @@ import torch
 
 from sysid.mmg.guards import SPEED_GUARD, safe_div
 
-DERIVATIVES = ("R_0", "X_vv", "X_vr", "X_rr", "X_vvvv",
-               "Y_v", "Y_r", "Y_vvv", "Y_vvr", "Y_vrr", "Y_rrr",
-               "N_v", "N_r", "N_vvv", "N_vvr", "N_vrr", "N_rrr")
-
-# name -> (section, low, high); dimensionless derivatives (the prime is dropped)
-PARAMETERS: dict[str, tuple[str, float, float]] = {
-    "R_0": ("hull", 0.0, 1.0),
-    **{name: ("hull", -20.0, 20.0) for name in DERIVATIVES[1:]},
-}
-
 
 def hull_force_standard(u: torch.Tensor, v: torch.Tensor, r: torch.Tensor, c
                         ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """X_H [N], Y_H [N], N_H [N m about midship] from u, v (midship) [m/s], r [rad/s].
 
-    `c` carries L_pp [m], d [m], rho [kg/m^3] and the derivatives in `DERIVATIVES`.
+    `c` carries L_pp [m], d [m], rho [kg/m^3] and the derivatives of the family's table
+    (`sysid.mmg.families`).
     Any batch shape; float32 or float64.
     """
     L = c.L_pp

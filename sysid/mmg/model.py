@@ -47,7 +47,7 @@ class ForceBreakdown:
 
 
 class MMG(nn.Module):
-    """Batched, differentiable MMG model (paper Appendix A; MMG_SPEC).
+    """Batched, differentiable MMG model (paper Appendix A; docs: MMG equations).
 
     Parameters
     ----------

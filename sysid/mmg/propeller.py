@@ -1,4 +1,4 @@
-"""Propeller forces in four quadrants (paper Eqs. 27-35, MMG_SPEC §4).
+"""Propeller forces in four quadrants (paper Eqs. 27-35; docs: MMG equations).
 
 Q1: n >= 0, u >= 0 (standard MMG thrust); Q2: n >= 0, u < 0 (thrust plus lateral
 polynomials in J_s); Q3/Q4: n < 0 (CMT reverse-rotation polynomials). n = 0 follows the
@@ -11,26 +11,6 @@ from typing import NamedTuple
 import torch
 
 from sysid.mmg.guards import SPEED_GUARD, TINY
-
-# name -> (section, low, high): the keys of the four-quadrant propeller family
-PARAMETERS: dict[str, tuple[str, float, float]] = {
-    "D": ("propeller", 1e-3, 20.0),     # m, diameter
-    "P": ("propeller", 1e-3, 40.0),     # m, pitch
-    "t_P": ("propeller", 0.0, 0.99),
-    "w_P0": ("propeller", 0.0, 0.99),
-    "tau": ("propeller", -10.0, 10.0),
-    "C_P": ("propeller", -10.0, 10.0),
-    "x_P": ("propeller", -1.0, 1.0),    # -, x'_P = x_P / L_pp
-    "k0": ("propeller", -5.0, 5.0),
-    "k1": ("propeller", -5.0, 5.0),
-    "k2": ("propeller", -5.0, 5.0),
-    **{f"A{i}": ("propeller", -1.0, 1.0) for i in range(1, 9)},
-    **{f"B{i}": ("propeller", -1.0, 1.0) for i in range(1, 9)},
-    "C3": ("propeller", -5.0, 5.0),
-    "C6": ("propeller", -5.0, 5.0),
-    "C7": ("propeller", -5.0, 5.0),
-    "C10": ("propeller", -10.0, 10.0),
-}
 
 
 class PropellerState(NamedTuple):

@@ -14,7 +14,7 @@ the propeller, beta_P = beta - x'_P r' (beta = atan2(-v_m, u), r' = r L / U):
 
 The paper is not on this machine: the formulas are written as the paper's from the
 authors' reading of it (equation numbers are not given for that reason); shipmmg's form
-is checked against shipmmg itself (tests/test_shipmmg_kvlcc2.py).
+is checked against shipmmg itself (tests/mmg/test_shipmmg_kvlcc2.py).
 
 Ahead motion and ahead revolutions (u > 0, n > 0) are the model's range; n = 0 gives zero
 thrust and J_P = 0.
@@ -25,22 +25,6 @@ import torch
 
 from sysid.mmg.guards import SPEED_GUARD, TINY, safe_atan2, safe_div
 from sysid.mmg.propeller import PropellerState
-
-# name -> (section, low, high)
-PARAMETERS: dict[str, tuple[str, float, float]] = {
-    "D": ("propeller", 1e-3, 20.0),      # m, diameter
-    "t_P": ("propeller", 0.0, 0.99),     # -, thrust deduction
-    "w_P0": ("propeller", 0.0, 0.99),    # -, wake fraction in straight motion
-    "x_P": ("propeller", -1.0, 1.0),     # -, x'_P = x_P / L_pp (negative: aft)
-    "k0": ("propeller", -5.0, 5.0),      # -, K_T polynomial
-    "k1": ("propeller", -5.0, 5.0),
-    "k2": ("propeller", -5.0, 5.0),
-}
-WAKE_PARAMETERS: dict[str, tuple[str, float, float]] = {
-    "C_1": ("propeller", 0.0, 100.0),       # -, wake change rate with |beta_P|
-    "C_2_plus": ("propeller", 0.0, 10.0),   # -, asymptotic (1-w_P)/(1-w_P0), beta_P > 0
-    "C_2_minus": ("propeller", 0.0, 10.0),  # -, same for beta_P <= 0
-}
 
 
 def drift_angles(u, v, r, L):

@@ -1,4 +1,4 @@
-"""Rudder forces (paper Eqs. 36-48, MMG_SPEC §5).
+"""Rudder forces (paper Eqs. 36-48; docs: MMG equations).
 
 Longitudinal rudder inflow u_R has three branches: Yoshimura's low-speed form when
 n >= 0 and K_T > 0; Kitagawa's reverse-rotation form otherwise when u >= 0; and u_R = u
@@ -13,23 +13,6 @@ import torch
 
 from sysid.mmg.guards import safe_atan2, safe_sqrt
 from sysid.mmg.propeller import PropellerState
-
-# name -> (section, low, high): the keys of the four-quadrant (low-speed) rudder family
-PARAMETERS: dict[str, tuple[str, float, float]] = {
-    "A_R": ("rudder", 1e-6, 1e3),       # m^2
-    "lambda_R": ("rudder", 0.1, 10.0),  # -, aspect ratio
-    "epsilon": ("rudder", 0.1, 5.0),
-    "k_x": ("rudder", 0.0, 5.0),
-    "k_xPR": ("rudder", 0.0, 5.0),
-    "C_PR": ("rudder", -5.0, 5.0),
-    "x_R": ("rudder", -1e3, 0.0),       # m
-    "l_R": ("rudder", -1e3, 1e3),       # m
-    "gamma_P": ("rudder", 0.0, 5.0),
-    "gamma_N": ("rudder", 0.0, 5.0),
-    "t_R": ("rudder", 0.0, 0.99),
-    "a_H": ("rudder", -1.0, 5.0),
-    "x_H": ("rudder", -1e3, 1e3),       # m
-}
 
 
 class RudderInflow(NamedTuple):

@@ -22,22 +22,6 @@ from sysid.mmg.propeller import PropellerState
 from sysid.mmg.propeller_standard import drift_angles
 from sysid.mmg.rudder import RudderInflow
 
-# name -> (section, low, high)
-PARAMETERS: dict[str, tuple[str, float, float]] = {
-    "A_R": ("rudder", 1e-6, 1e3),            # m^2, rudder area
-    "H_R": ("rudder", 1e-4, 1e2),            # m, rudder span (eta = D / H_R)
-    "f_alpha": ("rudder", 0.0, 10.0),        # -, normal-force gradient
-    "epsilon": ("rudder", 0.1, 5.0),         # -, wake ratio rudder / propeller
-    "kappa": ("rudder", 0.0, 5.0),           # -, propeller-race factor
-    "x_R": ("rudder", -1e3, 0.0),            # m, rudder position (aft: negative)
-    "l_R": ("rudder", -1e3, 1e3),            # m, effective lever in beta_R (l'_R L_pp)
-    "gamma_R_minus": ("rudder", 0.0, 5.0),   # -, flow straightening, beta_R < 0
-    "gamma_R_plus": ("rudder", 0.0, 5.0),    # -, flow straightening, beta_R >= 0
-    "t_R": ("rudder", 0.0, 0.99),            # -, steering resistance deduction
-    "a_H": ("rudder", -1.0, 5.0),            # -, rudder force increase factor
-    "x_H": ("rudder", -1e3, 1e3),            # m, acting point of a_H F_N
-}
-
 
 def rudder_inflow_standard(u, v, r, n, delta, c, prop: PropellerState) -> RudderInflow:
     """u_R, v_R [m/s], alpha_R [rad], F_N [N]; u, v [m/s], r [rad/s], n [rps], delta [rad]."""

@@ -1,6 +1,6 @@
 """Ship definitions: a TOML file to a frozen, validated `Ship`.
 
-A ship TOML (``configs/ships/NAME.toml``) holds principal particulars, masses, one
+A ship TOML (a file, or a bundled ``sysid/configs/ships/NAME.toml`` by name) holds principal particulars, masses, one
 section per force component and the ``[sensors]`` table. Each of [hull], [propeller],
 [rudder] and the optional [wind] names its force-model family (``model = "standard"``;
 see `sysid.mmg.families`, the Esso Osaka's families when absent) and holds exactly the
@@ -13,14 +13,15 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
 from typing import Mapping
 
 from preprocessing.sensors import SensorLayout
+from sysid.bundled import bundled_dir
 from sysid.errors import ShipDefinitionError
+from sysid.store.toml_file import read_toml
 
 from sysid.mmg.families import COMPONENTS, DEFAULT_MODELS, FAMILIES, OPTIONAL_COMPONENTS
 
@@ -148,11 +149,8 @@ def _check_value(name: str, value: object, source: str,
 
 
 def ships_dir() -> Path:
-    """Directory of the bundled ship definitions (``$SYSID_CONFIGS/ships`` wins)."""
-    env = os.environ.get("SYSID_CONFIGS")
-    if env:
-        return Path(env) / "ships"
-    return Path(__file__).resolve().parents[2] / "configs" / "ships"
+    """Directory of the bundled ship definitions (package data; ``$SYSID_CONFIGS/ships`` wins)."""
+    return bundled_dir("ships")
 
 
 def resolve_ship_path(name_or_path: str | os.PathLike) -> Path:
@@ -181,11 +179,7 @@ def load_ship(name_or_path: str | os.PathLike = "esso_osaka",
     overrides : parameter values replacing the file's, e.g. ``{"Xvr": 0.4535}``.
     """
     path = resolve_ship_path(name_or_path)
-    try:
-        with open(path, "rb") as fh:
-            doc = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
-        raise ShipDefinitionError(f"{path}: not valid TOML ({exc})") from None
+    doc, _ = read_toml(path, "ship file", ShipDefinitionError)
     src = str(path)
     for section in doc:
         if section not in SECTIONS + ("ship", "sensors"):

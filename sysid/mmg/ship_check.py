@@ -14,11 +14,13 @@ from sysid.mmg.ship import Ship
 
 @dataclass
 class ShipCheck:
-    """quantities : (label, value, unit) rows; warnings : one sentence each."""
+    """quantities : (label, value, unit) rows; verdicts : what a value means, one sentence
+    each (course stability); warnings : one sentence each."""
 
     ship: Ship
     quantities: list[tuple[str, float, str]] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    verdicts: list[str] = field(default_factory=list)
 
     def text(self) -> str:
         lines = [f"ship {self.ship.name!r} from {self.ship.source}",
@@ -27,8 +29,16 @@ class ShipCheck:
         width = max(len(label) for label, _, _ in self.quantities)
         lines += [f"  {label:<{width}}  {value:.6g} {unit}".rstrip() for label, value, unit in self.quantities]
         lines.append("")
+        lines += self.verdicts
         lines += [f"warning: {w}" for w in self.warnings] or ["no warnings"]
         return "\n".join(lines)
+
+
+def course_stability_verdict(index: float) -> str:
+    """The hull's straight-line stability in words, from C' (`check_ship`)."""
+    if index > 0:
+        return f"course stability: C' = {index:.3g} > 0: the bare hull is course-stable"
+    return f"course stability: C' = {index:.3g} {'<' if index < 0 else '='} 0: the bare hull is course-unstable"
 
 
 def check_ship(ship: Ship) -> ShipCheck:
@@ -50,11 +60,17 @@ def check_ship(ship: Ship) -> ShipCheck:
         warn(f"block coefficient {block:.3g} is outside [0.3, 1.0]: check m, rho, L_pp, B, d")
     if p["m_x"] > p["m"] or p["m_y"] > 2.0 * p["m"]:
         warn("added masses are large against the ship's mass: check [mass] m_x, m_y (kg, not non-dimensional)")
-    # linear straight-line stability of the hull alone (no rudder): C' > 0 stable
+    # straight-line (course) stability of the hull alone, rudder fixed at zero, from the
+    # linearised sway-yaw equations (Y - (m + m_x) u r, N - m x_G u r; sysid.dynamics):
+    # with the usual signs (Y'v < 0, N'r - m'x'_G < 0) the course is stable when C' > 0
     Yv, Yr, Nv, Nr = p["Y_v"], p["Y_r"], p["N_v"], p["N_r"]
     stability = Yv * (Nr - m_nd * xG_nd) - Nv * (Yr - m_nd - mx_nd)
-    add(("hull course stability C' = Y'v (N'r - m'x'_G) - N'v (Y'r - m' - m'_x)", stability,
-         "(> 0: stable)"))
+    add(("hull course-stability index C' = Y'v (N'r - m'x'_G) - N'v (Y'r - m' - m'_x)", stability, ""))
+    out.verdicts.append(course_stability_verdict(stability))
+    if stability <= 0:
+        warn(f"course-unstable bare hull: usual for full hull forms such as tankers (C_b = {block:.2f} here), "
+             "which the rudder keeps on course; if this ship is known to be course-stable, check [hull] Y_v, Y_r, "
+             "N_v, N_r and [mass] m, m_x, x_G")
     if Yv > 0 or Nr > 0:
         warn("Y'v > 0 or N'r > 0: sway and yaw damping of the hull should be negative")
     # propeller

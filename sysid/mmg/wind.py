@@ -1,4 +1,4 @@
-"""Wind forces: Fujiwara's regression (paper Eqs. 49-54, MMG_SPEC §6).
+"""Wind forces: Fujiwara's regression (paper Eqs. 49-54; docs: MMG equations).
 
 The input is the *true* wind (U_T, zeta: speed and the earth-frame direction it comes
 from, x0 towards y0); the relative wind is computed from the ship's current state, as the
@@ -14,15 +14,6 @@ import torch
 from sysid.mmg.guards import SPEED_GUARD, safe_atan2
 
 TWO_PI = 2.0 * math.pi
-
-# name -> (section, low, high): the keys of Fujiwara's wind family (rho_air sits in [principal])
-PARAMETERS: dict[str, tuple[str, float, float]] = {
-    "rho_air": ("principal", 0.5, 2.0),  # kg/m^3
-    "A_T": ("wind", 0.0, 1e5),           # m^2, transverse projected area
-    "A_L": ("wind", 0.0, 1e6),           # m^2, lateral projected area
-    "L_wind": ("wind", 1e-3, 1e3),       # m, moment lever
-    **{k: ("wind", -10.0, 10.0) for k in ("X0", "X1", "X3", "X5", "Y1", "Y3", "Y5", "N1", "N2", "N3")},
-}
 
 
 class RelativeWind(NamedTuple):

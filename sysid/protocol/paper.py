@@ -2,20 +2,19 @@
 the one long table of our runs beside them (`comparison_table`), with the model labels
 every table and figure uses (`model_label`, `run_label`).
 
-One source: ``configs/paper/tables_7_8.csv`` (the paper's numbers; MMG rows are the same for
+One source: ``sysid/configs/paper/tables_7_8.csv`` (package data) (the paper's numbers; MMG rows are the same for
 both data sets). Scenario names match in any spelling ("Turning 20°", "turning 20 test").
 """
 from __future__ import annotations
 
 import re
 from functools import lru_cache
-from pathlib import Path
 
 import pandas as pd
 
+from sysid.bundled import bundled_dir
 from sysid.errors import ConfigError
 
-TABLE = Path(__file__).resolve().parents[2] / "configs" / "paper" / "tables_7_8.csv"
 KIND_LABELS = {"mmg": "MMG", "nn": "NN", "hybrid": "Hybrid"}  # the paper's model names
 
 
@@ -29,9 +28,10 @@ def scenario_key(name: str) -> str:
 @lru_cache(maxsize=1)
 def paper_table() -> pd.DataFrame:
     """Rows scenario, model (MMG/NN/Hybrid), dataset, horizon_s, rmse_u, rmse_v, rmse_r."""
-    if not TABLE.is_file():
-        raise ConfigError(f"{TABLE}: the paper's Tables 7/8 are missing")
-    return pd.read_csv(TABLE)
+    table = bundled_dir("paper") / "tables_7_8.csv"
+    if not table.is_file():
+        raise ConfigError(f"{table}: the paper's Tables 7/8 are missing")
+    return pd.read_csv(table)
 
 
 @lru_cache(maxsize=1)

@@ -14,16 +14,16 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from sysid.data.recordings import read_run
-from sysid.data.datasets import TEST_FILES, data_root, test_files
+from sysid.data.datasets import TEST_FILES, data_root
+from sysid.bundled import bundled_dir
 from sysid.errors import ConfigError
+from sysid.config.choices import ModelKind
 from sysid.config.experiment import Experiment, load_experiment
 from sysid.store.files import write_csv, write_text
-from sysid.runs.lifecycle import run_experiment, training_runs
+from sysid.runs.lifecycle import cached_test_runs, cached_training_runs, run_experiment
 from sysid.protocol.paper import MODEL_LABELS, comparison_table, model_label
 from sysid.workers import in_workers
 
-CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 # run name -> experiment config; labels and data sets come from the configs
 PROTOCOL = {
     "mmg_paper": "mmg_paper.toml",
@@ -42,7 +42,7 @@ def protocol_experiment(name: str) -> Experiment:
     """The experiment of a protocol run."""
     if name not in PROTOCOL:
         raise ConfigError(f"unknown protocol run {name!r}: choose from {', '.join(PROTOCOL)}")
-    return load_experiment(CONFIGS / "experiments" / PROTOCOL[name])
+    return load_experiment(bundled_dir("experiments") / PROTOCOL[name])
 
 
 def markdown_table(table: pd.DataFrame, horizon: int) -> str:
@@ -117,21 +117,10 @@ class ProtocolRun:
     seconds: float
 
 
-_TRAINING_CACHE: dict = {}
-
-
 def _run_one(name: str, exp: Experiment, out: Path, data, progress: bool, log) -> ProtocolRun:
     """One protocol run through `run_experiment` (in this process or a worker's)."""
-    tests = _TRAINING_CACHE.get("tests")
-    if tests is None:
-        tests = _TRAINING_CACHE["tests"] = [read_run(p) for p in test_files(data).values()]
-    train = None
-    if exp.needs_training:
-        key = (exp.experiment.dataset, exp.data.files, exp.data.rate)
-        if key not in _TRAINING_CACHE:
-            _TRAINING_CACHE[key] = training_runs(exp, data)
-        train = _TRAINING_CACHE[key]
-    result = run_experiment(exp, out / "runs" / name, tests, train, data, progress, log=log)
+    train = cached_training_runs(exp, data) if exp.needs_training else None
+    result = run_experiment(exp, out / "runs" / name, cached_test_runs(data), train, data, progress, log=log)
     return ProtocolRun(name, exp.experiment.model, exp.experiment.dataset if exp.needs_training else "-",
                        result.evaluation.metrics, result.evaluation.gate_off_share, result.failure, result.seconds)
 
@@ -139,7 +128,7 @@ def _run_one(name: str, exp: Experiment, out: Path, data, progress: bool, log) -
 def expected_cost(exp: Experiment) -> float:
     """Relative training cost of a run, to start the longest first (results do not depend
     on the order; the wall time does): hybrid > NN-only > identification, D2 about twice D1."""
-    cost = {"hybrid": 5.0, "nn": 3.5, "mmg": 0.0}[exp.experiment.model] + 1.5 * bool(exp.identify.parameters)
+    cost = {ModelKind.HYBRID: 5.0, ModelKind.NN: 3.5, ModelKind.MMG: 0.0}[exp.experiment.model] + 1.5 * bool(exp.identify.parameters)
     return cost * (2.0 if exp.data.files or exp.experiment.dataset == "D2" else 1.0)
 
 
@@ -157,14 +146,13 @@ def _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, d
     log(f"training {len(trained)} runs x {seeds} seeds = {len(trained) * seeds} trials on Ray, "
         f"{jobs} side by side" + (f" on {address}" if address else ""))
     groups = train_seeds({n: experiments[n] for n in ordered}, seeds, out, str(data_root(data)), jobs, address, log)
-    tests = _TRAINING_CACHE.get("tests") or [read_run(p) for p in test_files(data).values()]
-    _TRAINING_CACHE["tests"] = tests
+    tests = cached_test_runs(data)
     ensembles = []
     for name in trained:
         exp, group = experiments[name], groups[name]
         done[name] = ProtocolRun(name, exp.experiment.model, exp.experiment.dataset, group.metrics,
                                  group.gate_off_share, group.failure, group.seconds)
-        if exp.experiment.model != "mmg" and group.seeds:
+        if exp.experiment.model is not ModelKind.MMG and group.seeds:
             target, evaluation, _ = write_ensemble(name, exp, group, out, tests)
             done[target] = ProtocolRun(target, exp.experiment.model, exp.experiment.dataset, evaluation.metrics,
                                        evaluation.gate_off_share, None, 0.0)
@@ -193,7 +181,7 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
     experiments = {}
     for name in names:
         exp = protocol_experiment(name)
-        experiments[name] = exp.replace(**overrides) if overrides and exp.experiment.model != "mmg" else exp
+        experiments[name] = exp.replace(**overrides) if overrides and exp.experiment.model is not ModelKind.MMG else exp
     done: dict[str, ProtocolRun] = {}
     trained = [n for n in names if experiments[n].needs_training]
     ensembles: list[str] = []

@@ -25,7 +25,7 @@ from sysid.report.html import HtmlFigure, figure_svg, render_html  # noqa: E402
 from sysid.report.methods import methods_paragraphs, run_rows, summary_items  # noqa: E402
 from sysid.report.palette import model_colour  # noqa: E402
 from sysid.report.pdf import PdfReport, paginate, pdf_style, table_pages, text_blocks, text_lines  # noqa: E402
-from sysid.report.plan import figure_plan  # noqa: E402
+from sysid.report.figure_plan import figure_plan  # noqa: E402
 from sysid.report.quality import quality_rows  # noqa: E402
 from sysid.report.source import ReportSource, read_source  # noqa: E402
 from sysid.report.tables import build_tables  # noqa: E402

@@ -104,20 +104,31 @@ def _signed_deg(angle_rad: np.ndarray) -> np.ndarray:
     return (np.asarray(angle_rad) * RAD2DEG + 180.0) % 360.0 - 180.0
 
 
+def _measured_relative_wind(frame: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+    """(U_A [m/s], gamma_A [rad]) seen by the recorded state: the trace's observed u, v_m,
+    psi and the true wind, through the MMG's relative wind (`sysid.mmg.wind`)."""
+    import torch
+
+    from sysid.mmg.wind import relative_wind
+
+    cols = ["obs_u", "obs_v", "obs_psi", "wind_velo_true", "wind_dir_true"]
+    wind = relative_wind(*torch.as_tensor(frame[cols].to_numpy(dtype=float)).unbind(-1))
+    return wind.U_A.numpy(), wind.gamma_A.numpy()
+
+
 def actuator_wind(traces: list[ModelTrace], start_s: float, title: str,
                   into: FigureBase | None = None) -> FigureBase:
     """Propeller speed [rps], rudder angle [deg] and the relative wind speed [m/s] and
     direction [deg] (Figs. 6, 8) in the window starting nearest `start_s`. The relative
     wind of each model is the one seen by its predicted state; "measured" uses the
     recorded state."""
-    from sysid.report.wind import measured_relative_wind
     fig = _canvas(into, TALL)
     axes = fig.subplots(4, 1, sharex=True)
     first = _window(traces[0].frame, start_s)
     t = first["t"].to_numpy()
     axes[0].plot(t, first["n_prop"], color=MEASURED, drawstyle="steps-post")
     axes[1].plot(t, first["delta_rudder"] * RAD2DEG, color=MEASURED, drawstyle="steps-post")
-    U_A, gamma_A = measured_relative_wind(first)
+    U_A, gamma_A = _measured_relative_wind(first)
     axes[2].plot(t, U_A, color=MEASURED, lw=1.6)
     axes[3].plot(t, _signed_deg(gamma_A), color=MEASURED, lw=1.6, ls="", marker=".", ms=3)
     for tr in traces:

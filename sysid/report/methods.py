@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import datetime as _dt
 import hashlib
-import platform
 from dataclasses import dataclass
 
 from sysid.identify.levenberg_marquardt import start_state_verdict
 from sysid.protocol.paper import run_label
 from sysid.report.quality import quality_rows
 from sysid.report.source import ReportSource, RunRecord
+from sysid.store.versions import software_versions
 
 MODEL_TEXT = {
     "mmg": "MMG model (hull, propeller, rudder and wind forces of the ship definition); not trained",
@@ -140,18 +140,6 @@ def sweep_items(source: ReportSource, top: int = 8) -> list[tuple[str, str]]:
         items.append((f"#{i}", f"{row.point}: {row.val_loss_mean:.5f}" + ("" if std != std else f" ± {std:.5f}")
                       + f" ({row.complete} of {row.seeds} seeds)"))
     return items
-
-
-def software_versions() -> dict[str, str]:
-    """Versions of the software building the report."""
-    import matplotlib
-    import numpy
-    import pandas
-    import torch
-
-    import sysid
-    return {"python": platform.python_version(), "sysid": sysid.__version__, "torch": torch.__version__,
-            "numpy": numpy.__version__, "pandas": pandas.__version__, "matplotlib": matplotlib.__version__}
 
 
 def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -> list[tuple[str, str]]:

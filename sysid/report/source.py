@@ -16,7 +16,8 @@ import pandas as pd
 
 from preprocessing.quality import QualityReport
 from sysid.errors import CheckpointError
-from sysid.config.experiment import KINDS as MODEL_KINDS, load_experiment
+from sysid.config.choices import ModelKind
+from sysid.config.experiment import load_experiment
 from sysid.evaluation.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
 from sysid.store.manifest import has_manifest, verify_manifest
 from sysid.runs.rundir import read_knn_bank, verify_run_dir
@@ -153,7 +154,7 @@ class ReportSource:
 
 def _run_order(run: RunRecord) -> tuple:
     """MMG (paper X'vr first), NN, hybrid; data sets in order."""
-    return (MODEL_KINDS.index(run.model), run.name != "mmg_paper", run.dataset, run.name)
+    return (list(ModelKind).index(ModelKind(run.model)), run.name != "mmg_paper", run.dataset, run.name)
 
 
 def read_run_dir(path: Path) -> RunRecord:
@@ -176,8 +177,8 @@ def read_run_dir(path: Path) -> RunRecord:
     metrics["scenario"] = scenario.where(scenario != "", stems)
     history = _read_table(path / "history.csv", ["epoch", "train_loss", "val_loss"], required=False)
     model = str(summary.get("model", "mmg")).lower()
-    if model not in MODEL_KINDS:
-        raise CheckpointError(f"{path / 'summary.json'}: model {model!r} is not one of {MODEL_KINDS}")
+    if model not in ModelKind.offered():
+        raise CheckpointError(f"{path / 'summary.json'}: model {model!r} is not one of {ModelKind.listing()}")
     return RunRecord(path.name, path, summary, config_text, config,
                      metrics, history)
 

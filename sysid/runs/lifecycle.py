@@ -5,6 +5,7 @@ sweep; the training data come from ``[data] files`` or the data set D1/D2.
 """
 from __future__ import annotations
 
+import glob
 import os
 import time
 from dataclasses import dataclass
@@ -15,8 +16,8 @@ import pandas as pd
 import torch
 
 from sysid.identify.checkpoint import TrainingCheckpoint
-from sysid.data.recordings import Run, read_run
-from sysid.data.datasets import training_files
+from sysid.data.recordings import Run, expand_paths, read_run
+from sysid.data.datasets import test_files, training_files
 from sysid.device import compute_threads
 from sysid.errors import ConfigError, TrainingError
 from sysid.evaluation.evaluate import Evaluation, evaluate_model, short_runs
@@ -47,8 +48,32 @@ class RunResult:
 
 def training_runs(exp: Experiment, data: str | os.PathLike | None = None) -> list[Run]:
     """The experiment's training files (``[data] files`` or its data set), read and checked."""
-    files = [Path(f) for f in exp.data.files] if exp.data.files else training_files(exp.experiment.dataset, data)
+    if not exp.data.files:
+        files = training_files(exp.experiment.dataset, data)
+    else:  # folders and patterns expanded; a plain file is read as named ("file not found" if missing)
+        files = [f for item in exp.data.files for f in (
+            expand_paths([item]) if glob.has_magic(item) or Path(item).is_dir() else [Path(item)])]
     return [read_run(f, exp.data.rate) for f in files]
+
+
+_READ: dict[tuple, list[Run]] = {}  # recordings read once per process (protocol runs and sweep trials share them)
+
+
+def cached_test_runs(data: str | os.PathLike | None = None) -> list[Run]:
+    """The protocol's six test recordings (`sysid.data.datasets.test_files`), read once per
+    process and data directory."""
+    key = ("tests", None if data is None else str(data))
+    if key not in _READ:
+        _READ[key] = [read_run(p) for p in test_files(data).values()]
+    return _READ[key]
+
+
+def cached_training_runs(exp: Experiment, data: str | os.PathLike | None = None) -> list[Run]:
+    """`training_runs`, read once per process for each training set (files or data set, rate)."""
+    key = ("training", None if data is None else str(data), exp.experiment.dataset, exp.data.files, exp.data.rate)
+    if key not in _READ:
+        _READ[key] = training_runs(exp, data)
+    return _READ[key]
 
 
 def checkpoint_path(out_dir: str | os.PathLike) -> Path:

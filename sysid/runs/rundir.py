@@ -44,7 +44,6 @@ from __future__ import annotations
 
 import json
 import os
-import platform
 import time
 import warnings
 from pathlib import Path
@@ -63,18 +62,7 @@ from sysid.mmg.model import MMG
 from sysid.hybrid.force_models import CorrectedModel, build_model
 from sysid.hybrid.knn_gate import KNNGate
 from sysid.store.staging import staged_directory
-
-
-def versions() -> dict[str, str]:
-    """Versions of the software a run was made with."""
-    import numpy
-    import pandas
-    import scipy
-    import torchdiffeq
-    from sysid import __version__
-    return {"sysid": __version__, "python": platform.python_version(), "torch": torch.__version__,
-            "torchdiffeq": getattr(torchdiffeq, "__version__", "?"), "numpy": numpy.__version__,
-            "pandas": pandas.__version__, "scipy": scipy.__version__}
+from sysid.store.versions import software_versions
 
 
 def _save_tensors(obj, path: Path) -> None:
@@ -140,7 +128,7 @@ def read_knn_bank(path: str | os.PathLike, exp: Experiment | None = None) -> dic
     if features is not None and bank.shape[1] != features:
         turned = " (transposed?)" if bank.shape[0] == features else ""
         raise bad(f"bank has shape {tuple(bank.shape)}, expected (N, {features}) for [gate] space = "
-                  f"{exp.gate.space!r}{turned}")
+                  f"'{exp.gate.space}'{turned}")
     if bank.shape[0] == 0:
         raise bad("bank is empty (0 training features)")
     for name in ("threshold", "k", "alpha"):
@@ -241,7 +229,7 @@ def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds:
         "stopped": info.pop("stopped", {}),
         "n_train_windows": info.pop("n_train_windows", None),
         "n_val_windows": info.pop("n_val_windows", None),
-        "versions": versions(), "mmg_overrides": ship_overrides(exp),
+        "versions": software_versions(), "mmg_overrides": ship_overrides(exp),
         "identified": info.pop("identified", {}) or {},
         "identified_initial": info.pop("identified_initial", {}) or {},
         "identified_uncertainty": info.pop("identified_uncertainty", None),

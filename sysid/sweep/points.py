@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from sysid.config.choices import Search
 from sysid.sweep.spec import Axis, SweepSpec
 
 
@@ -57,10 +58,10 @@ def sweep_points(spec: SweepSpec) -> list[dict[str, Any]]:
     """Grid: every combination of the axes' values, in file order. Random: ``samples`` draws
     from a generator seeded with ``search_seed`` (the same points on every run). Optuna
     proposes its points while it runs: none here."""
-    if spec.search == "grid":
+    if spec.search is Search.GRID:
         keys = spec.keys
         return [dict(zip(keys, combo)) for combo in itertools.product(*(a.values for a in spec.axes))]
-    if spec.search == "random":
+    if spec.search is Search.RANDOM:
         rng = np.random.default_rng(spec.search_seed)
         return [{a.key: _draw(a, rng) for a in spec.axes} for _ in range(spec.samples)]
     return []

@@ -35,10 +35,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sysid.config.choices import Search
 from sysid.errors import ConfigError
+from sysid.store.toml_file import read_toml
 from sysid.config.experiment import Experiment, load_experiment, parse_experiment
 
-SEARCHES = ("grid", "random", "optuna")
 OBJECTIVES = ("val_loss",)
 DISTRIBUTIONS = ("uniform", "loguniform", "randint", "choice")
 
@@ -70,13 +71,14 @@ class SweepSpec:
     base_path: Path
     axes: tuple[Axis, ...]
     seeds: tuple[int, ...] = (0,)
-    search: str = "grid"
+    search: Search = Search.GRID
     samples: int = 1
     objective: str = "val_loss"
     max_retries: int = 2
     search_seed: int = 0
     source: str = ""
     text: str = ""                        # the sweep file as written (kept beside the results)
+    directory: Path | None = None         # the sweep file's; relative paths in [set] / [vary] resolve here
 
     @property
     def keys(self) -> list[str]:
@@ -84,7 +86,7 @@ class SweepSpec:
 
     def experiment(self, values: dict[str, Any], seed: int, name: str) -> Experiment:
         """The base experiment with `values` ({"section.option": value}) and `seed` set."""
-        return apply_values(self.base, values, seed, name, self.source)
+        return apply_values(self.base, values, seed, name, self.source, self.directory)
 
 
 def base_document(exp: Experiment) -> dict:
@@ -93,8 +95,9 @@ def base_document(exp: Experiment) -> dict:
 
 
 def apply_values(base: Experiment, values: dict[str, Any], seed: int, name: str,
-                 source: str = "<sweep>") -> Experiment:
-    """`base` with ``{"section.option": value}`` applied and validated like a config file."""
+                 source: str = "<sweep>", directory: Path | None = None) -> Experiment:
+    """`base` with ``{"section.option": value}`` applied and validated like a config file;
+    relative paths among the values resolve against `directory` (the sweep file's)."""
     doc = base_document(base)
     for key, value in values.items():
         section, option = key.split(".", 1)
@@ -102,7 +105,7 @@ def apply_values(base: Experiment, values: dict[str, Any], seed: int, name: str,
     doc["experiment"]["seed"] = int(seed)
     doc["experiment"]["name"] = name
     where = f"{source}: [vary] " + ", ".join(f"{k} = {v!r}" for k, v in values.items()) if values else source
-    exp = parse_experiment(doc, where)
+    exp = parse_experiment(doc, where, directory)
     return dataclasses.replace(exp, source=base.source)
 
 
@@ -145,7 +148,7 @@ def _axis(src: str, key: str, value: Any, base: Experiment) -> Axis:
     raise ConfigError(f"{where}: expected a list of values or a distribution table, got {value!r}")
 
 
-def _check_axis_values(spec_src: str, axis: Axis, base: Experiment) -> None:
+def _check_axis_values(spec_src: str, axis: Axis, base: Experiment, directory: Path | None = None) -> None:
     """Apply every value (or both bounds) alone to the base config: bad ones fail now."""
     if axis.distribution:
         low, high = axis.bounds
@@ -153,7 +156,7 @@ def _check_axis_values(spec_src: str, axis: Axis, base: Experiment) -> None:
     else:
         probes = list(axis.values)
     for value in probes:
-        apply_values(base, {axis.key: value}, base.experiment.seed, base.experiment.name, spec_src)
+        apply_values(base, {axis.key: value}, base.experiment.seed, base.experiment.name, spec_src, directory)
 
 
 def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = None, text: str = "") -> SweepSpec:
@@ -181,10 +184,11 @@ def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = Non
         _axis(source, key, [value], base)  # the key is an option (and not the seed)
     if fixed:
         base = apply_values(base, {k: tuple(v) if isinstance(v, list) else v for k, v in fixed.items()},
-                            base.experiment.seed, base.experiment.name, source)
-    search = table.get("search", "grid")
-    if search not in SEARCHES:
-        raise ConfigError(f"{source}: [sweep] search = {search!r}: choose one of {', '.join(SEARCHES)}")
+                            base.experiment.seed, base.experiment.name, source, directory)
+    try:
+        search = Search.parse(table.get("search", "grid"), f"{source}: [sweep] search")
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
     objective = table.get("objective", "val_loss")
     if objective not in OBJECTIVES:
         raise ConfigError(f"{source}: [sweep] objective = {objective!r}: the objective is the validation "
@@ -207,24 +211,16 @@ def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = Non
         raise ConfigError(f"{source}: [vary] must be a table of \"section.option\" = values")
     axes = tuple(_axis(source, key, value, base) for key, value in vary.items())
     for axis in axes:
-        if search == "grid" and axis.distribution:
+        if search is Search.GRID and axis.distribution:
             raise ConfigError(f"{source}: [vary] {axis.key!r}: a {axis.distribution} distribution needs "
                               "search = \"random\" or \"optuna\" (grid search takes a list of values)")
-        _check_axis_values(source, axis, base)
+        _check_axis_values(source, axis, base, directory)
     return SweepSpec(name, base, base_path, axes, tuple(seeds), search, ints["samples"], objective,
-                     ints["max_retries"], ints["search_seed"], source, text)
+                     ints["max_retries"], ints["search_seed"], source, text, directory)
 
 
 def load_sweep(path: str | os.PathLike) -> SweepSpec:
     """Read and validate a sweep file; errors name the file and key."""
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"{path}: sweep file not found")
-    try:
-        text = path.read_text()
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML ({exc})") from None
-    except UnicodeDecodeError:
-        raise ConfigError(f"{path}: not UTF-8 text; a sweep file is a UTF-8 TOML file") from None
+    doc, text = read_toml(path, "sweep file", ConfigError)
     return parse_sweep(doc, str(path), path.resolve().parent, text)

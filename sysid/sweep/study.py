@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 from typing import Callable
 
+from sysid.config.choices import Search
 from sysid.errors import ConfigError, OutputError
 from sysid.store.files import write_text
 from sysid.store.manifest import write_manifest
@@ -72,7 +73,7 @@ def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = Non
     prepare_output(spec, out, resume, overwrite)
     workers = workers or default_workers()
     context = TrialContext(str(out.resolve()), data, spec.source)
-    if spec.search == "optuna":
+    if spec.search is Search.OPTUNA:
         log(f"sweep {spec.name}: optuna, {spec.samples} configurations x {len(spec.seeds)} seeds, "
             f"{workers} workers" + (f" on {address}" if address else ""))
         errors = run_optuna(spec, context, workers, address, resume=resume, log=log)

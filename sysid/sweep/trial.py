@@ -17,11 +17,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from sysid.data.recordings import read_run
-from sysid.data.datasets import test_files
 from sysid.errors import IncompleteOutputError
 from sysid.config.experiment import parse_experiment
-from sysid.runs.lifecycle import checkpoint_path, run_experiment, training_runs
+from sysid.runs.lifecycle import cached_test_runs, cached_training_runs, checkpoint_path, run_experiment
 from sysid.runs.rundir import verify_run_dir
 from sysid.sweep.trial_lock import trial_lock
 
@@ -100,15 +98,6 @@ def result_row(trial: TrialSpec, summary: dict | None, run_dir: Path) -> dict:
             "train_seconds": summary.get("train_seconds")}
 
 
-_CACHE: dict = {}
-
-
-def _tests(data: str | None):
-    if "tests" not in _CACHE:
-        _CACHE["tests"] = [read_run(p) for p in test_files(data).values()]
-    return _CACHE["tests"]
-
-
 def run_trial(trial: TrialSpec, context: TrialContext, log: Callable[[str], None] = lambda m: None) -> dict:
     """Train `trial` into its run directory unless it is complete; its results-table row.
     One process at a time per trial (`sysid.sweep.trial_lock`)."""
@@ -125,11 +114,9 @@ def _run_locked(trial: TrialSpec, context: TrialContext, log: Callable[[str], No
     exp = parse_experiment(tomllib.loads(trial.config), f"{context.source} (trial {trial.path})")
     resume = checkpoint_path(run_dir).is_file()
     journal(context.out, "resumed" if resume else "started", trial)
-    key = (exp.experiment.dataset, exp.data.files, exp.data.rate)
-    if exp.needs_training and key not in _CACHE:
-        _CACHE[key] = training_runs(exp, context.data)
+    train = cached_training_runs(exp, context.data) if exp.needs_training else None
     run_dir.parent.mkdir(parents=True, exist_ok=True)
-    result = run_experiment(exp, run_dir, _tests(context.data), _CACHE.get(key), context.data,
+    result = run_experiment(exp, run_dir, cached_test_runs(context.data), train, context.data,
                             progress=False, log=log, resume=resume, overwrite=run_dir.exists())
     summary = json.loads((result.path / "summary.json").read_text())
     journal(context.out, "trained", trial, val_loss=summary.get("val_loss"))

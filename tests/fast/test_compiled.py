@@ -101,7 +101,7 @@ def test_step_loop_is_torchdiffeq_euler_bit_for_bit(hybrid_run, zigzag):
     model = hybrid_run[1]
     with torch.no_grad():
         reference = integrate(model, states[0], inputs, 1.0, "euler")  # torchdiffeq odeint
-        ours = run_steps(Step(model, "euler", 1.0), states[:1], inputs[:, None])[:, 0]
+        ours = run_steps(Step(model, Method.EULER, 1.0), states[:1], inputs[:, None])[:, 0]
         on = model(reference, inputs).gate_on
     assert on.any() and not on.all()  # both branches of the gate are exercised
     assert torch.equal(ours, reference)
@@ -116,7 +116,7 @@ def test_record_gives_one_force_breakdown_per_euler_step(zigzag):
     torch.testing.assert_close(record[3].total, model(pred[3], inputs[3]).total, rtol=0, atol=0)
 
 
-@pytest.mark.parametrize("method", ["euler", "rk4"])
+@pytest.mark.parametrize("method", [Method.EULER, Method.RK4])
 def test_compiled_prediction_equals_eager(hybrid_run, zigzag, method):
     states, inputs = zigzag
     model = hybrid_run[1]
@@ -155,9 +155,9 @@ def test_compiled_loop_allocates_only_what_its_kernels_use(hybrid_run, zigzag):
     if not codegen_fixes.available():
         pytest.skip(f"the wrapper fixes are not applied to torch {torch.__version__}")
     model = hybrid_run[1]
-    if compiled_rollout_function(model, "rk4", 1.0, 1) is None:
+    if compiled_rollout_function(model, Method.RK4, 1.0, 1) is None:
         pytest.skip("compilation unavailable here (the eager fallback was used)")
-    loop = _loop_source(rollout_package(model, "rk4", 1.0))
+    loop = _loop_source(rollout_package(model, Method.RK4, 1.0))
     condition = loop[loop.index("// subgraph: while_loop_cond_graph"):loop.index("// subgraph: while_loop_body_graph")]
     assert condition.count("aoti_torch_assign_tensors_out(") == 2
     allocated = re.findall(r"aoti_torch_empty_strided\([^;]*&(\w+)_handle\)\);", loop)
@@ -203,7 +203,7 @@ def test_export_predicts_the_same_without_sysid(hybrid_run, zigzag, tmp_path, po
     from sysid.fast.export import load_step
     run_dir, model = hybrid_run
     states, inputs = zigzag
-    if not portable and compiled_step(model, "euler", 1.0, 1) is None:
+    if not portable and compiled_step(model, Method.EULER, 1.0, 1) is None:
         pytest.skip("compilation unavailable here")
     out = tmp_path / "model.pt2"
     run(["export", str(run_dir), "-o", str(out)] + (["--portable"] if portable else []))
@@ -240,7 +240,7 @@ def test_compiled_batch_equals_eager(zigzag):
     """Batches are compiled channels first (vectorized): the same states as eager."""
     states, inputs = zigzag
     model = MMG(load_ship("esso_osaka"))
-    if compiled_step(model, "euler", 1.0, 4) is None:
+    if compiled_step(model, Method.EULER, 1.0, 4) is None:
         pytest.skip("compilation unavailable here")
     x0 = states[:4] * torch.tensor([1.0, 1.1, 1.0, 0.9, 1.0, 1.2], dtype=torch.float64)  # four ships
     u = inputs[:31, None].expand(31, 4, 4).contiguous()

@@ -10,7 +10,7 @@ import pytest
 
 from preprocessing.quality import QualityReport
 
-from preprocessing import differencing, geodesy, gnss, gyro, resample, wind, writer
+from preprocessing import anemometer, differencing, geodesy, gnss, gyro, resample, writer
 from preprocessing.frames import body_to_earth, earth_to_body, flow_velocity, from_direction
 from preprocessing.sensors import SensorLayout
 
@@ -64,10 +64,10 @@ def test_wind_from_direction_and_sensor_round_trip():
     u, v, r, psi = np.full(n, 0.5), np.full(n, 0.05), np.full(n, 0.1), np.linspace(0, 3, n)
     tvx, tvy = flow_velocity(np.full(n, 3.0), np.full(n, 1.0))
     pos = [(0.9, 0.1), (-0.6, -0.2)]
-    sensors = [wind.apparent_at(tvx, tvy, u, v, r, psi, p) for p in pos]
-    ut, gt, ua, ga = wind.combine(sensors, u, v, r, psi, pos)
+    sensors = [anemometer.apparent_at(tvx, tvy, u, v, r, psi, p) for p in pos]
+    ut, gt, ua, ga = anemometer.combine(sensors, u, v, r, psi, pos)
     assert np.allclose(ut, 3.0) and np.allclose(gt, 1.0)
-    ua2, ga2 = wind.apparent_at(tvx, tvy, u, v, r, psi, (0.0, 0.0))
+    ua2, ga2 = anemometer.apparent_at(tvx, tvy, u, v, r, psi, (0.0, 0.0))
     assert np.allclose(ua, ua2) and np.allclose(ga, ga2)
 
 
@@ -93,12 +93,12 @@ def test_resample_takes_samples_on_the_run_grid():
 
 def test_writer_is_atomic_and_complete(tmp_path):
     seg = pd.DataFrame({c: [0.0, 1.0] for c in writer.schema.PROCESSED})
-    paths = writer.write_run(tmp_path, "run", [seg, seg], QualityReport("x"))
+    paths = writer.write_segments(tmp_path, "run", [seg, seg], QualityReport("x"))
     assert sorted(p.name for p in paths) == ["run.report.json", "run_seg1.csv", "run_seg2.csv"]
     assert json.loads((tmp_path / "run.report.json").read_text())["outputs"] == ["run_seg1.csv", "run_seg2.csv"]
     assert not [f for f in os.listdir(tmp_path) if f.endswith(".tmp")]
     with pytest.raises(KeyError):
-        writer.write_run(tmp_path / "bad", "run", [seg.drop(columns=["t"])], QualityReport("bad"))
+        writer.write_segments(tmp_path / "bad", "run", [seg.drop(columns=["t"])], QualityReport("bad"))
     assert list((tmp_path / "bad").iterdir()) == []
 
 

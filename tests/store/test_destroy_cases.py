@@ -246,7 +246,7 @@ def test_two_trainings_into_one_output(sysid, files, tmp_path):
                              env={**environment(), "PYTHONUNBUFFERED": "1"})  # each line as it is printed
     try:
         for line in first.stdout:  # its first line comes once it holds the output, before it trains
-            if line.startswith("train:"):
+            if "train: " in line:  # time-stamped: stdout is a pipe
                 break
         second = sysid("train", config, "-o", out, "--test", files["test"])
         assert_refused(second, 2, f"{out}: another sysid process (pid {first.pid}) is writing it",
