@@ -4,7 +4,8 @@ One obvious entry point per task: `load_ship` for a ship definition, `MMG` for t
 model, `integrate` for (differentiable) trajectories, `predict` for fast predictions
 (``predict(model, x0, inputs, dt, Integrator("rk4", compiled=True))``);
 `sysid.runs.lifecycle.run_experiment` trains, evaluates and writes one experiment (``sysid
-train``), `sysid.protocol.reproduce.reproduce` the paper's protocol.
+train``), `sysid.protocol.reproduce.reproduce` the paper's protocol; `RunDir` opens a run
+directory (``RunDir.open("runs/hybrid_D2").read_summary()``: its typed `RunSummary`).
 
 Subpackages in layers, each importing only those before it (tests/test_import_graph.py):
 `store` (files, manifests), `mmg` (ship files, force families, the force model) → `config`
@@ -27,10 +28,11 @@ _HOME = {
     "ShipDynamics": "sysid.dynamics.equations", "integrate": "sysid.dynamics.equations",
     "predict": "sysid.fast.compiled", "Integrator": "sysid.dynamics.integrators", "Method": "sysid.config.choices",
     "state_derivative": "sysid.dynamics.equations", "body_acceleration": "sysid.dynamics.equations",
+    "RunDir": "sysid.runs.directory", "RunSummary": "sysid.runs.summary",
 }
 
 __all__ = ["Ship", "load_ship", "MMG", "ForceBreakdown", "ShipDynamics", "integrate", "predict", "Integrator", "Method",
-           "state_derivative", "body_acceleration", "__version__"]
+           "state_derivative", "body_acceleration", "RunDir", "RunSummary", "__version__"]
 
 
 def __getattr__(name: str):

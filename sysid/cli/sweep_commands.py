@@ -45,15 +45,15 @@ def sweep(
     if len(results.points):
         shown = results.points.head(10)
         typer.echo(shown.to_string(index=False, float_format=lambda v: f"{v:.5f}"))
-    best = summary.get("best")
+    best = summary.best
     if best:
-        spread = f" ± {best['val_loss_std']:.5f} (std over seeds)" if best.get("val_loss_std") is not None else ""
-        typer.echo(f"sweep: chosen {best['point']}: validation loss {best['val_loss_mean']:.5f}{spread}")
-    counts = f"{summary['complete']}/{summary['trials']} trials complete"
-    if summary["failed"] or summary["missing"]:
-        counts += f", {summary['failed']} failed, {summary['missing']} missing"
+        spread = f" ± {best.val_loss_std:.5f} (std over seeds)" if best.val_loss_std is not None else ""
+        typer.echo(f"sweep: chosen {best.point}: validation loss {best.val_loss_mean:.5f}{spread}")
+    counts = f"{summary.complete}/{summary.trials} trials complete"
+    if summary.failed or summary.missing:
+        counts += f", {summary.failed} failed, {summary.missing} missing"
     typer.echo(f"sweep: {counts}; wrote {output} in {(time.perf_counter() - start) / 60:.1f} min")
-    if summary["failed"] or summary["missing"]:
+    if summary.failed or summary.missing:
         for row in results.trials.itertuples():
             if row.status != "complete":
                 typer.secho(f"sweep: {row.run}: {row.status}", fg=typer.colors.RED, err=True)

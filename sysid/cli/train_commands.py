@@ -120,22 +120,18 @@ def reproduce(
                      f"(sysid report {output} -o {output} writes it)")
         paths = build_report(output, output)
         typer.echo(f"report: {paths.html} and {paths.pdf} ({paths.n_figures} figures, {paths.n_pages} pages)")
-    for key in ("scorecard", "scorecard_ensemble"):
-        card = dict(summary.get(key, {}))
-        baseline, model = card.pop("baseline", "MMG"), card.pop("model", "Hybrid")
-        if seeds > 1 and model == "Hybrid":
-            model = f"Hybrid (mean over {seeds} seeds)"
-        for ds, c in card.items():
-            worst = min(c["reduction_vs_mmg_30s_by_scenario"].values())
-            typer.echo(f"{ds}: {model} vs {baseline} at 30 s: {100 * c['reduction_vs_mmg_30s_mean']:.0f} % lower RMSE "
-                       f"on average (least {100 * worst:.0f} %); beats the paper's hybrid on "
-                       f"{c['cells_beating_paper_hybrid']}/{c['cells']} cells")
-    shares = summary.get("gate_off_share_random_30s", {})
+    for card in summary.scorecards:
+        model = f"Hybrid (mean over {seeds} seeds)" if seeds > 1 and card.model == "Hybrid" else card.model
+        for ds, c in card.datasets.items():
+            typer.echo(f"{ds}: {model} vs {card.baseline} at 30 s: {100 * c.reduction_vs_mmg_30s_mean:.0f} % lower RMSE "
+                       f"on average (least {100 * c.least_reduction_30s:.0f} %); beats the paper's hybrid on "
+                       f"{c.cells_beating_paper_hybrid}/{c.cells} cells")
+    shares = summary.gate_off_share_random_30s or {}
     if shares:
         typer.echo("kNN gate off on the Random test (30 s): " +
                    ", ".join(f"{k} {100 * v:.0f} %" for k, v in shares.items() if v is not None))
-    for name, why in summary.get("failed", {}).items():
+    for name, why in (summary.failed or {}).items():
         typer.secho(f"reproduce: run {name} FAILED: {why}", fg=typer.colors.RED, err=True)
-    typer.echo(f"reproduce: {output} in {summary['seconds'] / 60:.1f} min")
-    if summary.get("failed"):
+    typer.echo(f"reproduce: {output} in {summary.seconds / 60:.1f} min")
+    if summary.failed:
         raise SystemExit(1)

@@ -62,6 +62,13 @@ class CorrectedModel(nn.Module):
         return self.correction_net.features(s) if z is None else z
 
     @property
+    def gate_width(self) -> int:
+        """F of the vectors the kNN gate compares: 9 standardised inputs, or the width of
+        the FNN's last hidden layer (its features)."""
+        net = self.correction_net
+        return net.input_mean.shape[0] if self.gate_space == "inputs" else net.weights[-1].shape[1]
+
+    @property
     def coefficients(self):
         return self.mmg.coefficients
 

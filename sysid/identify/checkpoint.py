@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import enum
 import os
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 import torch
@@ -32,24 +33,72 @@ def plain(value):
     return value
 
 
-class TrainingCheckpoint:
-    """One file holding the state of the running training stage.
+STAGES = ("identify", "train")
 
-    Keys: ``version``, ``config`` (the resolved experiment TOML it belongs to), ``stage``
-    ("identify" | "train"), ``epoch`` (last finished), ``model``, ``optimizer``,
-    ``generator`` (minibatch order), ``best_loss``, ``best_epoch``, ``best_state``,
-    ``stage_history``, ``history`` (earlier stages), ``summary`` (`TrainingSummary` so far).
+
+@dataclass(frozen=True)
+class CheckpointState:
+    """The state of a training stage at the end of an epoch, all that a resumed stage needs
+    to continue to the model an uninterrupted one gives.
+
+    stage : "identify" | "train"; epoch : the last finished one (from 1);
+    model, optimizer : state dicts; scheduler : the learning-rate schedule's ({} without);
+    generator : the minibatch order's random state (uint8 tensor);
+    best_loss, best_epoch, best_state : the best validation loss so far, its epoch and its
+    weights (None before the first epoch improved on inf);
+    stage_history : this stage's history rows; history : the rows of earlier stages;
+    summary : the trainer's `TrainingSummary.to_dict()` so far.
     """
+
+    stage: str
+    epoch: int
+    model: dict
+    optimizer: dict
+    scheduler: dict
+    generator: torch.Tensor
+    best_loss: float
+    best_epoch: int
+    best_state: dict | None
+    stage_history: list
+    history: list
+    summary: dict
+
+    def to_state_dict(self) -> dict:
+        """The checkpoint's keys after ``version`` and ``config``, in this order."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    @classmethod
+    def from_state_dict(cls, state: dict, source: str | os.PathLike) -> "CheckpointState":
+        """The state in `state` (read from the file `source`); one `CheckpointError` line
+        naming the file and the key when one is missing or of the wrong kind."""
+        kinds = {"stage": str, "epoch": int, "model": dict, "optimizer": dict, "scheduler": dict,
+                 "generator": torch.Tensor, "best_loss": (int, float), "best_epoch": int,
+                 "best_state": (dict, type(None)), "stage_history": list, "history": list, "summary": dict}
+        for f in fields(cls):
+            if f.name not in state:
+                raise CheckpointError(f"{source}: training checkpoint has no {f.name!r}; delete it to start afresh")
+            if not isinstance(state[f.name], kinds[f.name]) or isinstance(state[f.name], bool):
+                raise CheckpointError(f"{source}: training checkpoint's {f.name!r} is a "
+                                      f"{type(state[f.name]).__name__}; delete it to start afresh")
+        if state["stage"] not in STAGES:
+            raise CheckpointError(f"{source}: training checkpoint of unknown stage {state['stage']!r} "
+                                  f"(expected one of {', '.join(STAGES)}); delete it to start afresh")
+        return cls(**{f.name: state[f.name] for f in fields(cls)})
+
+
+class TrainingCheckpoint:
+    """One file holding the `CheckpointState` of the running training stage, with
+    ``version`` and ``config`` (the resolved experiment TOML it belongs to) before it."""
 
     def __init__(self, path: str | os.PathLike, config: str):
         self.path = Path(path)
         self.config = config
 
-    def save(self, **state) -> None:
+    def save(self, state: CheckpointState) -> None:
         with atomic_path(self.path, ".pt") as tmp:
-            torch.save(plain({"version": VERSION, "config": self.config, **state}), tmp)
+            torch.save(plain({"version": VERSION, "config": self.config, **state.to_state_dict()}), tmp)
 
-    def load(self) -> dict | None:
+    def load(self) -> CheckpointState | None:
         """The saved state, None when there is none; refuses another config's checkpoint."""
         if not self.path.is_file():
             return None
@@ -63,7 +112,7 @@ class TrainingCheckpoint:
                                   f"{state.get('version') if isinstance(state, dict) else '?'})")
         if state.get("config") != self.config:
             raise CheckpointError(f"{self.path}: made with another config; delete it or train without --resume")
-        return state
+        return CheckpointState.from_state_dict(state, self.path)
 
     def remove(self) -> None:
         self.path.unlink(missing_ok=True)

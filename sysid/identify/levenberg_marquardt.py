@@ -296,6 +296,11 @@ class StartStateCheck:
         name = max(finite, key=lambda k: abs(finite[k]), default="")
         return name, finite.get(name, float("nan"))
 
+    def verdict(self) -> str:
+        """The check in one clause (`start_state_verdict`)."""
+        name, value = self.largest
+        return start_state_verdict(self.start_states, name, value if math.isfinite(value) else None, self.agrees)
+
     def as_dict(self) -> dict:
         name, value = self.largest
         return {"start_states": self.start_states.value, "coefficients": dict(self.coefficients),
@@ -304,15 +309,16 @@ class StartStateCheck:
                 "limit_sigma": CHECK_LIMIT, "agrees": self.agrees}
 
 
-def start_state_verdict(check: Mapping) -> str:
-    """A check (`StartStateCheck.as_dict()`, as summary.json keeps it) in one clause, the
-    same in the training log and the report: how far the estimates move in sigma and
-    whether that stays within the ± 2 sigma."""
-    if check.get("largest_sigma") is None:
-        return f"with start states {check.get('start_states')}: no estimate has a finite σ to compare with"
-    said = (f"with start states {check.get('start_states')} the estimates move by at most "
-            f"{abs(check['largest_sigma']):.1f}σ ({check.get('largest')})")
-    if check.get("agrees"):
+def start_state_verdict(start_states: str, largest: str, largest_sigma: float | None, agrees: bool) -> str:
+    """A check (as `StartStateCheck.verdict` and summary.json's
+    ``identification.start_state_check`` hold it) in one clause, the same in the training
+    log and the report: how far the estimates move in sigma (`largest_sigma`, None: no
+    finite sigma; `largest`: that coefficient) and whether that stays within the ± 2 sigma."""
+    if largest_sigma is None:
+        return f"with start states {start_states}: no estimate has a finite σ to compare with"
+    said = (f"with start states {start_states} the estimates move by at most "
+            f"{abs(largest_sigma):.1f}σ ({largest})")
+    if agrees:
         return said + ", within the ± 2σ"
     return (said + ": beyond the ± 2σ, so the data carry noisy start states or a model-structure error "
             "and the ± 2σ, which measures the noise only, is a lower bound on the uncertainty")

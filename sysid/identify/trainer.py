@@ -42,15 +42,14 @@ import torch
 from tqdm import tqdm
 
 from sysid.hybrid.correction import ForceCorrection, correction_inputs
-from sysid.identify.checkpoint import TrainingCheckpoint
+from sysid.identify.checkpoint import CheckpointState, TrainingCheckpoint
 from sysid.data.recordings import Run, duplicate_runs, sliding_windows, stack_windows, window_touches
 from sysid.device import resolve_device
 from sysid.dynamics.equations import integrate, integrate_with_forces, required_force
 from sysid.errors import ConfigError, DataError, TrainingError
 from sysid.config.choices import DType, Method, ModelKind, Solver, Stage, StartStates
 from sysid.config.experiment import Experiment
-from sysid.identify.levenberg_marquardt import (fit_uncertainty, identify_levenberg_marquardt, start_state_check,
-                                      start_state_verdict)
+from sysid.identify.levenberg_marquardt import fit_uncertainty, identify_levenberg_marquardt, start_state_check
 from sysid.hybrid.force_models import CorrectedModel, PerMember, build_mmg, correction_of
 from sysid.hybrid.knn_gate import KNNGate
 from sysid.state import VELOCITY_INDEX
@@ -302,16 +301,16 @@ class Trainer:
         best, best_state, best_epoch, history = math.inf, None, 0, []
         gen = torch.Generator().manual_seed(self.experiment.experiment.seed + 1)
         first = 1
-        resume = self._resume if self._resume and self._resume["stage"] == label else None
+        resume = self._resume if self._resume and self._resume.stage == label else None
         if resume:
-            model.load_state_dict(resume["model"])
-            opt.load_state_dict(resume["optimizer"])
+            model.load_state_dict(resume.model)
+            opt.load_state_dict(resume.optimizer)
             if sched is not None:
-                sched.load_state_dict(resume["scheduler"])
-            gen.set_state(resume["generator"])
-            best, best_epoch, best_state = resume["best_loss"], resume["best_epoch"], resume["best_state"]
-            history, first = list(resume["stage_history"]), resume["epoch"] + 1
-            self.log(f"{label}: resumed after epoch {resume['epoch']} from {self.checkpoint.path}")
+                sched.load_state_dict(resume.scheduler)
+            gen.set_state(resume.generator)
+            best, best_epoch, best_state = resume.best_loss, resume.best_epoch, resume.best_state
+            history, first = list(resume.stage_history), resume.epoch + 1
+            self.log(f"{label}: resumed after epoch {resume.epoch} from {self.checkpoint.path}")
         stopped = "epoch limit"
         bar = self._bar(range(first, epochs + 1), label, epochs, first - 1)
         for epoch in bar:
@@ -347,11 +346,11 @@ class Trainer:
             elif time.perf_counter() > self._deadline:
                 stopped = "time limit"
             if self.checkpoint is not None:
-                self.checkpoint.save(stage=label, epoch=epoch, model=model.state_dict(), optimizer=opt.state_dict(),
-                                     scheduler=sched.state_dict() if sched is not None else {},
-                                     generator=gen.get_state(), best_loss=best, best_epoch=best_epoch,
-                                     best_state=best_state, stage_history=history, history=self._history,
-                                     summary=self._summary.to_dict())
+                self.checkpoint.save(CheckpointState(
+                    stage=label, epoch=epoch, model=model.state_dict(), optimizer=opt.state_dict(),
+                    scheduler=sched.state_dict() if sched is not None else {}, generator=gen.get_state(),
+                    best_loss=best, best_epoch=best_epoch, best_state=best_state, stage_history=history,
+                    history=self._history, summary=self._summary.to_dict()))
             if stopped != "epoch limit":
                 break
         if hasattr(bar, "close"):
@@ -476,7 +475,7 @@ class Trainer:
         return (StageResult([row], fit.iterations, val_v, fit.stopped), self._log_uncertainty(result), estimator)
 
     def _log_start_state_check(self, check, val_v: float, check_val: float) -> None:
-        said = (f"check: {start_state_verdict(check.as_dict())}; validation loss {check_val:.5f} "
+        said = (f"check: {check.verdict()}; validation loss {check_val:.5f} "
                 f"(start states {check.start_states}) against {val_v:.5f}")
         self.log(said if check.agrees else "WARNING " + said)
 
@@ -567,10 +566,10 @@ class Trainer:
         mmg = build_mmg(exp, dtype).to(device)
         summary = TrainingSummary(len(train), len(val), report, str(device))
         self._summary, self._history = summary, []
-        resumed_in = self._resume["stage"] if self._resume else None
+        resumed_in = self._resume.stage if self._resume else None
         if resumed_in == "train":  # earlier stages are done: their results come from the checkpoint
-            summary = self._summary = TrainingSummary.from_dict(self._resume["summary"])
-            self._history = list(self._resume["history"])
+            summary = self._summary = TrainingSummary.from_dict(self._resume.summary)
+            self._history = list(self._resume.history)
         if identify and not summary.identified_initial:
             summary.identified_initial = self._coefficients(mmg)
         if identify and (kind is ModelKind.MMG or not joint) and resumed_in != "train":
@@ -607,7 +606,7 @@ class Trainer:
                 self.log(f"after warm start: validation loss {summary.warm_val_loss:.5f}")
             params = list(net.parameters()) + (list(mmg.parameters()) if identify and joint else [])
             if resumed_in == "train":  # buffers (standardisation) first: w_F depends on them
-                PerMember(model).load_state_dict(self._resume["model"])
+                PerMember(model).load_state_dict(self._resume.model)
             w_F = 1.0 / net.output_std if kind is ModelKind.HYBRID else None
             stage = self.train(model, params, train, val, w_v, w_F)
             self._history += stage.history

@@ -3,7 +3,6 @@ hybrid on D1 and D2, evaluated on the six test files, tables beside the paper's 
 from __future__ import annotations
 
 import functools
-import json
 import multiprocessing
 import os
 import time
@@ -21,6 +20,7 @@ from sysid.config.choices import ModelKind
 from sysid.config.experiment import Experiment, load_experiment
 from sysid.store.files import write_csv, write_text
 from sysid.runs.lifecycle import cached_test_runs, cached_training_runs, run_experiment
+from sysid.runs.reproduction import DatasetScore, Reproduction, Scorecard
 from sysid.protocol.paper import MODEL_LABELS, comparison_table, model_label
 from sysid.workers import in_workers
 
@@ -73,10 +73,10 @@ def markdown_table(table: pd.DataFrame, horizon: int) -> str:
     return head + "\n".join(lines) + "\n"
 
 
-def scorecard(table: pd.DataFrame, baseline: str = "MMG", model: str = "Hybrid") -> dict:
+def scorecard(table: pd.DataFrame, baseline: str = "MMG", model: str = "Hybrid") -> Scorecard:
     """`model` (the hybrid; with seeds, its seed mean) against MMG-only with the same X'vr
     (`baseline` label) and against the paper's hybrid, cell by cell."""
-    out: dict = {"baseline": baseline, "model": model}
+    scores = {}
     for ds in ("D1", "D2"):
         hyb = table[(table.model == model) & (table.dataset == ds)].set_index(["scenario", "horizon_s"])
         mmg = table[(table.model == baseline) & (table.dataset == ds)].set_index(["scenario", "horizon_s"])
@@ -86,13 +86,12 @@ def scorecard(table: pd.DataFrame, baseline: str = "MMG", model: str = "Hybrid")
         paper_cols = ["paper_u", "paper_v", "paper_r"]
         ref = table[(table.model == "Hybrid") & (table.dataset == ds)].set_index(["scenario", "horizon_s"])
         beats = (hyb[cols].to_numpy() < ref.loc[hyb.index, paper_cols].to_numpy())
-        out[ds] = {
-            "reduction_vs_mmg_30s_by_scenario": {s: float(1 - at30.loc[s].mean()) for s in at30.index},
-            "reduction_vs_mmg_30s_mean": float(1 - at30.to_numpy().mean()),
-            "reduction_vs_mmg_100s_mean": float(1 - ratio.xs(100, level="horizon_s").to_numpy().mean()),
-            "cells_beating_paper_hybrid": int(beats.sum()), "cells": int(beats.size),
-        }
-    return out
+        scores[ds] = DatasetScore(
+            reduction_vs_mmg_30s_by_scenario={s: float(1 - at30.loc[s].mean()) for s in at30.index},
+            reduction_vs_mmg_30s_mean=float(1 - at30.to_numpy().mean()),
+            reduction_vs_mmg_100s_mean=float(1 - ratio.xs(100, level="horizon_s").to_numpy().mean()),
+            cells_beating_paper_hybrid=int(beats.sum()), cells=int(beats.size))
+    return Scorecard(baseline, model, **scores)
 
 
 def hybrid_baseline() -> str:
@@ -164,7 +163,7 @@ def _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, d
 def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
               only: list[str] | None = None, progress: bool = True,
               overrides: dict | None = None, log: Callable[[str], None] = print,
-              jobs: int = 1, seeds: int = 1, address: str | None = None) -> dict:
+              jobs: int = 1, seeds: int = 1, address: str | None = None) -> Reproduction:
     """Run the protocol; write runs/, comparison.csv, table7.md, table8.md, summary.json.
 
     `jobs` > 1 trains that many runs side by side in worker processes (each with its
@@ -216,21 +215,22 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
     write_csv(table, out / "comparison.csv", float_format="%.5f")
     for horizon, fname in ((30, "table7.md"), (100, "table8.md")):
         write_text(markdown_table(table, horizon), out / fname)
-    summary = {"seconds": time.perf_counter() - started, "runs": names, "failed": failed,
-               "protocol": list(PROTOCOL), "seeds": seeds}
+    card = card_ensemble = identified_cells = None
     if {"hybrid_D1", "hybrid_D2", "mmg_paper", "mmg_lab"} <= set(names):
-        summary["scorecard"] = scorecard(table, hybrid_baseline())
+        card = scorecard(table, hybrid_baseline())
         if {"hybrid_ensemble_D1", "hybrid_ensemble_D2"} <= set(names):
-            summary["scorecard_ensemble"] = scorecard(table, hybrid_baseline(), MODEL_LABELS["hybrid_ensemble"])
+            card_ensemble = scorecard(table, hybrid_baseline(), MODEL_LABELS["hybrid_ensemble"])
     if "hybrid_identified_D2" in names:
         hyb = table[(table.model == MODEL_LABELS["hybrid_identified"])]
         ref = table[(table.model == "Hybrid") & (table.dataset == "D2")].set_index(["scenario", "horizon_s"])
         ours = hyb.set_index(["scenario", "horizon_s"])[["rmse_u", "rmse_v", "rmse_r"]]
         paper = ref.loc[ours.index, ["paper_u", "paper_v", "paper_r"]].to_numpy()
-        summary["identified_hybrid_D2_cells_beating_paper_hybrid"] = [int((ours.to_numpy() < paper).sum()),
-                                                                      int(paper.size)]
+        identified_cells = (int((ours.to_numpy() < paper).sum()), int(paper.size))
     random_file = Path(TEST_FILES["Random"]).stem
-    summary["gate_off_share_random_30s"] = {
-        n: shares[n].get(f"{random_file}_h30.csv") for n in names if n.startswith("hybrid")}
-    write_text(json.dumps(summary, indent=2), out / "summary.json")
+    summary = Reproduction(
+        seconds=time.perf_counter() - started, runs=tuple(names), failed=failed, protocol=tuple(PROTOCOL),
+        seeds=seeds, scorecard=card, scorecard_ensemble=card_ensemble,
+        identified_hybrid_D2_cells_beating_paper_hybrid=identified_cells,
+        gate_off_share_random_30s={n: shares[n].get(f"{random_file}_h30.csv") for n in names if n.startswith("hybrid")})
+    write_text(summary.to_text(), out / "summary.json")
     return summary

@@ -16,6 +16,7 @@ from sysid.data.recordings import Run
 from sysid.evaluation.evaluate import evaluate_model
 from sysid.config.experiment import Experiment
 from sysid.protocol.paper import run_variant
+from sysid.runs.directory import RunDir
 from sysid.runs.rundir import load_model, write_run
 from sysid.protocol.seeds import seed_metrics
 from sysid.hybrid.ensemble import SeedEnsemble
@@ -63,12 +64,12 @@ def train_seeds(experiments: dict[str, Experiment], seeds: int, out: Path, data:
             if summary is None:
                 failures.append(f"seed {trial.seed}: {errors.get(trial.path, 'no complete run')}")
                 continue
-            if summary.get("status", "complete") != "complete":
-                failures.append(f"seed {trial.seed}: {summary['status']}")
-            frames.append(pd.read_csv(out / trial.path / "metrics.csv"))
-            shares.append((summary.get("gate") or {}).get("off_share") or {})
+            if summary.status != "complete":
+                failures.append(f"seed {trial.seed}: {summary.status}")
+            frames.append(RunDir(out / trial.path).read_metrics())
+            shares.append(summary.gate.off_share or {})
             used.append(trial.seed)
-            seconds += float(summary.get("seconds") or 0.0)
+            seconds += float(summary.seconds or 0.0)
         metrics = seed_metrics(frames) if frames else pd.DataFrame()
         mean_share = {k: sum(s.get(k, 0.0) for s in shares) / len(shares) for k in (shares[0] if shares else {})}
         groups[name] = SeedGroup(name, used, metrics, mean_share, "; ".join(failures) or None, seconds)

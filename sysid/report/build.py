@@ -54,7 +54,7 @@ class ReportPaths:
 def ship_size(source: ReportSource) -> tuple[float, float] | None:
     """(L_pp, B) [m] of the runs' ship, or None when its definition cannot be loaded."""
     from sysid.mmg.ship import load_ship
-    name = next((r.summary.get("ship") for r in source.runs if r.summary.get("ship")), None)
+    name = next((r.summary.ship for r in source.runs if r.summary.ship), None)
     if not name:
         return None
     try:

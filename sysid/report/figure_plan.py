@@ -216,7 +216,7 @@ def _force_figures(c: _Context) -> None:
 
 
 def _loss_figure(c: _Context) -> None:
-    histories = [(_label(r), _colour(r, i), r.history, r.summary.get("best_epoch"))
+    histories = [(_label(r), _colour(r, i), r.history, r.summary.best_epoch)
                  for i, r in enumerate(c.runs) if r.history is not None and len(r.history)]
     if histories:
         c.add("loss", "Training", "Training and validation loss",
@@ -230,20 +230,20 @@ def _loss_figure(c: _Context) -> None:
 def _uncertainty_figures(c: _Context) -> None:
     """Identified coefficients with ± 2 sigma beside their prior, and their correlations."""
     for run in c.runs:
-        u = run.summary.get("identified_uncertainty")
-        if not isinstance(u, dict) or not u.get("names"):
+        u = run.summary.identified_uncertainty
+        if u is None or not u.names:
             continue
-        names = list(u["names"])
-        prior_map = run.summary.get("identified_initial") or {}
+        names = list(u.names)
+        prior_map = run.summary.identified_initial
         prior = [prior_map.get(n) for n in names] if all(n in prior_map for n in names) else []
-        two_sigma = [None if s is None else 2.0 * s for s in u.get("std_error", [])]
+        two_sigma = [None if s is None else 2.0 * s for s in u.std_error]
         title = f"Identified coefficients of {_label(run)}"
         c.add(f"identified_{run.name}", "Identification", title,
               "Estimates with ± 2 standard errors from the curvature of the multi-step loss (Jacobian of "
               "the residuals on disjoint training windows, windows as independent clusters), beside the "
               f"ship file's values; right: correlations of the estimates. Estimator: {estimator_text(run.summary)}.",
-              partial(F.identified_coefficients, names, u.get("estimate", []), two_sigma, prior,
-                      u.get("correlation", []), title), True)
+              partial(F.identified_coefficients, names, list(u.estimate), two_sigma, prior,
+                      [list(row) for row in u.correlation], title), True)
 
 
 def _seed_figures(c: _Context) -> None:
@@ -259,7 +259,7 @@ def _seed_figures(c: _Context) -> None:
             rows = []
             for record in run.seeds:
                 m = record.metrics[(record.metrics.horizon_s - c.short).abs() < 0.5]
-                rows.append(m.assign(seed=record.summary.get("seed")))
+                rows.append(m.assign(seed=record.summary.seed))
             models.append(F.SeedSpread(_label(run), _colour(run, i), pd.concat(rows, ignore_index=True)))
         scenarios = list(dict.fromkeys(s for m in models for s in m.rmse.scenario.astype(str)))
         paper = {s: paper_rmse(s, "hybrid", dataset, c.short) for s in scenarios}
@@ -276,8 +276,8 @@ def _sweep_figures(source: ReportSource, plan: FigurePlan) -> None:
     from sysid.report import sweep_figures as SF
 
     sweep = source.sweep
-    chosen = (source.summary.get("best") or {}).get("point")
-    seeds = len(source.summary.get("seeds") or [])
+    chosen = sweep.summary.best.point if sweep.summary.best else None
+    seeds = len(sweep.summary.seeds)
     plan.figures.append(FigureSpec(
         "sweep_keys", "Sweep", "Validation loss against the varied keys",
         "Validation loss (the sweep's objective; validation windows only, never the test files) of every "

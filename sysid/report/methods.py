@@ -6,10 +6,11 @@ import datetime as _dt
 import hashlib
 from dataclasses import dataclass
 
-from sysid.identify.levenberg_marquardt import start_state_verdict
 from sysid.protocol.paper import run_label
 from sysid.report.quality import quality_rows
 from sysid.report.source import ReportSource, RunRecord
+from sysid.runs.reproduction import Reproduction
+from sysid.runs.summary import RunSummary, StartStateCheckSummary
 from sysid.store.versions import software_versions
 
 MODEL_TEXT = {
@@ -62,18 +63,17 @@ def run_rows(source: ReportSource) -> list[RunRow]:
     rows = []
     for run in source.runs:
         s = run.summary
-        stopped = s.get("stopped") or {}
-        why = "; ".join(f"{stage}: {reason}" for stage, reason in stopped.items()) if isinstance(stopped, dict) else ""
-        epochs = ("-" if not s.get("epochs") else f"{s.get('epochs')} (best {s.get('best_epoch', '-')}"
+        why = s.stopped_text
+        epochs = ("-" if not s.epochs else f"{s.epochs} (best {_or(s.best_epoch, '-')}"
                   + (f"; {why}" if why else "") + ")")
-        est = s.get("identification") or {}
-        if est.get("solver") == "levenberg_marquardt" and "train" not in stopped:  # no epochs: LM alone
-            epochs = f"{est.get('iterations', '?')} Levenberg-Marquardt iterations" + (f" ({why})" if why else "")
-        if str(s.get("status", "")).startswith("failed"):
-            epochs += f" - {str(s['status']).upper()}"
+        est = s.identification
+        if est is not None and est.solver == "levenberg_marquardt" and "train" not in s.stopped:  # no epochs: LM alone
+            epochs = f"{_or(est.iterations, '?')} Levenberg-Marquardt iterations" + (f" ({why})" if why else "")
+        if s.failed:
+            epochs += f" - {s.status.upper()}"
         rows.append(RunRow(run_label(run.name, run.model, run.dataset), run.model, run.dataset, epochs,
-                           "-" if run.model == "mmg" else _seconds(s.get("train_seconds")),
-                           config_digest(run), str(s.get("created", "-"))))
+                           "-" if run.model == "mmg" else _seconds(s.train_seconds),
+                           config_digest(run), _or(s.created, "-")))
     return rows
 
 
@@ -92,28 +92,29 @@ def _flatten(data, prefix: str = "") -> list[tuple[str, str]]:
     return out
 
 
-def reproduction_items(summary: dict) -> list[tuple[str, str]]:
+def _or(value, default: str) -> str:
+    """`value` as text, `default` where it is None."""
+    return default if value is None else str(value)
+
+
+def reproduction_items(summary: Reproduction) -> list[tuple[str, str]]:
     """Readable lines of a reproduction's summary.json (time, scorecard, gate shares)."""
     items = []
-    if summary.get("seconds") is not None:
-        items.append(("Reproduction time", _seconds(float(summary["seconds"]))))
-    seeds = int(summary.get("seeds") or 1)
+    if summary.seconds is not None:
+        items.append(("Reproduction time", _seconds(float(summary.seconds))))
+    seeds = summary.seeds or 1
     if seeds > 1:
         items.append(("Seeds", f"every learned model trained with {seeds} seeds: table cells are the mean ± std "
                                "over the seeds; an ensemble row averages the forces of the seeds' models"))
-    for key in ("scorecard", "scorecard_ensemble"):
-        card = dict(summary.get(key) or {})
-        baseline = card.pop("baseline", "MMG")
-        model = card.pop("model", "Hybrid")
-        if seeds > 1 and model == "Hybrid":
-            model = f"Hybrid (mean over {seeds} seeds)"
-        for ds, c in card.items():
-            by = ", ".join(f"{k} {100 * v:.0f} %" for k, v in (c.get("reduction_vs_mmg_30s_by_scenario") or {}).items())
-            items.append((f"{model} {ds} vs {baseline}",
-                          f"{100 * c.get('reduction_vs_mmg_30s_mean', float('nan')):.0f} % lower RMSE at 30 s "
-                          f"({by}); {100 * c.get('reduction_vs_mmg_100s_mean', float('nan')):.0f} % at 100 s; "
-                          f"beats the paper's hybrid in {c.get('cells_beating_paper_hybrid')} of {c.get('cells')} cells"))
-    shares = {k: v for k, v in (summary.get("gate_off_share_random_30s") or {}).items() if v is not None}
+    for card in summary.scorecards:
+        model = f"Hybrid (mean over {seeds} seeds)" if seeds > 1 and card.model == "Hybrid" else card.model
+        for ds, c in card.datasets.items():
+            by = ", ".join(f"{k} {100 * v:.0f} %" for k, v in c.reduction_vs_mmg_30s_by_scenario.items())
+            items.append((f"{model} {ds} vs {card.baseline}",
+                          f"{100 * c.reduction_vs_mmg_30s_mean:.0f} % lower RMSE at 30 s "
+                          f"({by}); {100 * c.reduction_vs_mmg_100s_mean:.0f} % at 100 s; "
+                          f"beats the paper's hybrid in {c.cells_beating_paper_hybrid} of {c.cells} cells"))
+    shares = {k: v for k, v in (summary.gate_off_share_random_30s or {}).items() if v is not None}
     if shares:
         items.append(("kNN gate off, Random test (30 s)",
                       ", ".join(f"{k} {100 * float(v):.0f} % of steps" for k, v in shares.items())))
@@ -123,18 +124,18 @@ def reproduction_items(summary: dict) -> list[tuple[str, str]]:
 def sweep_items(source: ReportSource, top: int = 8) -> list[tuple[str, str]]:
     """Readable lines of a sweep: what it varied, its trials, the chosen configuration and
     the best configurations by mean validation loss over their seeds."""
-    s, sweep = source.summary, source.sweep
-    best = s.get("best") or {}
-    items = [("Sweep", f"{s.get('name')}: {s.get('search')} search over {', '.join(s.get('keys') or []) or '-'}; "
-                       f"seeds {s.get('seeds')}; base {s.get('base')}"),
-             ("Trials", f"{s.get('complete')} of {s.get('trials')} complete, {s.get('failed')} failed, "
-                        f"{s.get('missing')} missing; {_seconds(s.get('seconds'))}"),
+    sweep = source.sweep
+    s, best = sweep.summary, sweep.summary.best
+    items = [("Sweep", f"{s.name}: {s.search} search over {', '.join(s.keys) or '-'}; "
+                       f"seeds {list(s.seeds)}; base {s.base}"),
+             ("Trials", f"{s.complete} of {s.trials} complete, {s.failed} failed, "
+                        f"{s.missing} missing; {_seconds(s.seconds)}"),
              ("Objective", "validation multi-step loss (validation blocks of the training files only; "
                            "the test files never choose)")]
     if best:
-        spread = f" ± {best['val_loss_std']:.5f} (std over seeds)" if best.get("val_loss_std") is not None else ""
-        items.append(("Chosen", f"{best['point']}: validation loss {best['val_loss_mean']:.5f}{spread}; "
-                                f"runs {', '.join(best.get('runs', []))}"))
+        spread = f" ± {best.val_loss_std:.5f} (std over seeds)" if best.val_loss_std is not None else ""
+        items.append(("Chosen", f"{best.point}: validation loss {best.val_loss_mean:.5f}{spread}; "
+                                f"runs {', '.join(best.runs)}"))
     for i, row in enumerate(sweep.points.head(top).itertuples(), 1):
         std = getattr(row, "val_loss_std", float("nan"))
         items.append((f"#{i}", f"{row.point}: {row.val_loss_mean:.5f}" + ("" if std != std else f" ± {std:.5f}")
@@ -145,18 +146,18 @@ def sweep_items(source: ReportSource, top: int = 8) -> list[tuple[str, str]]:
 def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -> list[tuple[str, str]]:
     """(key, value) lines of the report's summary section."""
     runs = source.runs
-    ships = sorted({str(r.summary.get("ship", "-")) for r in runs})
+    ships = sorted({_or(r.summary.ship, "-") for r in runs})
     ship = ", ".join(ships)
     if ship_size:
         ship += f" (L_pp {ship_size[0]:g} m, B {ship_size[1]:g} m)"
     datasets = sorted({r.dataset for r in runs if r.dataset != "-"})
     scenarios = list(dict.fromkeys(s for r in runs for s in r.scenarios()))
-    trained = [float(s.summary.get("train_seconds") or 0.0) for r in runs for s in (r.seeds or [r])]
+    trained = [float(s.summary.train_seconds or 0.0) for r in runs for s in (r.seeds or [r])]
     versions: dict[str, set] = {}
     for r in runs:
-        for k, v in (r.summary.get("versions") or {}).items():
+        for k, v in r.summary.versions.items():
             versions.setdefault(k, set()).add(str(v))
-    created = sorted(str(r.summary.get("created")) for r in runs if r.summary.get("created"))
+    created = sorted(r.summary.created for r in runs if r.summary.created)
     items = [
         ("Source", f"{source.path} ({SOURCE_KINDS[source.kind].format(n=len(runs), q=len(source.quality))})"),
         ("Ship", ship),
@@ -170,8 +171,8 @@ def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -
         ("Report built", _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")),
         ("Training time", _seconds(sum(trained)) + " in total"),
     ]
-    if source.kind == "reproduction" and source.summary:
-        items += reproduction_items(source.summary)
+    if source.reproduction is not None:
+        items += reproduction_items(source.reproduction)
     if source.sweep is not None:
         items = sweep_items(source) + items
     missing = source.missing_runs
@@ -203,34 +204,34 @@ def _config_text(config: dict) -> str:
     return "; ".join(parts)
 
 
-def estimator_text(summary: dict) -> str:
+def estimator_text(summary: RunSummary) -> str:
     """Which estimator produced a run's identified coefficients and their ± 2 sigma, from
     summary.json's "identification" and "stopped" (older runs: the generic description)."""
-    est = summary.get("identification")
-    if not isinstance(est, dict) or "solver" not in est:
+    est = summary.identification
+    if est is None or est.solver is None:
         return "± 2σ from the curvature of the multi-step loss on disjoint training windows"
-    stopped = (summary.get("stopped") or {}).get("identify")
-    starts = ("each window's start state estimated along" if est.get("start_states") == "estimated"
+    stopped = summary.stopped.get("identify")
+    starts = ("each window's start state estimated along" if est.start_states == "estimated"
               else "each window integrated from its recorded first sample")
-    if est["solver"] == "levenberg_marquardt":
-        how = (f"Levenberg-Marquardt on the multi-step residuals of {est.get('windows', '?')} disjoint training "
-               f"windows, {starts}; {est.get('iterations', '?')} iterations" + (f", {stopped}" if stopped else ""))
-        if est.get("prior_weight"):
-            how += f"; pulled toward the ship file's values with prior weight {est['prior_weight']:g}"
+    if est.solver == "levenberg_marquardt":
+        how = (f"Levenberg-Marquardt on the multi-step residuals of {_or(est.windows, '?')} disjoint training "
+               f"windows, {starts}; {_or(est.iterations, '?')} iterations" + (f", {stopped}" if stopped else ""))
+        if est.prior_weight:
+            how += f"; pulled toward the ship file's values with prior weight {est.prior_weight:g}"
     else:
-        how = (f"gradient (Adam) on the multi-step loss, {est.get('stage', 'before')}, "
-               f"{est.get('epochs', '?')} epochs" + (f", {stopped}" if stopped else "") + f"; {starts}")
+        how = (f"gradient (Adam) on the multi-step loss, {_or(est.stage, 'before')}, "
+               f"{_or(est.epochs, '?')} epochs" + (f", {stopped}" if stopped else "") + f"; {starts}")
     return how + ("; ± 2σ: window-clustered sandwich of that estimator on disjoint training windows"
-                  + (", start states profiled out" if est.get("start_states") == "estimated" else "")
-                  + start_state_check_text(est.get("start_state_check")))
+                  + (", start states profiled out" if est.start_states == "estimated" else "")
+                  + start_state_check_text(est.start_state_check))
 
 
-def start_state_check_text(check) -> str:
+def start_state_check_text(check: StartStateCheckSummary | None) -> str:
     """The model-error check of a Levenberg-Marquardt run (summary.json's
     identification.start_state_check) in a sentence; "" where there is none."""
-    if not isinstance(check, dict) or check.get("largest_sigma") is None:
+    if check is None or check.largest_sigma is None:
         return ""
-    return "; check: " + start_state_verdict(check)
+    return "; check: " + check.verdict()
 
 
 def methods_paragraphs(source: ReportSource) -> list[str]:
@@ -246,28 +247,28 @@ def methods_paragraphs(source: ReportSource) -> list[str]:
     for run in source.runs:
         s = run.summary
         text = f"{run_label(run.name, run.model, run.dataset)}: {MODEL_TEXT.get(run.model, run.model)}."
-        if s.get("mmg_overrides"):
+        if s.mmg_overrides:
             text += " MMG coefficients changed from the ship file: " + ", ".join(
-                f"{k} = {v}" for k, v in s["mmg_overrides"].items()) + "."
+                f"{k} = {v}" for k, v in s.mmg_overrides.items()) + "."
         if run.model != "mmg":
-            text += (f" Trained on data set {run.dataset} ({s.get('n_train_windows', '?')} training and "
-                     f"{s.get('n_val_windows', '?')} validation windows) for {s.get('epochs', '?')} epochs; "
-                     f"the weights of epoch {s.get('best_epoch', '?')} were kept "
-                     f"(training time {_seconds(s.get('train_seconds'))}, seed {s.get('seed', '?')}).")
-        u = s.get("identified_uncertainty")
-        if isinstance(u, dict) and u.get("names"):
-            prior = s.get("identified_initial") or {}
+            text += (f" Trained on data set {run.dataset} ({_or(s.n_train_windows, '?')} training and "
+                     f"{_or(s.n_val_windows, '?')} validation windows) for {s.epochs} epochs; "
+                     f"the weights of epoch {_or(s.best_epoch, '?')} were kept "
+                     f"(training time {_seconds(s.train_seconds)}, seed {_or(s.seed, '?')}).")
+        u = s.identified_uncertainty
+        if u is not None and u.names:
+            prior = s.identified_initial
             parts = []
-            for name, est, sd, weak in zip(u["names"], u.get("estimate", []), u.get("std_error", []),
-                                           u.get("undetermined", [])):
+            for name, est, sd, weak in zip(u.names, u.estimate, u.std_error, u.undetermined):
                 cell = f"{name} = {est:.4g}" + (f" ± {2 * sd:.2g} (2σ)" if sd is not None else " (σ infinite)")
                 cell += f", prior {prior[name]:.4g}" if name in prior else ""
                 parts.append(cell + (", not determined by the data" if weak else ""))
             text += f" Identified coefficients ({estimator_text(s)}): " + "; ".join(parts) + "."
-        elif s.get("identified"):
-            text += " Identified coefficients: " + ", ".join(f"{k} = {v}" for k, v in _flatten(s["identified"])) + "."
-        if run.model == "hybrid" and s.get("gate"):
-            scalars = {k: v for k, v in s["gate"].items() if not isinstance(v, (dict, list))}
+        elif s.identified:
+            text += " Identified coefficients: " + ", ".join(f"{k} = {v}" for k, v in _flatten(s.identified)) + "."
+        gate = s.gate.to_json()
+        if run.model == "hybrid" and gate:
+            scalars = {k: v for k, v in gate.items() if not isinstance(v, (dict, list))}
             text += " OOD gate: " + ", ".join(f"{k} = {v}" for k, v in _flatten(scalars)) + "."
         if run.config:
             text += f" Configuration: {_config_text(run.config)}."

@@ -7,18 +7,18 @@ interrupted) or "failed" (its error from Ray).
 """
 from __future__ import annotations
 
-import json
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
 
+from sysid.runs.directory import RunDir
 from sysid.store.files import write_csv, write_text
 from sysid.sweep.plan import TRIALS_DIR
 from sysid.sweep.points import format_value
 from sysid.sweep.spec import SweepSpec
+from sysid.sweep.summary import ChosenPoint, SweepSummary
 from sysid.sweep.trial import TrialSpec, complete_summary, result_row
 
 
@@ -28,7 +28,7 @@ class SweepResults:
 
     trials: pd.DataFrame
     points: pd.DataFrame
-    best: dict | None
+    best: ChosenPoint | None
 
     @property
     def counts(self) -> dict[str, int]:
@@ -47,10 +47,9 @@ def scanned_trials(spec: SweepSpec, out: Path) -> list[TrialSpec]:
     """Trials found on disk (Optuna's points are only known from their run directories)."""
     found = []
     for run_dir in sorted((out / TRIALS_DIR).glob("*/seed*")):
-        config_path = run_dir / "config.toml"
-        if not config_path.is_file() or complete_summary(run_dir) is None:
+        if not RunDir(run_dir).config.is_file() or complete_summary(run_dir) is None:
             continue
-        config = tomllib.loads(config_path.read_text())
+        config = RunDir(run_dir).read_config()
         values = {key: _value(config, key) for key in spec.keys}
         found.append(TrialSpec(str(run_dir.relative_to(out)), run_dir.parent.name,
                                int(config["experiment"]["seed"]), "", values))
@@ -86,10 +85,9 @@ def collect_results(spec: SweepSpec, out: Path, trials: list[TrialSpec], errors:
     best = None
     if len(whole):
         top = whole.iloc[0]
-        best = {"point": top.point, "values": {k: _plain(top[k]) for k in spec.keys},
-                "val_loss_mean": float(top.val_loss_mean),
-                "val_loss_std": None if math.isnan(top.val_loss_std) else float(top.val_loss_std),
-                "runs": list(done[done.point == top.point]["run"])}
+        best = ChosenPoint(top.point, {k: _plain(top[k]) for k in spec.keys}, float(top.val_loss_mean),
+                           None if math.isnan(top.val_loss_std) else float(top.val_loss_std),
+                           tuple(done[done.point == top.point]["run"]))
     return SweepResults(table, points_frame.reset_index(drop=True), best)
 
 
@@ -97,12 +95,11 @@ def _plain(value):
     return value.item() if hasattr(value, "item") else value
 
 
-def write_results(spec: SweepSpec, out: Path, results: SweepResults, seconds: float) -> dict:
+def write_results(spec: SweepSpec, out: Path, results: SweepResults, seconds: float) -> SweepSummary:
     """results.csv, points.csv and summary.json (each written atomically)."""
     write_csv(results.trials, out / "results.csv", float_format="%.6g")
     write_csv(results.points, out / "points.csv", float_format="%.6g")
-    summary = {"name": spec.name, "base": str(spec.base_path), "search": spec.search,
-               "seeds": list(spec.seeds), "objective": spec.objective, "keys": spec.keys,
-               **results.counts, "best": results.best, "seconds": seconds}
-    write_text(json.dumps(summary, indent=2, default=str), out / "summary.json")
+    summary = SweepSummary(spec.name, str(spec.base_path), spec.search, tuple(spec.seeds), spec.objective,
+                           tuple(spec.keys), **results.counts, best=results.best, seconds=seconds)
+    write_text(summary.to_text(), out / "summary.json")
     return summary

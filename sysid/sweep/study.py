@@ -27,6 +27,7 @@ from sysid.store.manifest import write_manifest
 from sysid.store.staging import check_target
 from sysid.sweep.plan import sweep_trials
 from sysid.sweep.results import SweepResults, collect_results, scanned_trials, write_results
+from sysid.sweep.summary import SweepSummary
 from sysid.sweep.runner import default_workers, run_optuna, run_trials
 from sysid.sweep.spec import SweepSpec
 from sysid.sweep.trial import TrialContext
@@ -63,7 +64,7 @@ def prepare_output(spec: SweepSpec, out: Path, resume: bool, overwrite: bool) ->
 
 def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = None, address: str | None = None,
               resume: bool = False, overwrite: bool = False, data: str | os.PathLike | None = None,
-              log: Callable[[str], None] = print) -> tuple[SweepResults, dict]:
+              log: Callable[[str], None] = print) -> tuple[SweepResults, SweepSummary]:
     """Train every trial of `spec` (on Ray) into `out`; returns the results and summary."""
     from sysid.data.datasets import data_root
 

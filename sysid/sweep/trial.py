@@ -17,10 +17,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from sysid.errors import IncompleteOutputError
+from sysid.errors import CheckpointError
 from sysid.config.experiment import parse_experiment
 from sysid.runs.lifecycle import cached_test_runs, cached_training_runs, checkpoint_path, run_experiment
-from sysid.runs.rundir import verify_run_dir
+from sysid.runs.directory import RunDir
+from sysid.runs.summary import RunSummary
 from sysid.sweep.trial_lock import trial_lock
 
 JOURNAL = "trials.log"
@@ -72,30 +73,25 @@ def read_journal(out: str | os.PathLike) -> list[dict]:
     return events
 
 
-def complete_summary(run_dir: Path) -> dict | None:
+def complete_summary(run_dir: Path) -> RunSummary | None:
     """summary.json of a complete run directory, else None."""
-    if not (run_dir / "manifest.json").is_file():
-        return None
+    run = RunDir.complete(run_dir)
     try:
-        verify_run_dir(run_dir)
-        return json.loads((run_dir / "summary.json").read_text())
-    except (IncompleteOutputError, OSError, json.JSONDecodeError):
+        return run.read_summary() if run is not None else None
+    except (CheckpointError, OSError):
         return None
 
 
-def result_row(trial: TrialSpec, summary: dict | None, run_dir: Path) -> dict:
+def result_row(trial: TrialSpec, summary: RunSummary | None, run_dir: Path) -> dict:
     """The results-table row of a trial (status "missing" when it has no complete run)."""
     row = {"point": trial.point, "seed": trial.seed, "run": trial.path, **trial.values}
     if trial.label:
         row["name"] = trial.label
     if summary is None:
         return {**row, "status": "missing", "val_loss": math.nan}
-    val = summary.get("val_loss")
-    return {**row, "status": summary.get("status", "complete"),
-            "val_loss": float(val) if val is not None else math.nan,
-            "epochs": summary.get("epochs"), "best_epoch": summary.get("best_epoch"),
-            "stopped": "; ".join(f"{k}: {v}" for k, v in (summary.get("stopped") or {}).items()),
-            "train_seconds": summary.get("train_seconds")}
+    return {**row, "status": summary.status, "val_loss": summary.objective,
+            "epochs": summary.epochs, "best_epoch": summary.best_epoch, "stopped": summary.stopped_text,
+            "train_seconds": summary.train_seconds}
 
 
 def run_trial(trial: TrialSpec, context: TrialContext, log: Callable[[str], None] = lambda m: None) -> dict:
@@ -118,8 +114,8 @@ def _run_locked(trial: TrialSpec, context: TrialContext, log: Callable[[str], No
     run_dir.parent.mkdir(parents=True, exist_ok=True)
     result = run_experiment(exp, run_dir, cached_test_runs(context.data), train, context.data,
                             progress=False, log=log, resume=resume, overwrite=run_dir.exists())
-    summary = json.loads((result.path / "summary.json").read_text())
-    journal(context.out, "trained", trial, val_loss=summary.get("val_loss"))
+    summary = RunDir(result.path).read_summary()
+    journal(context.out, "trained", trial, val_loss=summary.val_loss)
     return result_row(trial, summary, run_dir)
 
 

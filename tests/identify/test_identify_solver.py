@@ -16,6 +16,7 @@ from sysid.cli import run as sysid
 from sysid.errors import ConfigError
 from sysid.config.experiment import load_experiment, parse_experiment
 from sysid.report.methods import estimator_text
+from sysid.runs.directory import RunDir
 from sysid.runs.rundir import load_model
 
 from processed_runs import write_processed_csv
@@ -89,7 +90,7 @@ def test_levenberg_marquardt_run_covers_the_truth_within_two_sigma(bench, runs, 
     for name, value in zip(NAMES, estimate):  # the model the run saved carries the estimate (float32)
         assert summary["identified"][name] == pytest.approx(value, rel=1e-6)
     assert summary["val_loss"] is not None and summary["val_loss"] < 1.0
-    said = estimator_text(summary)  # what the report's methods text and figure caption state
+    said = estimator_text(RunDir(run_dir).read_summary())  # what the report's methods text and figure caption state
     assert "Levenberg-Marquardt" in said and "start state estimated" in said and "converged" in said
     # the model is exact here: the recorded-start fit lands within 2 sigma (measured 1.7, Y_r)
     check = summary["identification"]["start_state_check"]
@@ -162,7 +163,7 @@ def test_start_state_check_flags_the_esso_osaka_model_error(dataset_dir, tmp_pat
     check = summaries["estimated"]["identification"]["start_state_check"]
     assert check["start_states"] == "recorded" and not check["agrees"]
     assert check["largest"] == "Y_v" and abs(check["largest_sigma"]) > 4, check
-    assert "lower bound on the uncertainty" in estimator_text(summaries["estimated"])
+    assert "lower bound on the uncertainty" in estimator_text(RunDir(tmp_path / "estimated").read_summary())
     back = summaries["recorded"]["identification"]["start_state_check"]
     assert back["start_states"] == "estimated" and not back["agrees"]
     for name in ESSO_PARAMETERS:

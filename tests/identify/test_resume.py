@@ -2,8 +2,9 @@
 import json
 
 import pytest
+import torch
 
-from sysid.identify.checkpoint import TrainingCheckpoint
+from sysid.identify.checkpoint import CheckpointState, TrainingCheckpoint
 from sysid.cli import main, run as sysid
 from sysid.runs.lifecycle import checkpoint_path
 from tiny_experiment import tiny_experiment, tiny_test_file
@@ -22,8 +23,8 @@ def test_interrupted_training_resumes_to_the_same_metrics(dataset_dir, tmp_path,
     saves = {"n": 0}
     original = TrainingCheckpoint.save
 
-    def save_then_interrupt(self, **state):
-        original(self, **state)
+    def save_then_interrupt(self, state):
+        original(self, state)
         saves["n"] += 1
         if saves["n"] == 3:  # Ctrl-C right after epoch 3 was checkpointed
             raise KeyboardInterrupt
@@ -51,6 +52,7 @@ def test_resume_refuses_another_configs_checkpoint(dataset_dir, tmp_path, monkey
     from sysid.errors import CheckpointError
     config, test_file = _config(tmp_path, dataset_dir)
     out = tmp_path / "run"
-    TrainingCheckpoint(checkpoint_path(out), "[experiment]\nname = 'other'\n").save(stage="train", epoch=1)
+    state = CheckpointState("train", 1, {}, {}, {}, torch.zeros(0, dtype=torch.uint8), 1.0, 1, None, [], [], {})
+    TrainingCheckpoint(checkpoint_path(out), "[experiment]\nname = 'other'\n").save(state)
     with pytest.raises(CheckpointError, match="made with another config"):
         sysid(["train", str(config), "-o", str(out), "--test", str(test_file), "--resume"])

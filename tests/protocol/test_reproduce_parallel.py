@@ -12,7 +12,7 @@ def test_parallel_workers_give_the_same_tables(dataset_dir, tmp_path):
     names = ["mmg_lab", "nn_D1", "hybrid_D1"]
     one = reproduce(tmp_path / "one", only=names, overrides=tiny, progress=False, log=lambda m: None, jobs=1)
     two = reproduce(tmp_path / "two", only=names, overrides=tiny, progress=False, log=lambda m: None, jobs=2)
-    assert one["failed"] == two["failed"] == {}
+    assert one.failed == two.failed == {}
     a = pd.read_csv(tmp_path / "one" / "comparison.csv")
     b = pd.read_csv(tmp_path / "two" / "comparison.csv")
     assert len(a) == 3 * 6 * 2 * 2 - 6 * 2 * 2  # MMG in D1 and D2, NN and hybrid in D1; 6 scenarios, 2 horizons

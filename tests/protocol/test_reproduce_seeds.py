@@ -35,8 +35,8 @@ def test_reproduce_with_two_seeds(tmp_path, dataset_dir):
     out = tmp_path / "repro"
     tiny = {"training": {"epochs": 3, "warm_start_epochs": 3}, "evaluation": {"horizons": (30.0,)}}
     summary = reproduce(out, dataset_dir.parent, only=["mmg_lab", "hybrid_D1"], overrides=tiny, jobs=2, seeds=2)
-    assert summary["seeds"] == 2 and not summary["failed"]
-    assert summary["runs"] == ["mmg_lab", "hybrid_D1", "hybrid_ensemble_D1"]
+    assert summary.seeds == 2 and not summary.failed
+    assert summary.runs == ("mmg_lab", "hybrid_D1", "hybrid_ensemble_D1")
     seeds = [pd.read_csv(out / "runs" / "hybrid_D1" / f"seed{k}" / "metrics.csv").set_index("scenario")
              for k in (0, 1)]
     assert not seeds[0][["rmse_u", "rmse_v", "rmse_r"]].equals(seeds[1][["rmse_u", "rmse_v", "rmse_r"]])

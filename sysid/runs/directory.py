@@ -1,0 +1,141 @@
+"""`RunDir`: the files of a run directory (layout: `sysid.runs.rundir`) and the one reader
+of them. The report, sweeps, seed runs, model loading and the CLI open a run here.
+
+Every read is checked: a missing or corrupt file raises `CheckpointError` naming it, and a
+run whose manifest is missing or disagrees with its files is refused by `RunDir.open`
+(`IncompleteOutputError`).
+"""
+from __future__ import annotations
+
+import os
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import ClassVar
+
+import pandas as pd
+
+from sysid.config.experiment import Experiment, load_experiment
+from sysid.errors import CheckpointError, ConfigError, IncompleteOutputError
+from sysid.evaluation.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
+from sysid.runs.knn_bank import KnnBank
+from sysid.runs.summary import RunSummary
+from sysid.runs.tensor_files import check_finite, load_tensors
+from sysid.store.manifest import MANIFEST, has_manifest, verify_manifest
+
+HISTORY_COLUMNS = ["epoch", "train_loss", "val_loss"]
+
+
+def read_table(path: Path, columns: list[str], required: bool = True) -> pd.DataFrame | None:
+    """A CSV table with (at least) `columns`; None when absent and not `required`;
+    `CheckpointError` naming the file otherwise."""
+    if not path.is_file():
+        if required:
+            raise CheckpointError(f"{path}: file not found")
+        return None
+    try:
+        frame = pd.read_csv(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise CheckpointError(f"{path}: not a readable CSV ({exc})") from None
+    missing = [c for c in columns if c not in frame.columns]
+    if missing:
+        raise CheckpointError(f"{path}: missing column(s) {missing}")
+    return frame
+
+
+def _file(name: str, what: str) -> property:
+    """A property: the path of `name` in the run directory."""
+    return property(lambda self: self.path / name, doc=f"{name}: {what}.")
+
+
+@dataclass(frozen=True)
+class RunDir:
+    """A run directory at `path`: its files' paths, and their checked readers."""
+
+    path: Path
+    REQUIRED: ClassVar[tuple[str, ...]] = ("config.toml", "summary.json", "metrics.csv")
+
+    def __post_init__(self):
+        object.__setattr__(self, "path", Path(self.path))  # a str given is a Path here
+
+    @classmethod
+    def open(cls, path: str | os.PathLike) -> "RunDir":
+        """The run directory at `path`, verified against its manifest (every listed file
+        present and unchanged, the `REQUIRED` ones listed)."""
+        path = Path(path)
+        if not path.is_dir():
+            raise CheckpointError(f"{path}: run directory not found")
+        verify_manifest(path, "run", cls.REQUIRED)
+        return cls(path)
+
+    @classmethod
+    def complete(cls, path: str | os.PathLike) -> "RunDir | None":
+        """The run directory at `path` when it is complete, else None (never written,
+        interrupted, changed afterwards)."""
+        if not has_manifest(path):
+            return None
+        try:
+            return cls.open(path)
+        except (IncompleteOutputError, CheckpointError, OSError):
+            return None
+
+    # -- the files -----------------------------------------------------------------
+    config = _file("config.toml", "the resolved experiment config")
+    summary = _file("summary.json", "`RunSummary`")
+    model = _file("model.pt", "the state dict without the kNN bank (trained runs only)")
+    knn = _file("knn.pt", "`KnnBank` (hybrid and NN runs with a gate)")
+    standardization = _file("standardization.json", "the FNN's input and output mean and std")
+    history = _file("history.csv", "losses per stage and epoch (trained runs only)")
+    metrics = _file("metrics.csv", "`sysid.evaluation.evaluate.METRICS_COLUMNS`")
+    traces = _file("traces", "one CSV per (test file, horizon)")
+    manifest = _file(MANIFEST, "every other file with its SHA-256, written last")
+
+    def trace(self, file_stem: str, horizon_s: float) -> Path:
+        """The trace of a test file at a horizon [s]."""
+        return self.traces / trace_name(file_stem, horizon_s)
+
+    # -- reading them --------------------------------------------------------------
+    def read_summary(self) -> RunSummary:
+        return RunSummary.read(self.summary)
+
+    def read_config_text(self) -> str:
+        if not self.config.is_file():
+            raise CheckpointError(f"{self.config}: file not found")
+        return self.config.read_text()
+
+    def read_config(self) -> dict:
+        """config.toml as a TOML table (as written: every section, defaults filled in)."""
+        try:
+            return tomllib.loads(self.read_config_text())
+        except tomllib.TOMLDecodeError as exc:
+            raise CheckpointError(f"{self.config}: not valid TOML ({exc})") from None
+
+    def read_experiment(self) -> Experiment:
+        try:
+            return load_experiment(self.config)
+        except ConfigError as exc:
+            raise CheckpointError(f"{self.path}: bad run config ({exc})") from None
+
+    def read_metrics(self) -> pd.DataFrame:
+        """metrics.csv as written (RMSE of u, v_m [m/s] and r [rad/s])."""
+        return read_table(self.metrics, METRICS_COLUMNS)
+
+    def read_history(self) -> pd.DataFrame | None:
+        """history.csv, None for an untrained run."""
+        return read_table(self.history, HISTORY_COLUMNS, required=False)
+
+    def read_trace(self, file_stem: str, horizon_s: float) -> pd.DataFrame | None:
+        """A trace (`TRACE_COLUMNS`), None when the run has none for that file and horizon."""
+        return read_table(self.trace(file_stem, horizon_s), TRACE_COLUMNS, required=False)
+
+    def read_model_state(self) -> dict:
+        """model.pt: the state dict (plain tensors, all finite)."""
+        state = load_tensors(self.model)
+        if not isinstance(state, dict):
+            raise CheckpointError(f"{self.model}: not a state dict")
+        check_finite(state, self.model)
+        return state
+
+    def read_knn_bank(self, width: int | None = None) -> KnnBank:
+        """knn.pt, checked (`KnnBank`); `width`: F of the model's gate vectors, if known."""
+        return KnnBank.load(self.knn, width)

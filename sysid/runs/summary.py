@@ -1,0 +1,190 @@
+"""summary.json of a run directory as a typed record (`RunSummary`), key for key.
+
+Written by `sysid.runs.rundir.write_run`, read by `sysid.runs.directory.RunDir.read_summary`
+(the report, sweeps, seed runs and the CLI read it there). Keys it does not know are kept
+(`extra`, see `sysid.runs.records`): a run written by a newer sysid still opens. Runs written
+before a key existed read it as its default.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from sysid.runs.records import JsonRecord
+
+
+@dataclass(frozen=True)
+class WeakDirection(JsonRecord):
+    """A combination of coefficients the data do not determine: its sigma relative to the
+    estimates, and the unit vector (coefficient name -> weight) in relative coordinates."""
+
+    relative_sigma: float
+    combination: dict[str, float]
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class UncertaintySummary(JsonRecord):
+    """"identified_uncertainty": the identified coefficients' estimates, standard errors
+    (None: infinite) and correlations (`sysid.identify.uncertainty.CoefficientUncertainty`)."""
+
+    names: tuple[str, ...]
+    estimate: tuple[float | None, ...] = ()
+    std_error: tuple[float | None, ...] = ()
+    correlation: tuple[tuple[float | None, ...], ...] = ()
+    undetermined: tuple[bool, ...] = ()
+    weak_directions: tuple[WeakDirection, ...] = ()
+    residual_rms: float | None = None
+    n_residuals: int | None = None
+    n_windows: int | None = None
+    method: str | None = None      # "sandwich" | "gauss_newton"
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class StartStateCheckSummary(JsonRecord):
+    """"identification.start_state_check": the Levenberg-Marquardt fit again with the other
+    start-state treatment, its distance from the configured fit in sigma and its validation loss."""
+
+    start_states: str                         # the other treatment: "recorded" | "estimated"
+    coefficients: dict[str, float]
+    difference_sigma: dict[str, float | None]  # (other - configured) / sigma; None: no finite sigma
+    largest: str
+    largest_sigma: float | None
+    limit_sigma: float
+    agrees: bool
+    val_loss: float
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def verdict(self) -> str:
+        """The check in one clause (the training log's and the report's wording)."""
+        from sysid.identify.levenberg_marquardt import start_state_verdict  # torch: only when asked
+        return start_state_verdict(self.start_states, self.largest, self.largest_sigma, self.agrees)
+
+
+@dataclass(frozen=True)
+class IdentificationSummary(JsonRecord):
+    """"identification": the estimator of the identified coefficients and of their sigma.
+    Gradient: solver, start_states, epochs, stage, integrator, covariance; Levenberg-Marquardt:
+    solver, start_states, prior_weight, iterations, windows, integrator, covariance,
+    start_state_check."""
+
+    SPARSE = True
+    solver: str | None = None                # "gradient" | "levenberg_marquardt"
+    start_states: str | None = None          # "recorded" | "estimated"
+    prior_weight: float | None = None
+    iterations: int | None = None
+    epochs: int | None = None
+    stage: str | None = None                 # "before" | "joint with the FNN"
+    windows: int | None = None
+    integrator: str | None = None
+    covariance: str | None = None
+    start_state_check: StartStateCheckSummary | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class GateSummary(JsonRecord):
+    """"gate": the kNN gate of a hybrid (k, alpha, space, bank rows, threshold; absent
+    without one) and, for every run, the share of prediction steps with the gate off per
+    trace file (``off_share``)."""
+
+    SPARSE = True
+    k: int | None = None
+    alpha: float | None = None
+    space: str | None = None                 # "features" | "inputs"
+    bank: int | None = None
+    threshold: float | None = None
+    off_share: dict[str, float] | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SplitFile(JsonRecord):
+    """One training file's windows in the training/validation split and its data issues."""
+
+    file: str
+    train_windows: int
+    val_windows: int
+    issues: tuple[str, ...] = ()
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SplitSummary(JsonRecord):
+    """"training.split" (`sysid.identify.trainer.SplitReport`)."""
+
+    files: tuple[SplitFile, ...] = ()
+    dropped_copies: tuple[str, ...] = ()
+    suspect_windows: int = 0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class TrainingDetails(JsonRecord):
+    """"training": the rest of the trainer's `TrainingSummary` (empty when untrained).
+    Losses are multi-step losses (dimensionless); residual forces in N, N, N m."""
+
+    SPARSE = True
+    split: SplitSummary | None = None
+    device: str | None = None
+    mmg_train_loss: float | None = None
+    mmg_val_loss: float | None = None
+    residual_force_mean: tuple[float, ...] | None = None
+    residual_force_std: tuple[float, ...] | None = None
+    warm_val_loss: float | None = None
+    ensemble_val_loss: float | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class RunSummary(JsonRecord):
+    """summary.json of a run directory.
+
+    status : "complete" or "failed: why"; dataset : "D1", "D2", "files" or "-" (an MMG used
+    as defined); seconds, train_seconds : wall time of the run and of its training [s];
+    epochs : the largest epoch of any stage; best_epoch : of the last stage; val_loss : the
+    final model's validation multi-step loss (the sweep objective); stopped : stage ->
+    why it stopped; identified, identified_initial : coefficient -> value after and before
+    identification.
+    """
+
+    name: str
+    model: str = "mmg"                       # "mmg" | "nn" | "hybrid"
+    status: str = "complete"
+    dataset: str | None = None
+    ship: str | None = None
+    seed: int | None = None
+    created: str | None = None
+    seconds: float | None = None
+    train_seconds: float | None = None
+    epochs: int = 0
+    best_epoch: int | None = None
+    val_loss: float | None = None
+    stopped: dict[str, str] = field(default_factory=dict)
+    n_train_windows: int | None = None
+    n_val_windows: int | None = None
+    versions: dict[str, str] = field(default_factory=dict)
+    mmg_overrides: dict[str, float] = field(default_factory=dict)
+    identified: dict[str, float] = field(default_factory=dict)
+    identified_initial: dict[str, float] = field(default_factory=dict)
+    identified_uncertainty: UncertaintySummary | None = None
+    identification: IdentificationSummary | None = None
+    gate: GateSummary = field(default_factory=GateSummary)
+    training: TrainingDetails = field(default_factory=TrainingDetails)
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def failed(self) -> bool:
+        return self.status.startswith("failed")
+
+    @property
+    def objective(self) -> float:
+        """`val_loss`, NaN when there is none (an untrained or failed run)."""
+        return float(self.val_loss) if self.val_loss is not None else math.nan
+
+    @property
+    def stopped_text(self) -> str:
+        """"identify: early stop; train: epoch limit"."""
+        return "; ".join(f"{stage}: {why}" for stage, why in self.stopped.items())

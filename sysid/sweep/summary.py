@@ -1,0 +1,43 @@
+"""summary.json of a sweep directory as a typed record (`SweepSummary`): written by
+`sysid.sweep.results.write_results`, read by the CLI and the report."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from sysid.runs.records import JsonRecord
+
+
+@dataclass(frozen=True)
+class ChosenPoint(JsonRecord):
+    """The chosen configuration: lowest mean validation loss over all its seeds (each of
+    them complete); its varied values, the loss's mean and std over the seeds (None for one
+    seed) and its run directories (relative to the sweep directory)."""
+
+    point: str
+    values: dict[str, Any]
+    val_loss_mean: float
+    val_loss_std: float | None
+    runs: tuple[str, ...]
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SweepSummary(JsonRecord):
+    """A sweep: its name, base config, search ("grid" | "random" | "optuna"), seeds,
+    objective, varied keys ("section.option"), trial counts, the chosen configuration (None:
+    no configuration completed all its seeds) and the wall time [s]."""
+
+    name: str
+    base: str | None = None
+    search: str | None = None
+    seeds: tuple[int, ...] = ()
+    objective: str | None = None
+    keys: tuple[str, ...] = ()
+    trials: int = 0
+    complete: int = 0
+    failed: int = 0
+    missing: int = 0
+    best: ChosenPoint | None = None
+    seconds: float | None = None
+    extra: dict[str, Any] = field(default_factory=dict)

@@ -1,0 +1,59 @@
+"""The training checkpoint as `CheckpointState`: a checkpoint the trainer wrote reads into the
+dataclass and writes back to the same content (``torch.load(weights_only=True)`` both ways);
+a checkpoint missing a key is refused with one line naming it."""
+from __future__ import annotations
+
+import pytest
+import torch
+
+from sysid.config.experiment import load_experiment
+from sysid.errors import CheckpointError
+from sysid.identify.checkpoint import CheckpointState, TrainingCheckpoint
+from sysid.identify.trainer import Trainer
+from sysid.runs.lifecycle import training_runs
+from tiny_experiment import tiny_experiment
+
+
+def _same(a, b) -> bool:
+    """Equal content: same keys in the same order, equal tensors (dtype and values)."""
+    if isinstance(a, torch.Tensor):
+        return isinstance(b, torch.Tensor) and a.dtype == b.dtype and torch.equal(a, b)
+    if isinstance(a, dict):
+        return isinstance(b, dict) and list(a) == list(b) and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple)):
+        return type(a) is type(b) and len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    return type(a) is type(b) and a == b
+
+
+@pytest.fixture(scope="module")
+def written(dataset_dir, tmp_path_factory):
+    """(checkpoint file, config) the trainer left after a 3-epoch training stage."""
+    tmp = tmp_path_factory.mktemp("checkpoint")
+    exp = load_experiment(tiny_experiment(tmp / "tiny.toml", dataset_dir, seed=1, epochs=3, warm_start_epochs=2))
+    trainer = Trainer(exp, progress=False, log=lambda m: None, checkpoint=tmp / "ckpt.pt").fit(training_runs(exp))
+    return tmp / "ckpt.pt", exp.to_toml(), trainer
+
+
+def test_checkpoint_reads_into_the_state_and_writes_back_the_same(written, tmp_path):
+    path, config, trainer = written
+    state = TrainingCheckpoint(path, config).load()
+    assert (state.stage, state.epoch) == ("train", 3)
+    assert [row["epoch"] for row in state.stage_history] == [1, 2, 3]
+    losses = [row["val_loss"] for row in state.stage_history]
+    assert state.best_loss == min(losses) and state.best_epoch == 1 + losses.index(min(losses))
+    assert state.summary["n_train_windows"] == trainer.summary_.n_train_windows
+    TrainingCheckpoint(tmp_path / "again.pt", config).save(state)
+    first = torch.load(path, weights_only=True)
+    again = torch.load(tmp_path / "again.pt", weights_only=True)
+    assert list(first)[:2] == ["version", "config"] and _same(first, again)
+    assert _same(CheckpointState.from_state_dict(again, "again.pt").to_state_dict(), state.to_state_dict())
+
+
+@pytest.mark.parametrize("key", ["generator", "best_state"])
+def test_a_checkpoint_missing_a_key_is_refused_naming_it(written, tmp_path, key):
+    path, config, _ = written
+    raw = torch.load(path, weights_only=True)
+    del raw[key]
+    torch.save(raw, tmp_path / "ckpt.pt")
+    with pytest.raises(CheckpointError, match=rf"training checkpoint has no '{key}'; delete it to start afresh$"):
+        TrainingCheckpoint(tmp_path / "ckpt.pt", config).load()

@@ -1,0 +1,122 @@
+"""summary.json as `RunSummary`: the record mirrors what the trainer's writer writes, key for
+key and byte for byte, and refuses a malformed file with one line naming the file and key."""
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import pytest
+
+from sysid.errors import CheckpointError
+from sysid.runs.directory import RunDir
+from sysid.runs.records import JsonRecord
+from sysid.runs.summary import RunSummary
+from synthetic_rundir import measured_runs, write_run
+
+
+def _extras(record: JsonRecord, at: str = "summary") -> dict:
+    """Every key the record did not know, anywhere in it (path -> keys)."""
+    found = {at: list(record.extra)} if record.extra else {}
+    for f in dataclasses.fields(record):
+        values = getattr(record, f.name)
+        for i, value in enumerate(values if isinstance(values, tuple) else (values,)):
+            if isinstance(value, JsonRecord):
+                found.update(_extras(value, f"{at}.{f.name}[{i}]"))
+    return found
+
+
+KEYS = ["name", "model", "status", "dataset", "ship", "seed", "created", "seconds", "train_seconds", "epochs",
+        "best_epoch", "val_loss", "stopped", "n_train_windows", "n_val_windows", "versions", "mmg_overrides",
+        "identified", "identified_initial", "identified_uncertainty", "identification", "gate", "training"]
+
+
+@pytest.mark.parametrize("which", ["hybrid_run", "levenberg_marquardt_run"])
+def test_written_summary_reads_back_and_writes_byte_identical(which, request):
+    run = RunDir.open(request.getfixturevalue(which).path)
+    text = run.summary.read_text()
+    summary = run.read_summary()
+    assert summary.to_text() == text                      # read, write again: the same bytes
+    assert RunSummary.from_json(json.loads(summary.to_text()), "again") == summary
+    assert _extras(summary) == {}                         # every key the writer writes is a typed field
+
+
+@pytest.mark.parametrize("which", ["hybrid_run", "levenberg_marquardt_run"])
+def test_summary_keeps_the_trainers_blocks_key_for_key_in_their_order(which, request):
+    """The documented top-level keys; the blocks as the trainer made them (`TrainingSummary`,
+    its identification, sigma and gate dicts), in the order it made them."""
+    result = request.getfixturevalue(which)
+    written = json.loads(RunDir(result.path).summary.read_text())
+    assert list(written) == KEYS
+    made = result.training.to_dict()
+    for key in ("identification", "identified_uncertainty", "identified", "identified_initial", "stopped"):
+        assert json.dumps(written[key]) == json.dumps(made.get(key)), key
+    gate = {**(made.get("gate") or {}), "off_share": result.evaluation.gate_off_share}
+    assert json.dumps(written["gate"]) == json.dumps(gate)
+    rest = {k: v for k, v in made.items() if k not in KEYS and k != "failure"}
+    assert json.dumps(written["training"]) == json.dumps(rest)
+
+
+def test_hybrid_summary_agrees_with_the_runs_other_files(hybrid_run):
+    run = RunDir.open(hybrid_run.path)
+    summary, bank = run.read_summary(), run.read_knn_bank()
+    assert (summary.name, summary.model, summary.status, summary.dataset) == ("tiny", "hybrid", "complete", "files")
+    assert (summary.gate.k, summary.gate.space) == (5, "inputs")  # the tiny experiment's [gate]
+    assert summary.gate.bank == bank.bank.shape[0] and summary.gate.threshold == float(bank.threshold)
+    assert set(summary.gate.off_share) == {p.name for p in run.traces.iterdir()}
+    assert summary.n_train_windows == sum(f.train_windows for f in summary.training.split.files)
+    assert summary.n_val_windows == sum(f.val_windows for f in summary.training.split.files)
+    history = run.read_history()
+    assert summary.epochs == history.epoch.max() and set(summary.stopped) == {"identify", "train"}
+    assert summary.identification.solver == "gradient" and summary.identification.epochs == 2
+    assert summary.identified_uncertainty.names == ("N_r",)
+    assert summary.identified_uncertainty.estimate[0] == pytest.approx(summary.identified["N_r"])
+    assert summary.val_loss > 0 and summary.objective == summary.val_loss
+
+
+def test_levenberg_marquardt_check_reads_as_the_trainer_logged_it(levenberg_marquardt_run):
+    summary = RunDir.open(levenberg_marquardt_run.path).read_summary()
+    est = summary.identification
+    assert (est.solver, est.start_states, est.iterations) == ("levenberg_marquardt", "estimated", 2)
+    check = est.start_state_check
+    assert check.start_states == "recorded" and set(check.coefficients) == {"N_r"}
+    assert check.largest == "N_r" and check.largest_sigma == check.difference_sigma["N_r"]
+    assert check.verdict().startswith(f"with start states recorded the estimates move by at most "
+                                      f"{abs(check.largest_sigma):.1f}σ (N_r)")
+
+
+def test_unknown_keys_are_kept_and_written_after_the_known_ones(hybrid_run):
+    data = json.loads(RunDir(hybrid_run.path).summary.read_text())
+    data["verdict"] = {"fit": "good"}                  # a block a newer sysid writes
+    data["gate"]["bank_bytes"] = 123
+    summary = RunSummary.from_json(data, "summary.json")
+    assert summary.extra == {"verdict": {"fit": "good"}} and summary.gate.extra == {"bank_bytes": 123}
+    assert summary.to_text() == json.dumps(data, indent=2)
+
+
+def test_a_run_written_before_keys_existed_reads_with_their_defaults(tmp_path):
+    """The report tests' synthetic run: no status, seconds, val_loss, stopped, training."""
+    runs = measured_runs(0.2)
+    path = write_run(tmp_path / "hybrid_D1", "hybrid_D1", {"Berthing": runs["Berthing"]}, horizons=(30,))
+    summary = RunDir.open(path).read_summary()
+    assert (summary.status, summary.val_loss, summary.stopped, summary.training.split) == ("complete", None, {}, None)
+    assert (summary.gate.k, summary.gate.threshold, summary.gate.off_share) == (10, 1.0, None)
+    assert not summary.failed and summary.epochs == 40
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda d: d["gate"].update(k="ten"), r"gate\.k: expected an integer, got a string 'ten'"),
+    (lambda d: d.update(stopped=["train"]), r"stopped: expected an object, got an array"),
+    (lambda d: d.update(val_loss=True), r"val_loss: expected a number, got true/false"),
+    (lambda d: d["training"]["split"]["files"][0].pop("val_windows"),
+     r"key 'training\.split\.files\[0\]\.val_windows' is missing"),
+    (lambda d: d.pop("name"), r"key 'name' is missing"),
+])
+def test_a_malformed_summary_is_one_line_naming_the_file_and_key(hybrid_run, tmp_path, change, message):
+    data = json.loads(RunDir(hybrid_run.path).summary.read_text())
+    change(data)
+    path = tmp_path / "summary.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(CheckpointError, match=message) as err:
+        RunSummary.read(path)
+    said = str(err.value)
+    assert said.startswith(f"{path}: ") and "\n" not in said and "write it again" in said
