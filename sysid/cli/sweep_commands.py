@@ -30,12 +30,12 @@ def sweep(
     --resume continues without training a finished trial again.
     """
     from sysid.cli.interrupts import on_interrupt
-    from sysid.errors import ConfigError
+    from sysid.config import checks
     from sysid.sweep import load_sweep, run_sweep
 
     start = time.perf_counter()
-    if workers is not None and workers < 1:
-        raise ConfigError(f"--workers {workers}: must be >= 1")
+    if workers is not None:
+        checks.workers("--workers", workers, cluster=address)
     spec = load_sweep(sweep_file)
     inputs = [sweep_file, spec.base_path, *experiment_inputs(spec.base, data)]
     claim(output, OutputKind.SWEEP, inputs, overwrite, resume=resume)

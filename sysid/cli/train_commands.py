@@ -32,6 +32,7 @@ def train(
     interrupted training leaves no run, only its checkpoint for --resume.
     """
     from sysid.data.recordings import expand_paths
+    from sysid.config import checks
     from sysid.errors import ConfigError
     from sysid.config.experiment import load_experiment
     from sysid.runs.lifecycle import checkpoint_path, evaluation_runs, run_experiment, training_runs, validation_runs
@@ -39,6 +40,8 @@ def train(
     start = time.perf_counter()
     if epochs is not None and epochs < 0:
         raise ConfigError(f"--epochs {epochs}: must be >= 0")
+    if threads is not None:
+        checks.threads("--threads", threads)
     exp = load_experiment(config)
     if epochs is not None:
         exp = exp.replace(training={"epochs": epochs})
@@ -112,13 +115,12 @@ def reproduce(
     """
     from sysid.device import cpu_cores
     from sysid.data.datasets import data_root
-    from sysid.errors import ConfigError
     from sysid.protocol.reproduce import reproduce as run_protocol
+    from sysid.config import checks
 
-    if jobs is not None and jobs < 1:
-        raise ConfigError(f"--jobs {jobs}: must be >= 1")
-    if seeds < 1:
-        raise ConfigError(f"--seeds {seeds}: must be >= 1")
+    if jobs is not None:
+        checks.workers("--jobs", jobs, cluster=address)
+    checks.POSITIVE_COUNT.check("--seeds", seeds)
     if seeds > 1:
         from sysid.sweep.runner import import_ray
         import_ray()  # a clear error now if Ray is not installed
