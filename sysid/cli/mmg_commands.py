@@ -229,10 +229,12 @@ def evaluate(
         checks.DURATION.check("--horizon", h)
     start = time.perf_counter()
     claim(output, OutputKind.FILE, [run_dir, *data, None if run_dir is not None else ship_file(ship)])
+    columns = None
     if run_dir is not None:
         from sysid.runs.rundir import load_model
         exp, model = load_model(run_dir)
         label = f"{exp.experiment.model} run {run_dir}"
+        columns = exp.data.columns  # the logs' column names and units, as in training
     else:
         if model_kind != "mmg":
             raise DataError(f"--model {model_kind!r}: give a run directory for trained models, or --model mmg")
@@ -240,7 +242,7 @@ def evaluate(
         overrides = ", ".join(f"{k}={v:g}" for k, v in model.ship.overrides.items()) or "none"
         label = f"MMG ({model.ship.name}, overrides: {overrides})"
     files = expand_paths(data)
-    runs = [read_run(f) for f in progress(files, desc="reading", unit="files", quiet=len(files) < 4)]
+    runs = [read_run(f, columns=columns) for f in progress(files, desc="reading", unit="files", quiet=len(files) < 4)]
     short = short_runs(runs, horizon)
     for h in horizon:
         if sum(s == h for _, s in short) == len(runs):

@@ -4,6 +4,7 @@ in none), and the target's lock, held until the command ends (`hold`, released b
 `sysid.cli.run` whatever the outcome)."""
 from __future__ import annotations
 
+import glob
 import os
 from contextlib import ExitStack
 from pathlib import Path
@@ -44,14 +45,16 @@ def ship_file(name_or_path: str | os.PathLike) -> Path | None:
 
 
 def experiment_inputs(exp, data: str | os.PathLike | None = None) -> list[Path]:
-    """The files an experiment reads: its config, its ship, its training files (``[data]
-    files``, or the dataset's data directory)."""
+    """The files an experiment reads: its config, its ship, its logs (``[data] train``,
+    ``validation`` and ``test``, patterns expanded), or the dataset's data directory (a paper
+    data set, `sysid.data.splits`)."""
     from sysid.data.datasets import data_dir
+    from sysid.data.recordings import expand_paths
 
     paths = [Path(exp.source)] if exp.source and Path(exp.source).is_file() else []
     paths.append(ship_file(exp.experiment.ship))
-    if exp.data.files:
-        paths += [Path(f) for f in exp.data.files]
-    elif exp.needs_training:
+    listed = exp.data.train + exp.data.validation + exp.data.test
+    paths += [p for f in listed for p in (expand_paths([f]) if glob.has_magic(f) else [Path(f)])]
+    if exp.experiment.dataset or (exp.needs_training and not exp.data.train):
         paths.append(data_dir(data))
     return [p for p in paths if p is not None]

@@ -47,8 +47,9 @@ def sweep(
         typer.echo(shown.to_string(index=False, float_format=lambda v: f"{v:.5f}"))
     best = summary.best
     if best:
-        spread = f" ± {best.val_loss_std:.5f} (std over seeds)" if best.val_loss_std is not None else ""
-        typer.echo(f"sweep: chosen {best.point}: validation loss {best.val_loss_mean:.5f}{spread}")
+        spread = (f" ± {best.val_loss_multistep_std:.5f} (std over seeds)"
+                  if best.val_loss_multistep_std is not None else "")
+        typer.echo(f"sweep: chosen {best.point}: val_loss_multistep {best.val_loss_multistep_mean:.5f}{spread}")
     counts = f"{summary.complete}/{summary.trials} trials complete"
     if summary.failed or summary.missing:
         counts += f", {summary.failed} failed, {summary.missing} missing"

@@ -1,6 +1,7 @@
 """``sysid train`` and ``sysid reproduce``."""
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 from typing import List, Optional
@@ -19,7 +20,7 @@ def train(
     config: Path = typer.Argument(..., help="Experiment TOML (configs/experiments/*.toml)."),
     output: Path = typer.Option(..., "-o", "--output", help="Run directory to write (runs/NAME)."),
     data: Optional[Path] = typer.Option(None, "--data", help="Dataset root (default: SYSID_DATA or ../shared/data/frt-ds-esso)."),
-    test: Optional[List[Path]] = typer.Option(None, "--test", help="Files to evaluate on (default: the six test files)."),
+    test: Optional[List[Path]] = typer.Option(None, "--test", help="Logs to evaluate on, instead of the config's [data] test (default: [data] test; the paper's six test files only for dataset = D1/D2)."),
     epochs: Optional[int] = typer.Option(None, "--epochs", help="Override [training] epochs."),
     threads: Optional[int] = typer.Option(None, "--threads", help="Override [training] threads (torch CPU threads; 0: one per core)."),
     resume: bool = typer.Option(False, "--resume", help="Continue an interrupted training from its checkpoint."),
@@ -30,12 +31,11 @@ def train(
     The run directory is moved into place only when complete (with a manifest); an
     interrupted training leaves no run, only its checkpoint for --resume.
     """
-    from sysid.data.recordings import expand_paths, read_run
-    from sysid.data.datasets import test_files
+    from sysid.data.recordings import expand_paths
     from sysid.config import checks
     from sysid.errors import ConfigError
     from sysid.config.experiment import load_experiment
-    from sysid.runs.lifecycle import checkpoint_path, run_experiment, training_runs
+    from sysid.runs.lifecycle import checkpoint_path, evaluation_runs, run_experiment, training_runs, validation_runs
 
     start = time.perf_counter()
     if epochs is not None and epochs < 0:
@@ -47,21 +47,35 @@ def train(
         exp = exp.replace(training={"epochs": epochs})
     if threads is not None:
         exp = exp.replace(training={"threads": threads})
-    test_inputs = test or list(test_files(data).values())
+    if test:
+        exp = exp.replace(data={"test": tuple(os.path.abspath(p) for p in expand_paths(test))})
     # a bad -o fails now, not after training
-    claim(output, OutputKind.RUN, [config, *experiment_inputs(exp, data), *test_inputs], overwrite)
+    claim(output, OutputKind.RUN, [config, *experiment_inputs(exp, data)], overwrite)
     checkpoint = checkpoint_path(output)
     on_interrupt(lambda: f"nothing written to {output}" + (
         f"; the training checkpoint {checkpoint} is kept: rerun with --resume to continue"
         if checkpoint.is_file() else ""))
     runs = training_runs(exp, data) if exp.needs_training else None
+    validation = validation_runs(exp) if exp.needs_training else []
+    tests = evaluation_runs(exp, data)
     if runs is not None:
-        logs.info(f"train: {exp.experiment.model} model on {len(runs)} file(s) "
-                   f"({sum(r.duration for r in runs):.0f} s of data), seed {exp.experiment.seed}")
-    tests = [read_run(p) for p in (expand_paths(test) if test else test_inputs)]
+        source = f"data set {exp.experiment.dataset}" if exp.experiment.dataset and not exp.data.train else "your logs"
+        logs.info(f"train: {exp.experiment.model} model on {len(runs)} training log(s) from {source} "
+                   f"({sum(r.duration for r in runs):.0f} s of data), seed {exp.experiment.seed}; validation: "
+                   + (f"{len(validation)} log(s)" if validation else
+                      f"{exp.training.val_fraction:g} of every training log's {exp.training.block_s:g}-s blocks"))
+    if tests:
+        paper = not exp.data.test and exp.experiment.dataset
+        logs.info(f"test: {len(tests)} log(s)" + (" (the paper's test files of data set "
+                                                  f"{exp.experiment.dataset})" if paper else ""))
+    else:
+        logs.info("test: none (no [data] test in the config, no --test): " + (
+            "scored on the validation windows only" if exp.needs_training else
+            "nothing to evaluate this MMG on; name test logs in [data] test or with --test"))
     result = run_experiment(exp, output, tests, runs, data, log=logs.indented(), resume=resume,
-                            overwrite=overwrite)
-    typer.echo(result.evaluation.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+                            overwrite=overwrite, validation=validation)
+    if tests:
+        typer.echo(result.evaluation.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     if result.failure:
         typer.secho(f"train: FAILED: {result.failure}; the run in {output} is marked failed", fg=typer.colors.RED, err=True)
         raise SystemExit(1)
@@ -76,6 +90,11 @@ def train(
             steps.append(f"{t.epochs} epochs, best {t.best_epoch}")
         detail = f" ({', '.join(steps)}; {stops})"
     typer.echo(f"train: wrote {output} in {time.perf_counter() - start:.0f} s{detail}")
+    if result.verdict is not None:
+        if result.verdict.beats_baseline:
+            typer.echo("verdict: " + result.verdict.statement())
+        else:  # the last line, on stderr
+            typer.secho(result.verdict.warning(), fg=typer.colors.YELLOW, err=True)
 
 
 @app.command()
@@ -133,5 +152,19 @@ def reproduce(
     for name, why in (summary.failed or {}).items():
         typer.secho(f"reproduce: run {name} FAILED: {why}", fg=typer.colors.RED, err=True)
     typer.echo(f"reproduce: {output} in {summary.seconds / 60:.1f} min")
+    _warn_below_baseline(output)
     if summary.failed:
         raise SystemExit(1)
+
+
+def _warn_below_baseline(output: Path) -> None:
+    """A WARNING on stderr for every run of a reproduction that does not beat its physics
+    baseline (`RunSummary.beats_baseline` false), with its verdict's statement."""
+    from sysid.runs.directory import RunDir
+
+    runs = output / "runs"
+    for path in sorted(runs.glob("**/summary.json")):
+        summary = RunDir(path.parent).read_summary()
+        if summary.beats_baseline is False and summary.verdict is not None:
+            typer.secho(f"WARNING: run {path.parent.relative_to(runs)}: {summary.verdict.statement}",
+                        fg=typer.colors.YELLOW, err=True)

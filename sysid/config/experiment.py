@@ -4,9 +4,16 @@
 [experiment]
 name = "hybrid_D2"
 model = "hybrid"            # mmg | nn | hybrid
-dataset = "D2"              # D1 | D2 (the paper's), or files = [...] under [data]
-ship = "esso_osaka"
+dataset = "D2"              # D1 | D2: the paper's training and test files; or [data] train
+ship = "esso_osaka"         # a bundled ship, or a ship file (relative to this config)
 seed = 0
+
+[data]                      # your own logs instead of a paper data set (paths relative to
+train = ["logs/turn_*.csv"] # this config; files, directories or glob patterns)
+validation = 0.3            # files, or a fraction of the training files' 30-s blocks
+test = ["logs/zigzag_20.csv"]   # read only by evaluation; none: no test set
+[data.columns]              # your column names and units (sysid.data.columns)
+u = { column = "STW", unit = "knots" }
 
 [mmg]
 overrides = { X_vr = 0.4535 }
@@ -36,6 +43,8 @@ prior_weight = 0.0          # levenberg_marquardt: pull toward the ship file's v
 members = ["../hybrid_D2/seed0", "../hybrid_D2/seed1"]
 ```
 Every section and key is optional except ``[experiment] model``; unknown keys are errors.
+Every path (``ship``, ``[data] train / validation / test``) resolves against the folder of
+the config file that names it (`load_experiment`); a resolved config holds absolute paths.
 """
 from __future__ import annotations
 
@@ -46,6 +55,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+from sysid.data.columns import ColumnMap, parse_columns
 from sysid.config.choices import Choice, DType, GateSpace, Method, ModelKind, Solver, Stage, StartStates
 from sysid.errors import ConfigError
 from sysid.mmg.ship import parameter_name
@@ -81,14 +91,22 @@ class _Options:
 class ExperimentOptions(_Options):
     name: str = "experiment"
     model: ModelKind = ModelKind.HYBRID
-    dataset: str = "D2"
+    dataset: str = ""              # "D1" | "D2": the paper's data (training and test); "": [data] train
     ship: str = "esso_osaka"
     seed: int = 0
 
 
 @dataclass(frozen=True)
 class DataOptions:
-    files: tuple[str, ...] = ()      # explicit training files instead of D1/D2
+    """Your own logs (instead of the paper's D1/D2): files, directories or glob patterns,
+    resolved against the config's folder. ``validation`` empty: the ``[training]
+    val_fraction`` of every training file's blocks; ``test`` empty (and no data set): no test
+    set. ``columns``: the logs' column names and units (`sysid.data.columns`)."""
+
+    train: tuple[str, ...] = ()      # training logs
+    validation: tuple[str, ...] = () # validation logs (whole files); empty: blocks of the training logs
+    test: tuple[str, ...] = ()       # test logs, read only by evaluation
+    columns: ColumnMap = ColumnMap()  # [data.columns]: channel = column or { column, unit }
     rate: float = 1.0                # Hz
     exclude_suspect: bool = True     # drop windows touching frozen-GNSS segments
 
@@ -122,7 +140,7 @@ class TrainingOptions(_Options):
     max_minutes: float = 0.0       # 0: off; > 0: a safety limit whose hit fails the run
     threads: int = 1               # torch intra-op threads; 0: one per core
     warm_start_epochs: int = 150   # one-step regression on the implied residual force
-    objective_s: float = 0.0       # horizon [s] of the final validation loss (summary val_loss); 0: T steps
+    objective_s: float = 0.0       # horizon [s] of val_loss_multistep (the run's validation loss); 0: T steps
     dtype: DType = DType.FLOAT32
     device: str = "auto"           # auto (CUDA when present) | cpu | cuda | cuda:N
 
@@ -211,7 +229,10 @@ class Experiment:
                 continue
             lines.append(f"[{section.name}]")
             for f in fields(getattr(self, section.name)):
-                lines.append(f"{f.name} = {_toml_value(getattr(getattr(self, section.name), f.name))}")
+                value = getattr(getattr(self, section.name), f.name)
+                if isinstance(value, ColumnMap):
+                    value = value.as_table()
+                lines.append(f"{f.name} = {_toml_value(value)}")
             lines.append("")
         return "\n".join(lines)
 
@@ -226,6 +247,8 @@ def _toml_value(value: Any) -> str:
     if isinstance(value, (list, tuple)):
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
     if isinstance(value, dict):
+        if not value:
+            return "{}"
         return "{ " + ", ".join(f"{k} = {_toml_value(v)}" for k, v in value.items()) + " }"
     raise TypeError(f"cannot write {value!r} as TOML")
 
@@ -237,7 +260,7 @@ _SECTIONS = {f.name: f.type for f in fields(Experiment) if f.name != "source"}
 
 
 # the element type of every list option
-_ELEMENT_TYPES = {("data", "files"): str, ("ensemble", "members"): str, ("network", "hidden"): int,
+_ELEMENT_TYPES = {("data", "train"): str, ("data", "validation"): str, ("data", "test"): str, ("ensemble", "members"): str, ("network", "hidden"): int,
                   ("identify", "parameters"): str, ("evaluation", "horizons"): float}
 _NAMES = {int: "an integer", float: "a finite number", str: "a string"}
 
@@ -302,14 +325,22 @@ def _coerce(section: str, opt_cls, table: dict, src: str):
         elif isinstance(default, dict):
             if not isinstance(value, dict):
                 raise ConfigError(f"{where}: expected a table, got {value!r}")
+        elif isinstance(default, ColumnMap):
+            value = parse_columns(value, src)
         out[key] = value
     return opt_cls(**out)
 
 
 def _validate(exp: Experiment, src: str) -> None:
     e, t, g, i = exp.experiment, exp.training, exp.gate, exp.identify
-    if not exp.data.files and e.dataset not in ("D1", "D2"):
-        raise ConfigError(f"{src}: [experiment] dataset = {e.dataset!r}: choose D1 or D2, or list [data] files")
+    if e.dataset not in ("", "D1", "D2"):
+        raise ConfigError(f"{src}: [experiment] dataset = {e.dataset!r}: choose D1 or D2 (the paper's data), "
+                          "or leave it out and list your logs in [data] train")
+    if exp.data.train and e.dataset:
+        raise ConfigError(f"{src}: [experiment] dataset = {e.dataset!r} and [data] train both name training "
+                          "data: keep one (dataset for the paper's D1/D2, [data] train for your logs)")
+    if exp.data.validation and not exp.data.train:
+        raise ConfigError(f"{src}: [data] validation files need [data] train files")
     checks = [
         (t.steps >= 1, "[training] steps must be >= 1"),
         (t.stride_s > 0, "[training] stride_s must be > 0"),
@@ -377,7 +408,7 @@ def _validate(exp: Experiment, src: str) -> None:
 
 # options that name files: a relative path resolves against the directory of the file that
 # names it (the experiment config, or the sweep file that sets it); globs stay patterns
-_PATH_OPTIONS = {("data", "files")}
+_PATH_OPTIONS = {("data", "train"), ("data", "validation"), ("data", "test")}
 
 
 def _is_ship_path(ship: str) -> bool:
@@ -406,9 +437,10 @@ def resolve_paths(sections: dict, directory: Path) -> dict:
 def parse_experiment(doc: dict, source: str = "<config>", directory: str | os.PathLike | None = None) -> Experiment:
     """A parsed TOML document to a validated `Experiment`.
 
-    `directory`: where relative file options (``[experiment] ship`` as a file, ``[data]``
-    files) are anchored, the directory of the file that names them; None: left as given
-    (relative to the working directory)."""
+    `directory`: where relative file options (``[experiment] ship`` as a file, ``[data] train
+    / validation / test``) are anchored, the directory of the file that names them; None:
+    left as given (relative to the working directory)."""
+    doc = _normalized_data(doc, source)
     unknown = set(doc) - set(_SECTIONS)
     if unknown:
         raise ConfigError(f"{source}: unknown section(s) {sorted(unknown)} (known: {', '.join(_SECTIONS)})")
@@ -423,6 +455,29 @@ def parse_experiment(doc: dict, source: str = "<config>", directory: str | os.Pa
     exp = Experiment(**sections, source=source)
     _validate(exp, source)
     return exp
+
+
+def _normalized_data(doc: dict, source: str) -> dict:
+    """``[data] files`` (the older name) as ``train``; ``validation = 0.3`` (a fraction) as
+    ``[training] val_fraction``."""
+    data = doc.get("data")
+    if not isinstance(data, dict):
+        return doc
+    data = dict(data)
+    if "files" in data:
+        if "train" in data:
+            raise ConfigError(f"{source}: [data] files and train both list training logs: keep train")
+        data["train"] = data.pop("files")
+    fraction = data.get("validation")
+    if isinstance(fraction, (int, float)) and not isinstance(fraction, bool):
+        training = dict(doc.get("training") or {})
+        if "val_fraction" in training and training["val_fraction"] != fraction:
+            raise ConfigError(f"{source}: [data] validation = {fraction!r} and [training] val_fraction = "
+                              f"{training['val_fraction']!r} disagree: keep one")
+        training["val_fraction"] = fraction
+        del data["validation"]
+        return {**doc, "data": data, "training": training}
+    return {**doc, "data": data}
 
 
 def load_experiment(path: str | os.PathLike) -> Experiment:

@@ -1,5 +1,6 @@
-"""Reading a CSV file a user hands to sysid: one clear error naming the file when it is
-empty, binary, not UTF-8 (a UTF-16 export) or not parseable as CSV."""
+"""Reading a CSV or Parquet file a user hands to sysid: one clear error naming the file when
+it is empty, binary, not UTF-8 (a UTF-16 export), not parseable, or (Parquet) when pyarrow
+is not installed."""
 from __future__ import annotations
 
 import codecs
@@ -47,3 +48,31 @@ def read_csv_table(path: str | os.PathLike, expect: str = "a CSV with a header r
         raise DataError(f"{path}: not UTF-8 text (binary, or another encoding); save it as UTF-8 CSV") from None
     except pd.errors.ParserError as exc:
         raise DataError(f"{path}: not a readable CSV ({str(exc).strip()})") from None
+
+
+PARQUET_SUFFIXES = (".parquet", ".pq")
+LOG_SUFFIXES = (".csv",) + PARQUET_SUFFIXES
+
+
+def read_parquet_table(path: str | os.PathLike, expect: str = "a Parquet table") -> pd.DataFrame:
+    """A Parquet file as a DataFrame (pandas with pyarrow), or `DataError` naming the file."""
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: file not found")
+    try:
+        import pyarrow  # noqa: F401  (pandas reads Parquet through it)
+    except ImportError:
+        raise DataError(f"{path}: reading Parquet needs pyarrow: pip install 'sysid[parquet]' "
+                        "(or save the log as CSV)") from None
+    try:
+        return pd.read_parquet(path)
+    except Exception as exc:  # noqa: BLE001 - pyarrow raises several kinds for a bad file
+        reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:200]
+        raise DataError(f"{path}: not a readable Parquet file ({reason}) (expected {expect})") from None
+
+
+def read_table(path: str | os.PathLike, expect: str = "a table with a header row") -> pd.DataFrame:
+    """A log as a DataFrame: Parquet for ``.parquet``/``.pq`` files, CSV otherwise."""
+    if Path(path).suffix.lower() in PARQUET_SUFFIXES:
+        return read_parquet_table(path, expect)
+    return read_csv_table(path, expect)

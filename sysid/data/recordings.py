@@ -1,9 +1,11 @@
-"""Processed runs (the public FRT-DS-ESSO schema) at 1 Hz, checked, and cut into windows.
+"""Processed runs at 1 Hz, checked, and cut into windows.
 
-A processed file has the header ``name [unit]`` of the processed schema (docs: input formats),
-at 10 Hz (public files) or 1 Hz (``sysid preprocess`` output). `read_run` drops trailing
-all-empty rows, rejects NaN inside the run, non-monotonic time and wrong units, and
-downsamples by taking every k-th sample from the first one (the protocol's t = 0, 1, 2 s).
+A processed file (CSV or Parquet) has the 13 columns of the processed schema, headers
+``name [unit]`` (``u_velo [m/s]``, ...; `sysid.data.columns.DEFAULT_COLUMNS`), at 10 Hz (the
+public FRT-DS-ESSO files) or 1 Hz (``sysid preprocess`` output), or any columns and units
+that a config's ``[data.columns]`` maps onto the channels (`sysid.data.columns`). `read_run`
+drops trailing all-empty rows, rejects NaN inside the run, non-monotonic time and wrong
+units, and downsamples by taking every k-th sample from the first one (t = 0, 1, 2 s).
 """
 from __future__ import annotations
 
@@ -18,15 +20,15 @@ import pandas as pd
 import torch
 
 from preprocessing.schema import PROCESSED, PROCESSED_CHANNEL, PROCESSED_PLAUSIBLE_ABS
-from sysid.data.csvfiles import read_csv_table
+from sysid.data.columns import QUANTITY, RELATIVE_WIND, SI_UNIT, ColumnMap
+from sysid.data.csvfiles import LOG_SUFFIXES, read_table
 from sysid.errors import DataError
+from sysid.mmg.wind import relative_wind
 from sysid.state import INPUTS, STATE
 
 # processed-schema header ("u_velo [m/s]") -> our channel name ("u"); one source: preprocessing.schema
 COLUMNS = {f"{name} [{unit}]": PROCESSED_CHANNEL[name] for name, unit in PROCESSED.items()}
-HEADER = {channel: header for header, channel in COLUMNS.items()}
 _LIMITS = PROCESSED_PLAUSIBLE_ABS
-_UNIT_HINTS = {"[rad]": " (degrees?)", "[rad/s]": " (deg/s?)"}
 
 
 @dataclass
@@ -61,18 +63,19 @@ class Run:
         return float(self.t[-1] - self.t[0]) if len(self.t) else 0.0
 
 
-def read_run(path: str | os.PathLike, rate: float = 1.0) -> Run:
-    """Read and check a processed run, downsampled to `rate` [Hz] by taking samples."""
+def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | None = None) -> Run:
+    """Read and check a processed run (CSV or Parquet), downsampled to `rate` [Hz] by taking
+    samples. `columns` maps the log's own column names and units onto the channels
+    (``[data.columns]``; default: the processed schema's headers)."""
     path = Path(path)
+    columns = columns if columns is not None else ColumnMap()
     if not (rate > 0 and np.isfinite(rate)):
         raise DataError(f"{path}: rate {rate} Hz: must be > 0")
-    frame = read_csv_table(path, "a processed run with the header 'name [unit]'")
-    missing = [c for c in COLUMNS if c not in frame.columns]
-    if missing:
-        raise DataError(f"{path}: missing column(s) {missing}")
-    frame = frame[list(COLUMNS)].rename(columns=COLUMNS)
+    raw = read_table(path, "a processed run with the header 'name [unit]', or columns named in [data.columns]")
+    frame = columns.to_channels(raw, path)
     # trailing all-empty rows (zigzag 13_50_28 ends with 327 of them) are dropped
-    values = frame.to_numpy(dtype=float)
+    recorded = [c for c in frame.columns if c not in RELATIVE_WIND or frame[c].notna().any()]
+    values = frame[recorded].to_numpy(dtype=float)
     filled = ~np.isnan(values[:, 1:]).all(axis=1)
     last = int(np.nonzero(filled)[0][-1]) + 1 if filled.any() else 0
     frame, values = frame.iloc[:last], values[:last]
@@ -81,22 +84,26 @@ def read_run(path: str | os.PathLike, rate: float = 1.0) -> Run:
     bad = ~np.isfinite(values)
     if bad.any():
         row, col = np.argwhere(bad)[0]
-        raise DataError(f"{path}: column {frame.columns[col]!r} is NaN/inf at data row {row + 2} "
-                        f"({int(bad.any(axis=1).sum())} bad rows)")
+        channel = recorded[col]
+        raise DataError(f"{path}: {columns.describe(channel)} (channel {channel}) is empty, NaN or inf at data "
+                        f"row {row + 2} ({int(bad.any(axis=1).sum())} bad rows)")
+    if len(recorded) < len(frame.columns):  # no relative wind recorded: from the state and true wind
+        frame = frame.assign(**dict(zip(RELATIVE_WIND, _relative_wind(frame))))
+    values = frame.to_numpy(dtype=float)
     t = values[:, 0]
     steps = np.diff(t)
     if (steps <= 0).any():
         row = int(np.argmax(steps <= 0)) + 1
-        raise DataError(f"{path}: column 't' is not strictly increasing at data row {row + 2} "
-                        f"(t = {t[row]})")
+        raise DataError(f"{path}: {columns.describe('t')} (channel t) is not strictly increasing at data row "
+                        f"{row + 2} (t = {t[row]} s)")
     for name, limit in _LIMITS.items():
         peak = np.abs(frame[name].to_numpy()).max()
         if name == "psi" and peak > limit and _turns_at_yaw_rate(t, frame["psi"].to_numpy(), frame["r"].to_numpy()):
             continue  # an unwrapped heading in radians (a simulated turn): it changes at r
         if peak > limit:
-            hint = next((h for unit, h in _UNIT_HINTS.items() if HEADER[name].endswith(unit)), "?")
-            raise DataError(f"{path}: column {name!r} reaches {peak:.4g}, beyond ±{limit:.4g} "
-                            f"(header '{HEADER[name]}'): wrong units{hint}")
+            raise DataError(f"{path}: {columns.describe(name)} (channel {name}) reaches {peak:.4g} "
+                            f"{SI_UNIT[name]}, beyond {limit}: wrong units? name its unit in [data.columns], "
+                            f"e.g. {name} = {{ column = \"...\", unit = \"{_UNIT_HINT[QUANTITY[name]]}\" }}")
     period = float(np.median(steps))
     stride = int(round(1.0 / rate / period))
     if stride < 1 or abs(stride * period * rate - 1.0) > 1e-3:
@@ -125,6 +132,17 @@ def _turns_at_yaw_rate(t: np.ndarray, psi: np.ndarray, r: np.ndarray) -> bool:
     rate, r_mid = dpsi[keep] / np.diff(t)[keep], 0.5 * (r[1:] + r[:-1])[keep]
     power = float(r_mid @ r_mid)
     return power > 0 and 0.5 < float(rate @ r_mid) / power < 2.0
+
+
+_UNIT_HINT = {"speed": "knots", "angle": "deg", "angular rate": "deg/s", "revolutions": "rpm"}
+
+
+def _relative_wind(frame: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+    """(U_A [m/s], gamma_A [rad]) at midship from the recorded state and true wind."""
+    c = {k: torch.tensor(frame[k].to_numpy(), dtype=torch.float64)
+         for k in ("u", "v", "psi", "wind_velo_true", "wind_dir_true")}
+    wind = relative_wind(c["u"], c["v"], c["psi"], c["wind_velo_true"], c["wind_dir_true"])
+    return wind[0].numpy(), wind[1].numpy()
 
 
 def _quality_issues(t: np.ndarray, values: np.ndarray, period: float):
@@ -171,8 +189,8 @@ def duplicate_runs(runs: Sequence[Run], tolerance: float = 1e-9) -> list[tuple[s
 
 
 def expand_paths(items: Iterable[str | os.PathLike]) -> list[Path]:
-    """Files, directories (searched recursively for *.csv) and glob patterns (``logs/*.csv``,
-    ``logs/**/*.csv``; matches sorted) to a file list."""
+    """Files, directories (searched recursively for .csv and .parquet logs) and glob patterns
+    (``logs/*.csv``, ``logs/**/*.parquet``; matches sorted) to a file list."""
     out: list[Path] = []
     from sysid.store.manifest import has_manifest, verify_manifest
 
@@ -188,10 +206,11 @@ def expand_paths(items: Iterable[str | os.PathLike]) -> list[Path]:
             if has_manifest(p):  # sysid preprocess output: refused when incomplete or changed
                 verify_manifest(p)
             # hidden entries are staging directories and temporaries of unfinished writes
-            found = sorted(q for q in p.rglob("*.csv") if not q.name.endswith(".truth.csv")
+            found = sorted(q for q in p.rglob("*") if q.suffix.lower() in LOG_SUFFIXES
+                           and not q.name.endswith(".truth.csv")
                            and not any(part.startswith(".") for part in q.relative_to(p).parts))
             if not found:
-                raise DataError(f"{p}: directory holds no .csv files")
+                raise DataError(f"{p}: directory holds no .csv or .parquet files")
             out += found
         elif p.is_file():
             out.append(p)

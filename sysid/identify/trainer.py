@@ -5,8 +5,10 @@
 
 1. Windows of T+1 samples (T Euler steps) slid by `stride_s` within each file; each file's
    time axis is cut into 30 s blocks, 30 % of them (seeded draw) validation, and a window
-   lies wholly in one part, so no validation window overlaps a training window. Exact copies of another file (``turn_cut_...``) and windows
-   touching frozen-GNSS segments are left out and reported.
+   lies wholly in one part, so no validation window overlaps a training window; or, given
+   validation logs (``[data] validation``), every window of those is validation and every
+   window of the training logs training. Exact copies of another file (``turn_cut_...``)
+   and windows touching frozen-GNSS segments are left out and reported.
 2. Standardisation: FNN input statistics from the training samples (relative wind computed
    from the recorded state and true wind, as the model sees it); output statistics from the
    residual force the data implies: M * (v[k+1] - v[k]) / dt + C(v[k]) - F_MMG(x[k])
@@ -20,9 +22,15 @@
    members`` K > 1, K networks are trained side by side (each on its own loss) and averaged.
 5. Multi-step training: Euler rollouts of T steps through torchdiffeq, loss
    lambda_v * L_v + lambda_F * L_F + lambda_L2 * |theta|^2, Adam, early stopping on the
-   validation velocity loss, best weights restored.
+   validation velocity loss L_v of the network being trained (the *early-stopping loss*;
+   the kNN gate does not exist yet), best weights restored.
 6. The kNN gate is fitted on the training samples: final features (the paper's) or the
    standardised inputs (``[gate] space``).
+
+The run's one validation loss is ``val_loss_multistep`` (`VAL_LOSS_DEFINITION`): L_v of the
+final model as it predicts (kNN gate included) on the validation windows, over T steps or
+``[training] objective_s``. The early-stopping loss is the same sum during training, before
+the gate exists, so the two differ by what the gate changes (and by objective_s).
 """
 from __future__ import annotations
 
@@ -56,6 +64,12 @@ from sysid.state import VELOCITY_INDEX
 from sysid.identify.uncertainty import coefficient_uncertainty
 
 VEL = list(VELOCITY_INDEX)
+VAL_LOSS_DEFINITION = (
+    "val_loss_multistep: mean over the validation windows and their steps k = 1..K of "
+    "sum over u, v_m, r of w_j (predicted_j - recorded_j)^2, w_j = 1 / variance of channel j in the "
+    "training windows; Euler rollouts from each window's recorded first state with its recorded inputs; "
+    "K = [training] steps, or objective_s / dt; the final model, kNN gate included. Validation windows: "
+    "the validation blocks of the training logs, or the [data] validation logs (never a test file).")
 _LOG = logging.getLogger(__name__)
 
 
@@ -114,7 +128,7 @@ class TrainingSummary:
     residual_force_std: list | None = None
     warm_val_loss: float | None = None
     ensemble_val_loss: float | None = None
-    val_loss: float | None = None         # the final model's validation multi-step loss (sweep objective)
+    val_loss_multistep: float | None = None  # VAL_LOSS_DEFINITION: the run's validation loss (sweep objective)
     identified_uncertainty: dict | None = None  # `CoefficientUncertainty.as_dict()`
     identification: dict | None = None    # the estimator: solver, start_states, iterations, ...
     gate: dict | None = None
@@ -147,21 +161,23 @@ def _block_parts(n: int, block: int, val_fraction: float, rng: np.random.Generat
 
 def split_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction: float,
                   exclude_suspect: bool = True, dtype=torch.float64, block_s: float = 30.0, seed: int = 0,
-                  device: str | torch.device = "cpu"):
+                  device: str | torch.device = "cpu", validation_runs: Sequence[Run] = ()):
     """Training and validation `WindowSet`s, the training samples (N, 6)/(N, 4), and a
     `SplitReport`.
 
     Each file is cut into blocks of `block_s`; a random `val_fraction` of the blocks (seeded)
     is validation. Windows lie wholly inside one part, so none overlaps across the split.
+    Given `validation_runs`, those are validation whole and `runs` training whole.
     """
     rng = np.random.default_rng(seed)
     report = SplitReport()
-    copies = {copy for copy, _ in duplicate_runs(runs)}
+    validation_runs = list(validation_runs)
+    copies = {copy for copy, _ in duplicate_runs(list(runs) + validation_runs)}
     parts: dict[str, list] = {"train": [], "val": []}
     samples = ([], [])
     dt = None
     length = steps + 1
-    for run in runs:
+    for run in list(runs) + validation_runs:
         if run.name in copies:
             report.dropped_copies.append(run.name)
             continue
@@ -169,7 +185,10 @@ def split_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction
         if abs(run.dt - dt) > 1e-9:
             raise DataError(f"{run.path}: sample period {run.dt} s differs from {dt} s")
         stride = max(1, int(round(stride_s / run.dt)))
-        part_of = _block_parts(len(run), int(round(block_s / run.dt)), val_fraction, rng)
+        if validation_runs:
+            part_of = np.full(len(run), any(run is v for v in validation_runs))
+        else:
+            part_of = _block_parts(len(run), int(round(block_s / run.dt)), val_fraction, rng)
         starts = sliding_windows(len(run), length, stride)
         ends = starts + length - 1
         counts = {}
@@ -194,7 +213,8 @@ def split_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction
     if not parts["train"]:
         raise DataError("no training windows: the files are shorter than one window")
     if not parts["val"]:
-        raise DataError("no validation windows: the files are too short for the 70/30 split")
+        raise DataError("no validation windows: the validation logs are shorter than one window"
+                        if validation_runs else "no validation windows: the files are too short for the 70/30 split")
 
     def window_set(chunks) -> WindowSet:
         return WindowSet(torch.cat([c[0] for c in chunks], 1), torch.cat([c[1] for c in chunks], 1), dt)
@@ -232,6 +252,20 @@ def weight_norm(net: ForceCorrection) -> torch.Tensor:
     return sum((w * w).sum() for w in net.weights) / net.members
 
 
+def velocity_loss(err: torch.Tensor, w_v: torch.Tensor) -> torch.Tensor:
+    """L_v (Eq. 15): the mean over windows and steps of sum_j w_j err_j^2; err (T, ..., 3)
+    velocity errors (u, v_m [m/s], r [rad/s]), w_v (3,) their weights."""
+    return ((err * err) * w_v).sum(-1).mean()
+
+
+def rollout_errors(model, batch: WindowSet) -> torch.Tensor:
+    """(T, W, 3) velocity errors (u, v_m [m/s], r [rad/s]) of Euler rollouts of T steps from
+    each window's first recorded state with its recorded inputs (no gradient)."""
+    with torch.no_grad():
+        pred = integrate(model, batch.states[0], batch.inputs, batch.dt, "euler")
+    return pred[1:, ..., VEL] - batch.states[1:, ..., VEL]
+
+
 def multistep_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor | None = None):
     """(L_v, L_F) of Eqs. (15)-(17) as means over windows and steps: Euler rollouts of T steps
     from each window's first recorded state with its recorded inputs.
@@ -249,8 +283,7 @@ def multistep_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor
     else:
         trajectory = integrate_with_forces(model, states[0], inputs, batch.dt, Method.EULER)
         pred, forces = trajectory.states, trajectory.forces
-    err = pred[1:, ..., VEL] - states[1:, ..., VEL]
-    loss_v = ((err * err) * w_v).sum(-1).mean()
+    loss_v = velocity_loss(pred[1:, ..., VEL] - states[1:, ..., VEL], w_v)
     if w_F is None:
         return loss_v, loss_v.new_zeros(())
     f_nn, f_mmg = forces.correction, forces.mmg
@@ -279,6 +312,7 @@ class Trainer:
         self.log = log
         self.checkpoint = TrainingCheckpoint(checkpoint, experiment.to_toml()) if checkpoint else None
         self.resume = resume
+        self._validation_runs: list[Run] = []   # fit's validation logs
 
     # -- building blocks -------------------------------------------------------------
     def _l2(self, model) -> torch.Tensor:
@@ -333,7 +367,7 @@ class Trainer:
                 val_v, _ = multistep_loss(model, val, w_v)
             sums /= len(train)
             row = {"stage": label, "epoch": epoch, "train_loss": float(sums[0]), "train_velocity": float(sums[1]),
-                   "train_penalty": float(sums[2]), "val_loss": float(val_v), "seconds": time.perf_counter() - start}
+                   "train_penalty": float(sums[2]), "early_stopping_loss": float(val_v), "seconds": time.perf_counter() - start}
             history.append(row)
             if float(val_v) < best:
                 best, best_epoch = float(val_v), epoch
@@ -361,7 +395,8 @@ class Trainer:
             self._summary.failure = (f"wall-clock limit of {self.experiment.training.max_minutes:g} min "
                                      f"([training] max_minutes) hit in stage {label} at epoch {len(history)}")
             self.log(f"FAILED: {self._summary.failure}")
-        self.log(f"{label}: {len(history)} epochs, best validation loss {best:.5f} at epoch {best_epoch} ({stopped})")
+        self.log(f"{label}: {len(history)} epochs, best early-stopping loss {best:.5f} at epoch {best_epoch} "
+                 f"({stopped}; validation windows, before any kNN gate)")
         return StageResult(history, best_epoch, best, stopped)
 
     def _bar(self, epochs, label: str, total: int, done: int):
@@ -371,7 +406,7 @@ class Trainer:
         return epochs
 
     def _progress(self, bar, epoch: int, total: int, train_v: float, val_v: float, best_epoch: int) -> None:
-        line = f"  epoch {epoch}/{total}: training {train_v:.5f}, validation {val_v:.5f} (best at {best_epoch})"
+        line = f"  epoch {epoch}/{total}: training {train_v:.5f}, early-stopping {val_v:.5f} (best at {best_epoch})"
         if hasattr(bar, "set_postfix"):
             bar.set_postfix(train=f"{train_v:.4f}", val=f"{val_v:.4f}", best=best_epoch)
         elif self.progress and (epoch % 10 == 0 or epoch == total):
@@ -384,7 +419,8 @@ class Trainer:
         independent clusters for the sandwich sigma, and what least squares identifies on."""
         exp, t = self.experiment, self.experiment.training
         return split_windows(runs, t.steps, float(t.steps + 1) / exp.data.rate, t.val_fraction,
-                             exp.data.exclude_suspect, dtype, t.block_s, exp.experiment.seed, device)[0]
+                             exp.data.exclude_suspect, dtype, t.block_s, exp.experiment.seed, device,
+                             self._validation_runs)[0]
 
     def _log_uncertainty(self, result) -> dict:
         self.log("identified ± 2 sigma: " + ", ".join(
@@ -415,7 +451,7 @@ class Trainer:
         exp, t = self.experiment, self.experiment.training
         train, val, samples, report = split_windows(runs, t.steps, t.stride_s, t.val_fraction,
                                                     exp.data.exclude_suspect, dtype, t.block_s,
-                                                    exp.experiment.seed, device)
+                                                    exp.experiment.seed, device, self._validation_runs)
         for name in report.dropped_copies:
             self.log(f"left out {name}: an exact copy of the start of another training file")
         self.log(f"{len(train)} training and {len(val)} validation windows of {t.steps} steps "
@@ -467,11 +503,11 @@ class Trainer:
         self._log_identified(mmg)
         self._log_start_state_check(check, val_v, check_val)
         row = {"stage": "identify", "epoch": fit.iterations, "train_loss": train_v, "train_velocity": train_v,
-               "train_penalty": 0.0, "val_loss": val_v, "seconds": time.perf_counter() - started}
+               "train_penalty": 0.0, "early_stopping_loss": val_v, "seconds": time.perf_counter() - started}
         estimator = {"solver": Solver.LEVENBERG_MARQUARDT.value, "start_states": ident.start_states.value,
                      "prior_weight": ident.prior_weight, "iterations": fit.iterations, "windows": len(windows),
                      "integrator": Method.EULER.value, "covariance": result.method,
-                     "start_state_check": {**check.as_dict(), "val_loss": check_val}}
+                     "start_state_check": {**check.as_dict(), "val_loss_multistep": check_val}}
         return (StageResult([row], fit.iterations, val_v, fit.stopped), self._log_uncertainty(result), estimator)
 
     def _log_start_state_check(self, check, val_v: float, check_val: float) -> None:
@@ -534,20 +570,26 @@ class Trainer:
                 "threshold": float(model.gate.threshold)}
 
     def objective(self, model, runs: Sequence[Run], val: WindowSet, w_v, dtype, device) -> float:
-        """The final model's validation loss L_v (as trained, gate included): over the
-        training windows' T steps, or over ``[training] objective_s`` seconds, a horizon
-        that stays the same when T varies (sweeps compare T on it). Validation blocks only."""
+        """The run's validation loss ``val_loss_multistep`` (`VAL_LOSS_DEFINITION`): L_v of the
+        final model (gate included) over the training windows' T steps, or over ``[training]
+        objective_s`` seconds, a horizon that stays the same when T varies (sweeps compare T
+        on it). Validation windows only; they are kept as ``validation_windows_``."""
         exp, t = self.experiment, self.experiment.training
         if t.objective_s > 0:
             steps = max(1, int(round(t.objective_s / val.dt)))
             val = split_windows(runs, steps, t.stride_s, t.val_fraction, exp.data.exclude_suspect, dtype,
-                                t.block_s, exp.experiment.seed, device)[1]
-        with torch.no_grad():
-            return float(multistep_loss(model, val, w_v)[0])
+                                t.block_s, exp.experiment.seed, device, self._validation_runs)[1]
+        self.validation_windows_ = val
+        return float(velocity_loss(rollout_errors(model, val), w_v))
 
     # -- the estimator ---------------------------------------------------------------
-    def fit(self, runs: Sequence[Run]) -> "Trainer":
+    def fit(self, runs: Sequence[Run], validation: Sequence[Run] = ()) -> "Trainer":
+        """Fit to the training logs `runs`; validation windows from `validation` logs when
+        given, else from the validation blocks of `runs`. Sets ``model_``, ``history_``,
+        ``summary_``, ``validation_windows_`` (the windows of ``val_loss_multistep``) and
+        ``velocity_weights_`` (w_v (3,), 1 / variance of u, v_m, r in the training windows)."""
         exp = self.experiment
+        self._validation_runs = list(validation)
         t, kind = exp.training, exp.experiment.model
         seed_everything(exp.experiment.seed)
         dtype = torch.float32 if t.dtype is DType.FLOAT32 else torch.float64
@@ -586,7 +628,7 @@ class Trainer:
             summary.identified_uncertainty, summary.identification = uncertainty, estimator
         if identify and not joint:
             mmg.requires_grad_(False)
-        model = mmg
+        model, stopping_best = mmg, None
         if kind is not ModelKind.MMG and summary.failure is None:
             net = ForceCorrection(exp.network.hidden, dtype, exp.network.members).to(device)
             model = CorrectedModel(mmg, net, None, physics=(kind is ModelKind.HYBRID), gate_space=exp.gate.space)
@@ -609,6 +651,7 @@ class Trainer:
                 PerMember(model).load_state_dict(self._resume.model)
             w_F = 1.0 / net.output_std if kind is ModelKind.HYBRID else None
             stage = self.train(model, params, train, val, w_v, w_F)
+            stopping_best = stage.best_loss if exp.gate.enabled else None
             self._history += stage.history
             summary.stopped["train"] = stage.stopped
             summary.best_epoch = stage.best_epoch
@@ -622,8 +665,16 @@ class Trainer:
                 summary.identification = self._gradient_estimator(stage, joint=True)
             if exp.gate.enabled:
                 summary.gate = self.fit_gate(model, samples, dtype)
+        self.velocity_weights_ = w_v
+        self.validation_windows_ = val
         if summary.failure is None:
-            summary.val_loss = self.objective(model, runs, val, w_v, dtype, device)
+            summary.val_loss_multistep = self.objective(model, runs, val, w_v, dtype, device)
+            horizon = t.objective_s if t.objective_s > 0 else t.steps * val.dt
+            self.log(f"val_loss_multistep {summary.val_loss_multistep:.5f}: the final model"
+                     + (" (kNN gate on)" if summary.gate else "") + f" on {len(self.validation_windows_)} "
+                     f"validation windows of {horizon:g} s"
+                     + (f"; the early-stopping loss {stopping_best:.5f} is the network's during training, "
+                        "before the gate" if stopping_best is not None else ""))
         self.history_ = pd.DataFrame(self._history)
         summary.epochs = int(self.history_["epoch"].max()) if len(self._history) else 0
         summary.train_seconds = time.perf_counter() - started

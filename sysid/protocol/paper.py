@@ -90,9 +90,10 @@ def model_label(name: str, kind: str, dataset: str = "-") -> str:
 
 
 def run_label(name: str, kind: str, dataset: str = "-") -> str:
-    """A run's label in legends: the model label and, for trained runs, its data set."""
+    """A run's label in legends: the model label and, for runs trained on a paper data set,
+    that data set ("Hybrid D2"; a run on the user's own logs: "Hybrid (name)")."""
     label = model_label(name, kind, dataset)
-    return f"{label} {dataset}" if dataset not in ("", "-", None) else label
+    return f"{label} {dataset}" if dataset not in ("", "-", None, "files") else label
 
 
 def _order(values, first: list[str], key=lambda v: v) -> list:

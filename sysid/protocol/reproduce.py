@@ -128,7 +128,7 @@ def expected_cost(exp: Experiment) -> float:
     """Relative training cost of a run, to start the longest first (results do not depend
     on the order; the wall time does): hybrid > NN-only > identification, D2 about twice D1."""
     cost = {ModelKind.HYBRID: 5.0, ModelKind.NN: 3.5, ModelKind.MMG: 0.0}[exp.experiment.model] + 1.5 * bool(exp.identify.parameters)
-    return cost * (2.0 if exp.data.files or exp.experiment.dataset == "D2" else 1.0)
+    return cost * (2.0 if exp.data.train or exp.experiment.dataset == "D2" else 1.0)
 
 
 def _worker(name: str, experiments: dict[str, Experiment], out: Path, data) -> ProtocolRun:

@@ -22,13 +22,14 @@ from matplotlib import rc_context  # noqa: E402
 import sysid  # noqa: E402
 from sysid.store.files import atomic_path, write_text  # noqa: E402
 from sysid.report.html import HtmlFigure, figure_svg, render_html  # noqa: E402
-from sysid.report.methods import methods_paragraphs, run_rows, summary_items  # noqa: E402
+from sysid.report.methods import changed_settings, methods_paragraphs, run_rows, summary_items  # noqa: E402
 from sysid.report.palette import model_colour  # noqa: E402
 from sysid.report.pdf import PdfReport, paginate, pdf_style, table_pages, text_blocks, text_lines  # noqa: E402
 from sysid.report.figure_plan import figure_plan  # noqa: E402
 from sysid.report.quality import quality_rows  # noqa: E402
 from sysid.report.source import ReportSource, read_source  # noqa: E402
-from sysid.report.tables import build_tables  # noqa: E402
+from sysid.protocol.paper import run_label  # noqa: E402
+from sysid.report.tables import build_tables, verdict_table  # noqa: E402
 
 STYLE = {"font.size": 9, "axes.titlesize": 9, "axes.labelsize": 9, "axes.grid": True,
          "grid.alpha": 0.3, "grid.linewidth": 0.5, "legend.fontsize": 8, "lines.linewidth": 1.2,
@@ -90,11 +91,15 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
     summary = summary_items(source, size)
     rows = run_rows(source)
     methods = methods_paragraphs(source)
+    settings = [(run_label(r.name, r.model, r.dataset), changed_settings(r)) for r in source.runs]
+    verdict = source.verdict
+    first = verdict_table(verdict, run_label(source.runs[0].name, source.runs[0].model, source.runs[0].dataset)) \
+        if verdict is not None else None
     built = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     title = f"sysid accuracy report: {source.title}"
 
     quality = quality_rows(source.quality)
-    text_pages = paginate(text_lines(text_blocks(title, summary, rows, methods, quality, notes)))
+    text_pages = paginate(text_lines(text_blocks(title, summary, rows, methods, quality, notes, first, settings)))
     split_tables = [(t, table_pages(t)) for t in tables]
     total = len(text_pages) + sum(len(p) for _, p in split_tables) + len(plan.figures)
 
@@ -133,6 +138,7 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
         runs=[{"row": row, "colour": model_colour(r.name, r.model, r.dataset, i)}
               for i, (row, r) in enumerate(zip(rows, source.runs))],
         methods=methods, tables=tables, figures=html_figures, notes=notes, quality=quality,
+        verdict=first, settings=settings,
         version=sysid.__version__, source=str(source.path), built=built)
     html_path = write_text(html, out_dir / "report.html")
     return ReportPaths(html_path, pdf_path, len(html_figures), n_pages, notes,

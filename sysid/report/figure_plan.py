@@ -6,6 +6,7 @@ figure is drawn; a figure whose data is missing is replaced by a note saying why
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Callable
@@ -26,6 +27,7 @@ SERIES_WINDOWS = [("Zigzag 30/30", 0.0), ("Random", 500.0)]              # Figs.
 TRAJECTORY_SCENARIOS = ["Turning 20", "Zigzag 30/30", "Random"]          # Figs. 10-12
 KNN_SCENARIOS = ["Turning 20", "Random"]                                 # Figs. 13-16
 FORCE_SCENARIOS = ["Turning 20", "Zigzag 30/30"]                         # Figs. 17-20
+_PAPER_POINTER = re.compile(r"\s*\(cf\. [^)]*\)")   # " (cf. Figs. 10-12)" in a caption
 
 
 @dataclass
@@ -106,13 +108,17 @@ class _Context:
     fig_dataset: str | None
     short: int | None           # horizon [s] of the 30 s figures
     long: int | None            # horizon [s] of the 100 s figures
+    paper: bool = True          # a paper protocol: captions point to the paper's figures
 
     @property
     def trained_on(self) -> str:
-        return f" (trained models: {self.fig_dataset})" if self.fig_dataset else ""
+        return f" (trained models: {self.fig_dataset})" if self.fig_dataset in ("D1", "D2") else ""
 
     def add(self, key: str, section: str, title: str, caption: str, factory, ok) -> None:
-        """Plan the figure, or note why it is skipped (`caption` then says why)."""
+        """Plan the figure, or note why it is skipped (`caption` then says why); outside a
+        paper protocol without the pointers to the paper's figures."""
+        if not self.paper:
+            caption = _PAPER_POINTER.sub("", caption)
         if ok:
             self.plan.figures.append(FigureSpec(key, section, title, caption, factory))
         else:
@@ -165,7 +171,8 @@ def _trajectory_figures(c: _Context, ship_size: tuple[float, float] | None) -> N
 def _gate_figures(c: _Context) -> None:
     """Figs. 13-16: kNN distance of every hybrid run, 30 s."""
     if not c.hybrids:
-        c.plan.notes.append("kNN distance (Figs. 13-16): skipped, no hybrid run in the source")
+        c.plan.notes.append("kNN distance" + (" (Figs. 13-16)" if c.paper else "") + ": skipped, no hybrid run "
+                            "in the source")
         return
     for scenario in _pick(KNN_SCENARIOS, c.scenarios):
         for run in c.hybrids:
@@ -219,9 +226,10 @@ def _loss_figure(c: _Context) -> None:
     histories = [(_label(r), _colour(r, i), r.history, r.summary.best_epoch)
                  for i, r in enumerate(c.runs) if r.history is not None and len(r.history)]
     if histories:
-        c.add("loss", "Training", "Training and validation loss",
-              "Training (solid) and validation (dashed) loss per epoch of every trained model; star: the "
-              "epoch whose weights were kept.", partial(F.loss_curves, histories, "Training and validation loss"),
+        c.add("loss", "Training", "Training and early-stopping loss",
+              "Training loss (solid) and early-stopping loss (dashed: L_v on the validation windows while "
+              "training, before the kNN gate exists; val_loss_multistep is that of the final, gated model) per "
+              "epoch of every trained model; star: the epoch whose weights were kept.", partial(F.loss_curves, histories, "Training and early-stopping loss"),
               True)
     else:
         c.plan.notes.append("Loss curves: skipped, no run has a history.csv (MMG-only runs are not trained)")
@@ -279,13 +287,13 @@ def _sweep_figures(source: ReportSource, plan: FigurePlan) -> None:
     chosen = sweep.summary.best.point if sweep.summary.best else None
     seeds = len(sweep.summary.seeds)
     plan.figures.append(FigureSpec(
-        "sweep_keys", "Sweep", "Validation loss against the varied keys",
-        "Validation loss (the sweep's objective; validation windows only, never the test files) of every "
+        "sweep_keys", "Sweep", "val_loss_multistep against the varied keys",
+        "val_loss_multistep (the sweep's objective; validation windows only, never the test files) of every "
         "trial against each varied option; grey: means; red circles: the chosen configuration.",
-        partial(SF.objective_by_key, sweep.trials, sweep.keys, chosen, "Validation loss against the varied keys")))
+        partial(SF.objective_by_key, sweep.trials, sweep.keys, chosen, "val_loss_multistep against the varied keys")))
     plan.figures.append(FigureSpec(
         "sweep_seeds", "Sweep", f"Spread over {seeds} seeds per configuration",
-        "Validation loss of each configuration over its seeds (box: spread; dots: single seeds), best mean "
+        "val_loss_multistep of each configuration over its seeds (box: spread; dots: single seeds), best mean "
         "first; red: the chosen configuration.",
         partial(SF.seed_spread, sweep.trials, sweep.points, chosen, f"Spread over {seeds} seeds per configuration")))
 
@@ -302,7 +310,7 @@ def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> 
         c = _Context(plan, runs, list(dict.fromkeys(s for r in runs for s in r.scenarios())),
                      [r for r in runs if r.model == "mmg" or r.dataset == fig_dataset],
                      [r for r in runs if r.model == "hybrid"], fig_dataset,
-                     _horizon(runs, 30, short=True), _horizon(runs, 100, short=False))
+                     _horizon(runs, 30, short=True), _horizon(runs, 100, short=False), source.paper_protocol)
         _error_figures(c)
         _series_figures(c)
         _trajectory_figures(c, ship_size)

@@ -346,8 +346,8 @@ def fnn_error_scatter(groups: list[tuple[str, str, pd.DataFrame]], title: str,
 
 def loss_curves(histories: list[tuple[str, str, pd.DataFrame, int | None]], title: str,
                 into: FigureBase | None = None) -> FigureBase:
-    """Training (solid) and validation (dashed) loss [-] per epoch, log scale; the best
-    epoch is marked. `histories` are (label, colour, history frame, best epoch)."""
+    """Training loss (solid) and early-stopping loss (dashed: L_v on the validation windows
+    during training, before the kNN gate) [-] per epoch, log scale; the best epoch is marked. `histories` are (label, colour, history frame, best epoch)."""
     fig = _canvas(into, (10.0, 4.6))
     ax = fig.subplots()
     positive, marked = True, set()
@@ -367,11 +367,11 @@ def loss_curves(histories: list[tuple[str, str, pd.DataFrame, int | None]], titl
                             xytext=(2, 0), textcoords="offset points", fontsize=7, color=colour,
                             ha="left", va="bottom", rotation=90)
         ax.plot(x, hist["train_loss"], color=colour, lw=1.3)
-        ax.plot(x, hist["val_loss"], color=colour, lw=1.3, ls="--")
-        positive &= bool((hist[["train_loss", "val_loss"]].to_numpy() > 0).all())
+        ax.plot(x, hist["early_stopping_loss"], color=colour, lw=1.3, ls="--")
+        positive &= bool((hist[["train_loss", "early_stopping_loss"]].to_numpy() > 0).all())
         hit = last & (hist["epoch"].to_numpy() == best)
         if best is not None and hit.any():
-            ax.plot(x[hit][0], hist["val_loss"].to_numpy()[hit][0], "*", color=colour, ms=9)
+            ax.plot(x[hit][0], hist["early_stopping_loss"].to_numpy()[hit][0], "*", color=colour, ms=9)
     if positive:
         ax.set_yscale("log")
     staged = any("stage" in h.columns and h["stage"].nunique() > 1 for _, _, h, _ in histories)
@@ -379,7 +379,7 @@ def loss_curves(histories: list[tuple[str, str, pd.DataFrame, int | None]], titl
     ax.set_ylabel("loss [-]")
     handles = [Line2D([], [], color=c, label=l) for l, c, _, _ in histories]
     handles += [Line2D([], [], color="grey", label="training"),
-                Line2D([], [], color="grey", ls="--", label="validation"),
+                Line2D([], [], color="grey", ls="--", label="early stopping (validation)"),
                 Line2D([], [], color="grey", marker="*", ls="", label="best epoch")]
     ax.legend(handles=handles, fontsize=8, ncol=2, loc="upper right")
     fig.suptitle(title, fontsize=10)

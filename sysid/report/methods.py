@@ -6,6 +6,10 @@ import datetime as _dt
 import hashlib
 from dataclasses import dataclass
 
+import tomllib
+from pathlib import Path
+
+from sysid.config.experiment import Experiment
 from sysid.protocol.paper import run_label
 from sysid.report.quality import quality_rows
 from sysid.report.source import ReportSource, RunRecord
@@ -71,7 +75,8 @@ def run_rows(source: ReportSource) -> list[RunRow]:
             epochs = f"{_or(est.iterations, '?')} Levenberg-Marquardt iterations" + (f" ({why})" if why else "")
         if s.failed:
             epochs += f" - {s.status.upper()}"
-        rows.append(RunRow(run_label(run.name, run.model, run.dataset), run.model, run.dataset, epochs,
+        dataset = "your logs" if run.dataset == "files" else run.dataset
+        rows.append(RunRow(run_label(run.name, run.model, run.dataset), run.model, dataset, epochs,
                            "-" if run.model == "mmg" else _seconds(s.train_seconds),
                            config_digest(run), _or(s.created, "-")))
     return rows
@@ -130,15 +135,16 @@ def sweep_items(source: ReportSource, top: int = 8) -> list[tuple[str, str]]:
                        f"seeds {list(s.seeds)}; base {s.base}"),
              ("Trials", f"{s.complete} of {s.trials} complete, {s.failed} failed, "
                         f"{s.missing} missing; {_seconds(s.seconds)}"),
-             ("Objective", "validation multi-step loss (validation blocks of the training files only; "
-                           "the test files never choose)")]
+             ("Objective", "val_loss_multistep, the validation multi-step loss of each trial's final model "
+                           "(validation windows only; the test files never choose)")]
     if best:
-        spread = f" ± {best.val_loss_std:.5f} (std over seeds)" if best.val_loss_std is not None else ""
-        items.append(("Chosen", f"{best.point}: validation loss {best.val_loss_mean:.5f}{spread}; "
+        spread = (f" ± {best.val_loss_multistep_std:.5f} (std over seeds)"
+                  if best.val_loss_multistep_std is not None else "")
+        items.append(("Chosen", f"{best.point}: val_loss_multistep {best.val_loss_multistep_mean:.5f}{spread}; "
                                 f"runs {', '.join(best.runs)}"))
     for i, row in enumerate(sweep.points.head(top).itertuples(), 1):
-        std = getattr(row, "val_loss_std", float("nan"))
-        items.append((f"#{i}", f"{row.point}: {row.val_loss_mean:.5f}" + ("" if std != std else f" ± {std:.5f}")
+        std = getattr(row, "val_loss_multistep_std", float("nan"))
+        items.append((f"#{i}", f"{row.point}: {row.val_loss_multistep_mean:.5f}" + ("" if std != std else f" ± {std:.5f}")
                       + f" ({row.complete} of {row.seeds} seeds)"))
     return items
 
@@ -162,8 +168,11 @@ def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -
         ("Source", f"{source.path} ({SOURCE_KINDS[source.kind].format(n=len(runs), q=len(source.quality))})"),
         ("Ship", ship),
         ("Models", ", ".join(run_label(r.name, r.model, r.dataset) for r in runs)),
-        ("Training data sets", ", ".join(datasets) or "none (MMG only)"),
-        ("Test scenarios", ", ".join(scenarios)),
+        ("Training data sets" if source.paper_protocol else "Training data",
+         ", ".join(training_data_text(next(r for r in runs if r.dataset == d)) if d == "files" else d
+                   for d in datasets) or "none (MMG only)"),
+        ("Test scenarios" if source.paper_protocol else "Test logs",
+         ", ".join(scenarios) or "none: no test logs (the verdict is on the validation windows)"),
         ("Configuration digest", ", ".join(f"{r.name}: {config_digest(r)}" for r in runs)),
         ("Software (runs)", ", ".join(f"{k} {'/'.join(sorted(v))}" for k, v in sorted(versions.items())) or "-"),
         ("Software (report)", ", ".join(f"{k} {v}" for k, v in software_versions().items())),
@@ -187,21 +196,11 @@ def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -
                       f"{sum(r.segments for r in rows)} segments, {sum(r.dropped for r in rows)} dropped; gaps "
                       f"{sum(r.gaps_interpolated for r in rows)} interpolated, {sum(r.gaps_split for r in rows)} split"))
     if not runs:
-        items = [i for i in items if i[0] not in ("Models", "Training data sets", "Test scenarios",
+        items = [i for i in items if i[0] not in ("Models", "Training data sets", "Training data", "Test scenarios",
+                                                  "Test logs",
                                                   "Configuration digest", "Software (runs)", "Runs created",
                                                   "Training time", "Ship")]
     return items
-
-
-def _config_text(config: dict) -> str:
-    parts = []
-    for section, values in config.items():
-        if not isinstance(values, dict):
-            continue
-        pairs = [f"{k} = {v}" for k, v in _flatten(values)[:12]]
-        if pairs:
-            parts.append(f"[{section}] " + ", ".join(pairs))
-    return "; ".join(parts)
 
 
 def estimator_text(summary: RunSummary) -> str:
@@ -251,10 +250,13 @@ def methods_paragraphs(source: ReportSource) -> list[str]:
             text += " MMG coefficients changed from the ship file: " + ", ".join(
                 f"{k} = {v}" for k, v in s.mmg_overrides.items()) + "."
         if run.model != "mmg":
-            text += (f" Trained on data set {run.dataset} ({_or(s.n_train_windows, '?')} training and "
+            text += (f" Trained on {training_data_text(run)} ({_or(s.n_train_windows, '?')} training and "
                      f"{_or(s.n_val_windows, '?')} validation windows) for {s.epochs} epochs; "
                      f"the weights of epoch {_or(s.best_epoch, '?')} were kept "
                      f"(training time {_seconds(s.train_seconds)}, seed {_or(s.seed, '?')}).")
+        if s.val_loss_multistep is not None:
+            text += (f" val_loss_multistep {s.val_loss_multistep:.5f}: the validation loss, L_v of the final "
+                     "model (kNN gate included) on the validation windows.")
         u = s.identified_uncertainty
         if u is not None and u.names:
             prior = s.identified_initial
@@ -270,7 +272,51 @@ def methods_paragraphs(source: ReportSource) -> list[str]:
         if run.model == "hybrid" and gate:
             scalars = {k: v for k, v in gate.items() if not isinstance(v, (dict, list))}
             text += " OOD gate: " + ", ".join(f"{k} = {v}" for k, v in _flatten(scalars)) + "."
-        if run.config:
-            text += f" Configuration: {_config_text(run.config)}."
         out.append(text)
     return out
+
+
+def training_data_text(run: RunRecord) -> str:
+    """"data set D2", or "5 of your logs (a.csv, b.csv, ...)" from summary.json "data"."""
+    data = run.summary.data
+    if data is not None and data.training == "files":
+        names = [Path(f.file).name for f in data.train]
+        return f"{len(names)} of your logs ({_names(names)})"
+    return f"data set {run.dataset}"
+
+
+def _names(names: list[str], first: int = 4) -> str:
+    return ", ".join(names[:first]) + (f" and {len(names) - first} more" if len(names) > first else "")
+
+
+def _setting_text(key: str, value) -> str:
+    if key in ("data.train", "data.validation", "data.test") and isinstance(value, list):
+        return (f"{len(value)} log{'s' if len(value) > 1 else ''}: {_names([Path(str(v)).name for v in value])}"
+                if value else "none")
+    if value == "" or value == {}:
+        return "none"
+    if key == "data.columns" and isinstance(value, dict):
+        return "; ".join(f"{ch}: {v}" if not isinstance(v, dict) else f"{ch}: {v.get('column')} [{v.get('unit')}]"
+                         for ch, v in value.items())
+    if isinstance(value, dict):
+        return ", ".join(f"{k} = {v}" for k, v in value.items()) or "{}"
+    if isinstance(value, list):
+        return "[" + ", ".join(str(v) for v in value) + "]"
+    return f"{value:.4g}" if isinstance(value, float) else str(value)
+
+
+def changed_settings(run: RunRecord) -> list[tuple[str, str, str]]:
+    """(section.key, value, default) where the run's resolved config.toml differs from the
+    defaults of `sysid.config.experiment.Experiment` (the name left out)."""
+    defaults = tomllib.loads(Experiment().to_toml())
+    rows = []
+    for section, values in run.config.items():
+        if not isinstance(values, dict):
+            continue
+        for key, value in values.items():
+            default = (defaults.get(section) or {}).get(key)
+            if (section, key) == ("experiment", "name") or value == default:
+                continue
+            name = f"{section}.{key}"
+            rows.append((name, _setting_text(name, value), "-" if default is None else _setting_text(name, default)))
+    return rows

@@ -15,7 +15,7 @@ from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure, FigureBase
 from matplotlib.patches import Rectangle
 
-from sysid.report.tables import RmseTable
+from sysid.report.tables import RmseTable, VerdictTable
 
 PAGE = (11.69, 8.27)          # in, A4 landscape
 MARGIN = 0.5                  # in
@@ -35,14 +35,26 @@ class TextLine:
     key: str = ""
 
 
-def text_blocks(title: str, summary, rows, methods, quality, notes) -> list[tuple]:
+def text_blocks(title: str, summary, rows, methods, quality, notes, verdict: VerdictTable | None = None,
+                settings=()) -> list[tuple]:
     """The report's text pages as blocks ("h1"/"h2"/"p"/"small", text) or ("kv", key, value):
-    summary items, run rows, methods paragraphs, preprocessing quality rows, figure notes."""
-    blocks = [("h1", title), ("h2", "Summary")] + [("kv", k, str(v)) for k, v in summary]
+    the verdict (first), summary items, run rows, methods paragraphs and the settings that
+    differ from the defaults ((run label, [(key, value, default)]) pairs), preprocessing
+    quality rows, figure notes."""
+    blocks = [("h1", title)]
+    if verdict is not None:
+        blocks += [("h2", "Verdict"), ("p", ("" if verdict.beats else "WARNING: ") + verdict.statement)]
+        blocks += [("kv", f"{r[0]}, {r[1]} s, {r[2]}", " | ".join(f"{h} {v}" for h, v in zip(verdict.header[3:], r[3:])))
+                   for r in verdict.rows]
+        blocks += [("small", verdict.losses)] if verdict.losses else []
+    blocks += [("h2", "Summary")] + [("kv", k, str(v)) for k, v in summary]
     blocks += [("h2", "Runs")] * bool(rows) + [("kv", r.label, f"{r.model}, data set {r.dataset}, epochs {r.epochs}, "
                                                 f"training {r.train_time}, config {r.config_digest}, created {r.created}")
                                                 for r in rows]
     blocks += [("h2", "Methods")] + [("p", p) for p in methods]
+    for label, changed in settings:
+        blocks += [("p", f"Settings of {label} that differ from the defaults" + (":" if changed else ": none."))]
+        blocks += [("kv", key, f"{value} (default: {default})") for key, value, default in changed]
     if quality:
         blocks += [("h2", "Preprocessing quality")] + [
             ("kv", q.file, f"{q.rows} rows ({q.missing_rows} missing), {q.segments} segments ({q.kept_s:.0f} s kept, "
@@ -178,10 +190,11 @@ class PdfReport:
                     fig.text(xr / W, (y + row_h * 0.15) / H, f"{cell.paper_text} {cell.change_text}",
                              ha="right", fontsize=6.5, color=colour)
         wins, total = table.wins
+        said = ("First line: our RMSE (u, v_m [m/s], r [rad/s]); second line: the paper's value and our change "
+                f"(green: better than the paper). {wins} of {total} cells better than the paper."
+                if table.has_paper else "RMSE of u, v_m [m/s] and r [rad/s] on the test logs.")
         fig.text(MARGIN / W, (y - 0.35) / H,
-                 f"First line: our RMSE (u, v_m [m/s], r [rad/s]); second line: the paper's value and our change "
-                 f"(green: better than the paper). {wins} of {total} cells better than the paper."
-                 + (" Bold on yellow: lowest RMSE of the test's models in that column." if table.has_best else ""),
+                 said + (" Bold on yellow: lowest RMSE of the test's models in that column." if table.has_best else ""),
                  fontsize=7.5, color="#333", wrap=True)
         self._save(fig)
 

@@ -16,6 +16,8 @@ import pandas as pd
 from preprocessing.quality import QualityReport
 from sysid.errors import CheckpointError
 from sysid.config.choices import ModelKind
+from sysid.data.splits import PAPER_TEST_STEMS
+from sysid.evaluation.verdict import BaselineVerdict, seed_mean_verdict
 from sysid.store.manifest import has_manifest, verify_manifest
 from sysid.runs.directory import RunDir, read_table
 from sysid.runs.records import read_json_object
@@ -42,6 +44,26 @@ class RunRecord:
     history: pd.DataFrame | None
     _traces: dict = field(default_factory=dict, repr=False)
     seeds: list["RunRecord"] = field(default_factory=list)   # a seed group's runs (seed0 first)
+    baseline_metrics: pd.DataFrame | None = None  # the physics baselines on the test logs (BASELINE_METRICS_COLUMNS)
+
+    @property
+    def verdict(self) -> BaselineVerdict | None:
+        """The run against its physics baselines (`RunSummary.verdict`), or None."""
+        if self.summary.verdict is None:
+            return None
+        try:
+            return self.summary.verdict.baseline_verdict()
+        except (KeyError, TypeError, ValueError) as exc:
+            raise CheckpointError(f"{self.run_dir.summary}: malformed verdict ({exc})") from None
+
+    @property
+    def paper_protocol(self) -> bool:
+        """Trained on D1/D2 (or not trained) and tested on the paper's six test files."""
+        data = self.summary.data
+        if data is not None:
+            return data.test_set == "paper" and data.training in ("D1", "D2", "-")
+        stems = {Path(str(f)).stem for f in self.metrics["file"]}
+        return self.dataset in ("D1", "D2") or (self.dataset == "-" and stems == set(PAPER_TEST_STEMS))
 
     @property
     def run_dir(self) -> RunDir:
@@ -116,6 +138,21 @@ class ReportSource:
         return self.path.resolve().name
 
     @property
+    def paper_protocol(self) -> bool:
+        """A reproduction, or runs of the paper's protocol: only then the paper's values and
+        figure numbers appear in the report."""
+        return self.kind == "reproduction" or (bool(self.runs) and all(r.paper_protocol for r in self.runs))
+
+    @property
+    def verdict(self) -> BaselineVerdict | None:
+        """Page 1 of a run's or a sweep's report: the run's verdict, or the seed mean of the
+        chosen configuration's; None for a reproduction or runs without one."""
+        if self.kind == "sweep" and self.sweep is not None:
+            verdicts = [r.verdict for r in self.sweep.chosen]
+            return seed_mean_verdict(verdicts) if verdicts and all(verdicts) else None
+        return self.runs[0].verdict if self.kind == "run" and self.runs else None
+
+    @property
     def missing_runs(self) -> list[str]:
         """Protocol runs a reproduction left out (``sysid reproduce --only``): a partial one."""
         if self.reproduction is None:
@@ -141,7 +178,8 @@ def read_run_dir(path: Path) -> RunRecord:
     metrics["scenario"] = scenario.where(scenario != "", stems)
     if summary.model.lower() not in ModelKind.offered():
         raise CheckpointError(f"{run.summary}: model {summary.model.lower()!r} is not one of {ModelKind.listing()}")
-    return RunRecord(run.path.name, run.path, summary, config_text, config, metrics, run.read_history())
+    return RunRecord(run.path.name, run.path, summary, config_text, config, metrics, run.read_history(),
+                     baseline_metrics=run.read_baseline_metrics())
 
 
 def read_seed_group(path: Path) -> RunRecord:
@@ -206,8 +244,8 @@ def read_sweep(path: Path, quality: list[QualityReport]) -> ReportSource:
     """A sweep directory: its tables, summary and the chosen configuration's seed runs (the
     report's run figures and table show the chosen configuration's first seed)."""
     summary = SweepSummary.read(path / "summary.json")
-    trials = read_table(path / "results.csv", ["point", "seed", "run", "status", "val_loss"])
-    points = read_table(path / "points.csv", ["point", "val_loss_mean"])
+    trials = read_table(path / "results.csv", ["point", "seed", "run", "status", "val_loss_multistep"])
+    points = read_table(path / "points.csv", ["point", "val_loss_multistep_mean"])
     keys = list(summary.keys)
     chosen = [read_run_dir(path / run) for run in (summary.best.runs if summary.best else ())]
     return ReportSource(path, "sweep", chosen[:1], quality, SweepRecord(trials, points, keys, chosen, summary))

@@ -47,15 +47,15 @@ def objective_by_key(trials: pd.DataFrame, keys: list[str], chosen: str | None, 
             x_of = {v: i for i, v in enumerate(values)}
             ax.set_xticks(range(len(values)), [str(v) for v in values], rotation=20, fontsize=8)
         x = done[key].map(x_of)
-        ax.plot(x, done.val_loss, ".", color=TRIAL, alpha=0.7)
-        means = done.groupby(key, sort=False).val_loss.mean()
+        ax.plot(x, done.val_loss_multistep, ".", color=TRIAL, alpha=0.7)
+        means = done.groupby(key, sort=False).val_loss_multistep.mean()
         xs = sorted((x_of[v], m) for v, m in means.items())
         ax.plot([a for a, _ in xs], [b for _, b in xs], "-", color="grey", lw=1)
         if chosen is not None:
             mine = done[done.point == chosen]
-            ax.plot(mine[key].map(x_of), mine.val_loss, "o", mfc="none", color=CHOSEN, ms=7)
+            ax.plot(mine[key].map(x_of), mine.val_loss_multistep, "o", mfc="none", color=CHOSEN, ms=7)
         ax.set_xlabel(key + ("" if numeric else " (categories)"))
-        ax.set_ylabel("validation loss [-]")
+        ax.set_ylabel("val_loss_multistep [-]")
     for ax in axes[len(keys):]:
         ax.set_visible(False)
     handles = [Line2D([], [], marker=".", ls="", color=TRIAL, label="one trial (seed)"),
@@ -74,7 +74,7 @@ def seed_spread(trials: pd.DataFrame, points: pd.DataFrame, chosen: str | None, 
     ax = fig.subplots()
     names = list(points.point[:top])
     done = trials[trials.status == "complete"]
-    data = [done[done.point == n].val_loss.to_numpy() for n in names]
+    data = [done[done.point == n].val_loss_multistep.to_numpy() for n in names]
     box = ax.boxplot(data, patch_artist=True, showfliers=False, medianprops={"color": "black"})
     for patch, name in zip(box["boxes"], names):
         patch.set_facecolor(CHOSEN if name == chosen else "#aec7e8")
@@ -82,7 +82,7 @@ def seed_spread(trials: pd.DataFrame, points: pd.DataFrame, chosen: str | None, 
     for i, values in enumerate(data, 1):
         ax.plot(np.full(len(values), i), values, ".", color="black", ms=4)
     ax.set_xticks(range(1, len(names) + 1), names, rotation=30, ha="right", fontsize=7)
-    ax.set_ylabel("validation loss [-]")
+    ax.set_ylabel("val_loss_multistep [-]")
     ax.set_xlabel("configuration (best mean first)")
     fig.suptitle(title, fontsize=10)
     return fig

@@ -13,10 +13,10 @@ from pathlib import Path
 
 from sysid.protocol.paper import SCENARIO_ORDER, comparison_table, model_label, paper_rmse, run_label, scenario_key
 from sysid.report.palette import model_colour
+from sysid.evaluation.verdict import UNITS, BaselineVerdict as Verdict, percent_text
 from sysid.report.source import ReportSource, RunRecord
 
 COMPONENTS = ("u", "v_m", "r")
-UNITS = {"u": "m/s", "v_m": "m/s", "r": "rad/s"}
 
 
 def format_rmse(value: float | None) -> str:
@@ -84,6 +84,11 @@ class RmseTable:
     @property
     def has_best(self) -> bool:
         return any(c.best for row in self.rows for c in row.cells)
+
+    @property
+    def has_paper(self) -> bool:
+        """Any cell with the paper's value (a paper protocol)."""
+        return any(c.paper is not None for row in self.rows for c in row.cells)
 
     @property
     def wins(self) -> tuple[int, int]:
@@ -180,22 +185,81 @@ def reproduction_tables(source: ReportSource) -> list[RmseTable]:
     return tables
 
 
-def run_table(run: RunRecord) -> RmseTable:
-    """One run: rows the scenarios, column groups the horizons."""
+def run_table(run: RunRecord, paper: bool = True) -> RmseTable:
+    """One run: rows the scenarios (test logs), the run and its physics baselines in each;
+    column groups the horizons. The paper's values only for a paper protocol (`paper`)."""
     rmse = run_rmse(run)
+    baselines = _baseline_rmse(run)
     horizons = run.horizons()
-    table = RmseTable("table_run", f"RMSE of {run_label(run.name, run.model, run.dataset)} "
-                      "(u, v_m [m/s]; r [rad/s])", [f"{h} s" for h in horizons])
+    label = run_label(run.name, run.model, run.dataset)
+    table = RmseTable("table_run", f"RMSE of {label}" + (" beside its physics baselines" if baselines else "")
+                      + " (u, v_m [m/s]; r [rad/s])", [f"{h} s" for h in horizons])
     for scenario in _scenario_order(s for s, _ in rmse):
         cells = []
         for horizon in horizons:
             values = rmse.get((scenario, horizon))
-            paper = paper_rmse(_paper_scenario(scenario), run.model, run.dataset, horizon)
+            ref = paper_rmse(_paper_scenario(scenario), run.model, run.dataset, horizon) if paper else None
             for i in range(3):
-                cells.append(Cell(values[i] if values else None, paper[i] if paper else None))
-        table.rows.append(TableRow(scenario, run_label(run.name, run.model, run.dataset),
-                                   model_colour(run.name, run.model, run.dataset), cells))
+                cells.append(Cell(values[i] if values else None, ref[i] if ref else None))
+        table.rows.append(TableRow(scenario, label, model_colour(run.name, run.model, run.dataset), cells))
+        for j, (baseline, values_of) in enumerate(baselines.items()):
+            cells = []
+            for horizon in horizons:
+                values = values_of.get((scenario, horizon))
+                cells += [Cell(values[i] if values else None, None) for i in range(3)]
+            table.rows.append(TableRow(scenario, baseline, BASELINE_COLOURS[j % len(BASELINE_COLOURS)], cells))
+    _mark_best(table.rows)
     return table
+
+
+BASELINE_COLOURS = ("#7f7f7f", "#b0b0b0")   # the physics baselines' rows (grey)
+
+
+def _baseline_rmse(run: RunRecord) -> dict[str, dict[tuple[str, int], tuple[float, float, float]]]:
+    """baseline label -> (row label, horizon [s]) -> (u, v_m, r) RMSE, from baseline_metrics.csv."""
+    frame = run.baseline_metrics
+    if frame is None or not len(frame):
+        return {}
+    labels = scenario_files(run)
+    out: dict = {}
+    for row in frame.itertuples(index=False):
+        key = (labels.get(Path(str(row.file)).stem, Path(str(row.file)).stem), int(round(row.horizon_s)))
+        out.setdefault(str(row.baseline), {})[key] = (float(row.rmse_u), float(row.rmse_v), float(row.rmse_r))
+    return out
+
+
+@dataclass
+class VerdictTable:
+    """Page 1: the verdict sentence and the model beside its baselines per split, horizon
+    and channel. header and rows are text cells; `beats` False marks a warning."""
+
+    statement: str
+    beats: bool
+    header: list[str]
+    rows: list[list[str]]
+    losses: str = ""   # "val_loss_multistep: hybrid 0.05772, MMG (ship file) 0.05870"
+
+
+def verdict_table(verdict: Verdict, model: str) -> VerdictTable:
+    """The first page's table of a `BaselineVerdict`: RMSE of the model (± its std over
+    seeds) and of each baseline with the model's change against it, deciding split first."""
+    header = ["Split", "Horizon [s]", "Channel", f"{model} RMSE"]
+    for b in verdict.baselines:
+        header += [f"{b} RMSE", f"change vs {b}"]
+    order = sorted(verdict.cells, key=lambda c: (c.split != verdict.decided_on, c.horizon_s))
+    rows = []
+    for c in order:
+        spread = f" ± {c.model_std:.5f}" if c.model_std is not None and math.isfinite(c.model_std) else ""
+        row = [c.split + (" (decides)" if c.split == verdict.decided_on else ""), f"{c.horizon_s:g}",
+               f"{c.channel} [{UNITS[c.channel]}]", format_rmse(c.model) + spread]
+        for b in verdict.baselines:
+            change = c.change(b)
+            row += [format_rmse(c.baselines[b]), percent_text(change)]
+        rows.append(row)
+    losses = ", ".join(f"{model if k == 'model' else k} {v:.5f}" for k, v in verdict.val_loss_multistep.items()
+                       if math.isfinite(v))
+    return VerdictTable(verdict.statement(), verdict.beats_baseline, header, rows,
+                        f"val_loss_multistep (the validation loss, on the validation windows): {losses}" if losses else "")
 
 
 def build_tables(source: ReportSource) -> list[RmseTable]:
@@ -203,4 +267,5 @@ def build_tables(source: ReportSource) -> list[RmseTable]:
         return []
     if source.kind == "reproduction":
         return reproduction_tables(source)
-    return [run_table(source.runs[0])]
+    table = run_table(source.runs[0], source.paper_protocol)
+    return [table] if table.rows else []   # no test logs: no RMSE table (the verdict is on validation)

@@ -23,7 +23,8 @@ from sysid.runs.summary import RunSummary
 from sysid.runs.tensor_files import check_finite, load_tensors
 from sysid.store.manifest import MANIFEST, has_manifest, verify_manifest
 
-HISTORY_COLUMNS = ["epoch", "train_loss", "val_loss"]
+BASELINE_METRICS_COLUMNS = ["baseline"] + METRICS_COLUMNS  # the physics baselines on the same test logs
+HISTORY_COLUMNS = ["epoch", "train_loss", "early_stopping_loss"]
 
 
 def read_table(path: Path, columns: list[str], required: bool = True) -> pd.DataFrame | None:
@@ -87,6 +88,8 @@ class RunDir:
     standardization = _file("standardization.json", "the FNN's input and output mean and std")
     history = _file("history.csv", "losses per stage and epoch (trained runs only)")
     metrics = _file("metrics.csv", "`sysid.evaluation.evaluate.METRICS_COLUMNS`")
+    baseline_metrics = _file("baseline_metrics.csv", "the physics baselines on the same test logs "
+                             "(`BASELINE_METRICS_COLUMNS`; runs with a verdict and test logs)")
     traces = _file("traces", "one CSV per (test file, horizon)")
     manifest = _file(MANIFEST, "every other file with its SHA-256, written last")
 
@@ -120,9 +123,20 @@ class RunDir:
         """metrics.csv as written (RMSE of u, v_m [m/s] and r [rad/s])."""
         return read_table(self.metrics, METRICS_COLUMNS)
 
+    def read_baseline_metrics(self) -> pd.DataFrame | None:
+        """baseline_metrics.csv (`BASELINE_METRICS_COLUMNS`), None for a run without one."""
+        return read_table(self.baseline_metrics, BASELINE_METRICS_COLUMNS, required=False)
+
     def read_history(self) -> pd.DataFrame | None:
-        """history.csv, None for an untrained run."""
-        return read_table(self.history, HISTORY_COLUMNS, required=False)
+        """history.csv, None for an untrained run. Runs written before ``val_loss_multistep``
+        named the per-epoch ``early_stopping_loss`` ``val_loss``: read under the new name."""
+        history = read_table(self.history, HISTORY_COLUMNS[:2], required=False)
+        if history is None:
+            return None
+        history = history.rename(columns={"val_loss": "early_stopping_loss"})
+        if "early_stopping_loss" not in history.columns:
+            raise CheckpointError(f"{self.history}: missing column(s) ['early_stopping_loss']")
+        return history
 
     def read_trace(self, file_stem: str, horizon_s: float) -> pd.DataFrame | None:
         """A trace (`TRACE_COLUMNS`), None when the run has none for that file and horizon."""

@@ -1,11 +1,11 @@
 """One experiment end to end: train if it needs training, evaluate, write the run directory.
 
 `run_experiment` is the one library call behind `sysid train`, `sysid reproduce` and any
-sweep; the training data come from ``[data] files`` or the data set D1/D2.
+sweep; the training data come from ``[data] train`` or the data set D1/D2, the test logs
+from ``[data] test`` or, for a paper data set, the paper's six (`sysid.data.splits`).
 """
 from __future__ import annotations
 
-import glob
 import os
 import time
 from dataclasses import dataclass
@@ -16,13 +16,16 @@ import pandas as pd
 import torch
 
 from sysid.identify.checkpoint import TrainingCheckpoint
-from sysid.data.recordings import Run, expand_paths, read_run
-from sysid.data.datasets import test_files, training_files
+from sysid.data.recordings import Run, read_run
+from sysid.data.datasets import test_files
+from sysid.data.splits import TEST, TRAINING, VALIDATION, check_disjoint_runs, data_split, provenance
 from sysid.device import compute_threads
 from sysid.errors import ConfigError, TrainingError
 from sysid.evaluation.evaluate import Evaluation, evaluate_model, short_runs
+from sysid.evaluation.verdict import (IDENTIFIED_MMG, SHIP_FILE_MMG, BaselineVerdict, baseline_verdict,
+                                      window_score)
 from sysid.config.experiment import Experiment
-from sysid.hybrid.force_models import build_model
+from sysid.hybrid.force_models import CorrectedModel, build_mmg, build_model
 from sysid.runs.rundir import write_run
 from sysid.identify.trainer import Trainer, TrainingSummary
 from sysid.config.checks import threads
@@ -39,6 +42,7 @@ class RunResult:
     history: pd.DataFrame | None
     training: TrainingSummary | None
     seconds: float
+    verdict: BaselineVerdict | None = None
 
     @property
     def failure(self) -> str | None:
@@ -47,13 +51,48 @@ class RunResult:
 
 
 def training_runs(exp: Experiment, data: str | os.PathLike | None = None) -> list[Run]:
-    """The experiment's training files (``[data] files`` or its data set), read and checked."""
-    if not exp.data.files:
-        files = training_files(exp.experiment.dataset, data)
-    else:  # folders and patterns expanded; a plain file is read as named ("file not found" if missing)
-        files = [f for item in exp.data.files for f in (
-            expand_paths([item]) if glob.has_magic(item) or Path(item).is_dir() else [Path(item)])]
-    return [read_run(f, exp.data.rate) for f in files]
+    """The experiment's training logs (``[data] train`` or its data set), read and checked."""
+    return [read_run(f, exp.data.rate, exp.data.columns) for f in data_split(exp, data).train]
+
+
+def validation_runs(exp: Experiment) -> list[Run]:
+    """The experiment's ``[data] validation`` logs, read (empty: validation blocks of the training logs)."""
+    return [read_run(f, exp.data.rate, exp.data.columns) for f in data_split(exp).validation] \
+        if exp.data.validation else []
+
+
+def evaluation_runs(exp: Experiment, data: str | os.PathLike | None = None) -> list[Run]:
+    """The experiment's test logs: ``[data] test``, else the paper's six when it names a
+    paper data set, else none. Read only to evaluate."""
+    split = data_split(exp, data)
+    columns = exp.data.columns if split.test_source == "files" else None
+    return [read_run(f, exp.data.rate, columns) for f in split.test]
+
+
+def physics_baselines(exp: Experiment, model: torch.nn.Module, dtype: torch.dtype,
+                      device: str | torch.device = "cpu") -> dict[str, torch.nn.Module]:
+    """The physics a learned model is judged against: the ship file's MMG (with ``[mmg]
+    overrides``) and, when the model carries identified coefficients under an FNN, its
+    identified MMG. Empty for a model without training."""
+    if not exp.needs_training:
+        return {}
+    out = {SHIP_FILE_MMG: build_mmg(exp, dtype).to(device)}
+    if exp.identify.parameters and isinstance(model, CorrectedModel):
+        out[IDENTIFIED_MMG] = model.mmg
+    return out
+
+
+def scores_on_tests(exp: Experiment, model: torch.nn.Module, evaluation: Evaluation,
+                tests: Sequence[Run]) -> dict[str, pd.DataFrame] | None:
+    """Metrics tables of the model (its `evaluation`) and of each physics baseline on the
+    test logs (None without test logs)."""
+    if not tests:
+        return None
+    scores = {"model": evaluation.metrics}
+    for label, baseline in physics_baselines(exp, model, torch.float64).items():
+        scores[label] = evaluate_model(baseline, tests, exp.evaluation.horizons, exp.evaluation.integrator,
+                                       traces=False).metrics
+    return scores
 
 
 _READ: dict[tuple, list[Run]] = {}  # recordings read once per process (protocol runs and sweep trials share them)
@@ -70,7 +109,8 @@ def cached_test_runs(data: str | os.PathLike | None = None) -> list[Run]:
 
 def cached_training_runs(exp: Experiment, data: str | os.PathLike | None = None) -> list[Run]:
     """`training_runs`, read once per process for each training set (files or data set, rate)."""
-    key = ("training", None if data is None else str(data), exp.experiment.dataset, exp.data.files, exp.data.rate)
+    key = ("training", None if data is None else str(data), exp.experiment.dataset, exp.data.train,
+           exp.data.columns, exp.data.rate)
     if key not in _READ:
         _READ[key] = training_runs(exp, data)
     return _READ[key]
@@ -99,36 +139,62 @@ def check_experiment_fits(exp: Experiment, tests: Sequence[Run]) -> None:
 def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[Run],
                    train_runs: Sequence[Run] | None = None, data: str | os.PathLike | None = None,
                    progress: bool = True, log: Callable[[str], None] = print,
-                   resume: bool = False, overwrite: bool = False) -> RunResult:
+                   resume: bool = False, overwrite: bool = False,
+                   validation: Sequence[Run] | None = None) -> RunResult:
     """Train `exp` (unless it is an MMG used as defined) on `train_runs` (default: its own
-    training files), evaluate it on `tests` at its horizons, write the run directory.
+    training logs) with `validation` logs (default: its ``[data] validation``, else
+    validation blocks of the training logs), evaluate it on `tests` at its horizons beside
+    its physics baselines (`sysid.evaluation.verdict`), write the run directory.
 
-    Runs with ``[training] threads`` torch threads. Training writes a checkpoint every epoch
-    (`checkpoint_path`); `resume` continues from it to the same model an uninterrupted run
-    gives. A run whose wall-clock safety limit was hit is written with its failure in
-    summary.json (``result.failure``). The run directory is written complete or not at all;
-    an existing one is replaced only with `overwrite`. Threads beyond this machine's cores,
-    or horizons that are not whole samples or longer than a test file, are a `ConfigError`
-    before any training.
+    A log in two of training, validation and test (the same samples) is a `DataError`
+    naming both. Runs with ``[training] threads`` torch threads. Training writes a
+    checkpoint every epoch (`checkpoint_path`); `resume` continues from it to the same
+    model an uninterrupted run gives. A run whose wall-clock safety limit was hit is
+    written with its failure in summary.json (``result.failure``). The run directory is
+    written complete or not at all; an existing one is replaced only with `overwrite`.
+    Threads beyond this machine's cores, or horizons that are not whole samples or longer
+    than a test file, are a `ConfigError` before any training.
     """
     check_experiment_fits(exp, tests)
     started = time.perf_counter()
-    history, training = None, None
+    history, training, validation_scores, horizon = None, None, None, 0.0
+    runs: list[Run] = []
+    validation = list(validation) if validation is not None else []
     with compute_threads(exp.training.threads):
         if exp.needs_training:
             runs = list(train_runs) if train_runs is not None else training_runs(exp, data)
+            if not validation and exp.data.validation:
+                validation = validation_runs(exp)
+            check_disjoint_runs({TRAINING: runs, VALIDATION: validation, TEST: tests}, exp.source)
             try:
                 trainer = Trainer(exp, progress=progress, log=log, checkpoint=checkpoint_path(out_dir),
-                                  resume=resume).fit(runs)
+                                  resume=resume).fit(runs, validation)
             except TrainingError:  # a diverged training resumes to the same divergence: keep nothing
                 TrainingCheckpoint(checkpoint_path(out_dir), exp.to_toml()).remove()
                 raise
-            model, history, training = trainer.model_.cpu().double(), trainer.history_, trainer.summary_
+            history, training = trainer.history_, trainer.summary_
+            if training.failure is None:  # in the training dtype, as val_loss_multistep
+                windows = trainer.validation_windows_
+                scored = {"model": trainer.model_, **physics_baselines(exp, trainer.model_, windows.states.dtype,
+                                                                        windows.states.device)}
+                validation_scores = {k: window_score(m, windows, trainer.velocity_weights_) for k, m in scored.items()}
+                horizon = round((windows.states.shape[0] - 1) * windows.dt, 6)  # s
+            model = trainer.model_.cpu().double()
         else:
             model = build_model(exp)
         evaluation = evaluate_model(model, tests, exp.evaluation.horizons, exp.evaluation.integrator)
+        verdict, baseline_metrics = None, None
+        if validation_scores is not None:
+            scores = scores_on_tests(exp, model, evaluation, tests)
+            verdict = baseline_verdict(str(exp.experiment.model), validation_scores, horizon, scores)
+            if scores:
+                baseline_metrics = pd.concat([m.assign(baseline=label) for label, m in scores.items()
+                                              if label != "model"], ignore_index=True)
+    source = "files" if exp.data.train else (exp.experiment.dataset if exp.needs_training else "-")
+    data_used = provenance(source, runs, validation, tests, exp.training.val_fraction, exp.training.block_s)
     seconds = time.perf_counter() - started
-    path = write_run(out_dir, exp, model, evaluation, history, training, seconds, overwrite)
+    path = write_run(out_dir, exp, model, evaluation, history, training, seconds, overwrite,
+                     verdict=verdict, data=data_used, baseline_metrics=baseline_metrics)
     if training is not None:
         TrainingCheckpoint(checkpoint_path(out_dir), exp.to_toml()).remove()
-    return RunResult(path, exp, model, evaluation, history, training, seconds)
+    return RunResult(path, exp, model, evaluation, history, training, seconds, verdict)

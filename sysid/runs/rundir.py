@@ -6,8 +6,12 @@ A **run directory** (``sysid train CONFIG -o runs/NAME``)::
     config.toml        resolved experiment config (all defaults filled in)
     summary.json       {"name", "model": "mmg"|"nn"|"hybrid", "status": "complete"|"failed: ...",
                         "dataset": "D1"|"D2"|..., "ship", "seed", "created", "train_seconds",
-                        "epochs", "best_epoch", "val_loss" (validation multi-step loss of
-                        the final model), "stopped": {stage: "early stop"|"epoch limit"|...},
+                        "epochs", "best_epoch", "val_loss_multistep" (the run's validation
+                        loss, "val_loss_definition"), "verdict" (`BaselineVerdict.to_dict`:
+                        model vs physics baselines per split, horizon and channel) and
+                        "beats_baseline", "data" (the logs used: training source, every file
+                        with its SHA-256, test set "files"|"paper"|"none"),
+                        "stopped": {stage: "early stop"|"epoch limit"|...},
                         "n_train_windows", "n_val_windows", "versions": {...},
                         "mmg_overrides": {...}, "identified": {...}, "identified_initial": {...},
                         "identified_uncertainty": {names, estimate, std_error, correlation,
@@ -19,8 +23,11 @@ A **run directory** (``sysid train CONFIG -o runs/NAME``)::
     standardization.json  input/output mean and std of the FNN (Eqs. 8, 10)
     knn.pt             {"bank": (N, F) gate vectors, "threshold": (), "train_distances": (N,),
                         "k": (), "alpha": ()}
-    history.csv        stage, epoch, train_loss, train_velocity, train_penalty, val_loss, seconds
+    history.csv        stage, epoch, train_loss, train_velocity, train_penalty, early_stopping_loss
+                       (L_v on the validation windows during training, before the kNN gate), seconds
     metrics.csv        `sysid.evaluation.evaluate.METRICS_COLUMNS`
+    baseline_metrics.csv  the physics baselines on the same test logs: "baseline" (its label,
+                       `sysid.evaluation.verdict`) + METRICS_COLUMNS; with a verdict and test logs
     traces/            one CSV per (file, horizon): ``{file_stem}_h{H}.csv``, `TRACE_COLUMNS`
     manifest.json      written last: every other file with its SHA-256 (`sysid.store.manifest`)
 
@@ -62,9 +69,11 @@ from sysid.config.experiment import Experiment, ship_overrides
 from sysid.store.files import write_csv, write_text
 from sysid.mmg.model import MMG
 from sysid.hybrid.force_models import CorrectedModel, build_model
-from sysid.runs.directory import RunDir
+from sysid.identify.trainer import VAL_LOSS_DEFINITION
+from sysid.runs.directory import BASELINE_METRICS_COLUMNS, RunDir
 from sysid.runs.knn_bank import KnnBank
-from sysid.runs.summary import GateSummary, IdentificationSummary, RunSummary, TrainingDetails, UncertaintySummary
+from sysid.runs.summary import (DataSummary, GateSummary, IdentificationSummary, RunSummary, TrainingDetails,
+                                UncertaintySummary, VerdictSummary)
 from sysid.runs.tensor_files import save_tensors
 from sysid.store.staging import staged_directory
 from sysid.store.versions import software_versions
@@ -118,20 +127,27 @@ def _parsed(record, value: dict | None, at: str):
     return None if value is None else record.from_json(value, "summary.json (being written)", at)
 
 
-def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds: float | None = None) -> RunSummary:
-    """summary.json of a run; `training` is the trainer's `TrainingSummary` (None if untrained)."""
+def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds: float | None = None,
+                verdict=None, data: dict | None = None) -> RunSummary:
+    """summary.json of a run; `training` is the trainer's `TrainingSummary` (None if untrained),
+    `verdict` its `sysid.evaluation.verdict.BaselineVerdict`, `data` the logs it used
+    (`sysid.data.splits.provenance`)."""
     info = training.to_dict() if training is not None else {}
     failure = info.pop("failure", None)
     return RunSummary(
         name=exp.experiment.name, model=exp.experiment.model,
         status=f"failed: {failure}" if failure else "complete",
-        dataset="files" if exp.data.files else (exp.experiment.dataset if exp.needs_training else "-"),
+        dataset="files" if exp.data.train else (exp.experiment.dataset if exp.needs_training else "-"),
         ship=exp.experiment.ship, seed=exp.experiment.seed,
         created=time.strftime("%Y-%m-%dT%H:%M:%S%z"), seconds=seconds,
         train_seconds=info.pop("train_seconds", None),
         epochs=info.pop("epochs", 0),
         best_epoch=info.pop("best_epoch", None),
-        val_loss=info.pop("val_loss", None),
+        val_loss_multistep=info.pop("val_loss_multistep", None),
+        val_loss_definition=VAL_LOSS_DEFINITION,
+        verdict=_parsed(VerdictSummary, verdict.to_dict() if verdict is not None else None, "verdict"),
+        beats_baseline=verdict.beats_baseline if verdict is not None else None,
+        data=_parsed(DataSummary, data, "data"),
         stopped=info.pop("stopped", {}),
         n_train_windows=info.pop("n_train_windows", None),
         n_val_windows=info.pop("n_val_windows", None),
@@ -148,7 +164,8 @@ def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds:
 
 def write_run(run_dir: str | os.PathLike, exp: Experiment, model, evaluation: Evaluation,
               history: pd.DataFrame | None = None, training=None,
-              seconds: float | None = None, overwrite: bool = False) -> Path:
+              seconds: float | None = None, overwrite: bool = False, verdict=None,
+              data: dict | None = None, baseline_metrics: pd.DataFrame | None = None) -> Path:
     """Write a complete run directory (config, weights, kNN bank, history, metrics, traces).
 
     Staged (`sysid.store.staging`): the files go into a hidden directory beside `run_dir`, sealed
@@ -156,17 +173,31 @@ def write_run(run_dir: str | os.PathLike, exp: Experiment, model, evaluation: Ev
     `overwrite`, which replaces all of it.
     """
     with staged_directory(run_dir, "run", overwrite) as staging:
-        _write_run_files(RunDir(staging), exp, model, evaluation, history, training, seconds)
+        _write_run_files(RunDir(staging), exp, model, evaluation, history, training, seconds, verdict, data,
+                         baseline_metrics)
     return Path(run_dir)
 
 
+def _used_files(exp: Experiment, data: dict | None) -> Experiment:
+    """`exp` with ``[data]`` train / validation / test as the files used (globs and
+    directories expanded), so the run's config.toml names what it was made from."""
+    if not data or not exp.data.train:
+        return exp
+    listed = {key: tuple(f["file"] for f in data[key]) for key in ("train", "validation", "test")
+              if isinstance(data.get(key), list)}
+    return exp.replace(data=listed)
+
+
 def _write_run_files(run: RunDir, exp: Experiment, model, evaluation: Evaluation,
-                     history: pd.DataFrame | None, training, seconds: float | None) -> None:
-    write_text(exp.to_toml(), run.config)
+                     history: pd.DataFrame | None, training, seconds: float | None, verdict=None,
+                     data: dict | None = None, baseline_metrics: pd.DataFrame | None = None) -> None:
+    write_text(_used_files(exp, data).to_toml(), run.config)
     save_model(model, run.path)
     if history is not None and len(history):
         write_csv(history, run.history, float_format="%.6g")
     write_csv(evaluation.metrics, run.metrics, float_format="%.6g")
+    if baseline_metrics is not None and len(baseline_metrics):
+        write_csv(baseline_metrics[BASELINE_METRICS_COLUMNS], run.baseline_metrics, float_format="%.6g")
     for name, frame in evaluation.traces.items():
         write_csv(frame, run.traces / name, float_format="%.8g")
-    write_text(run_summary(exp, evaluation, training, seconds).to_text(), run.summary)
+    write_text(run_summary(exp, evaluation, training, seconds, verdict, data).to_text(), run.summary)

@@ -13,6 +13,8 @@ from typing import Any
 
 from sysid.runs.records import JsonRecord
 
+LEGACY_VAL_LOSS = "val_loss"  # val_loss_multistep's key in runs written before it was renamed
+
 
 @dataclass(frozen=True)
 class WeakDirection(JsonRecord):
@@ -54,7 +56,7 @@ class StartStateCheckSummary(JsonRecord):
     largest_sigma: float | None
     limit_sigma: float
     agrees: bool
-    val_loss: float
+    val_loss_multistep: float                 # the other fit's validation loss (`RunSummary.val_loss_multistep`)
     extra: dict[str, Any] = field(default_factory=dict)
 
     def verdict(self) -> str:
@@ -139,13 +141,85 @@ class TrainingDetails(JsonRecord):
 
 
 @dataclass(frozen=True)
+class VerdictCell(JsonRecord):
+    """One channel at one horizon on one split of a verdict: the model's RMSE and each
+    baseline's [m/s or rad/s] (`sysid.evaluation.verdict.ChannelCell`)."""
+
+    split: str                                # "validation" | "test"
+    horizon_s: float
+    channel: str                              # "u" | "v_m" | "r"
+    model: float
+    baselines: dict[str, float]
+    model_std: float | None = None            # spread over seeds of a seed-mean cell
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class VerdictSummary(JsonRecord):
+    """"verdict": the run against its physics baselines
+    (`sysid.evaluation.verdict.BaselineVerdict.to_dict`); `baseline_verdict` gives it back
+    as that dataclass."""
+
+    model: str
+    baselines: tuple[str, ...]
+    decided_on: str                           # "test" | "validation"
+    beats_baseline: bool
+    seeds: int
+    val_loss_multistep: dict[str, float]      # "model" or a baseline label -> validation loss
+    statement: str
+    cells: tuple[VerdictCell, ...]
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def baseline_verdict(self):
+        """The verdict as `sysid.evaluation.verdict.BaselineVerdict`."""
+        from sysid.evaluation.verdict import BaselineVerdict  # torch: only when asked
+        return BaselineVerdict.from_dict(self.to_json())
+
+
+@dataclass(frozen=True)
+class LogFile(JsonRecord):
+    """A log a run used, as named in its config, with its SHA-256."""
+
+    file: str
+    sha256: str
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class DataSummary(JsonRecord):
+    """"data": what a run was trained, validated and tested on (`sysid.data.splits.provenance`).
+
+    training : "files", "D1", "D2" or "-"; validation : the validation logs, or how the
+    validation blocks were drawn (a sentence), or "none"; test_set : "files", "paper" or "none".
+    """
+
+    training: str
+    train: tuple[LogFile, ...] = ()
+    validation: Any = "none"                  # tuple of `LogFile` as read: see `validation_logs`
+    test_set: str = "none"
+    test: tuple[LogFile, ...] = ()
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def validation_logs(self) -> tuple[LogFile, ...]:
+        """The validation logs (empty: validation blocks of the training logs)."""
+        if not isinstance(self.validation, (list, tuple)):
+            return ()
+        return tuple(LogFile.from_json(f, "summary.json", f"data.validation[{i}]")
+                     for i, f in enumerate(self.validation))
+
+
+@dataclass(frozen=True)
 class RunSummary(JsonRecord):
     """summary.json of a run directory.
 
     status : "complete" or "failed: why"; dataset : "D1", "D2", "files" or "-" (an MMG used
     as defined); seconds, train_seconds : wall time of the run and of its training [s];
-    epochs : the largest epoch of any stage; best_epoch : of the last stage; val_loss : the
-    final model's validation multi-step loss (the sweep objective); stopped : stage ->
+    epochs : the largest epoch of any stage; best_epoch : of the last stage;
+    val_loss_multistep : the run's validation loss, the final model's (kNN gate included)
+    validation multi-step loss (the sweep objective), defined in words by
+    val_loss_definition; verdict, beats_baseline : the run against its physics baselines
+    (None without training); data : the logs it used; stopped : stage ->
     why it stopped; identified, identified_initial : coefficient -> value after and before
     identification.
     """
@@ -161,7 +235,11 @@ class RunSummary(JsonRecord):
     train_seconds: float | None = None
     epochs: int = 0
     best_epoch: int | None = None
-    val_loss: float | None = None
+    val_loss_multistep: float | None = None
+    val_loss_definition: str | None = None
+    verdict: VerdictSummary | None = None
+    beats_baseline: bool | None = None
+    data: DataSummary | None = None
     stopped: dict[str, str] = field(default_factory=dict)
     n_train_windows: int | None = None
     n_val_windows: int | None = None
@@ -181,8 +259,10 @@ class RunSummary(JsonRecord):
 
     @property
     def objective(self) -> float:
-        """`val_loss`, NaN when there is none (an untrained or failed run)."""
-        return float(self.val_loss) if self.val_loss is not None else math.nan
+        """`val_loss_multistep`, NaN when there is none (an untrained or failed run). A run
+        written before the rename has it under its older name, val_loss (kept in `extra`)."""
+        value = self.val_loss_multistep if self.val_loss_multistep is not None else self.extra.get(LEGACY_VAL_LOSS)
+        return float(value) if value is not None else math.nan
 
     @property
     def stopped_text(self) -> str:

@@ -52,6 +52,6 @@ def optuna_trainable(config: dict, spec: SweepSpec, context: TrialContext) -> No
     from ray import tune
 
     values = values_of(spec, config)
-    losses = [run_trial(make_trial(spec, values, seed), context)["val_loss"] for seed in spec.seeds]
+    losses = [run_trial(make_trial(spec, values, seed), context)["val_loss_multistep"] for seed in spec.seeds]
     finite = [v for v in losses if math.isfinite(v)]
-    tune.report({"val_loss": sum(finite) / len(finite) if len(finite) == len(losses) else math.inf})
+    tune.report({"val_loss_multistep": sum(finite) / len(finite) if len(finite) == len(losses) else math.inf})

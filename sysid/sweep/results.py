@@ -73,20 +73,20 @@ def collect_results(spec: SweepSpec, out: Path, trials: list[TrialSpec], errors:
     done = table[table.status == "complete"]
     points = []
     for point, group in table.groupby("point", sort=False):
-        ok = done[done.point == point]["val_loss"]
+        ok = done[done.point == point]["val_loss_multistep"]
         points.append({"point": point, **{k: group[k].iloc[0] for k in spec.keys},
                        "seeds": int(len(group)), "complete": int(len(ok)),
-                       "val_loss_mean": float(ok.mean()) if len(ok) else math.nan,
-                       "val_loss_std": float(ok.std(ddof=1)) if len(ok) > 1 else math.nan,
-                       "val_loss_min": float(ok.min()) if len(ok) else math.nan,
-                       "val_loss_max": float(ok.max()) if len(ok) else math.nan})
-    points_frame = pd.DataFrame(points).sort_values("val_loss_mean", kind="stable", na_position="last")
-    whole = points_frame[(points_frame.complete == points_frame.seeds) & points_frame.val_loss_mean.notna()]
+                       "val_loss_multistep_mean": float(ok.mean()) if len(ok) else math.nan,
+                       "val_loss_multistep_std": float(ok.std(ddof=1)) if len(ok) > 1 else math.nan,
+                       "val_loss_multistep_min": float(ok.min()) if len(ok) else math.nan,
+                       "val_loss_multistep_max": float(ok.max()) if len(ok) else math.nan})
+    points_frame = pd.DataFrame(points).sort_values("val_loss_multistep_mean", kind="stable", na_position="last")
+    whole = points_frame[(points_frame.complete == points_frame.seeds) & points_frame.val_loss_multistep_mean.notna()]
     best = None
     if len(whole):
         top = whole.iloc[0]
-        best = ChosenPoint(top.point, {k: _plain(top[k]) for k in spec.keys}, float(top.val_loss_mean),
-                           None if math.isnan(top.val_loss_std) else float(top.val_loss_std),
+        best = ChosenPoint(top.point, {k: _plain(top[k]) for k in spec.keys}, float(top.val_loss_multistep_mean),
+                           None if math.isnan(top.val_loss_multistep_std) else float(top.val_loss_multistep_std),
                            tuple(done[done.point == top.point]["run"]))
     return SweepResults(table, points_frame.reset_index(drop=True), best)
 

@@ -62,7 +62,7 @@ def progress_callback(total: int, names: Callable[[dict], str], log: Callable[[s
             self.best = (math.inf, "")
 
         def _line(self, event: str) -> None:
-            best = f"; best validation loss {self.best[0]:.5f} ({self.best[1]})" if math.isfinite(self.best[0]) else ""
+            best = f"; best val_loss_multistep {self.best[0]:.5f} ({self.best[1]})" if math.isfinite(self.best[0]) else ""
             log(f"{prefix}: {event} | {self.done}/{total} done, {len(self.running)} running, "
                 f"{self.failed} failed{f', {self.retried} retried' if self.retried else ''}{best}")
 
@@ -73,10 +73,10 @@ def progress_callback(total: int, names: Callable[[dict], str], log: Callable[[s
         def on_trial_complete(self, iteration, trials, trial, **info):
             self.running.discard(trial.trial_id)
             self.done += 1
-            value = (trial.last_result or {}).get("val_loss", math.inf)
+            value = (trial.last_result or {}).get("val_loss_multistep", math.inf)
             if value < self.best[0]:
                 self.best = (value, names(trial.config))
-            self._line(f"done {names(trial.config)} (validation loss {value:.5f})")
+            self._line(f"done {names(trial.config)} (val_loss_multistep {value:.5f})")
 
         def on_trial_recover(self, iteration, trials, trial, **info):
             self.retried += 1
@@ -146,7 +146,7 @@ def run_optuna(spec, context: TrialContext, workers: int, address: str | None = 
         if resume and tune.Tuner.can_restore(str(path)):
             tuner = tune.Tuner.restore(str(path), trainable, resume_errored=True)
         else:
-            search = OptunaSearch(metric="val_loss", mode="min", seed=spec.search_seed)
+            search = OptunaSearch(metric="val_loss_multistep", mode="min", seed=spec.search_seed)
             tuner = tune.Tuner(
                 trainable, param_space=optuna_space(spec),
                 tune_config=tune.TuneConfig(search_alg=search, num_samples=spec.samples,

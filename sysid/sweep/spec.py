@@ -7,7 +7,7 @@ base = "../experiments/hybrid_D2.toml"   # experiment config (relative to this f
 search = "grid"          # grid | random | optuna
 samples = 8              # random / optuna: configurations drawn
 seeds = [0, 1, 2]        # every configuration is trained with each seed
-objective = "val_loss"   # validation multi-step loss, minimised (never a test file)
+objective = "val_loss_multistep"   # validation multi-step loss, minimised (never a test file)
 max_retries = 2          # a trial that crashes or is killed is retried this often
 search_seed = 0          # seed of the random / optuna sampler
 
@@ -40,7 +40,7 @@ from sysid.errors import ConfigError
 from sysid.store.toml_file import read_toml
 from sysid.config.experiment import Experiment, load_experiment, parse_experiment
 
-OBJECTIVES = ("val_loss",)
+OBJECTIVES = ("val_loss_multistep",)
 DISTRIBUTIONS = ("uniform", "loguniform", "randint", "choice")
 
 
@@ -73,7 +73,7 @@ class SweepSpec:
     seeds: tuple[int, ...] = (0,)
     search: Search = Search.GRID
     samples: int = 1
-    objective: str = "val_loss"
+    objective: str = "val_loss_multistep"
     max_retries: int = 2
     search_seed: int = 0
     source: str = ""
@@ -189,10 +189,11 @@ def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = Non
         search = Search.parse(table.get("search", "grid"), f"{source}: [sweep] search")
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
-    objective = table.get("objective", "val_loss")
+    objective = table.get("objective", "val_loss_multistep")
+    objective = "val_loss_multistep" if objective == "val_loss" else objective  # its older name
     if objective not in OBJECTIVES:
         raise ConfigError(f"{source}: [sweep] objective = {objective!r}: the objective is the validation "
-                          "loss (val_loss); test files are never used to choose")
+                          "loss (val_loss_multistep); test files are never used to choose")
     seeds = table.get("seeds", [base.experiment.seed])
     if (not isinstance(seeds, list) or not seeds or any(isinstance(s, bool) or not isinstance(s, int) or s < 0
                                                        for s in seeds) or len(set(seeds)) != len(seeds)):

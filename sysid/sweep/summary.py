@@ -16,8 +16,8 @@ class ChosenPoint(JsonRecord):
 
     point: str
     values: dict[str, Any]
-    val_loss_mean: float
-    val_loss_std: float | None
+    val_loss_multistep_mean: float
+    val_loss_multistep_std: float | None
     runs: tuple[str, ...]
     extra: dict[str, Any] = field(default_factory=dict)
 

@@ -88,8 +88,8 @@ def result_row(trial: TrialSpec, summary: RunSummary | None, run_dir: Path) -> d
     if trial.label:
         row["name"] = trial.label
     if summary is None:
-        return {**row, "status": "missing", "val_loss": math.nan}
-    return {**row, "status": summary.status, "val_loss": summary.objective,
+        return {**row, "status": "missing", "val_loss_multistep": math.nan}
+    return {**row, "status": summary.status, "val_loss_multistep": summary.objective,
             "epochs": summary.epochs, "best_epoch": summary.best_epoch, "stopped": summary.stopped_text,
             "train_seconds": summary.train_seconds}
 
@@ -115,7 +115,7 @@ def _run_locked(trial: TrialSpec, context: TrialContext, log: Callable[[str], No
     result = run_experiment(exp, run_dir, cached_test_runs(context.data), train, context.data,
                             progress=False, log=log, resume=resume, overwrite=run_dir.exists())
     summary = RunDir(result.path).read_summary()
-    journal(context.out, "trained", trial, val_loss=summary.val_loss)
+    journal(context.out, "trained", trial, val_loss_multistep=summary.val_loss_multistep)
     return result_row(trial, summary, run_dir)
 
 
@@ -124,6 +124,6 @@ def tune_trainable(config: dict, trials: list[TrialSpec], context: TrialContext)
     from ray import tune
 
     row = run_trial(trials[int(config["trial"])], context)
-    value = row["val_loss"]
-    tune.report({"val_loss": value if math.isfinite(value) else math.inf,
+    value = row["val_loss_multistep"]
+    tune.report({"val_loss_multistep": value if math.isfinite(value) else math.inf,
                  "epochs": int(row.get("epochs") or 0), "failed": row["status"] != "complete"})

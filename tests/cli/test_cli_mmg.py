@@ -85,19 +85,19 @@ def _processed(dataset_dir, tmp_path, edit):
 
 def test_processed_run_errors_name_file_and_field(dataset_dir, tmp_path):
     def nan(f): f.loc[120, "r_angvelo [rad/s]"] = np.nan
-    with pytest.raises(DataError, match=r"run.csv: column 'r' is NaN/inf at data row 122"):
+    with pytest.raises(DataError, match=r"run.csv: column 'r_angvelo \[rad/s\]' \(channel r\) is empty, NaN or inf at data row 122"):
         read_run(_processed(dataset_dir, tmp_path, nan))
 
     def backwards(f): f.loc[50, "t [s]"] = 1.0
-    with pytest.raises(DataError, match=r"run.csv: column 't' is not strictly increasing"):
+    with pytest.raises(DataError, match=r"run.csv: column 't \[s\]' \(channel t\) is not strictly increasing"):
         read_run(_processed(dataset_dir, tmp_path, backwards))
 
     def degrees(f): f["delta_rudder [rad]"] = np.degrees(f["delta_rudder [rad]"])
-    with pytest.raises(DataError, match=r"run.csv: column 'delta_rudder' reaches .* wrong units"):
+    with pytest.raises(DataError, match=r"run.csv: column 'delta_rudder \[rad\]' \(channel delta_rudder\) reaches .* wrong units"):
         read_run(_processed(dataset_dir, tmp_path, degrees))
 
     def renamed(f): f.columns = [("u" if c == "u_velo [m/s]" else c) for c in f.columns]
-    with pytest.raises(DataError, match=r"run.csv: missing column\(s\) \['u_velo \[m/s\]'\]"):
+    with pytest.raises(DataError, match=r"run.csv: no column 'u_velo \[m/s\]' for channel u \(the file has"):
         read_run(_processed(dataset_dir, tmp_path, renamed))
 
 

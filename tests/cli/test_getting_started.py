@@ -48,9 +48,12 @@ def test_getting_started_from_another_directory(tmp_path, dataset_dir, monkeypat
     out = in_process(capsys, "train", "../home/tanker/experiment.toml", "-o", run, "--test", "../home/tanker/test")
     assert out.code == 0, out.err
     resolved = (run / "config.toml").read_text()
-    assert str(project / "my_tanker.toml") in resolved and str(project / "logs" / "*.csv") in resolved
+    # the run's config names what it was made from: the pattern's files, the test folder's log
+    assert str(project / "my_tanker.toml") in resolved and str(project / "logs" / "monday_turn.csv") in resolved
+    assert str(project / "test" / "wednesday_zigzag.csv") in resolved and 'dataset = ""' in resolved
     summary = json.loads((run / "summary.json").read_text())
     assert summary["status"] == "complete" and summary["model"] == "hybrid"
+    assert summary["verdict"]["decided_on"] == "test" and summary["data"]["test_set"] == "files"
     trained = pd.read_csv(run / "metrics.csv")
     assert list(trained.file) == ["wednesday_zigzag"]
 

@@ -29,7 +29,7 @@ def test_init_writes_a_project_that_loads_from_another_working_directory(tmp_pat
     monkeypatch.chdir(elsewhere)  # paths in the config resolve against the config, not the cwd
     exp = load_experiment(project / "experiment.toml")
     assert exp.experiment.ship == str(project / "my_tanker.toml")
-    assert exp.data.files == (str(project / "logs" / "*.csv"),)
+    assert exp.data.train == (str(project / "logs" / "*.csv"),)
     assert exp.experiment.model == "hybrid" and exp.experiment.name == "tanker"
 
     # every key of the typed config is in the file, written or (two) commented out

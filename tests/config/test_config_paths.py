@@ -48,7 +48,7 @@ def test_relative_files_and_globs_resolve_against_the_config_from_another_direct
         original = read_run(dataset_dir / LOGS[new])
         assert np.array_equal(run.states, original.states) and np.array_equal(run.inputs, original.inputs)
     monkeypatch.chdir(project.parent)  # the same config from its parent folder: the same files
-    assert load_experiment("project/experiment.toml").data.files == exp.data.files
+    assert load_experiment("project/experiment.toml").data.train == exp.data.train
 
 
 def test_sweep_values_resolve_against_the_sweep_file(tmp_path, dataset_dir, monkeypatch):
@@ -64,5 +64,5 @@ def test_sweep_values_resolve_against_the_sweep_file(tmp_path, dataset_dir, monk
     spec = load_sweep(sweeps / "s.toml")
     assert spec.base.experiment.ship == str(tmp_path / "ships" / "other.toml")
     trial = spec.experiment({f"data.{TRAIN}": ("../project/logs/day2_berthing.csv",)}, 0, "t")
-    assert trial.data.files == (str(project / "logs" / "day2_berthing.csv"),)
+    assert trial.data.train == (str(project / "logs" / "day2_berthing.csv"),)
     assert trial.experiment.ship == str(tmp_path / "ships" / "other.toml")

@@ -123,7 +123,7 @@ def test_two_epochs_on_a_synthetic_ship_recover_the_added_force(trained):
     info, hist = trainer.summary_, trainer.history_
     train_hist = hist[hist.stage == "train"]
     assert len(train_hist) == 2
-    assert train_hist.val_loss.iloc[-1] < info.mmg_val_loss * 0.5  # far better than MMG alone
+    assert train_hist.early_stopping_loss.iloc[-1] < info.mmg_val_loss * 0.5  # far better than MMG alone
     model = trainer.model_.double()
     states = torch.tensor(np.concatenate([r.states for r in runs]))
     inputs = torch.tensor(np.concatenate([r.inputs for r in runs]))
@@ -236,8 +236,8 @@ def test_force_correction_is_the_papers_network_and_members_average():
 
 
 @pytest.mark.slow
-def test_val_loss_is_the_final_models_validation_loss_at_the_objective_horizon(trained):
-    """summary.val_loss (the sweep objective): L_v of the final (gated) model on the
+def test_val_loss_multistep_is_the_final_models_validation_loss_at_the_objective_horizon(trained):
+    """summary.val_loss_multistep (the sweep objective): L_v of the final (gated) model on the
     validation windows; with objective_s, on validation windows of that many seconds."""
     from sysid.identify.trainer import multistep_loss, split_windows
     runs, trainer = trained
@@ -250,12 +250,12 @@ def test_val_loss_is_the_final_models_validation_loss_at_the_objective_horizon(t
     w_v = 1.0 / train.states[:, :, list(VELOCITY_INDEX)].reshape(-1, 3).var(0)
     with torch.no_grad():
         expected = float(multistep_loss(model, val, w_v)[0])
-    assert trainer.summary_.val_loss == pytest.approx(expected, rel=1e-5)
+    assert trainer.summary_.val_loss_multistep == pytest.approx(expected, rel=1e-5)
 
     longer = Trainer(small_experiment(objective_s=20.0), progress=False, log=lambda m: None).fit(runs)
     _, val20, _, _ = split_windows(runs, 20, t.stride_s, t.val_fraction, False, torch.float32, t.block_s,
                                    exp.experiment.seed)
     with torch.no_grad():
         expected20 = float(multistep_loss(longer.model_, val20, w_v)[0])
-    assert longer.summary_.val_loss == pytest.approx(expected20, rel=1e-5)
-    assert longer.summary_.val_loss > trainer.summary_.val_loss  # errors grow over 20 s
+    assert longer.summary_.val_loss_multistep == pytest.approx(expected20, rel=1e-5)
+    assert longer.summary_.val_loss_multistep > trainer.summary_.val_loss_multistep  # errors grow over 20 s

@@ -57,7 +57,7 @@ def _write_runs(bench, out_dir, seed=0):
 def _config(path, files, start, **sections):
     """The own-ship example config (configs/experiments/own_ship_identified.toml) on these
     files, starting from `start` ([mmg] overrides), one 30-s horizon, `sections` changed."""
-    exp = load_experiment(EXAMPLE).replace(data={"files": tuple(str(f) for f in files)},
+    exp = load_experiment(EXAMPLE).replace(data={"train": tuple(str(f) for f in files)},
                                            mmg={"overrides": {k: float(v) for k, v in start.items()}},
                                            evaluation={"horizons": (30.0,)}, **sections)
     path.write_text(exp.to_toml())
@@ -89,7 +89,7 @@ def test_levenberg_marquardt_run_covers_the_truth_within_two_sigma(bench, runs, 
     assert not any(u["undetermined"])
     for name, value in zip(NAMES, estimate):  # the model the run saved carries the estimate (float32)
         assert summary["identified"][name] == pytest.approx(value, rel=1e-6)
-    assert summary["val_loss"] is not None and summary["val_loss"] < 1.0
+    assert summary["val_loss_multistep"] is not None and summary["val_loss_multistep"] < 1.0
     said = estimator_text(RunDir(run_dir).read_summary())  # what the report's methods text and figure caption state
     assert "Levenberg-Marquardt" in said and "start state estimated" in said and "converged" in said
     # the model is exact here: the recorded-start fit lands within 2 sigma (measured 1.7, Y_r)

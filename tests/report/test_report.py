@@ -139,7 +139,7 @@ def test_reproduction_html_tables_equal_metrics(reproduction, reproduction_repor
     html = paths.html.read_text()
     assert html.count("<svg") == paths.n_figures >= 15
     for word in ("Summary", "Methods", "Configuration digest", "Software (report)", "kNN distance",
-                 "Trajectories", "Forces by module", "Training and validation loss", "0.0069"):
+                 "Trajectories", "Forces by module", "Training and early-stopping loss", "0.0069"):
         assert word in html, word
 
 

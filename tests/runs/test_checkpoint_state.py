@@ -39,7 +39,7 @@ def test_checkpoint_reads_into_the_state_and_writes_back_the_same(written, tmp_p
     state = TrainingCheckpoint(path, config).load()
     assert (state.stage, state.epoch) == ("train", 3)
     assert [row["epoch"] for row in state.stage_history] == [1, 2, 3]
-    losses = [row["val_loss"] for row in state.stage_history]
+    losses = [row["early_stopping_loss"] for row in state.stage_history]
     assert state.best_loss == min(losses) and state.best_epoch == 1 + losses.index(min(losses))
     assert state.summary["n_train_windows"] == trainer.summary_.n_train_windows
     TrainingCheckpoint(tmp_path / "again.pt", config).save(state)

@@ -61,6 +61,11 @@ def test_scratch_ship_trains_evaluates_and_reports(tmp_path):
     for name, est, sd in zip(u["names"], u["estimate"], u["std_error"]):
         assert est == pytest.approx(identified[name], rel=1e-5)
         assert sd is not None and 0 < sd < 0.5 * abs(est)
+    # the identified MMG (moved toward the truth) beats the ship file's on the held-out run
+    verdict = summary["verdict"]
+    assert summary["beats_baseline"] is True and verdict["baselines"] == ["MMG (ship file)"]
+    assert verdict["statement"].startswith("The identified MMG beats its physics baseline, MMG (ship file), "
+                                           "on the test logs")
     out = tmp_path / "metrics.csv"
     sysid(["evaluate", str(run_dir), "--data", str(files[2]), "--horizon", "30", "-o", str(out)])
     assert pd.read_csv(out).rmse_r.iloc[0] < 0.01

@@ -3,7 +3,9 @@ key and byte for byte, and refuses a malformed file with one line naming the fil
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
+from pathlib import Path
 
 import pytest
 
@@ -26,7 +28,7 @@ def _extras(record: JsonRecord, at: str = "summary") -> dict:
 
 
 KEYS = ["name", "model", "status", "dataset", "ship", "seed", "created", "seconds", "train_seconds", "epochs",
-        "best_epoch", "val_loss", "stopped", "n_train_windows", "n_val_windows", "versions", "mmg_overrides",
+        "best_epoch", "val_loss_multistep", "val_loss_definition", "verdict", "beats_baseline", "data", "stopped", "n_train_windows", "n_val_windows", "versions", "mmg_overrides",
         "identified", "identified_initial", "identified_uncertainty", "identification", "gate", "training"]
 
 
@@ -70,7 +72,13 @@ def test_hybrid_summary_agrees_with_the_runs_other_files(hybrid_run):
     assert summary.identification.solver == "gradient" and summary.identification.epochs == 2
     assert summary.identified_uncertainty.names == ("N_r",)
     assert summary.identified_uncertainty.estimate[0] == pytest.approx(summary.identified["N_r"])
-    assert summary.val_loss > 0 and summary.objective == summary.val_loss
+    assert summary.val_loss_multistep > 0 and summary.objective == summary.val_loss_multistep
+    verdict = summary.verdict.baseline_verdict()         # the typed block gives back the trainer's verdict
+    assert summary.beats_baseline == summary.verdict.beats_baseline == verdict.beats_baseline
+    assert summary.verdict.statement == verdict.statement()
+    assert summary.data.training == "files" and summary.data.test_set == "files"
+    for log in summary.data.train + summary.data.test:  # every log named with its SHA-256
+        assert log.sha256 == hashlib.sha256(Path(log.file).read_bytes()).hexdigest()
 
 
 def test_levenberg_marquardt_check_reads_as_the_trainer_logged_it(levenberg_marquardt_run):
@@ -86,19 +94,20 @@ def test_levenberg_marquardt_check_reads_as_the_trainer_logged_it(levenberg_marq
 
 def test_unknown_keys_are_kept_and_written_after_the_known_ones(hybrid_run):
     data = json.loads(RunDir(hybrid_run.path).summary.read_text())
-    data["verdict"] = {"fit": "good"}                  # a block a newer sysid writes
+    data["calibration"] = {"fit": "good"}              # a block a newer sysid writes
     data["gate"]["bank_bytes"] = 123
     summary = RunSummary.from_json(data, "summary.json")
-    assert summary.extra == {"verdict": {"fit": "good"}} and summary.gate.extra == {"bank_bytes": 123}
+    assert summary.extra == {"calibration": {"fit": "good"}} and summary.gate.extra == {"bank_bytes": 123}
     assert summary.to_text() == json.dumps(data, indent=2)
 
 
 def test_a_run_written_before_keys_existed_reads_with_their_defaults(tmp_path):
-    """The report tests' synthetic run: no status, seconds, val_loss, stopped, training."""
+    """The report tests' synthetic run: no status, seconds, val_loss_multistep, verdict, data, stopped, training."""
     runs = measured_runs(0.2)
     path = write_run(tmp_path / "hybrid_D1", "hybrid_D1", {"Berthing": runs["Berthing"]}, horizons=(30,))
     summary = RunDir.open(path).read_summary()
-    assert (summary.status, summary.val_loss, summary.stopped, summary.training.split) == ("complete", None, {}, None)
+    assert (summary.status, summary.val_loss_multistep, summary.stopped, summary.training.split) == ("complete", None, {}, None)
+    assert (summary.verdict, summary.beats_baseline, summary.data) == (None, None, None)
     assert (summary.gate.k, summary.gate.threshold, summary.gate.off_share) == (10, 1.0, None)
     assert not summary.failed and summary.epochs == 40
 
@@ -106,7 +115,7 @@ def test_a_run_written_before_keys_existed_reads_with_their_defaults(tmp_path):
 @pytest.mark.parametrize("change, message", [
     (lambda d: d["gate"].update(k="ten"), r"gate\.k: expected an integer, got a string 'ten'"),
     (lambda d: d.update(stopped=["train"]), r"stopped: expected an object, got an array"),
-    (lambda d: d.update(val_loss=True), r"val_loss: expected a number, got true/false"),
+    (lambda d: d.update(val_loss_multistep=True), r"val_loss_multistep: expected a number, got true/false"),
     (lambda d: d["training"]["split"]["files"][0].pop("val_windows"),
      r"key 'training\.split\.files\[0\]\.val_windows' is missing"),
     (lambda d: d.pop("name"), r"key 'name' is missing"),
@@ -120,3 +129,19 @@ def test_a_malformed_summary_is_one_line_naming_the_file_and_key(hybrid_run, tmp
         RunSummary.read(path)
     said = str(err.value)
     assert said.startswith(f"{path}: ") and "\n" not in said and "write it again" in said
+
+
+def test_reproduce_warns_for_every_run_below_its_baseline(hybrid_run, tmp_path, capsys):
+    """``sysid reproduce``'s last lines: one WARNING per run whose summary says it does not beat
+    its physics baseline, with that run's verdict statement; none for a run that does."""
+    import shutil
+
+    from sysid.cli.train_commands import _warn_below_baseline
+
+    data = json.loads(RunDir(hybrid_run.path).summary.read_text())
+    for name, beats in (("a", False), ("b", True)):
+        shutil.copytree(hybrid_run.path, tmp_path / "runs" / name / "seed0")
+        (tmp_path / "runs" / name / "seed0" / "summary.json").write_text(json.dumps({**data, "beats_baseline": beats}))
+    _warn_below_baseline(tmp_path)
+    said = capsys.readouterr().err.splitlines()
+    assert said == [f"WARNING: run a/seed0: {data['verdict']['statement']}"]

@@ -162,7 +162,7 @@ def write_run(out: Path, name: str, runs: dict[str, Run], horizons=(30, 100), se
         train = 0.02 * np.exp(-epochs / 8) + 0.002
         stage = np.where(epochs <= 10, "mmg", "fnn") if kind == "hybrid" else np.full(len(epochs), "train")
         epochs = np.where(epochs <= 10, epochs, epochs - 10) if kind == "hybrid" else epochs
-        history = pd.DataFrame({"stage": stage, "epoch": epochs, "train_loss": train, "val_loss": train * 1.3,
+        history = pd.DataFrame({"stage": stage, "epoch": epochs, "train_loss": train, "early_stopping_loss": train * 1.3,
                                 "train_velocity": train * 0.9, "train_penalty": train * 0.1,
                                 "seconds": epochs * 3.0})
         history.to_csv(out / "history.csv", index=False)

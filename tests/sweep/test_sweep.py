@@ -103,14 +103,14 @@ def test_sweep_killed_part_way_resumes_without_training_a_trial_twice(tmp_path, 
     assert set(trained_before) <= reused
     table = pd.read_csv(out / "results.csv")
     assert len(table) == 4 and set(table.status) == {"complete"}
-    assert table.val_loss.map(math.isfinite).all()
+    assert table.val_loss_multistep.map(math.isfinite).all()
     assert sorted(table.seed) == [0, 0, 1, 1]
     summary = json.loads((out / "summary.json").read_text())
     points = pd.read_csv(out / "points.csv")
     assert summary["best"]["point"] == points.point.iloc[0]
-    assert summary["best"]["val_loss_mean"] == pytest.approx(points.val_loss_mean.min(), rel=1e-5)
-    best = table[table.point == summary["best"]["point"]].val_loss.mean()
-    assert summary["best"]["val_loss_mean"] == pytest.approx(best, rel=1e-5)
+    assert summary["best"]["val_loss_multistep_mean"] == pytest.approx(points.val_loss_multistep_mean.min(), rel=1e-5)
+    best = table[table.point == summary["best"]["point"]].val_loss_multistep.mean()
+    assert summary["best"]["val_loss_multistep_mean"] == pytest.approx(best, rel=1e-5)
 
     # every trial is an ordinary run directory
     from sysid.runs.rundir import load_model
@@ -119,7 +119,11 @@ def test_sweep_killed_part_way_resumes_without_training_a_trial_twice(tmp_path, 
     # the sweep's report: objective against the keys, seed spread, the chosen configuration
     from sysid.report import build_report
     html = build_report(out, tmp_path / "report").html.read_text()
-    assert "Validation loss against the varied keys" in html and "Spread over 2 seeds" in html
+    assert "val_loss_multistep against the varied keys" in html and "Spread over 2 seeds" in html
+    # page 1: the chosen configuration's verdict, the mean over its 2 seeds with their spread
+    assert html.index('id="verdict"') < html.index('id="summary"') and "(mean over 2 seeds)" in html
+    verdict = html[html.index('id="verdict"'):html.index('id="summary"')]
+    assert verdict.count(" ± ") >= 3   # the model's RMSE ± its std over the seeds, per channel
     assert "Chosen" in html and summary["best"]["point"] in html
     # the resumed sweep refuses another sweep file
     path.write_text(path.read_text().replace("3e-3", "5e-3"))
@@ -135,7 +139,7 @@ def test_shipped_sweep_files_are_valid():
     assert files
     for path in files:
         spec = load_sweep(path)
-        assert spec.objective == "val_loss" and len(spec.seeds) >= 2 and sweep_trials(spec)
+        assert spec.objective == "val_loss_multistep" and len(spec.seeds) >= 2 and sweep_trials(spec)
 
 
 _TRAIN_ONE = """

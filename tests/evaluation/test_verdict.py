@@ -1,0 +1,89 @@
+"""A verdict, always: a deliberately bad hybrid (a 2-neuron network, 2 epochs at a learning rate
+of 0.5, no warm start, no gate) trained on real logs ends with a WARNING on stderr, ``beats_baseline: false`` in
+summary.json and the statement first on page 1 of its report; the verdict's numbers are
+those of the run's metrics and of the MMG evaluated on its own (``sysid evaluate --model mmg``)."""
+from __future__ import annotations
+
+import json
+
+import pandas as pd
+import pytest
+from pypdf import PdfReader
+
+from cli_harness import in_process
+from sysid.evaluation.verdict import SHIP_FILE_MMG, BaselineVerdict
+
+TRAIN = ("berthing/berthing_12-Nov-2020_13_37_05.csv", "berthing/berthing_12-Nov-2020_13_09_11.csv")
+TEST = "zigzag/zigzag_31-Jul-2020_13_57_45.csv"   # not one of the paper's test files
+
+
+def bad_config(path, dataset_dir):
+    path.write_text(
+        "[experiment]\nname = 'bad'\nmodel = 'hybrid'\nseed = 0\n"
+        f"[data]\ntrain = {json.dumps([str(dataset_dir / f) for f in TRAIN])}\n"
+        f"test = [{json.dumps(str(dataset_dir / TEST))}]\n"
+        "[network]\nhidden = [2]\n"
+        "[training]\nepochs = 2\nwarm_start_epochs = 0\nlearning_rate = 0.5\nbatch_size = 64\n"
+        "[gate]\nenabled = false\n[evaluation]\nhorizons = [30.0]\n")
+    return path
+
+
+@pytest.mark.slow
+def test_a_bad_model_is_flagged_in_summary_on_stderr_and_on_page_one(dataset_dir, tmp_path, capsys):
+    config = bad_config(tmp_path / "bad.toml", dataset_dir)
+    run = tmp_path / "run"
+    trained = in_process(capsys, "train", config, "-o", run)
+    assert trained.code == 0, trained.err
+    summary = json.loads((run / "summary.json").read_text())
+    verdict = BaselineVerdict.from_dict(summary["verdict"])
+    assert summary["beats_baseline"] is False and summary["verdict"]["beats_baseline"] is False
+    assert verdict.decided_on == "test" and verdict.baselines == (SHIP_FILE_MMG,) and verdict.worse
+    warning = trained.err.strip().splitlines()[-1]   # the last line, on stderr
+    assert warning.startswith("WARNING: The hybrid is WORSE than its physics baseline, MMG (ship file), on the "
+                              "test logs"), trained.err
+    # the verdict's test cells: the run's own metrics, and the MMG evaluated independently
+    metrics = pd.read_csv(run / "metrics.csv").iloc[0]
+    mmg_csv = tmp_path / "mmg.csv"
+    assert in_process(capsys, "evaluate", "--model", "mmg", "--data", dataset_dir / TEST, "--horizon", "30",
+                      "-o", mmg_csv).code == 0
+    mmg = pd.read_csv(mmg_csv).iloc[0]
+    test = {c.channel: c for c in verdict.cells if c.split == "test"}
+    for channel, column in (("u", "rmse_u"), ("v_m", "rmse_v"), ("r", "rmse_r")):
+        assert test[channel].model == pytest.approx(metrics[column], rel=1e-5)
+        assert test[channel].baselines[SHIP_FILE_MMG] == pytest.approx(mmg[column], rel=1e-5)
+    # measured: 54-116 % worse than the MMG in every channel; the flag needs one cell 10 % worse
+    assert all(cell.model > 1.1 * cell.baselines[SHIP_FILE_MMG] for cell in test.values())
+    # one validation loss: the log line, summary.json and the verdict say the same number; the
+    # ship file's MMG on the same windows is the trainer's own MMG-only loss
+    assert f"val_loss_multistep {summary['val_loss_multistep']:.5f}" in trained.out
+    assert verdict.val_loss_multistep["model"] == pytest.approx(summary["val_loss_multistep"], rel=1e-6)
+    assert verdict.val_loss_multistep[SHIP_FILE_MMG] == pytest.approx(summary["training"]["mmg_val_loss"], rel=1e-5)
+    assert "early_stopping_loss" in pd.read_csv(run / "history.csv").columns
+
+    reported = in_process(capsys, "report", run, "-o", tmp_path / "report")
+    assert reported.code == 0, reported.err
+    first = PdfReader(tmp_path / "report" / "report.pdf").pages[0].extract_text()
+    lines = [line for line in first.splitlines() if line.strip()]
+    assert lines[1] == "Verdict" and lines[2].startswith("WARNING: The hybrid is WORSE than its physics baseline")
+    assert any(line.startswith("val_loss_multistep") and f"{summary['val_loss_multistep']:.5f}" in line
+               for line in lines)   # the same name and number as in the log and summary.json
+    html = (tmp_path / "report" / "report.html").read_text()
+    assert html.index('id="verdict"') < html.index('id="summary"')
+    for paper_words in ("better than the paper", "cf. Fig", "Figs. 10-12", "D2"):
+        assert paper_words not in html and paper_words not in first, paper_words
+
+
+def test_without_test_logs_the_verdict_is_on_validation_and_says_so(dataset_dir, tmp_path, capsys):
+    config = tmp_path / "no_test.toml"
+    config.write_text(bad_config(tmp_path / "bad.toml", dataset_dir).read_text()
+                      .replace(f"test = [{json.dumps(str(dataset_dir / TEST))}]\n", "")
+                      .replace("epochs = 2", "epochs = 1"))
+    trained = in_process(capsys, "train", config, "-o", tmp_path / "run")
+    assert trained.code == 0, trained.err
+    assert "test: none (no [data] test in the config, no --test)" in trained.out
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["data"]["test_set"] == "none" and summary["data"]["test"] == []
+    verdict = BaselineVerdict.from_dict(summary["verdict"])
+    assert verdict.decided_on == "validation" and {c.split for c in verdict.cells} == {"validation"}
+    assert "on the validation windows (there is no test set)" in verdict.statement()
+    assert pd.read_csv(tmp_path / "run" / "metrics.csv").empty
