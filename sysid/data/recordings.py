@@ -28,6 +28,7 @@ from sysid.state import INPUTS, STATE
 
 # processed-schema header ("u_velo [m/s]") -> our channel name ("u"); one source: preprocessing.schema
 COLUMNS = {f"{name} [{unit}]": PROCESSED_CHANNEL[name] for name, unit in PROCESSED.items()}
+HEADER = {channel: header for header, channel in COLUMNS.items()}
 _LIMITS = PROCESSED_PLAUSIBLE_ABS
 
 
@@ -123,17 +124,6 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
         dt=period * stride, issues=issues, suspect=suspect)
 
 
-def _turns_at_yaw_rate(t: np.ndarray, psi: np.ndarray, r: np.ndarray) -> bool:
-    """Whether heading psi changes at the yaw rate r [rad/s], as an unwrapped heading in
-    radians does, and not 57 times faster (degrees): the least-squares factor between
-    dpsi/dt and r, over steps without a wrap, lies within a factor 2 of 1."""
-    dpsi = np.diff(psi)
-    keep = np.abs(dpsi) < np.pi
-    rate, r_mid = dpsi[keep] / np.diff(t)[keep], 0.5 * (r[1:] + r[:-1])[keep]
-    power = float(r_mid @ r_mid)
-    return power > 0 and 0.5 < float(rate @ r_mid) / power < 2.0
-
-
 _UNIT_HINT = {"speed": "knots", "angle": "deg", "angular rate": "deg/s", "revolutions": "rpm"}
 
 
@@ -143,6 +133,17 @@ def _relative_wind(frame: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
          for k in ("u", "v", "psi", "wind_velo_true", "wind_dir_true")}
     wind = relative_wind(c["u"], c["v"], c["psi"], c["wind_velo_true"], c["wind_dir_true"])
     return wind[0].numpy(), wind[1].numpy()
+
+
+def _turns_at_yaw_rate(t: np.ndarray, psi: np.ndarray, r: np.ndarray) -> bool:
+    """Whether heading psi changes at the yaw rate r [rad/s], as an unwrapped heading in
+    radians does, and not 57 times faster (degrees): the least-squares factor between
+    dpsi/dt and r, over steps without a wrap, lies within a factor 2 of 1."""
+    dpsi = np.diff(psi)
+    keep = np.abs(dpsi) < np.pi
+    rate, r_mid = dpsi[keep] / np.diff(t)[keep], 0.5 * (r[1:] + r[:-1])[keep]
+    power = float(r_mid @ r_mid)
+    return power > 0 and 0.5 < float(rate @ r_mid) / power < 2.0
 
 
 def _quality_issues(t: np.ndarray, values: np.ndarray, period: float):
