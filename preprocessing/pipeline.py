@@ -220,6 +220,7 @@ class Pipeline:
         segments = []
         bias_all = []
         min_len = int(round(s.min_segment / dt))
+        sparse = 0  # segments left with one sample at the output rate
         for a0, a1 in _runs(valid):
             if a1 - a0 < min_len:
                 report["dropped_segments"].append({"t_start": float(t[a0]), "t_end": float(t[a1 - 1]),
@@ -228,10 +229,18 @@ class Pipeline:
             sl = slice(a0, a1)
             seg, bias = self._segment({k: v[sl] for k, v in g.items()}, fx[sl], fy[sl], ax[sl],
                                       ay[sl], keep[sl], np.arange(a0, a1))
+            if len(seg) < 2:  # one sample is no run: nothing reads it
+                sparse += 1
+                report["dropped_segments"].append({"t_start": float(t[a0]), "t_end": float(t[a1 - 1]),
+                                                   "reason": f"fewer than 2 samples at {s.output_rate:g} Hz"})
+                continue
             bias_all.append(bias)
             segments.append(seg)
             report["segments"].append({"t_start": float(seg["t"].iloc[0]),
                                        "t_end": float(seg["t"].iloc[-1]), "samples": len(seg)})
+        if not segments and sparse:
+            raise RawLogError(f"{name}: column t: --rate {s.output_rate:g} Hz leaves fewer than 2 samples "
+                              "in every segment; choose a higher rate")
         if not segments:
             raise RawLogError(f"{name}: column gnss: no stretch of at least {s.min_segment} s "
                               "without a long gap")

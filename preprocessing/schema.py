@@ -49,9 +49,12 @@ PROCESSED_CHANNEL = {
     "wind_velo_relative_mid": "wind_velo_relative", "wind_dir_relative_mid": "wind_dir_relative",
     "wind_velo_true": "wind_velo_true", "wind_dir_true": "wind_dir_true",
 }
-# plausibility limits of a processed run (channel names, SI); beyond means wrong units
-PROCESSED_PLAUSIBLE_ABS = {"u": 20.0, "v": 20.0, "r": 3.0, "delta_rudder": 1.6, "wind_dir_true": 7.0,
-                           "wind_dir_relative": 7.0, "n_prop": 200.0, "wind_velo_true": 60.0}
+# plausibility limits of a processed run (channel names, SI); beyond means wrong units. A
+# heading beyond one turn either way is degrees (processed headings are wrapped) unless it
+# changes at the yaw rate (unwrapped radians, `sysid.data.read_run`); 3 rad/s (172 deg/s) is
+# six times the fastest turn of a ship model (< 0.5 rad/s)
+PROCESSED_PLAUSIBLE_ABS = {"u": 20.0, "v": 20.0, "psi": 2 * np.pi, "r": 3.0, "delta_rudder": 1.6,
+                           "wind_dir_true": 7.0, "wind_dir_relative": 7.0, "n_prop": 200.0, "wind_velo_true": 60.0}
 
 # headers in degrees accepted for a radian column, converted (a logged repair)
 _DEGREE_UNITS = {"rad": ("deg", np.pi / 180.0), "rad/s": ("deg/s", np.pi / 180.0)}

@@ -51,6 +51,9 @@ class SynthSettings:
     reference: tuple[float, float] = (34.8195, 135.5236)
 
 
+OUTLIER_MARGIN = 30  # rows at either end of a log that get no outlier
+
+
 @dataclass
 class SynthResult:
     """raw : raw log (header ``name [unit]``); truth : processed-schema truth at 10 Hz
@@ -123,7 +126,7 @@ def synthesise(run: pd.DataFrame, layout: SensorLayout, settings: SynthSettings 
 
     outliers: list[dict] = []
     if settings.outliers:
-        rows = np.sort(rng.choice(np.arange(30, n - 30), settings.outliers, replace=False))
+        rows = np.sort(rng.choice(np.arange(OUTLIER_MARGIN, n - OUTLIER_MARGIN), settings.outliers, replace=False))
         for i, row in enumerate(rows):
             dfx = ant["fore_x"][row] - ant["aft_x"][row]
             dfy = ant["fore_y"][row] - ant["aft_y"][row]

@@ -1,13 +1,15 @@
 """Where tensors live (CUDA when present, else the CPU) and how many CPU threads work on them."""
 from __future__ import annotations
 
-import os
 from contextlib import contextmanager
 from typing import Iterator
 
 import torch
 
+from sysid.config.checks import cpu_cores
 from sysid.errors import ConfigError
+
+__all__ = ["resolve_device", "cpu_cores", "compute_threads"]
 
 
 def resolve_device(name: str = "auto") -> torch.device:
@@ -20,17 +22,10 @@ def resolve_device(name: str = "auto") -> torch.device:
     return device
 
 
-def cpu_cores() -> int:
-    """CPU cores this process may run on."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
-
-
 @contextmanager
 def compute_threads(n: int) -> Iterator[int]:
-    """Run the block with `n` torch intra-op threads (0: one per core), then restore.
+    """Run the block with `n` torch intra-op threads (0: one per core; at most `cpu_cores`,
+    `sysid.config.checks.threads`), then restore.
 
     One thread is the default for training: the multi-step rollout is dispatch-bound, so
     more threads barely help alone and, beside another job, oversubscribe the cores (a

@@ -18,6 +18,10 @@ class ConfigError(SysidError):
     """An experiment config is malformed."""
 
 
+class OptionError(SysidError):
+    """A command-line option is not a finite number, or lies outside its range."""
+
+
 class CheckpointError(SysidError):
     """A run directory or checkpoint is missing or corrupt."""
 

@@ -10,7 +10,7 @@ import typer
 import typer.main
 
 from sysid.errors import SysidError
-from sysid.cli.interrupts import interrupt_note
+from sysid.cli.interrupts import interrupt_note, interruptible
 from sysid.cli.outputs import release
 
 from sysid.cli.app import app  # noqa: E402
@@ -24,9 +24,10 @@ from sysid.cli import ship_commands  # noqa: E402,F401
 from sysid.cli import init_commands  # noqa: E402,F401
 from sysid.cli import export_commands  # noqa: E402,F401
 from sysid.cli import sweep_commands  # noqa: E402,F401
+from sysid.cli import maneuver_commands  # noqa: E402,F401
 
 
-MULTI_VALUE_OPTIONS = ("--data",)
+MULTI_VALUE_OPTIONS = ("--data", "--turning", "--zigzag")
 
 
 def expand_multi_value(argv: list[str]) -> list[str]:
@@ -111,7 +112,8 @@ def main(argv: list[str] | None = None) -> None:
     show_traceback = TRACEBACK_FLAG in args
     args = [a for a in args if a != TRACEBACK_FLAG]
     try:
-        run(args)
+        with interruptible():
+            run(args)
     except SysidError as exc:
         typer.secho(f"error: {exc}", fg=typer.colors.RED, err=True)
         sys.exit(2)

@@ -30,13 +30,14 @@ def export(
     from sysid.config.choices import Method
     from sysid.fast.export import export_model, load_step, step_latency
     from sysid.runs.rundir import load_model
+    from sysid.config import checks
 
     try:
         method = Method.parse(integrator, "--integrator")  # every rule, the 3/8 one too
     except ValueError as exc:
         raise DataError(str(exc)) from None
-    if dt <= 0 or batch < 1:
-        raise DataError(f"--dt must be > 0 and --batch >= 1 (got {dt}, {batch})")
+    checks.STEP.check("--dt", dt)
+    checks.BATCH.check("--batch", batch)
     dtype = torch.float32 if float32 else torch.float64
     claim(output, OutputKind.FILE, [run_dir])
     exp, model = load_model(run_dir, dtype)

@@ -1,7 +1,6 @@
 """``sysid forces``, ``sysid simulate``, ``sysid evaluate --model mmg``."""
 from __future__ import annotations
 
-import math
 import time
 from pathlib import Path
 from typing import List, Optional
@@ -24,11 +23,6 @@ QuadratureOption = typer.Option("exact", "--quadrature",
                                 help="Cross-flow integrals: exact (closed form) or simpson (the lab simulator's).")
 CompiledOption = typer.Option(False, "--compiled",
                               help="Compiled step (native code, cached on disk; first use compiles, about a minute).")
-
-
-def _check_positive(option: str, value: float, unit: str) -> None:
-    if not (value > 0 and math.isfinite(value)):
-        raise DataError(f"{option} {value:g}: must be a finite number > 0 [{unit}]")
 
 
 def _integrator(name: str, compiled: bool):
@@ -115,11 +109,11 @@ def forces(
     import numpy as np
     import pandas as pd
     from sysid.store.files import write_float_csv
+    from sysid.config import checks
     from sysid.progress import progress
 
     start = time.perf_counter()
-    if chunk < 1:
-        raise DataError(f"--chunk {chunk}: rows per batch must be >= 1")
+    checks.POSITIVE_COUNT.check("--chunk", chunk)
     model = _model(ship, set_, quadrature)
     claim(output, OutputKind.FILE, [input_csv, ship_file(ship)])
     numeric = _read_force_inputs(input_csv)
@@ -170,20 +164,20 @@ def simulate(
     from sysid.fast.compiled import predict
     from sysid.data.recordings import read_run
     from sysid.store.files import write_csv
+    from sysid.config import checks
 
     chosen = _integrator(integrator, compiled)
-    _check_positive("--rate", rate, "Hz")
-    _check_positive("--horizon", horizon, "s")
-    if not math.isfinite(start):
-        raise DataError(f"--start {start}: must be a finite time [s]")
+    checks.RATE.check("--rate", rate)
+    checks.DURATION.check("--horizon", horizon)
+    checks.TIME.check("--start", start)
     model = _model(ship, set_, quadrature)
     claim(output, OutputKind.FILE, [log, ship_file(ship)])
     run = read_run(log, rate)
     i0 = int(np.argmin(np.abs(run.t - start)))
     if abs(run.t[i0] - start) > 0.5 * run.dt:
         raise DataError(f"{log}: --start {start} s is outside the run ({run.t[0]:.1f}..{run.t[-1]:.1f} s)")
-    steps = int(round(horizon / run.dt))
-    if steps < 1 or i0 + steps >= len(run):
+    steps = checks.whole_samples("--horizon", horizon, run.dt)
+    if i0 + steps >= len(run):
         raise DataError(f"{log}: --horizon {horizon} s from {run.t[i0]:.1f} s runs past the end "
                         f"({run.t[-1]:.1f} s)")
     sl = slice(i0, i0 + steps + 1)
@@ -225,13 +219,14 @@ def evaluate(
     """The protocol's windowed RMSE of u, v_m, r per file and horizon (MMG or a trained run)."""
     import pandas as pd
     from sysid.data.recordings import expand_paths, read_run
-    from sysid.evaluation.evaluate import evaluate_model
+    from sysid.evaluation.evaluate import evaluate_model, short_runs
     from sysid.store.files import write_csv
+    from sysid.config import checks
     from sysid.progress import progress
 
     chosen = _integrator(integrator, compiled)
     for h in horizon:
-        _check_positive("--horizon", h, "s")
+        checks.DURATION.check("--horizon", h)
     start = time.perf_counter()
     claim(output, OutputKind.FILE, [run_dir, *data, None if run_dir is not None else ship_file(ship)])
     columns = None
@@ -248,12 +243,16 @@ def evaluate(
         label = f"MMG ({model.ship.name}, overrides: {overrides})"
     files = expand_paths(data)
     runs = [read_run(f, columns=columns) for f in progress(files, desc="reading", unit="files", quiet=len(files) < 4)]
+    short = short_runs(runs, horizon)
+    for h in horizon:
+        if sum(s == h for _, s in short) == len(runs):
+            longest = max(r.duration for r in runs)
+            raise DataError(f"--horizon {h:g} s: no file is long enough for one window "
+                            f"(the longest lasts {longest:.0f} s); nothing written")
+    for run, h in short:
+        typer.secho(f"warning: {run.path}: {len(run)} samples ({run.duration:.0f} s), fewer than one {h:g}-s "
+                    "window: its metrics row is empty (n_windows 0)", fg=typer.colors.YELLOW, err=True)
     table = evaluate_model(model, runs, horizon, chosen, traces=False).metrics
-    empty = [h for h in horizon if not table[table.horizon_s == h].n_windows.sum()]
-    if empty:
-        longest = max(r.duration for r in runs)
-        raise DataError(f"--horizon {empty[0]:g} s: no file is long enough for one window "
-                        f"(the longest lasts {longest:.0f} s); nothing written")
     write_csv(table, output, float_format="%.6g")
     with pd.option_context("display.width", 120, "display.float_format", "{:.5f}".format):
         typer.echo(table.to_string(index=False))

@@ -2,11 +2,7 @@
 from __future__ import annotations
 
 import functools
-import math
-import os
-import signal
 import time
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import List, Optional
 
@@ -22,23 +18,27 @@ ShipOption = typer.Option("esso_osaka", "--ship", help="Ship name (configs/ships
 
 
 def _parse_dropout(text: str) -> tuple[float, float]:
+    from sysid.config import checks
+
     try:
         start, duration = (float(v) for v in text.split(":"))
     except ValueError:
         raise DataError(f"--dropout {text!r}: expected START:DURATION in seconds, e.g. 100:3") from None
-    if duration <= 0 or start < 0:
-        raise DataError(f"--dropout {text!r}: start must be >= 0 and duration > 0")
+    checks.NON_NEGATIVE_SECONDS.check(f"--dropout {text}: START", start)
+    checks.DURATION.check(f"--dropout {text}: DURATION", duration)
     return start, duration
 
 
 def _parse_latlon(text: Optional[str]) -> Optional[tuple[float, float]]:
+    from sysid.config import checks
+
     if text is None:
         return None
     try:
         lat, lon = (float(v) for v in text.split(","))
     except ValueError:
         raise DataError(f"--reference {text!r}: expected LAT,LON in degrees") from None
-    return lat, lon
+    return checks.LATITUDE.check(f"--reference {text}: LAT", lat), checks.LONGITUDE.check(f"--reference {text}: LON", lon)
 
 
 @app.command("synth-raw")
@@ -61,7 +61,12 @@ def synth_raw(
     from preprocessing.schema import RawLogError
     from sysid.store.files import write_csv
     from sysid.mmg.ship import load_ship
+    from sysid.config import checks
 
+    checks.COUNT.check("--seed", seed)
+    checks.NOISE.check("--gnss-noise", gnss_noise)
+    checks.NOISE.check("--gnss-correlated", gnss_correlated)
+    checks.COUNT.check("--outliers", outliers)
     layout = load_ship(ship).sensors
     truth_path = output.with_suffix(".truth.csv")
     inputs = [processed, ship_file(ship)]
@@ -78,6 +83,8 @@ def synth_raw(
         latlon=latlon, **kwargs)
     try:
         run = synth.read_processed(processed)
+        room = max(0, len(run) - 2 * synth.OUTLIER_MARGIN)
+        checks.Range(0, room, whole=True, reason=f"rows of {processed} away from its ends").check("--outliers", outliers)
         result = synth.synthesise(run, layout, settings)
     except (RawLogError, OSError) as exc:
         raise DataError(str(exc)) from None
@@ -109,15 +116,14 @@ def preprocess(
     is done; files that fail are reported and left out, the others are complete.
     """
     from preprocessing import pipeline
+    from sysid.config import checks
     from sysid.progress import progress
     from sysid.mmg.ship import load_ship
+    from sysid.workers import in_workers
 
-    if not (rate > 0 and math.isfinite(rate)):
-        raise DataError(f"--rate {rate:g}: must be a number of Hz > 0 that divides 10 Hz")
-    if not (max_gap >= 0 and math.isfinite(max_gap)):
-        raise DataError(f"--max-gap {max_gap:g}: must be a number of seconds >= 0")
-    if jobs < 1:
-        raise DataError(f"--jobs {jobs}: must be >= 1")
+    checks.RATE.check("--rate", rate)
+    checks.NON_NEGATIVE_SECONDS.check("--max-gap", max_gap)
+    checks.workers("--jobs", jobs)
     try:
         settings = pipeline.PreprocessSettings(
             output_rate=rate, max_interp_gap=max_gap, reference=_parse_latlon(reference),
@@ -142,7 +148,7 @@ def preprocess(
         bar = progress(total=len(paths), unit="files", desc="preprocess")
         if jobs > 1 and len(paths) > 1:
             work = functools.partial(pipeline.process_file, layout=layout, settings=settings, outdir=str(staging))
-            results = _in_parallel(work, paths, min(jobs, len(paths), os.cpu_count() or 1), bar)
+            results = in_workers(work, paths, jobs, on_result=lambda r: bar.update())
         else:
             for p in paths:
                 results.append(pipeline.process_file(p, layout, settings, str(staging)))
@@ -158,33 +164,6 @@ def preprocess(
     failed = [r for r in results if not r["ok"]]
     if failed:
         raise SystemExit(1)  # (typer.Exit is swallowed by standalone_mode=False)
-
-
-def _in_parallel(work, paths: list[str], workers: int, bar) -> list[dict]:
-    """`work(path)` for every path in worker processes, in completion order.
-
-    The workers ignore Ctrl-C. The main process only notes it in a flag, checked between
-    short waits: an exception raised by the signal handler itself can land while the pool
-    forks a worker, where Python swallows it with a traceback.
-    """
-    stopped: list[int] = []
-    previous = signal.signal(signal.SIGINT, lambda signum, frame: stopped.append(signum))
-    pool = ProcessPoolExecutor(max_workers=workers, initializer=signal.signal,
-                               initargs=(signal.SIGINT, signal.SIG_IGN))
-    try:
-        pending = {pool.submit(work, p) for p in paths}
-        results = []
-        while pending and not stopped:
-            done, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
-            for future in done:
-                results.append(future.result())
-                bar.update()
-        if stopped:
-            raise KeyboardInterrupt
-        return results
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
-        signal.signal(signal.SIGINT, previous)
 
 
 def _summary(results: list[dict], outdir: Path, seconds: float) -> None:

@@ -13,15 +13,19 @@ from sysid.store.target import OutputKind
 
 @app.command()
 def report(
-    source: Path = typer.Argument(..., help="Run directory (sysid train) or reproduction directory (sysid reproduce)."),
+    source: Path = typer.Argument(..., help="Run directory (sysid train), reproduction directory (sysid reproduce) or maneuvers directory (sysid maneuver)."),
     out: Path = typer.Option(None, "-o", "--out", help="Output directory [default: reports/<source name>]."),
 ) -> None:
     """Write an accuracy report (self-contained HTML and page-numbered PDF) for a run or a reproduction."""
     from sysid.report import build_report
+    from sysid.report.maneuver_report import build_maneuver_report, is_maneuvers_directory
 
     out = out or Path("reports") / source.resolve().name
     claim(out, OutputKind.REPORT, [source], adds_to=source)
-    paths = build_report(source, out, logs.indented())
+    if is_maneuvers_directory(source):  # sysid maneuver's output has a report of its own
+        paths = build_maneuver_report(source, out)
+    else:
+        paths = build_report(source, out, logs.indented())
     typer.echo(f"report: {paths.html}")
     typer.echo(f"        {paths.pdf} ({paths.n_pages} pages, {paths.n_figures} figures, {paths.seconds:.1f} s)")
     for note in paths.notes:

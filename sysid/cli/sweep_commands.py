@@ -34,14 +34,15 @@ def sweep(
     without training a finished trial again. [sweep] scheduler stops poor trials early.
     """
     from sysid.cli.interrupts import on_interrupt
-    from sysid.errors import ConfigError
+    from sysid.config import checks
     from sysid.sweep import load_sweep, run_sweep
 
     start = time.perf_counter()
-    if workers is not None and workers < 1:
-        raise ConfigError(f"--workers {workers}: must be >= 1")
     from sysid.sweep.connect import check_reachable, ray_target
-    check_reachable(ray_target(address))  # an address nobody answers at: one line in seconds, before any work
+    target = ray_target(address)
+    if workers is not None:  # on a cluster: its cores, not this machine's
+        checks.workers("--workers", workers, cluster=target.address)
+    check_reachable(target)  # an address nobody answers at: one line in seconds, before any work
     spec = load_sweep(sweep_file)
     inputs = [sweep_file, spec.base_path, *experiment_inputs(spec.base, data)]
     claim(output, OutputKind.SWEEP, inputs, overwrite, resume=resume)

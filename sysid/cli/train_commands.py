@@ -33,6 +33,7 @@ def train(
     interrupted training leaves no run, only its checkpoint for --resume.
     """
     from sysid.data.recordings import expand_paths
+    from sysid.config import checks
     from sysid.errors import ConfigError
     from sysid.config.experiment import load_experiment
     from sysid.runs.lifecycle import checkpoint_path, evaluation_runs, run_experiment, training_runs, validation_runs
@@ -40,6 +41,8 @@ def train(
     start = time.perf_counter()
     if epochs is not None and epochs < 0:
         raise ConfigError(f"--epochs {epochs}: must be >= 0")
+    if threads is not None:
+        checks.threads("--threads", threads)
     exp = load_experiment(config)
     if epochs is not None:
         exp = exp.replace(training={"epochs": epochs})
@@ -129,13 +132,12 @@ def reproduce(
     """
     from sysid.device import cpu_cores
     from sysid.data.datasets import data_root
-    from sysid.errors import ConfigError
     from sysid.protocol.reproduce import reproduce as run_protocol
+    from sysid.config import checks
 
-    if jobs is not None and jobs < 1:
-        raise ConfigError(f"--jobs {jobs}: must be >= 1")
-    if seeds < 1:
-        raise ConfigError(f"--seeds {seeds}: must be >= 1")
+    if jobs is not None:  # on a cluster: its cores, not this machine's
+        checks.workers("--jobs", jobs, cluster=address or os.environ.get("RAY_ADDRESS"))
+    checks.POSITIVE_COUNT.check("--seeds", seeds)
     cluster = False
     if seeds > 1:
         from sysid.sweep.connect import check_reachable, import_ray, ray_target

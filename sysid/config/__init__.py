@@ -1,2 +1,3 @@
-"""Configuration, torch-free: the closed choices as enums (`choices`) and experiment TOML ->
-typed, validated `Experiment` (`experiment`)."""
+"""Configuration, torch-free: the closed choices as enums (`choices`), experiment TOML ->
+typed, validated `Experiment` (`experiment`), and the numbers a user hands sysid, each kind
+checked in one place (`checks`)."""

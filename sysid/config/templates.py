@@ -140,6 +140,8 @@ def ship_template(name: str) -> str:
         lines.append(_line(key, repr(start.parameters[key]), f"{unit}, {what}" if what else unit))
     lines += ["", "# No [wind] section: no wind force acts. With wind in your logs, add [wind] model = \"fujiwara\"",
               "# with A_T, A_L, L_wind, X0, X1, X3, X5, Y1, Y3, Y5, N1, N2, N3 and rho_air under [principal].",
+              "# Optional [maneuvering], the defaults of `sysid maneuver`: approach_speed [m/s], scale (full-scale",
+              "# L_pp / this L_pp, for IMO criteria at full scale), rudder_rate [deg/s] of the steering gear.",
               "", "[sensors]",
               "# where the instruments sit (used by `sysid preprocess` on raw logs only)"]
     for key, (unit, what) in SENSOR_KEYS.items():

@@ -28,6 +28,7 @@ from sysid.state import INPUTS, STATE
 
 # processed-schema header ("u_velo [m/s]") -> our channel name ("u"); one source: preprocessing.schema
 COLUMNS = {f"{name} [{unit}]": PROCESSED_CHANNEL[name] for name, unit in PROCESSED.items()}
+HEADER = {channel: header for header, channel in COLUMNS.items()}
 _LIMITS = PROCESSED_PLAUSIBLE_ABS
 
 
@@ -101,14 +102,22 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
                         f"{row + 2} (t = {t[row]} s)")
     for name, limit in _LIMITS.items():
         peak = np.abs(frame[name].to_numpy()).max()
+        if name == "psi" and peak > limit and _turns_at_yaw_rate(t, frame["psi"].to_numpy(), frame["r"].to_numpy()):
+            continue  # an unwrapped heading in radians (a simulated turn): it changes at r
         if peak > limit:
             raise DataError(f"{path}: {columns.describe(name)} (channel {name}) reaches {peak:.4g} "
                             f"{SI_UNIT[name]}, beyond {limit}: wrong units? name its unit in [data.columns], "
                             f"e.g. {name} = {{ column = \"...\", unit = \"{_UNIT_HINT[QUANTITY[name]]}\" }}")
     period = float(np.median(steps))
-    stride = max(1, int(round(1.0 / rate / period)))
+    stride = int(round(1.0 / rate / period))
+    if stride < 1 or abs(stride * period * rate - 1.0) > 1e-3:
+        raise DataError(f"{path}: rate {rate:g} Hz is not a whole number of this file's {period:g}-s samples "
+                        f"per step; choose a rate that divides {1.0 / period:g} Hz")
     issues, suspect = _quality_issues(t, values, period)
     sel = values[::stride]
+    if len(sel) < 2:
+        raise DataError(f"{path}: rate {rate:g} Hz leaves {len(sel)} sample of this {t[-1] - t[0]:.0f}-s run; "
+                        "choose a higher rate")
     return Run(
         name=path.stem, path=path, t=sel[:, 0],
         states=sel[:, [frame.columns.get_loc(c) for c in list(STATE)]],
@@ -127,6 +136,17 @@ def _relative_wind(frame: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
          for k in ("u", "v", "psi", "wind_velo_true", "wind_dir_true")}
     wind = relative_wind(c["u"], c["v"], c["psi"], c["wind_velo_true"], c["wind_dir_true"])
     return wind[0].numpy(), wind[1].numpy()
+
+
+def _turns_at_yaw_rate(t: np.ndarray, psi: np.ndarray, r: np.ndarray) -> bool:
+    """Whether heading psi changes at the yaw rate r [rad/s], as an unwrapped heading in
+    radians does, and not 57 times faster (degrees): the least-squares factor between
+    dpsi/dt and r, over steps without a wrap, lies within a factor 2 of 1."""
+    dpsi = np.diff(psi)
+    keep = np.abs(dpsi) < np.pi
+    rate, r_mid = dpsi[keep] / np.diff(t)[keep], 0.5 * (r[1:] + r[:-1])[keep]
+    power = float(r_mid @ r_mid)
+    return power > 0 and 0.5 < float(rate @ r_mid) / power < 2.0
 
 
 def _quality_issues(t: np.ndarray, values: np.ndarray, period: float):

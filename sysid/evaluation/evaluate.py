@@ -23,6 +23,7 @@ from sysid.data.datasets import TEST_FILES
 from sysid.config.choices import Method
 from sysid.dynamics.equations import eager_predict
 from sysid.dynamics.integrators import Integrator, IntegratorLike
+from sysid.config.checks import whole_samples
 from sysid.errors import DataError
 from sysid.state import FORCE, FORCE_COMPONENTS, INPUTS, STATE, VELOCITY_INDEX
 
@@ -87,7 +88,7 @@ def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
             dt = run.dt
         elif abs(run.dt - dt) > 1e-9:
             raise DataError(f"{run.path}: sample period {run.dt} s differs from {dt} s of the other files")
-        H = int(round(horizon_s / run.dt))
+        H = whole_samples("horizon", horizon_s, run.dt, DataError)
         starts = protocol_windows(len(run), H)
         meta.append((run, H, starts))
         if len(starts):
@@ -110,6 +111,14 @@ def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
             empty = torch.zeros(H, 0, 6, dtype=dtype)
             out.append(WindowPrediction(run, H, starts, t, empty, empty, torch.zeros(H, 0, 4, dtype=dtype)))
     return out
+
+
+def short_runs(runs: Sequence[Run], horizons: Sequence[float], name: str = "--horizon",
+               error: type[Exception] = DataError) -> list[tuple[Run, float]]:
+    """(run, horizon [s]) pairs where the run holds fewer samples than one window: their
+    metrics rows would be empty. Every horizon must be a whole number of every run's
+    samples (else `error` naming `name`)."""
+    return [(run, h) for h in horizons for run in runs if len(run) < whole_samples(name, h, run.dt, error)]
 
 
 @dataclass

@@ -37,12 +37,37 @@ from sysid.dynamics.integrators import run_steps
 from sysid.fast.prepared import prepared
 from sysid.fast.stepper import Step
 from sysid.store.files import atomic_path
+from sysid.errors import DataError
 
 METADATA_FILE = "sysid.json"  # the metadata inside a portable export (extra file)
 
 
 def _examples(batch: int, dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor]:
     return torch.zeros(batch, 6, dtype=dtype), torch.zeros(batch, 4, dtype=dtype)
+
+
+PROBE_STEPS = 100
+PROBE_SPEED = 20.0  # m/s; no ship model goes faster (`preprocessing.schema.PROCESSED_PLAUSIBLE_ABS`)
+
+
+def straight_run(batch: int, dtype: torch.dtype, steps: int = PROBE_STEPS) -> tuple[torch.Tensor, torch.Tensor]:
+    """A plain run to probe a step with: x0 (B, 6) ahead at 0.4 m/s, and inputs (steps + 1,
+    B, 4) held: 10 rps, rudder 0.1 rad, true wind 1 m/s from 0.5 rad."""
+    x = torch.tensor([[0.0, 0.4, 0.0, 0.0, 0.0, 0.0]], dtype=dtype).expand(batch, 6).contiguous()
+    u = torch.tensor([[10.0, 0.1, 1.0, 0.5]], dtype=dtype).expand(steps + 1, batch, 4).contiguous()
+    return x, u
+
+
+def check_step_stable(step: Callable, batch: int, dtype: torch.dtype, method: Method, dt: float) -> None:
+    """`DataError` when `PROBE_STEPS` steps of the straight run leave every ship's speed
+    (non-finite, or beyond `PROBE_SPEED`): the explicit step is unstable at this dt."""
+    x, u = straight_run(batch, dtype)
+    with torch.no_grad():
+        speed = run_steps(step, x, u)[..., [1, 3]].abs().amax()
+    if not bool(speed <= PROBE_SPEED):  # NaN too
+        raise DataError(f"--dt {dt:g} s ({method.value}): {PROBE_STEPS} steps of a straight run at 0.4 m/s "
+                        f"reach a speed of {float(speed):.3g} m/s: explicit steps this long are unstable "
+                        "for this model; choose a shorter --dt (nothing written)")
 
 
 def export_model(model: nn.Module, path: str | Path, method: Method = Method.EULER,
@@ -54,7 +79,8 @@ def export_model(model: nn.Module, path: str | Path, method: Method = Method.EUL
     ----------
     model : MMG, NN-only or hybrid force model (CPU), kNN gate included (as an
         `IndexedGate`: the same decisions from a pruned scan; coefficients packed, `sysid.fast.prepared`).
-    method, dt : the step rule and its length [s] (the paper's: Euler, 1 s).
+    method, dt : the step rule and its length [s] (the paper's: Euler, 1 s); a dt at which
+        the step runs a straight run off is refused (`check_step_stable`, `DataError`).
     batch : number of ships per call (shapes are fixed at export).
     dtype : float64 (as evaluated) or float32.
     compiled : AOTInductor package (native, fast; same torch and platform to load) or a
@@ -62,6 +88,7 @@ def export_model(model: nn.Module, path: str | Path, method: Method = Method.EUL
     """
     path = Path(path)
     step = Step(prepared(model, batch), method, dt)
+    check_step_stable(step, batch, dtype, step.method, dt)
     examples = _examples(batch, dtype)
     metadata = step_metadata(model, method, dt, batch, dtype)
     with atomic_path(path, ".pt2") as tmp:  # a link at `path` is replaced, never written through
@@ -113,9 +140,8 @@ def step_latency(exported: ExportedStep, calls: int = 2000) -> tuple[float, floa
     """(median seconds per step call, seconds per 100-step prediction) at the exported shape."""
     batch = int(exported.metadata.get("batch", 1))
     dtype = getattr(torch, exported.metadata.get("dtype", "float64"))
-    x = torch.tensor([[0.0, 0.4, 0.0, 0.0, 0.0, 0.0]], dtype=dtype).expand(batch, 6).contiguous()
-    u = torch.tensor([[10.0, 0.1, 1.0, 0.5]], dtype=dtype).expand(batch, 4).contiguous()
-    inputs = u.expand(101, batch, 4).contiguous()
+    x, inputs = straight_run(batch, dtype)
+    u = inputs[0]
     times = []
     with torch.no_grad():
         exported(x, u)

@@ -3,7 +3,8 @@
 `prepared(model, batch)` returns a shallow copy (the model itself is untouched) whose MMG
 coefficients are packed into one tensor (`sysid.mmg.coefficients.PackedCoefficients`: one
 constant instead of about a hundred, which a compiled loop would otherwise pass on every
-step) and whose fitted kNN gate is an `IndexedGate` (`sysid.fast.knn_index.with_indexed_gate`).
+step) and whose fitted kNN gate is an `IndexedGate` (`sysid.fast.knn_index.with_indexed_gate`);
+the members of an ensemble are prepared each.
 """
 from __future__ import annotations
 
@@ -35,5 +36,9 @@ def packed(model: nn.Module) -> nn.Module:
 
 
 def prepared(model: nn.Module, batch: int) -> nn.Module:
-    """`model` ready to compile for `batch` rows: packed coefficients, indexed kNN gate."""
+    """`model` ready to compile for `batch` rows: packed coefficients, indexed kNN gate; a
+    mean-of-members ensemble (``members``) with each member prepared."""
+    members = getattr(model, "members", None)
+    if isinstance(members, nn.ModuleList):
+        return _with_module(model, "members", nn.ModuleList([prepared(m, batch) for m in members]))
     return packed(with_indexed_gate(model, batch))

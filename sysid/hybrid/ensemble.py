@@ -36,6 +36,14 @@ class SeedEnsemble(nn.Module):
     def kind(self) -> str:
         return getattr(self.members[0], "kind", "mmg")
 
+    def gate_decision(self, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor | None:
+        """(...,) True where at least half of the members apply their correction (as
+        `forward`'s ``gate_on``); None unless every member has a gate."""
+        decisions = [getattr(m, "gate_decision", lambda *a: None)(state, inputs) for m in self.members]
+        if any(d is None for d in decisions):
+            return None
+        return torch.stack(decisions).to(state.dtype).mean(0) >= 0.5
+
     def forward(self, state: torch.Tensor, inputs: torch.Tensor) -> ForceBreakdown:
         parts = [m(state, inputs) for m in self.members]
 

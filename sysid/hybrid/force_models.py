@@ -87,6 +87,16 @@ class CorrectedModel(nn.Module):
             return torch.where(on[..., None], f_nn, torch.zeros_like(f_nn)), distance.to(state.dtype), on
         return f_nn, None, None
 
+    def gate_decision(self, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor | None:
+        """(...,) True where the kNN gate applies F_NN at state (..., 6) with inputs (..., 4)
+        (what `forward` decides); None without a fitted gate."""
+        if self.gate is None or not self.gate_enabled or self.gate.bank.shape[0] == 0:
+            return None
+        wind = relative_wind(state[..., 1], state[..., 3], state[..., 4], inputs[..., 2], inputs[..., 3])
+        s = correction_inputs(state, inputs, torch.stack(wind, -1))
+        z = None if self.gate_space == "inputs" else self.correction_net.features(s)
+        return self.gate(self.gate_coordinates(s, z))[1]
+
     def forward(self, state: torch.Tensor, inputs: torch.Tensor, per_member: bool = False) -> ForceBreakdown:
         """Forces at state (..., 6) with inputs (..., 4); with `per_member` (training) the
         leading axis of both is the FNN's K members and F_NN is each member's own."""

@@ -8,6 +8,11 @@ coefficients that family needs (SI; dimensionless derivatives without the prime)
 without a [wind] section feels no wind force. `load_ship` checks every key (section and
 allowed range) and applies overrides such as ``{"Xvr": 0.4535}``; keys are matched without
 underscores and primes (``X_vr``, ``Xvr`` and ``X'vr`` are the same key).
+
+The optional ``[maneuvering]`` table holds what standard maneuvers (`sysid.maneuvers`) take
+as defaults: ``approach_speed`` [m/s], ``scale`` (full-scale L_pp over this ship's L_pp,
+for Froude scaling; absent: the ship is taken as it is, no full-scale criteria that need
+L/U) and ``rudder_rate`` [deg/s] of the steering gear at this ship's scale.
 """
 from __future__ import annotations
 
@@ -40,6 +45,12 @@ BASE_PARAMETERS: dict[str, tuple[str, float, float]] = {
     "x_G": ("mass", -1e2, 1e2),
 }
 SECTIONS = ("principal", "mass") + COMPONENTS
+# [maneuvering] (optional): key -> (low, high, unit); see the module docstring
+MANEUVERING_KEYS: dict[str, tuple[float, float, str]] = {
+    "approach_speed": (1e-3, 50.0, "m/s"),
+    "scale": (1.0, 1000.0, "-"),
+    "rudder_rate": (0.1, 100.0, "deg/s"),
+}
 
 
 def active_parameters(models: Mapping[str, str]) -> dict[str, tuple[str, float, float]]:
@@ -96,6 +107,8 @@ class Ship:
     overrides : the parameters changed from the file's values.
     models : force-model family per component (``{"hull": "standard", ...}``); no "wind"
         key when the ship file has no [wind] section.
+    maneuvering : the ``[maneuvering]`` values the file gives (`MANEUVERING_KEYS`; absent
+        keys are absent): approach_speed [m/s], scale [-], rudder_rate [deg/s].
     """
 
     name: str
@@ -105,6 +118,7 @@ class Ship:
     description: str = ""
     overrides: Mapping[str, float] = field(default_factory=dict)
     models: Mapping[str, str] = field(default_factory=lambda: MappingProxyType(dict(DEFAULT_MODELS)))
+    maneuvering: Mapping[str, float] = field(default_factory=lambda: MappingProxyType({}))
 
     @property
     def has_wind(self) -> bool:
@@ -131,7 +145,7 @@ class Ship:
             params[name] = _check_value(name, value, source, spec[name])
             applied[name] = params[name]
         return Ship(self.name, MappingProxyType(params), self.sensors, self.source,
-                    self.description, MappingProxyType(applied), self.models)
+                    self.description, MappingProxyType(applied), self.models, self.maneuvering)
 
 
 def _check_value(name: str, value: object, source: str,
@@ -182,7 +196,7 @@ def load_ship(name_or_path: str | os.PathLike = "esso_osaka",
     doc, _ = read_toml(path, "ship file", ShipDefinitionError)
     src = str(path)
     for section in doc:
-        if section not in SECTIONS + ("ship", "sensors"):
+        if section not in SECTIONS + ("ship", "sensors", "maneuvering"):
             raise ShipDefinitionError(f"{src}: unknown section [{section}]")
     models = _read_models(doc, src)
     spec = active_parameters(models)
@@ -212,6 +226,7 @@ def load_ship(name_or_path: str | os.PathLike = "esso_osaka",
         description=str(meta.get("description", "")),
         overrides=MappingProxyType({}),
         models=MappingProxyType(models),
+        maneuvering=MappingProxyType(_read_maneuvering(doc.get("maneuvering", {}), src)),
     )
     return ship.with_overrides(overrides, "override") if overrides else ship
 
@@ -232,6 +247,21 @@ def _read_models(doc: dict, src: str) -> dict[str, str]:
             raise ShipDefinitionError(f"{src}: [{component}] model = {name!r} is not known; choose one of {known}")
         models[component] = name
     return models
+
+
+def _read_maneuvering(table: object, src: str) -> dict[str, float]:
+    """The optional [maneuvering] values, each checked against `MANEUVERING_KEYS`."""
+    if not isinstance(table, dict):
+        raise ShipDefinitionError(f"{src}: [maneuvering] must be a table of keys "
+                                  f"({', '.join(MANEUVERING_KEYS)})")
+    out = {}
+    for key, value in table.items():
+        if key not in MANEUVERING_KEYS:
+            raise ShipDefinitionError(f"{src}: [maneuvering] {key} is not known; "
+                                      f"choose from {', '.join(MANEUVERING_KEYS)}")
+        low, high, unit = MANEUVERING_KEYS[key]
+        out[key] = _check_value(key, value, src, ("maneuvering", low, high))
+    return out
 
 
 def _owner(name: str, models: Mapping[str, str]) -> str:

@@ -2,10 +2,10 @@
 hybrid on D1 and D2, evaluated on the six test files, tables beside the paper's 7 and 8."""
 from __future__ import annotations
 
+import functools
 import multiprocessing
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -21,7 +21,9 @@ from sysid.config.experiment import Experiment, load_experiment
 from sysid.store.files import write_csv, write_text
 from sysid.runs.lifecycle import cached_test_runs, cached_training_runs, run_experiment
 from sysid.runs.reproduction import DatasetScore, Reproduction, Scorecard
-from sysid.protocol.paper import MODEL_LABELS, comparison_table, model_label
+from sysid.maneuvers.recorded import RECORD_FILE, write_record_comparison
+from sysid.protocol.paper import MODEL_LABELS, comparison_table, model_label, run_label
+from sysid.workers import in_workers
 
 # run name -> experiment config; labels and data sets come from the configs
 PROTOCOL = {
@@ -130,9 +132,9 @@ def expected_cost(exp: Experiment) -> float:
     return cost * (2.0 if exp.data.train or exp.experiment.dataset == "D2" else 1.0)
 
 
-def _worker(name: str, exp: Experiment, out: Path, data) -> ProtocolRun:
+def _worker(name: str, experiments: dict[str, Experiment], out: Path, data) -> ProtocolRun:
     """A worker process: its lines are prefixed with the run's name."""
-    return _run_one(name, exp, out, data, True, lambda m: print(f"[{name}] {m.strip()}", flush=True))
+    return _run_one(name, experiments[name], out, data, True, lambda m: print(f"[{name}] {m.strip()}", flush=True))
 
 
 def _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, done, storage=None,
@@ -169,7 +171,8 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
     """Run the protocol; write runs/, comparison.csv, table7.md, table8.md, summary.json.
 
     `jobs` > 1 trains that many runs side by side in worker processes (each with its
-    config's ``[training] threads``, 1 by default): the results do not depend on it.
+    config's ``[training] threads``, 1 by default): the results do not depend on it. Ctrl-C
+    (`KeyboardInterrupt`) ends every worker before it propagates (`sysid.workers`).
     `seeds` > 1 trains every learned run with that many seeds on Ray (`jobs` trials side by
     side, or on the cluster at `address`): cells are seed means with their spread, and each
     network's mean-of-seeds ensemble is a model row of its own (`sysid.protocol.seed_runs`);
@@ -191,14 +194,14 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
                             mlflow)
     elif jobs > 1 and len(trained) > 1:
         log(f"training {len(trained)} runs in {min(jobs, len(trained))} worker processes")
-        context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(min(jobs, len(trained)), mp_context=context) as pool:
-            longest_first = sorted(trained, key=lambda n: -expected_cost(experiments[n]))
-            futures = {pool.submit(_worker, n, experiments[n], out, data): n for n in longest_first}
-            for future in as_completed(futures):
-                run = future.result()
-                done[run.name] = run
-                log(f"[{run.name}] done in {run.seconds:.0f} s" + (f"; FAILED: {run.failure}" if run.failure else ""))
+
+        def finished(run: ProtocolRun) -> None:
+            done[run.name] = run
+            log(f"[{run.name}] done in {run.seconds:.0f} s" + (f"; FAILED: {run.failure}" if run.failure else ""))
+
+        longest_first = sorted(trained, key=lambda n: -expected_cost(experiments[n]))
+        work = functools.partial(_worker, experiments=experiments, out=out, data=data)
+        in_workers(work, longest_first, jobs, multiprocessing.get_context("spawn"), finished)
     for i, name in enumerate(names, 1):
         if name in done:
             continue
@@ -230,6 +233,7 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
         paper = ref.loc[ours.index, ["paper_u", "paper_v", "paper_r"]].to_numpy()
         identified_cells = (int((ours.to_numpy() < paper).sum()), int(paper.size))
     random_file = Path(TEST_FILES["Random"]).stem
+    _recorded_maneuvers(out, runs, data, log)
     summary = Reproduction(
         seconds=time.perf_counter() - started, runs=tuple(names), failed=failed, protocol=tuple(PROTOCOL),
         seeds=seeds, scorecard=card, scorecard_ensemble=card_ensemble,
@@ -237,3 +241,13 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
         gate_off_share_random_30s={n: shares[n].get(f"{random_file}_h30.csv") for n in names if n.startswith("hybrid")})
     write_text(summary.to_text(), out / "summary.json")
     return summary
+
+
+def _recorded_maneuvers(out: Path, runs: list[ProtocolRun], data, log: Callable[[str], None]) -> None:
+    """maneuver_indices.csv: the recorded turning and zig-zag test runs' IMO indices beside
+    every finished model's prediction of them (`sysid.maneuvers.recorded`)."""
+    started = time.perf_counter()
+    done = {run_label(r.name, r.kind, r.dataset): out / "runs" / r.name for r in runs if not r.failure}
+    write_record_comparison(out, done, data)
+    log(f"{RECORD_FILE}: indices of the recorded turning and zig-zag runs beside {len(done)} models' predictions "
+        f"({time.perf_counter() - started:.0f} s)")

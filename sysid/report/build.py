@@ -10,6 +10,7 @@ import datetime as _dt
 import os
 import time
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Callable
 
@@ -30,6 +31,8 @@ from sysid.report.quality import quality_rows  # noqa: E402
 from sysid.report.source import ReportSource, read_source  # noqa: E402
 from sysid.protocol.paper import run_label  # noqa: E402
 from sysid.report.tables import build_tables, verdict_table  # noqa: E402
+from sysid.report.maneuver_tables import record_plain_table  # noqa: E402
+from sysid.report.plain_tables import table_figure  # noqa: E402
 
 STYLE = {"font.size": 9, "axes.titlesize": 9, "axes.labelsize": 9, "axes.grid": True,
          "grid.alpha": 0.3, "grid.linewidth": 0.5, "legend.fontsize": 8, "lines.linewidth": 1.2,
@@ -84,6 +87,7 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
     say(f"read {source.kind} {source.path} ({len(source.runs)} run{'s' if len(source.runs) != 1 else ''})")
     size = ship_size(source)
     tables = build_tables(source)
+    plain = [record_plain_table(source.maneuver_indices)] if source.maneuver_indices is not None else []
     plan = figure_plan(source, size)
     notes = list(plan.notes)
     if size is None and source.runs:
@@ -101,7 +105,7 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
     quality = quality_rows(source.quality)
     text_pages = paginate(text_lines(text_blocks(title, summary, rows, methods, quality, notes, first, settings)))
     split_tables = [(t, table_pages(t)) for t in tables]
-    total = len(text_pages) + sum(len(p) for _, p in split_tables) + len(plan.figures)
+    total = len(text_pages) + sum(len(p) for _, p in split_tables) + len(plain) + len(plan.figures)
 
     html_figures: list[HtmlFigure] = []
     pdf_path = out_dir / "report.pdf"
@@ -113,7 +117,9 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
             for i, page_rows in enumerate(pages):
                 part = f" (part {i + 1} of {len(pages)})" if len(pages) > 1 else ""
                 pdf.add_table(table, page_rows, part)
-        say(f"tables: {len(tables)}; drawing {len(plan.figures)} figures")
+        for table in plain:
+            pdf.add_figure(partial(table_figure, table), tuple(table_figure(table).get_size_inches()), table.title)
+        say(f"tables: {len(tables) + len(plain)}; drawing {len(plan.figures)} figures")
         for number, spec in enumerate(plan.figures, 1):
             try:
                 fig = spec.factory()
@@ -137,7 +143,7 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
         summary=summary,
         runs=[{"row": row, "colour": model_colour(r.name, r.model, r.dataset, i)}
               for i, (row, r) in enumerate(zip(rows, source.runs))],
-        methods=methods, tables=tables, figures=html_figures, notes=notes, quality=quality,
+        methods=methods, tables=tables, plain_tables=plain, figures=html_figures, notes=notes, quality=quality,
         verdict=first, settings=settings,
         version=sysid.__version__, source=str(source.path), built=built)
     html_path = write_text(html, out_dir / "report.html")

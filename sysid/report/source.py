@@ -132,6 +132,7 @@ class ReportSource:
     quality: list[QualityReport] = field(default_factory=list)  # preprocessing *.report.json
     sweep: SweepRecord | None = None
     reproduction: Reproduction | None = None  # a reproduction's summary.json (None: it has none)
+    maneuver_indices: pd.DataFrame | None = None  # a reproduction's maneuver_indices.csv (recorded vs predicted)
 
     @property
     def title(self) -> str:
@@ -228,7 +229,8 @@ def read_source(path) -> ReportSource:
         reproduction = Reproduction.read(path / "summary.json") if (path / "summary.json").exists() else None
         runs = sorted((read_run_dir(p) if RunDir(p).manifest.is_file() or RunDir(p).summary.is_file()
                        else read_seed_group(p) for p in run_dirs), key=_run_order)
-        return ReportSource(path, "reproduction", runs, quality, reproduction=reproduction)
+        indices = read_table(path / "maneuver_indices.csv", ["scenario", "maneuver", "model"], required=False)
+        return ReportSource(path, "reproduction", runs, quality, reproduction=reproduction, maneuver_indices=indices)
     if (path / "sweep.toml").is_file() and (path / "results.csv").is_file():
         return read_sweep(path, quality)
     if RunDir(path).summary.exists() or RunDir(path).metrics.exists():

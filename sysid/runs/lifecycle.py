@@ -20,14 +20,15 @@ from sysid.data.recordings import Run, read_run
 from sysid.data.datasets import test_files
 from sysid.data.splits import TEST, TRAINING, VALIDATION, check_disjoint_runs, data_split, provenance
 from sysid.device import compute_threads
-from sysid.errors import TrainingError
-from sysid.evaluation.evaluate import Evaluation, evaluate_model
+from sysid.errors import ConfigError, TrainingError
+from sysid.evaluation.evaluate import Evaluation, evaluate_model, short_runs
 from sysid.evaluation.verdict import (IDENTIFIED_MMG, SHIP_FILE_MMG, BaselineVerdict, baseline_verdict,
                                       window_score)
 from sysid.config.experiment import Experiment
 from sysid.hybrid.force_models import CorrectedModel, build_mmg, build_model
 from sysid.runs.rundir import write_run
 from sysid.identify.trainer import EpochReport, Trainer, TrainingSummary
+from sysid.config.checks import threads
 
 
 @dataclass
@@ -122,6 +123,19 @@ def checkpoint_path(out_dir: str | os.PathLike) -> Path:
     return out_dir.parent / f".{out_dir.name}.checkpoint.pt"
 
 
+def check_experiment_fits(exp: Experiment, tests: Sequence[Run]) -> None:
+    """The config's resources and horizons against this machine and these test runs."""
+    source = exp.source or "config"
+    threads(f"{source}: [training] threads =", exp.training.threads, ConfigError)
+    name = f"{source}: [evaluation] horizons"
+    short = short_runs(tests, exp.evaluation.horizons, name, ConfigError)
+    if short:
+        run, h = short[0]
+        raise ConfigError(f"{name}: the test file {run.path} holds {len(run)} samples ({run.duration:.0f} s), "
+                          f"fewer than one {h:g}-s window, so its metrics would be empty; choose shorter "
+                          "horizons or other test files (nothing trained)")
+
+
 def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[Run],
                    train_runs: Sequence[Run] | None = None, data: str | os.PathLike | None = None,
                    progress: bool = True, log: Callable[[str], None] = print,
@@ -138,9 +152,13 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
     checkpoint every epoch (`checkpoint_path`); `resume` continues from it to the same
     model an uninterrupted run gives. A run whose wall-clock safety limit was hit is
     written with its failure in summary.json (``result.failure``). The run directory is
-    written complete or not at all; an existing one is replaced only with `overwrite`. `on_epoch` receives every
-    epoch's `EpochReport` (sweeps report it to Ray Tune, tracking to MLflow).
+    written complete or not at all; an existing one is replaced only with `overwrite`.
+    Threads beyond this machine's cores, or horizons that are not whole samples or longer
+    than a test file, are a `ConfigError` before any training.
+    `on_epoch` receives every epoch's `EpochReport` (sweeps report it to Ray Tune,
+    tracking to MLflow).
     """
+    check_experiment_fits(exp, tests)
     started = time.perf_counter()
     history, training, validation_scores, horizon = None, None, None, 0.0
     runs: list[Run] = []

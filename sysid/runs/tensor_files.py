@@ -34,7 +34,11 @@ def load_tensors(path: Path):
 
 
 def check_finite(tensors: dict, path: Path) -> None:
-    """Refuse weights holding NaN or inf (a diverged training): they predict nothing."""
+    """Refuse weights holding NaN or inf (a diverged training): they predict nothing; and
+    standard deviations (``*_std``, the FNN's scaling) that are not > 0."""
     for key, value in tensors.items():
         if isinstance(value, torch.Tensor) and value.is_floating_point() and not torch.isfinite(value).all():
             raise CheckpointError(f"{path}: {key} holds NaN or inf values (a diverged training); train the run again")
+        if key.endswith("_std") and isinstance(value, torch.Tensor) and not bool((value > 0).all()):
+            raise CheckpointError(f"{path}: {key} holds a standard deviation <= 0 (the FNN would divide by it); "
+                                  "train the run again")

@@ -49,6 +49,7 @@ class OutputKind(str, Enum):
     PREPROCESSING = "preprocessing"
     REPRODUCTION = "reproduction"
     SWEEP = "sweep"
+    MANEUVERS = "maneuvers"
     REPORT = "report"
 
     @property
@@ -87,10 +88,12 @@ def sealed_by(directory: Path) -> str | None:
 def is_sysid_report(path: Path) -> bool:
     """Whether `path` is a report.html or report.pdf `sysid report` wrote (its title or
     the PDF's creator say so)."""
-    marker = b"<title>sysid accuracy report" if path.suffix == ".html" else b"sysid report"
+    markers = (b"<title>sysid accuracy report", b"<title>sysid maneuvers report") if path.suffix == ".html" \
+        else (b"sysid report",)
     try:
         with open(path, "rb") as fh:
-            return marker in fh.read()
+            head = fh.read()
+            return any(marker in head for marker in markers)
     except OSError:
         return False
 

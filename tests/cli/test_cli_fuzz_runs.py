@@ -10,21 +10,10 @@ import shutil
 import pytest
 import torch
 
-from cli_harness import BINARY, assert_refused, in_process, leftovers
+from cli_fixtures import run_copy, sysid  # noqa: F401 (fixtures)
+from cli_harness import BINARY, assert_refused, leftovers
 from tiny_experiment import tiny_config
 from sysid.store.manifest import MANIFEST, verify_manifest, write_manifest
-
-
-@pytest.fixture
-def sysid(capsys):
-    return lambda *args: in_process(capsys, *args)
-
-
-@pytest.fixture
-def run_copy(trained, tmp_path):
-    copy = tmp_path / "run"
-    shutil.copytree(trained, copy)
-    return copy
 
 
 # -- train: configs -----------------------------------------------------------------------

@@ -5,6 +5,8 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
+import time
+from pathlib import Path
 
 import pytest
 
@@ -117,3 +119,65 @@ def test_console_script_exit_codes_for_bad_input_and_unwritable_output(files, tm
                    2, "missing.csv: file not found")
     assert_refused(subprocess_run("evaluate", "--data", files["test"], "--horizon", "30",
                                   "-o", "/proc/sysid-fuzz/m.csv"), 2, "/proc/sysid-fuzz")
+
+
+def live_processes(group: int) -> list[str]:
+    """Command lines of a process group's processes that are still running (zombies have
+    ended)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+            if int(fields[2]) == group and fields[0] != "Z":
+                found.append((stat.parent / "cmdline").read_bytes().replace(b"\0", b" ").decode())
+        except OSError:  # ended while we looked
+            continue
+    return found
+
+
+def group_ended(group: int, wait_s: float = 30.0) -> list[str]:
+    """[] once no process of the group runs; else, after `wait_s`, the ones still running.
+    (multiprocessing's resource tracker, a helper of the spawned workers, exits on its own
+    when sysid has exited: a moment later.)"""
+    deadline = time.monotonic() + wait_s
+    while live_processes(group) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return live_processes(group)
+
+
+# expected_cost orders them nn_D2, hybrid_D1, nn_D1: two workers take the first two, nn_D1 waits
+QUEUED_BEHIND_TWO = ("nn_D2", "hybrid_D1", "nn_D1")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("to_group", [True, False], ids=["ctrl-c to the job", "kill -INT to sysid alone"])
+def test_ctrl_c_in_a_parallel_reproduce_ends_every_worker(dataset_dir, tmp_path, to_group):
+    out = tmp_path / "reproduction"
+    only = [arg for name in QUEUED_BEHIND_TWO for arg in ("--only", name)]
+    proc = start("reproduce", "-o", out, *only, "--jobs", "2", "--no-report")
+    before = wait_for(proc.stdout, "epoch 10/")  # both workers are training
+    if to_group:
+        outcome = finish(proc, before, signal.SIGINT)
+    else:
+        os.kill(proc.pid, signal.SIGINT)
+        out_text, err = proc.communicate(timeout=120)
+        outcome = Outcome(proc.returncode, "".join(before) + out_text, err)
+    assert_refused(outcome, 130, f"interrupted: nothing written to {out}", absent=(out,))
+    assert group_ended(proc.pid) == []  # the workers have ended with it
+    assert "[nn_D1]" not in outcome.out  # the queued run never started
+    assert leftovers(tmp_path) == []
+
+
+@pytest.mark.slow
+def test_ctrl_c_reaches_a_reproduction_started_with_sigint_ignored(dataset_dir, tmp_path):
+    """A background job of a non-interactive shell inherits SIGINT ignored; a Ctrl-C that
+    reaches sysid still ends it, and nothing is left behind."""
+    out = tmp_path / "reproduction"
+    proc = subprocess.Popen([console_script(), "reproduce", "-o", str(out), "--only", "mmg_paper", "--only", "nn_D1",
+                             "--jobs", "1", "--no-report"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=environment(), start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    before = wait_for(proc.stdout, "epoch 10/")  # mmg_paper is done (in the staging directory), nn_D1 trains
+    outcome = finish(proc, before, signal.SIGINT)
+    assert_refused(outcome, 130, f"interrupted: nothing written to {out}", absent=(out,))
+    assert group_ended(proc.pid) == [] and leftovers(tmp_path) == []

@@ -31,12 +31,12 @@ from scipy.interpolate import CubicSpline
 
 from sysid import MMG, load_ship, state_derivative
 from sysid.mmg.families import family
-from sysid.mmg.ship import ships_dir
 
 shipmmg = pytest.importorskip(
     "shipmmg.mmg_3dof", reason="shipmmg not installed (a dev extra: pip install -e '.[dev]')")
 
-U0, NPS = 2.29 * 0.512, 17.95  # shipmmg's example operating point
+from shipmmg_kvlcc2 import NPS, U0, ship_like_shipmmg, shipmmg_params  # noqa: E402
+
 # Relative agreement of two codings of the same model integrated on the same grid: each
 # right-hand side evaluation agrees to a few ulp (relative 1e-16 to 1e-15), and the
 # manoeuvres' dynamics are stable, so the trajectories stay within a few 1e-15 of each
@@ -93,35 +93,6 @@ def _solver(time):
     return dict(method=FixedStepRK4, step=float(time[1] - time[0]))
 
 
-def _ship_like_shipmmg(tmp_path, x_G: float):
-    """kvlcc2_l7 with shipmmg's wake form and x'_P, and the given x_G [m]."""
-    text = (ships_dir() / "kvlcc2_l7.toml").read_text()
-    for old, new in [('model = "standard"  # differs', 'model = "standard_gaussian_wake"  # differs'),
-                     ("x_P = -0.48 ", "x_P = -0.650 "), ("x_G = 0.25 ", f"x_G = {x_G!r} ")]:
-        assert old in text, old
-        text = text.replace(old, new, 1)
-    text = "\n".join(line for line in text.splitlines() if not line.startswith(("C_1 ", "C_2_")))
-    path = tmp_path / f"kvlcc2_shipmmg_xg{x_G}.toml"
-    path.write_text(text)
-    return load_ship(path)
-
-
-def _shipmmg_params(ship):
-    p = ship.parameters
-    basic = shipmmg.Mmg3DofBasicParams(
-        L_pp=p["L_pp"], B=p["B"], d=p["d"], x_G=p["x_G"], D_p=p["D"], m=p["m"],
-        I_zG=p["I_zz_J_zz"], J_z=0.0,  # only their sum enters the equations of motion
-        A_R=p["A_R"], η=p["D"] / p["H_R"], m_x=p["m_x"], m_y=p["m_y"], f_α=p["f_alpha"],
-        ϵ=p["epsilon"], t_R=p["t_R"], x_R=p["x_R"], a_H=p["a_H"], x_H=p["x_H"],
-        γ_R_minus=p["gamma_R_minus"], γ_R_plus=p["gamma_R_plus"], l_R=p["l_R"] / p["L_pp"],
-        κ=p["kappa"], t_P=p["t_P"], w_P0=p["w_P0"], x_P=p["x_P"])
-    names = ["R_0", "X_vv", "X_vr", "X_rr", "X_vvvv", "Y_v", "Y_r", "Y_vvv", "Y_vvr", "Y_vrr",
-             "Y_rrr", "N_v", "N_r", "N_vvv", "N_vvr", "N_vrr", "N_rrr"]
-    maneuvering = shipmmg.Mmg3DofManeuveringParams(
-        k_0=p["k0"], k_1=p["k1"], k_2=p["k2"], **{f"{n}_dash": p[n] for n in names})
-    return basic, maneuvering
-
-
 def _ours(ship, time, delta, nps):
     """Our model's trajectory, same augmented state and splines as shipmmg's."""
     model = MMG(ship)
@@ -143,7 +114,7 @@ def _ours(ship, time, delta, nps):
 
 
 def _theirs(ship, time, delta, nps):
-    basic, man = _shipmmg_params(ship)
+    basic, man = shipmmg_params(ship)
     sol = shipmmg.simulate_mmg_3dof(basic, man, time, delta, nps, u0=U0, ρ=ship["rho"],
                                     t_eval=time, **_solver(time))
     assert sol.success
@@ -163,7 +134,7 @@ def _turning(duration=200.0):
 def _zigzag(ship, duration=80.0):
     """shipmmg's own 10/10 zigzag rudder schedule (its heading-triggered switching)."""
     time = np.linspace(0.0, duration, int(duration * 4) + 1)
-    basic, man = _shipmmg_params(ship)
+    basic, man = shipmmg_params(ship)
     delta = shipmmg.zigzag_test_mmg_3dof(basic, man, math.radians(10), math.radians(10), time,
                                          np.full_like(time, NPS), δ_rad_rate=math.radians(15.8),
                                          u0=U0, ρ=ship["rho"])[0]
@@ -176,7 +147,7 @@ def _zigzag(ship, duration=80.0):
 @pytest.mark.slow
 @pytest.mark.parametrize("maneuver", ["turning35", "zigzag10"])
 def test_trajectories_agree_with_shipmmg(tmp_path, maneuver):
-    ship = _ship_like_shipmmg(tmp_path, x_G=0.0)
+    ship = ship_like_shipmmg(tmp_path, x_G=0.0)
     time, delta, nps = _turning() if maneuver == "turning35" else _zigzag(ship)
     ours, theirs = _ours(ship, time, delta, nps), _theirs(ship, time, delta, nps)
     gap = _relative_gap(ours, theirs)
@@ -189,7 +160,7 @@ def test_trajectories_agree_with_shipmmg(tmp_path, maneuver):
 def test_shipmmg_midship_convention_is_the_only_gap_with_x_G(tmp_path):
     """Convention 2: with x_G = 0.25 m shipmmg evaluates U and beta at x = -x_G; the gap
     appears, stays small, and is gone with x_G = 0 (previous test)."""
-    ship = _ship_like_shipmmg(tmp_path, x_G=0.25)
+    ship = ship_like_shipmmg(tmp_path, x_G=0.25)
     time, delta, nps = _turning(100.0)
     gap = _relative_gap(_ours(ship, time, delta, nps), _theirs(ship, time, delta, nps))
     assert 1e-5 < gap.max() < 0.05
@@ -197,10 +168,10 @@ def test_shipmmg_midship_convention_is_the_only_gap_with_x_G(tmp_path):
 
 def test_force_components_against_shipmmg(tmp_path):
     """Forces and inflow quantities at states along a turn, with convention 3 for Y_R."""
-    ship = _ship_like_shipmmg(tmp_path, x_G=0.0)
+    ship = ship_like_shipmmg(tmp_path, x_G=0.0)
     time, delta, nps = _turning(60.0)
     u, v, r = _theirs(ship, time, delta, nps)[:3]
-    basic, man = _shipmmg_params(ship)
+    basic, man = shipmmg_params(ship)
     ref = shipmmg.get_sub_values_from_simulation_result(
         u, v, r, delta, nps, basic, man, ρ=ship["rho"], return_all_vals=True)
     (X_H, X_R, X_P, Y_H, Y_R, N_H, N_R, _U, _beta, _vd, _rd, _bP, w_P, J, K_T, _bR, _gR,

@@ -18,3 +18,7 @@ def test_parallel_workers_give_the_same_tables(dataset_dir, tmp_path):
     assert len(a) == 3 * 6 * 2 * 2 - 6 * 2 * 2  # MMG in D1 and D2, NN and hybrid in D1; 6 scenarios, 2 horizons
     pd.testing.assert_frame_equal(a, b)
     assert (tmp_path / "one" / "table7.md").read_text() == (tmp_path / "two" / "table7.md").read_text()
+    indices = [pd.read_csv(tmp_path / d / "maneuver_indices.csv") for d in ("one", "two")]
+    pd.testing.assert_frame_equal(*indices)  # recorded maneuvers beside every model's prediction
+    assert list(dict.fromkeys(indices[0].model)) == ["recorded", "MMG (lab X'vr)", "NN D1", "Hybrid D1"]
+    assert set(indices[0].scenario) == {"Turning 20", "Turning 35", "Zigzag 20/20", "Zigzag 30/30"}

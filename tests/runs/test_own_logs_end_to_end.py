@@ -5,11 +5,11 @@ config in its own folder naming them relative to itself, with ``[data.columns]``
 ``sysid train``, ``sysid evaluate``, ``sysid report``. The report's first page states the
 verdict, and nothing says D1/D2 or the paper.
 
-The config is written here by the test (``sysid init`` writes its template on another branch;
-once it is on main, this test starts from it)."""
+The project starts from ``sysid init``, as the docs' "Getting started" does."""
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import pandas as pd
@@ -18,6 +18,7 @@ from pypdf import PdfReader
 
 from cli_harness import in_process
 from own_logs import columns_table, write_own_log
+from sysid.bundled import bundled_dir
 from sysid.data.splits import PAPER_TEST_STEMS
 
 LOGS = {  # the user's name -> the dataset file it is made from; role
@@ -29,33 +30,38 @@ LOGS = {  # the user's name -> the dataset file it is made from; role
 }
 
 
-def own_project(root: Path, dataset_dir: Path) -> Path:
-    """project/logs/* (the user's logs) and project/configs/own.toml; returns the config."""
-    (root / "logs").mkdir(parents=True)
-    (root / "configs").mkdir()
+def own_project(root: Path, dataset_dir: Path, capsys) -> Path:
+    """The documented path: ``sysid init`` writes project/ (ship file, experiment config), the
+    user's logs go to project/logs/, the config's [data] lists and [data.columns] are filled in
+    and the network made small (a test, not a model to keep). Returns the config."""
+    assert in_process(capsys, "init", str(root), "--ship", "own_ship").code == 0
+    shutil.copy(bundled_dir("ships") / "esso_osaka.toml", root / "own_ship.toml")  # these logs' ship
     roles: dict[str, list[str]] = {"train": [], "validation": [], "test": []}
     for name, (source, role) in LOGS.items():
         assert Path(source).stem not in PAPER_TEST_STEMS
         write_own_log(dataset_dir / source, root / "logs" / name)
-        roles[role].append(f"../logs/{name}")
-    config = root / "configs" / "own.toml"
-    config.write_text(
-        "[experiment]\nname = 'own'\nmodel = 'hybrid'\nship = 'esso_osaka'\nseed = 0\n"
-        f"[data]\ntrain = {json.dumps(roles['train'])}\nvalidation = {json.dumps(roles['validation'])}\n"
-        f"test = {json.dumps(roles['test'])}\n" + columns_table()
-        + "[network]\nhidden = [16, 16]\n"
-        "[training]\nepochs = 3\nwarm_start_epochs = 20\nbatch_size = 64\n"
-        "[gate]\nk = 5\nspace = 'inputs'\n[evaluation]\nhorizons = [30.0]\n")
+        roles[role].append(f"logs/{name}")
+    config = root / "experiment.toml"
+    text = config.read_text()
+    for old, new in {'train = ["logs/*.csv"]': f"train = {json.dumps(roles['train'])}",
+                     "validation = []": f"validation = {json.dumps(roles['validation'])}",
+                     'test = ["test/*.csv"]': f"test = {json.dumps(roles['test'])}",
+                     "hidden = [64, 64]": "hidden = [16, 16]", "epochs = 400": "epochs = 3",
+                     "batch_size = 128": "batch_size = 64", "warm_start_epochs = 150": "warm_start_epochs = 20",
+                     'space = "features"': 'space = "inputs"', "horizons = [30.0, 100.0]": "horizons = [30.0]"}.items():
+        assert text.count(old) == 1, old
+        text = text.replace(old, new)
+    config.write_text(text + "\n" + columns_table())
     return config
 
 
 @pytest.mark.slow
 def test_own_logs_train_evaluate_and_report_from_another_directory(dataset_dir, tmp_path, capsys, monkeypatch):
-    own_project(tmp_path / "project", dataset_dir)
+    own_project(tmp_path / "project", dataset_dir, capsys)
     work = tmp_path / "work"
     work.mkdir()
     monkeypatch.chdir(work)
-    trained = in_process(capsys, "train", "../project/configs/own.toml", "-o", "runs/own")
+    trained = in_process(capsys, "train", "../project/experiment.toml", "-o", "runs/own")
     assert trained.code == 0, trained.err
     run = work / "runs" / "own"
     summary = json.loads((run / "summary.json").read_text())

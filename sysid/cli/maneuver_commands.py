@@ -1,0 +1,179 @@
+"""``sysid maneuver MODEL -o DIR``: standard maneuvers of any model, indices, IMO criteria, report."""
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from sysid.cli.app import app
+from sysid.cli.interrupts import on_interrupt
+
+LIMITS = {  # option -> (low, high, unit): finite numbers inside, else one line naming the option
+    "--speed": (1e-3, 50.0, "m/s"), "--rps": (-200.0, 200.0, "rps"), "--rudder-rate": (0.1, 100.0, "deg/s"),
+    "--dt": (1e-4, 10.0, "s"), "--duration": (1e-3, 1e5, "s"),
+}
+MAX_STEPS = 2_000_000  # duration / dt beyond this: surely a typo
+
+
+def _error(message: str):
+    from sysid.maneuvers import ManeuverError
+    return ManeuverError(message)
+
+
+def _number(option: str, text: str, unit: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise _error(f"{option} {text!r}: not a number [{unit}] (give MODEL before the options)") from None
+    if not math.isfinite(value):
+        raise _error(f"{option} {text!r}: must be a finite number [{unit}]")
+    return value
+
+
+def _check(option: str, value: float | None) -> float | None:
+    if value is None:
+        return None
+    low, high, unit = LIMITS[option]
+    if not (math.isfinite(value) and low <= value <= high):
+        raise _error(f"{option} {value:g}: must be a finite number in [{low:g}, {high:g}] {unit}")
+    return value
+
+
+def parse_maneuvers(turning: list[str], zigzag: list[str], crash_stop: bool, side: str):
+    """The maneuvers the options ask for (`sysid.maneuvers.base` specs); none asked: IMO's
+    (35 deg turning, 10/10 and 20/20 zig-zag on `side`, crash stop)."""
+    from sysid.maneuvers import CrashStop, Side, TurningCircle, ZigZag, imo_maneuvers
+
+    if side not in ("port", "starboard", "both"):
+        raise _error(f"--side {side!r}: choose port, starboard or both")
+    sides = (Side.STARBOARD, Side.PORT) if side == "both" else (Side(side),)
+    if not (turning or zigzag or crash_stop):
+        return imo_maneuvers(sides)
+    out = []
+    for text in turning:
+        angle = _number("--turning", text, "deg")
+        out += [TurningCircle(angle, s) for s in sides]
+    for text in zigzag:
+        parts = text.split("/")
+        if len(parts) != 2:
+            raise _error(f"--zigzag {text!r}: expected RUDDER/CHECK in deg, e.g. 10/10")
+        rudder, check = (_number("--zigzag", p, "deg") for p in parts)
+        out += [ZigZag(rudder, check, s) for s in sides]
+    if crash_stop:
+        out.append(CrashStop())
+    names = [m.name for m in out]
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise _error(f"maneuver {repeated[0]} asked for twice")
+    return out
+
+
+def parse_wind(text: str | None) -> tuple[float, float]:
+    """``"V,DIR"`` -> (speed [m/s], direction it comes from [rad]); DIR in deg."""
+    if text is None:
+        return 0.0, 0.0
+    parts = text.split(",")
+    if len(parts) != 2:
+        raise _error(f"--wind {text!r}: expected SPEED,DIRECTION (m/s, deg the wind comes from), e.g. 2,45")
+    speed, direction = _number("--wind", parts[0], "m/s"), _number("--wind", parts[1], "deg")
+    if not 0.0 <= speed <= 100.0:
+        raise _error(f"--wind {text!r}: speed {speed:g} m/s must be in [0, 100]")
+    return speed, math.radians(direction)
+
+
+@app.command()
+def maneuver(
+    model: Path = typer.Argument(..., help="Ship file or bundled ship name (its MMG), run directory (MMG, identified, "
+                                           "NN-only, hybrid, ensemble) or folder of seed run directories."),
+    output: Path = typer.Option(..., "-o", "--output", help="Directory to write (indices.csv, criteria.csv, "
+                                                             "trajectories.csv, summary.json, report.html/.pdf)."),
+    turning: Optional[List[str]] = typer.Option(None, "--turning", help="Turning circle, rudder [deg] (several)."),
+    zigzag: Optional[List[str]] = typer.Option(None, "--zigzag", help="Zig-zag RUDDER/CHECK [deg], e.g. 10/10."),
+    crash_stop: bool = typer.Option(False, "--crash-stop", help="Crash stop: minus the approach revolutions."),
+    side: str = typer.Option("both", "--side", help="Side of the first rudder order: port, starboard or both."),
+    speed: Optional[float] = typer.Option(None, "--speed", help="Approach speed U0 [m/s] (default: the ship file's)."),
+    rps: Optional[float] = typer.Option(None, "--rps", help="Propeller revolutions [rps] (default: those holding U0)."),
+    rudder_rate: Optional[float] = typer.Option(None, "--rudder-rate", help="Steering rate [deg/s] (default: the ship "
+                                                "file's, or 2.32 deg/s at full scale Froude-scaled)."),
+    dt: float = typer.Option(0.1, "--dt", help="Integration step [s]."),
+    duration: Optional[float] = typer.Option(None, "--duration", help="Time after the execute [s] (default: 80 L/U0)."),
+    wind: Optional[str] = typer.Option(None, "--wind", help="True wind SPEED,DIRECTION [m/s, deg from]; calm."),
+    integrator: str = typer.Option("rk4", "--integrator", help="rk4 (classical) or euler."),
+    compiled: bool = typer.Option(True, "--compiled/--eager", help="Compiled loop (compiled once per model, cached) "
+                                                                   "or the eager step."),
+    report: bool = typer.Option(True, "--report/--no-report", help="Write report.html and report.pdf too."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output directory (all of it)."),
+) -> None:
+    """Turning circles, zig-zags and a crash stop of any model: IMO indices and criteria, trajectories, report."""
+    from sysid.config.choices import Method
+    from sysid.maneuvers import default_conditions, load_maneuver_model, run_maneuvers
+    from sysid.maneuvers.outputs import MOSTLY_OUTSIDE, summary_document, write_maneuvers
+    from sysid.maneuvers.simulate import ahead_only
+    from sysid.cli.outputs import claim, ship_file
+    from sysid.store.target import OutputKind
+
+    start = time.perf_counter()
+    for option, value in (("--speed", speed), ("--rps", rps), ("--rudder-rate", rudder_rate), ("--dt", dt),
+                          ("--duration", duration)):
+        _check(option, value)
+    try:
+        method = Method.parse(integrator, "--integrator", offered_only=True)
+    except ValueError as exc:
+        raise _error(str(exc)) from None
+    if duration is not None and duration / dt > MAX_STEPS:
+        raise _error(f"--duration {duration:g} s at --dt {dt:g} s: {duration / dt:.0f} steps, more than {MAX_STEPS}")
+    wind_speed, wind_direction = parse_wind(wind)
+    maneuvers = parse_maneuvers(turning or [], zigzag or [], crash_stop, side)
+    source = model if model.is_dir() else ship_file(model)  # what the command reads
+    target = claim(output, OutputKind.MANEUVERS, [source], overwrite)  # a bad -o fails now
+    subject = load_maneuver_model(model)
+    if not (turning or zigzag or crash_stop) and ahead_only(subject.model):
+        maneuvers = [m for m in maneuvers if m.kind != "crash_stop"]
+        typer.echo(f"maneuver: no crash stop: the propeller model {subject.ship.models.get('propeller')!r} is for "
+                   "ahead motion only")
+    conditions, sources = default_conditions(subject.model, subject.ship, speed=speed, rps=rps,
+                                             rudder_rate=rudder_rate, dt=dt, duration=duration,
+                                             wind_speed=wind_speed, wind_direction=wind_direction,
+                                             method=method)
+    if conditions.steps > MAX_STEPS:
+        raise _error(f"duration {conditions.duration:g} s at --dt {dt:g} s: {conditions.steps} steps, "
+                     f"more than {MAX_STEPS}")
+    members = f", spread over {len(subject.members)} {subject.spread}" if subject.members else ""
+    typer.echo(f"maneuver: {len(maneuvers)} maneuvers of {subject.label} ({subject.kind}{members}); "
+               f"U0 {conditions.speed:.4g} m/s ({sources['speed']}), n {conditions.rps:.4g} rps ({sources['rps']}), "
+               f"rudder rate {conditions.rudder_rate:.3g} deg/s ({sources['rudder_rate']}), dt {conditions.dt:g} s, "
+               f"{conditions.duration:g} s ({sources['duration']}), {conditions.method.value}, "
+               f"{'compiled' if compiled else 'eager'}")
+    on_interrupt(f"nothing written to {output} (it is moved into place only when complete)")
+    simulated = time.perf_counter()
+    results = run_maneuvers(subject, maneuvers, conditions, compiled=compiled)
+    seconds = time.perf_counter() - simulated
+    summary = summary_document(subject.label, subject.kind, subject.ship, conditions, sources, results, compiled,
+                               seconds, subject.spread)
+    with target.staged() as staging:
+        write_maneuvers(staging, results, subject.ship, conditions, summary)
+        if report:
+            from sysid.report.maneuver_report import build_maneuver_report
+            build_maneuver_report(staging)
+    _print_results(output, results)
+    for r in results:
+        if r.gate_off_share is not None and r.gate_off_share > MOSTLY_OUTSIDE:
+            typer.secho(f"  {r.maneuver.name}: kNN gate off on {100 * r.gate_off_share:.0f} % of the steps: the "
+                        "maneuver runs mostly outside the training data (the FNN is switched off there)",
+                        fg=typer.colors.YELLOW)
+    typer.echo(f"maneuver: {output} ({seconds:.1f} s simulating, {time.perf_counter() - start:.1f} s in all)")
+
+
+def _print_results(output: Path, results) -> None:
+    import pandas as pd
+
+    frame = pd.read_csv(output / "indices.csv")
+    shown = [c for c in frame.columns if c.endswith(("_m", "_deg", "_ratio")) and frame[c].notna().any()]
+    with pd.option_context("display.width", 160, "display.max_columns", 20, "display.float_format", "{:.3f}".format):
+        typer.echo(frame[["maneuver", *shown]].to_string(index=False, na_rep=""))
+    criteria = pd.read_csv(output / "criteria.csv")
+    for row in criteria.itertuples(index=False):
+        typer.echo(f"  IMO {row.maneuver}: {row.rule}: {row.met}")

@@ -1,0 +1,71 @@
+"""Any model a maneuver can be run with: a ship file (its MMG) or a run directory (MMG,
+identified MMG, NN-only, hybrid, a mean-of-seeds ensemble), or a folder of seed run
+directories (``runs/NAME/seed0``, ``seed1``, ... of ``sysid reproduce --seeds``), whose
+mean-of-seeds ensemble is then the model and whose seeds give the spread."""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from torch import nn
+
+from sysid.errors import CheckpointError
+from sysid.hybrid.ensemble import SeedEnsemble
+from sysid.mmg.model import MMG
+from sysid.mmg.ship import Ship, load_ship
+from sysid.runs.rundir import load_model
+from sysid.store.manifest import has_manifest
+
+
+@dataclass
+class ManeuverModel:
+    """A model to maneuver.
+
+    label : its name (the ship's or the run directory's); model : the force model; ship :
+    its ship (dimensions, [maneuvering] defaults); kind : "mmg", "nn" or "hybrid"; members :
+    (label, model) of an ensemble's members or a folder's seeds, whose maneuvers give the
+    spread of the indices (empty for a single model); spread : what the members are.
+    """
+
+    label: str
+    model: nn.Module
+    ship: Ship
+    kind: str = "mmg"
+    members: list[tuple[str, nn.Module]] = field(default_factory=list)
+    spread: str = ""
+
+
+def ship_of(model: nn.Module) -> Ship:
+    """The `Ship` behind a force model (its MMG's; an ensemble's first member's)."""
+    if isinstance(model, MMG):
+        return model.ship
+    if isinstance(model, SeedEnsemble):
+        return ship_of(model.members[0])
+    mmg = getattr(model, "mmg", None)
+    if isinstance(mmg, MMG):
+        return mmg.ship
+    raise CheckpointError(f"{type(model).__name__}: no MMG to take the ship's dimensions from")
+
+
+def load_maneuver_model(path: str | os.PathLike) -> ManeuverModel:
+    """A `ManeuverModel` from a ship file or bundled ship name, a run directory, or a folder
+    of seed run directories; one clear error otherwise."""
+    path = Path(path)
+    if path.is_dir():
+        if has_manifest(path):
+            _, model = load_model(path)
+            members = []
+            if isinstance(model, SeedEnsemble):
+                members = [(f"{path.name} member {i}", m) for i, m in enumerate(model.members)]
+            return ManeuverModel(path.name, model, ship_of(model), getattr(model, "kind", "mmg"), members,
+                                 "ensemble members" if members else "")
+        seeds = sorted((p for p in path.glob("seed*") if has_manifest(p)), key=lambda p: (len(p.name), p.name))
+        if not seeds:
+            raise CheckpointError(f"{path}: neither a run directory (no manifest.json) nor a folder of seed run "
+                                  "directories (seed0/, seed1/, ...)")
+        members = [(f"{path.name} {p.name}", load_model(p)[1]) for p in seeds]
+        model = SeedEnsemble([m for _, m in members])
+        return ManeuverModel(path.name, model, ship_of(model), model.kind, members, "seeds")
+    ship = load_ship(path)
+    return ManeuverModel(ship.name, MMG(ship), ship, "mmg")

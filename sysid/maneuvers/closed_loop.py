@@ -1,0 +1,145 @@
+"""The ship under maneuver orders, step by step: eager (batched over maneuvers) or as one
+compiled loop (cached on disk, compiled once per model and integration rule).
+
+`ClosedLoopStep` asks `ManeuverOrders` for the inputs held over the step (from the state at
+its start) and takes one step of the integration rule (`sysid.dynamics.integrators`) on
+the model's right-hand side (`sysid.fast.stepper.Derivative`). `ClosedLoopRollout` runs up
+to `CAPACITY` such steps in one `while_loop`, writing each step's state, controller state
+and inputs, and the kNN gate's decision at its start, into a record in place (as
+`sysid.fast.stepper.Rollout` does for recorded inputs); the step dt, the start time and the
+maneuver's parameters are inputs, so one compiled package serves every maneuver, dt and
+duration of a model.
+"""
+from __future__ import annotations
+
+import functools
+import hashlib
+import math
+import sys
+from pathlib import Path
+from typing import Callable
+
+import torch
+from torch import nn
+from torch._higher_order_ops.while_loop import while_loop
+
+from sysid.dynamics.integrators import STEP_RULES, Method
+from sysid.fast.compiled import compile_cached, fingerprint
+from sysid.fast.prepared import prepared
+from sysid.fast.stepper import Derivative
+from sysid.maneuvers.controllers import COLUMNS, ManeuverOrders
+
+CAPACITY = 512  # steps per call of the compiled loop
+RECORD = 6 + 2 + 4 + 1  # per step: state after it, controller state after it, inputs held over it, gate on
+_compiled: dict[str, Callable | None] = {}
+
+
+class ClosedLoopStep(nn.Module):
+    """``forward(state (B, 6), orders (B, 2), parameters (B, P), t (), dt ())`` -> (state
+    after the step (B, 6), orders after it (B, 2), inputs held over it (B, 4), the kNN
+    gate's decision at the step's start (B, 1): 1 on, 0 off, NaN for a model without a gate)."""
+
+    def __init__(self, force_model: nn.Module, method: Method | str):
+        super().__init__()
+        self.derivative = Derivative(force_model)
+        self.orders = ManeuverOrders()
+        self.method = Method.parse(method)
+
+    def forward(self, state, orders, parameters, t, dt):
+        inputs, after = self.orders(state, orders, parameters, t, dt)
+        following = STEP_RULES[self.method](lambda x: self.derivative(x, inputs), state, dt)
+        decide = getattr(self.derivative.force_model, "gate_decision", None)
+        on = decide(state, inputs) if decide is not None else None
+        gate = torch.full_like(state[:, :1], math.nan) if on is None else on.to(state.dtype)[:, None]
+        return following, after, inputs, gate
+
+
+class ClosedLoopRollout(nn.Module):
+    """Up to `capacity` closed-loop steps in one call.
+
+    ``forward(x0 (B, 6), orders0 (B, 2), parameters (B, P), t0 (), dt (), steps () int64)``
+    returns the record (capacity, B, `RECORD`) of steps 1..steps (rows from `steps` on are
+    zero) and the last state; `source` (a digest of the controller's code) is part of the
+    compiled package's cache key.
+    """
+
+    def __init__(self, step: ClosedLoopStep, capacity: int, source: str):
+        super().__init__()
+        self.step = step
+        self.capacity = int(capacity)
+        self.source = source
+
+    def forward(self, x0, orders0, parameters, t0, dt, steps):
+        record = torch.zeros((self.capacity, x0.shape[0], RECORD), dtype=x0.dtype, device=x0.device)
+        k0 = torch.zeros((), dtype=torch.int64, device=x0.device)
+
+        def more(k, x, o):
+            return k < steps
+
+        def advance(k, x, o):
+            x, o, u, g = self.step(x, o, parameters, t0 + k.to(x.dtype) * dt, dt)
+            record.index_copy_(0, k.reshape(1), torch.cat((x, o, u, g), -1)[None])  # in place, as in Rollout
+            return k + 1, x, o
+
+        last = while_loop(more, advance, (k0, x0, orders0))[1]
+        return record, last
+
+
+@functools.lru_cache(maxsize=None)
+def source_digest() -> str:
+    """sha256 of the controller and loop code (a compiled loop is rebuilt when it changes)."""
+    here = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for name in ("controllers.py", "closed_loop.py"):
+        h.update((here / name).read_bytes())
+    return h.hexdigest()[:16]
+
+
+def run_eager(model: nn.Module, x0: torch.Tensor, orders0: torch.Tensor, parameters: torch.Tensor,
+              steps: int, dt: float, method: Method | str) -> torch.Tensor:
+    """Record (steps, B, `RECORD`) of `steps` closed-loop steps of all B maneuvers at once."""
+    step = ClosedLoopStep(model, method)
+    dt_t = torch.tensor(dt, dtype=x0.dtype)
+    out = torch.empty((steps, x0.shape[0], RECORD), dtype=x0.dtype)
+    x, o = x0, orders0
+    with torch.no_grad():
+        for k in range(steps):
+            x, o, u, g = step(x, o, parameters, dt_t * k, dt_t)
+            out[k] = torch.cat((x, o, u, g), -1)
+    return out
+
+
+def _notice(message: str) -> None:
+    """One line on stderr when a loop is compiled (not the line when it is done)."""
+    if "compiling" in message:
+        print(message, file=sys.stderr, flush=True)
+
+
+def compiled_loop(model: nn.Module, method: Method | str, dtype: torch.dtype = torch.float64
+                  ) -> Callable[..., torch.Tensor] | None:
+    """The compiled `ClosedLoopRollout` of `model` for one maneuver at a time (batch 1), from
+    this process's memory, the disk cache, or compiled now (one notice line); None where
+    compilation is off or fails (the caller runs `run_eager`)."""
+    method = Method.parse(method)
+    module = ClosedLoopRollout(ClosedLoopStep(prepared(model, 1), method), CAPACITY, source_digest())
+    examples = (torch.zeros(1, 6, dtype=dtype), torch.zeros(1, 2, dtype=dtype),
+                torch.zeros(1, len(COLUMNS), dtype=dtype), torch.zeros((), dtype=dtype),
+                torch.full((), 0.1, dtype=dtype), torch.tensor(CAPACITY, dtype=torch.int64))
+    key = fingerprint(module, examples)
+    if key not in _compiled:
+        _compiled[key] = compile_cached(module, examples, f"maneuver-{method.name.lower()}", log=_notice)
+    return _compiled[key]
+
+
+def run_compiled(loop: Callable[..., torch.Tensor], x0: torch.Tensor, orders0: torch.Tensor,
+                 parameters: torch.Tensor, steps: int, dt: float) -> torch.Tensor:
+    """Record (steps, 1, `RECORD`) of one maneuver through a compiled loop, `CAPACITY` steps
+    per call, each call from the last state and controller state of the one before."""
+    dt_t = torch.tensor(dt, dtype=x0.dtype)
+    x, o, parts, done = x0, orders0, [], 0
+    while done < steps:
+        n = min(CAPACITY, steps - done)
+        rec = loop(x, o, parameters, dt_t * done, dt_t, torch.tensor(n, dtype=torch.int64))[:n]
+        parts.append(rec)
+        x, o, done = rec[-1, :, :6], rec[-1, :, 6:8], done + n
+    return torch.cat(parts)

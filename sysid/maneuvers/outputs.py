@@ -1,0 +1,127 @@
+"""The tables of a maneuvers directory (``sysid maneuver MODEL -o DIR``), as data frames.
+
+- ``indices.csv`` (`indices_table`): one row per maneuver (``turning_35_starboard``,
+  ``zigzag_10_10_starboard``, ``crash_stop``): the indices (`INDEX_COLUMNS`: m, deg, ratio;
+  empty where not applicable), with an ensemble or seeds ``n_members`` and the standard
+  deviation over the members ``<index>_std``; ``gate_off_share`` (kNN gate off at this share
+  of the steps, empty without a gate) and ``mostly_outside`` (True when over half); each
+  IMO criterion that applies as ``imo_<index>`` = "met" / "not met" / "not assessed";
+- ``criteria.csv`` (`criteria_table`): every criterion with value, limit, the values as
+  ratios to L (lengths) or in deg (angles), met, and the rule;
+- ``trajectories.csv`` (`trajectory_table`): every step of every maneuver (and of every
+  member), states and inputs in `sysid.state`'s units (m, m/s, rad, rad/s, rps).
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import pandas as pd
+
+from sysid.maneuvers.base import ManeuverResult
+from sysid.maneuvers.criteria import Criterion, criteria_for
+from sysid.maneuvers.indices import INDEX_COLUMNS
+from sysid.state import INPUTS, STATE
+from sysid.store.files import write_csv, write_text
+
+MOSTLY_OUTSIDE = 0.5  # gate off on more than this share of the steps: "mostly outside the training data"
+CRITERION_COLUMNS = ("maneuver", "index", "value", "limit", "ratio", "limit_ratio", "met", "rule")
+
+
+def spread(result: ManeuverResult) -> dict[str, float]:
+    """Standard deviation (ddof 1) of each index over the result's members; empty without
+    at least two members."""
+    if len(result.members) < 2:
+        return {}
+    out = {}
+    for c in INDEX_COLUMNS:
+        values = np.array([getattr(m.indices, c) for m in result.members], dtype=float)
+        values = values[np.isfinite(values)]
+        out[f"{c}_std"] = float(np.std(values, ddof=1)) if len(values) >= 2 else math.nan
+    return out
+
+
+def _verdict(met: bool | None) -> str:
+    return "not assessed" if met is None else ("met" if met else "not met")
+
+
+def indices_table(results: Sequence[ManeuverResult], L: float, U: float, scale: float | None) -> pd.DataFrame:
+    """One row per maneuver (see the module docstring); L [m], U approach speed [m/s],
+    `scale` (full over model length, or None) for the criteria."""
+    rows = []
+    for r in results:
+        row = {"maneuver": r.maneuver.name, "kind": r.maneuver.kind, "model": r.model, **r.indices.as_dict()}
+        if r.members:
+            row["n_members"] = len(r.members)
+            row.update(spread(r))
+        row["gate_off_share"] = r.gate_off_share
+        row["mostly_outside"] = None if r.gate_off_share is None else bool(r.gate_off_share > MOSTLY_OUTSIDE)
+        for c in criteria_for(r.maneuver, r.indices, L, U, scale):
+            row[f"imo_{c.index.rsplit('_', 1)[0]}"] = _verdict(c.met)
+        rows.append(row)
+    frame = pd.DataFrame(rows)
+    order = ["maneuver", "kind", "model", *INDEX_COLUMNS]
+    return frame[order + [c for c in frame.columns if c not in order]]
+
+
+def criteria_table(results: Sequence[ManeuverResult], L: float, U: float, scale: float | None) -> pd.DataFrame:
+    """Every IMO criterion of every maneuver (`Criterion` fields; met as "met", "not met" or
+    "not assessed")."""
+    rows: list[Criterion] = [c for r in results for c in criteria_for(r.maneuver, r.indices, L, U, scale)]
+    frame = pd.DataFrame([{k: getattr(c, k) for k in CRITERION_COLUMNS} for c in rows], columns=list(CRITERION_COLUMNS))
+    frame["met"] = [_verdict(c.met) for c in rows]
+    return frame
+
+
+def trajectory_table(results: Sequence[ManeuverResult]) -> pd.DataFrame:
+    """Every step of every maneuver and member: maneuver, model, t [s], the state (`STATE`),
+    the inputs held over the step (`INPUTS`; delta_rudder their mean over the step) and
+    ``rudder_angle`` [rad] at t."""
+    parts = []
+    for r in results:
+        for own in [r, *r.members]:
+            frame = pd.DataFrame(own.states, columns=list(STATE))
+            frame[list(INPUTS)] = own.inputs
+            frame.insert(0, "t", own.t)
+            frame.insert(0, "model", own.model)
+            frame.insert(0, "maneuver", r.maneuver.name)
+            frame["rudder_angle"] = own.rudder
+            parts.append(frame)
+    return pd.concat(parts, ignore_index=True)
+
+
+def summary_document(subject_label: str, kind: str, ship, conditions, sources: dict[str, str],
+                     results: Sequence[ManeuverResult], compiled: bool, seconds: float, spread: str = "") -> dict:
+    """summary.json of a maneuvers directory: the model, the ship's dimensions and scale,
+    every condition with where it came from, per maneuver the kNN gate's off share."""
+    L, B = float(ship["L_pp"]), float(ship["B"])
+    scale = ship.maneuvering.get("scale")
+    return {
+        "model": subject_label, "kind": kind, "ship": ship.name, "ship_file": ship.source,
+        "L_pp_m": L, "B_m": B, "scale": scale,
+        "L_over_U_s": L / conditions.speed,
+        "L_over_U_full_scale_s": None if scale is None else L / conditions.speed * math.sqrt(scale),
+        "conditions": {"speed_m_s": conditions.speed, "rps": conditions.rps,
+                       "rudder_rate_deg_s": conditions.rudder_rate, "dt_s": conditions.dt,
+                       "duration_s": conditions.duration, "wind_speed_m_s": conditions.wind_speed,
+                       "wind_direction_deg": math.degrees(conditions.wind_direction),
+                       "integrator": conditions.method.value},
+        "sources": dict(sources), "compiled": compiled, "seconds": seconds,
+        "spread": spread, "n_members": len(results[0].members) if results else 0,
+        "maneuvers": [r.maneuver.name for r in results],
+        "gate_off_share": {r.maneuver.name: r.gate_off_share for r in results},
+    }
+
+
+def write_maneuvers(directory, results: Sequence[ManeuverResult], ship, conditions, summary: dict) -> None:
+    """indices.csv, criteria.csv, trajectories.csv and summary.json into `directory` (a
+    staging directory: `sysid.store.staging.staged_directory`)."""
+    directory = Path(directory)
+    L, scale = float(ship["L_pp"]), ship.maneuvering.get("scale")
+    write_csv(indices_table(results, L, conditions.speed, scale), directory / "indices.csv", float_format="%.8g")
+    write_csv(criteria_table(results, L, conditions.speed, scale), directory / "criteria.csv", float_format="%.8g")
+    write_csv(trajectory_table(results), directory / "trajectories.csv", float_format="%.10g")
+    write_text(json.dumps(summary, indent=2), directory / "summary.json")

@@ -1,0 +1,181 @@
+"""The indices of recorded turning and zig-zag runs beside each model's prediction of them.
+
+A recorded run's order is its largest rudder angle (95th percentile of |delta|, rounded to
+a whole degree); the turn is the longest stretch of samples within 10 % of it, a zig-zag's
+first order the first such stretch of `HOLD_S` (the approach's course keeping never holds
+that long); the execute is the last sample before it with the rudder below half of the
+order on that side. The maneuver is a
+turning circle of that angle, or a zig-zag A/A (the dataset's zig-zags check at the rudder
+angle; a scenario name such as "Zigzag 20/20" gives both). A model predicts the run open
+loop from the recorded state at the execute with the recorded inputs (zero-order hold,
+the protocol's rate and integrator); the indices of the record and of each prediction are
+computed by the same functions (`sysid.maneuvers.indices`), the zig-zag's reversals taken
+from the recorded rudder for both.
+"""
+from __future__ import annotations
+
+import math
+import os
+import re
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+import torch
+from torch import nn
+
+from sysid.data.datasets import TEST_FILES, data_dir
+from sysid.data.recordings import Run, read_run
+from sysid.dynamics.integrators import IntegratorLike, Method
+from sysid.errors import DataError
+from sysid.fast.compiled import predict
+from sysid.maneuvers.any_model import load_maneuver_model
+from sysid.maneuvers.base import Maneuver, Side, TurningCircle, ZigZag
+from sysid.maneuvers.indices import INDEX_COLUMNS, KIND_INDICES, Track, maneuver_indices
+from sysid.maneuvers.simulate import gate_off_share
+from sysid.store.files import write_csv
+
+RECORD_COLUMNS = ["scenario", "file", "maneuver", "model", "n_members", *INDEX_COLUMNS,
+                  *(f"{c}_std" for c in INDEX_COLUMNS), "gate_off_share"]
+RECORDED = "recorded"  # the `model` of the record's own row
+HOLD_S = 5.0  # [s] a zig-zag's first order is the first stretch this long near the run's largest angle
+
+
+def recorded_test_runs(data: str | os.PathLike | None = None, rate: float = 1.0) -> dict[str, Run]:
+    """The protocol's turning and zig-zag test runs (scenario -> `Run` at `rate` [Hz])."""
+    root = data_dir(data)
+    return {name: read_run(root / path, rate) for name, path in TEST_FILES.items()
+            if name.startswith(("Turning", "Zigzag"))}
+
+
+def recorded_maneuver(run: Run, scenario: str = "") -> tuple[Maneuver, int]:
+    """(the maneuver of a recorded run, the sample index of its execute). The kind comes
+    from the scenario name or the file's folder (``turning/``, ``zigzag/``)."""
+    text = f"{scenario} {run.path.parent.name} {run.name}".lower()
+    kind = "zigzag" if "zigzag" in text else "turning" if ("turn" in text) else None
+    if kind is None:
+        raise DataError(f"{run.path}: not a turning or zig-zag run (name it in the scenario or keep it in "
+                        "a turning/ or zigzag/ folder)")
+    rudder = run.inputs[:, 1]
+    order = float(np.percentile(np.abs(rudder), 95))
+    if order < math.radians(1.0):
+        raise DataError(f"{run.path}: no rudder order found (95th percentile of |delta_rudder| below 1 deg)")
+    full = np.concatenate(([0], (np.abs(rudder) >= 0.9 * order).astype(int), [0]))
+    edges = np.diff(full)
+    starts, ends = np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0]  # stretches at the order
+    lengths = (ends - starts) * run.dt
+    if kind == "turning":  # the turn: the longest stretch at the order
+        first = int(starts[np.argmax(lengths)])
+    else:  # the first order of the zig-zag: the first stretch held HOLD_S
+        held = np.nonzero(lengths >= HOLD_S)[0]
+        if not len(held):
+            raise DataError(f"{run.path}: the rudder never holds its order ({math.degrees(order):.0f} deg) "
+                            f"for {HOLD_S:g} s")
+        first = int(starts[held[0]])
+    sign = 1.0 if rudder[first] > 0 else -1.0
+    side = Side.STARBOARD if sign > 0 else Side.PORT
+    execute = first
+    while execute > 0 and sign * rudder[execute] >= 0.5 * order:  # back to the sample before the order
+        execute -= 1
+    angle = float(round(math.degrees(order)))
+    if kind == "turning":
+        return TurningCircle(angle, side), execute
+    named = re.search(r"(\d+(?:\.\d+)?)\s*/\s*(\d+(?:\.\d+)?)", scenario)
+    rudder_deg, check_deg = (float(named[1]), float(named[2])) if named else (angle, angle)
+    return ZigZag(rudder_deg, check_deg, side), execute
+
+
+def _predictions(model: nn.Module, runs: Sequence[Run], starts: Sequence[int], method: Method
+                 ) -> list[tuple[np.ndarray, float | None]]:
+    """Each run predicted from its recorded state at `starts` with its recorded inputs, all
+    runs in one batched integration (shorter ones padded with their last inputs):
+    (states (T_i, 6), kNN gate off share or None) per run."""
+    lengths = [len(r) - s for r, s in zip(runs, starts)]
+    longest = max(lengths)
+    x0 = torch.tensor(np.stack([r.states[s] for r, s in zip(runs, starts)]), dtype=torch.float64)
+    inputs = []
+    for r, s in zip(runs, starts):
+        u = r.inputs[s:]
+        inputs.append(np.concatenate([u, np.repeat(u[-1:], longest - len(u), 0)]))
+    u = torch.tensor(np.stack(inputs, 1), dtype=torch.float64)
+    states = predict(model, x0, u, runs[0].dt, method)
+    out = []
+    for i, n in enumerate(lengths):
+        share = gate_off_share(model, states[:n - 1, i], u[:n - 1, i])
+        out.append((states[:n, i].numpy(), share))
+    return out
+
+
+def _row(scenario: str, run: Run, maneuver: Maneuver, model: str, values: list[dict], shares: list) -> dict:
+    row = {"scenario": scenario, "file": run.name, "maneuver": maneuver.name, "model": model, "n_members": len(values)}
+    for c in INDEX_COLUMNS:
+        column = np.array([v[c] for v in values], dtype=float)
+        finite = column[np.isfinite(column)]
+        row[c] = float(finite.mean()) if len(finite) == len(column) else math.nan
+        row[f"{c}_std"] = float(np.std(finite, ddof=1)) if len(finite) >= 2 else math.nan
+    known = [s for s in shares if s is not None]
+    row["gate_off_share"] = float(np.mean(known)) if known else math.nan
+    return row
+
+
+def record_comparison(models: Mapping[str, Sequence[nn.Module]], runs: Mapping[str, Run],
+                      method: IntegratorLike = "euler") -> pd.DataFrame:
+    """`RECORD_COLUMNS` rows: for each run (scenario -> `Run`) the record's indices, then
+    each model's (label -> its models: one, or several seeds whose indices are averaged,
+    with their standard deviation in ``<index>_std``) prediction of it from the execute."""
+    method = Method.parse(method)
+    scenarios = list(runs)
+    found = [recorded_maneuver(runs[s], s) for s in scenarios]
+    starts = [e for _, e in found]
+    rows = []
+    predicted = {label: [_predictions(m, [runs[s] for s in scenarios], starts, method) for m in members]
+                 for label, members in models.items()}
+    for i, scenario in enumerate(scenarios):
+        run, (maneuver, start) = runs[scenario], found[i]
+        t = run.t[start:] - run.t[start]
+        rudder = run.inputs[start:, 1]
+        record = maneuver_indices(maneuver, Track.of(t, run.states[start:]), rudder).as_dict()
+        rows.append(_row(scenario, run, maneuver, RECORDED, [record], [None]))
+        for label, per_member in predicted.items():
+            values = [maneuver_indices(maneuver, Track.of(t, p[i][0]), rudder).as_dict() for p in per_member]
+            rows.append(_row(scenario, run, maneuver, label, values, [p[i][1] for p in per_member]))
+    frame = pd.DataFrame(rows, columns=RECORD_COLUMNS)
+    frame.loc[frame.model == RECORDED, "n_members"] = 0
+    return frame
+
+
+def side_by_side(frame: pd.DataFrame) -> pd.DataFrame:
+    """A `record_comparison` frame as one row per (scenario, index that applies) and one
+    column per model, the record first: what the report shows."""
+    rows = []
+    for (scenario, maneuver), group in frame.groupby(["scenario", "maneuver"], sort=False):
+        kind = "zigzag" if maneuver.startswith("zigzag") else "turning"
+        for index in KIND_INDICES[kind]:
+            values = dict(zip(group.model, group[index]))
+            if all(isinstance(v, float) and math.isnan(v) for v in values.values()):
+                continue
+            rows.append({"scenario": scenario, "maneuver": maneuver, "index": index, **values})
+    return pd.DataFrame(rows)
+
+
+def run_models(run_dirs: Mapping[str, str | os.PathLike]) -> dict[str, list[nn.Module]]:
+    """label -> models of run directories (a folder of seed run directories gives each
+    seed's model)."""
+    out = {}
+    for label, path in run_dirs.items():
+        subject = load_maneuver_model(Path(path))
+        out[label] = [m for _, m in subject.members] if subject.spread == "seeds" else [subject.model]
+    return out
+
+
+RECORD_FILE = "maneuver_indices.csv"
+
+
+def write_record_comparison(out_dir: str | os.PathLike, run_dirs: Mapping[str, str | os.PathLike],
+                            data: str | os.PathLike | None = None, method: IntegratorLike = "euler") -> Path:
+    """``out_dir/maneuver_indices.csv``: `record_comparison` of the protocol's turning and
+    zig-zag test runs (1 Hz) and the models of `run_dirs` (label -> run directory or folder
+    of seed run directories)."""
+    frame = record_comparison(run_models(run_dirs), recorded_test_runs(data), method)
+    return write_csv(frame, Path(out_dir) / RECORD_FILE, float_format="%.6g")

@@ -1,0 +1,166 @@
+"""Standard maneuvers of any force model: conditions from the ship file and the model,
+closed-loop simulation (eager and batched over maneuvers, or compiled), indices, the kNN
+gate's share along the way, and the spread over an ensemble's members or seeds.
+
+    from sysid.maneuvers import load_maneuver_model, default_conditions, run_maneuvers, imo_maneuvers
+    subject = load_maneuver_model("runs/hybrid_D2")                 # or "configs/ships/kvlcc2_l7.toml"
+    conditions, sources = default_conditions(subject.model, subject.ship)
+    results = run_maneuvers(subject, imo_maneuvers(), conditions, compiled=True)
+    results[0].indices.advance_m                                      # [m]
+"""
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+import torch
+from torch import nn
+
+from sysid.dynamics.integrators import Method
+from sysid.maneuvers.any_model import ManeuverModel, ship_of
+from sysid.maneuvers.base import Conditions, Maneuver, ManeuverError, ManeuverResult, check_number
+from sysid.maneuvers.closed_loop import compiled_loop, run_compiled, run_eager
+from sysid.maneuvers.controllers import initial_orders, order_parameters
+from sysid.maneuvers.indices import Track, maneuver_indices
+from sysid.maneuvers.straight import straight_running_rps
+from sysid.mmg.ship import Ship
+
+FULL_SCALE_RUDDER_RATE = 2.32  # deg/s: 65 deg in 28 s (SOLAS II-1/29), at full scale
+DURATION_L_OVER_U = 80.0       # default duration [s]: this many times L/U0
+GATE_CHUNK = 1024              # rows per call when the kNN gate is evaluated along a maneuver
+
+
+def default_rudder_rate(ship: Ship) -> tuple[float, str]:
+    """(rudder rate [deg/s], where it comes from): the ship file's steering gear, else
+    2.32 deg/s at full scale Froude-scaled (times sqrt(scale)) with a scale factor, else
+    2.32 deg/s."""
+    given = ship.maneuvering
+    if "rudder_rate" in given:
+        return float(given["rudder_rate"]), "ship file [maneuvering] rudder_rate"
+    if "scale" in given:
+        scale = float(given["scale"])
+        return FULL_SCALE_RUDDER_RATE * math.sqrt(scale), f"2.32 deg/s at full scale, Froude-scaled (scale {scale:g})"
+    return FULL_SCALE_RUDDER_RATE, "2.32 deg/s (ship file gives no scale: taken as full scale)"
+
+
+def default_conditions(model: nn.Module, ship: Ship, *, speed: float | None = None, rps: float | None = None,
+                       rudder_rate: float | None = None, dt: float = 0.1, duration: float | None = None,
+                       wind_speed: float = 0.0, wind_direction: float = 0.0,
+                       method: Method | str = Method.RK4) -> tuple[Conditions, dict[str, str]]:
+    """`Conditions` with every value not given taken from the ship file or the model, and
+    where each came from: approach speed [m/s] from ``[maneuvering] approach_speed``;
+    revolutions [rps] that hold it in straight running (`straight_running_rps`); rudder
+    rate [deg/s] (`default_rudder_rate`); duration [s] `DURATION_L_OVER_U` L/U0 rounded up to
+    10 s; calm water."""
+    sources = {}
+    if speed is None:
+        if "approach_speed" not in ship.maneuvering:
+            raise ManeuverError(f"{ship.source or ship.name}: no approach speed: give --speed (speed= in Python), or "
+                                "approach_speed [m/s] in the ship file's [maneuvering] table")
+        speed, sources["speed"] = float(ship.maneuvering["approach_speed"]), "ship file [maneuvering] approach_speed"
+    else:
+        sources["speed"] = "given"
+    check_number("approach speed", speed, "m/s", positive=True)  # before the search for revolutions
+    check_number("wind speed", wind_speed, "m/s", low=0.0)
+    check_number("wind direction", wind_direction, "rad")
+    if rps is None:
+        rps = straight_running_rps(model, speed, wind_speed, wind_direction)
+        sources["rps"] = "straight running of the model"
+    else:
+        sources["rps"] = "given"
+    if rudder_rate is None:
+        rudder_rate, sources["rudder_rate"] = default_rudder_rate(ship)
+    else:
+        sources["rudder_rate"] = "given"
+    if duration is None:
+        L = float(ship["L_pp"])
+        duration = 10.0 * math.ceil(DURATION_L_OVER_U * L / speed / 10.0)
+        sources["duration"] = f"{DURATION_L_OVER_U:g} L/U0"
+    else:
+        sources["duration"] = "given"
+    sources["wind"] = "calm water" if wind_speed == 0.0 else "given"
+    return Conditions(speed, rps, rudder_rate, dt, duration, wind_speed, wind_direction, method), sources
+
+
+def ahead_only(model: nn.Module) -> bool:
+    """True when the model's propeller force is the standard MMG family's, which holds for
+    ahead motion only (no astern thrust): a crash stop needs a four-quadrant propeller (or
+    a learned force, NN-only)."""
+    return getattr(model, "kind", "mmg") != "nn" and ship_of(model).models.get("propeller") != "four_quadrant"
+
+
+def gate_off_share(model: nn.Module, states: torch.Tensor, inputs: torch.Tensor) -> float | None:
+    """Share of the rows (states (N, 6), inputs (N, 4)) at which the model's kNN gate
+    switches its FNN off; None for a model without a gate."""
+    off, total = 0, 0
+    with torch.no_grad():
+        for lo in range(0, states.shape[0], GATE_CHUNK):
+            gate = model(states[lo:lo + GATE_CHUNK], inputs[lo:lo + GATE_CHUNK]).gate_on
+            if gate is None:
+                return None
+            off += int((~gate).sum())
+            total += gate.numel()
+    return off / total if total else None
+
+
+def _results(maneuvers: Sequence[Maneuver], conditions: Conditions, x0: torch.Tensor, record: torch.Tensor,
+             label: str) -> list[ManeuverResult]:
+    """`ManeuverResult`s from a record (steps, B, `RECORD`) of closed-loop steps from x0 (B, 6);
+    the kNN gate's off share is over the steps' start states."""
+    steps = record.shape[0]
+    states = torch.cat((x0[None], record[..., :6]))
+    rudder = torch.cat((torch.zeros_like(x0[None, :, 0]), record[..., 6]))
+    held = torch.cat((record[..., 8:12], record[-1:, :, 8:12]))
+    t = np.arange(steps + 1) * conditions.dt
+    out = []
+    for b, maneuver in enumerate(maneuvers):
+        s, r, u = states[:, b].numpy(), rudder[:, b].numpy(), held[:, b].numpy()
+        indices = maneuver_indices(maneuver, Track.of(t, s), r)
+        on = record[:, b, 12]
+        share = None if torch.isnan(on).any() else float((on < 0.5).double().mean())
+        out.append(ManeuverResult(maneuver, t, s, r, u, indices, share, label))
+    return out
+
+
+def simulate_maneuvers(model: nn.Module, maneuvers: Sequence[Maneuver], conditions: Conditions, *,
+                       compiled: bool = False, label: str = "model") -> list[ManeuverResult]:
+    """Each maneuver from straight running at the approach speed (x = y = psi = 0, u = U0,
+    v_m = r = 0, rudder amidships) for `conditions.duration`, closed loop, with its indices
+    and the kNN gate's off share.
+
+    Eager: all maneuvers at once, one batched step per time step. ``compiled=True``: one
+    maneuver at a time through the model's compiled loop (`sysid.maneuvers.closed_loop`;
+    compiled once per model and rule, cached on disk, one notice line on stderr), or eager
+    where compilation is off or unavailable; the numbers agree to round-off.
+    """
+    if not maneuvers:
+        return []
+    if any(m.kind == "crash_stop" for m in maneuvers) and ahead_only(model):
+        raise ManeuverError(f"crash stop: the propeller model {ship_of(model).models.get('propeller')!r} of "
+                            f"{ship_of(model).name} is for ahead motion only (no astern thrust); a crash stop needs "
+                            "a four-quadrant propeller")
+    dtype = torch.float64
+    x0 = torch.zeros(len(maneuvers), 6, dtype=dtype)
+    x0[:, 1] = conditions.speed
+    orders = initial_orders(maneuvers, dtype)
+    parameters = order_parameters(maneuvers, conditions, dtype)
+    loop = compiled_loop(model, conditions.method, dtype) if compiled else None
+    if loop is None:
+        record = run_eager(model, x0, orders, parameters, conditions.steps, conditions.dt, conditions.method)
+    else:
+        record = torch.cat([run_compiled(loop, x0[b:b + 1], orders[b:b + 1], parameters[b:b + 1], conditions.steps,
+                                         conditions.dt) for b in range(len(maneuvers))], 1)
+    return _results(maneuvers, conditions, x0, record, label)
+
+
+def run_maneuvers(subject: ManeuverModel, maneuvers: Sequence[Maneuver], conditions: Conditions, *,
+                  compiled: bool = False) -> list[ManeuverResult]:
+    """`simulate_maneuvers` of the subject's model, and of each member (an ensemble's
+    members, a folder's seeds) into each result's ``members``: the spread of the indices."""
+    results = simulate_maneuvers(subject.model, maneuvers, conditions, compiled=compiled, label=subject.label)
+    for label, member in subject.members:
+        for result, own in zip(results, simulate_maneuvers(member, maneuvers, conditions, compiled=compiled,
+                                                           label=label)):
+            result.members.append(own)
+    return results

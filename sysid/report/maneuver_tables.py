@@ -1,0 +1,82 @@
+"""The tables of maneuver indices in reports: a maneuvers directory's indices and IMO
+criteria (`sysid.report.maneuver_report`), and a reproduction's recorded turning and
+zig-zag runs beside each model's prediction of them (``maneuver_indices.csv``)."""
+from __future__ import annotations
+
+import math
+
+import pandas as pd
+
+from sysid.maneuvers.indices import KIND_INDICES
+from sysid.report.plain_tables import PlainTable, number
+
+INDEX_LABELS = {"advance_m": "advance [m]", "transfer_m": "transfer [m]", "tactical_diameter_m": "tactical diam. [m]",
+                "steady_turning_diameter_m": "steady diam. [m]", "speed_loss_ratio": "speed loss [-]",
+                "initial_turning_distance_m": "initial turning [m]", "first_overshoot_deg": "1st overshoot [deg]",
+                "second_overshoot_deg": "2nd overshoot [deg]", "head_reach_m": "head reach [m]",
+                "track_reach_m": "track reach [m]"}
+
+
+def indices_plain_table(indices: pd.DataFrame) -> PlainTable:
+    """Indices per maneuver (± the members' standard deviation) and the kNN gate's share."""
+    shown = [c for c in INDEX_LABELS if c in indices and indices[c].notna().any()]
+    gate = indices["gate_off_share"].notna().any() if "gate_off_share" in indices else False
+    rows, marks = [], []
+    for r in indices.itertuples(index=False):
+        d = r._asdict()
+        cells = [d["maneuver"]] + [number(d[c], 4, d.get(f"{c}_std")) for c in shown]
+        mark = [""] * len(cells)
+        if gate:
+            share = d["gate_off_share"]
+            outside = " (mostly outside)" if share > 0.5 else ""
+            cells.append("" if pd.isna(share) else f"{100 * share:.0f} %{outside}")
+            mark.append("not-met" if not pd.isna(share) and share > 0.5 else "")
+        rows.append(cells)
+        marks.append(mark)
+    columns = ["maneuver"] + [INDEX_LABELS[c] for c in shown] + (["kNN gate off"] if gate else [])
+    spread = "n_members" in indices and indices["n_members"].notna().any()
+    note = ("Empty: not applicable or not reached in the run. ± : standard deviation over the members. "
+            if spread else "Empty: not applicable or not reached in the run. ")
+    if gate:
+        note += "kNN gate off: share of the steps at which the FNN is switched off (outside the training data)."
+    return PlainTable("indices", "Maneuver indices", columns, rows, marks, note)
+
+
+def criteria_plain_table(criteria: pd.DataFrame) -> PlainTable:
+    """Every IMO criterion: value, limit, in L (lengths) or deg (angles), met or not."""
+    rows, marks = [], []
+    for r in criteria.itertuples(index=False):
+        unit = "deg" if r.index.endswith("_deg") else "L"
+        rows.append([r.maneuver, r.rule, number(r.value, 4), number(r.limit, 4), f"{number(r.ratio, 3)} {unit}",
+                     r.met])
+        marks.append(["", "", "", "", "", {"met": "met", "not met": "not-met"}.get(r.met, "muted")])
+    return PlainTable("criteria", "IMO MSC.137(76) criteria", ["maneuver", "criterion", "value", "limit",
+                                                                "value in L or deg", "verdict"], rows, marks,
+                      "Lengths in m and as multiples of L = L_pp (Froude-invariant); overshoot angles in deg.")
+
+
+def record_plain_table(frame: pd.DataFrame) -> PlainTable:
+    """One row per recorded run and index that applies, one column per model (the record
+    first): the indices of the record and of each model's prediction from the record's
+    execute with the recorded inputs; ± the spread over seeds; the kNN gate's share."""
+    models = list(dict.fromkeys(frame["model"]))
+    rows = []
+    for (scenario, maneuver), group in frame.groupby(["scenario", "maneuver"], sort=False):
+        by_model = {r["model"]: r for _, r in group.iterrows()}
+        kind = "zigzag" if maneuver.startswith("zigzag") else "turning"
+        for index in KIND_INDICES[kind]:
+            cells = [number(by_model[m][index], 3, by_model[m].get(f"{index}_std")) if m in by_model else ""
+                     for m in models]
+            if not any(cells):
+                continue
+            rows.append([scenario, INDEX_LABELS[index], *cells])
+        shares = [by_model[m]["gate_off_share"] if m in by_model else math.nan for m in models]
+        if any(not pd.isna(v) for v in shares):
+            rows.append([scenario, "kNN gate off [%]", *("" if pd.isna(v) else f"{100 * v:.0f}" for v in shares)])
+    return PlainTable("maneuver-record", "Standard-maneuver indices: recorded runs and predictions", ["test", "index",
+                      *models], rows, [],
+                      "Each test run's IMO indices (sysid.maneuvers.indices) from the record and from each model's "
+                      "prediction of the whole run from the record's execute with the recorded inputs (1 Hz, the "
+                      "protocol's integrator; zig-zag reversals at the recorded rudder's). Lengths in m; negative "
+                      "overshoot: the predicted heading peaked before the check angle. Empty: not reached in the run. "
+                      "± : standard deviation over seeds.")

@@ -1,0 +1,87 @@
+"""``sysid maneuver``: the directory it writes (row and column names, empty cells where an
+index does not apply, criteria, trajectories, report, manifest) and one clear line for
+every bad option, with nothing written."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from cli_harness import assert_refused, in_process  # noqa: E402
+
+from sysid.maneuvers import INDEX_COLUMNS  # noqa: E402
+from sysid.mmg.ship import ships_dir  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def written(tmp_path_factory):
+    out = tmp_path_factory.mktemp("maneuvers") / "kvlcc2"
+    from sysid.cli import run
+    run(["maneuver", "kvlcc2_l7", "-o", str(out), "--turning", "35", "10", "--zigzag", "10/10",
+         "--side", "starboard", "--duration", "60", "--dt", "0.2", "--eager"])
+    return out
+
+
+def test_directory_holds_indices_criteria_trajectories_and_report(written):
+    indices = pd.read_csv(written / "indices.csv")
+    assert list(indices.maneuver) == ["turning_35_starboard", "turning_10_starboard", "zigzag_10_10_starboard"]
+    assert list(indices.columns[3:3 + len(INDEX_COLUMNS)]) == list(INDEX_COLUMNS)
+    turn = indices.set_index("maneuver").loc["turning_35_starboard"]
+    assert 2.0 < turn.advance_m / 7.0 < 4.5 and turn.tactical_diameter_m > turn.transfer_m > 0
+    assert pd.isna(turn.first_overshoot_deg) and pd.isna(turn.head_reach_m)  # empty: not a zig-zag, no stop
+    assert turn.imo_advance == "met" and turn.imo_tactical_diameter == "met"
+    zigzag = indices.set_index("maneuver").loc["zigzag_10_10_starboard"]
+    assert 0 < zigzag.first_overshoot_deg < 10 and pd.isna(zigzag.advance_m)
+    assert zigzag.imo_first_overshoot in ("met", "not met")  # kvlcc2_l7 gives a scale: assessed
+    assert indices.gate_off_share.isna().all()  # the MMG has no gate
+    criteria = pd.read_csv(written / "criteria.csv")
+    assert {"advance_m", "tactical_diameter_m", "initial_turning_distance_m", "first_overshoot_deg",
+            "second_overshoot_deg"} <= set(criteria["index"])
+    row = criteria[(criteria.maneuver == "turning_35_starboard") & (criteria["index"] == "advance_m")].iloc[0]
+    assert row.limit == pytest.approx(4.5 * 7.0) and row.ratio == pytest.approx(turn.advance_m / 7.0, rel=1e-6)
+    traj = pd.read_csv(written / "trajectories.csv")
+    one = traj[traj.maneuver == "turning_35_starboard"]
+    assert len(one) == 301 and one.t.iloc[-1] == pytest.approx(60.0)
+    assert one.u.iloc[0] == pytest.approx(1.17248) and one.psi.iloc[0] == 0.0
+    assert np.degrees(one.rudder_angle.max()) == pytest.approx(35.0)
+    summary = json.loads((written / "summary.json").read_text())
+    assert summary["sources"]["speed"].startswith("ship file") and summary["sources"]["rps"].startswith("straight")
+    assert summary["conditions"]["rudder_rate_deg_s"] == pytest.approx(2.32 * math.sqrt(45.714))
+    manifest = json.loads((written / "manifest.json").read_text())
+    assert manifest["kind"] == "maneuvers" and "report.pdf" in manifest["files"]
+    html = (written / "report.html").read_text()
+    assert "IMO MSC.137(76) criteria" in html and "x0 (north) [m]" in html and "<svg" in html
+
+
+def test_report_command_rebuilds_a_maneuvers_report(written, tmp_path, capsys):
+    outcome = in_process(capsys, "report", written, "-o", tmp_path / "again")
+    assert outcome.code == 0, outcome.err
+    assert (tmp_path / "again" / "report.pdf").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("args, named", [
+    (["--dt", "0"], "--dt"), (["--dt", "nan"], "--dt"), (["--speed", "-1"], "--speed"),
+    (["--rudder-rate", "inf"], "--rudder-rate"), (["--duration", "1e9"], "--duration"),
+    (["--zigzag", "10"], "--zigzag"), (["--zigzag", "10/abc"], "--zigzag"), (["--turning", "95"], "95"),
+    (["--wind", "3"], "--wind"), (["--wind", "-2,40"], "--wind"), (["--side", "up"], "--side"),
+    (["--integrator", "rk5"], "--integrator"), (["--crash-stop"], "ahead motion"),
+])
+def test_bad_options_are_one_clear_line_and_nothing_written(tmp_path, capsys, args, named):
+    out = tmp_path / "out"
+    outcome = in_process(capsys, "maneuver", "kvlcc2_l7", "-o", out, "--eager", "--duration", "5", *args)
+    assert_refused(outcome, 2, named, absent=(out,))
+
+
+def test_missing_approach_speed_names_the_ship_file_and_the_fix(tmp_path, capsys):
+    text = (ships_dir() / "kvlcc2_l7.toml").read_text().replace("approach_speed = 1.17248", "")
+    ship = tmp_path / "ship.toml"
+    ship.write_text(text)
+    outcome = in_process(capsys, "maneuver", ship, "-o", tmp_path / "out", "--eager")
+    line = assert_refused(outcome, 2, str(ship), "--speed", absent=(tmp_path / "out",))
+    assert "approach_speed" in line
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace("scale = 45.714", "scale = 0.5"))
+    assert_refused(in_process(capsys, "maneuver", bad, "-o", tmp_path / "o2"), 2, "[maneuvering] scale")

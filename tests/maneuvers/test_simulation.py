@@ -1,0 +1,130 @@
+"""The simulation around the indices: straight-running revolutions against the closed form
+of the standard MMG, the rudder's mean over a rate-limited step against quadrature, the
+kNN gate's share along a maneuver that leaves the training data, the spread over an
+ensemble's members, and (slow) the compiled loop against the eager one."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from sysid import MMG, load_ship
+from sysid.hybrid.correction import ForceCorrection, correction_inputs
+from sysid.hybrid.ensemble import SeedEnsemble
+from sysid.hybrid.force_models import CorrectedModel
+from sysid.hybrid.knn_gate import KNNGate
+from sysid.maneuvers import (Conditions, CrashStop, ManeuverError, ManeuverModel, TurningCircle, ZigZag,
+                             default_conditions, run_maneuvers, simulate_maneuvers, straight_running_rps)
+from sysid.maneuvers.controllers import rate_limited
+from sysid.maneuvers.outputs import indices_table
+from sysid.maneuvers.simulate import gate_off_share
+from sysid.maneuvers.straight import surge_acceleration
+from sysid.mmg.wind import relative_wind
+
+
+def test_straight_running_rps_is_the_closed_form_of_the_standard_mmg():
+    """v = r = 0, rudder amidships: (1 - t_P) rho D^4 K_T(J) n^2 = R'_0 0.5 rho L d U^2 with
+    J = U (1 - w_P0) / (n D), a quadratic in n."""
+    ship = load_ship("kvlcc2_l7")
+    p = ship.parameters
+    U = 1.1
+    a = U * (1 - p["w_P0"]) / p["D"]
+    R = 0.5 * p["L_pp"] * p["d"] * U**2 * p["R_0"] / ((1 - p["t_P"]) * p["D"] ** 4)
+    k0, k1, k2 = p["k0"], p["k1"], p["k2"]
+    n = (-k1 * a + math.sqrt(k1**2 * a**2 - 4 * k0 * (k2 * a**2 - R))) / (2 * k0)
+    model = MMG(ship)
+    assert straight_running_rps(model, U) == pytest.approx(n, rel=1e-10)
+    assert abs(surge_acceleration(model, U, np.array([n]))[0]) < 1e-12
+
+
+def test_straight_running_without_a_root_is_one_clear_error():
+    with pytest.raises(ManeuverError, match="no propeller revolutions"):
+        straight_running_rps(MMG(load_ship("kvlcc2_l7")), 1.1, max_rps=2.0)
+
+
+@pytest.mark.parametrize("angle, order", [(0.0, 0.5), (0.3, 0.32), (-0.1, 0.0), (0.2, 0.2)])
+def test_rudder_mean_over_a_step_is_the_integral_of_the_rate_limited_ramp(angle, order):
+    rate_dt = 0.05  # rad per step
+    fine = np.linspace(0.0, 1.0, 200001)
+    path = angle + np.clip(order - angle, -rate_dt * fine, rate_dt * fine)  # moves at the rate, stops at the order
+    mean, end = rate_limited(*(torch.tensor([v], dtype=torch.float64) for v in (angle, order, rate_dt)))
+    assert float(mean) == pytest.approx(np.trapezoid(path, fine), abs=1e-9)
+    assert float(end) == pytest.approx(path[-1], abs=1e-15)
+
+
+def _hybrid_without_correction(ship, bank_states: torch.Tensor) -> CorrectedModel:
+    """A hybrid whose FNN gives zero force (so its motion is the MMG's) and whose kNN gate
+    (inputs space, k = 5) was fitted on `bank_states` in straight running."""
+    mmg = MMG(ship)
+    net = ForceCorrection((8,), torch.float64)
+    with torch.no_grad():
+        net.weights[-1].zero_()
+        net.biases[-1].zero_()
+    model = CorrectedModel(mmg, net, None, physics=True, gate_space="inputs")
+    n = straight_running_rps(mmg, float(bank_states[0, 1]))
+    inputs = torch.zeros(len(bank_states), 4, dtype=torch.float64)
+    inputs[:, 0] = n
+    wind = torch.stack(relative_wind(bank_states[:, 1], bank_states[:, 3], bank_states[:, 4], inputs[:, 2],
+                                     inputs[:, 3]), -1)
+    coordinates = model.gate_coordinates(correction_inputs(bank_states, inputs, wind))
+    model.gate, model.gate_enabled = KNNGate(5, 0.99, coordinates.shape[1], torch.float64).fit(coordinates), True
+    return model
+
+
+def test_gate_share_says_a_maneuver_runs_outside_the_training_data():
+    ship = load_ship("kvlcc2_l7")
+    U0 = 1.17248
+    bank = torch.zeros(400, 6, dtype=torch.float64)
+    bank[:, 1] = torch.linspace(U0 - 0.05, U0 + 0.05, 400)  # trained on straight running only
+    hybrid = _hybrid_without_correction(ship, bank)
+    conditions, _ = default_conditions(MMG(ship), ship, duration=40.0, dt=0.2)
+    turn = [TurningCircle(35.0)]
+    theirs, ours = simulate_maneuvers(MMG(ship), turn, conditions)[0], simulate_maneuvers(hybrid, turn, conditions)[0]
+    np.testing.assert_allclose(ours.states, theirs.states, rtol=0, atol=1e-12)  # F_NN = 0: the MMG's motion
+    assert theirs.gate_off_share is None
+    assert ours.gate_off_share > 0.9  # the turn leaves straight running within seconds
+    scan = gate_off_share(hybrid, torch.tensor(ours.states[:-1]), torch.tensor(ours.inputs[:-1]))
+    assert ours.gate_off_share == scan  # the loop's decisions are the gate's own scan's
+    row = indices_table([ours], float(ship["L_pp"]), U0, None).iloc[0]
+    assert bool(row["mostly_outside"]) and row["gate_off_share"] == ours.gate_off_share
+
+
+def test_ensemble_indices_carry_the_members_spread():
+    ships = [load_ship("kvlcc2_l7", {"N_r": v}) for v in (-0.049, -0.055)]
+    members = [MMG(s) for s in ships]
+    subject = ManeuverModel("two", SeedEnsemble(members), ships[0], "mmg", [("a", members[0]), ("b", members[1])],
+                            "ensemble members")
+    conditions = Conditions(1.17248, 11.8, 15.7, 0.2, 60.0)
+    result = run_maneuvers(subject, [TurningCircle(35.0)], conditions)[0]
+    alone = [simulate_maneuvers(m, [TurningCircle(35.0)], conditions)[0].indices.tactical_diameter_m for m in members]
+    row = indices_table([result], 7.0, 1.17248, None).iloc[0]
+    assert row["n_members"] == 2
+    assert row["tactical_diameter_m_std"] == pytest.approx(abs(alone[0] - alone[1]) / math.sqrt(2), rel=1e-12)
+    assert min(alone) < result.indices.tactical_diameter_m < max(alone)  # the mean-force model lies between
+
+
+def test_crash_stop_needs_astern_thrust():
+    ship = load_ship("kvlcc2_l7")
+    with pytest.raises(ManeuverError, match="ahead motion only"):
+        simulate_maneuvers(MMG(ship), [CrashStop()], Conditions(1.17, 11.8, 15.7, 0.2, 10.0))
+
+
+@pytest.mark.slow
+def test_compiled_loop_equals_the_eager_one(tmp_path, monkeypatch):
+    """One compile of the maneuver loop (about a minute), then every maneuver, dt and
+    duration through it: the same states as the eager loop to round-off."""
+    monkeypatch.setenv("SYSID_COMPILE", "1")
+    monkeypatch.setenv("SYSID_CACHE", str(tmp_path))
+    ship = load_ship("esso_osaka")
+    maneuvers = [TurningCircle(35.0), ZigZag(20.0, 20.0, "port"), CrashStop(reversal_s=5.0)]
+    conditions = Conditions(0.35, 8.85, 24.1, 0.1, 70.0)  # 700 steps: two calls of the loop
+    eager = simulate_maneuvers(MMG(ship), maneuvers, conditions)
+    compiled = simulate_maneuvers(MMG(ship), maneuvers, conditions, compiled=True)
+    assert len(list(tmp_path.glob("maneuver-rk4-*.pt2"))) == 1
+    for a, b in zip(eager, compiled):
+        np.testing.assert_allclose(b.states, a.states, rtol=0, atol=1e-10)
+        np.testing.assert_allclose(b.inputs, a.inputs, rtol=0, atol=1e-12)
+    other = simulate_maneuvers(MMG(ship), maneuvers[:1], Conditions(0.35, 8.85, 24.1, 0.25, 30.0), compiled=True)
+    assert other[0].states.shape == (121, 6) and len(list(tmp_path.glob("*.pt2"))) == 1  # no second compile

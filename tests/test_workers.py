@@ -1,0 +1,69 @@
+"""`sysid.workers.in_workers`: Ctrl-C or an error in one worker ends every worker before the
+call returns, and work not yet started never starts."""
+from __future__ import annotations
+
+import functools
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from sysid.workers import in_workers
+
+
+def _started(folder: Path, item: str) -> str:
+    """Work that says it started (a file named by its pid), then waits far longer than a test."""
+    (folder / f"{item}.{os.getpid()}").touch()
+    if item == "fails":
+        while not list(folder.glob("sleeps.*")):  # fail only once the other one works
+            time.sleep(0.05)
+        raise ValueError("bad item")
+    time.sleep(600)
+    return item
+
+
+def _ended(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:  # exited and reaped
+        return True
+    return False
+
+
+def _when(condition, then) -> threading.Thread:
+    def watch():
+        while not condition():
+            time.sleep(0.05)
+        then()
+    thread = threading.Thread(target=watch, daemon=True)
+    thread.start()
+    return thread
+
+
+def test_ctrl_c_ends_every_worker_and_starts_no_more_work(tmp_path):
+    work = functools.partial(_started, tmp_path)
+    before = signal.getsignal(signal.SIGINT)
+    _when(lambda: len(list(tmp_path.iterdir())) == 2, lambda: os.kill(os.getpid(), signal.SIGINT))
+    with pytest.raises(KeyboardInterrupt):
+        in_workers(work, ["a", "b", "c"], 2)
+    started = sorted(tmp_path.iterdir())
+    assert [p.name.split(".")[0] for p in started] == ["a", "b"]  # c was waiting: it never ran
+    assert all(_ended(int(p.suffix[1:])) for p in started)
+    assert signal.getsignal(signal.SIGINT) is before  # put back
+
+
+def test_an_error_in_one_worker_ends_the_others(tmp_path):
+    work = functools.partial(_started, tmp_path)
+    with pytest.raises(ValueError, match="bad item"):
+        in_workers(work, ["sleeps", "fails"], 2)
+    sleeper = [p for p in tmp_path.iterdir() if p.name.startswith("sleeps.")]
+    assert len(sleeper) == 1 and all(_ended(int(p.suffix[1:])) for p in sleeper)
+
+
+def test_results_arrive_each_once(tmp_path):
+    seen = []
+    assert sorted(in_workers(abs, [-3, 1, -2], 2, on_result=seen.append)) == [1, 2, 3]
+    assert sorted(seen) == [1, 2, 3]
