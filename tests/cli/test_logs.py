@@ -28,7 +28,7 @@ def test_stage_lines_are_time_stamped_and_verbosity_follows_v_and_q(tmp_path, da
     verbose = _train(capsys, tmp_path, dataset_dir, "-v")                 # -v after the command's name
     stamped = [STAMP.match(line) for line in verbose.out.splitlines() if STAMP.match(line)]
     stages = [m.group(2).strip() for m in stamped]
-    assert any(s.startswith("train: hybrid model on 2 file(s)") for s in stages)
+    assert any(s.startswith("train: hybrid model on 2 training log(s)") for s in stages)
     assert any(s.startswith("warm start: 3 epochs") for s in stages)       # the warm start says so
     assert any(s.startswith("warm start epoch 3/3: loss") for s in stages)
     assert any(s.startswith("kNN gate:") for s in stages)
