@@ -263,6 +263,12 @@ def output_penalty(f_nn: torch.Tensor, f_mmg: torch.Tensor, w_F: torch.Tensor, b
     return (torch.relu(f_nn.abs() - band * f_mmg.abs()) * w_F).sum(-1)
 
 
+def adam(params, lr: float) -> torch.optim.Adam:
+    """Adam (the paper's optimiser) updating all parameters in a few multi-tensor
+    operations (``foreach``): the same numbers as the per-parameter loop, fewer dispatches."""
+    return torch.optim.Adam(params, lr=lr, foreach=True)
+
+
 def weight_norm(net: ForceCorrection) -> torch.Tensor:
     """||theta||^2 of the FNN weights (Eq. 13), per member (losses are means over members)."""
     return sum((w * w).sum() for w in net.weights) / net.members
@@ -346,7 +352,7 @@ class Trainer:
         checkpoint is written after every epoch, and a resumed stage continues from it.
         """
         t = self.experiment.training
-        opt = torch.optim.Adam(params, lr=lr)
+        opt = adam(params, lr)
         # the learning rate falls by lr_factor after lr_patience epochs without a better
         # validation loss (lr_factor = 1: constant, the paper's Adam)
         sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=t.lr_factor, patience=t.lr_patience) \
@@ -550,8 +556,8 @@ class Trainer:
         """Stage 4: every FNN member regresses the standardised residual force (one step)."""
         t = self.experiment.training
         target = (residual - net.output_mean) / net.output_std
-        s_members = s.expand(net.members, *s.shape)
-        opt = torch.optim.Adam(net.parameters(), lr=3e-3)
+        z = net.standardize_inputs(s).expand(net.members, *s.shape)  # (K, N, 9), fixed over the warm start
+        opt = adam(net.parameters(), 3e-3)
         gen = torch.Generator().manual_seed(self.experiment.experiment.seed + 2)
         bar = self._bar(range(t.warm_start_epochs), "warm start", t.warm_start_epochs, 0)
         if not hasattr(bar, "set_postfix"):
@@ -560,7 +566,7 @@ class Trainer:
             order = torch.randperm(len(s), generator=gen).to(device)
             for lo in range(0, len(s), 256):
                 idx = order[lo:lo + 256]
-                y = net.evaluate(s_members[:, idx], standardized=True, per_member=True)[0]
+                y = net.layers(z[:, idx])[0]
                 loss = ((y - target[idx]) ** 2).mean() + t.lambda_L2 * weight_norm(net)
                 opt.zero_grad()
                 loss.backward()
