@@ -69,8 +69,10 @@ class ForceCorrection(nn.Module):
         return self
 
     def _layer(self, z: torch.Tensor, i: int) -> torch.Tensor:
+        w = self.weights[i]
         b = self.biases[i].reshape(self.members, *([1] * (z.dim() - 2)), -1)
-        return torch.einsum("k...i,kio->k...o", z, self.weights[i]) + b
+        # (K, ..., i) @ (K, i, o) as one batched product over the flattened middle axes
+        return torch.bmm(z.reshape(self.members, -1, w.shape[1]), w).reshape(*z.shape[:-1], w.shape[2]) + b
 
     def evaluate(self, s: torch.Tensor, standardized: bool = False,
                  per_member: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
