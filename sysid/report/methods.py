@@ -250,7 +250,7 @@ def methods_paragraphs(source: ReportSource) -> list[str]:
             text += " MMG coefficients changed from the ship file: " + ", ".join(
                 f"{k} = {v}" for k, v in s.mmg_overrides.items()) + "."
         if run.model != "mmg":
-            text += (f" Trained on {training_data_text(run)} ({_or(s.n_train_windows, '?')} training and "
+            text += (f" Trained on {training_data_text(run)}{held_out_text(run)} ({_or(s.n_train_windows, '?')} training and "
                      f"{_or(s.n_val_windows, '?')} validation windows) for {s.epochs} epochs; "
                      f"the weights of epoch {_or(s.best_epoch, '?')} were kept "
                      f"(training time {_seconds(s.train_seconds)}, seed {_or(s.seed, '?')}).")
@@ -283,6 +283,20 @@ def training_data_text(run: RunRecord) -> str:
         names = [Path(f.file).name for f in data.train]
         return f"{len(names)} of your logs ({_names(names)})"
     return f"data set {run.dataset}"
+
+
+def held_out_text(run: RunRecord) -> str:
+    """"; validated on 3 training logs held out whole (berthing: a; zigzag: b, c; split_seed 0)"
+    for a run with ``[training] validation = "files"`` (summary.json "data.held_out"), else ""."""
+    data = run.summary.data
+    held = data.held_out if data is not None else None
+    if not held:
+        return ""
+    groups = held.get("groups") or {}
+    n = sum(len(v) for v in groups.values())
+    listed = "; ".join(f"{group}: {', '.join(names)}" for group, names in groups.items())
+    return (f", validated on {n} training log{'s' if n != 1 else ''} held out whole ({listed}; "
+            f"split_seed {held.get('split_seed')})")
 
 
 def _names(names: list[str], first: int = 4) -> str:

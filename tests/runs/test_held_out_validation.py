@@ -40,6 +40,12 @@ def test_held_out_logs_are_validation_whole_and_the_run_names_them(dataset_dir, 
     assert summary["data"]["held_out"] == {"val_fraction": 0.3, "split_seed": 5, "groups": {"berthing": sorted(held_names)}}
     assert {f["file"] for f in summary["data"]["validation"]} == {str(r.path) for r in held.validation}
     assert summary["val_loss_multistep"] == trainer.summary_.val_loss_multistep   # the same training, twice
+    # the report's methods name them
+    from sysid.report.methods import methods_paragraphs
+    from sysid.report.source import read_source
+    (held_name,) = held_names
+    assert any(f"validated on 1 training log held out whole (berthing: {held_name}; split_seed 5)" in p
+               for p in methods_paragraphs(read_source(result.path)))
     # the run's config.toml lists every training log and draws the same validation logs again
     again = load_experiment(result.path / "config.toml")
     assert again.training.validation == "files" and again.data.validation == ()
