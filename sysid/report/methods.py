@@ -114,11 +114,11 @@ def reproduction_items(summary: Reproduction) -> list[tuple[str, str]]:
     for card in summary.scorecards:
         model = f"Hybrid (mean over {seeds} seeds)" if seeds > 1 and card.model == "Hybrid" else card.model
         for ds, c in card.datasets.items():
-            by = ", ".join(f"{k} {100 * v:.0f} %" for k, v in c.reduction_vs_mmg_30s_by_scenario.items())
+            nn = f"; {c.nn_text()}" if c.nn_text() else ""
             items.append((f"{model} {ds} vs {card.baseline}",
-                          f"{100 * c.reduction_vs_mmg_30s_mean:.0f} % lower RMSE at 30 s "
-                          f"({by}); {100 * c.reduction_vs_mmg_100s_mean:.0f} % at 100 s; "
-                          f"beats the paper's hybrid in {c.cells_beating_paper_hybrid} of {c.cells} cells"))
+                          f"{100 * c.reduction_vs_mmg_30s_mean:.0f} % lower RMSE at 30 s (mean over the scenarios: "
+                          f"{c.by_scenario_text()}); {100 * c.reduction_vs_mmg_100s_mean:.0f} % at 100 s; "
+                          f"beats the paper's hybrid in {c.cells_beating_paper_hybrid} of {c.cells} cells{nn}"))
     shares = {k: v for k, v in (summary.gate_off_share_random_30s or {}).items() if v is not None}
     if shares:
         items.append(("kNN gate off, Random test (30 s)",
