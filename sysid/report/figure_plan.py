@@ -279,6 +279,39 @@ def _seed_figures(c: _Context) -> None:
               partial(F.seed_boxplots, models, scenarios, title, {k: v for k, v in paper.items() if v}), True)
 
 
+def _cell_figures(source: ReportSource, c: _Context) -> None:
+    """Per data set: every Table 7/8 cell of NN-only and the hybrid relative to the MMG the
+    hybrid corrects, with the seed spread and the paper's printed hybrid."""
+    from sysid.report.cell_ratios import dataset_cells
+
+    for cells in dataset_cells(source):
+        labels = [m.label for m in cells.models]
+        n = len(cells.cells[cells.cells.model == labels[0]])
+        seeds = cells.seeds
+        spread = (f"markers: seed means over {seeds} seeds, bars: min to max over the seeds"
+                  if seeds > 1 else "one seed: points without spread")
+        counts = []
+        hybrid = next((m for m in labels if m.startswith("Hybrid")), None)
+        nn = next((m for m in labels if m.startswith("NN")), None)
+        if hybrid and nn:
+            beats, total = cells.beating(hybrid, nn)
+            counts.append(f"{hybrid} below {nn} in {beats} of {total} cells")
+        if hybrid:
+            mine = cells.cells[cells.cells.model == hybrid].set_index(["scenario", "horizon_s", "channel"]).ratio
+            paper = cells.paper.set_index(["scenario", "horizon_s", "channel"]).ratio
+            shared = mine.index.intersection(paper.index)
+            counts.append(f"below the paper's hybrid in {int((mine.loc[shared] < paper.loc[shared]).sum())} "
+                          f"of {len(shared)}")
+        title = f"Every cell relative to {cells.baseline}, trained on {cells.dataset}"
+        c.add(f"cells_{cells.dataset}", "Hybrid against NN-only and MMG-only", title,
+              f"RMSE of each of the {n} cells of Tables 7 and 8 (scenario x u, v_m, r x horizon) divided by the "
+              f"RMSE of {cells.baseline}, the MMG the hybrid corrects and the baseline of every cut: "
+              f"{', '.join(labels)} ({spread}); black bars: the paper's printed hybrid over the same baseline; "
+              f"dashed: the baseline (1). Log axis, below 1: a smaller error than the baseline. "
+              + ("; ".join(counts) + "." if counts else ""),
+              partial(F.relative_rmse, cells, title), len(cells.cells) > 0)
+
+
 def _sweep_figures(source: ReportSource, plan: FigurePlan) -> None:
     """A sweep: validation loss against each varied key; the seed spread per configuration."""
     from sysid.report import sweep_figures as SF
@@ -311,6 +344,8 @@ def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> 
                      [r for r in runs if r.model == "mmg" or r.dataset == fig_dataset],
                      [r for r in runs if r.model == "hybrid"], fig_dataset,
                      _horizon(runs, 30, short=True), _horizon(runs, 100, short=False), source.paper_protocol)
+        if source.kind == "reproduction":
+            _cell_figures(source, c)
         _error_figures(c)
         _series_figures(c)
         _trajectory_figures(c, ship_size)
