@@ -312,30 +312,32 @@ def _cell_figures(source: ReportSource, c: _Context) -> None:
               partial(F.relative_rmse, cells, title), len(cells.cells) > 0)
 
 
-def _sweep_figures(source: ReportSource, plan: FigurePlan) -> None:
-    """A sweep: validation loss against each varied key; the seed spread per configuration."""
+def _sweep_figures(sweep, plan: FigurePlan, linked: bool = False) -> None:
+    """A sweep (`SweepRecord`): validation loss against each varied key; the seed spread per
+    configuration. `linked`: a sweep shown beside another source (titled by its name)."""
     from sysid.report import sweep_figures as SF
 
-    sweep = source.sweep
     chosen = sweep.summary.best.point if sweep.summary.best else None
     seeds = len(sweep.summary.seeds)
+    name = sweep.summary.name
+    section, key, of = (f"Sweep {name}", f"sweep_{name}_", f" (sweep {name})") if linked else ("Sweep", "sweep_", "")
     plan.figures.append(FigureSpec(
-        "sweep_keys", "Sweep", "val_loss_multistep against the varied keys",
+        f"{key}keys", section, f"val_loss_multistep against the varied keys{of}",
         "val_loss_multistep (the sweep's objective; validation windows only, never the test files) of every "
         "trial against each varied option; grey: means; red circles: the chosen configuration.",
-        partial(SF.objective_by_key, sweep.trials, sweep.keys, chosen, "val_loss_multistep against the varied keys")))
+        partial(SF.objective_by_key, sweep.trials, sweep.keys, chosen, f"val_loss_multistep against the varied keys{of}")))
     plan.figures.append(FigureSpec(
-        "sweep_seeds", "Sweep", f"Spread over {seeds} seeds per configuration",
+        f"{key}seeds", section, f"Spread over {seeds} seeds per configuration{of}",
         "val_loss_multistep of each configuration over its seeds (box: spread; dots: single seeds), best mean "
         "first; red: the chosen configuration.",
-        partial(SF.seed_spread, sweep.trials, sweep.points, chosen, f"Spread over {seeds} seeds per configuration")))
+        partial(SF.seed_spread, sweep.trials, sweep.points, chosen, f"Spread over {seeds} seeds per configuration{of}")))
 
 
 def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> FigurePlan:
     """The figures of a report for `source`; `ship_size` = (L_pp, B) [m] for outlines."""
     plan = FigurePlan()
     if source.sweep is not None:
-        _sweep_figures(source, plan)
+        _sweep_figures(source.sweep, plan)
     runs = source.runs
     if runs:
         datasets = sorted({r.dataset for r in runs if r.model != "mmg" and r.dataset != "-"})
@@ -354,4 +356,6 @@ def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> 
         _loss_figure(c)
         _seed_figures(c)
         _uncertainty_figures(c)
+    for sweep in source.linked_sweeps:
+        _sweep_figures(sweep, plan, linked=True)
     return _quality_figures(source, plan)

@@ -126,10 +126,33 @@ def reproduction_items(summary: Reproduction) -> list[tuple[str, str]]:
     return items
 
 
+def nn_count_items(source: ReportSource) -> list[tuple[str, str]]:
+    """For a summary.json written before the scorecard counted the cells where the hybrid
+    beats NN-only: that count from the runs' metrics (`sysid.report.cell_ratios`)."""
+    from sysid.report.cell_ratios import dataset_cells
+
+    cards = source.reproduction.scorecards if source.reproduction is not None else []
+    if not cards or all(c.cells_beating_nn is not None for card in cards for c in card.datasets.values()):
+        return []
+    items = []
+    for cells in dataset_cells(source):
+        labels = [m.label for m in cells.models]
+        hybrid = next((m for m in labels if m.startswith("Hybrid")), None)
+        nn = next((m for m in labels if m.startswith("NN")), None)
+        if hybrid and nn:
+            beats, total = cells.beating(hybrid, nn)
+            items.append((f"{hybrid} vs {nn}", f"lower RMSE in {beats} of {total} cells (from the runs' metrics)"))
+    return items
+
+
 def sweep_items(source: ReportSource, top: int = 8) -> list[tuple[str, str]]:
-    """Readable lines of a sweep: what it varied, its trials, the chosen configuration and
-    the best configurations by mean validation loss over their seeds."""
-    sweep = source.sweep
+    """Readable lines of the source's sweep (`sweep_record_items`)."""
+    return sweep_record_items(source.sweep, top)
+
+
+def sweep_record_items(sweep, top: int = 8) -> list[tuple[str, str]]:
+    """Readable lines of a sweep (`SweepRecord`): what it varied, its trials, the chosen
+    configuration and the best configurations by mean validation loss over their seeds."""
     s, best = sweep.summary, sweep.summary.best
     items = [("Sweep", f"{s.name}: {s.search} search over {', '.join(s.keys) or '-'}; "
                        f"seeds {list(s.seeds)}; base {s.base}"),
@@ -180,8 +203,8 @@ def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -
         ("Report built", _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")),
         ("Training time", _seconds(sum(trained)) + " in total"),
     ]
-    if source.reproduction is not None:
-        items += reproduction_items(source.reproduction)
+    if source.reproduction is not None:   # the scorecard first: page 1 of the report
+        items = reproduction_items(source.reproduction) + nn_count_items(source) + items
     if source.sweep is not None:
         items = sweep_items(source) + items
     missing = source.missing_runs
