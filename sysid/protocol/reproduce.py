@@ -116,9 +116,13 @@ def scorecard(table: pd.DataFrame, baseline: str = "MMG", model: str = "Hybrid",
               datasets: tuple[str, ...] = ("D1", "D2")) -> Scorecard:
     """`model` (the hybrid; with seeds, its seed mean) against MMG-only with the same X'vr
     (`baseline` label), against the paper's hybrid and against NN-only (`nn` label, its seed
-    mean), cell by cell, on each of `datasets` the table holds `model` and `baseline` for."""
-    scores = {ds: dataset_score(table, ds, baseline, model, nn) for ds in datasets
-              if len(_cells(table, model, ds)) and len(_cells(table, baseline, ds))}
+    mean), cell by cell, on each of `datasets` the table holds `model` and `baseline` for
+    at the paper's horizons (30 and 100 s)."""
+    def scored(ds: str) -> bool:
+        return all({30, 100} <= set(_cells(table, label, ds).index.get_level_values("horizon_s"))
+                   for label in (model, baseline))
+
+    scores = {ds: dataset_score(table, ds, baseline, model, nn) for ds in datasets if scored(ds)}
     return Scorecard(baseline, model, **scores)
 
 
@@ -258,6 +262,7 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
         if ensembles_done:
             card_ensemble = scorecard(table, baseline, MODEL_LABELS["hybrid_ensemble"], MODEL_LABELS["nn_ensemble"],
                                       ensembles_done)
+        card, card_ensemble = (c if c is not None and c.datasets else None for c in (card, card_ensemble))
     if "hybrid_identified_D2" in names:
         hyb = table[(table.model == MODEL_LABELS["hybrid_identified"])]
         ref = table[(table.model == "Hybrid") & (table.dataset == "D2")].set_index(["scenario", "horizon_s"])

@@ -13,10 +13,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from sysid.protocol.paper import paper_rmse, run_label, run_variant
+from sysid.protocol.paper import SCENARIO_ORDER, paper_rmse, run_label, run_variant, scenario_key
 from sysid.report.palette import model_colour
 from sysid.report.source import ReportSource, RunRecord
-from sysid.report.tables import _scenario_order
 
 CHANNELS = ("u", "v", "r")                            # metrics' rmse_{channel}
 CHANNEL_NAMES = {"u": "u", "v": "v_m", "r": "r"}
@@ -111,6 +110,12 @@ def baseline_run(runs: list[RunRecord]) -> RunRecord | None:
     return (same or mmg or [None])[0]
 
 
+def _paper_order(scenarios) -> list[str]:
+    """The paper's scenario order (any spelling), then the others as found."""
+    rank = {scenario_key(s): i for i, s in enumerate(SCENARIO_ORDER)}
+    return sorted(dict.fromkeys(scenarios), key=lambda s: rank.get(scenario_key(s), len(rank)))
+
+
 def dataset_cells(source: ReportSource) -> list[CellRatios]:
     """Per training data set (D1, D2) with NN-only or a hybrid: its cells against the baseline
     MMG run (`baseline_run`); none when the source has no such MMG run."""
@@ -128,7 +133,7 @@ def dataset_cells(source: ReportSource) -> list[CellRatios]:
         models = [ModelSeeds(run_label(r.name, r.model, r.dataset), model_colour(r.name, r.model, r.dataset), seed_rmse(r))
                   for r in sorted(chosen, key=lambda r: r.model != "nn")]
         cells = relative_cells(models, baseline)
-        scenarios = tuple(_scenario_order(s for s in labels.values() if s in set(cells.scenario)))
+        scenarios = tuple(_paper_order(s for s in labels.values() if s in set(cells.scenario)))
         horizons = tuple(sorted(set(cells.horizon_s)))
         out.append(CellRatios(dataset, base_label, model_colour(base_run.name, base_run.model, base_run.dataset),
                               tuple(models), cells, paper_ratios(baseline, dataset), scenarios, horizons))

@@ -69,3 +69,8 @@ def test_a_partial_reproduction_scores_the_data_sets_it_holds():
     table = _table()
     card = scorecard(table[table.dataset == "D1"], "MMG (lab X'vr)")
     assert card.D2 is None and card.D1.cells_beating_nn == 8
+
+
+def test_without_the_papers_horizons_there_is_no_score():
+    table = _table()
+    assert scorecard(table[table.horizon_s == 30], "MMG (lab X'vr)").datasets == {}
