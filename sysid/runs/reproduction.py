@@ -37,10 +37,10 @@ class DatasetScore(JsonRecord):
         return ", ".join(f"{k} {100 * v:.0f} %" for k, v in self.reduction_vs_mmg_30s_by_scenario.items())
 
     def nn_text(self) -> str:
-        """"beats NN 30/36 cells (the paper's hybrid: 25/36)", or "" when NN-only was not compared."""
+        """"beats NN on 30/36 cells (the paper's hybrid beats its NN on 25/36)", or "" when NN-only was not compared."""
         if self.cells_beating_nn is None:
             return ""
-        paper = (f" (the paper's hybrid its NN: {self.paper_cells_hybrid_beating_nn}/{self.cells})"
+        paper = (f" (the paper's hybrid beats its NN on {self.paper_cells_hybrid_beating_nn}/{self.cells})"
                  if self.paper_cells_hybrid_beating_nn is not None else "")
         return f"beats {self.nn} on {self.cells_beating_nn}/{self.cells} cells{paper}"
 

@@ -44,7 +44,7 @@ def test_scorecard_counts_the_cells_where_the_hybrid_beats_nn_only():
         assert score.reduction_vs_mmg_100s_mean == pytest.approx(0.35)
         assert (score.cells_beating_paper_hybrid, score.cells) == (1, 12)
         assert (score.nn, score.cells_beating_nn, score.paper_cells_hybrid_beating_nn) == ("NN", 8, 8)
-        assert score.nn_text() == "beats NN on 8/12 cells (the paper's hybrid its NN: 8/12)"
+        assert score.nn_text() == "beats NN on 8/12 cells (the paper's hybrid beats its NN on 8/12)"
         assert score.by_scenario_text() == "Berthing 50 %, Random 10 %"
 
 
