@@ -176,7 +176,8 @@ def reproduce(
         for ds, c in card.datasets.items():
             typer.echo(f"{ds}: {model} vs {card.baseline} at 30 s: {100 * c.reduction_vs_mmg_30s_mean:.0f} % lower RMSE "
                        f"on average (least {100 * c.least_reduction_30s:.0f} %); beats the paper's hybrid on "
-                       f"{c.cells_beating_paper_hybrid}/{c.cells} cells")
+                       f"{c.cells_beating_paper_hybrid}/{c.cells} cells" + (f"; {c.nn_text()}" if c.nn_text() else ""))
+            typer.echo(f"    30 s cut per scenario: {c.by_scenario_text()}")
     shares = summary.gate_off_share_random_30s or {}
     if shares:
         typer.echo("kNN gate off on the Random test (30 s): " +
