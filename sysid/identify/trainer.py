@@ -6,8 +6,9 @@
 1. Windows of T+1 samples (T Euler steps) slid by `stride_s` within each file; each file's
    time axis is cut into 30 s blocks, 30 % of them (seeded draw) validation, and a window
    lies wholly in one part, so no validation window overlaps a training window; or, given
-   validation logs (``[data] validation``), every window of those is validation and every
-   window of the training logs training. Exact copies of another file (``turn_cut_...``)
+   validation logs (``[data] validation``, or with ``[training] validation = "files"`` 30 %
+   of each folder's training logs held out whole), every window of those is validation and
+   every window of the training logs training. Exact copies of another file (``turn_cut_...``)
    and windows touching frozen-GNSS segments are left out and reported.
 2. Standardisation: FNN input statistics from the training samples (relative wind computed
    from the recorded state and true wind, as the model sees it); output statistics from the
@@ -53,10 +54,11 @@ from tqdm import tqdm
 from sysid.hybrid.correction import ForceCorrection, correction_inputs
 from sysid.identify.checkpoint import CheckpointState, TrainingCheckpoint
 from sysid.data.recordings import Run, duplicate_runs, sliding_windows, stack_windows, window_touches
+from sysid.data.splits import hold_out_files
 from sysid.device import resolve_device
 from sysid.dynamics.equations import integrate, integrate_with_forces, required_force
 from sysid.errors import ConfigError, DataError, TrainingError
-from sysid.config.choices import DType, Method, ModelKind, Solver, Stage, StartStates
+from sysid.config.choices import DType, Method, ModelKind, Solver, Stage, StartStates, Validation
 from sysid.config.experiment import Experiment
 from sysid.identify.levenberg_marquardt import fit_uncertainty, identify_levenberg_marquardt, start_state_check
 from sysid.hybrid.force_models import CorrectedModel, PerMember, build_mmg, correction_of
@@ -70,7 +72,8 @@ VAL_LOSS_DEFINITION = (
     "sum over u, v_m, r of w_j (predicted_j - recorded_j)^2, w_j = 1 / variance of channel j in the "
     "training windows; Euler rollouts from each window's recorded first state with its recorded inputs; "
     "K = [training] steps, or objective_s / dt; the final model, kNN gate included. Validation windows: "
-    "the validation blocks of the training logs, or the [data] validation logs (never a test file).")
+    "the validation blocks of the training logs, or whole validation logs: [data] validation, or the training "
+    "logs held out by [training] validation = \"files\" (never a test file).")
 _LOG = logging.getLogger(__name__)
 
 
@@ -613,10 +616,15 @@ class Trainer:
     # -- the estimator ---------------------------------------------------------------
     def fit(self, runs: Sequence[Run], validation: Sequence[Run] = ()) -> "Trainer":
         """Fit to the training logs `runs`; validation windows from `validation` logs when
-        given, else from the validation blocks of `runs`. Sets ``model_``, ``history_``,
+        given, else from logs of `runs` held out whole (``[training] validation = "files"``,
+        `sysid.data.splits.hold_out_files`), else from the validation blocks of `runs`.
+        Sets ``model_``, ``history_``,
         ``summary_``, ``validation_windows_`` (the windows of ``val_loss_multistep``) and
         ``velocity_weights_`` (w_v (3,), 1 / variance of u, v_m, r in the training windows)."""
         exp = self.experiment
+        if not validation and exp.training.validation is Validation.FILES:
+            held_out = hold_out_files(runs, exp.training.val_fraction, exp.training.split_seed)
+            runs, validation = held_out.train, held_out.validation
         self._validation_runs = list(validation)
         t, kind = exp.training, exp.experiment.model
         seed_everything(exp.experiment.seed)
