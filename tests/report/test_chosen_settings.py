@@ -54,6 +54,8 @@ def _run(name: str, model: str, config: dict):
 def test_settings_row_reads_the_runs_config_and_the_validation_design():
     config = _shipped("hybrid_D1")
     config["training"].pop("validation", None)           # a run written before the key existed
+    config["training"].pop("objective_s", None)          # scored over its T steps
+    config["training"].setdefault("block_s", 30.0)
     row = settings_row(_run("hybrid_D1", "hybrid", config))
     shipped = config
     assert row.network == "-".join(str(w) for w in shipped["network"]["hidden"])
@@ -114,6 +116,6 @@ def test_a_linked_sweep_adds_its_landscape_and_the_settings_section(tmp_path):
     assert section.sweeps[0][0] == "width" and "--sweep" not in section.note
     blocks = text_blocks("t", [], [], [], [], [], chosen=section)
     assert ("h2", "How the settings were chosen") in blocks
-    assert any(b[0] == "kv" and b[1] == "Hybrid D1" and "T [steps]: 5" in b[2] for b in blocks)
+    assert any(b[0] == "kv" and b[1] == "Hybrid D1" and f"T [steps]: {config['training']['steps']}" in b[2] for b in blocks)
     with pytest.raises(CheckpointError, match="not a sweep directory"):
         read_source(run_dir, [tmp_path])
