@@ -127,13 +127,18 @@ def _row(scenario: str, run: Run, maneuver: Maneuver, model: str, values: list[d
 Predictions = list[tuple[np.ndarray, "float | None"]]  # per run: (states (T_i, 6), gate off share)
 
 
+def _execute_starts(runs: Mapping[str, Run]) -> list[int]:
+    """Sample index of each run's execute (scenario -> `Run`, in order), where predictions start."""
+    return [start for _, start in (recorded_maneuver(run, scenario) for scenario, run in runs.items())]
+
+
 def record_comparison(models: Mapping[str, Sequence[nn.Module]], runs: Mapping[str, Run],
                       method: IntegratorLike = "euler") -> pd.DataFrame:
     """`RECORD_COLUMNS` rows: for each run (scenario -> `Run`) the record's indices, then
     each model's (label -> its models: one, or several seeds whose indices are averaged,
     with their standard deviation in ``<index>_std``) prediction of it from the execute."""
     method = Method.parse(method)
-    starts = [e for _, e in (recorded_maneuver(r, s) for s, r in runs.items())]
+    starts = _execute_starts(runs)
     predicted = {label: [_predictions(m, list(runs.values()), starts, method) for m in members]
                  for label, members in models.items()}
     return compared(predicted, runs)
@@ -216,7 +221,7 @@ def write_record_comparison(out_dir: str | os.PathLike, run_dirs: Mapping[str, s
         frame = record_comparison(run_models(run_dirs), runs, method)
         return write_csv(frame, Path(out_dir) / RECORD_FILE, float_format="%.6g")
     method = Method.parse(method)
-    starts = [e for _, e in (recorded_maneuver(r, s) for s, r in runs.items())]
+    starts = _execute_starts(runs)
     paths = {label: model_paths(path) for label, path in run_dirs.items()}
     items = [p for found in paths.values() for p in found]
     work = functools.partial(_predicted_run, runs=list(runs.values()), starts=starts, method=method,
