@@ -238,6 +238,11 @@ def run_optuna(spec, out: Path, data: TrialData, session: Session, storage: Tune
 
 
 def _outcomes(grid, key: Callable[[dict], str]) -> Outcomes:
+    """What Tune ended without a complete run; `KeyboardInterrupt` when Tune was stopped by
+    Ctrl-C (it catches SIGINT, ends its loop and returns with trials still pending or
+    running: nothing downstream may take that for a finished sweep)."""
+    if grid.num_terminated + grid.num_errors < len(grid):
+        raise KeyboardInterrupt
     outcomes = Outcomes()
     for result in grid:
         outcomes.configs.append(dict(result.config))
