@@ -45,6 +45,18 @@ def wait_for(stream, text: str) -> list[str]:
     raise AssertionError(f"{text!r} never appeared; output:\n{''.join(seen)}")
 
 
+def wait_for_each(stream, texts: list[tuple[str, str]]) -> list[str]:
+    """Lines of `stream` up to where, for every pair of `texts`, one line has held both of its
+    parts (fails if the stream ends first)."""
+    seen, missing = [], list(texts)
+    for line in stream:
+        seen.append(line)
+        missing = [pair for pair in missing if not all(part in line for part in pair)]
+        if not missing:
+            return seen
+    raise AssertionError(f"{missing!r} never appeared; output:\n{''.join(seen)}")
+
+
 def finish(proc: subprocess.Popen, before: list[str], sig: int) -> Outcome:
     os.killpg(proc.pid, sig)  # the whole job, as Ctrl-C in a terminal
     out, err = proc.communicate(timeout=120)
@@ -155,7 +167,8 @@ def test_ctrl_c_in_a_parallel_reproduce_ends_every_worker(dataset_dir, tmp_path,
     out = tmp_path / "reproduction"
     only = [arg for name in QUEUED_BEHIND_TWO for arg in ("--only", name)]
     proc = start("reproduce", "-o", out, *only, "--jobs", "2", "--no-report")
-    before = wait_for(proc.stdout, "epoch 10/")  # both workers are training
+    # both workers are training: each has logged its training windows
+    before = wait_for_each(proc.stdout, [(f"[{name}] ", " validation windows of ") for name in QUEUED_BEHIND_TWO[:2]])
     if to_group:
         outcome = finish(proc, before, signal.SIGINT)
     else:

@@ -69,7 +69,7 @@ def test_training_and_sweeps_open_no_test_file_and_evaluation_does(tmp_path, dat
     assert len(PAPER_TEST_STEMS) == len(TEST_FILES) == 6
     # the shipped hybrid D2 config, fewer epochs: its data and validation as shipped
     quick = load_experiment(SHIPPED / "experiments" / "hybrid_D2.toml").replace(
-        training={"epochs": 2, "warm_start_epochs": 2, "threads": 1})
+        training={"epochs": 1, "warm_start_epochs": 1, "threads": 1})
     base = tmp_path / "hybrid_D2_quick.toml"
     base.write_text(quick.to_toml())
     # the shipped gate-space sweep on that base: two trials (both spaces, one alpha, one seed)

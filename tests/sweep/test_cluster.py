@@ -43,7 +43,7 @@ def cluster(tmp_path_factory, dataset_dir):
 
 
 def _sweep_file(work: Path, dataset_dir: Path, name: str, epochs: int) -> Path:
-    tiny_experiment(work / f"{name}_base.toml", dataset_dir, seed=0, epochs=epochs, warm_start_epochs=2)
+    tiny_experiment(work / f"{name}_base.toml", dataset_dir, seed=0, epochs=epochs, warm_start_epochs=1)
     path = work / f"{name}.toml"
     path.write_text(f"[sweep]\nbase = '{name}_base.toml'\nseeds = [0]\nmax_retries = 2\n"
                     "[vary]\n'training.learning_rate' = [1e-3, 3e-3]\n")
@@ -65,7 +65,7 @@ def test_runs_trained_where_nothing_is_shared_arrive_complete(cluster, dataset_d
     nodes, work = cluster
     worker, seen = nodes.worker_view([work, dataset_dir / "berthing", tiny_test_file(dataset_dir)])
     assert seen == [True, False, False]  # the tmpfs over the output folder exists, empty; no data
-    path = _sweep_file(work, dataset_dir, "two", epochs=4)
+    path = _sweep_file(work, dataset_dir, "two", epochs=2)
     out = work / "two_out"
     proc = _sysid(["sweep", str(path), "-o", str(out), "--address", nodes.address], nodes.env, dataset_dir)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
@@ -134,7 +134,7 @@ def test_a_node_lost_mid_sweep_is_replaced_and_no_trial_restarts(cluster, datase
     from sysid.sweep.plan import sweep_trials
 
     nodes, work = cluster
-    path = _sweep_file(work, dataset_dir, "lost", epochs=60)
+    path = _sweep_file(work, dataset_dir, "lost", epochs=20)
     out = work / "lost_out"
     env = {**nodes.env, "SYSID_DATA": str(dataset_dir.parent)}
     first_worker, _ = nodes.worker_view([])

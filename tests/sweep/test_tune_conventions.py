@@ -18,36 +18,51 @@ from tiny_experiment import tiny_experiment, tiny_test_file
 
 ROOT = Path(__file__).resolve().parents[2]
 CSV = 1e-5   # history.csv keeps 6 significant digits
-EPOCHS = 6
+EPOCHS = 3
 GOOD, POOR = 3e-3, 1e-6   # learning rates: the poor one barely moves from the warm start
 
 
-def _sysid(args: list[str], dataset_dir: Path, cwd: Path) -> subprocess.CompletedProcess:
+def _start(args: list[str], dataset_dir: Path, cwd: Path) -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": str(ROOT), "SYSID_DATA": str(dataset_dir.parent), "SYSID_COMPILE": "0"}
     env.pop("RAY_ADDRESS", None)
-    proc = subprocess.run([sys.executable, "-m", "sysid", *args], capture_output=True, text=True, timeout=1200,
-                          env=env, cwd=cwd)
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    return proc
+    return subprocess.Popen([sys.executable, "-m", "sysid", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=env, cwd=cwd)
+
+
+def _finish(proc: subprocess.Popen) -> str:
+    """`proc`'s standard output, once it has exited with 0."""
+    out, err = proc.communicate(timeout=1200)
+    assert proc.returncode == 0, out[-3000:] + err[-3000:]
+    return out
+
+
+def _sysid(args: list[str], dataset_dir: Path, cwd: Path) -> str:
+    return _finish(_start(args, dataset_dir, cwd))
 
 
 @pytest.fixture(scope="module")
 def sweeps(tmp_path_factory, dataset_dir):
     """The same two-configuration sweep without a scheduler (tracked in MLflow) and with
-    ASHA (Tune's experiment in --storage); one trial at a time, the good configuration first."""
+    ASHA (Tune's experiment in --storage); one trial at a time, the good configuration first.
+    The two sweeps run side by side, each on its own local Ray."""
     pytest.importorskip("ray.tune")
     pytest.importorskip("mlflow")
     tmp = tmp_path_factory.mktemp("tune")
-    tiny_experiment(tmp / "base.toml", dataset_dir, seed=0, epochs=EPOCHS, warm_start_epochs=2)
+    tiny_experiment(tmp / "base.toml", dataset_dir, seed=0, epochs=EPOCHS, warm_start_epochs=1)
     body = f"[sweep]\nbase = 'base.toml'\nseeds = [0]\n[vary]\n'training.learning_rate' = [{GOOD}, {POOR}]\n"
     (tmp / "plain.toml").write_text(body)
     (tmp / "asha.toml").write_text(body.replace("seeds = [0]\n", "seeds = [0]\nscheduler = 'asha'\n")
                                    + "[scheduler]\ngrace_period = 1\nreduction_factor = 2\n")
-    logs = {}
-    for name, extra in (("plain", ["--mlflow", str(tmp / "mlruns")]), ("asha", ["--storage", str(tmp / "store")])):
-        logs[name] = _sysid(["sweep", str(tmp / f"{name}.toml"), "-o", str(tmp / name), "--workers", "1", *extra],
-                            dataset_dir, tmp).stdout
-    return tmp, logs
+    running = {name: _start(["sweep", str(tmp / f"{name}.toml"), "-o", str(tmp / name), "--workers", "1", *extra],
+                            dataset_dir, tmp)
+               for name, extra in (("plain", ["--mlflow", str(tmp / "mlruns")]),
+                                   ("asha", ["--storage", str(tmp / "store")]))}
+    try:
+        return tmp, {name: _finish(proc) for name, proc in running.items()}
+    finally:
+        for proc in running.values():
+            if proc.poll() is None:
+                proc.kill()
 
 
 @pytest.mark.slow
