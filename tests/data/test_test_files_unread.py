@@ -4,8 +4,8 @@ Every file a child process opens is seen by an audit hook on Python's "open" eve
 installed by a ``sitecustomize`` module on the child's PYTHONPATH, so it also runs in the
 Ray worker processes of a sweep. It records each opened path whose stem is a test file's
 (`sysid.data.datasets.TEST_FILES`). The shipped hybrid config is trained with few epochs by
-``sysid train``, the shipped gate-space sweep runs two trials, and ``sysid evaluate`` of the
-trained run on the test files must show up in the same record (else the hook saw nothing).
+``sysid train``, the shipped gate-space sweep runs two trials beside it, and ``sysid evaluate`` of
+the trained run on the test files must show up in its record (else the hook saw nothing).
 """
 from __future__ import annotations
 
@@ -53,11 +53,20 @@ def _child_env(tmp_path: Path, record: Path) -> dict[str, str]:
     return env
 
 
-def _sysid(env, *args, cwd) -> subprocess.CompletedProcess:
-    done = subprocess.run([console_script(), *map(str, args)], env=env, cwd=cwd, capture_output=True, text=True,
-                          timeout=1800)
-    assert done.returncode == 0, f"sysid {' '.join(map(str, args))} failed:\n{done.stdout}\n{done.stderr}"
-    return done
+def _start(env, *args, cwd) -> subprocess.Popen:
+    return subprocess.Popen([console_script(), *map(str, args)], env=env, cwd=cwd, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def _finish(proc: subprocess.Popen) -> str:
+    """`proc`'s output, once it has exited with 0."""
+    out, err = proc.communicate(timeout=1800)
+    assert proc.returncode == 0, f"{' '.join(proc.args)} failed:\n{out}\n{err}"
+    return out + err
+
+
+def _sysid(env, *args, cwd) -> str:
+    return _finish(_start(env, *args, cwd=cwd))
 
 
 def _opened(record: Path) -> set[str]:
@@ -81,16 +90,21 @@ def test_training_and_sweeps_open_no_test_file_and_evaluation_does(tmp_path, dat
         sweep = sweep.replace(old, new)
     spec = tmp_path / "gate_space_quick.toml"
     spec.write_text(sweep)
-    record = tmp_path / "opened.txt"
-    env = _child_env(tmp_path, record)
-    env["SYSID_DATA"] = str(dataset_dir.parent)
-
-    _sysid(env, "train", base, "-o", tmp_path / "run", cwd=tmp_path)
-    assert _opened(record) == set(), f"sysid train opened test files:\n{record.read_text()}"
-    done = _sysid(env, "sweep", spec, "-o", tmp_path / "sweep", "--workers", "1", cwd=tmp_path)
-    assert _opened(record) == set(), f"sysid sweep opened test files:\n{record.read_text()}"
+    # training and the sweep side by side, each recording what it opens in a file of its own
+    records = {what: tmp_path / f"opened_{what}.txt" for what in ("train", "sweep", "evaluate")}
+    envs = {what: {**_child_env(tmp_path, record), "SYSID_DATA": str(dataset_dir.parent)}
+            for what, record in records.items()}
+    sweeping = _start(envs["sweep"], "sweep", spec, "-o", tmp_path / "sweep", "--workers", "1", cwd=tmp_path)
+    try:
+        _sysid(envs["train"], "train", base, "-o", tmp_path / "run", cwd=tmp_path)
+        done = _finish(sweeping)
+    finally:
+        if sweeping.poll() is None:
+            sweeping.kill()
+    for what in ("train", "sweep"):
+        assert _opened(records[what]) == set(), f"sysid {what} opened test files:\n{records[what].read_text()}"
     results = (tmp_path / "sweep" / "results.csv").read_text()
-    assert results.count("complete") == 2, done.stdout + done.stderr
+    assert results.count("complete") == 2, done
     # the trials were validated on held-out training files, named in their summaries
     import json
     summary = json.loads(next((tmp_path / "sweep" / "trials").glob("*/seed0/summary.json")).read_text())
@@ -100,6 +114,6 @@ def test_training_and_sweeps_open_no_test_file_and_evaluation_does(tmp_path, dat
 
     # sanity: the hook sees evaluation open every test file
     tests = [dataset_dir / f for f in TEST_FILES.values()]
-    _sysid(env, "evaluate", tmp_path / "run", "--data", *tests, "--horizon", "30", "-o", tmp_path / "m.csv",
-           cwd=tmp_path)
-    assert _opened(record) == PAPER_TEST_STEMS
+    _sysid(envs["evaluate"], "evaluate", tmp_path / "run", "--data", *tests, "--horizon", "30", "-o",
+           tmp_path / "m.csv", cwd=tmp_path)
+    assert _opened(records["evaluate"]) == PAPER_TEST_STEMS
