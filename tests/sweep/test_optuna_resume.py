@@ -89,7 +89,8 @@ def test_an_optuna_sweep_resumed_on_ray_loads_no_pickle(tmp_path, dataset_dir):
     out = tmp_path / "sweep"
     env = {**os.environ, "PYTHONPATH": str(ROOT), "SYSID_DATA": str(dataset_dir.parent)}
     env.pop("RAY_ADDRESS", None)
-    first = subprocess.run([sys.executable, "-m", "sysid", "sweep", str(sweep_file), "-o", str(out), "--workers", "1"],
+    # the first sweep's two trials side by side
+    first = subprocess.run([sys.executable, "-m", "sysid", "sweep", str(sweep_file), "-o", str(out), "--workers", "2"],
                            capture_output=True, text=True, timeout=1200, env=env)
     assert first.returncode == 0, first.stdout[-3000:] + first.stderr[-3000:]
     runs = sorted((out / "trials").glob("*/seed0"))
