@@ -33,7 +33,7 @@ def test_reproduce_with_two_seeds(tmp_path, dataset_dir):
     from sysid.runs.rundir import load_model
 
     out = tmp_path / "repro"
-    tiny = {"training": {"epochs": 2, "warm_start_epochs": 1}, "evaluation": {"horizons": (30.0,)}}
+    tiny = {"training": {"epochs": 3, "warm_start_epochs": 3}, "evaluation": {"horizons": (30.0,)}}
     summary = reproduce(out, dataset_dir.parent, only=["mmg_lab", "hybrid_D1"], overrides=tiny, jobs=2, seeds=2)
     assert summary.seeds == 2 and not summary.failed
     assert summary.runs == ("mmg_lab", "hybrid_D1", "hybrid_ensemble_D1")

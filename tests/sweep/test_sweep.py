@@ -23,7 +23,7 @@ from tiny_experiment import tiny_experiment
 
 
 def _base(tmp_path, dataset_dir) -> str:
-    return tiny_experiment(tmp_path / "base.toml", dataset_dir, seed=0, epochs=2, warm_start_epochs=1).name
+    return tiny_experiment(tmp_path / "base.toml", dataset_dir, seed=0, epochs=4, warm_start_epochs=3).name
 
 
 def _sweep(tmp_path, dataset_dir, body: str) -> object:
