@@ -19,6 +19,7 @@ from torch import nn
 from torchdiffeq import odeint
 
 from sysid.dynamics.integrators import Integrator, IntegratorLike, Method, rollout
+from sysid.mmg.coefficients import view_of
 from sysid.mmg.model import ForceBreakdown
 
 _ODEINT_NAME = {Method.EULER: "euler", Method.RK4_38: "rk4"}  # torchdiffeq's public names
@@ -27,14 +28,13 @@ _ODEINT_NAME = {Method.EULER: "euler", Method.RK4_38: "rk4"}  # torchdiffeq's pu
 def acceleration_channels(u, v, r, X, Y, N, c):
     """(u_dot, v_dot, r_dot), each (...,), from Eq. (4) for u, v [m/s], r [rad/s] and
     X, Y [N], N [N m], each (...,); `c` provides m, m_x, m_y, I_zz_J_zz [kg, kg m^2], x_G [m]."""
-    m, xG = c.m, c.x_G
-    mxG = m * xG
-    u_dot = (X + (m + c.m_y) * v * r + mxG * r * r) / (m + c.m_x)
+    c = view_of(c)
+    m_x, m_y, mxG = c.m_plus_mx, c.m_plus_my, c.mxG  # m + m_x, m + m_y, m x_G
+    u_dot = (X + m_y * v * r + mxG * r * r) / m_x
     # [[m+m_y, x_G m], [x_G m, I+J+x_G^2 m]] (v_dot, r_dot) = (Y - (m+m_x) u r, N - x_G m u r)
-    a11, a12, a22 = m + c.m_y, mxG, c.I_zz_J_zz + xG * xG * m
-    b1 = Y - (m + c.m_x) * u * r
+    a11, a12, a22, det = m_y, mxG, c.a22, c.det
+    b1 = Y - m_x * u * r
     b2 = N - mxG * u * r
-    det = a11 * a22 - a12 * a12
     v_dot = (a22 * b1 - a12 * b2) / det
     r_dot = (a11 * b2 - a12 * b1) / det
     return u_dot, v_dot, r_dot

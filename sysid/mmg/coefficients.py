@@ -8,10 +8,12 @@ when bounds are given.
 """
 from __future__ import annotations
 
+from types import SimpleNamespace
 from typing import Iterable, Mapping
 
 import torch
 from torch import nn
+from torch._C._functorch import is_functorch_wrapped_tensor
 
 from sysid.mmg.ship import Ship, parameter_name
 from sysid.errors import ShipDefinitionError
@@ -21,6 +23,94 @@ def raw_value(value: torch.Tensor, low: float, high: float) -> torch.Tensor:
     """The unconstrained raw value whose ``low + (high-low)*sigmoid(raw)`` is `value`."""
     frac = (value - low) / (high - low)
     return torch.log(frac / (1 - frac))
+
+
+def derived_constants(c) -> dict:
+    """Constants every forward would otherwise recompute from the coefficients, by the same
+    expressions as the force functions wrote them (so the numbers are the same to the bit):
+    q = 1/2 rho L_pp d [kg/m], q L_pp [kg], D^2, D^4 [m^2, m^4], P^2 [m^2], the rudder's
+    H_R, eta, kappa, f_alpha and the mass terms of the equations of motion. `c` holds the
+    coefficients as 0-d tensors; only the names the ship has are derived."""
+    have = c.__dict__
+    out = {}
+    if "rho" in have and "L_pp" in have and "d" in have:
+        out["q"] = 0.5 * c.rho * c.L_pp * c.d
+        out["qL"] = out["q"] * c.L_pp
+        out["L_pp2"] = c.L_pp * c.L_pp
+        out["L_pp3"] = c.L_pp ** 3
+    if "D" in have:
+        out["D2"], out["D4"] = c.D ** 2, c.D ** 4
+    if "P" in have:
+        out["P2"] = c.P ** 2
+    if "X_0F" in have and "X_0A" in have:
+        out["dX_0"] = c.X_0A - c.X_0F
+    if "C_D" in have:
+        out["C_D_L"] = c.C_D / c.L_pp
+        out["C_D_L2"] = c.C_D / (c.L_pp * c.L_pp)
+    if "lambda_R" in have:  # four-quadrant rudder: span, Fujii's normal-force gradient
+        out["H_R"] = torch.sqrt(c.A_R * c.lambda_R)
+        out["kappa"] = c.k_x / c.epsilon
+        out["f_alpha"] = 6.13 * c.lambda_R / (2.25 + c.lambda_R)
+    if "H_R" in have or "H_R" in out:
+        out["eta"] = c.D / out.get("H_R", have.get("H_R"))
+        out["one_minus_eta"] = 1.0 - out["eta"]
+        out["half_rho_A_R"] = 0.5 * c.rho * c.A_R
+        out["l_R_nd"] = c.l_R / c.L_pp
+    if "a_H" in have:
+        out["one_plus_aH"] = 1.0 + c.a_H
+        out["one_minus_tR"] = 1.0 - c.t_R
+        out["N_R_lever"] = c.x_R + c.a_H * c.x_H
+    if "t_P" in have:
+        out["one_minus_tP"] = 1.0 - c.t_P
+        out["one_minus_tP_rho"] = out["one_minus_tP"] * c.rho
+    if "w_P0" in have:
+        out["one_minus_wP0"] = 1.0 - c.w_P0
+    if "rho_air" in have:
+        out["half_rho_air"] = 0.5 * c.rho_air
+    if "m" in have:
+        m, xG = c.m, c.x_G
+        out["m_plus_mx"] = m + c.m_x
+        out["m_plus_my"] = m + c.m_y
+        out["mxG"] = m * xG
+        out["a22"] = c.I_zz_J_zz + xG * xG * m
+        out["det"] = out["m_plus_my"] * out["a22"] - out["mxG"] * out["mxG"]
+    return out
+
+
+def _plain(value: torch.Tensor):
+    """A Python float for a constant tensor (exact: float32 and float64 are doubles), the
+    tensor itself where autograd or a functorch transform must see it."""
+    if value.requires_grad or is_functorch_wrapped_tensor(value) or type(value) not in (torch.Tensor, nn.Parameter):
+        return value
+    return value.item()
+
+
+def coefficient_view(values: Mapping[str, torch.Tensor], plain: bool = True) -> SimpleNamespace:
+    """Attribute access to `values` (0-d tensors) and their `derived_constants`; with
+    `plain`, constants as Python floats (no tensor operation on a 0-d tensor per forward,
+    no module lookup)."""
+    view = SimpleNamespace(**values)
+    view.__dict__.update(derived_constants(view))
+    if plain:
+        view.__dict__.update({k: _plain(v) for k, v in view.__dict__.items()})
+    return view
+
+
+class _WatchedTensors(dict):
+    """A module's ``_buffers``/``_parameters`` that counts replacements (`to`, `double`,
+    `torch.func.functional_call` write here), so cached values know when they are stale."""
+
+    def __init__(self, *args):
+        super().__init__(*args)
+        self.changes = 0
+
+    def __setitem__(self, key, value):
+        self.changes += 1
+        super().__setitem__(key, value)
+
+    def __delitem__(self, key):
+        self.changes += 1
+        super().__delitem__(key)
 
 
 class Coefficients(nn.Module):
@@ -61,6 +151,46 @@ class Coefficients(nn.Module):
                 setattr(self, f"raw_{name}", nn.Parameter(value))
             else:
                 self.register_buffer(name, value)
+        self._watch()
+
+    def _watch(self):
+        if not isinstance(self._buffers, _WatchedTensors):
+            self._buffers = _WatchedTensors(self._buffers)
+            self._parameters = _WatchedTensors(self._parameters)
+            self._loads = 0   # bumped by assign, load_state_dict and _apply
+            self._view_key = self._view = None
+
+    def values_view(self) -> SimpleNamespace:
+        """The coefficients (``view.X_vr``) and their derived constants (`derived_constants`):
+        Python floats where nothing needs a tensor, tensors where autograd or a functorch
+        transform must see them (trainable coefficients with gradient on, swapped-in
+        values). Cached until a coefficient changes (`assign`, `load_state_dict`, an
+        optimizer step on a trainable one, `to`, `functional_call`)."""
+        self._watch()
+        if torch.compiler.is_compiling():
+            return coefficient_view({name: getattr(self, name) for name in self.names}, plain=False)
+        raws = [self._parameters[f"raw_{n}"] for n in self.trainable_names]
+        live = torch.is_grad_enabled() and any(p.requires_grad for p in raws)
+        key = (self._buffers.changes, self._parameters.changes, self._loads,
+               tuple(p._version for p in raws))
+        if not live and key == self._view_key:
+            return self._view
+        view = coefficient_view({name: getattr(self, name) for name in self.names})
+        if live:
+            self._view_key = None
+        else:
+            self._view_key, self._view = key, view
+        return view
+
+    def _load_from_state_dict(self, *args, **kwargs):
+        self._watch()
+        self._loads += 1
+        super()._load_from_state_dict(*args, **kwargs)
+
+    def _apply(self, fn, recurse=True):
+        self._watch()
+        self._loads += 1
+        return super()._apply(fn, recurse)
 
     def __getattr__(self, name: str):
         if name in self.__dict__.get("trainable_names", ()):
@@ -86,6 +216,8 @@ class Coefficients(nn.Module):
                     raw.copy_(target)
                 else:
                     super().__getattr__(name).fill_(float(value))
+        self._watch()
+        self._loads += 1
 
     def values(self) -> dict[str, float]:
         """Current value of every parameter, as plain floats."""
@@ -112,3 +244,29 @@ class PackedCoefficients(nn.Module):
         if name in index:
             return super().__getattr__("values")[index[name]]
         return super().__getattr__(name)
+
+    def values_view(self) -> SimpleNamespace:
+        """The coefficients and `derived_constants` as 0-d tensors (what compiled code
+        reads: Inductor folds the derived constants)."""
+        return coefficient_view({name: getattr(self, name) for name in self.names}, plain=False)
+
+
+def view_of(c) -> SimpleNamespace:
+    """`c` as a values view: itself if it is one, else its ``values_view()`` (a
+    `Coefficients` or `PackedCoefficients`)."""
+    return c if type(c) is SimpleNamespace else c.values_view()
+
+
+def coefficient_vector(c: SimpleNamespace, names: tuple[str, ...], like: torch.Tensor) -> torch.Tensor:
+    """(k,) the values of `names` in `like`'s dtype and device: one tensor, cached in the
+    view while every value is a constant; stacked anew (through autograd) otherwise."""
+    values = [getattr(c, n) for n in names]
+    if any(isinstance(v, torch.Tensor) for v in values):
+        return torch.stack([torch.as_tensor(v, dtype=like.dtype, device=like.device).expand(())
+                            if not isinstance(v, torch.Tensor) else v.to(like.dtype) for v in values])
+    cache = c.__dict__.setdefault("_vectors", {})
+    key = (names, like.dtype, like.device)
+    found = cache.get(key)
+    if found is None:
+        found = cache[key] = torch.tensor(values, dtype=like.dtype, device=like.device)
+    return found

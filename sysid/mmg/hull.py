@@ -9,6 +9,7 @@ import math
 
 import torch
 
+from sysid.mmg.coefficients import coefficient_vector, view_of
 from sysid.mmg.guards import SPEED_GUARD, safe_atan2, safe_div
 
 SIMPSON_POINTS = 100  # the lab simulator's sample count
@@ -47,20 +48,23 @@ def crossflow_integrals_simpson(v: torch.Tensor, b: torch.Tensor, L: torch.Tenso
     return f @ weights, (f * x) @ weights
 
 
-def crossflow_integrals(v: torch.Tensor, b: torch.Tensor, L: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+def crossflow_integrals(v: torch.Tensor, b: torch.Tensor, L, L3=None) -> tuple[torch.Tensor, torch.Tensor]:
     """Exact cross-flow integrals over the hull, x in [-L/2, L/2] [m].
 
     With w(x) = v + b x (local lateral velocity [m/s], b = C_r r [1/s]) returns
-    I1 = ∫ |w| w dx [m^3/s^2] and I2 = ∫ |w| w x dx [m^4/s^2].
+    I1 = ∫ |w| w dx [m^3/s^2] and I2 = ∫ |w| w x dx [m^4/s^2]. `L3` is L**3 when known.
+    v and b broadcast: the hull's two integrals (C_rY and C_rN) come from one call on
+    b (..., 2).
     """
+    L3 = L**3 if L3 is None else L3
     half = 0.5 * L
     w1 = v - b * half
     w2 = v + b * half
     same_sign = w1 * w2 >= 0  # no zero crossing along the hull (includes b = 0)
     sign = torch.where(v >= 0, 1.0, -1.0).to(v.dtype)
     # no crossing: |w| w = s w^2, polynomial integrals, no division by b
-    i1_same = sign * (v * v * L + b * b * L**3 / 12.0)
-    i2_same = sign * v * b * L**3 / 6.0
+    i1_same = sign * (v * v * L + b * b * L3 / 12.0)
+    i2_same = sign * v * b * L3 / 6.0
     # crossing (w1, w2 of opposite signs): |w2|^3 - |w1|^3 = sign(b) (w1^3 + w2^3) and
     # w1^3 + w2^3 = 2 v (w1^2 - w1 w2 + w2^2): no cancellation, and |b| L/2 >= |v|
     crossing = ~same_sign
@@ -75,20 +79,25 @@ def hull_force(u: torch.Tensor, v: torch.Tensor, r: torch.Tensor, c,
                quadrature: str = "exact") -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """X_H [N], Y_H [N], N_H [N m about midship] from u, v (midship) [m/s], r [rad/s].
 
-    `c` carries the coefficients (`Coefficients`): L_pp, d, rho, X_0F, X_0A, X_vr, Y_v,
-    Y_r, N_v, N_r, C_D, C_rY, C_rN. `quadrature` is "exact" (closed form) or "simpson"
-    (the lab simulator's rule).
+    `c` carries the coefficients (`Coefficients` or its values view): L_pp, d, rho, X_0F,
+    X_0A, X_vr, Y_v, Y_r, N_v, N_r, C_D, C_rY, C_rN. `quadrature` is "exact" (closed form)
+    or "simpson" (the lab simulator's rule).
     """
+    c = view_of(c)
     L = c.L_pp
-    q = 0.5 * c.rho * L * c.d  # kg/m
+    q = c.q  # kg/m, 1/2 rho L d
     U = torch.sqrt(u * u + v * v)
-    U_guarded = torch.where(U < SPEED_GUARD, torch.full_like(U, 1e-7), U)
+    U_guarded = torch.where(U < SPEED_GUARD, 1e-7, U)
     beta_hat = safe_atan2(v, u)  # = -beta of the usual convention, (-pi, pi]
-    X0 = c.X_0F + (c.X_0A - c.X_0F) * beta_hat.abs() / math.pi
+    X0 = c.X_0F + c.dX_0 * beta_hat.abs() / math.pi
     X_H = q * (X0 * u * U_guarded + c.X_vr * v * r * L)
-    integrals = crossflow_integrals_simpson if quadrature == "simpson" else crossflow_integrals
-    i1, _ = integrals(v, c.C_rY * r, L)
-    _, i2 = integrals(v, c.C_rN * r, L)
-    Y_H = q * (c.Y_v * v * u.abs() + c.Y_r * r * L * u - c.C_D / L * i1)
-    N_H = q * L * (c.N_v * v * u + c.N_r * r * L * u.abs() - c.C_D / (L * L) * i2)
+    if quadrature == "simpson":
+        i1, _ = crossflow_integrals_simpson(v, c.C_rY * r, L)
+        _, i2 = crossflow_integrals_simpson(v, c.C_rN * r, L)
+    else:  # both cross-flow corrections in one pass: b (..., 2) = (C_rY r, C_rN r)
+        b = r[..., None] * coefficient_vector(c, ("C_rY", "C_rN"), r)
+        i1s, i2s = crossflow_integrals(v[..., None], b, L, c.L_pp3)
+        i1, i2 = i1s[..., 0], i2s[..., 1]
+    Y_H = q * (c.Y_v * v * u.abs() + c.Y_r * r * L * u - c.C_D_L * i1)
+    N_H = c.qL * (c.N_v * v * u + c.N_r * r * L * u.abs() - c.C_D_L2 * i2)
     return X_H, Y_H, N_H

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import torch
 
+from sysid.mmg.coefficients import view_of
 from sysid.mmg.guards import SPEED_GUARD, safe_div
 
 
@@ -25,8 +26,9 @@ def hull_force_standard(u: torch.Tensor, v: torch.Tensor, r: torch.Tensor, c
     (`sysid.mmg.families`).
     Any batch shape; float32 or float64.
     """
+    c = view_of(c)
     L = c.L_pp
-    q = 0.5 * c.rho * L * c.d  # kg/m
+    q = c.q  # kg/m, 1/2 rho L d
     U2 = u * u + v * v
     U = torch.sqrt(U2)
     moving = U >= SPEED_GUARD
@@ -38,4 +40,4 @@ def hull_force_standard(u: torch.Tensor, v: torch.Tensor, r: torch.Tensor, c
     cubic_N = c.N_vvv * v ** 3 + c.N_vvr * v * v * rL + c.N_vrr * v * rL * rL + c.N_rrr * rL ** 3
     Y_nd = (c.Y_v * v + c.Y_r * rL) * U + safe_div(cubic_Y, U, moving)
     N_nd = (c.N_v * v + c.N_r * rL) * U + safe_div(cubic_N, U, moving)
-    return q * X_nd, q * Y_nd, q * L * N_nd
+    return q * X_nd, q * Y_nd, c.qL * N_nd

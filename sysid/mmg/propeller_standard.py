@@ -23,7 +23,8 @@ from __future__ import annotations
 
 import torch
 
-from sysid.mmg.guards import SPEED_GUARD, TINY, safe_atan2, safe_div
+from sysid.mmg.coefficients import view_of
+from sysid.mmg.guards import SPEED_GUARD, TINY, choose, safe_atan2, safe_div
 from sysid.mmg.propeller import PropellerState
 
 
@@ -32,15 +33,15 @@ def drift_angles(u, v, r, L):
     both 0 below the speed guard."""
     U = torch.sqrt(u * u + v * v)
     moving = U >= SPEED_GUARD
-    beta = torch.where(moving, safe_atan2(-v, u), torch.zeros_like(u))
+    beta = torch.where(moving, safe_atan2(-v, u), 0.0)
     r_nd = safe_div(r * L, U, moving)
     return beta, r_nd
 
 
 def wake_yasukawa(beta_P, c):
     """1 - w_P [-] with the C_1/C_2 correction of Yasukawa & Yoshimura (2015)."""
-    C_2 = torch.where(beta_P > 0, c.C_2_plus + 0.0 * beta_P, c.C_2_minus + 0.0 * beta_P)
-    return (1.0 - c.w_P0) * (1.0 + (1.0 - torch.exp(-c.C_1 * beta_P.abs())) * (C_2 - 1.0))
+    C_2 = choose(beta_P > 0, c.C_2_plus, c.C_2_minus, beta_P)
+    return c.one_minus_wP0 * (1.0 + (1.0 - torch.exp(-c.C_1 * beta_P.abs())) * (C_2 - 1.0))
 
 
 def wake_gaussian(beta_P, c):
@@ -53,6 +54,7 @@ def propeller_inflow_standard(u, v, r, n, c, wake=wake_yasukawa) -> PropellerSta
 
     Returns the `PropellerState` every rudder model reads (J_s = u / (n D) [-]).
     """
+    c = view_of(c)
     beta, r_nd = drift_angles(u, v, r, c.L_pp)
     one_minus_wP = wake(beta - c.x_P * r_nd, c)
     turning = n.abs() >= TINY
@@ -66,8 +68,9 @@ def propeller_inflow_standard(u, v, r, n, c, wake=wake_yasukawa) -> PropellerSta
 def propeller_force_standard(u, v, r, n, c, inflow: PropellerState | None = None,
                              wake=wake_yasukawa):
     """X_P [N], Y_P = 0 [N], N_P = 0 [N m]; `c` provides rho, D, t_P and the inflow terms."""
+    c = view_of(c)
     if inflow is None:
         inflow = propeller_inflow_standard(u, v, r, n, c, wake)
-    X_P = (1.0 - c.t_P) * c.rho * n * n * c.D ** 4 * inflow.K_T
+    X_P = c.one_minus_tP_rho * n * n * c.D4 * inflow.K_T
     zero = torch.zeros_like(X_P)
     return X_P, zero, zero

@@ -17,35 +17,35 @@ import math
 
 import torch
 
-from sysid.mmg.guards import safe_atan2, safe_sqrt
+from sysid.mmg.coefficients import view_of
+from sysid.mmg.guards import choose, safe_atan2, safe_sqrt
 from sysid.mmg.propeller import PropellerState
 from sysid.mmg.propeller_standard import drift_angles
-from sysid.mmg.rudder import RudderInflow
+from sysid.mmg.rudder import RudderInflow, rudder_components
 
 
 def rudder_inflow_standard(u, v, r, n, delta, c, prop: PropellerState) -> RudderInflow:
     """u_R, v_R [m/s], alpha_R [rad], F_N [N]; u, v [m/s], r [rad/s], n [rps], delta [rad]."""
-    eta = c.D / c.H_R
+    c = view_of(c)
+    eta = c.eta  # D / H_R
     u_P = u * prop.one_minus_wP
-    jet = safe_sqrt(u_P * u_P + 8.0 * prop.K_T * n * n * c.D ** 2 / math.pi)
+    jet = safe_sqrt(u_P * u_P + 8.0 * prop.K_T * n * n * c.D2 / math.pi)
     core = u_P + c.kappa * (jet - u_P)
-    u_R = c.epsilon * safe_sqrt(eta * core * core + (1.0 - eta) * u_P * u_P)
+    u_R = c.epsilon * safe_sqrt(eta * core * core + c.one_minus_eta * u_P * u_P)
     beta, r_nd = drift_angles(u, v, r, c.L_pp)
-    beta_R = beta - c.l_R / c.L_pp * r_nd
-    gamma_R = torch.where(beta_R < 0, c.gamma_R_minus + 0.0 * beta_R, c.gamma_R_plus + 0.0 * beta_R)
+    beta_R = beta - c.l_R_nd * r_nd
+    gamma_R = choose(beta_R < 0, c.gamma_R_minus, c.gamma_R_plus, beta_R)
     U = torch.sqrt(u * u + v * v)
     v_R = U * gamma_R * beta_R
     alpha_R = delta - safe_atan2(v_R, u_R)
-    F_N = 0.5 * c.rho * c.A_R * (u_R * u_R + v_R * v_R) * c.f_alpha * torch.sin(alpha_R)
+    F_N = c.half_rho_A_R * (u_R * u_R + v_R * v_R) * c.f_alpha * torch.sin(alpha_R)
     return RudderInflow(u_R, v_R, alpha_R, F_N)
 
 
 def rudder_force_standard(u, v, r, n, delta, c, prop: PropellerState,
                           inflow: RudderInflow | None = None):
     """X_R [N], Y_R [N], N_R [N m about midship] from the rudder normal force."""
+    c = view_of(c)
     if inflow is None:
         inflow = rudder_inflow_standard(u, v, r, n, delta, c, prop)
-    F_N = inflow.F_N
-    cos_d, sin_d = torch.cos(delta), torch.sin(delta)
-    return (-(1.0 - c.t_R) * F_N * sin_d, -(1.0 + c.a_H) * F_N * cos_d,
-            -(c.x_R + c.a_H * c.x_H) * F_N * cos_d)
+    return rudder_components(inflow.F_N, delta, c)

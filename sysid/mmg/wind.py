@@ -11,6 +11,7 @@ from typing import NamedTuple
 
 import torch
 
+from sysid.mmg.coefficients import view_of
 from sysid.mmg.guards import SPEED_GUARD, safe_atan2
 
 TWO_PI = 2.0 * math.pi
@@ -30,14 +31,16 @@ def relative_wind(u, v, psi, U_T, zeta) -> RelativeWind:
     slow = U < SPEED_GUARD
     beta_hat = safe_atan2(v, u)
     course = psi + beta_hat
-    U_guarded = torch.where(slow, torch.full_like(U, 1e-7), U)
+    U_guarded = torch.where(slow, 1e-7, U)
     # 'from' vector of the relative wind = true 'from' vector + ship velocity (earth frame)
     W_x = U_T * torch.cos(zeta) + U_guarded * torch.cos(course)
     W_y = U_T * torch.sin(zeta) + U_guarded * torch.sin(course)
     U_A = torch.sqrt(W_x * W_x + W_y * W_y)
-    gamma_A = torch.remainder(safe_atan2(W_y, W_x) - psi, TWO_PI)
-    gamma_A = torch.where(slow, torch.remainder(zeta - psi, TWO_PI), gamma_A)
-    gamma_A = torch.where(U_T < SPEED_GUARD, torch.remainder(beta_hat, TWO_PI), gamma_A)  # wins
+    # the angle before reduction to [0, 2 pi): from the relative 'from' vector; below the
+    # speed guard the true wind's; without true wind (wins) the drift angle's
+    angle = torch.where(slow, zeta, safe_atan2(W_y, W_x)) - psi
+    angle = torch.where(U_T < SPEED_GUARD, beta_hat, angle)
+    gamma_A = torch.remainder(angle, TWO_PI)
     return RelativeWind(U_A, gamma_A)
 
 
@@ -46,6 +49,7 @@ def wind_force(U_A, gamma_A, c):
 
     `c` provides rho_air, A_T, A_L, L_wind and Fujiwara's X0..X5, Y1..Y5, N1..N3.
     """
+    c = view_of(c)
     aoa = TWO_PI - gamma_A
     dyn = 0.5 * c.rho_air * U_A * U_A
     C_X = c.X0 + c.X1 * torch.cos(aoa) + c.X3 * torch.cos(3 * aoa) + c.X5 * torch.cos(5 * aoa)
