@@ -28,7 +28,7 @@ _ODEINT_NAME = {Method.EULER: "euler", Method.RK4_38: "rk4"}  # torchdiffeq's pu
 def acceleration_channels(u, v, r, X, Y, N, c):
     """(u_dot, v_dot, r_dot), each (...,), from Eq. (4) for u, v [m/s], r [rad/s] and
     X, Y [N], N [N m], each (...,); `c` provides m, m_x, m_y, I_zz_J_zz [kg, kg m^2], x_G [m]."""
-    c = view_of(c)
+    c = view_of(c, u)
     m_x, m_y, mxG = c.m_plus_mx, c.m_plus_my, c.mxG  # m + m_x, m + m_y, m x_G
     u_dot = (X + m_y * v * r + mxG * r * r) / m_x
     # [[m+m_y, x_G m], [x_G m, I+J+x_G^2 m]] (v_dot, r_dot) = (Y - (m+m_x) u r, N - x_G m u r)

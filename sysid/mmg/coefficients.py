@@ -77,22 +77,26 @@ def derived_constants(c) -> dict:
     return out
 
 
-def _plain(value: torch.Tensor):
-    """A Python float for a constant tensor (exact: float32 and float64 are doubles), the
-    tensor itself where autograd or a functorch transform must see it."""
+def _constant(value: torch.Tensor, dtype: torch.dtype | None):
+    """A constant 0-d tensor in `dtype` (the dtype of the states it multiplies: an operation
+    on two dtypes costs a cast), or the tensor itself where autograd or a functorch
+    transform must see it."""
     if value.requires_grad or is_functorch_wrapped_tensor(value) or type(value) not in (torch.Tensor, nn.Parameter):
         return value
-    return value.item()
+    value = value.detach()
+    return value if dtype is None or value.dtype == dtype else value.to(dtype)
 
 
-def coefficient_view(values: Mapping[str, torch.Tensor], plain: bool = True) -> SimpleNamespace:
+def coefficient_view(values: Mapping[str, torch.Tensor], dtype: torch.dtype | None = None,
+                     plain: bool = True) -> SimpleNamespace:
     """Attribute access to `values` (0-d tensors) and their `derived_constants`; with
-    `plain`, constants as Python floats (no tensor operation on a 0-d tensor per forward,
-    no module lookup)."""
+    `plain`, constants detached and in `dtype` (no operation between two coefficients per
+    forward, no module lookup, no cast)."""
     view = SimpleNamespace(**values)
     view.__dict__.update(derived_constants(view))
     if plain:
-        view.__dict__.update({k: _plain(v) for k, v in view.__dict__.items()})
+        view.__dict__.update({k: _constant(v, dtype) for k, v in view.__dict__.items()})
+    view.dtype = dtype
     return view
 
 
@@ -158,11 +162,12 @@ class Coefficients(nn.Module):
             self._buffers = _WatchedTensors(self._buffers)
             self._parameters = _WatchedTensors(self._parameters)
             self._loads = 0   # bumped by assign, load_state_dict and _apply
-            self._view_key = self._view = None
+            self._view_key, self._views = None, {}
 
-    def values_view(self) -> SimpleNamespace:
-        """The coefficients (``view.X_vr``) and their derived constants (`derived_constants`):
-        Python floats where nothing needs a tensor, tensors where autograd or a functorch
+    def values_view(self, dtype: torch.dtype | None = None) -> SimpleNamespace:
+        """The coefficients (``view.X_vr``) and their derived constants (`derived_constants`)
+        for states of `dtype` (default: the coefficients'): constants as detached 0-d
+        tensors of that dtype, tensors with their history where autograd or a functorch
         transform must see them (trainable coefficients with gradient on, swapped-in
         values). Cached until a coefficient changes (`assign`, `load_state_dict`, an
         optimizer step on a trainable one, `to`, `functional_call`)."""
@@ -173,13 +178,13 @@ class Coefficients(nn.Module):
         live = torch.is_grad_enabled() and any(p.requires_grad for p in raws)
         key = (self._buffers.changes, self._parameters.changes, self._loads,
                tuple(p._version for p in raws))
-        if not live and key == self._view_key:
-            return self._view
-        view = coefficient_view({name: getattr(self, name) for name in self.names})
-        if live:
-            self._view_key = None
-        else:
-            self._view_key, self._view = key, view
+        if key != self._view_key:
+            self._view_key, self._views = key, {}
+        view = None if live else self._views.get(dtype)
+        if view is None:
+            view = coefficient_view({name: getattr(self, name) for name in self.names}, dtype)
+            if not live:
+                self._views[dtype] = view
         return view
 
     def _load_from_state_dict(self, *args, **kwargs):
@@ -245,28 +250,28 @@ class PackedCoefficients(nn.Module):
             return super().__getattr__("values")[index[name]]
         return super().__getattr__(name)
 
-    def values_view(self) -> SimpleNamespace:
+    def values_view(self, dtype: torch.dtype | None = None) -> SimpleNamespace:
         """The coefficients and `derived_constants` as 0-d tensors (what compiled code
         reads: Inductor folds the derived constants)."""
-        return coefficient_view({name: getattr(self, name) for name in self.names}, plain=False)
+        return coefficient_view({name: getattr(self, name) for name in self.names}, dtype, plain=False)
 
 
-def view_of(c) -> SimpleNamespace:
-    """`c` as a values view: itself if it is one, else its ``values_view()`` (a
-    `Coefficients` or `PackedCoefficients`)."""
-    return c if type(c) is SimpleNamespace else c.values_view()
+def view_of(c, like: torch.Tensor | None = None) -> SimpleNamespace:
+    """`c` as a values view: itself if it is one, else its ``values_view`` (a
+    `Coefficients` or `PackedCoefficients`) for states like `like`."""
+    return c if type(c) is SimpleNamespace else c.values_view(None if like is None else like.dtype)
 
 
 def coefficient_vector(c: SimpleNamespace, names: tuple[str, ...], like: torch.Tensor) -> torch.Tensor:
     """(k,) the values of `names` in `like`'s dtype and device: one tensor, cached in the
     view while every value is a constant; stacked anew (through autograd) otherwise."""
-    values = [getattr(c, n) for n in names]
-    if any(isinstance(v, torch.Tensor) for v in values):
-        return torch.stack([torch.as_tensor(v, dtype=like.dtype, device=like.device).expand(())
-                            if not isinstance(v, torch.Tensor) else v.to(like.dtype) for v in values])
     cache = c.__dict__.setdefault("_vectors", {})
     key = (names, like.dtype, like.device)
     found = cache.get(key)
-    if found is None:
-        found = cache[key] = torch.tensor(values, dtype=like.dtype, device=like.device)
-    return found
+    if found is not None:
+        return found
+    values = [getattr(c, n) for n in names]
+    stacked = torch.stack([torch.as_tensor(v, device=like.device).to(like.dtype) for v in values])
+    if not any(v.requires_grad or is_functorch_wrapped_tensor(v) for v in values) and not torch.compiler.is_compiling():
+        cache[key] = stacked
+    return stacked

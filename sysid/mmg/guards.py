@@ -22,10 +22,10 @@ def constant(x: torch.Tensor) -> bool:
 
 
 def choose(condition: torch.Tensor, a, b, like: torch.Tensor) -> torch.Tensor:
-    """a where `condition` holds, else b (coefficients: floats or 0-d tensors), in the
-    dtype and shape of `like` (`torch.where` of two floats would take the default dtype)."""
-    if isinstance(a, float) and isinstance(b, float):
-        return torch.full_like(like, b).masked_fill_(condition, a)
+    """a where `condition` holds, else b (coefficients: 0-d tensors), in the dtype and shape
+    of `like` (`torch.where` of two 0-d tensors takes their dtype)."""
+    if a.dtype == b.dtype == like.dtype and constant(a) and constant(b):
+        return torch.where(condition, a, b)
     return torch.where(condition, a + 0.0 * like, b + 0.0 * like)
 
 

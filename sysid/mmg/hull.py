@@ -83,7 +83,7 @@ def hull_force(u: torch.Tensor, v: torch.Tensor, r: torch.Tensor, c,
     X_0A, X_vr, Y_v, Y_r, N_v, N_r, C_D, C_rY, C_rN. `quadrature` is "exact" (closed form)
     or "simpson" (the lab simulator's rule).
     """
-    c = view_of(c)
+    c = view_of(c, u)
     L = c.L_pp
     q = c.q  # kg/m, 1/2 rho L d
     U = torch.sqrt(u * u + v * v)

@@ -26,7 +26,7 @@ def hull_force_standard(u: torch.Tensor, v: torch.Tensor, r: torch.Tensor, c
     (`sysid.mmg.families`).
     Any batch shape; float32 or float64.
     """
-    c = view_of(c)
+    c = view_of(c, u)
     L = c.L_pp
     q = c.q  # kg/m, 1/2 rho L d
     U2 = u * u + v * v

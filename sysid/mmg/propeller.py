@@ -29,7 +29,7 @@ def propeller_inflow(u, v, r, n, c) -> PropellerState:
     u, v [m/s], r [rad/s], n [rps]; `c` provides L_pp, D, w_P0, tau, C_P, x_P, k0..k2,
     C3, C6, C7, C10.
     """
-    c = view_of(c)
+    c = view_of(c, u)
     L = c.L_pp
     U = torch.sqrt(u * u + v * v)
     slow = U < SPEED_GUARD
@@ -57,7 +57,7 @@ def propeller_force(u, v, r, n, c, inflow: PropellerState | None = None):
 
     `c` provides rho, L_pp, d, D, P, t_P, A1..A8, B1..B8 and what `propeller_inflow` needs.
     """
-    c = view_of(c)
+    c = view_of(c, u)
     if inflow is None:
         inflow = propeller_inflow(u, v, r, n, c)
     J_s = inflow.J_s

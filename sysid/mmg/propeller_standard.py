@@ -54,7 +54,7 @@ def propeller_inflow_standard(u, v, r, n, c, wake=wake_yasukawa) -> PropellerSta
 
     Returns the `PropellerState` every rudder model reads (J_s = u / (n D) [-]).
     """
-    c = view_of(c)
+    c = view_of(c, u)
     beta, r_nd = drift_angles(u, v, r, c.L_pp)
     one_minus_wP = wake(beta - c.x_P * r_nd, c)
     turning = n.abs() >= TINY
@@ -68,7 +68,7 @@ def propeller_inflow_standard(u, v, r, n, c, wake=wake_yasukawa) -> PropellerSta
 def propeller_force_standard(u, v, r, n, c, inflow: PropellerState | None = None,
                              wake=wake_yasukawa):
     """X_P [N], Y_P = 0 [N], N_P = 0 [N m]; `c` provides rho, D, t_P and the inflow terms."""
-    c = view_of(c)
+    c = view_of(c, u)
     if inflow is None:
         inflow = propeller_inflow_standard(u, v, r, n, c, wake)
     X_P = c.one_minus_tP_rho * n * n * c.D4 * inflow.K_T

@@ -29,7 +29,7 @@ def rudder_inflow(u, v, r, n, delta, c, prop: PropellerState) -> RudderInflow:
     u, v [m/s], r [rad/s], n [rps], delta [rad, positive to starboard]; `c` provides
     rho, D, A_R, lambda_R, epsilon, k_x, k_xPR, C_PR, x_R, l_R, gamma_P, gamma_N.
     """
-    c = view_of(c)
+    c = view_of(c, u)
     eta = c.eta  # D / H_R, H_R = sqrt(A_R lambda_R)
     kappa = c.kappa  # k_x / epsilon
     K_T = prop.K_T
@@ -54,7 +54,7 @@ def rudder_inflow(u, v, r, n, delta, c, prop: PropellerState) -> RudderInflow:
 
 def rudder_force(u, v, r, n, delta, c, prop: PropellerState, inflow: RudderInflow | None = None):
     """X_R [N], Y_R [N], N_R [N m] from the rudder normal force (paper Eqs. 36-38)."""
-    c = view_of(c)
+    c = view_of(c, u)
     if inflow is None:
         inflow = rudder_inflow(u, v, r, n, delta, c, prop)
     return rudder_components(inflow.F_N, delta, c)

@@ -26,7 +26,7 @@ from sysid.mmg.rudder import RudderInflow, rudder_components
 
 def rudder_inflow_standard(u, v, r, n, delta, c, prop: PropellerState) -> RudderInflow:
     """u_R, v_R [m/s], alpha_R [rad], F_N [N]; u, v [m/s], r [rad/s], n [rps], delta [rad]."""
-    c = view_of(c)
+    c = view_of(c, u)
     eta = c.eta  # D / H_R
     u_P = u * prop.one_minus_wP
     jet = safe_sqrt(u_P * u_P + 8.0 * prop.K_T * n * n * c.D2 / math.pi)
@@ -45,7 +45,7 @@ def rudder_inflow_standard(u, v, r, n, delta, c, prop: PropellerState) -> Rudder
 def rudder_force_standard(u, v, r, n, delta, c, prop: PropellerState,
                           inflow: RudderInflow | None = None):
     """X_R [N], Y_R [N], N_R [N m about midship] from the rudder normal force."""
-    c = view_of(c)
+    c = view_of(c, u)
     if inflow is None:
         inflow = rudder_inflow_standard(u, v, r, n, delta, c, prop)
     return rudder_components(inflow.F_N, delta, c)

@@ -49,7 +49,7 @@ def wind_force(U_A, gamma_A, c):
 
     `c` provides rho_air, A_T, A_L, L_wind and Fujiwara's X0..X5, Y1..Y5, N1..N3.
     """
-    c = view_of(c)
+    c = view_of(c, U_A)
     aoa = TWO_PI - gamma_A
     dyn = 0.5 * c.rho_air * U_A * U_A
     C_X = c.X0 + c.X1 * torch.cos(aoa) + c.X3 * torch.cos(3 * aoa) + c.X5 * torch.cos(5 * aoa)
