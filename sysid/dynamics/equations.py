@@ -78,8 +78,9 @@ def state_derivative(state: torch.Tensor, force: torch.Tensor, c) -> torch.Tenso
 
 
 def derivative(force_model: nn.Module, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
-    """dx/dt (..., 6) of any force model at state (..., 6) with inputs (..., 4)."""
-    return state_derivative(state, force_model(state, inputs).total, force_model.coefficients)
+    """dx/dt (..., 6) of any force model at state (..., 6) with inputs (..., 4) (through
+    `lean_derivative`: the same numbers as from the model's `ForceBreakdown`)."""
+    return lean_derivative(force_model, state, inputs)
 
 
 def lean_derivative(force_model: nn.Module, state: torch.Tensor, inputs: torch.Tensor, dim: int = -1) -> torch.Tensor:
@@ -116,9 +117,16 @@ class ShipDynamics(nn.Module):
             self.record.append(forces)
         return state_derivative(state, forces.total, self.force_model.coefficients), forces
 
+    def rate(self, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
+        """dx/dt (..., 6): without a record, by `lean_derivative` (the same numbers, fewer
+        operations: no force breakdown is built)."""
+        if self.record is None:
+            return lean_derivative(self.force_model, state, inputs)
+        return self.derivative(state, inputs)[0]
+
     def forward(self, tau: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
         k = min(max(int(tau), 0), self.inputs.shape[0] - 1)  # tau >= 0: int() is floor
-        return self.dt * self.derivative(state, self.inputs[k])[0]
+        return self.dt * self.rate(state, self.inputs[k])
 
 
 def check_shapes(x0: torch.Tensor, inputs: torch.Tensor) -> None:
@@ -157,7 +165,7 @@ def integrate(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt
                          "integrator through sysid.fast.compiled.predict")
     rhs = ShipDynamics(force_model, inputs, dt, record)
     if integrator.method not in _ODEINT_NAME:  # classical RK4: a plain step loop
-        return rollout(lambda x, u: rhs.derivative(x, u)[0], x0, inputs, dt, integrator.method)
+        return rollout(rhs.rate, x0, inputs, dt, integrator.method)
     tau = torch.arange(inputs.shape[0], dtype=x0.dtype, device=x0.device)
     options = {"perturb": True} if integrator.method is not Method.EULER else None
     return odeint(rhs, x0, tau, method=_ODEINT_NAME[integrator.method], options=options)

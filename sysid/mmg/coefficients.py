@@ -262,16 +262,36 @@ def view_of(c, like: torch.Tensor | None = None) -> SimpleNamespace:
     return c if type(c) is SimpleNamespace else c.values_view(None if like is None else like.dtype)
 
 
-def coefficient_vector(c: SimpleNamespace, names: tuple[str, ...], like: torch.Tensor) -> torch.Tensor:
-    """(k,) the values of `names` in `like`'s dtype and device: one tensor, cached in the
-    view while every value is a constant; stacked anew (through autograd) otherwise."""
+def coefficient_vector(c: SimpleNamespace, names: tuple, like: torch.Tensor) -> torch.Tensor:
+    """(k,) the values of `names` in `like`'s dtype and device (a name may be a tuple of
+    names: their product, in that order; None: 0; a float: itself): one tensor, cached in the view while
+    every value is a constant; stacked anew (through autograd) otherwise."""
     cache = c.__dict__.setdefault("_vectors", {})
     key = (names, like.dtype, like.device)
     found = cache.get(key)
     if found is not None:
         return found
-    values = [getattr(c, n) for n in names]
-    stacked = torch.stack([torch.as_tensor(v, device=like.device).to(like.dtype) for v in values])
+    zero = torch.zeros((), dtype=like.dtype, device=like.device)
+
+    def value(name):
+        if name is None:
+            return zero
+        if isinstance(name, float):
+            return torch.tensor(name, dtype=like.dtype, device=like.device)
+        if isinstance(name, tuple):
+            out = value(name[0])
+            for other in name[1:]:
+                out = out * value(other)
+            return out
+        return torch.as_tensor(getattr(c, name), device=like.device).to(like.dtype)
+    values = [value(n) for n in names]
+    stacked = torch.stack(values)
     if not any(v.requires_grad or is_functorch_wrapped_tensor(v) for v in values) and not torch.compiler.is_compiling():
         cache[key] = stacked
     return stacked
+
+
+def coefficient_matrix(c: SimpleNamespace, rows: tuple, like: torch.Tensor) -> torch.Tensor:
+    """(k, m) from k rows of m names (as `coefficient_vector`), cached alike."""
+    flat = coefficient_vector(c, tuple(n for row in rows for n in row), like)
+    return flat.view(len(rows), -1)

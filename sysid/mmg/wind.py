@@ -11,7 +11,7 @@ from typing import NamedTuple
 
 import torch
 
-from sysid.mmg.coefficients import view_of
+from sysid.mmg.coefficients import coefficient_matrix, coefficient_vector, view_of
 from sysid.mmg.guards import SPEED_GUARD, safe_atan2
 
 TWO_PI = 2.0 * math.pi
@@ -44,15 +44,25 @@ def relative_wind(u, v, psi, U_T, zeta) -> RelativeWind:
     return RelativeWind(U_A, gamma_A)
 
 
+# Fujiwara's coefficients by harmonic: rows cos(k aoa) for k = 1, 3, 5 (C_X) and sin(k aoa)
+# for k = 1, 3, 5, 2 (C_Y, C_N); columns (C_X, C_Y, C_N)
+_HARMONICS = (1.0, 3.0, 5.0, 2.0)
+_FUJIWARA = (("X1", None, None), ("X3", None, None), ("X5", None, None), (None, None, None),
+             (None, "Y1", "N1"), (None, "Y3", "N3"), (None, "Y5", None), (None, None, "N2"))
+
+
 def wind_force(U_A, gamma_A, c):
     """X_A [N], Y_A [N], N_A [N m] from the relative wind (U_A [m/s], gamma_A [rad]).
 
     `c` provides rho_air, A_T, A_L, L_wind and Fujiwara's X0..X5, Y1..Y5, N1..N3.
+    C_X = X0 + sum_k X_k cos(k aoa), C_Y = sum_k Y_k sin(k aoa), C_N = sum_k N_k sin(k aoa),
+    aoa = 2 pi - gamma_A, evaluated as one (..., 8) x (8, 3) product.
     """
     c = view_of(c, U_A)
-    aoa = TWO_PI - gamma_A
-    dyn = 0.5 * c.rho_air * U_A * U_A
-    C_X = c.X0 + c.X1 * torch.cos(aoa) + c.X3 * torch.cos(3 * aoa) + c.X5 * torch.cos(5 * aoa)
-    C_Y = c.Y1 * torch.sin(aoa) + c.Y3 * torch.sin(3 * aoa) + c.Y5 * torch.sin(5 * aoa)
-    C_N = c.N1 * torch.sin(aoa) + c.N2 * torch.sin(2 * aoa) + c.N3 * torch.sin(3 * aoa)
-    return dyn * c.A_T * C_X, dyn * c.A_L * C_Y, dyn * c.A_L * c.L_wind * C_N
+    aoa = (TWO_PI - gamma_A)[..., None] * coefficient_vector(c, _HARMONICS, U_A)  # (..., 4)
+    harmonics = torch.cat([torch.cos(aoa), torch.sin(aoa)], -1)                    # (..., 8)
+    C = torch.addmm(coefficient_vector(c, ("X0", None, None), U_A), harmonics.reshape(-1, 8),
+                    coefficient_matrix(c, _FUJIWARA, U_A)).view(U_A.shape + (3,))
+    dyn = c.half_rho_air * U_A * U_A  # Pa
+    F = dyn[..., None] * coefficient_vector(c, ("A_T", "A_L", ("A_L", "L_wind")), U_A) * C
+    return F.unbind(-1)
