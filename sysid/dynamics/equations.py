@@ -64,7 +64,7 @@ def required_force(state: torch.Tensor, acceleration: torch.Tensor, c) -> torch.
 def derivative_channels(state: torch.Tensor, force, c) -> tuple[torch.Tensor, ...]:
     """(x_dot, u_dot, y_dot, v_dot, psi_dot, r_dot), each (...,), Eqs. (1) and (4), from
     state (..., 6) and force = (X, Y, N), each (...,) [N, N, N m]."""
-    u, v, psi, r = state[..., 1], state[..., 3], state[..., 4], state[..., 5]
+    _, u, _, v, psi, r = state.unbind(-1)
     u_dot, v_dot, r_dot = acceleration_channels(u, v, r, *force, c)
     cos_psi, sin_psi = torch.cos(psi), torch.sin(psi)
     x_dot = u * cos_psi - v * sin_psi

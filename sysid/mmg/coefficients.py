@@ -60,6 +60,9 @@ def derived_constants(c) -> dict:
         out["one_plus_aH"] = 1.0 + c.a_H
         out["one_minus_tR"] = 1.0 - c.t_R
         out["N_R_lever"] = c.x_R + c.a_H * c.x_H
+        out["minus_one_plus_aH"] = -out["one_plus_aH"]
+        out["minus_one_minus_tR"] = -out["one_minus_tR"]
+        out["minus_N_R_lever"] = -out["N_R_lever"]
     if "t_P" in have:
         out["one_minus_tP"] = 1.0 - c.t_P
         out["one_minus_tP_rho"] = out["one_minus_tP"] * c.rho

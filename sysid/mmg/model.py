@@ -76,7 +76,7 @@ class MMG(nn.Module):
     def components(self, state: torch.Tensor, inputs: torch.Tensor):
         """((X, Y, N) of hull, propeller, rudder, wind or None), relative wind: each (...,)."""
         c = self.coefficients.values_view(state.dtype)  # constants and derived constants, cached
-        u, v, psi, r = state[..., 1], state[..., 3], state[..., 4], state[..., 5]
+        _, u, _, v, psi, r = state.unbind(-1)
         n, delta, U_T, zeta = inputs.unbind(-1)
         families = self.families
         hull = families["hull"].force(u, v, r, c, self.quadrature)

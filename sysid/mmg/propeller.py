@@ -21,6 +21,7 @@ class PropellerState(NamedTuple):
     J_s: torch.Tensor           # -, u / (n D) (guarded)
     J: torch.Tensor             # -, advance ratio with wake for u >= 0
     K_T: torch.Tensor           # -, thrust coefficient the rudder sees (0 for n = 0)
+    K_T_ahead: torch.Tensor | None = None  # -, K_T(J) of ahead revolutions, where computed
 
 
 def propeller_inflow(u, v, r, n, c) -> PropellerState:
@@ -31,7 +32,7 @@ def propeller_inflow(u, v, r, n, c) -> PropellerState:
     """
     c = view_of(c, u)
     L = c.L_pp
-    U = torch.sqrt(u * u + v * v)
+    U = torch.hypot(u, v)
     slow = U < SPEED_GUARD
     U_safe = torch.where(slow, 1.0, U)
     v_nd = torch.where(slow, 1e-7, v / U_safe)           # v'
@@ -49,7 +50,7 @@ def propeller_inflow(u, v, r, n, c) -> PropellerState:
     K_T_ahead = c.k0 + c.k1 * J + c.k2 * J * J
     K_T_reverse = torch.where(J_s >= c.C10, c.C6 + c.C7 * J_s, c.C3)
     K_T = torch.where(n > TINY, K_T_ahead, torch.where(n < -TINY, K_T_reverse, 0.0))
-    return PropellerState(one_minus_wP, J_s, J, K_T)
+    return PropellerState(one_minus_wP, J_s, J, K_T, K_T_ahead)
 
 
 def propeller_force(u, v, r, n, c, inflow: PropellerState | None = None):
@@ -66,7 +67,9 @@ def propeller_force(u, v, r, n, c, inflow: PropellerState | None = None):
     astern_motion = u < 0
     thrust_scale = c.rho * n2 * c.D4
     # n >= 0: K_T(J) with J = J_s for u < 0; n < 0: CMT reverse polynomial
-    K_T_ahead = c.k0 + c.k1 * inflow.J + c.k2 * inflow.J * inflow.J
+    K_T_ahead = inflow.K_T_ahead
+    if K_T_ahead is None:
+        K_T_ahead = c.k0 + c.k1 * inflow.J + c.k2 * inflow.J * inflow.J
     X_P = torch.where(ahead, thrust_scale * c.one_minus_tP * K_T_ahead, thrust_scale * inflow.K_T)
     # lateral force and moment: Q2 polynomials in J_s times (n P)^2 (ahead revolutions,
     # astern motion, else 0); reverse rotation: piecewise linear in J_s times (n D)^2.

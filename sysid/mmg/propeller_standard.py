@@ -31,7 +31,7 @@ from sysid.mmg.propeller import PropellerState
 def drift_angles(u, v, r, L):
     """beta = atan2(-v_m, u) [rad] (positive: flow from port ahead) and r' = r L / U [-];
     both 0 below the speed guard."""
-    U = torch.sqrt(u * u + v * v)
+    U = torch.hypot(u, v)
     moving = U >= SPEED_GUARD
     beta = torch.where(moving, safe_atan2(-v, u), 0.0)
     r_nd = safe_div(r * L, U, moving)

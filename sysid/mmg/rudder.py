@@ -35,9 +35,10 @@ def rudder_inflow(u, v, r, n, delta, c, prop: PropellerState) -> RudderInflow:
     K_T = prop.K_T
     u_p = u * prop.one_minus_wP
     # Yoshimura: n >= 0 and K_T > 0
-    jet = safe_sqrt(u_p * u_p + 8.0 * K_T * n * n * c.D2 / math.pi)
+    u_p2 = u_p * u_p
+    jet = safe_sqrt(u_p2 + 8.0 * K_T * n * n * c.D2 / math.pi)
     core = u_p + kappa * (jet - u_p)
-    u_R_yoshimura = c.epsilon * safe_sqrt(eta * core * core + c.one_minus_eta * u_p * u_p)
+    u_R_yoshimura = c.epsilon * safe_sqrt(eta * core * core + c.one_minus_eta * u_p2)
     # Kitagawa: otherwise, u >= 0
     u2 = u * c.epsilon * prop.one_minus_wP
     u1 = u2 + n * c.D * c.k_xPR * safe_sqrt(8.0 * K_T.abs() / math.pi)
@@ -64,5 +65,4 @@ def rudder_components(F_N, delta, c):
     """X_R = -(1 - t_R) F_N sin(delta), Y_R = -(1 + a_H) F_N cos(delta),
     N_R = -(x_R + a_H x_H) F_N cos(delta) [N, N, N m], from F_N [N] and delta [rad]."""
     cos_d = torch.cos(delta)
-    return (-c.one_minus_tR * F_N * torch.sin(delta), -c.one_plus_aH * F_N * cos_d,
-            -c.N_R_lever * F_N * cos_d)
+    return c.minus_one_minus_tR * F_N * torch.sin(delta), c.minus_one_plus_aH * F_N * cos_d, c.minus_N_R_lever * F_N * cos_d

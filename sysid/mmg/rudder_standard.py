@@ -35,7 +35,7 @@ def rudder_inflow_standard(u, v, r, n, delta, c, prop: PropellerState) -> Rudder
     beta, r_nd = drift_angles(u, v, r, c.L_pp)
     beta_R = beta - c.l_R_nd * r_nd
     gamma_R = choose(beta_R < 0, c.gamma_R_minus, c.gamma_R_plus, beta_R)
-    U = torch.sqrt(u * u + v * v)
+    U = torch.hypot(u, v)
     v_R = U * gamma_R * beta_R
     alpha_R = delta - safe_atan2(v_R, u_R)
     F_N = c.half_rho_A_R * (u_R * u_R + v_R * v_R) * c.f_alpha * torch.sin(alpha_R)

@@ -27,7 +27,7 @@ def relative_wind(u, v, psi, U_T, zeta) -> RelativeWind:
 
     u, v [m/s] midship body velocity, psi [rad] heading, U_T [m/s], zeta [rad].
     """
-    U = torch.sqrt(u * u + v * v)
+    U = torch.hypot(u, v)
     slow = U < SPEED_GUARD
     beta_hat = safe_atan2(v, u)
     course = psi + beta_hat
