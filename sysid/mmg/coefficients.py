@@ -25,13 +25,13 @@ def raw_value(value: torch.Tensor, low: float, high: float) -> torch.Tensor:
     return torch.log(frac / (1 - frac))
 
 
-def derived_constants(c) -> dict:
+def derived_constants(c, names) -> dict:
     """Constants every forward would otherwise recompute from the coefficients, by the same
     expressions as the force functions wrote them (so the numbers are the same to the bit):
     q = 1/2 rho L_pp d [kg/m], q L_pp [kg], D^2, D^4 [m^2, m^4], P^2 [m^2], the rudder's
     H_R, eta, kappa, f_alpha and the mass terms of the equations of motion. `c` holds the
-    coefficients as 0-d tensors; only the names the ship has are derived."""
-    have = c.__dict__
+    coefficients (`names`) as 0-d tensors; only the names the ship has are derived."""
+    have = {name: None for name in names}
     out = {}
     if "rho" in have and "L_pp" in have and "d" in have:
         out["q"] = 0.5 * c.rho * c.L_pp * c.d
@@ -52,7 +52,7 @@ def derived_constants(c) -> dict:
         out["kappa"] = c.k_x / c.epsilon
         out["f_alpha"] = 6.13 * c.lambda_R / (2.25 + c.lambda_R)
     if "H_R" in have or "H_R" in out:
-        out["eta"] = c.D / out.get("H_R", have.get("H_R"))
+        out["eta"] = c.D / out["H_R"] if "H_R" in out else c.D / c.H_R
         out["one_minus_eta"] = 1.0 - out["eta"]
         out["half_rho_A_R"] = 0.5 * c.rho * c.A_R
         out["l_R_nd"] = c.l_R / c.L_pp
@@ -80,6 +80,14 @@ def derived_constants(c) -> dict:
     return out
 
 
+# every name `derived_constants` may give
+DERIVED_NAMES = frozenset((
+    "q", "qL", "L_pp2", "L_pp3", "D2", "D4", "P2", "dX_0", "C_D_L", "C_D_L2", "H_R", "kappa", "f_alpha",
+    "eta", "one_minus_eta", "half_rho_A_R", "l_R_nd", "one_plus_aH", "one_minus_tR", "N_R_lever",
+    "minus_one_plus_aH", "minus_one_minus_tR", "minus_N_R_lever", "one_minus_tP", "one_minus_tP_rho",
+    "one_minus_wP0", "half_rho_air", "m_plus_mx", "m_plus_my", "mxG", "a22", "det"))
+
+
 def _constant(value: torch.Tensor, dtype: torch.dtype | None):
     """A constant 0-d tensor in `dtype` (the dtype of the states it multiplies: an operation
     on two dtypes costs a cast), or the tensor itself where autograd or a functorch
@@ -96,7 +104,7 @@ def coefficient_view(values: Mapping[str, torch.Tensor], dtype: torch.dtype | No
     `plain`, constants detached and in `dtype` (no operation between two coefficients per
     forward, no module lookup, no cast)."""
     view = SimpleNamespace(**values)
-    view.__dict__.update(derived_constants(view))
+    view.__dict__.update(derived_constants(view, values))
     if plain:
         view.__dict__.update({k: _constant(v, dtype) for k, v in view.__dict__.items()})
     view.dtype = dtype
@@ -174,9 +182,9 @@ class Coefficients(nn.Module):
         transform must see them (trainable coefficients with gradient on, swapped-in
         values). Cached until a coefficient changes (`assign`, `load_state_dict`, an
         optimizer step on a trainable one, `to`, `functional_call`)."""
+        if torch.compiler.is_compiling():  # traced code reads the module (derived names too)
+            return self
         self._watch()
-        if torch.compiler.is_compiling():
-            return coefficient_view({name: getattr(self, name) for name in self.names}, plain=False)
         raws = [self._parameters[f"raw_{n}"] for n in self.trainable_names]
         live = torch.is_grad_enabled() and any(p.requires_grad for p in raws)
         key = (self._buffers.changes, self._parameters.changes, self._loads,
@@ -207,7 +215,20 @@ class Coefficients(nn.Module):
                 low, high = self._bounds[name]
                 return low + (high - low) * torch.sigmoid(raw)
             return raw
-        return super().__getattr__(name)
+        try:
+            return super().__getattr__(name)
+        except AttributeError:
+            if (name.startswith("_") or name not in DERIVED_NAMES or "names" not in self.__dict__
+                    or self.__dict__.get("_deriving")):
+                raise
+            self.__dict__["_deriving"] = True
+            try:
+                derived = derived_constants(self, self.names)
+            finally:
+                self.__dict__["_deriving"] = False
+            if name not in derived:
+                raise
+            return derived[name]
 
     def assign(self, values: Mapping[str, float]) -> None:
         """Set coefficients to these values (physical units, e.g. identified ones): a
@@ -244,8 +265,11 @@ class PackedCoefficients(nn.Module):
         super().__init__()
         self.ship_name = coefficients.ship_name
         self.names = coefficients.names
-        self.index = {name: i for i, name in enumerate(self.names)}
-        self.register_buffer("values", torch.stack([getattr(coefficients, n).detach() for n in self.names]))
+        with torch.no_grad():
+            derived = derived_constants(coefficients, coefficients.names)
+        every = {**{n: getattr(coefficients, n).detach() for n in self.names}, **derived}
+        self.index = {name: i for i, name in enumerate(every)}  # coefficients, then derived constants
+        self.register_buffer("values", torch.stack([v.to(coefficients_dtype(coefficients)) for v in every.values()]))
 
     def __getattr__(self, name: str):
         index = self.__dict__.get("index", {})
@@ -253,10 +277,14 @@ class PackedCoefficients(nn.Module):
             return super().__getattr__("values")[index[name]]
         return super().__getattr__(name)
 
-    def values_view(self, dtype: torch.dtype | None = None) -> SimpleNamespace:
-        """The coefficients and `derived_constants` as 0-d tensors (what compiled code
-        reads: Inductor folds the derived constants)."""
-        return coefficient_view({name: getattr(self, name) for name in self.names}, dtype, plain=False)
+    def values_view(self, dtype: torch.dtype | None = None) -> "PackedCoefficients":
+        """Itself: coefficients and derived constants are entries of ``values``."""
+        return self
+
+
+def coefficients_dtype(coefficients) -> torch.dtype:
+    """The dtype of a `Coefficients`' values."""
+    return next(iter(coefficients.state_dict().values())).dtype
 
 
 def view_of(c, like: torch.Tensor | None = None) -> SimpleNamespace:
@@ -269,7 +297,8 @@ def coefficient_vector(c: SimpleNamespace, names: tuple, like: torch.Tensor) -> 
     """(k,) the values of `names` in `like`'s dtype and device (a name may be a tuple of
     names: their product, in that order; None: 0; a float: itself): one tensor, cached in the view while
     every value is a constant; stacked anew (through autograd) otherwise."""
-    cache = c.__dict__.setdefault("_vectors", {})
+    compiling = torch.compiler.is_compiling()
+    cache = {} if compiling else c.__dict__.setdefault("_vectors", {})
     key = (names, like.dtype, like.device)
     found = cache.get(key)
     if found is not None:
@@ -289,7 +318,9 @@ def coefficient_vector(c: SimpleNamespace, names: tuple, like: torch.Tensor) -> 
         return torch.as_tensor(getattr(c, name), device=like.device).to(like.dtype)
     values = [value(n) for n in names]
     stacked = torch.stack(values)
-    if not any(v.requires_grad or is_functorch_wrapped_tensor(v) for v in values) and not torch.compiler.is_compiling():
+    # only plain constants are kept (a traced value, e.g. under torch.export, never is)
+    if (not compiling and type(stacked) is torch.Tensor
+            and not any(v.requires_grad or is_functorch_wrapped_tensor(v) for v in values)):
         cache[key] = stacked
     return stacked
 

@@ -117,10 +117,15 @@ def hull_force(u: torch.Tensor, v: torch.Tensor, r: torch.Tensor, c,
     else:  # both cross-flow corrections in one pass: b (..., 2) = (C_rY r, C_rN r)
         b = r[..., None] * coefficient_vector(c, ("C_rY", "C_rN"), r)
         i1s, i2s = crossflow_integrals(v[..., None], b, L, c.L_pp3)
-        integrals = torch.where(_FIRST_LANE, i1s, i2s)  # (I1 of C_rY, I2 of C_rN)
-    basis = torch.stack([u, v, r, u.abs()], -1)
-    motion = torch.cat([(X0 * u * U_guarded)[..., None],
-                        basis.index_select(-1, _LEFT) * basis.index_select(-1, _RIGHT), integrals], -1)
+        integrals = (torch.stack([i1s[..., 0], i2s[..., 1]], -1) if torch.compiler.is_compiling()
+                     else torch.where(_FIRST_LANE, i1s, i2s))  # (I1 of C_rY, I2 of C_rN)
+    au = u.abs()
+    if torch.compiler.is_compiling():  # no tensor constants in traced loop bodies
+        pairs = torch.stack([v * r, v * au, r * u, v * u, r * au], -1)
+    else:
+        basis = torch.stack([u, v, r, au], -1)
+        pairs = basis.index_select(-1, _LEFT) * basis.index_select(-1, _RIGHT)
+    motion = torch.cat([(X0 * u * U_guarded)[..., None], pairs, integrals], -1)
     shape = motion.shape
     forces = (motion.reshape(-1, 8) @ coefficient_matrix(c, _HULL, u)).view(shape[:-1] + (3,))
     return forces.unbind(-1)
