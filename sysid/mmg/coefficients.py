@@ -38,6 +38,7 @@ def derived_constants(c, names) -> dict:
         out["qL"] = out["q"] * c.L_pp
         out["L_pp2"] = c.L_pp * c.L_pp
         out["L_pp3"] = c.L_pp ** 3
+        out["half_L"] = 0.5 * c.L_pp
     if "D" in have:
         out["D2"], out["D4"] = c.D ** 2, c.D ** 4
     if "P" in have:
@@ -82,7 +83,7 @@ def derived_constants(c, names) -> dict:
 
 # every name `derived_constants` may give
 DERIVED_NAMES = frozenset((
-    "q", "qL", "L_pp2", "L_pp3", "D2", "D4", "P2", "dX_0", "C_D_L", "C_D_L2", "H_R", "kappa", "f_alpha",
+    "q", "qL", "L_pp2", "L_pp3", "half_L", "D2", "D4", "P2", "dX_0", "C_D_L", "C_D_L2", "H_R", "kappa", "f_alpha",
     "eta", "one_minus_eta", "half_rho_A_R", "l_R_nd", "one_plus_aH", "one_minus_tR", "N_R_lever",
     "minus_one_plus_aH", "minus_one_minus_tR", "minus_N_R_lever", "one_minus_tP", "one_minus_tP_rho",
     "one_minus_wP0", "half_rho_air", "m_plus_mx", "m_plus_my", "mxG", "a22", "det"))

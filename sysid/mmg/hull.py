@@ -48,7 +48,7 @@ def crossflow_integrals_simpson(v: torch.Tensor, b: torch.Tensor, L: torch.Tenso
     return f @ weights, (f * x) @ weights
 
 
-def crossflow_integrals(v: torch.Tensor, b: torch.Tensor, L, L3=None) -> tuple[torch.Tensor, torch.Tensor]:
+def crossflow_integrals(v: torch.Tensor, b: torch.Tensor, L, L3=None, half=None) -> tuple[torch.Tensor, torch.Tensor]:
     """Exact cross-flow integrals over the hull, x in [-L/2, L/2] [m].
 
     With w(x) = v + b x (local lateral velocity [m/s], b = C_r r [1/s]) returns
@@ -57,7 +57,7 @@ def crossflow_integrals(v: torch.Tensor, b: torch.Tensor, L, L3=None) -> tuple[t
     b (..., 2).
     """
     L3 = L**3 if L3 is None else L3
-    half = 0.5 * L
+    half = 0.5 * L if half is None else half  # m
     bh = b * half
     w1 = v - bh
     w2 = v + bh
@@ -116,7 +116,7 @@ def hull_force(u: torch.Tensor, v: torch.Tensor, r: torch.Tensor, c,
         integrals = torch.stack([i1, i2], -1)
     else:  # both cross-flow corrections in one pass: b (..., 2) = (C_rY r, C_rN r)
         b = r[..., None] * coefficient_vector(c, ("C_rY", "C_rN"), r)
-        i1s, i2s = crossflow_integrals(v[..., None], b, L, c.L_pp3)
+        i1s, i2s = crossflow_integrals(v[..., None], b, L, c.L_pp3, c.half_L)
         integrals = (torch.stack([i1s[..., 0], i2s[..., 1]], -1) if torch.compiler.is_compiling()
                      else torch.where(_FIRST_LANE, i1s, i2s))  # (I1 of C_rY, I2 of C_rN)
     au = u.abs()
