@@ -310,7 +310,7 @@ def coefficient_vector(c: SimpleNamespace, names: tuple, like: torch.Tensor) -> 
         if name is None:
             return zero
         if isinstance(name, float):
-            return torch.tensor(name, dtype=like.dtype, device=like.device)
+            return torch.full((), name, dtype=like.dtype, device=like.device)  # an op, not a lifted constant
         if isinstance(name, tuple):
             out = value(name[0])
             for other in name[1:]:
