@@ -2,13 +2,17 @@
 
 Prints, per data set and batch size: time per minibatch (forward + backward + Adam step of
 T = 5 Euler steps of the hybrid right-hand side), window-steps per second and epochs per
-second; with --converge also the wall time of a whole training to its early stop.
+second; with --converge also the wall time of a whole training to its early stop; with
+--parts the CPU time of the pieces of an epoch and of the seed ensembles' evaluation, each
+beside the way it was done before (interleaved repeats, medians of process CPU time, which a
+machine shared with other jobs disturbs less than wall time).
 
-    python benchmarks/training_speed.py [--data DIR] [--threads 1] [--converge]
+    python benchmarks/training_speed.py [--data DIR] [--threads 1] [--converge] [--parts]
 """
 from __future__ import annotations
 
 import argparse
+import statistics
 import time
 
 import torch
@@ -49,11 +53,121 @@ def minibatch_seconds(exp, train, batch: int, repeats: int = 8) -> float:
     return (time.perf_counter() - start) / repeats
 
 
+def cpu_ms(fn, repeats: int) -> list[float]:
+    """CPU times [ms] of `repeats` calls of `fn` (after one warm-up call)."""
+    fn()
+    out = []
+    for _ in range(repeats):
+        start = time.process_time()
+        fn()
+        out.append(1e3 * (time.process_time() - start))
+    return out
+
+
+def side_by_side(label: str, old, new, repeats: int = 7) -> None:
+    """Median CPU time of `old` and `new`, called alternately, and their ratio."""
+    times = {"old": [], "new": []}
+    for _ in range(repeats):
+        times["old"] += cpu_ms(old, 1)
+        times["new"] += cpu_ms(new, 1)
+    a, b = statistics.median(times["old"]), statistics.median(times["new"])
+    print(f"{label:44s} {a:9.1f} {b:9.1f} {a / b:6.2f}x")
+
+
+def parts(exp, runs, train, val, data=None) -> None:
+    """Pieces of a hybrid training epoch and of a seed ensemble's evaluation, before and after."""
+    from sysid.hybrid.ensemble import SeedEnsemble
+    from sysid.hybrid.knn_gate import KNNGate
+    from sysid.identify.checkpoint import CheckpointState, TrainingCheckpoint
+    from sysid.identify.trainer import adam, weight_norm
+    from sysid.evaluation.evaluate import evaluate_model
+    from sysid.runs.lifecycle import cached_test_runs
+    import tempfile
+
+    t = exp.training
+    mmg = build_mmg(exp, torch.float32).requires_grad_(False)
+    net = ForceCorrection(exp.network.hidden, torch.float32, exp.network.members)
+    hybrid = CorrectedModel(mmg, net, None, True, exp.gate.space)
+    model = PerMember(hybrid)
+    w_v = 1.0 / train.states[:, :, [1, 3, 5]].reshape(-1, 3).var(0)
+    w_F = torch.ones(3)
+    chunk = train.select(torch.arange(min(t.batch_size, len(train))))
+    print(f"\nCPU ms (median of interleaved repeats)      {'before':>9} {'after':>9} {'ratio':>7}")
+
+    def train_step(opt):
+        def step():
+            loss_v, loss_F = multistep_loss(model, chunk, w_v, w_F)
+            loss = loss_v + t.lambda_F * loss_F + t.lambda_L2 * weight_norm(net)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+        return step
+    side_by_side(f"train step, batch {len(chunk)}, Adam", train_step(torch.optim.Adam(net.parameters(), t.learning_rate)),
+                 train_step(adam(net.parameters(), t.learning_rate)))
+
+    # one warm-start epoch (one-step regression, batches of 256): before, inputs standardised
+    # per batch and Adam parameter by parameter; after, standardised once, Adam foreach
+    s = torch.randn(2 * len(train), 9)
+    target = torch.randn(2 * len(train), 3)
+    z = net.standardize_inputs(s).expand(net.members, *s.shape)
+    s_members = s.expand(net.members, *s.shape)
+
+    def warm_epoch(opt, old: bool):
+        def epoch():
+            for lo in range(0, len(s), 256):
+                idx = torch.arange(lo, min(lo + 256, len(s)))
+                y = (net.evaluate(s_members[:, idx], standardized=True, per_member=True)[0] if old
+                     else net.layers(z[:, idx])[0])
+                loss = ((y - target[idx]) ** 2).mean() + t.lambda_L2 * weight_norm(net)
+                opt.zero_grad()
+                loss.backward()
+                opt.step()
+        return epoch
+    side_by_side(f"warm-start epoch, {len(s)} samples", warm_epoch(torch.optim.Adam(net.parameters(), 3e-3), True),
+                 warm_epoch(adam(net.parameters(), 3e-3), False), 5)
+
+    def val_loss():
+        with torch.no_grad():
+            multistep_loss(model, val, w_v)
+    print(f"{'validation loss, ' + str(len(val)) + ' windows':44s} {statistics.median(cpu_ms(val_loss, 5)):9.1f}")
+    with tempfile.TemporaryDirectory() as scratch:
+        checkpoint = TrainingCheckpoint(f"{scratch}/c.pt", exp.to_toml())
+        opt = adam(net.parameters(), t.learning_rate)
+        train_step(opt)()
+        rows = [{"stage": "train", "epoch": e, "train_loss": 0.1, "early_stopping_loss": 0.1} for e in range(100)]
+
+        def save():
+            checkpoint.save(CheckpointState("train", 100, model.state_dict(), opt.state_dict(), {},
+                                            torch.Generator().get_state(), 0.1, 50,
+                                            {k: v.clone() for k, v in model.state_dict().items()}, rows, [], {}))
+        print(f"{'checkpoint write (every epoch)':44s} {statistics.median(cpu_ms(save, 5)):9.1f}")
+
+    # a mean-of-5-seeds hybrid ensemble evaluated on the six test files (30 and 100 s),
+    # float64 as the protocol: before, every member computes F_MMG; after, once
+    tests = cached_test_runs(data)
+    bank = torch.randn(4000, 9, dtype=torch.float64)
+    members = []
+    for seed in range(5):
+        torch.manual_seed(seed)
+        m = CorrectedModel(build_mmg(exp, torch.float64), ForceCorrection(exp.network.hidden, torch.float64),
+                           None, True, exp.gate.space)
+        m.gate = KNNGate(exp.gate.k, exp.gate.alpha, 9, torch.float64).fit(bank)
+        m.gate_enabled = True
+        members.append(m)
+    shared = SeedEnsemble(members)
+    separate = SeedEnsemble(members)
+    separate._shared_mmg = False
+    side_by_side("seed ensemble (5 hybrids), test evaluation",
+                 lambda: evaluate_model(separate, tests, exp.evaluation.horizons, exp.evaluation.integrator),
+                 lambda: evaluate_model(shared, tests, exp.evaluation.horizons, exp.evaluation.integrator), 3)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", default=None)
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--converge", action="store_true", help="also train each config to its early stop")
+    parser.add_argument("--parts", action="store_true", help="CPU time of an epoch's pieces, before and after")
     args = parser.parse_args()
     try:
         data_root(args.data)
@@ -65,8 +179,8 @@ def main() -> None:
         exp = load_experiment(path)
         runs = training_runs(exp, args.data)
         t = exp.training
-        train, _, _, _ = split_windows(runs, t.steps, t.stride_s, t.val_fraction, True, torch.float32,
-                                       t.block_s, exp.experiment.seed)
+        train, val, _, _ = split_windows(runs, t.steps, t.stride_s, t.val_fraction, True, torch.float32,
+                                         t.block_s, exp.experiment.seed)
         print(f"\n{name}: {len(train)} training windows of {t.steps} steps (config batch {t.batch_size})")
         print(f"{'batch':>6} {'ms/step':>9} {'window-steps/s':>15} {'epochs/s':>9}")
         for batch in sorted({128, 512, t.batch_size, 1024, len(train)}):
@@ -74,6 +188,8 @@ def main() -> None:
             steps_per_epoch = -(-len(train) // batch)
             print(f"{batch:6d} {1e3 * seconds:9.1f} {min(batch, len(train)) * t.steps / seconds:15.0f} "
                   f"{1.0 / (seconds * steps_per_epoch):9.2f}")
+        if args.parts:
+            parts(exp, runs, train, val, args.data)
         if args.converge:
             start = time.perf_counter()
             trainer = Trainer(exp, progress=False, log=lambda m: None).fit(runs)

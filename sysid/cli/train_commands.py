@@ -20,7 +20,7 @@ def train(
     config: Path = typer.Argument(..., help="Experiment TOML (configs/experiments/*.toml)."),
     output: Path = typer.Option(..., "-o", "--output", help="Run directory to write (runs/NAME)."),
     data: Optional[Path] = typer.Option(None, "--data", help="Dataset root (default: SYSID_DATA or ../shared/data/frt-ds-esso)."),
-    test: Optional[List[Path]] = typer.Option(None, "--test", help="Logs to evaluate on, instead of the config's [data] test (default: [data] test; the paper's six test files only for dataset = D1/D2)."),
+    test: Optional[List[Path]] = typer.Option(None, "--test", help="Logs to score the run on after training, instead of the config's [data] test (default: [data] test; the paper's six test files are never read by training: sysid evaluate or sysid reproduce score on them)."),
     epochs: Optional[int] = typer.Option(None, "--epochs", help="Override [training] epochs."),
     threads: Optional[int] = typer.Option(None, "--threads", help="Override [training] threads (torch CPU threads; 0: one per core)."),
     resume: bool = typer.Option(False, "--resume", help="Continue an interrupted training from its checkpoint."),
@@ -34,6 +34,7 @@ def train(
     """
     from sysid.data.recordings import expand_paths
     from sysid.config import checks
+    from sysid.config.choices import Validation
     from sysid.errors import ConfigError
     from sysid.config.experiment import load_experiment
     from sysid.runs.lifecycle import checkpoint_path, evaluation_runs, run_experiment, training_runs, validation_runs
@@ -58,17 +59,24 @@ def train(
         if checkpoint.is_file() else ""))
     runs = training_runs(exp, data) if exp.needs_training else None
     validation = validation_runs(exp) if exp.needs_training else []
-    tests = evaluation_runs(exp, data)
+    # the logs the config (or --test) names are scored after training; the paper's six test
+    # files are never opened by training (sysid evaluate and sysid reproduce read them)
+    tests = evaluation_runs(exp, data) if exp.data.test else []
     if runs is not None:
         source = f"data set {exp.experiment.dataset}" if exp.experiment.dataset and not exp.data.train else "your logs"
         logs.info(f"train: {exp.experiment.model} model on {len(runs)} training log(s) from {source} "
                    f"({sum(r.duration for r in runs):.0f} s of data), seed {exp.experiment.seed}; validation: "
                    + (f"{len(validation)} log(s)" if validation else
+                      f"{exp.training.val_fraction:g} of each folder's training logs, held out whole "
+                      f"(split_seed {exp.training.split_seed})" if exp.training.validation is Validation.FILES else
                       f"{exp.training.val_fraction:g} of every training log's {exp.training.block_s:g}-s blocks"))
     if tests:
         paper = not exp.data.test and exp.experiment.dataset
         logs.info(f"test: {len(tests)} log(s)" + (" (the paper's test files of data set "
                                                   f"{exp.experiment.dataset})" if paper else ""))
+    elif exp.experiment.dataset:
+        logs.info(f"test: none: training opens no test file; score the run on the paper's test files of data set "
+                  f"{exp.experiment.dataset} with sysid evaluate RUN --data FILES, or name logs with --test")
     else:
         logs.info("test: none (no [data] test in the config, no --test): " + (
             "scored on the validation windows only" if exp.needs_training else
@@ -168,7 +176,8 @@ def reproduce(
         for ds, c in card.datasets.items():
             typer.echo(f"{ds}: {model} vs {card.baseline} at 30 s: {100 * c.reduction_vs_mmg_30s_mean:.0f} % lower RMSE "
                        f"on average (least {100 * c.least_reduction_30s:.0f} %); beats the paper's hybrid on "
-                       f"{c.cells_beating_paper_hybrid}/{c.cells} cells")
+                       f"{c.cells_beating_paper_hybrid}/{c.cells} cells" + (f"; {c.nn_text()}" if c.nn_text() else ""))
+            typer.echo(f"    30 s cut per scenario: {c.by_scenario_text()}")
     shares = summary.gate_off_share_random_30s or {}
     if shares:
         typer.echo("kNN gate off on the Random test (30 s): " +

@@ -133,3 +133,14 @@ class Search(Choice):
     GRID = "grid"        # every combination of the listed values
     RANDOM = "random"    # seeded random draws
     OPTUNA = "optuna"    # Optuna's sampler through Ray Tune
+
+
+class Validation(Choice):
+    """``[training] validation``: what the run's validation windows are."""
+
+    BLOCKS = "blocks"    # a val_fraction of every training file's block_s blocks (in distribution)
+    FILES = "files"      # a val_fraction of the training files of each maneuver group, whole
+
+    @classmethod
+    def what(cls) -> str:
+        return "validation"

@@ -24,7 +24,8 @@ hidden = [64, 64]
 [training]                  # paper Eqs. 13-17; weights are means over windows and steps
 steps = 5                   # T, Euler steps of the multi-step loss
 stride_s = 2.0              # windows slid by 2 s
-val_fraction = 0.3          # last 30 % of each file's time axis
+validation = "blocks"       # blocks of every file | files: whole files of each maneuver group
+val_fraction = 0.3          # 30 % of each file's 30-s blocks (or of each group's files)
 ...
 
 [gate]                      # paper section 3.4.3
@@ -56,14 +57,14 @@ from pathlib import Path
 from typing import Any
 
 from sysid.data.columns import ColumnMap, parse_columns
-from sysid.config.choices import Choice, DType, GateSpace, Method, ModelKind, Solver, Stage, StartStates
+from sysid.config.choices import Choice, DType, GateSpace, Method, ModelKind, Solver, Stage, StartStates, Validation
 from sysid.errors import ConfigError
 from sysid.mmg.ship import parameter_name
 from sysid.store.toml_file import read_toml
 
 
 _CHOICE_TYPES: dict[str, type[Choice]] = {
-    c.__name__: c for c in (DType, GateSpace, Method, ModelKind, Solver, Stage, StartStates)}
+    c.__name__: c for c in (DType, GateSpace, Method, ModelKind, Solver, Stage, StartStates, Validation)}
 
 
 def _choice_type(f: dataclasses.Field) -> type[Choice] | None:
@@ -126,8 +127,10 @@ class NetworkOptions:
 class TrainingOptions(_Options):
     steps: int = 5
     stride_s: float = 2.0
-    val_fraction: float = 0.3
+    validation: Validation = Validation.BLOCKS  # blocks (of every training file) | files (whole files held out)
+    val_fraction: float = 0.3      # share of the blocks, or of each group's files, held out
     block_s: float = 30.0          # validation blocks of this length, drawn per file
+    split_seed: int = 0            # validation = "files": the draw of the held-out files (not the run's seed)
     batch_size: int = 128
     epochs: int = 400
     learning_rate: float = 1e-3
@@ -341,6 +344,9 @@ def _validate(exp: Experiment, src: str) -> None:
                           "data: keep one (dataset for the paper's D1/D2, [data] train for your logs)")
     if exp.data.validation and not exp.data.train:
         raise ConfigError(f"{src}: [data] validation files need [data] train files")
+    if exp.data.validation and t.validation is Validation.FILES:
+        raise ConfigError(f"{src}: [data] validation names the validation logs and [training] validation = "
+                          "\"files\" draws them from the training logs: keep one")
     checks = [
         (t.steps >= 1, "[training] steps must be >= 1"),
         (t.stride_s > 0, "[training] stride_s must be > 0"),
@@ -373,6 +379,7 @@ def _validate(exp: Experiment, src: str) -> None:
         (i.solver is Solver.GRADIENT or bool(i.parameters),
          "[identify] solver = \"levenberg_marquardt\" needs parameters to identify"),
         (e.seed >= 0, f"[experiment] seed = {e.seed}: must be >= 0"),
+        (t.split_seed >= 0, f"[training] split_seed = {t.split_seed}: must be >= 0"),
         (len(exp.evaluation.horizons) > 0, "[evaluation] horizons must list at least one horizon [s]"),
         (all(h > 0 for h in exp.evaluation.horizons), "[evaluation] horizons must be > 0"),
         (all(w <= MAX_WIDTH for w in exp.network.hidden), f"[network] hidden widths must be <= {MAX_WIDTH}"),

@@ -81,8 +81,19 @@ KEYS: dict[tuple[str, str], KeyDoc] = {
     ("training", "steps"): KeyDoc("steps", "T: integration steps of each training window's multi-step loss "
                                            "(T / rate seconds)."),
     ("training", "stride_s"): KeyDoc("s", "Training windows start this far apart."),
-    ("training", "val_fraction"): KeyDoc("", "Share of each file's blocks held back for validation (early "
-                                              "stopping, the validation loss), in (0, 1)."),
+    ("training", "validation"): KeyDoc("", "What validation (early stopping, the validation loss, sweeps' "
+                                            "choices) is: `blocks` (default), a `val_fraction` of every "
+                                            "training file's `block_s` blocks (the same maneuvers as training); "
+                                            "`files`, a `val_fraction` of the training files of each folder "
+                                            "(maneuver type) held out whole, at least one of a folder with two "
+                                            "or more and never all, so validation sees maneuvers the model did "
+                                            "not train on. Not with `[data] validation`."),
+    ("training", "val_fraction"): KeyDoc("", "Share held back for validation, in (0, 1): of each file's blocks "
+                                              "(`validation = \"blocks\"`), or of each folder's training files "
+                                              "(`validation = \"files\"`, rounded)."),
+    ("training", "split_seed"): KeyDoc("", "Seed of the draw of the held-out files (`validation = \"files\"`), "
+                                            "apart from `[experiment] seed` so that every configuration and seed "
+                                            "of a sweep is judged on the same files."),
     ("training", "block_s"): KeyDoc("s", "Length of the blocks each file is cut into for the validation split; "
                                          "windows never straddle two blocks."),
     ("training", "batch_size"): KeyDoc("windows", "Training windows per optimiser step."),

@@ -11,10 +11,14 @@ from __future__ import annotations
 
 import glob
 import hashlib
+import math
 import os
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
+
+import numpy as np
 
 from sysid.data.datasets import TEST_FILES, test_files, training_files
 from sysid.data.recordings import Run, duplicate_runs, expand_paths
@@ -87,8 +91,12 @@ def data_split(exp, data: str | os.PathLike | None = None) -> DataSplit:
 
 
 def check_disjoint_files(split: DataSplit, source: str = "") -> None:
-    """`DataError` naming both files when one file, or two files with identical bytes, are
-    in two parts (training, validation, test) or twice in one."""
+    """`DataError` naming both files when one file is in two parts (training, validation,
+    test) or twice in one, or two training or validation files have identical bytes.
+
+    Test files are compared by path only, never opened: training and sweeps read no test
+    file. Their samples are checked against the training logs when a run is evaluated
+    (`check_disjoint_runs` in `sysid.runs.lifecycle.run_experiment`)."""
     where = f"{source}: " if source else ""
     seen: dict[Path, str] = {}
     digests: dict[str, tuple[Path, str]] = {}
@@ -99,12 +107,70 @@ def check_disjoint_files(split: DataSplit, source: str = "") -> None:
                 raise DataError(f"{where}{path} is listed in {seen[real]} and in {part}: a log may be in one "
                                 "part only (remove it from one of the lists)")
             seen[real] = part
+            if part == TEST:
+                continue
             digest = file_sha256(path)
             if digest in digests:
                 other, other_part = digests[digest]
                 raise DataError(f"{where}{path} ({part}) and {other} ({other_part}) have identical content "
                                 f"(SHA-256 {digest[:12]}...): the same log under two names; remove one")
             digests[digest] = (path, part)
+
+
+def maneuver_group(run: Run) -> str:
+    """The group a training log is held out within: the name of its folder (the paper's data
+    sets: berthing, turning, zigzag, random)."""
+    return run.path.parent.name
+
+
+@dataclass(frozen=True)
+class HeldOutFiles:
+    """Training logs split into training and validation by whole files (``[training]
+    validation = "files"``): the runs of each part, and per group the held-out names."""
+
+    train: tuple[Run, ...]
+    validation: tuple[Run, ...]
+    groups: dict[str, list[str]]   # group -> names of its held-out logs (copies included)
+
+
+def hold_out_files(runs: Sequence[Run], fraction: float, seed: int) -> HeldOutFiles:
+    """Whole training logs held out as validation, stratified by `maneuver_group`.
+
+    Of a group's n logs (an exact copy of the start of another log, `duplicate_runs`, is not
+    counted: it follows its original), round(fraction n) are held out, at least 1 when n >= 2
+    and at most n - 1, so no group is validation only; a group of one log stays training.
+    Each group draws with its own generator, seeded by (`seed`, the group's name), from its
+    logs sorted by name: the draw depends on neither the order of `runs` nor the other groups
+    (D1 and D2 hold out the same berthing, turning and zigzag logs)."""
+    original = {}
+    for copy, of in duplicate_runs(list(runs)):
+        original.setdefault(copy, of)
+
+    def root(name: str) -> str:  # a copy of a copy follows the first original
+        seen = set()
+        while name in original and name not in seen:
+            seen.add(name)
+            name = original[name]
+        return name
+
+    members: dict[str, list[str]] = {}
+    for run in runs:
+        if root(run.name) == run.name:
+            members.setdefault(maneuver_group(run), []).append(run.name)
+    held: set[str] = set()
+    for group, names in sorted(members.items()):
+        names = sorted(names)
+        if len(names) < 2:
+            continue
+        n_val = min(len(names) - 1, max(1, int(math.floor(fraction * len(names) + 0.5))))
+        rng = np.random.default_rng([seed, zlib.crc32(group.encode())])
+        held.update(names[i] for i in sorted(rng.choice(len(names), n_val, replace=False)))
+    validation = tuple(r for r in runs if root(r.name) in held)
+    groups: dict[str, list[str]] = {}
+    for r in validation:
+        groups.setdefault(maneuver_group(r), []).append(r.name)
+    return HeldOutFiles(tuple(r for r in runs if root(r.name) not in held), validation,
+                        {g: sorted(v) for g, v in sorted(groups.items())})
 
 
 def check_disjoint_runs(parts: dict[str, Sequence[Run]], source: str = "") -> None:
@@ -125,10 +191,13 @@ def check_disjoint_runs(parts: dict[str, Sequence[Run]], source: str = "") -> No
 
 
 def provenance(source: str, train: Sequence[Run], validation: Sequence[Run], test: Sequence[Run],
-               val_fraction: float, block_s: float) -> dict:
+               val_fraction: float, block_s: float, held_out: HeldOutFiles | None = None,
+               split_seed: int = 0) -> dict:
     """What a run was trained, validated and tested on, for summary.json: where the training
     data came from ("files", "D1", "D2", "-"), every log with its SHA-256, how validation
-    was drawn and which test set it was ("files", "paper" or "none")."""
+    was drawn and which test set it was ("files", "paper" or "none"). `held_out`: the
+    validation logs were drawn from the training logs (``[training] validation = "files"``):
+    ``held_out`` names them per group with the share and ``split_seed`` of the draw."""
     def files(runs):
         return [{"file": str(r.path), "sha256": r.sha256 or file_sha256(r.path)} for r in runs]
 
@@ -136,6 +205,9 @@ def provenance(source: str, train: Sequence[Run], validation: Sequence[Run], tes
     validation_text = files(validation) if validation else (
         f"{val_fraction:g} of the {block_s:g}-s blocks of every training log, drawn with the seed"
         if train else "none")
-    return {"training": source, "train": files(train), "validation": validation_text,
-            "test_set": "none" if not test else ("paper" if stems == PAPER_TEST_STEMS else "files"),
-            "test": files(test)}
+    out = {"training": source, "train": files(train), "validation": validation_text,
+           "test_set": "none" if not test else ("paper" if stems == PAPER_TEST_STEMS else "files"),
+           "test": files(test)}
+    if held_out is not None:
+        out["held_out"] = {"val_fraction": val_fraction, "split_seed": split_seed, "groups": held_out.groups}
+    return out

@@ -69,8 +69,10 @@ class ForceCorrection(nn.Module):
         return self
 
     def _layer(self, z: torch.Tensor, i: int) -> torch.Tensor:
+        w = self.weights[i]
         b = self.biases[i].reshape(self.members, *([1] * (z.dim() - 2)), -1)
-        return torch.einsum("k...i,kio->k...o", z, self.weights[i]) + b
+        # (K, ..., i) @ (K, i, o) as one batched product over the flattened middle axes
+        return torch.bmm(z.reshape(self.members, -1, w.shape[1]), w).reshape(*z.shape[:-1], w.shape[2]) + b
 
     def evaluate(self, s: torch.Tensor, standardized: bool = False,
                  per_member: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
@@ -81,16 +83,25 @@ class ForceCorrection(nn.Module):
         (the first member's when several are averaged). With `per_member` (training), s is
         (K, ..., 9) and each member's force (K, ..., 3) and features come back.
         """
-        z = (s.to(self.input_mean.dtype) - self.input_mean) / self.input_std
+        z = self.standardize_inputs(s)
         if not per_member:
             z = z.expand(self.members, *z.shape)
-        for i in range(len(self.weights) - 1):
-            z = torch.tanh(self._layer(z, i))
-        y = self._layer(z, len(self.weights) - 1)
+        y, z = self.layers(z)
         force = y if standardized else y * self.output_std + self.output_mean
         if per_member:
             return force, z
         return force.mean(0), z[0]
+
+    def standardize_inputs(self, s: torch.Tensor) -> torch.Tensor:
+        """s-bar = (s - mu_s) / sigma_s (Eq. 8), (..., 9), in the parameters' dtype."""
+        return (s.to(self.input_mean.dtype) - self.input_mean) / self.input_std
+
+    def layers(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(standardised output y (K, ..., 3), features (K, ..., 64)) of every member for
+        standardised inputs z (K, ..., 9): the networks without Eqs. 8 and 10."""
+        for i in range(len(self.weights) - 1):
+            z = torch.tanh(self._layer(z, i))
+        return self._layer(z, len(self.weights) - 1), z
 
     def features(self, s: torch.Tensor) -> torch.Tensor:
         """Activations before the output layer (..., 64)."""

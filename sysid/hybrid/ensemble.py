@@ -12,6 +12,7 @@ from typing import Sequence
 import torch
 from torch import nn
 
+from sysid.hybrid.force_models import CorrectedModel
 from sysid.mmg.model import ForceBreakdown
 
 
@@ -27,6 +28,8 @@ class SeedEnsemble(nn.Module):
         if not members:
             raise ValueError("a seed ensemble needs at least one member")
         self.members = nn.ModuleList(members)
+        # hybrids of one MMG (coefficients not identified): F_MMG is computed once, not per member
+        self._shared_mmg = _common_mmg(self.members)
 
     @property
     def coefficients(self):
@@ -45,6 +48,8 @@ class SeedEnsemble(nn.Module):
         return torch.stack(decisions).to(state.dtype).mean(0) >= 0.5
 
     def forward(self, state: torch.Tensor, inputs: torch.Tensor) -> ForceBreakdown:
+        if self._shared_mmg:
+            return self._shared_forward(state, inputs)
         parts = [m(state, inputs) for m in self.members]
 
         def mean(name: str) -> torch.Tensor:
@@ -56,3 +61,28 @@ class SeedEnsemble(nn.Module):
             forces.ood_distance = mean("ood_distance")
             forces.gate_on = torch.stack([p.gate_on for p in parts]).to(state.dtype).mean(0) >= 0.5
         return forces
+
+    def _shared_forward(self, state: torch.Tensor, inputs: torch.Tensor) -> ForceBreakdown:
+        """`forward` of hybrids that share their MMG: F_MMG once, the members' gated F_NN averaged."""
+        forces = self.members[0].mmg(state, inputs)
+        gated = [m._correction(state, inputs, forces.relative_wind) for m in self.members]
+        forces.correction = torch.stack([g[0] for g in gated]).mean(0)
+        if all(g[2] is not None for g in gated):
+            forces.ood_distance = torch.stack([g[1] for g in gated]).mean(0)
+            forces.gate_on = torch.stack([g[2] for g in gated]).to(state.dtype).mean(0) >= 0.5
+        return forces
+
+
+def _common_mmg(members: Sequence[nn.Module]) -> bool:
+    """True when every member is a hybrid (`CorrectedModel` with physics) and their MMGs are
+    one model: the same ship, quadrature and coefficient values."""
+    if not all(isinstance(m, CorrectedModel) and m.physics for m in members):
+        return False
+    first = members[0].mmg
+    reference = first.state_dict()
+    for m in members[1:]:
+        mine = m.mmg.state_dict()
+        if (m.mmg.ship != first.ship or m.mmg.quadrature != first.quadrature or mine.keys() != reference.keys()
+                or any(not torch.equal(mine[k], reference[k]) for k in reference)):
+            return False
+    return True

@@ -6,8 +6,9 @@
 1. Windows of T+1 samples (T Euler steps) slid by `stride_s` within each file; each file's
    time axis is cut into 30 s blocks, 30 % of them (seeded draw) validation, and a window
    lies wholly in one part, so no validation window overlaps a training window; or, given
-   validation logs (``[data] validation``), every window of those is validation and every
-   window of the training logs training. Exact copies of another file (``turn_cut_...``)
+   validation logs (``[data] validation``, or with ``[training] validation = "files"`` 30 %
+   of each folder's training logs held out whole), every window of those is validation and
+   every window of the training logs training. Exact copies of another file (``turn_cut_...``)
    and windows touching frozen-GNSS segments are left out and reported.
 2. Standardisation: FNN input statistics from the training samples (relative wind computed
    from the recorded state and true wind, as the model sees it); output statistics from the
@@ -53,10 +54,11 @@ from tqdm import tqdm
 from sysid.hybrid.correction import ForceCorrection, correction_inputs
 from sysid.identify.checkpoint import CheckpointState, TrainingCheckpoint
 from sysid.data.recordings import Run, duplicate_runs, sliding_windows, stack_windows, window_touches
+from sysid.data.splits import hold_out_files
 from sysid.device import resolve_device
 from sysid.dynamics.equations import integrate, integrate_with_forces, required_force
 from sysid.errors import ConfigError, DataError, TrainingError
-from sysid.config.choices import DType, Method, ModelKind, Solver, Stage, StartStates
+from sysid.config.choices import DType, Method, ModelKind, Solver, Stage, StartStates, Validation
 from sysid.config.experiment import Experiment
 from sysid.identify.levenberg_marquardt import fit_uncertainty, identify_levenberg_marquardt, start_state_check
 from sysid.hybrid.force_models import CorrectedModel, PerMember, build_mmg, correction_of
@@ -70,7 +72,8 @@ VAL_LOSS_DEFINITION = (
     "sum over u, v_m, r of w_j (predicted_j - recorded_j)^2, w_j = 1 / variance of channel j in the "
     "training windows; Euler rollouts from each window's recorded first state with its recorded inputs; "
     "K = [training] steps, or objective_s / dt; the final model, kNN gate included. Validation windows: "
-    "the validation blocks of the training logs, or the [data] validation logs (never a test file).")
+    "the validation blocks of the training logs, or whole validation logs: [data] validation, or the training "
+    "logs held out by [training] validation = \"files\" (never a test file).")
 _LOG = logging.getLogger(__name__)
 
 
@@ -263,6 +266,12 @@ def output_penalty(f_nn: torch.Tensor, f_mmg: torch.Tensor, w_F: torch.Tensor, b
     return (torch.relu(f_nn.abs() - band * f_mmg.abs()) * w_F).sum(-1)
 
 
+def adam(params, lr: float) -> torch.optim.Adam:
+    """Adam (the paper's optimiser) updating all parameters in a few multi-tensor
+    operations (``foreach``): the same numbers as the per-parameter loop, fewer dispatches."""
+    return torch.optim.Adam(params, lr=lr, foreach=True)
+
+
 def weight_norm(net: ForceCorrection) -> torch.Tensor:
     """||theta||^2 of the FNN weights (Eq. 13), per member (losses are means over members)."""
     return sum((w * w).sum() for w in net.weights) / net.members
@@ -346,7 +355,7 @@ class Trainer:
         checkpoint is written after every epoch, and a resumed stage continues from it.
         """
         t = self.experiment.training
-        opt = torch.optim.Adam(params, lr=lr)
+        opt = adam(params, lr)
         # the learning rate falls by lr_factor after lr_patience epochs without a better
         # validation loss (lr_factor = 1: constant, the paper's Adam)
         sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=t.lr_factor, patience=t.lr_patience) \
@@ -550,8 +559,8 @@ class Trainer:
         """Stage 4: every FNN member regresses the standardised residual force (one step)."""
         t = self.experiment.training
         target = (residual - net.output_mean) / net.output_std
-        s_members = s.expand(net.members, *s.shape)
-        opt = torch.optim.Adam(net.parameters(), lr=3e-3)
+        z = net.standardize_inputs(s).expand(net.members, *s.shape)  # (K, N, 9), fixed over the warm start
+        opt = adam(net.parameters(), 3e-3)
         gen = torch.Generator().manual_seed(self.experiment.experiment.seed + 2)
         bar = self._bar(range(t.warm_start_epochs), "warm start", t.warm_start_epochs, 0)
         if not hasattr(bar, "set_postfix"):
@@ -560,7 +569,7 @@ class Trainer:
             order = torch.randperm(len(s), generator=gen).to(device)
             for lo in range(0, len(s), 256):
                 idx = order[lo:lo + 256]
-                y = net.evaluate(s_members[:, idx], standardized=True, per_member=True)[0]
+                y = net.layers(z[:, idx])[0]
                 loss = ((y - target[idx]) ** 2).mean() + t.lambda_L2 * weight_norm(net)
                 opt.zero_grad()
                 loss.backward()
@@ -607,10 +616,15 @@ class Trainer:
     # -- the estimator ---------------------------------------------------------------
     def fit(self, runs: Sequence[Run], validation: Sequence[Run] = ()) -> "Trainer":
         """Fit to the training logs `runs`; validation windows from `validation` logs when
-        given, else from the validation blocks of `runs`. Sets ``model_``, ``history_``,
+        given, else from logs of `runs` held out whole (``[training] validation = "files"``,
+        `sysid.data.splits.hold_out_files`), else from the validation blocks of `runs`.
+        Sets ``model_``, ``history_``,
         ``summary_``, ``validation_windows_`` (the windows of ``val_loss_multistep``) and
         ``velocity_weights_`` (w_v (3,), 1 / variance of u, v_m, r in the training windows)."""
         exp = self.experiment
+        if not validation and exp.training.validation is Validation.FILES:
+            held_out = hold_out_files(runs, exp.training.val_fraction, exp.training.split_seed)
+            runs, validation = held_out.train, held_out.validation
         self._validation_runs = list(validation)
         t, kind = exp.training, exp.experiment.model
         seed_everything(exp.experiment.seed)

@@ -57,7 +57,7 @@ def train_seeds(experiments: dict[str, Experiment], seeds: int, out: Path, data:
     The data are read here once and shipped to the trials; Tune's experiment goes to
     ``{out}/tune`` or `storage`; `mlflow` logs every seed run."""
     trials = seed_trials(experiments, seeds)
-    trial_data = read_trial_data(experiments.values(), data)
+    trial_data = read_trial_data(experiments.values(), data, tests=True)  # the protocol evaluates
     callbacks = []
     with ray_session(out, workers, address, log) as session:
         tracker = parent = None

@@ -27,6 +27,7 @@ from sysid.report.methods import changed_settings, methods_paragraphs, run_rows,
 from sysid.report.palette import model_colour  # noqa: E402
 from sysid.report.pdf import PdfReport, paginate, pdf_style, table_pages, text_blocks, text_lines  # noqa: E402
 from sysid.report.figure_plan import figure_plan  # noqa: E402
+from sysid.report.chosen_settings import chosen_section  # noqa: E402
 from sysid.report.quality import quality_rows  # noqa: E402
 from sysid.report.source import ReportSource, read_source  # noqa: E402
 from sysid.protocol.paper import run_label  # noqa: E402
@@ -76,14 +77,15 @@ def _placeholder(message: str, into=None):
 
 
 def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
-                 progress: Callable[[str], None] | None = None) -> ReportPaths:
+                 progress: Callable[[str], None] | None = None, sweeps=()) -> ReportPaths:
     """Write ``out_dir/report.html`` and ``out_dir/report.pdf`` for a run directory or a
-    reproduction directory (`sysid.runs.rundir`). Raises `CheckpointError` naming the missing
-    or corrupt file."""
+    reproduction directory (`sysid.runs.rundir`); `sweeps`: sweep directories whose validation
+    landscape and chosen configuration the report shows beside. Raises `CheckpointError`
+    naming the missing or corrupt file."""
     started = time.perf_counter()
     say = progress or (lambda message: None)
     out_dir = Path(out_dir)
-    source = read_source(source_dir)
+    source = read_source(source_dir, sweeps)
     say(f"read {source.kind} {source.path} ({len(source.runs)} run{'s' if len(source.runs) != 1 else ''})")
     size = ship_size(source)
     tables = build_tables(source)
@@ -96,6 +98,7 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
     rows = run_rows(source)
     methods = methods_paragraphs(source)
     settings = [(run_label(r.name, r.model, r.dataset), changed_settings(r)) for r in source.runs]
+    chosen = chosen_section(source)
     verdict = source.verdict
     first = verdict_table(verdict, run_label(source.runs[0].name, source.runs[0].model, source.runs[0].dataset)) \
         if verdict is not None else None
@@ -103,7 +106,7 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
     title = f"sysid accuracy report: {source.title}"
 
     quality = quality_rows(source.quality)
-    text_pages = paginate(text_lines(text_blocks(title, summary, rows, methods, quality, notes, first, settings)))
+    text_pages = paginate(text_lines(text_blocks(title, summary, rows, methods, quality, notes, first, settings, chosen)))
     split_tables = [(t, table_pages(t)) for t in tables]
     total = len(text_pages) + sum(len(p) for _, p in split_tables) + len(plain) + len(plan.figures)
 
@@ -144,7 +147,7 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
         runs=[{"row": row, "colour": model_colour(r.name, r.model, r.dataset, i)}
               for i, (row, r) in enumerate(zip(rows, source.runs))],
         methods=methods, tables=tables, plain_tables=plain, figures=html_figures, notes=notes, quality=quality,
-        verdict=first, settings=settings,
+        verdict=first, settings=settings, chosen=chosen,
         version=sysid.__version__, source=str(source.path), built=built)
     html_path = write_text(html, out_dir / "report.html")
     return ReportPaths(html_path, pdf_path, len(html_figures), n_pages, notes,

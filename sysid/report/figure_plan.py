@@ -279,30 +279,65 @@ def _seed_figures(c: _Context) -> None:
               partial(F.seed_boxplots, models, scenarios, title, {k: v for k, v in paper.items() if v}), True)
 
 
-def _sweep_figures(source: ReportSource, plan: FigurePlan) -> None:
-    """A sweep: validation loss against each varied key; the seed spread per configuration."""
+def _cell_figures(source: ReportSource, c: _Context) -> None:
+    """Per data set: every Table 7/8 cell of NN-only and the hybrid relative to the MMG the
+    hybrid corrects, with the seed spread and the paper's printed hybrid."""
+    from sysid.report.cell_ratios import dataset_cells
+
+    for cells in dataset_cells(source):
+        labels = [m.label for m in cells.models]
+        n = len(cells.cells[cells.cells.model == labels[0]])
+        seeds = cells.seeds
+        spread = (f"markers: seed means over {seeds} seeds, bars: min to max over the seeds"
+                  if seeds > 1 else "one seed: points without spread")
+        counts = []
+        hybrid = next((m for m in labels if m.startswith("Hybrid")), None)
+        nn = next((m for m in labels if m.startswith("NN")), None)
+        if hybrid and nn:
+            beats, total = cells.beating(hybrid, nn)
+            counts.append(f"{hybrid} below {nn} in {beats} of {total} cells")
+        if hybrid:
+            mine = cells.cells[cells.cells.model == hybrid].set_index(["scenario", "horizon_s", "channel"]).ratio
+            paper = cells.paper.set_index(["scenario", "horizon_s", "channel"]).ratio
+            shared = mine.index.intersection(paper.index)
+            counts.append(f"below the paper's hybrid in {int((mine.loc[shared] < paper.loc[shared]).sum())} "
+                          f"of {len(shared)}")
+        title = f"Every cell relative to {cells.baseline}, trained on {cells.dataset}"
+        c.add(f"cells_{cells.dataset}", "Hybrid against NN-only and MMG-only", title,
+              f"RMSE of each of the {n} cells of Tables 7 and 8 (scenario x u, v_m, r x horizon) divided by the "
+              f"RMSE of {cells.baseline}, the MMG the hybrid corrects and the baseline of every cut: "
+              f"{', '.join(labels)} ({spread}); black bars: the paper's printed hybrid over the same baseline; "
+              f"dashed: the baseline (1). Log axis, below 1: a smaller error than the baseline. "
+              + ("; ".join(counts) + "." if counts else ""),
+              partial(F.relative_rmse, cells, title), len(cells.cells) > 0)
+
+
+def _sweep_figures(sweep, plan: FigurePlan, linked: bool = False) -> None:
+    """A sweep (`SweepRecord`): validation loss against each varied key; the seed spread per
+    configuration. `linked`: a sweep shown beside another source (titled by its name)."""
     from sysid.report import sweep_figures as SF
 
-    sweep = source.sweep
     chosen = sweep.summary.best.point if sweep.summary.best else None
     seeds = len(sweep.summary.seeds)
+    name = sweep.summary.name
+    section, key, of = (f"Sweep {name}", f"sweep_{name}_", f" (sweep {name})") if linked else ("Sweep", "sweep_", "")
     plan.figures.append(FigureSpec(
-        "sweep_keys", "Sweep", "val_loss_multistep against the varied keys",
+        f"{key}keys", section, f"val_loss_multistep against the varied keys{of}",
         "val_loss_multistep (the sweep's objective; validation windows only, never the test files) of every "
         "trial against each varied option; grey: means; red circles: the chosen configuration.",
-        partial(SF.objective_by_key, sweep.trials, sweep.keys, chosen, "val_loss_multistep against the varied keys")))
+        partial(SF.objective_by_key, sweep.trials, sweep.keys, chosen, f"val_loss_multistep against the varied keys{of}")))
     plan.figures.append(FigureSpec(
-        "sweep_seeds", "Sweep", f"Spread over {seeds} seeds per configuration",
+        f"{key}seeds", section, f"Spread over {seeds} seeds per configuration{of}",
         "val_loss_multistep of each configuration over its seeds (box: spread; dots: single seeds), best mean "
         "first; red: the chosen configuration.",
-        partial(SF.seed_spread, sweep.trials, sweep.points, chosen, f"Spread over {seeds} seeds per configuration")))
+        partial(SF.seed_spread, sweep.trials, sweep.points, chosen, f"Spread over {seeds} seeds per configuration{of}")))
 
 
 def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> FigurePlan:
     """The figures of a report for `source`; `ship_size` = (L_pp, B) [m] for outlines."""
     plan = FigurePlan()
     if source.sweep is not None:
-        _sweep_figures(source, plan)
+        _sweep_figures(source.sweep, plan)
     runs = source.runs
     if runs:
         datasets = sorted({r.dataset for r in runs if r.model != "mmg" and r.dataset != "-"})
@@ -311,6 +346,8 @@ def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> 
                      [r for r in runs if r.model == "mmg" or r.dataset == fig_dataset],
                      [r for r in runs if r.model == "hybrid"], fig_dataset,
                      _horizon(runs, 30, short=True), _horizon(runs, 100, short=False), source.paper_protocol)
+        if source.kind == "reproduction":
+            _cell_figures(source, c)
         _error_figures(c)
         _series_figures(c)
         _trajectory_figures(c, ship_size)
@@ -319,4 +356,6 @@ def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> 
         _loss_figure(c)
         _seed_figures(c)
         _uncertainty_figures(c)
+    for sweep in source.linked_sweeps:
+        _sweep_figures(sweep, plan, linked=True)
     return _quality_figures(source, plan)

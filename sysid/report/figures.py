@@ -15,6 +15,7 @@ import pandas as pd
 from matplotlib.figure import Figure, FigureBase
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
+from matplotlib.ticker import FixedLocator, FormatStrFormatter, NullFormatter
 
 from sysid.report.palette import (COMPONENT_COLOURS, COMPONENT_LABELS, KNN_LINE, MEASURED,
                                   OOD_SHADE, THRESHOLD)
@@ -22,6 +23,7 @@ from sysid.report.palette import (COMPONENT_COLOURS, COMPONENT_LABELS, KNN_LINE,
 RAD2DEG = 180.0 / math.pi
 WIDE = (10.0, 6.2)      # in, landscape figures (fits an A4 landscape page with caption)
 TALL = (10.0, 7.0)
+RATIO_TICKS = [0.05, 0.1, 0.2, 0.3, 0.5, 0.7, 1.0, 1.5, 2.0, 3.0, 5.0, 10.0]   # RMSE ratios [-] on a log axis
 
 
 @dataclass
@@ -457,5 +459,58 @@ def seed_boxplots(models: list[SeedSpread], scenarios: list[str], title: str,
     if paper:
         handles.append(Line2D([], [], color="black", lw=1.6, label="paper's hybrid"))
     _legend_top(fig, handles, ncol=min(len(handles), 6))
+    fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def relative_rmse(cells, title: str, into: FigureBase | None = None) -> FigureBase:
+    """Every Table 7/8 cell of one data set relative to MMG-only (`sysid.report.cell_ratios.CellRatios`):
+    rows the horizons, columns u, v_m, r, scenarios along x; per learned model its seed mean
+    (marker) with the min-max over the seeds (bar; none for one seed), the paper's printed
+    hybrid (black bar) and the baseline MMG at 1 (dashed). One log axis for all panels:
+    RMSE / RMSE of the baseline [-], below 1 is better than the baseline.
+
+    Artists carry ``gid``s "{model}|{horizon}|{channel}" (markers), "... |spread" (seed bars)
+    and "paper|{horizon}|{channel}", so the plotted values can be read back."""
+    from sysid.report.cell_ratios import CHANNEL_NAMES, CHANNELS
+
+    fig = _canvas(into, (10.0, 6.4))
+    rows, scenarios = list(cells.horizons), list(cells.scenarios)
+    axes = np.atleast_2d(fig.subplots(len(rows), 3, sharey=True, squeeze=False))
+    x = np.arange(len(scenarios))
+    width = 0.7 / max(len(cells.models), 1)
+    for i, horizon in enumerate(rows):
+        for j, c in enumerate(CHANNELS):
+            ax = axes[i, j]
+            ax.axhline(1.0, color=cells.baseline_colour, ls="--", lw=1.2)
+            for k, model in enumerate(cells.models):
+                at = cells.cells[(cells.cells.model == model.label) & (cells.cells.horizon_s == horizon)
+                                 & (cells.cells.channel == c)].set_index("scenario").reindex(scenarios)
+                xs = x + (k - (len(cells.models) - 1) / 2) * width
+                ax.plot(xs, at.ratio.to_numpy(), "o", color=model.colour, markeredgecolor="black",
+                        markeredgewidth=0.5, markersize=5, gid=f"{model.label}|{horizon}|{c}", zorder=3)
+                if (at.n_seeds > 1).any():
+                    ax.vlines(xs, at.low.to_numpy(), at.high.to_numpy(), colors=model.colour, lw=2.0,
+                              gid=f"{model.label}|{horizon}|{c}|spread", zorder=2)
+            paper = cells.paper[(cells.paper.horizon_s == horizon) & (cells.paper.channel == c)]
+            paper = paper.set_index("scenario").reindex(scenarios)
+            ax.hlines(paper.ratio.to_numpy(), x - 0.4, x + 0.4, colors="black", lw=1.4,
+                      gid=f"paper|{horizon}|{c}", zorder=4)
+            ax.set_yscale("log")
+            ax.yaxis.set_major_locator(FixedLocator(RATIO_TICKS))
+            ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+            ax.yaxis.set_minor_formatter(NullFormatter())
+            ax.set_xticks(x, scenarios if i == len(rows) - 1 else [""] * len(scenarios), rotation=35,
+                          ha="right", fontsize=8)
+            ax.set_title(f"{CHANNEL_NAMES[c]}, {horizon} s predictions", fontsize=9)
+            if j == 0:
+                ax.set_ylabel(f"RMSE / RMSE of {cells.baseline} [-]", fontsize=8)
+    seeds = cells.seeds
+    mean = f" (mean of {seeds} seeds; bar: min-max)" if seeds > 1 else ""
+    handles = [Line2D([], [], color=cells.baseline_colour, ls="--", lw=1.2, label=f"{cells.baseline} = 1")]
+    handles += [Line2D([], [], marker="o", ls="", color=m.colour, markeredgecolor="black", markeredgewidth=0.5,
+                       label=m.label + mean) for m in cells.models]
+    handles.append(Line2D([], [], color="black", lw=1.4, label=f"paper's hybrid {cells.dataset}"))
+    _legend_top(fig, handles, ncol=len(handles))
     fig.suptitle(title, fontsize=10)
     return fig

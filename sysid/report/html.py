@@ -53,14 +53,15 @@ def _html_rows(table: RmseTable) -> list[dict]:
 
 def render_html(*, title: str, subtitle: str, summary, runs, methods, tables: list[RmseTable],
                 figures: list[HtmlFigure], notes: list[str], version: str, source: str, built: str,
-                quality=(), verdict=None, settings=(), plain_tables=()) -> str:
+                quality=(), verdict=None, settings=(), plain_tables=(), chosen=None) -> str:
     """The report page as one string; `verdict` (a `VerdictTable`) comes first, `settings`
     are (run label, [(key, value, default)]) of the settings that differ from the defaults;
-    `plain_tables` (`sysid.report.plain_tables.PlainTable`) follow the RMSE tables."""
+    `plain_tables` (`sysid.report.plain_tables.PlainTable`) follow the RMSE tables; `chosen`
+    (`sysid.report.chosen_settings.ChosenSection`) is "How the settings were chosen"."""
     for table in tables:
         table.html_rows = _html_rows(table)
     template = _ENV.get_template("report.html.j2")
     return template.render(title=title, subtitle=subtitle, summary=summary, runs=runs, methods=methods,
                            tables=tables, figures=figures, notes=notes, version=version, source=source,
                            built=built, quality=quality, verdict=verdict, settings=settings,
-                           plain_tables=plain_tables)
+                           plain_tables=plain_tables, chosen=chosen)

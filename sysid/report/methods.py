@@ -114,11 +114,11 @@ def reproduction_items(summary: Reproduction) -> list[tuple[str, str]]:
     for card in summary.scorecards:
         model = f"Hybrid (mean over {seeds} seeds)" if seeds > 1 and card.model == "Hybrid" else card.model
         for ds, c in card.datasets.items():
-            by = ", ".join(f"{k} {100 * v:.0f} %" for k, v in c.reduction_vs_mmg_30s_by_scenario.items())
+            nn = f"; {c.nn_text()}" if c.nn_text() else ""
             items.append((f"{model} {ds} vs {card.baseline}",
-                          f"{100 * c.reduction_vs_mmg_30s_mean:.0f} % lower RMSE at 30 s "
-                          f"({by}); {100 * c.reduction_vs_mmg_100s_mean:.0f} % at 100 s; "
-                          f"beats the paper's hybrid in {c.cells_beating_paper_hybrid} of {c.cells} cells"))
+                          f"{100 * c.reduction_vs_mmg_30s_mean:.0f} % lower RMSE at 30 s (mean over the scenarios: "
+                          f"{c.by_scenario_text()}); {100 * c.reduction_vs_mmg_100s_mean:.0f} % at 100 s; "
+                          f"beats the paper's hybrid in {c.cells_beating_paper_hybrid} of {c.cells} cells{nn}"))
     shares = {k: v for k, v in (summary.gate_off_share_random_30s or {}).items() if v is not None}
     if shares:
         items.append(("kNN gate off, Random test (30 s)",
@@ -126,10 +126,33 @@ def reproduction_items(summary: Reproduction) -> list[tuple[str, str]]:
     return items
 
 
+def nn_count_items(source: ReportSource) -> list[tuple[str, str]]:
+    """For a summary.json written before the scorecard counted the cells where the hybrid
+    beats NN-only: that count from the runs' metrics (`sysid.report.cell_ratios`)."""
+    from sysid.report.cell_ratios import dataset_cells
+
+    cards = source.reproduction.scorecards if source.reproduction is not None else []
+    if not cards or all(c.cells_beating_nn is not None for card in cards for c in card.datasets.values()):
+        return []
+    items = []
+    for cells in dataset_cells(source):
+        labels = [m.label for m in cells.models]
+        hybrid = next((m for m in labels if m.startswith("Hybrid")), None)
+        nn = next((m for m in labels if m.startswith("NN")), None)
+        if hybrid and nn:
+            beats, total = cells.beating(hybrid, nn)
+            items.append((f"{hybrid} vs {nn}", f"lower RMSE in {beats} of {total} cells (from the runs' metrics)"))
+    return items
+
+
 def sweep_items(source: ReportSource, top: int = 8) -> list[tuple[str, str]]:
-    """Readable lines of a sweep: what it varied, its trials, the chosen configuration and
-    the best configurations by mean validation loss over their seeds."""
-    sweep = source.sweep
+    """Readable lines of the source's sweep (`sweep_record_items`)."""
+    return sweep_record_items(source.sweep, top)
+
+
+def sweep_record_items(sweep, top: int = 8) -> list[tuple[str, str]]:
+    """Readable lines of a sweep (`SweepRecord`): what it varied, its trials, the chosen
+    configuration and the best configurations by mean validation loss over their seeds."""
     s, best = sweep.summary, sweep.summary.best
     items = [("Sweep", f"{s.name}: {s.search} search over {', '.join(s.keys) or '-'}; "
                        f"seeds {list(s.seeds)}; base {s.base}"),
@@ -180,8 +203,8 @@ def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -
         ("Report built", _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")),
         ("Training time", _seconds(sum(trained)) + " in total"),
     ]
-    if source.reproduction is not None:
-        items += reproduction_items(source.reproduction)
+    if source.reproduction is not None:   # the scorecard first: page 1 of the report
+        items = reproduction_items(source.reproduction) + nn_count_items(source) + items
     if source.sweep is not None:
         items = sweep_items(source) + items
     missing = source.missing_runs
@@ -250,7 +273,7 @@ def methods_paragraphs(source: ReportSource) -> list[str]:
             text += " MMG coefficients changed from the ship file: " + ", ".join(
                 f"{k} = {v}" for k, v in s.mmg_overrides.items()) + "."
         if run.model != "mmg":
-            text += (f" Trained on {training_data_text(run)} ({_or(s.n_train_windows, '?')} training and "
+            text += (f" Trained on {training_data_text(run)}{held_out_text(run)} ({_or(s.n_train_windows, '?')} training and "
                      f"{_or(s.n_val_windows, '?')} validation windows) for {s.epochs} epochs; "
                      f"the weights of epoch {_or(s.best_epoch, '?')} were kept "
                      f"(training time {_seconds(s.train_seconds)}, seed {_or(s.seed, '?')}).")
@@ -283,6 +306,20 @@ def training_data_text(run: RunRecord) -> str:
         names = [Path(f.file).name for f in data.train]
         return f"{len(names)} of your logs ({_names(names)})"
     return f"data set {run.dataset}"
+
+
+def held_out_text(run: RunRecord) -> str:
+    """"; validated on 3 training logs held out whole (berthing: a; zigzag: b, c; split_seed 0)"
+    for a run with ``[training] validation = "files"`` (summary.json "data.held_out"), else ""."""
+    data = run.summary.data
+    held = data.held_out if data is not None else None
+    if not held:
+        return ""
+    groups = held.get("groups") or {}
+    n = sum(len(v) for v in groups.values())
+    listed = "; ".join(f"{group}: {', '.join(names)}" for group, names in groups.items())
+    return (f", validated on {n} training log{'s' if n != 1 else ''} held out whole ({listed}; "
+            f"split_seed {held.get('split_seed')})")
 
 
 def _names(names: list[str], first: int = 4) -> str:

@@ -36,11 +36,12 @@ class TextLine:
 
 
 def text_blocks(title: str, summary, rows, methods, quality, notes, verdict: VerdictTable | None = None,
-                settings=()) -> list[tuple]:
+                settings=(), chosen=None) -> list[tuple]:
     """The report's text pages as blocks ("h1"/"h2"/"p"/"small", text) or ("kv", key, value):
     the verdict (first), summary items, run rows, methods paragraphs and the settings that
-    differ from the defaults ((run label, [(key, value, default)]) pairs), preprocessing
-    quality rows, figure notes."""
+    differ from the defaults ((run label, [(key, value, default)]) pairs), how the settings
+    were chosen (`sysid.report.chosen_settings.ChosenSection`), preprocessing quality rows,
+    figure notes."""
     blocks = [("h1", title)]
     if verdict is not None:
         blocks += [("h2", "Verdict"), ("p", ("" if verdict.beats else "WARNING: ") + verdict.statement)]
@@ -55,6 +56,13 @@ def text_blocks(title: str, summary, rows, methods, quality, notes, verdict: Ver
     for label, changed in settings:
         blocks += [("p", f"Settings of {label} that differ from the defaults" + (":" if changed else ": none."))]
         blocks += [("kv", key, f"{value} (default: {default})") for key, value, default in changed]
+    if chosen is not None:
+        blocks += [("h2", "How the settings were chosen"), ("p", chosen.note)]
+        blocks += [("kv", row.label, " | ".join(f"{h}: {v}" for h, v in zip(chosen.header[1:], row.cells[1:])))
+                   for row in chosen.rows]
+        blocks += [("kv", f"{r.setting}", f"{r.text} [{r.runs}]") for r in chosen.reasons]
+        for name, path, items in chosen.sweeps:
+            blocks += [("p", f"Sweep {name} ({path}):")] + [("kv", k, str(v)) for k, v in items]
     if quality:
         blocks += [("h2", "Preprocessing quality")] + [
             ("kv", q.file, f"{q.rows} rows ({q.missing_rows} missing), {q.segments} segments ({q.kept_s:.0f} s kept, "

@@ -119,6 +119,7 @@ class SweepRecord:
     keys: list[str]
     chosen: list[RunRecord]
     summary: SweepSummary
+    path: Path | None = None   # the sweep directory
 
 
 @dataclass
@@ -133,6 +134,7 @@ class ReportSource:
     sweep: SweepRecord | None = None
     reproduction: Reproduction | None = None  # a reproduction's summary.json (None: it has none)
     maneuver_indices: pd.DataFrame | None = None  # a reproduction's maneuver_indices.csv (recorded vs predicted)
+    linked_sweeps: list[SweepRecord] = field(default_factory=list)  # sweeps the report shows beside (``--sweep``)
 
     @property
     def title(self) -> str:
@@ -212,9 +214,24 @@ def read_quality_reports(*folders: Path) -> list[QualityReport]:
     return reports
 
 
-def read_source(path) -> ReportSource:
-    """A run directory (has summary.json and metrics.csv) or a reproduction directory (has runs/)."""
-    path = Path(path)
+def read_source(path, sweeps=()) -> ReportSource:
+    """A run directory (has summary.json and metrics.csv) or a reproduction directory (has
+    runs/); `sweeps`: sweep directories whose validation landscape the report shows beside."""
+    source = _read_source(Path(path))
+    source.linked_sweeps = [read_linked_sweep(Path(s)) for s in sweeps]
+    return source
+
+
+def read_linked_sweep(path: Path) -> SweepRecord:
+    """A sweep directory given beside a report's source, checked to be one."""
+    if not ((path / "sweep.toml").is_file() and (path / "results.csv").is_file()):
+        raise CheckpointError(f"{path}: not a sweep directory (sweep.toml and results.csv of `sysid sweep`); "
+                              "give the directory `sysid sweep -o` wrote")
+    sweep = read_sweep(path, []).sweep
+    return sweep
+
+
+def _read_source(path: Path) -> ReportSource:
     if not path.is_dir():
         raise CheckpointError(f"{path}: no such directory")
     if (path / "runs").is_dir():
@@ -250,4 +267,4 @@ def read_sweep(path: Path, quality: list[QualityReport]) -> ReportSource:
     points = read_table(path / "points.csv", ["point", "val_loss_multistep_mean"])
     keys = list(summary.keys)
     chosen = [read_run_dir(path / run) for run in (summary.best.runs if summary.best else ())]
-    return ReportSource(path, "sweep", chosen[:1], quality, SweepRecord(trials, points, keys, chosen, summary))
+    return ReportSource(path, "sweep", chosen[:1], quality, SweepRecord(trials, points, keys, chosen, summary, path))

@@ -18,12 +18,14 @@ import torch
 from sysid.identify.checkpoint import TrainingCheckpoint
 from sysid.data.recordings import Run, read_run
 from sysid.data.datasets import test_files
-from sysid.data.splits import TEST, TRAINING, VALIDATION, check_disjoint_runs, data_split, provenance
+from sysid.data.splits import (TEST, TRAINING, VALIDATION, HeldOutFiles, check_disjoint_runs, data_split,
+                               hold_out_files, provenance)
 from sysid.device import compute_threads
 from sysid.errors import ConfigError, TrainingError
 from sysid.evaluation.evaluate import Evaluation, evaluate_model, short_runs
 from sysid.evaluation.verdict import (IDENTIFIED_MMG, SHIP_FILE_MMG, BaselineVerdict, baseline_verdict,
                                       window_score)
+from sysid.config.choices import Validation
 from sysid.config.experiment import Experiment
 from sysid.hybrid.force_models import CorrectedModel, build_mmg, build_model
 from sysid.runs.rundir import write_run
@@ -59,6 +61,14 @@ def validation_runs(exp: Experiment) -> list[Run]:
     """The experiment's ``[data] validation`` logs, read (empty: validation blocks of the training logs)."""
     return [read_run(f, exp.data.rate, exp.data.columns) for f in data_split(exp).validation] \
         if exp.data.validation else []
+
+
+def held_out_validation(exp: Experiment, runs: Sequence[Run]) -> HeldOutFiles | None:
+    """With ``[training] validation = "files"``: the training logs `runs` split into training
+    and held-out validation logs (`sysid.data.splits.hold_out_files`, ``val_fraction`` of each
+    folder's logs, drawn with ``split_seed``); else None."""
+    t = exp.training
+    return hold_out_files(runs, t.val_fraction, t.split_seed) if t.validation is Validation.FILES else None
 
 
 def evaluation_runs(exp: Experiment, data: str | os.PathLike | None = None) -> list[Run]:
@@ -163,11 +173,16 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
     history, training, validation_scores, horizon = None, None, None, 0.0
     runs: list[Run] = []
     validation = list(validation) if validation is not None else []
+    held_out = None
     with compute_threads(exp.training.threads):
         if exp.needs_training:
             runs = list(train_runs) if train_runs is not None else training_runs(exp, data)
             if not validation and exp.data.validation:
                 validation = validation_runs(exp)
+            if not validation and (held_out := held_out_validation(exp, runs)) is not None:
+                runs, validation = list(held_out.train), list(held_out.validation)
+                log("validation: the held-out training logs " + "; ".join(
+                    f"{group}: {', '.join(names)}" for group, names in held_out.groups.items()))
             check_disjoint_runs({TRAINING: runs, VALIDATION: validation, TEST: tests}, exp.source)
             try:
                 trainer = Trainer(exp, progress=progress, log=log, checkpoint=checkpoint_path(out_dir),
@@ -194,7 +209,8 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
                 baseline_metrics = pd.concat([m.assign(baseline=label) for label, m in scores.items()
                                               if label != "model"], ignore_index=True)
     source = "files" if exp.data.train else (exp.experiment.dataset if exp.needs_training else "-")
-    data_used = provenance(source, runs, validation, tests, exp.training.val_fraction, exp.training.block_s)
+    data_used = provenance(source, runs, validation, tests, exp.training.val_fraction, exp.training.block_s,
+                           held_out, exp.training.split_seed)
     seconds = time.perf_counter() - started
     path = write_run(out_dir, exp, model, evaluation, history, training, seconds, overwrite,
                      verdict=verdict, data=data_used, baseline_metrics=baseline_metrics)

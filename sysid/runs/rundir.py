@@ -185,6 +185,8 @@ def _used_files(exp: Experiment, data: dict | None) -> Experiment:
         return exp
     listed = {key: tuple(f["file"] for f in data[key]) for key in ("train", "validation", "test")
               if isinstance(data.get(key), list)}
+    if data.get("held_out"):  # validation drawn from the training logs: all of them are [data] train
+        listed["train"] += listed.pop("validation", ())
     return exp.replace(data=listed)
 
 

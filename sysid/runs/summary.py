@@ -190,7 +190,9 @@ class DataSummary(JsonRecord):
     """"data": what a run was trained, validated and tested on (`sysid.data.splits.provenance`).
 
     training : "files", "D1", "D2" or "-"; validation : the validation logs, or how the
-    validation blocks were drawn (a sentence), or "none"; test_set : "files", "paper" or "none".
+    validation blocks were drawn (a sentence), or "none"; test_set : "files", "paper" or "none";
+    held_out : with ``[training] validation = "files"``, the draw of the validation logs from
+    the training logs: {"val_fraction", "split_seed", "groups": {group: [log names]}}.
     """
 
     training: str
@@ -198,6 +200,7 @@ class DataSummary(JsonRecord):
     validation: Any = "none"                  # tuple of `LogFile` as read: see `validation_logs`
     test_set: str = "none"
     test: tuple[LogFile, ...] = ()
+    held_out: dict[str, Any] | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
     @property

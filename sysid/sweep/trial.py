@@ -61,8 +61,8 @@ def data_key(exp: Experiment) -> tuple:
 
 @dataclass(frozen=True)
 class TrialData:
-    """The data every trial needs, read once on the driver: the test runs, and the training
-    runs of each `data_key`. ``root`` is the driver's data root (a trial whose data were not
+    """The data every trial needs, read once on the driver: the test runs (none for a sweep),
+    and the training runs of each `data_key`. ``root`` is the driver's data root (a trial whose data were not
     shipped reads them there, which works only where that path exists)."""
 
     tests: tuple[Run, ...]
@@ -80,8 +80,11 @@ class TrialData:
                             "training data)") from None
 
 
-def read_trial_data(experiments: Iterable[Experiment], root: str | os.PathLike | None) -> TrialData:
-    """Test runs and the training runs of every distinct `data_key` among `experiments`."""
+def read_trial_data(experiments: Iterable[Experiment], root: str | os.PathLike | None,
+                    tests: bool = False) -> TrialData:
+    """The training runs of every distinct `data_key` among `experiments` and, with `tests`
+    (``sysid reproduce --seeds``: evaluation), the paper's test runs. A sweep reads no test
+    file: its trials are trained, validated and ranked without one."""
     def hashed(runs) -> tuple[Run, ...]:  # the files' SHA-256 travel with them (the run's provenance)
         return tuple(dataclasses.replace(r, sha256=r.sha256 or file_sha256(r.path)) for r in runs)
 
@@ -89,8 +92,8 @@ def read_trial_data(experiments: Iterable[Experiment], root: str | os.PathLike |
     for exp in experiments:
         if exp.needs_training and data_key(exp) not in training:
             training[data_key(exp)] = hashed(training_runs(exp, root))
-    tests = hashed(read_run(p) for p in test_files(root).values())
-    return TrialData(tests, training, str(root) if root is not None else None)
+    test_runs = hashed(read_run(p) for p in test_files(root).values()) if tests else ()
+    return TrialData(test_runs, training, str(root) if root is not None else None)
 
 
 def node_name() -> str:

@@ -49,6 +49,7 @@ def test_python_callers_may_name_choices():
     ("training", "dtype", "float16", "float32, float64"),
     ("identify", "stage", "after", "before, joint"),
     ("gate", "space", "weights", "features, inputs"),
+    ("training", "validation", "maneuvers", "blocks, files"),
     ("evaluation", "integrator", "rk4_3/8", "euler, rk4"),  # the 3/8 rule is offered in Python only
 ])
 def test_a_word_that_is_not_a_choice_is_one_line(section, key, word, choices):

@@ -29,6 +29,23 @@ def test_validation_as_files_or_a_fraction(tmp_path):
         load_experiment(_write(tmp_path / "d.toml", "[data]\nvalidation = ['v.csv']\n"))
 
 
+def test_validation_by_blocks_or_by_held_out_files(tmp_path):
+    from sysid.config.choices import Validation
+    default = load_experiment(_write(tmp_path / "a.toml", "[data]\ntrain = ['a.csv']\n"))
+    assert default.training.validation is Validation.BLOCKS and default.training.split_seed == 0
+    files = load_experiment(_write(tmp_path / "b.toml", "[data]\ntrain = ['a.csv']\n"
+                                                        "[training]\nvalidation = 'files'\nsplit_seed = 4\n"))
+    assert files.training.validation is Validation.FILES and files.training.split_seed == 4
+    (tmp_path / "c.toml").write_text(files.to_toml())
+    assert load_experiment(tmp_path / "c.toml").training == files.training
+    with pytest.raises(ConfigError, match=r"b\.toml: \[data\] validation names the validation logs and \[training\] "
+                                          r"validation = \"files\" draws them from the training logs: keep one"):
+        load_experiment(_write(tmp_path / "b.toml", "[data]\ntrain = ['a.csv']\nvalidation = ['v.csv']\n"
+                                                    "[training]\nvalidation = 'files'\n"))
+    with pytest.raises(ConfigError, match=r"\[training\] split_seed = -1: must be >= 0"):
+        load_experiment(_write(tmp_path / "d.toml", "[data]\ntrain = ['a.csv']\n[training]\nsplit_seed = -1\n"))
+
+
 def test_files_is_the_older_name_of_train(tmp_path):
     exp = load_experiment(_write(tmp_path / "old.toml", "[data]\nfiles = ['logs/a.csv']\n"))
     assert exp.data.train == (str(tmp_path / "logs" / "a.csv"),)

@@ -122,10 +122,16 @@ def test_a_log_in_training_and_test_is_an_error_naming_both(dataset_dir, tmp_pat
         data_split(load_experiment(same))
     copy = tmp_path / "renamed_log.csv"
     shutil.copy(zigzag, copy)
-    renamed = _config(tmp_path / "renamed.toml", [zigzag, berthing], [copy])
-    with pytest.raises(DataError, match=rf"renamed_log\.csv \(test\) and .*{zigzag.name} \(training\) have identical "
-                                        r"content \(SHA-256"):
-        data_split(load_experiment(renamed))
+    twice = _config(tmp_path / "twice.toml", [zigzag, berthing, copy])
+    with pytest.raises(DataError, match=rf"renamed_log\.csv \(training\) and .*{zigzag.name} \(training\) have "
+                                        r"identical content \(SHA-256"):
+        data_split(load_experiment(twice))
+    # a renamed copy as a test log: the split opens no test file (training reads none), the
+    # samples' check when the run is evaluated names both
+    split = data_split(load_experiment(_config(tmp_path / "renamed.toml", [zigzag, berthing], [copy])))
+    with pytest.raises(DataError, match=rf"renamed_log\.csv \(test\) holds the same samples as .*{zigzag.name} "
+                                        r"\(training\)"):
+        check_disjoint_runs({TRAINING: [read_run(p) for p in split.train], TEST: [read_run(p) for p in split.test]})
     # the same recording in another format and other units: the same samples
     own = write_own_log(zigzag, tmp_path / "converted.parquet")
     converted = read_run(own, columns=parse_columns(_table(), "exp.toml"))

@@ -259,3 +259,35 @@ def test_val_loss_multistep_is_the_final_models_validation_loss_at_the_objective
         expected20 = float(multistep_loss(longer.model_, val20, w_v)[0])
     assert longer.summary_.val_loss_multistep == pytest.approx(expected20, rel=1e-5)
     assert longer.summary_.val_loss_multistep > trainer.summary_.val_loss_multistep  # errors grow over 20 s
+
+
+def test_seed_ensemble_of_hybrids_is_their_mmg_plus_the_mean_gated_correction():
+    """Hybrids sharing one MMG: the ensemble computes F_MMG once; its forces equal the mean
+    of the members' own forces (each member called alone), gate decisions by majority.
+    Members whose MMG coefficients differ (identified) average their whole forces."""
+    from sysid.hybrid.ensemble import SeedEnsemble
+    from sysid.hybrid.force_models import CorrectedModel
+
+    def member(seed: int, overrides: dict | None = None) -> CorrectedModel:
+        torch.manual_seed(seed)
+        net = ForceCorrection((16, 16), torch.float64)
+        net.set_standardization(torch.zeros(9), torch.full((9,), 3.0), torch.zeros(3), torch.tensor([1e5, 1e5, 1e7]))
+        model = CorrectedModel(MMG(load_ship("esso_osaka", overrides)), net, None, True, "inputs")
+        model.gate = KNNGate(3, 0.9, 9, torch.float64).fit(torch.randn(200, 9, dtype=torch.float64))
+        model.gate_enabled = True
+        return model
+
+    gen = torch.Generator().manual_seed(1)
+    state = torch.randn(40, 6, generator=gen, dtype=torch.float64) * torch.tensor([1, 2, 1, 0.3, 1, 0.01]) \
+        + torch.tensor([0, 6, 0, 0, 0, 0])
+    inputs = torch.randn(40, 4, generator=gen, dtype=torch.float64).abs() * torch.tensor([2, 0.3, 8, 3])
+    for members, shared in (([member(0), member(1), member(2)], True),
+                            ([member(0), member(1, {"N_r": -0.07})], False)):
+        ensemble = SeedEnsemble(members)
+        assert ensemble._shared_mmg is shared
+        parts = [m(state, inputs) for m in members]
+        forces = ensemble(state, inputs)
+        torch.testing.assert_close(forces.total, torch.stack([p.total for p in parts]).mean(0), rtol=1e-12, atol=1e-9)
+        torch.testing.assert_close(forces.correction, torch.stack([p.correction for p in parts]).mean(0))
+        majority = torch.stack([p.gate_on for p in parts]).double().mean(0) >= 0.5
+        assert torch.equal(forces.gate_on, majority) and 0 < int(majority.sum()) < len(majority)
