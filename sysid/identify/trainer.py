@@ -6,8 +6,8 @@
 1. Windows of T+1 samples (T Euler steps) slid by `stride_s` within each file; each file's
    time axis is cut into 30 s blocks, 30 % of them (seeded draw) validation, and a window
    lies wholly in one part, so no validation window overlaps a training window; or, given
-   validation logs (``[data] validation``, or with ``[training] validation = "files"`` 30 %
-   of each folder's training logs held out whole), every window of those is validation and
+   validation logs (``[data] validation``, or with ``[training] validation = "files"`` a
+   ``val_fraction`` of each folder's training logs held out whole), every window of those is validation and
    every window of the training logs training. Exact copies of another file (``turn_cut_...``)
    and windows touching frozen-GNSS segments are left out and reported.
 2. Standardisation: FNN input statistics from the training samples (relative wind computed
@@ -54,7 +54,7 @@ from tqdm import tqdm
 from sysid.hybrid.correction import ForceCorrection, correction_inputs
 from sysid.identify.checkpoint import CheckpointState, TrainingCheckpoint
 from sysid.data.recordings import Run, duplicate_runs, sliding_windows, stack_windows, window_touches
-from sysid.data.splits import hold_out_files
+from sysid.data.splits import HeldOutFiles, hold_out_files
 from sysid.device import resolve_device
 from sysid.dynamics.equations import integrate, integrate_with_forces, required_force
 from sysid.errors import ConfigError, DataError, TrainingError
@@ -264,6 +264,14 @@ def output_penalty(f_nn: torch.Tensor, f_mmg: torch.Tensor, w_F: torch.Tensor, b
     magnitude; grows linearly outside. w_F (3,) scales X [1/N], Y [1/N], N [1/(N m)].
     """
     return (torch.relu(f_nn.abs() - band * f_mmg.abs()) * w_F).sum(-1)
+
+
+def held_out_validation(exp: Experiment, runs: Sequence[Run]) -> HeldOutFiles | None:
+    """With ``[training] validation = "files"``: the training logs `runs` split into training
+    and held-out validation logs (`sysid.data.splits.hold_out_files`, ``val_fraction`` of each
+    folder's logs, drawn with ``split_seed``); else None."""
+    t = exp.training
+    return hold_out_files(runs, t.val_fraction, t.split_seed) if t.validation is Validation.FILES else None
 
 
 def adam(params, lr: float) -> torch.optim.Adam:
@@ -622,8 +630,7 @@ class Trainer:
         ``summary_``, ``validation_windows_`` (the windows of ``val_loss_multistep``) and
         ``velocity_weights_`` (w_v (3,), 1 / variance of u, v_m, r in the training windows)."""
         exp = self.experiment
-        if not validation and exp.training.validation is Validation.FILES:
-            held_out = hold_out_files(runs, exp.training.val_fraction, exp.training.split_seed)
+        if not validation and (held_out := held_out_validation(exp, runs)) is not None:
             runs, validation = held_out.train, held_out.validation
         self._validation_runs = list(validation)
         t, kind = exp.training, exp.experiment.model

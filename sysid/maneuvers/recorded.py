@@ -14,7 +14,9 @@ from the recorded rudder for both.
 """
 from __future__ import annotations
 
+import functools
 import math
+import multiprocessing
 import os
 import re
 from pathlib import Path
@@ -34,7 +36,10 @@ from sysid.maneuvers.any_model import load_maneuver_model
 from sysid.maneuvers.base import Maneuver, Side, TurningCircle, ZigZag
 from sysid.maneuvers.indices import INDEX_COLUMNS, KIND_INDICES, Track, maneuver_indices
 from sysid.maneuvers.simulate import gate_off_share
+from sysid.device import compute_threads
+from sysid.store.manifest import has_manifest
 from sysid.store.files import write_csv
+from sysid.workers import in_workers
 
 RECORD_COLUMNS = ["scenario", "file", "maneuver", "model", "n_members", *INDEX_COLUMNS,
                   *(f"{c}_std" for c in INDEX_COLUMNS), "gate_off_share"]
@@ -119,18 +124,32 @@ def _row(scenario: str, run: Run, maneuver: Maneuver, model: str, values: list[d
     return row
 
 
+Predictions = list[tuple[np.ndarray, "float | None"]]  # per run: (states (T_i, 6), gate off share)
+
+
+def _execute_starts(runs: Mapping[str, Run]) -> list[int]:
+    """Sample index of each run's execute (scenario -> `Run`, in order), where predictions start."""
+    return [start for _, start in (recorded_maneuver(run, scenario) for scenario, run in runs.items())]
+
+
 def record_comparison(models: Mapping[str, Sequence[nn.Module]], runs: Mapping[str, Run],
                       method: IntegratorLike = "euler") -> pd.DataFrame:
     """`RECORD_COLUMNS` rows: for each run (scenario -> `Run`) the record's indices, then
     each model's (label -> its models: one, or several seeds whose indices are averaged,
     with their standard deviation in ``<index>_std``) prediction of it from the execute."""
     method = Method.parse(method)
+    starts = _execute_starts(runs)
+    predicted = {label: [_predictions(m, list(runs.values()), starts, method) for m in members]
+                 for label, members in models.items()}
+    return compared(predicted, runs)
+
+
+def compared(predicted: Mapping[str, Sequence[Predictions]], runs: Mapping[str, Run]) -> pd.DataFrame:
+    """`record_comparison`'s rows from its models' predictions (label -> per member: the
+    predictions of `runs` in their order, from each run's execute)."""
     scenarios = list(runs)
     found = [recorded_maneuver(runs[s], s) for s in scenarios]
-    starts = [e for _, e in found]
     rows = []
-    predicted = {label: [_predictions(m, [runs[s] for s in scenarios], starts, method) for m in members]
-                 for label, members in models.items()}
     for i, scenario in enumerate(scenarios):
         run, (maneuver, start) = runs[scenario], found[i]
         t = run.t[start:] - run.t[start]
@@ -172,10 +191,41 @@ def run_models(run_dirs: Mapping[str, str | os.PathLike]) -> dict[str, list[nn.M
 RECORD_FILE = "maneuver_indices.csv"
 
 
+def model_paths(path: str | os.PathLike) -> list[Path]:
+    """The paths whose models `run_models` takes from `path`, in its order: a folder's seed
+    run directories, else `path` itself (a run directory or ship)."""
+    path = Path(path)
+    if not path.is_dir() or has_manifest(path):
+        return [path]
+    seeds = sorted((p for p in path.glob("seed*") if has_manifest(p)), key=lambda p: (len(p.name), p.name))
+    return seeds or [path]  # none: loading `path` gives the clear error
+
+
+def _predicted_run(path: Path, runs: Sequence[Run], starts: Sequence[int], method: Method,
+                   threads: int) -> tuple[Path, Predictions]:
+    """(path, `_predictions` of the model of one run directory): one worker's item."""
+    with compute_threads(threads):
+        return path, _predictions(load_maneuver_model(path).model, runs, starts, method)
+
+
 def write_record_comparison(out_dir: str | os.PathLike, run_dirs: Mapping[str, str | os.PathLike],
-                            data: str | os.PathLike | None = None, method: IntegratorLike = "euler") -> Path:
+                            data: str | os.PathLike | None = None, method: IntegratorLike = "euler",
+                            workers: int = 1, threads: int = 1) -> Path:
     """``out_dir/maneuver_indices.csv``: `record_comparison` of the protocol's turning and
     zig-zag test runs (1 Hz) and the models of `run_dirs` (label -> run directory or folder
-    of seed run directories)."""
-    frame = record_comparison(run_models(run_dirs), recorded_test_runs(data), method)
+    of seed run directories). `workers` > 1 predicts the models side by side in that many
+    worker processes (`sysid.workers`, `threads` torch threads each); the numbers do not
+    depend on it."""
+    runs = recorded_test_runs(data)
+    if workers <= 1:
+        frame = record_comparison(run_models(run_dirs), runs, method)
+        return write_csv(frame, Path(out_dir) / RECORD_FILE, float_format="%.6g")
+    method = Method.parse(method)
+    starts = _execute_starts(runs)
+    paths = {label: model_paths(path) for label, path in run_dirs.items()}
+    items = [p for found in paths.values() for p in found]
+    work = functools.partial(_predicted_run, runs=list(runs.values()), starts=starts, method=method,
+                             threads=threads)
+    done = dict(in_workers(work, items, workers, multiprocessing.get_context("spawn")))
+    frame = compared({label: [done[p] for p in found] for label, found in paths.items()}, runs)
     return write_csv(frame, Path(out_dir) / RECORD_FILE, float_format="%.6g")

@@ -23,6 +23,7 @@ from sysid.runs.lifecycle import cached_test_runs, cached_training_runs, run_exp
 from sysid.runs.reproduction import DatasetScore, Reproduction, Scorecard
 from sysid.maneuvers.recorded import RECORD_FILE, write_record_comparison
 from sysid.protocol.paper import MODEL_LABELS, comparison_table, model_label, run_label
+from sysid.device import cpu_cores
 from sysid.workers import in_workers
 
 # run name -> experiment config; labels and data sets come from the configs
@@ -173,26 +174,37 @@ def _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, d
             mlflow=None) -> list[str]:
     """Learned runs with `seeds` seeds on Ray into `done`; their ensembles' names."""
     from sysid.data.datasets import data_root
-    from sysid.protocol.seed_runs import train_seeds, write_ensemble
+    from sysid.protocol.seed_runs import ensemble_name, train_seeds, write_ensembles
 
     ordered = sorted(trained, key=lambda n: -expected_cost(experiments[n]))  # longest first
     log(f"training {len(trained)} runs x {seeds} seeds = {len(trained) * seeds} trials on Ray, "
         + (f"{jobs} side by side" if jobs else "one per CPU of the cluster") + (f" on {address}" if address else ""))
     groups = train_seeds({n: experiments[n] for n in ordered}, seeds, out, str(data_root(data)), jobs, address, log,
                          storage, mlflow)
-    tests = cached_test_runs(data)
-    ensembles = []
+    learned = []
     for name in trained:
         exp, group = experiments[name], groups[name]
         done[name] = ProtocolRun(name, exp.experiment.model, exp.experiment.dataset, group.metrics,
                                  group.gate_off_share, group.failure, group.seconds)
         if exp.experiment.model is not ModelKind.MMG and group.seeds:
-            target, evaluation, _ = write_ensemble(name, exp, group, out, tests)
-            done[target] = ProtocolRun(target, exp.experiment.model, exp.experiment.dataset, evaluation.metrics,
-                                       evaluation.gate_off_share, None, 0.0)
-            ensembles.append(target)
-            log(f"[{target}] mean of {len(group.seeds)} seeds' networks evaluated")
+            learned.append((name, exp, group))
+    sizes = {ensemble_name(n, e.experiment.dataset): len(g.seeds) for n, e, g in learned}
+    written = write_ensembles(learned, out, cached_test_runs(data), _driver_workers(jobs),
+                              on_result=lambda r: log(f"[{r[0]}] mean of {sizes[r[0]]} seeds' networks evaluated"))
+    ensembles = []
+    for name, exp, _ in learned:  # in the protocol's order, whichever was written first
+        target, evaluation, _ = written[name]
+        done[target] = ProtocolRun(target, exp.experiment.model, exp.experiment.dataset, evaluation.metrics,
+                                   evaluation.gate_off_share, None, 0.0)
+        ensembles.append(target)
     return ensembles
+
+
+def _driver_workers(jobs: int | None) -> int:
+    """Worker processes for the driver's own work after training (ensembles, recorded
+    maneuvers): `jobs`, or one per core of this machine (on a cluster, `jobs` counts its
+    trials, not this machine's cores)."""
+    return max(1, min(jobs or cpu_cores(), cpu_cores()))
 
 
 def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
@@ -270,7 +282,7 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
         paper = ref.loc[ours.index, ["paper_u", "paper_v", "paper_r"]].to_numpy()
         identified_cells = (int((ours.to_numpy() < paper).sum()), int(paper.size))
     random_file = Path(TEST_FILES["Random"]).stem
-    _recorded_maneuvers(out, runs, data, log)
+    _recorded_maneuvers(out, runs, data, log, _driver_workers(jobs))
     summary = Reproduction(
         seconds=time.perf_counter() - started, runs=tuple(names), failed=failed, protocol=tuple(PROTOCOL),
         seeds=seeds, scorecard=card, scorecard_ensemble=card_ensemble,
@@ -280,11 +292,13 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
     return summary
 
 
-def _recorded_maneuvers(out: Path, runs: list[ProtocolRun], data, log: Callable[[str], None]) -> None:
+def _recorded_maneuvers(out: Path, runs: list[ProtocolRun], data, log: Callable[[str], None],
+                        workers: int = 1) -> None:
     """maneuver_indices.csv: the recorded turning and zig-zag test runs' IMO indices beside
-    every finished model's prediction of them (`sysid.maneuvers.recorded`)."""
+    every finished model's prediction of them (`sysid.maneuvers.recorded`; the models in
+    `workers` processes, one torch thread each)."""
     started = time.perf_counter()
     done = {run_label(r.name, r.kind, r.dataset): out / "runs" / r.name for r in runs if not r.failure}
-    write_record_comparison(out, done, data)
+    write_record_comparison(out, done, data, workers=workers)
     log(f"{RECORD_FILE}: indices of the recorded turning and zig-zag runs beside {len(done)} models' predictions "
         f"({time.perf_counter() - started:.0f} s)")

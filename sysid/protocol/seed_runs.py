@@ -4,6 +4,8 @@ the seeds with their spread (`sysid.protocol.seeds`), and the networks' mean-of-
 of its own, ``runs/{variant}_ensemble_{dataset}/`` (`sysid.hybrid.ensemble`)."""
 from __future__ import annotations
 
+import functools
+import multiprocessing
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -12,6 +14,7 @@ from typing import Callable, Sequence
 import pandas as pd
 
 from sysid.data.recordings import Run
+from sysid.device import compute_threads
 from sysid.evaluation.evaluate import evaluate_model
 from sysid.config.experiment import Experiment
 from sysid.protocol.paper import run_variant
@@ -22,6 +25,7 @@ from sysid.hybrid.ensemble import SeedEnsemble
 from sysid.sweep.inbox import complete_summary
 from sysid.sweep.runner import TuneStorage, ray_session, run_trials
 from sysid.sweep.trial import TrialSpec, read_trial_data
+from sysid.workers import in_workers
 
 
 @dataclass
@@ -102,9 +106,14 @@ def ensemble_name(name: str, dataset: str) -> str:
     return f"{run_variant(name, dataset)}_ensemble_{dataset}"
 
 
-def write_ensemble(name: str, exp: Experiment, group: SeedGroup, out: Path, tests: Sequence[Run]):
-    """The mean-of-seeds ensemble of a learned run, evaluated and written as a run directory
-    whose ``[ensemble] members`` point at the seeds' run directories."""
+def write_ensemble(name: str, exp: Experiment, group: SeedGroup, out: Path, tests: Sequence[Run],
+                   threads: int | None = None):
+    """The mean-of-seeds ensemble of a learned run, evaluated (with `threads` torch threads;
+    None: as set) and written as a run directory whose ``[ensemble] members`` point at the
+    seeds' run directories: (its name, `Evaluation`, its path)."""
+    if threads is not None:
+        with compute_threads(threads):
+            return write_ensemble(name, exp, group, out, tests)
     started = time.perf_counter()
     members = [load_model(out / "runs" / name / f"seed{seed}")[1] for seed in group.seeds]
     model = SeedEnsemble(members)
@@ -115,3 +124,29 @@ def write_ensemble(name: str, exp: Experiment, group: SeedGroup, out: Path, test
     path = write_run(out / "runs" / target, ens, model, evaluation, seconds=time.perf_counter() - started)
     return target, evaluation, path
 
+
+
+def write_ensembles(groups: Sequence[tuple[str, Experiment, SeedGroup]], out: Path, tests: Sequence[Run],
+                    workers: int = 1, threads: int = 1, on_result: Callable | None = None) -> dict[str, tuple]:
+    """`write_ensemble` of each (name, experiment, seed group), in up to `workers` worker
+    processes side by side (`sysid.workers`, `threads` torch threads each): name ->
+    its result in the order of `groups`, each also passed to `on_result` as it is written."""
+    if workers <= 1 or len(groups) <= 1:
+        done = {}
+        for name, exp, group in groups:
+            done[name] = write_ensemble(name, exp, group, out, tests, threads if workers > 1 else None)
+            if on_result is not None:
+                on_result(done[name])
+        return done
+    work = functools.partial(_ensemble_work, out=out, tests=tests, threads=threads)
+    results = in_workers(work, list(groups), workers, multiprocessing.get_context("spawn"),
+                         on_result=None if on_result is None else lambda r: on_result(r[1]))
+    written = dict(results)
+    return {name: written[name] for name, _, _ in groups}  # in the order of `groups`
+
+
+def _ensemble_work(item: tuple[str, Experiment, SeedGroup], out: Path, tests: Sequence[Run],
+                   threads: int) -> tuple[str, tuple]:
+    """One worker's item of `write_ensembles`: (name, `write_ensemble`'s result)."""
+    name, exp, group = item
+    return name, write_ensemble(name, exp, group, out, tests, threads)

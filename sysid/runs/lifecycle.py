@@ -18,18 +18,16 @@ import torch
 from sysid.identify.checkpoint import TrainingCheckpoint
 from sysid.data.recordings import Run, read_run
 from sysid.data.datasets import test_files
-from sysid.data.splits import (TEST, TRAINING, VALIDATION, HeldOutFiles, check_disjoint_runs, data_split,
-                               hold_out_files, provenance)
+from sysid.data.splits import TEST, TRAINING, VALIDATION, check_disjoint_runs, data_split, provenance
 from sysid.device import compute_threads
 from sysid.errors import ConfigError, TrainingError
 from sysid.evaluation.evaluate import Evaluation, evaluate_model, short_runs
 from sysid.evaluation.verdict import (IDENTIFIED_MMG, SHIP_FILE_MMG, BaselineVerdict, baseline_verdict,
                                       window_score)
-from sysid.config.choices import Validation
 from sysid.config.experiment import Experiment
 from sysid.hybrid.force_models import CorrectedModel, build_mmg, build_model
 from sysid.runs.rundir import write_run
-from sysid.identify.trainer import EpochReport, Trainer, TrainingSummary
+from sysid.identify.trainer import EpochReport, Trainer, TrainingSummary, held_out_validation
 from sysid.config.checks import threads
 
 
@@ -61,14 +59,6 @@ def validation_runs(exp: Experiment) -> list[Run]:
     """The experiment's ``[data] validation`` logs, read (empty: validation blocks of the training logs)."""
     return [read_run(f, exp.data.rate, exp.data.columns) for f in data_split(exp).validation] \
         if exp.data.validation else []
-
-
-def held_out_validation(exp: Experiment, runs: Sequence[Run]) -> HeldOutFiles | None:
-    """With ``[training] validation = "files"``: the training logs `runs` split into training
-    and held-out validation logs (`sysid.data.splits.hold_out_files`, ``val_fraction`` of each
-    folder's logs, drawn with ``split_seed``); else None."""
-    t = exp.training
-    return hold_out_files(runs, t.val_fraction, t.split_seed) if t.validation is Validation.FILES else None
 
 
 def evaluation_runs(exp: Experiment, data: str | os.PathLike | None = None) -> list[Run]:

@@ -13,6 +13,7 @@ from synthetic_rundir import write_reproduction  # noqa: E402
 
 from sysid import MMG, load_ship  # noqa: E402
 from sysid.maneuvers.recorded import (RECORD_FILE, recorded_maneuver, record_comparison, recorded_test_runs,  # noqa: E402
+                                      write_record_comparison,
                                       side_by_side)
 from sysid.report import build_report  # noqa: E402
 from sysid.store.manifest import write_manifest  # noqa: E402
@@ -73,3 +74,16 @@ def test_reproduction_report_shows_the_record_table(runs, tmp_path):
     assert "Standard-maneuver indices: recorded runs and predictions" in html
     advance = frame[(frame.model == "MMG") & (frame.scenario == "Turning 35")].advance_m.iloc[0]
     assert f"{advance:.3g}" in html
+
+
+def test_models_predicted_in_workers_write_the_same_file(dataset_dir, tmp_path):
+    """Two worker processes write the bytes the driver alone writes, rows in the order of
+    the labels (the bundled ship under two labels, one of them first)."""
+    models = {"MMG": "esso_osaka", "MMG again": "esso_osaka"}
+    alone = write_record_comparison(tmp_path / "alone", models, dataset_dir.parent)
+    workers = write_record_comparison(tmp_path / "workers", models, dataset_dir.parent, workers=2)
+    assert workers.read_bytes() == alone.read_bytes()
+    frame = pd.read_csv(alone)
+    assert list(frame.model[:3]) == ["recorded", "MMG", "MMG again"]
+    turning = frame[(frame.model == "MMG") & frame.maneuver.str.startswith("turning")]
+    assert len(turning) == 2 and np.isfinite(turning.advance_m).all()
