@@ -19,7 +19,7 @@ from torch import nn
 from torchdiffeq import odeint
 
 from sysid.dynamics.integrators import Integrator, IntegratorLike, Method, rollout
-from sysid.mmg.coefficients import view_of
+from sysid.mmg.coefficients import coefficient_matrix, view_of
 from sysid.mmg.model import ForceBreakdown
 
 _ODEINT_NAME = {Method.EULER: "euler", Method.RK4_38: "rk4"}  # torchdiffeq's public names
@@ -72,6 +72,35 @@ def derivative_channels(state: torch.Tensor, force, c) -> tuple[torch.Tensor, ..
     return x_dot, u_dot, y_dot, v_dot, r, r_dot
 
 
+# dx/dt (..., 6) as features (..., 16) times a (16, 6) matrix of the mass terms: features
+# (X, Y, N, u r, v r, r r, u cos psi, u sin psi, v cos psi, v sin psi, x, u, y, v, psi, r)
+_NONE6 = (None,) * 6
+_RATE = ((None, "eom_X_u", None, None, None, None),        # X
+         (None, None, None, "eom_Y_v", None, "eom_N_v"),   # Y
+         (None, None, None, "eom_N_v", None, "eom_N_r"),   # N
+         (None, None, None, "eom_ur_v", None, "eom_ur_r"),  # u r
+         (None, "eom_vr_u", None, None, None, None),       # v r
+         (None, "eom_rr_u", None, None, None, None),       # r r
+         (1.0, None, None, None, None, None),              # u cos psi -> x_dot
+         (None, None, 1.0, None, None, None),              # u sin psi -> y_dot
+         (None, None, 1.0, None, None, None),              # v cos psi -> y_dot
+         (-1.0, None, None, None, None, None),             # v sin psi -> x_dot
+         _NONE6, _NONE6, _NONE6, _NONE6, _NONE6,           # x, u, y, v, psi
+         (None, None, None, None, 1.0, None))              # r -> psi_dot
+
+
+def motion_rate(state: torch.Tensor, force: torch.Tensor, motion, c) -> torch.Tensor:
+    """dx/dt (..., 6), Eqs. (1) and (4), from state (..., 6), force (..., 3) = (X, Y, N)
+    [N, N, N m] and the forward's `sysid.mmg.motion.Motion` (psi, r, constants), as one
+    product with a matrix of the mass terms (`derived_constants`' ``eom_*``)."""
+    uvr = state[..., 1::2]                                             # (u, v, r)
+    coriolis = uvr * motion.r[..., None]                               # (u r, v r, r r)
+    cos_sin = torch.sin(motion.psi[..., None] + motion.k.cos_sin_phase)  # (cos psi, sin psi)
+    rotation = (uvr[..., :2, None] * cos_sin[..., None, :]).flatten(-2)
+    features = torch.cat([force, coriolis, rotation, state], -1)
+    return features @ coefficient_matrix(c, _RATE, state)
+
+
 def state_derivative(state: torch.Tensor, force: torch.Tensor, c) -> torch.Tensor:
     """dx/dt (..., 6) = (x_dot, u_dot, y_dot, v_dot, psi_dot, r_dot), Eqs. (1) and (4)."""
     return torch.stack(derivative_channels(state, force.unbind(-1), c), -1)
@@ -87,6 +116,9 @@ def lean_derivative(force_model: nn.Module, state: torch.Tensor, inputs: torch.T
     """`derivative` through the model's ``force_channels`` (X, Y, N as separate tensors, no
     force breakdown) where it has one: the same numbers with fewer, larger operations
     (what compiled steps run). dx/dt is stacked along `dim` (0: channels first, (6, ...))."""
+    rate = getattr(force_model, "rate", None)
+    if rate is not None and (dim == -1 or dim == state.dim() - 1) and not torch.compiler.is_compiling():
+        return rate(state, inputs)  # one product for the equations of motion (eager)
     channels = getattr(force_model, "force_channels", None)
     force = channels(state, inputs)[0] if channels is not None else force_model(state, inputs).total.unbind(-1)
     return torch.stack(derivative_channels(state, force, force_model.coefficients), dim)

@@ -8,6 +8,7 @@ when bounds are given.
 """
 from __future__ import annotations
 
+import math
 from types import SimpleNamespace
 from typing import Iterable, Mapping
 
@@ -45,6 +46,7 @@ def derived_constants(c, names) -> dict:
         out["P2"] = c.P ** 2
     if "X_0F" in have and "X_0A" in have:
         out["dX_0"] = c.X_0A - c.X_0F
+        out["dX_0_pi"] = out["dX_0"] / math.pi
     if "C_D" in have:
         out["C_D_L"] = c.C_D / c.L_pp
         out["C_D_L2"] = c.C_D / (c.L_pp * c.L_pp)
@@ -52,11 +54,19 @@ def derived_constants(c, names) -> dict:
         out["H_R"] = torch.sqrt(c.A_R * c.lambda_R)
         out["kappa"] = c.k_x / c.epsilon
         out["f_alpha"] = 6.13 * c.lambda_R / (2.25 + c.lambda_R)
+        # Kitagawa's propeller term: (n D k_xPR)^2 8 |K_T| / pi = n^2 |K_T| kitagawa_jet [m^2]
+        out["kitagawa_jet"] = 8.0 * (c.D * c.k_xPR) ** 2 / math.pi
+        out["minus_gamma_P"], out["minus_gamma_N"] = -c.gamma_P, -c.gamma_N
     if "H_R" in have or "H_R" in out:
         out["eta"] = c.D / out["H_R"] if "H_R" in out else c.D / c.H_R
         out["one_minus_eta"] = 1.0 - out["eta"]
         out["half_rho_A_R"] = 0.5 * c.rho * c.A_R
         out["l_R_nd"] = c.l_R / c.L_pp
+        out["minus_l_R_nd"] = -out["l_R_nd"]
+        # u_R^2 = epsilon^2 (eta core^2 + (1 - eta) u_P^2); the propeller race 8 K_T (n D)^2 / pi
+        out["eps2_eta"] = c.epsilon * c.epsilon * out["eta"]
+        out["eps2_one_minus_eta"] = c.epsilon * c.epsilon * out["one_minus_eta"]
+        out["jet_D2"] = 8.0 * out["D2"] / math.pi
     if "a_H" in have:
         out["one_plus_aH"] = 1.0 + c.a_H
         out["one_minus_tR"] = 1.0 - c.t_R
@@ -67,8 +77,20 @@ def derived_constants(c, names) -> dict:
     if "t_P" in have:
         out["one_minus_tP"] = 1.0 - c.t_P
         out["one_minus_tP_rho"] = out["one_minus_tP"] * c.rho
+        out["rho_D4"] = c.rho * out["D4"]
+        out["one_minus_tP_rho_D4"] = out["one_minus_tP_rho"] * out["D4"]
     if "w_P0" in have:
         out["one_minus_wP0"] = 1.0 - c.w_P0
+        out["minus_w_P0"] = -c.w_P0
+    if "x_P" in have:
+        out["minus_x_P"] = -c.x_P
+        out["x_P_L"] = c.x_P * c.L_pp  # m
+        # the four-quadrant wake's lateral inflow below the speed guard (v' = r' = 1e-7)
+        out["slow_lateral_inflow"] = 1e-7 + c.x_P * 1e-7
+    if "C_2_plus" in have:
+        out["wake_plus"] = out["one_minus_wP0"] * (c.C_2_plus - 1.0)
+        out["wake_minus"] = out["one_minus_wP0"] * (c.C_2_minus - 1.0)
+        out["minus_C_1"] = -c.C_1
     if "rho_air" in have:
         out["half_rho_air"] = 0.5 * c.rho_air
     if "m" in have:
@@ -78,15 +100,31 @@ def derived_constants(c, names) -> dict:
         out["mxG"] = m * xG
         out["a22"] = c.I_zz_J_zz + xG * xG * m
         out["det"] = out["m_plus_my"] * out["a22"] - out["mxG"] * out["mxG"]
+        # Eq. (4) solved: u_dot = X/(m+m_x) + (m+m_y)/(m+m_x) v r + m x_G/(m+m_x) r^2,
+        # (v_dot, r_dot) = [[a22, -mxG], [-mxG, m+m_y]] (Y - (m+m_x) u r, N - mxG u r) / det
+        det, mx, my, mxG = out["det"], out["m_plus_mx"], out["m_plus_my"], out["mxG"]
+        out["eom_X_u"] = 1.0 / mx
+        out["eom_vr_u"] = my / mx
+        out["eom_rr_u"] = mxG / mx
+        out["eom_Y_v"] = out["a22"] / det
+        out["eom_N_v"] = -mxG / det
+        out["eom_ur_v"] = (mxG * mxG - out["a22"] * mx) / det
+        out["eom_N_r"] = my / det
+        out["eom_ur_r"] = mxG * (mx - my) / det
     return out
 
 
 # every name `derived_constants` may give
 DERIVED_NAMES = frozenset((
-    "q", "qL", "L_pp2", "L_pp3", "half_L", "D2", "D4", "P2", "dX_0", "C_D_L", "C_D_L2", "H_R", "kappa", "f_alpha",
-    "eta", "one_minus_eta", "half_rho_A_R", "l_R_nd", "one_plus_aH", "one_minus_tR", "N_R_lever",
+    "q", "qL", "L_pp2", "L_pp3", "half_L", "D2", "D4", "P2", "dX_0", "dX_0_pi", "C_D_L", "C_D_L2", "H_R",
+    "kappa", "f_alpha", "kitagawa_jet", "minus_gamma_P", "minus_gamma_N",
+    "eta", "one_minus_eta", "half_rho_A_R", "l_R_nd", "minus_l_R_nd", "eps2_eta", "eps2_one_minus_eta",
+    "jet_D2", "one_plus_aH", "one_minus_tR", "N_R_lever",
     "minus_one_plus_aH", "minus_one_minus_tR", "minus_N_R_lever", "one_minus_tP", "one_minus_tP_rho",
-    "one_minus_wP0", "half_rho_air", "m_plus_mx", "m_plus_my", "mxG", "a22", "det"))
+    "rho_D4", "one_minus_tP_rho_D4", "one_minus_wP0", "minus_w_P0", "minus_x_P", "x_P_L",
+    "slow_lateral_inflow", "wake_plus", "wake_minus", "minus_C_1", "half_rho_air",
+    "m_plus_mx", "m_plus_my", "mxG", "a22", "det", "eom_X_u", "eom_vr_u", "eom_rr_u", "eom_Y_v",
+    "eom_N_v", "eom_ur_v", "eom_N_r", "eom_ur_r"))
 
 
 def _constant(value: torch.Tensor, dtype: torch.dtype | None):
@@ -108,6 +146,9 @@ def coefficient_view(values: Mapping[str, torch.Tensor], dtype: torch.dtype | No
     view.__dict__.update(derived_constants(view, values))
     if plain:
         view.__dict__.update({k: _constant(v, dtype) for k, v in view.__dict__.items()})
+    every = list(view.__dict__.values())
+    view.requires_grad = any(v.requires_grad for v in every)        # autograd may pass
+    view.wrapped = any(is_functorch_wrapped_tensor(v) for v in every)  # a torch.func transform
     view.dtype = dtype
     return view
 
@@ -294,16 +335,29 @@ def view_of(c, like: torch.Tensor | None = None) -> SimpleNamespace:
     return c if type(c) is SimpleNamespace else c.values_view(None if like is None else like.dtype)
 
 
+def _cached(c, names, like: torch.Tensor) -> torch.Tensor | None:
+    """The vector or matrix of `names` (a module-level tuple: keyed by its identity) cached
+    in the values view `c` for `like`'s dtype and device, or None."""
+    if type(c) is not SimpleNamespace:
+        return None
+    found = c.__dict__.get("_vectors", _EMPTY).get(id(names))
+    if found is not None and found[0] is names and found[1] is like.dtype and found[2] == like.get_device():
+        return found[3]
+    return None
+
+
+_EMPTY: dict = {}
+
+
 def coefficient_vector(c: SimpleNamespace, names: tuple, like: torch.Tensor) -> torch.Tensor:
     """(k,) the values of `names` in `like`'s dtype and device (a name may be a tuple of
     names: their product, in that order; None: 0; a float: itself): one tensor, cached in the view while
-    every value is a constant; stacked anew (through autograd) otherwise."""
-    compiling = torch.compiler.is_compiling()
-    cache = {} if compiling else c.__dict__.setdefault("_vectors", {})
-    key = (names, like.dtype, like.device)
-    found = cache.get(key)
+    every value is a constant (keyed by the identity of `names`, a constant tuple); stacked
+    anew (through autograd) otherwise."""
+    found = _cached(c, names, like)
     if found is not None:
         return found
+    compiling = torch.compiler.is_compiling()
     zero = torch.zeros((), dtype=like.dtype, device=like.device)
 
     def value(name):
@@ -322,11 +376,25 @@ def coefficient_vector(c: SimpleNamespace, names: tuple, like: torch.Tensor) -> 
     # only plain constants are kept (a traced value, e.g. under torch.export, never is)
     if (not compiling and type(stacked) is torch.Tensor
             and not any(v.requires_grad or is_functorch_wrapped_tensor(v) for v in values)):
-        cache[key] = stacked
+        _keep(c, names, like, stacked)
     return stacked
+
+
+def _keep(c, names, like: torch.Tensor, value: torch.Tensor) -> None:
+    if type(c) is SimpleNamespace:
+        cache = c.__dict__.setdefault("_vectors", {})
+        if len(cache) > 512:  # names built anew per call (not module constants): keep none
+            cache.clear()
+        cache[id(names)] = (names, like.dtype, like.get_device(), value)
 
 
 def coefficient_matrix(c: SimpleNamespace, rows: tuple, like: torch.Tensor) -> torch.Tensor:
     """(k, m) from k rows of m names (as `coefficient_vector`), cached alike."""
-    flat = coefficient_vector(c, tuple(n for row in rows for n in row), like)
-    return flat.view(len(rows), -1)
+    found = _cached(c, rows, like)
+    if found is not None:
+        return found
+    flat = coefficient_vector(c, tuple(n for row in rows for n in row), like).view(len(rows), -1)
+    if not torch.compiler.is_compiling() and type(flat) is torch.Tensor and not flat.requires_grad \
+            and not is_functorch_wrapped_tensor(flat):
+        _keep(c, rows, like, flat)
+    return flat

@@ -5,12 +5,11 @@ no term cancels catastrophically when the yaw rate is small (float32 safe).
 """
 from __future__ import annotations
 
-import math
-
 import torch
 
 from sysid.mmg.coefficients import coefficient_matrix, coefficient_vector, view_of
-from sysid.mmg.guards import SPEED_GUARD, safe_atan2, safe_div
+from sysid.mmg.guards import safe_div
+from sysid.mmg.motion import Motion, motion_from
 
 SIMPSON_POINTS = 100  # the lab simulator's sample count
 
@@ -79,19 +78,65 @@ def crossflow_integrals(v: torch.Tensor, b: torch.Tensor, L, L3=None, half=None)
     return torch.where(same_sign, i1_same, i1_cross), torch.where(same_sign, i2_same, i2_cross)
 
 
-# the hull's forces as (..., 8) products of the motion times an (8, 3) coefficient matrix:
-# (X0 u U, v r, v |u|, r u, v u, r |u|, I1, I2) -> (X_H, Y_H, N_H)
-_LEFT = torch.tensor([1, 1, 2, 1, 2])   # of (u, v, r, |u|)
-_RIGHT = torch.tensor([2, 3, 0, 0, 3])
-_HULL = (("q", None, None),
-         (("q", "X_vr", "L_pp"), None, None),
-         (None, ("q", "Y_v"), None),
-         (None, ("q", "Y_r", "L_pp"), None),
-         (None, None, ("qL", "N_v")),
-         (None, None, ("qL", "N_r", "L_pp")),
-         (None, (-1.0, "q", "C_D_L"), None),
-         (None, None, (-1.0, "qL", "C_D_L2")))
-_FIRST_LANE = torch.tensor([True, False])
+# the hull's forces as an (..., 11) feature vector times an (11, 3) coefficient matrix:
+# features (v, r, X0 U) x (u, |u|, r) (outer product, row-major), then (I1, I2)
+_HULL = ((None, None, ("qL", "N_v")),             # v u
+         (None, ("q", "Y_v"), None),              # v |u|
+         (("q", "X_vr", "L_pp"), None, None),     # v r
+         (None, ("q", "Y_r", "L_pp"), None),      # r u
+         (None, None, ("qL", "N_r", "L_pp")),     # r |u|
+         (None, None, None),                      # r r
+         ("q", None, None),                       # X0 U u
+         (None, None, None),                      # X0 U |u|
+         (None, None, None),                      # X0 U r
+         (None, (-1.0, "q", "C_D_L"), None),      # I1
+         (None, None, (-1.0, "qL", "C_D_L2")))    # I2
+# the cross-flow integrals as lanes (I1 of b = C_rY r, I2 of b = C_rN r), h = L/2 [m]:
+# no zero crossing along the hull: sign(v) (a v^2 + g v b + c b^2) with
+# a = (L, 0), g = (0, L^3/6), c = (L^3/12, 0);
+# crossing (|b| h > |v|): b |b| P(t), t = v / b, P(t) = (2/3) t^3 + 2 h^2 t (I1) and
+# h^4/2 + h^2 t^2 - t^4/6 (I2): every term bounded by |t| <= h, no cancellation
+_SAME_V2 = ("L_pp", None)
+_SAME_VB = (None, (1.0 / 6.0, "L_pp3"))
+_SAME_B2 = ((1.0 / 12.0, "L_pp3"), None)
+_HORNER = ((None, -1.0 / 6.0),                            # t^4
+           (2.0 / 3.0, None),                             # t^3
+           (None, ("half_L", "half_L")),                  # t^2
+           ((2.0, "half_L", "half_L"), None),             # t
+           (None, (0.5, "half_L", "half_L", "half_L", "half_L")))  # 1
+
+
+def crossflow_lanes(v: torch.Tensor, r: torch.Tensor, c, k, smooth: bool) -> torch.Tensor:
+    """(..., 2) = (I1 of b = C_rY r [m^3/s^2], I2 of b = C_rN r [m^4/s^2]), the integrals of
+    `crossflow_integrals` the hull reads, in one lane pass; v [m/s], r [rad/s] (...,); `k`
+    the forward's constants (`sysid.mmg.motion.constants`)."""
+    v2 = v[..., None]
+    b = r[..., None] * coefficient_vector(c, ("C_rY", "C_rN"), v)
+    bh = b * c.half_L
+    crossing = (v2 - bh) * (v2 + bh) < k.zero
+    same = torch.addcmul(coefficient_vector(c, _SAME_V2, v) * v2, coefficient_vector(c, _SAME_VB, v), b) * v2
+    same = torch.addcmul(same, coefficient_vector(c, _SAME_B2, v), b * b) * torch.sign(v2)
+    t = v2 / (torch.where(crossing, b, k.one) if smooth else b)
+    P = coefficient_vector(c, _HORNER[0], v)
+    for row in _HORNER[1:]:
+        P = torch.addcmul(coefficient_vector(c, row, v), P, t)
+    return torch.where(crossing, P * (b * b.abs()), same)
+
+
+def hull_forces(m: Motion, c, quadrature: str = "exact") -> torch.Tensor:
+    """(X_H [N], Y_H [N], N_H [N m about midship]) (..., 3) of a `Motion` (see `hull_force`)."""
+    u, v, r = m.u, m.v, m.r
+    X0 = torch.addcmul(c.X_0F, c.dX_0_pi, m.beta_hat.abs())  # beta_hat = -beta, (-pi, pi]
+    if quadrature == "simpson":
+        i1, _ = crossflow_integrals_simpson(v, c.C_rY * r, c.L_pp)
+        _, i2 = crossflow_integrals_simpson(v, c.C_rN * r, c.L_pp)
+        integrals = torch.stack([i1, i2], -1)
+    else:
+        integrals = crossflow_lanes(v, r, c, m.k, m.smooth)
+    left = torch.stack([v, r, X0 * m.U_guarded], -1)
+    right = torch.stack([u, u.abs(), r], -1)
+    features = torch.cat([(left[..., :, None] * right[..., None, :]).flatten(-2), integrals], -1)
+    return features @ coefficient_matrix(c, _HULL, u)
 
 
 def hull_force(u: torch.Tensor, v: torch.Tensor, r: torch.Tensor, c,
@@ -105,27 +150,4 @@ def hull_force(u: torch.Tensor, v: torch.Tensor, r: torch.Tensor, c,
     N_H = q L (N_v v u + N_r r L |u| - C_D/L^2 I2).
     """
     c = view_of(c, u)
-    L = c.L_pp
-    U = torch.hypot(u, v)
-    U_guarded = torch.where(U < SPEED_GUARD, 1e-7, U)
-    beta_hat = safe_atan2(v, u)  # = -beta of the usual convention, (-pi, pi]
-    X0 = c.X_0F + c.dX_0 * beta_hat.abs() / math.pi
-    if quadrature == "simpson":
-        i1, _ = crossflow_integrals_simpson(v, c.C_rY * r, L)
-        _, i2 = crossflow_integrals_simpson(v, c.C_rN * r, L)
-        integrals = torch.stack([i1, i2], -1)
-    else:  # both cross-flow corrections in one pass: b (..., 2) = (C_rY r, C_rN r)
-        b = r[..., None] * coefficient_vector(c, ("C_rY", "C_rN"), r)
-        i1s, i2s = crossflow_integrals(v[..., None], b, L, c.L_pp3, c.half_L)
-        integrals = (torch.stack([i1s[..., 0], i2s[..., 1]], -1) if torch.compiler.is_compiling()
-                     else torch.where(_FIRST_LANE, i1s, i2s))  # (I1 of C_rY, I2 of C_rN)
-    au = u.abs()
-    if torch.compiler.is_compiling():  # no tensor constants in traced loop bodies
-        pairs = torch.stack([v * r, v * au, r * u, v * u, r * au], -1)
-    else:
-        basis = torch.stack([u, v, r, au], -1)
-        pairs = basis.index_select(-1, _LEFT) * basis.index_select(-1, _RIGHT)
-    motion = torch.cat([(X0 * u * U_guarded)[..., None], pairs, integrals], -1)
-    shape = motion.shape
-    forces = (motion.reshape(-1, 8) @ coefficient_matrix(c, _HULL, u)).view(shape[:-1] + (3,))
-    return forces.unbind(-1)
+    return hull_forces(motion_from(u, v, r, c), c, quadrature).unbind(-1)

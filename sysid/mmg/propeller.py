@@ -11,7 +11,7 @@ from typing import NamedTuple
 import torch
 
 from sysid.mmg.coefficients import coefficient_vector, view_of
-from sysid.mmg.guards import SPEED_GUARD, TINY
+from sysid.mmg.motion import Motion, motion_from
 
 
 class PropellerState(NamedTuple):
@@ -22,6 +22,33 @@ class PropellerState(NamedTuple):
     J: torch.Tensor             # -, advance ratio with wake for u >= 0
     K_T: torch.Tensor           # -, thrust coefficient the rudder sees (0 for n = 0)
     K_T_ahead: torch.Tensor | None = None  # -, K_T(J) of ahead revolutions, where computed
+    n2: torch.Tensor | None = None         # rps^2, n^2, where computed
+    turning_ahead: torch.Tensor | None = None  # n >= 0, where computed
+    moving_ahead: torch.Tensor | None = None   # u >= 0, where computed
+    beta: torch.Tensor | None = None       # rad, drift angle atan2(-v, u) (0 below the speed guard), where computed
+    r_nd: torch.Tensor | None = None       # -, r' = r L / U (0 below the speed guard), where computed
+
+
+def inflow_of(m: Motion, c) -> PropellerState:
+    """`propeller_inflow` of a `Motion`."""
+    k, u, n = m.k, m.u, m.n
+    # lateral inflow at the propeller s = v' + x'_P r' (v' = v / U, r' = r L / U); below
+    # the speed guard v' = r' = 1e-7
+    s = torch.where(m.slow, c.slow_lateral_inflow, torch.addcmul(m.v, c.x_P_L, m.r) / m.U_guarded)
+    # 1 - w_P = 1 - w_P0 + tau |s| + C_P s^2, for u > 0 only, within [TINY, 1]
+    one_minus_wP = torch.addcmul(torch.addcmul(c.one_minus_wP0, c.tau, s.abs()), c.C_P, s * s)
+    one_minus_wP = torch.where(u > k.zero, one_minus_wP.clamp(k.tiny, k.one), k.one)
+
+    n_stopped = n.abs() < k.tiny
+    u_stopped = u.abs() < k.tiny
+    nD = (torch.where(n_stopped, k.one, n) if m.smooth else n) * c.D
+    J_s = torch.where(n_stopped, torch.sign(u) * k.stopped_ratio, torch.where(u_stopped, k.tiny, u / nD))
+    moving_ahead = u >= k.zero
+    J = torch.where(moving_ahead, J_s * one_minus_wP, J_s)
+    K_T_ahead = torch.addcmul(c.k0, torch.addcmul(c.k1, c.k2, J), J)
+    K_T_reverse = torch.where(J_s >= c.C10, torch.addcmul(c.C6, c.C7, J_s), c.C3)
+    K_T = torch.where(n > k.tiny, K_T_ahead, torch.where(n < k.minus_tiny, K_T_reverse, k.zero))
+    return PropellerState(one_minus_wP, J_s, J, K_T, K_T_ahead, n * n, n >= k.zero, moving_ahead)
 
 
 def propeller_inflow(u, v, r, n, c) -> PropellerState:
@@ -31,56 +58,42 @@ def propeller_inflow(u, v, r, n, c) -> PropellerState:
     C3, C6, C7, C10.
     """
     c = view_of(c, u)
-    L = c.L_pp
-    U = torch.hypot(u, v)
-    slow = U < SPEED_GUARD
-    U_safe = torch.where(slow, 1.0, U)
-    v_nd = torch.where(slow, 1e-7, v / U_safe)           # v'
-    r_nd = torch.where(slow, 1e-7, r * L / U_safe)       # r'
-    s = v_nd + c.x_P * r_nd                               # lateral inflow at the propeller
-    w_P = c.w_P0 - c.tau * s.abs() - c.C_P * s * s
-    one_minus_wP = torch.where(u > 0, 1.0 - w_P, 1.0).clamp(max=1.0)
-    one_minus_wP = torch.where(one_minus_wP <= 0.0, TINY, one_minus_wP)
+    return inflow_of(motion_from(u, v, r, c, n), c)
 
-    n_stopped = n.abs() < TINY
-    u_stopped = u.abs() < TINY
-    nD = torch.where(n_stopped, 1.0, n) * c.D
-    J_s = torch.where(n_stopped, torch.sign(u) * 1e4, torch.where(u_stopped, TINY, u / nD))
-    J = torch.where(u >= 0, J_s * one_minus_wP, J_s)
-    K_T_ahead = c.k0 + c.k1 * J + c.k2 * J * J
-    K_T_reverse = torch.where(J_s >= c.C10, c.C6 + c.C7 * J_s, c.C3)
-    K_T = torch.where(n > TINY, K_T_ahead, torch.where(n < -TINY, K_T_reverse, 0.0))
-    return PropellerState(one_minus_wP, J_s, J, K_T, K_T_ahead)
+
+# the lateral force and moment lanes (Y, N) [N, N m]: (q, q L) times (n P)^2 times the
+# second-quadrant polynomial in J_s, or (n D)^2 times the reverse-rotation piecewise lines
+_Q2 = tuple(((s, "P2", f"A{i}"), (s + "L", "P2", f"B{i}")) for i in (6, 7, 8) for s in ("q",))
+_REVERSE = {i: (("q", "D2", f"A{i}"), ("qL", "D2", f"B{i}")) for i in range(1, 6)}
+
+
+def propeller_forces(m: Motion, c, inflow: PropellerState) -> torch.Tensor:
+    """(X_P [N], Y_P [N], N_P [N m]) (..., 3) of a `Motion` (see `propeller_force`)."""
+    k = m.k
+    n2 = inflow.n2 if inflow.n2 is not None else m.n * m.n
+    ahead = inflow.turning_ahead if inflow.turning_ahead is not None else m.n >= k.zero
+    moving_ahead = inflow.moving_ahead if inflow.moving_ahead is not None else m.u >= k.zero
+    K_T_ahead = inflow.K_T_ahead
+    if K_T_ahead is None:
+        K_T_ahead = torch.addcmul(c.k0, torch.addcmul(c.k1, c.k2, inflow.J), inflow.J)
+    # n >= 0: (1 - t_P) rho D^4 K_T(J), J = J_s for u < 0; n < 0: rho D^4 K_T (CMT reverse)
+    X_P = torch.where(ahead, K_T_ahead * c.one_minus_tP_rho_D4, inflow.K_T * c.rho_D4)
+    Js = inflow.J_s[..., None]
+    V = lambda names: coefficient_vector(c, names, Js)  # noqa: E731
+    second = torch.addcmul(V(_Q2[2]), torch.addcmul(V(_Q2[1]), V(_Q2[0]), Js), Js)
+    reverse = torch.where(Js < V((-0.35,)), torch.addcmul(V(_REVERSE[3]), V(_REVERSE[4]), Js),
+                          torch.where(Js > V((-0.06,)), V(_REVERSE[5]), torch.addcmul(V(_REVERSE[1]), V(_REVERSE[2]), Js)))
+    lateral = torch.where(ahead[..., None], torch.where(moving_ahead[..., None], k.zero, second), reverse)
+    return torch.cat([X_P[..., None], lateral], -1) * n2[..., None]
 
 
 def propeller_force(u, v, r, n, c, inflow: PropellerState | None = None):
     """X_P [N], Y_P [N], N_P [N m] for any quadrant.
 
     `c` provides rho, L_pp, d, D, P, t_P, A1..A8, B1..B8 and what `propeller_inflow` needs.
+    Y_P, N_P: Q2 polynomials in J_s times (n P)^2 (ahead revolutions, astern motion, else
+    0); reverse rotation: piecewise linear in J_s times (n D)^2.
     """
     c = view_of(c, u)
-    if inflow is None:
-        inflow = propeller_inflow(u, v, r, n, c)
-    J_s = inflow.J_s
-    n2 = n * n
-    ahead = n >= 0
-    astern_motion = u < 0
-    thrust_scale = c.rho * n2 * c.D4
-    # n >= 0: K_T(J) with J = J_s for u < 0; n < 0: CMT reverse polynomial
-    K_T_ahead = inflow.K_T_ahead
-    if K_T_ahead is None:
-        K_T_ahead = c.k0 + c.k1 * inflow.J + c.k2 * inflow.J * inflow.J
-    X_P = torch.where(ahead, thrust_scale * c.one_minus_tP * K_T_ahead, thrust_scale * inflow.K_T)
-    # lateral force and moment: Q2 polynomials in J_s times (n P)^2 (ahead revolutions,
-    # astern motion, else 0); reverse rotation: piecewise linear in J_s times (n D)^2.
-    # Y and N in one pass: (..., 2) lanes = (Y, N)
-    Js = J_s[..., None]
-    A = lambda *names: coefficient_vector(c, names, J_s)  # noqa: E731
-    poly_Q2 = A("A6", "B6") * Js * Js + A("A7", "B7") * Js + A("A8", "B8")
-    low, high = Js < -0.35, Js > -0.06
-    reverse = torch.where(low, A("A3", "B3") + A("A4", "B4") * Js,
-                          torch.where(high, A("A5", "B5"), A("A1", "B1") + A("A2", "B2") * Js))
-    scale = coefficient_vector(c, ("q", "qL"), J_s)  # (q, q L)
-    lateral = torch.where(ahead[..., None], torch.where(astern_motion[..., None], scale * (n2 * c.P2)[..., None] * poly_Q2, 0.0),
-                          scale * (n2 * c.D2)[..., None] * reverse)
-    return X_P, lateral[..., 0], lateral[..., 1]
+    m = motion_from(u, v, r, c, n)
+    return propeller_forces(m, c, inflow if inflow is not None else inflow_of(m, c)).unbind(-1)

@@ -11,8 +11,9 @@ from typing import NamedTuple
 
 import torch
 
-from sysid.mmg.coefficients import view_of
+from sysid.mmg.coefficients import coefficient_vector, view_of
 from sysid.mmg.guards import choose, safe_atan2, safe_sqrt
+from sysid.mmg.motion import Motion, motion_from
 from sysid.mmg.propeller import PropellerState
 
 
@@ -20,7 +21,64 @@ class RudderInflow(NamedTuple):
     u_R: torch.Tensor      # m/s, longitudinal inflow
     v_R: torch.Tensor      # m/s, lateral inflow
     alpha_R: torch.Tensor  # rad, effective inflow angle
-    F_N: torch.Tensor      # N, rudder normal force
+    F_N: torch.Tensor      # N, rudder normal force (None from `inflow_of`: see `rudder_lanes`)
+
+
+def _sqrt(x: torch.Tensor, smooth: bool) -> torch.Tensor:
+    """sqrt(max(x, 0)), with a finite gradient at 0 where `smooth`."""
+    return safe_sqrt(x) if smooth else torch.sqrt(torch.clamp(x, min=0.0))
+
+
+def inflow_of(m: Motion, c, prop: PropellerState) -> RudderInflow:
+    """u_R, v_R [m/s], alpha_R [rad] of a `Motion` (F_N left to `rudder_lanes`)."""
+    k, u, n, smooth = m.k, m.u, m.n, m.smooth
+    K_T = prop.K_T
+    n2 = prop.n2 if prop.n2 is not None else n * n
+    u_p = u * prop.one_minus_wP
+    u_p2 = u_p * u_p
+    # Yoshimura (n >= 0 and K_T > 0): u_R^2 = epsilon^2 (eta core^2 + (1 - eta) u_p^2),
+    # core = u_p + kappa (sqrt(u_p^2 + 8 K_T (n D)^2 / pi) - u_p)
+    jet = torch.addcmul(u_p2, K_T * n2, c.jet_D2)
+    jet = safe_sqrt(jet) if smooth else torch.sqrt(jet)  # >= 0 where this branch is taken
+    core = torch.addcmul(u_p, c.kappa, jet - u_p)
+    u_R_yoshimura = _sqrt(torch.addcmul(core * core * c.eps2_eta, c.eps2_one_minus_eta, u_p2), smooth)
+    # Kitagawa (otherwise, u >= 0): u1 = epsilon u_p + n D k_xPR sqrt(8 |K_T| / pi),
+    # s = eta u1 |u1| + (1 - eta) (epsilon u_p)^2 + C_PR u^2, u_R = sign(s) sqrt(|s|)
+    u2 = u_p * c.epsilon
+    race = K_T.abs() * c.kitagawa_jet
+    u1 = torch.addcmul(u2, n, safe_sqrt(race) if smooth else torch.sqrt(race))
+    s = torch.addcmul(torch.addcmul(u1 * u1.abs() * c.eta, c.eps2_one_minus_eta, u_p2), c.C_PR, u * u)
+    u_R_kitagawa = torch.sign(s) * (safe_sqrt(s.abs()) if smooth else torch.sqrt(s.abs()))
+    ahead = prop.turning_ahead if prop.turning_ahead is not None else n >= k.zero
+    moving_ahead = prop.moving_ahead if prop.moving_ahead is not None else u >= k.zero
+    u_R = torch.where(ahead & (K_T > k.zero), u_R_yoshimura, torch.where(moving_ahead, u_R_kitagawa, u))
+
+    straightening = choose(torch.addcmul(m.v, c.x_R, m.r) >= k.zero, c.minus_gamma_P, c.minus_gamma_N, m.v)
+    v_R = straightening * torch.addcmul(m.v, c.l_R, m.r)
+    alpha_R = m.delta - (safe_atan2(v_R, u_R) if smooth else torch.atan2(v_R, u_R))
+    return RudderInflow(u_R, v_R, alpha_R, None)
+
+
+_SIN_COS_COS = (None, 0.5 * math.pi, 0.5 * math.pi)  # phases: sin(x + pi/2) = cos(x)
+# X_R = -(1 - t_R) F_N sin(delta), Y_R = -(1 + a_H) F_N cos(delta),
+# N_R = -(x_R + a_H x_H) F_N cos(delta), F_N = 1/2 rho A_R f_alpha U_R^2 sin(alpha_R)
+_LANES = (("minus_one_minus_tR", "half_rho_A_R", "f_alpha"), ("minus_one_plus_aH", "half_rho_A_R", "f_alpha"),
+          ("minus_N_R_lever", "half_rho_A_R", "f_alpha"))
+
+
+def rudder_lanes(inflow: RudderInflow, delta: torch.Tensor, c) -> torch.Tensor:
+    """(X_R [N], Y_R [N], N_R [N m]) (..., 3) from u_R, v_R [m/s], alpha_R and delta [rad]
+    (paper Eqs. 36-38); `c` provides rho, A_R, f_alpha, t_R, a_H, x_R, x_H."""
+    u_R, v_R = inflow.u_R, inflow.v_R
+    F_N = torch.addcmul(u_R * u_R, v_R, v_R) * torch.sin(inflow.alpha_R)  # / (1/2 rho A_R f_alpha)
+    # (sin, cos, cos)(delta) as sin(delta + (0, pi/2, pi/2))
+    trig = torch.sin(delta[..., None] + coefficient_vector(c, _SIN_COS_COS, delta))
+    return trig * coefficient_vector(c, _LANES, delta) * F_N[..., None]
+
+
+def rudder_forces(m: Motion, c, prop: PropellerState) -> torch.Tensor:
+    """(X_R, Y_R, N_R) (..., 3) [N, N, N m] of a `Motion` (see `rudder_force`)."""
+    return rudder_lanes(inflow_of(m, c, prop), m.delta, c)
 
 
 def rudder_inflow(u, v, r, n, delta, c, prop: PropellerState) -> RudderInflow:
@@ -28,37 +86,25 @@ def rudder_inflow(u, v, r, n, delta, c, prop: PropellerState) -> RudderInflow:
 
     u, v [m/s], r [rad/s], n [rps], delta [rad, positive to starboard]; `c` provides
     rho, D, A_R, lambda_R, epsilon, k_x, k_xPR, C_PR, x_R, l_R, gamma_P, gamma_N.
+    Longitudinal inflow: Yoshimura's form where n >= 0 and K_T > 0, else Kitagawa's where
+    u >= 0, else u.
     """
     c = view_of(c, u)
-    eta = c.eta  # D / H_R, H_R = sqrt(A_R lambda_R)
-    kappa = c.kappa  # k_x / epsilon
-    K_T = prop.K_T
-    u_p = u * prop.one_minus_wP
-    # Yoshimura: n >= 0 and K_T > 0
-    u_p2 = u_p * u_p
-    jet = safe_sqrt(u_p2 + 8.0 * K_T * n * n * c.D2 / math.pi)
-    core = u_p + kappa * (jet - u_p)
-    u_R_yoshimura = c.epsilon * safe_sqrt(eta * core * core + c.one_minus_eta * u_p2)
-    # Kitagawa: otherwise, u >= 0
-    u2 = u * c.epsilon * prop.one_minus_wP
-    u1 = u2 + n * c.D * c.k_xPR * safe_sqrt(8.0 * K_T.abs() / math.pi)
-    s = eta * torch.sign(u1) * u1 * u1 + c.one_minus_eta * u2 * u2 + c.C_PR * u * u
-    u_R_kitagawa = torch.sign(s) * safe_sqrt(s.abs())
-    u_R = torch.where((n >= 0) & (K_T > 0), u_R_yoshimura, torch.where(u >= 0, u_R_kitagawa, u))
+    inflow = inflow_of(motion_from(u, v, r, c, n, delta), c, prop)
+    return inflow._replace(F_N=normal_force(inflow, c))
 
-    gamma = choose(v + c.x_R * r >= 0, c.gamma_P, c.gamma_N, v)
-    v_R = -gamma * (v + c.l_R * r)
-    alpha_R = delta - safe_atan2(v_R, u_R)
-    F_N = c.half_rho_A_R * (u_R * u_R + v_R * v_R) * c.f_alpha * torch.sin(alpha_R)
-    return RudderInflow(u_R, v_R, alpha_R, F_N)
+
+def normal_force(inflow: RudderInflow, c) -> torch.Tensor:
+    """F_N [N] = 1/2 rho A_R f_alpha (u_R^2 + v_R^2) sin(alpha_R)."""
+    return c.half_rho_A_R * (inflow.u_R * inflow.u_R + inflow.v_R * inflow.v_R) * c.f_alpha * torch.sin(inflow.alpha_R)
 
 
 def rudder_force(u, v, r, n, delta, c, prop: PropellerState, inflow: RudderInflow | None = None):
     """X_R [N], Y_R [N], N_R [N m] from the rudder normal force (paper Eqs. 36-38)."""
     c = view_of(c, u)
     if inflow is None:
-        inflow = rudder_inflow(u, v, r, n, delta, c, prop)
-    return rudder_components(inflow.F_N, delta, c)
+        inflow = inflow_of(motion_from(u, v, r, c, n, delta), c, prop)
+    return rudder_lanes(inflow, delta, c).unbind(-1)
 
 
 def rudder_components(F_N, delta, c):

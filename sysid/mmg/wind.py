@@ -12,7 +12,8 @@ from typing import NamedTuple
 import torch
 
 from sysid.mmg.coefficients import coefficient_matrix, coefficient_vector, view_of
-from sysid.mmg.guards import SPEED_GUARD, safe_atan2
+from sysid.mmg.guards import safe_atan2
+from sysid.mmg.motion import Motion, motion_from
 
 TWO_PI = 2.0 * math.pi
 
@@ -22,33 +23,56 @@ class RelativeWind(NamedTuple):
     gamma_A: torch.Tensor  # rad in [0, 2 pi), direction it comes from, bow towards starboard
 
 
+_HALF_PI = 0.5 * math.pi
+
+
+def relative_wind_of(m: Motion) -> RelativeWind:
+    """`relative_wind` of a `Motion` (with psi, U_T and zeta)."""
+    k = m.k
+    course = m.psi + m.beta_hat
+    # 'from' vector of the relative wind = true 'from' vector + ship velocity (earth frame):
+    # rows (zeta, course) x columns (cos, sin), the cosines as sin(x + pi/2)
+    angles = torch.stack([m.zeta, course], -1)[..., None]
+    trig = torch.sin(angles + k.cos_sin_phase)
+    speeds = torch.stack([m.U_T, m.U_guarded], -1)[..., None]
+    W_x, W_y = (speeds * trig).sum(-2).unbind(-1)
+    U_A = torch.hypot(W_x, W_y)
+    # the angle before reduction to [0, 2 pi): from the relative 'from' vector; below the
+    # speed guard the true wind's; without true wind (wins) the drift angle's
+    angle = torch.where(m.slow, m.zeta, safe_atan2(W_y, W_x) if m.smooth else torch.atan2(W_y, W_x)) - m.psi
+    angle = torch.where(m.U_T < k.speed_guard, m.beta_hat, angle)
+    return RelativeWind(U_A, torch.remainder(angle, k.two_pi))
+
+
 def relative_wind(u, v, psi, U_T, zeta) -> RelativeWind:
     """True wind to relative wind at midship, with the simulator's low-speed guards.
 
     u, v [m/s] midship body velocity, psi [rad] heading, U_T [m/s], zeta [rad].
     """
-    U = torch.hypot(u, v)
-    slow = U < SPEED_GUARD
-    beta_hat = safe_atan2(v, u)
-    course = psi + beta_hat
-    U_guarded = torch.where(slow, 1e-7, U)
-    # 'from' vector of the relative wind = true 'from' vector + ship velocity (earth frame)
-    W_x = U_T * torch.cos(zeta) + U_guarded * torch.cos(course)
-    W_y = U_T * torch.sin(zeta) + U_guarded * torch.sin(course)
-    U_A = torch.sqrt(W_x * W_x + W_y * W_y)
-    # the angle before reduction to [0, 2 pi): from the relative 'from' vector; below the
-    # speed guard the true wind's; without true wind (wins) the drift angle's
-    angle = torch.where(slow, zeta, safe_atan2(W_y, W_x)) - psi
-    angle = torch.where(U_T < SPEED_GUARD, beta_hat, angle)
-    gamma_A = torch.remainder(angle, TWO_PI)
-    return RelativeWind(U_A, gamma_A)
+    return relative_wind_of(motion_from(u, v, None, None, psi=psi, U_T=U_T, zeta=zeta))
 
 
-# Fujiwara's coefficients by harmonic: rows cos(k aoa) for k = 1, 3, 5 (C_X) and sin(k aoa)
-# for k = 1, 3, 5, 2 (C_Y, C_N); columns (C_X, C_Y, C_N)
+# Fujiwara's coefficients by harmonic: rows cos(k aoa) for k = 1, 3, 5, 2 (C_X) and sin(k aoa)
+# for k = 1, 3, 5, 2 (C_Y, C_N); columns (X_A, Y_A, N_A) / U_A^2, each coefficient times
+# 1/2 rho_air and its area (A_T, A_L, A_L L_wind)
 _HARMONICS = (1.0, 3.0, 5.0, 2.0)
-_FUJIWARA = (("X1", None, None), ("X3", None, None), ("X5", None, None), (None, None, None),
-             (None, "Y1", "N1"), (None, "Y3", "N3"), (None, "Y5", None), (None, None, "N2"))
+_AREAS = (("half_rho_air", "A_T"), ("half_rho_air", "A_L"), ("half_rho_air", "A_L", "L_wind"))
+_FUJIWARA = tuple(tuple(None if name is None else (name,) + area for name, area in zip(row, _AREAS))
+                  for row in (("X1", None, None), ("X3", None, None), ("X5", None, None), (None, None, None),
+                              (None, "Y1", "N1"), (None, "Y3", "N3"), (None, "Y5", None), (None, None, "N2")))
+_CONSTANT = (("X0",) + _AREAS[0], None, None)
+# aoa = 2 pi - gamma_A: cos(k aoa) = sin(pi/2 - k gamma_A), sin(k aoa) = sin(-k gamma_A)
+_PHASES = (_HALF_PI,) * 4 + (None,) * 4
+_MINUS_HARMONICS = tuple(-h for h in _HARMONICS) * 2
+
+
+def wind_forces(U_A: torch.Tensor, gamma_A: torch.Tensor, c) -> torch.Tensor:
+    """(X_A [N], Y_A [N], N_A [N m]) (..., 3), see `wind_force`."""
+    harmonics = torch.sin(torch.addcmul(coefficient_vector(c, _PHASES, U_A), gamma_A[..., None],
+                                        coefficient_vector(c, _MINUS_HARMONICS, U_A)))  # (..., 8)
+    C = torch.addmm(coefficient_vector(c, _CONSTANT, U_A), harmonics.reshape(-1, 8),
+                    coefficient_matrix(c, _FUJIWARA, U_A)).view(U_A.shape + (3,))
+    return C * (U_A * U_A)[..., None]
 
 
 def wind_force(U_A, gamma_A, c):
@@ -56,13 +80,8 @@ def wind_force(U_A, gamma_A, c):
 
     `c` provides rho_air, A_T, A_L, L_wind and Fujiwara's X0..X5, Y1..Y5, N1..N3.
     C_X = X0 + sum_k X_k cos(k aoa), C_Y = sum_k Y_k sin(k aoa), C_N = sum_k N_k sin(k aoa),
-    aoa = 2 pi - gamma_A, evaluated as one (..., 8) x (8, 3) product.
+    aoa = 2 pi - gamma_A, evaluated as one (..., 8) x (8, 3) product; X_A = 1/2 rho_air
+    A_T U_A^2 C_X, Y_A = 1/2 rho_air A_L U_A^2 C_Y, N_A = 1/2 rho_air A_L L_wind U_A^2 C_N.
     """
     c = view_of(c, U_A)
-    aoa = (TWO_PI - gamma_A)[..., None] * coefficient_vector(c, _HARMONICS, U_A)  # (..., 4)
-    harmonics = torch.cat([torch.cos(aoa), torch.sin(aoa)], -1)                    # (..., 8)
-    C = torch.addmm(coefficient_vector(c, ("X0", None, None), U_A), harmonics.reshape(-1, 8),
-                    coefficient_matrix(c, _FUJIWARA, U_A)).view(U_A.shape + (3,))
-    dyn = c.half_rho_air * U_A * U_A  # Pa
-    F = dyn[..., None] * coefficient_vector(c, ("A_T", "A_L", ("A_L", "L_wind")), U_A) * C
-    return F.unbind(-1)
+    return wind_forces(U_A, gamma_A, c).unbind(-1)
