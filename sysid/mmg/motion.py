@@ -8,7 +8,6 @@ made once per dtype and device, so no Python float becomes a tensor inside a for
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
 from typing import NamedTuple
 
 import torch
@@ -18,13 +17,22 @@ from sysid.mmg.guards import SPEED_GUARD, TINY, safe_atan2
 
 LOW_SPEED = 1e-7  # m/s, the simulator's U below the speed guard
 
-# the constants a forward compares or selects with: name -> value
-_VALUES = {
-    "zero": 0.0, "one": 1.0, "tiny": TINY, "minus_tiny": -TINY,
-    "speed_guard": SPEED_GUARD, "low_speed": LOW_SPEED, "stopped_ratio": 1e4,  # J_s at n = 0 [-]
-    "two_pi": 2.0 * math.pi, "minus_four": -4.0,
-    "cos_sin_phase": (0.5 * math.pi, 0.0),  # (cos x, sin x) = sin(x + phase)
-}
+class Constants(NamedTuple):
+    """The constants a forward compares or selects with, as tensors (see `constants`)."""
+
+    zero: torch.Tensor
+    one: torch.Tensor
+    tiny: torch.Tensor           # TINY, the simulator's machine-epsilon guard
+    minus_tiny: torch.Tensor
+    speed_guard: torch.Tensor    # m/s, SPEED_GUARD
+    low_speed: torch.Tensor      # m/s, LOW_SPEED
+    stopped_ratio: torch.Tensor  # -, J_s at n = 0 (times sign(u))
+    two_pi: torch.Tensor
+    minus_four: torch.Tensor
+    cos_sin_phase: torch.Tensor  # (2,) = (pi/2, 0): (cos x, sin x) = sin(x + phase)
+
+
+_VALUES = Constants(0.0, 1.0, TINY, -TINY, SPEED_GUARD, LOW_SPEED, 1e4, 2.0 * math.pi, -4.0, (0.5 * math.pi, 0.0))
 
 
 def _made(value, like: torch.Tensor) -> torch.Tensor:
@@ -32,21 +40,21 @@ def _made(value, like: torch.Tensor) -> torch.Tensor:
     if isinstance(value, tuple):
         return torch.stack([_made(v, like) for v in value])
     return torch.full((), value, dtype=like.dtype, device=like.device)
-_TENSORS: dict[tuple, SimpleNamespace] = {}
 
 
-def constants(like: torch.Tensor) -> SimpleNamespace:
-    """The forward's constants (``k.tiny``, ``k.one``, ...) as 0-d tensors of `like`'s
-    dtype and device: made once, or, while compiling, by operations of the traced code
-    (never lifted tensor constants)."""
-    if torch.compiler.is_compiling():  # made by operations in the traced code
-        return SimpleNamespace(**{name: _made(value, like) for name, value in _VALUES.items()})
+_TENSORS: dict[tuple, Constants] = {}
+
+
+def constants(like: torch.Tensor) -> Constants:
+    """The forward's `Constants` as tensors of `like`'s dtype and device: made once, or,
+    while compiling, by operations of the traced code (never lifted tensor constants)."""
+    if torch.compiler.is_compiling():
+        return Constants(*[_made(value, like) for value in _VALUES])
     key = (like.dtype, like.device)
     found = _TENSORS.get(key)
     if found is None:
         with torch.inference_mode(False), torch.no_grad():
-            found = SimpleNamespace(**{name: torch.tensor(value, dtype=like.dtype, device=like.device)
-                                       for name, value in _VALUES.items()})
+            found = Constants(*[torch.tensor(value, dtype=like.dtype, device=like.device) for value in _VALUES])
         _TENSORS[key] = found
     return found
 
@@ -68,7 +76,7 @@ class Motion(NamedTuple):
     slow: torch.Tensor       # U < SPEED_GUARD
     U_guarded: torch.Tensor  # m/s, U, or LOW_SPEED below the guard
     beta_hat: torch.Tensor   # rad, atan2(v, u) in (-pi, pi] (= -beta; 0 at rest)
-    k: SimpleNamespace       # `constants` of the states' dtype
+    k: Constants             # `constants` of the states' dtype
     smooth: bool             # a derivative may pass: the guards' gradient-safe forms
 
 
