@@ -28,7 +28,13 @@ def test_exported_maneuver_loop_has_no_tensor_constants_and_equals_eager():
                 torch.zeros(1, len(COLUMNS), dtype=dtype), torch.zeros((), dtype=dtype),
                 torch.full((), dt, dtype=dtype), torch.tensor(STEPS, dtype=torch.int64))
     program = export_program(module, examples)
+    # tensor constants, lifted or inside the loop body's subgraph (torch.tensor of numbers)
     assert not program.constants, f"lifted tensor constants: {sorted(program.constants)}"
+    constant_nodes = [node.target for graph_module in program.graph_module.modules() if hasattr(graph_module, "graph")
+                      for node in graph_module.graph.nodes
+                      if (node.op == "get_attr" and "_tensor_constant" in str(node.target))
+                      or "lift_fresh" in str(node.target)]
+    assert not constant_nodes, f"{len(constant_nodes)} tensor constants in the traced loop: {constant_nodes[:4]}"
 
     maneuvers = [TurningCircle(35.0)]
     conditions = Conditions(0.35, 8.85, 24.1, dt, STEPS * dt)  # U0 [m/s], n [rps], rudder rate [deg/s]
