@@ -19,7 +19,7 @@ from torch import nn
 from torchdiffeq import odeint
 
 from sysid.dynamics.integrators import Integrator, IntegratorLike, Method, rollout
-from sysid.mmg.coefficients import coefficient_matrix, view_of
+from sysid.mmg.coefficients import Rows, coefficient_matrix, view_of
 from sysid.mmg.model import ForceBreakdown
 
 _ODEINT_NAME = {Method.EULER: "euler", Method.RK4_38: "rk4"}  # torchdiffeq's public names
@@ -89,16 +89,22 @@ _RATE = ((None, "eom_X_u", None, None, None, None),        # X
          (None, None, None, None, 1.0, None))              # r -> psi_dot
 
 
-def motion_rate(state: torch.Tensor, force: torch.Tensor, motion, c) -> torch.Tensor:
-    """dx/dt (..., 6), Eqs. (1) and (4), from state (..., 6), force (..., 3) = (X, Y, N)
-    [N, N, N m] and the forward's `sysid.mmg.motion.Motion` (psi, r, constants), as one
-    product with a matrix of the mass terms (`derived_constants`' ``eom_*``)."""
-    uvr = state[..., 1::2]                                             # (u, v, r)
-    coriolis = uvr * motion.r[..., None]                               # (u r, v r, r r)
-    cos_sin = torch.sin(motion.psi[..., None] + motion.k.cos_sin_phase)  # (cos psi, sin psi)
-    rotation = (uvr[..., :2, None] * cos_sin[..., None, :]).flatten(-2)
-    features = torch.cat([force, coriolis, rotation, state], -1)
-    return features @ coefficient_matrix(c, _RATE, state)
+def motion_rate(state: torch.Tensor, forces, motion, c) -> torch.Tensor:
+    """dx/dt (..., 6), Eqs. (1) and (4), from state (..., 6), the force components, each
+    (..., 3) = (X, Y, N) [N, N, N m] (summed in the product), and the forward's
+    `sysid.mmg.motion.Motion` (u, v, psi, r as (..., 1), constants): one product with a
+    matrix of the mass terms (`derived_constants`' ``eom_*``)."""
+    coriolis = state[..., 1::2] * motion.r                        # (u r, v r, r r)
+    cos_sin = torch.sin(motion.psi + motion.k.cos_sin_phase)      # (cos psi, sin psi)
+    features = torch.cat([*forces, coriolis, motion.u * cos_sin, motion.v * cos_sin, state], -1)
+    return features @ _rate_matrix(c, len(forces), state)
+
+
+_RATES = {count: Rows(_RATE[:3] * count + _RATE[3:]) for count in range(1, 6)}  # by number of components
+
+
+def _rate_matrix(c, components: int, like: torch.Tensor) -> torch.Tensor:
+    return coefficient_matrix(c, _RATES[components], like)
 
 
 def state_derivative(state: torch.Tensor, force: torch.Tensor, c) -> torch.Tensor:

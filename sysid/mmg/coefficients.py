@@ -398,3 +398,21 @@ def coefficient_matrix(c: SimpleNamespace, rows: tuple, like: torch.Tensor) -> t
             and not is_functorch_wrapped_tensor(flat):
         _keep(c, rows, like, flat)
     return flat
+
+
+class Rows(tuple):
+    """Rows of names: a matrix in `coefficient_vectors` (see `coefficient_matrix`)."""
+
+
+def coefficient_vectors(c: SimpleNamespace, groups: tuple, like: torch.Tensor) -> tuple:
+    """`coefficient_vector` of each names tuple of `groups` (a module-level tuple;
+    `coefficient_matrix` of each `Rows`), cached together: one look-up for all."""
+    found = _cached(c, groups, like)
+    if found is not None:
+        return found
+    vectors = tuple(coefficient_matrix(c, names, like) if isinstance(names, Rows) else
+                    coefficient_vector(c, names, like) for names in groups)
+    if not torch.compiler.is_compiling() and all(type(v) is torch.Tensor and not v.requires_grad
+                                                 and not is_functorch_wrapped_tensor(v) for v in vectors):
+        _keep(c, groups, like, vectors)
+    return vectors

@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import torch
 
-from sysid.mmg.coefficients import coefficient_matrix, coefficient_vector, view_of
+from sysid.mmg.coefficients import coefficient_matrix, coefficient_vectors, view_of
 from sysid.mmg.guards import safe_div
-from sysid.mmg.motion import Motion, motion_from
+from sysid.mmg.motion import Motion, motion_of_channels
 
 SIMPSON_POINTS = 100  # the lab simulator's sample count
 
@@ -104,23 +104,24 @@ _HORNER = ((None, -1.0 / 6.0),                            # t^4
            (None, ("half_L", "half_L")),                  # t^2
            ((2.0, "half_L", "half_L"), None),             # t
            (None, (0.5, "half_L", "half_L", "half_L", "half_L")))  # 1
+_CROSSFLOW = (("C_rY", "C_rN"), _SAME_V2, _SAME_VB, _SAME_B2) + _HORNER
 
 
 def crossflow_lanes(v: torch.Tensor, r: torch.Tensor, c, k, smooth: bool) -> torch.Tensor:
     """(..., 2) = (I1 of b = C_rY r [m^3/s^2], I2 of b = C_rN r [m^4/s^2]), the integrals of
-    `crossflow_integrals` the hull reads, in one lane pass; v [m/s], r [rad/s] (...,); `k`
-    the forward's constants (`sysid.mmg.motion.constants`)."""
-    v2 = v[..., None]
-    b = r[..., None] * coefficient_vector(c, ("C_rY", "C_rN"), v)
-    bh = b * c.half_L
-    crossing = (v2 - bh) * (v2 + bh) < k.zero
-    same = torch.addcmul(coefficient_vector(c, _SAME_V2, v) * v2, coefficient_vector(c, _SAME_VB, v), b) * v2
-    same = torch.addcmul(same, coefficient_vector(c, _SAME_B2, v), b * b) * torch.sign(v2)
-    t = v2 / (torch.where(crossing, b, k.one) if smooth else b)
-    P = coefficient_vector(c, _HORNER[0], v)
-    for row in _HORNER[1:]:
-        P = torch.addcmul(coefficient_vector(c, row, v), P, t)
-    return torch.where(crossing, P * (b * b.abs()), same)
+    `crossflow_integrals` the hull reads, in one lane pass; v [m/s], r [rad/s] (..., 1);
+    `k` the forward's constants (`sysid.mmg.motion.constants`)."""
+    Cr, same_v2, same_vb, same_b2, *horner = coefficient_vectors(c, _CROSSFLOW, v)
+    b = r * Cr
+    b_abs = b.abs()
+    crossing = v.abs() < b_abs * c.half_L  # w = v + b x changes sign along the hull
+    same = torch.addcmul(same_v2 * v, same_vb, b) * v
+    same = torch.addcmul(same, same_b2, b * b) * torch.sign(v)
+    t = v / (torch.where(crossing, b, k.one) if smooth else b)
+    P = horner[0]
+    for row in horner[1:]:
+        P = torch.addcmul(row, P, t)
+    return torch.where(crossing, P * (b * b_abs), same)
 
 
 def hull_forces(m: Motion, c, quadrature: str = "exact") -> torch.Tensor:
@@ -128,13 +129,13 @@ def hull_forces(m: Motion, c, quadrature: str = "exact") -> torch.Tensor:
     u, v, r = m.u, m.v, m.r
     X0 = torch.addcmul(c.X_0F, c.dX_0_pi, m.beta_hat.abs())  # beta_hat = -beta, (-pi, pi]
     if quadrature == "simpson":
-        i1, _ = crossflow_integrals_simpson(v, c.C_rY * r, c.L_pp)
-        _, i2 = crossflow_integrals_simpson(v, c.C_rN * r, c.L_pp)
+        i1, _ = crossflow_integrals_simpson(v[..., 0], c.C_rY * r[..., 0], c.L_pp)
+        _, i2 = crossflow_integrals_simpson(v[..., 0], c.C_rN * r[..., 0], c.L_pp)
         integrals = torch.stack([i1, i2], -1)
     else:
         integrals = crossflow_lanes(v, r, c, m.k, m.smooth)
-    left = torch.stack([v, r, X0 * m.U_guarded], -1)
-    right = torch.stack([u, u.abs(), r], -1)
+    left = torch.cat([v, r, X0 * m.U_guarded], -1)
+    right = torch.cat([u, u.abs(), r], -1)
     features = torch.cat([(left[..., :, None] * right[..., None, :]).flatten(-2), integrals], -1)
     return features @ coefficient_matrix(c, _HULL, u)
 
@@ -150,4 +151,4 @@ def hull_force(u: torch.Tensor, v: torch.Tensor, r: torch.Tensor, c,
     N_H = q L (N_v v u + N_r r L |u| - C_D/L^2 I2).
     """
     c = view_of(c, u)
-    return hull_forces(motion_from(u, v, r, c), c, quadrature).unbind(-1)
+    return hull_forces(motion_of_channels(u, v, r, c), c, quadrature).unbind(-1)

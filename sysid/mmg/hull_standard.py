@@ -15,7 +15,7 @@ from __future__ import annotations
 import torch
 
 from sysid.mmg.coefficients import coefficient_matrix, view_of
-from sysid.mmg.motion import Motion, motion_from
+from sysid.mmg.motion import Motion, motion_of_channels
 
 
 # features (..., 16) times a (16, 3) coefficient matrix, with w = (v, rL) [m/s]:
@@ -34,13 +34,12 @@ def hull_forces_standard(m: Motion, c) -> torch.Tensor:
     """(X_H, Y_H, N_H) (..., 3) [N, N, N m] of a `Motion` (see `hull_force_standard`)."""
     k, U = m.k, m.U
     inverse_U = torch.where(m.slow, k.zero, m.U_guarded.reciprocal())  # 1/m/s, 0 below the guard
-    w = torch.stack([m.v, m.r * c.L_pp], -1)
+    w = torch.cat([m.v, m.r * c.L_pp], -1)
     w2 = (w[..., :, None] * w[..., None, :]).flatten(-2)
-    w3 = (w2[..., :, None] * w[..., None, :]).flatten(-2) * inverse_U[..., None]
+    w3 = (w2[..., :, None] * w[..., None, :]).flatten(-2) * inverse_U
     v2 = w2[..., :1]
     U2 = m.u * m.u + m.v * m.v if m.smooth else U * U  # m^2/s^2 (a finite gradient at rest)
-    features = torch.cat([U2[..., None], w2, w * U[..., None], w3,
-                          v2 * v2 * (inverse_U * inverse_U)[..., None]], -1)
+    features = torch.cat([U2, w2, w * U, w3, v2 * v2 * (inverse_U * inverse_U)], -1)
     return features @ coefficient_matrix(c, _ROWS, U)
 
 
@@ -53,4 +52,4 @@ def hull_force_standard(u: torch.Tensor, v: torch.Tensor, r: torch.Tensor, c
     Any batch shape; float32 or float64.
     """
     c = view_of(c, u)
-    return hull_forces_standard(motion_from(u, v, r, c), c).unbind(-1)
+    return hull_forces_standard(motion_of_channels(u, v, r, c), c).unbind(-1)

@@ -14,7 +14,7 @@ from torch import nn
 from sysid.errors import ShipDefinitionError
 from sysid.mmg.coefficients import Coefficients
 from sysid.mmg.families import family
-from sysid.mmg.motion import motion_of
+from sysid.mmg.motion import as_channels, motion_of
 from sysid.mmg.wind import relative_wind_of
 from sysid.mmg.ship import Ship
 
@@ -99,7 +99,7 @@ class MMG(nn.Module):
         (hull, propeller, rudder, wind), wind_rel, _ = self.components(state, inputs)
         zero = torch.zeros_like(hull)
         return ForceBreakdown(hull, propeller, rudder, zero if wind is None else wind, zero,
-                              torch.stack(wind_rel, -1))
+                              torch.cat(wind_rel, -1))
 
     def total_force(self, state: torch.Tensor, inputs: torch.Tensor, relative: bool = True):
         """F_MMG (..., 3) = (X, Y, N) [N, N, N m] (the sum of `forward`'s components in the
@@ -116,12 +116,12 @@ class MMG(nn.Module):
         """(X, Y, N) of F_MMG, each (...,) [N, N, N m], and the relative wind (`total_force`
         as channels)."""
         total, wind_rel, _ = self.total_force(state, inputs)
-        return total.unbind(-1), wind_rel
+        return total.unbind(-1), as_channels(wind_rel)
 
     def rate(self, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
         """dx/dt (..., 6) at state (..., 6) with inputs (..., 4): `total_force` and the
         equations of motion (`sysid.dynamics.equations.motion_rate`)."""
         from sysid.dynamics.equations import motion_rate
         c = self.coefficients.values_view(state.dtype)
-        total, _, m = self._total_force(state, inputs, c, False)
-        return motion_rate(state, total, m, c)
+        forces, _, m = self._components(state, inputs, c, False)
+        return motion_rate(state, [f for f in forces if f is not None], m, c)

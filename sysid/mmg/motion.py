@@ -60,9 +60,10 @@ def constants(like: torch.Tensor) -> Constants:
 
 
 class Motion(NamedTuple):
-    """One forward's channels, each (...,): u, v [m/s] (midship), r [rad/s], psi [rad],
-    n [rps], delta [rad], U_T [m/s], zeta [rad] (None where a caller has no such input), and
-    what several families derive from them."""
+    """One forward's channels, each (..., 1) (a lane each: products with (k,) coefficient
+    vectors give (..., k) lanes without reshaping): u, v [m/s] (midship), r [rad/s],
+    psi [rad], n [rps], delta [rad], U_T [m/s], zeta [rad] (None where a caller has no such
+    input), and what several families derive from them."""
 
     u: torch.Tensor
     v: torch.Tensor
@@ -97,8 +98,8 @@ def needs_smooth(c, *tensors) -> bool:
 
 def motion_from(u, v, r, c, n=None, delta=None, psi=None, U_T=None, zeta=None,
                 smooth: bool | None = None) -> Motion:
-    """`Motion` from separate channels (...,); `c` is a values view (for `needs_smooth`,
-    unless `smooth` is given)."""
+    """`Motion` from separate channels, each (..., 1); `c` is a values view (for
+    `needs_smooth`, unless `smooth` is given)."""
     k = constants(u)
     if smooth is None:
         smooth = needs_smooth(c, u, v, r, n, delta, psi, U_T, zeta)
@@ -112,6 +113,22 @@ def motion_from(u, v, r, c, n=None, delta=None, psi=None, U_T=None, zeta=None,
 def motion_of(state: torch.Tensor, inputs: torch.Tensor, c) -> Motion:
     """`Motion` of state (..., 6) = (x, u, y, v, psi, r) and inputs (..., 4) = (n, delta,
     U_T, zeta)."""
-    _, u, _, v, psi, r = state.unbind(-1)
-    n, delta, U_T, zeta = inputs.unbind(-1)
+    _, u, _, v, psi, r = state.split(1, -1)
+    n, delta, U_T, zeta = inputs.split(1, -1)
     return motion_from(u, v, r, c, n, delta, psi, U_T, zeta, needs_smooth(c, state, inputs))
+
+
+def motion_of_channels(u, v, r, c, n=None, delta=None, psi=None, U_T=None, zeta=None) -> Motion:
+    """`Motion` from channels (...,) (the functions of the public interface)."""
+    lane = lambda x: None if x is None else x[..., None]  # noqa: E731
+    return motion_from(lane(u), lane(v), lane(r), c, lane(n), lane(delta), lane(psi), lane(U_T), lane(zeta))
+
+
+def as_lanes(values: NamedTuple) -> NamedTuple:
+    """A named tuple of (...,) tensors (or None) as (..., 1) lanes."""
+    return type(values)(*(None if x is None else x[..., None] for x in values))
+
+
+def as_channels(values: NamedTuple) -> NamedTuple:
+    """A named tuple of (..., 1) lanes (or None) as (...,) channels."""
+    return type(values)(*(None if x is None else x.squeeze(-1) for x in values))

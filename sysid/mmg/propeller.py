@@ -10,8 +10,8 @@ from typing import NamedTuple
 
 import torch
 
-from sysid.mmg.coefficients import coefficient_vector, view_of
-from sysid.mmg.motion import Motion, motion_from
+from sysid.mmg.coefficients import coefficient_vectors, view_of
+from sysid.mmg.motion import Motion, as_channels, as_lanes, motion_of_channels
 
 
 class PropellerState(NamedTuple):
@@ -30,7 +30,7 @@ class PropellerState(NamedTuple):
 
 
 def inflow_of(m: Motion, c) -> PropellerState:
-    """`propeller_inflow` of a `Motion`."""
+    """`propeller_inflow` of a `Motion` (fields (..., 1))."""
     k, u, n = m.k, m.u, m.n
     # lateral inflow at the propeller s = v' + x'_P r' (v' = v / U, r' = r L / U); below
     # the speed guard v' = r' = 1e-7
@@ -58,13 +58,14 @@ def propeller_inflow(u, v, r, n, c) -> PropellerState:
     C3, C6, C7, C10.
     """
     c = view_of(c, u)
-    return inflow_of(motion_from(u, v, r, c, n), c)
+    return as_channels(inflow_of(motion_of_channels(u, v, r, c, n), c))
 
 
 # the lateral force and moment lanes (Y, N) [N, N m]: (q, q L) times (n P)^2 times the
 # second-quadrant polynomial in J_s, or (n D)^2 times the reverse-rotation piecewise lines
-_Q2 = tuple(((s, "P2", f"A{i}"), (s + "L", "P2", f"B{i}")) for i in (6, 7, 8) for s in ("q",))
-_REVERSE = {i: (("q", "D2", f"A{i}"), ("qL", "D2", f"B{i}")) for i in range(1, 6)}
+_Q2 = tuple((("q", "P2", f"A{i}"), ("qL", "P2", f"B{i}")) for i in (6, 7, 8))
+_REVERSE = tuple((("q", "D2", f"A{i}"), ("qL", "D2", f"B{i}")) for i in range(1, 6))
+_LATERAL = _Q2 + _REVERSE + ((-0.35,), (-0.06,))  # J_s bounds of the reverse-rotation lines
 
 
 def propeller_forces(m: Motion, c, inflow: PropellerState) -> torch.Tensor:
@@ -78,13 +79,13 @@ def propeller_forces(m: Motion, c, inflow: PropellerState) -> torch.Tensor:
         K_T_ahead = torch.addcmul(c.k0, torch.addcmul(c.k1, c.k2, inflow.J), inflow.J)
     # n >= 0: (1 - t_P) rho D^4 K_T(J), J = J_s for u < 0; n < 0: rho D^4 K_T (CMT reverse)
     X_P = torch.where(ahead, K_T_ahead * c.one_minus_tP_rho_D4, inflow.K_T * c.rho_D4)
-    Js = inflow.J_s[..., None]
-    V = lambda names: coefficient_vector(c, names, Js)  # noqa: E731
-    second = torch.addcmul(V(_Q2[2]), torch.addcmul(V(_Q2[1]), V(_Q2[0]), Js), Js)
-    reverse = torch.where(Js < V((-0.35,)), torch.addcmul(V(_REVERSE[3]), V(_REVERSE[4]), Js),
-                          torch.where(Js > V((-0.06,)), V(_REVERSE[5]), torch.addcmul(V(_REVERSE[1]), V(_REVERSE[2]), Js)))
-    lateral = torch.where(ahead[..., None], torch.where(moving_ahead[..., None], k.zero, second), reverse)
-    return torch.cat([X_P[..., None], lateral], -1) * n2[..., None]
+    Js = inflow.J_s
+    A6, A7, A8, A1, A2, A3, A4, A5, low, high = coefficient_vectors(c, _LATERAL, Js)
+    second = torch.addcmul(A8, torch.addcmul(A7, A6, Js), Js)
+    reverse = torch.where(Js < low, torch.addcmul(A3, A4, Js),
+                          torch.where(Js > high, A5, torch.addcmul(A1, A2, Js)))
+    lateral = torch.where(ahead, torch.where(moving_ahead, k.zero, second), reverse)
+    return torch.cat([X_P, lateral], -1) * n2
 
 
 def propeller_force(u, v, r, n, c, inflow: PropellerState | None = None):
@@ -95,5 +96,5 @@ def propeller_force(u, v, r, n, c, inflow: PropellerState | None = None):
     0); reverse rotation: piecewise linear in J_s times (n D)^2.
     """
     c = view_of(c, u)
-    m = motion_from(u, v, r, c, n)
-    return propeller_forces(m, c, inflow if inflow is not None else inflow_of(m, c)).unbind(-1)
+    m = motion_of_channels(u, v, r, c, n)
+    return propeller_forces(m, c, as_lanes(inflow) if inflow is not None else inflow_of(m, c)).unbind(-1)

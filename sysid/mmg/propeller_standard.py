@@ -25,7 +25,7 @@ import torch
 
 from sysid.mmg.coefficients import coefficient_vector, view_of
 from sysid.mmg.guards import SPEED_GUARD, choose, safe_atan2, safe_div
-from sysid.mmg.motion import Motion, motion_from
+from sysid.mmg.motion import Motion, as_channels, as_lanes, motion_of_channels
 from sysid.mmg.propeller import PropellerState
 
 
@@ -76,21 +76,20 @@ def propeller_inflow_standard(u, v, r, n, c, wake=wake_yasukawa) -> PropellerSta
     Returns the `PropellerState` every rudder model reads (J_s = u / (n D) [-]).
     """
     c = view_of(c, u)
-    return inflow_standard_of(motion_from(u, v, r, c, n), c, wake)
+    return as_channels(inflow_standard_of(motion_of_channels(u, v, r, c, n), c, wake))
 
 
 def propeller_forces_standard(m: Motion, c, inflow: PropellerState) -> torch.Tensor:
     """(X_P, 0, 0) (..., 3) [N, N, N m] of a `Motion` (see `propeller_force_standard`)."""
     n2 = inflow.n2 if inflow.n2 is not None else m.n * m.n
     X_P = inflow.K_T * n2 * c.one_minus_tP_rho_D4
-    return X_P[..., None] * coefficient_vector(c, (1.0, None, None), X_P)
+    return X_P * coefficient_vector(c, (1.0, None, None), X_P)
 
 
 def propeller_force_standard(u, v, r, n, c, inflow: PropellerState | None = None,
                              wake=wake_yasukawa):
     """X_P [N], Y_P = 0 [N], N_P = 0 [N m]; `c` provides rho, D, t_P and the inflow terms."""
     c = view_of(c, u)
-    m = motion_from(u, v, r, c, n)
-    if inflow is None:
-        inflow = inflow_standard_of(m, c, wake)
+    m = motion_of_channels(u, v, r, c, n)
+    inflow = inflow_standard_of(m, c, wake) if inflow is None else as_lanes(inflow)
     return propeller_forces_standard(m, c, inflow).unbind(-1)

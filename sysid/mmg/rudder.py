@@ -11,9 +11,9 @@ from typing import NamedTuple
 
 import torch
 
-from sysid.mmg.coefficients import coefficient_vector, view_of
+from sysid.mmg.coefficients import coefficient_vectors, view_of
 from sysid.mmg.guards import choose, safe_atan2, safe_sqrt
-from sysid.mmg.motion import Motion, motion_from
+from sysid.mmg.motion import Motion, as_channels, as_lanes, motion_of_channels
 from sysid.mmg.propeller import PropellerState
 
 
@@ -41,13 +41,14 @@ def inflow_of(m: Motion, c, prop: PropellerState) -> RudderInflow:
     jet = torch.addcmul(u_p2, K_T * n2, c.jet_D2)
     jet = safe_sqrt(jet) if smooth else torch.sqrt(jet)  # >= 0 where this branch is taken
     core = torch.addcmul(u_p, c.kappa, jet - u_p)
-    u_R_yoshimura = _sqrt(torch.addcmul(core * core * c.eps2_eta, c.eps2_one_minus_eta, u_p2), smooth)
+    outer = u_p2 * c.eps2_one_minus_eta  # (1 - eta) (epsilon u_p)^2 [m^2/s^2], in both forms
+    u_R_yoshimura = _sqrt(torch.addcmul(outer, core * core, c.eps2_eta), smooth)
     # Kitagawa (otherwise, u >= 0): u1 = epsilon u_p + n D k_xPR sqrt(8 |K_T| / pi),
     # s = eta u1 |u1| + (1 - eta) (epsilon u_p)^2 + C_PR u^2, u_R = sign(s) sqrt(|s|)
     u2 = u_p * c.epsilon
     race = K_T.abs() * c.kitagawa_jet
     u1 = torch.addcmul(u2, n, safe_sqrt(race) if smooth else torch.sqrt(race))
-    s = torch.addcmul(torch.addcmul(u1 * u1.abs() * c.eta, c.eps2_one_minus_eta, u_p2), c.C_PR, u * u)
+    s = torch.addcmul(torch.addcmul(outer, u1 * u1.abs(), c.eta), c.C_PR, u * u)
     u_R_kitagawa = torch.sign(s) * (safe_sqrt(s.abs()) if smooth else torch.sqrt(s.abs()))
     ahead = prop.turning_ahead if prop.turning_ahead is not None else n >= k.zero
     moving_ahead = prop.moving_ahead if prop.moving_ahead is not None else u >= k.zero
@@ -64,16 +65,17 @@ _SIN_COS_COS = (None, 0.5 * math.pi, 0.5 * math.pi)  # phases: sin(x + pi/2) = c
 # N_R = -(x_R + a_H x_H) F_N cos(delta), F_N = 1/2 rho A_R f_alpha U_R^2 sin(alpha_R)
 _LANES = (("minus_one_minus_tR", "half_rho_A_R", "f_alpha"), ("minus_one_plus_aH", "half_rho_A_R", "f_alpha"),
           ("minus_N_R_lever", "half_rho_A_R", "f_alpha"))
+_RUDDER = (_SIN_COS_COS, _LANES)
 
 
 def rudder_lanes(inflow: RudderInflow, delta: torch.Tensor, c) -> torch.Tensor:
-    """(X_R [N], Y_R [N], N_R [N m]) (..., 3) from u_R, v_R [m/s], alpha_R and delta [rad]
-    (paper Eqs. 36-38); `c` provides rho, A_R, f_alpha, t_R, a_H, x_R, x_H."""
+    """(X_R [N], Y_R [N], N_R [N m]) (..., 3) from u_R, v_R [m/s], alpha_R and delta [rad],
+    each (..., 1) (paper Eqs. 36-38); `c` provides rho, A_R, f_alpha, t_R, a_H, x_R, x_H."""
     u_R, v_R = inflow.u_R, inflow.v_R
     F_N = torch.addcmul(u_R * u_R, v_R, v_R) * torch.sin(inflow.alpha_R)  # / (1/2 rho A_R f_alpha)
     # (sin, cos, cos)(delta) as sin(delta + (0, pi/2, pi/2))
-    trig = torch.sin(delta[..., None] + coefficient_vector(c, _SIN_COS_COS, delta))
-    return trig * coefficient_vector(c, _LANES, delta) * F_N[..., None]
+    phases, scale = coefficient_vectors(c, _RUDDER, delta)
+    return torch.sin(delta + phases) * scale * F_N
 
 
 def rudder_forces(m: Motion, c, prop: PropellerState) -> torch.Tensor:
@@ -90,7 +92,7 @@ def rudder_inflow(u, v, r, n, delta, c, prop: PropellerState) -> RudderInflow:
     u >= 0, else u.
     """
     c = view_of(c, u)
-    inflow = inflow_of(motion_from(u, v, r, c, n, delta), c, prop)
+    inflow = as_channels(inflow_of(motion_of_channels(u, v, r, c, n, delta), c, as_lanes(prop)))
     return inflow._replace(F_N=normal_force(inflow, c))
 
 
@@ -103,8 +105,10 @@ def rudder_force(u, v, r, n, delta, c, prop: PropellerState, inflow: RudderInflo
     """X_R [N], Y_R [N], N_R [N m] from the rudder normal force (paper Eqs. 36-38)."""
     c = view_of(c, u)
     if inflow is None:
-        inflow = inflow_of(motion_from(u, v, r, c, n, delta), c, prop)
-    return rudder_lanes(inflow, delta, c).unbind(-1)
+        inflow = inflow_of(motion_of_channels(u, v, r, c, n, delta), c, as_lanes(prop))
+    else:
+        inflow = as_lanes(inflow)
+    return rudder_lanes(inflow, delta[..., None], c).unbind(-1)
 
 
 def rudder_components(F_N, delta, c):

@@ -17,7 +17,7 @@ import torch
 
 from sysid.mmg.coefficients import view_of
 from sysid.mmg.guards import choose, safe_atan2, safe_sqrt
-from sysid.mmg.motion import Motion, motion_from
+from sysid.mmg.motion import Motion, as_channels, as_lanes, motion_of_channels
 from sysid.mmg.propeller import PropellerState
 from sysid.mmg.rudder import RudderInflow, normal_force, rudder_lanes
 
@@ -52,7 +52,7 @@ def rudder_forces_standard(m: Motion, c, prop: PropellerState) -> torch.Tensor:
 def rudder_inflow_standard(u, v, r, n, delta, c, prop: PropellerState) -> RudderInflow:
     """u_R, v_R [m/s], alpha_R [rad], F_N [N]; u, v [m/s], r [rad/s], n [rps], delta [rad]."""
     c = view_of(c, u)
-    inflow = inflow_standard_of(motion_from(u, v, r, c, n, delta), c, prop)
+    inflow = as_channels(inflow_standard_of(motion_of_channels(u, v, r, c, n, delta), c, as_lanes(prop)))
     return inflow._replace(F_N=normal_force(inflow, c))
 
 
@@ -61,5 +61,7 @@ def rudder_force_standard(u, v, r, n, delta, c, prop: PropellerState,
     """X_R [N], Y_R [N], N_R [N m about midship] from the rudder normal force."""
     c = view_of(c, u)
     if inflow is None:
-        inflow = inflow_standard_of(motion_from(u, v, r, c, n, delta), c, prop)
-    return rudder_lanes(inflow, delta, c).unbind(-1)
+        inflow = inflow_standard_of(motion_of_channels(u, v, r, c, n, delta), c, as_lanes(prop))
+    else:
+        inflow = as_lanes(inflow)
+    return rudder_lanes(inflow, delta[..., None], c).unbind(-1)

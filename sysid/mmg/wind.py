@@ -11,9 +11,9 @@ from typing import NamedTuple
 
 import torch
 
-from sysid.mmg.coefficients import coefficient_matrix, coefficient_vector, view_of
+from sysid.mmg.coefficients import Rows, coefficient_vectors, view_of
 from sysid.mmg.guards import safe_atan2
-from sysid.mmg.motion import Motion, motion_from
+from sysid.mmg.motion import Motion, as_channels, motion_of_channels
 
 TWO_PI = 2.0 * math.pi
 
@@ -27,15 +27,15 @@ _HALF_PI = 0.5 * math.pi
 
 
 def relative_wind_of(m: Motion) -> RelativeWind:
-    """`relative_wind` of a `Motion` (with psi, U_T and zeta)."""
+    """`relative_wind` of a `Motion` (with psi, U_T and zeta), fields (..., 1)."""
     k = m.k
     course = m.psi + m.beta_hat
     # 'from' vector of the relative wind = true 'from' vector + ship velocity (earth frame):
     # rows (zeta, course) x columns (cos, sin), the cosines as sin(x + pi/2)
-    angles = torch.stack([m.zeta, course], -1)[..., None]
+    angles = torch.cat([m.zeta, course], -1)[..., None]
     trig = torch.sin(angles + k.cos_sin_phase)
-    speeds = torch.stack([m.U_T, m.U_guarded], -1)[..., None]
-    W_x, W_y = (speeds * trig).sum(-2).unbind(-1)
+    speeds = torch.cat([m.U_T, m.U_guarded], -1)[..., None]
+    W_x, W_y = (speeds * trig).sum(-2).split(1, -1)
     U_A = torch.hypot(W_x, W_y)
     # the angle before reduction to [0, 2 pi): from the relative 'from' vector; below the
     # speed guard the true wind's; without true wind (wins) the drift angle's
@@ -49,7 +49,7 @@ def relative_wind(u, v, psi, U_T, zeta) -> RelativeWind:
 
     u, v [m/s] midship body velocity, psi [rad] heading, U_T [m/s], zeta [rad].
     """
-    return relative_wind_of(motion_from(u, v, None, None, psi=psi, U_T=U_T, zeta=zeta))
+    return as_channels(relative_wind_of(motion_of_channels(u, v, None, None, psi=psi, U_T=U_T, zeta=zeta)))
 
 
 # Fujiwara's coefficients by harmonic: rows cos(k aoa) for k = 1, 3, 5, 2 (C_X) and sin(k aoa)
@@ -57,22 +57,23 @@ def relative_wind(u, v, psi, U_T, zeta) -> RelativeWind:
 # 1/2 rho_air and its area (A_T, A_L, A_L L_wind)
 _HARMONICS = (1.0, 3.0, 5.0, 2.0)
 _AREAS = (("half_rho_air", "A_T"), ("half_rho_air", "A_L"), ("half_rho_air", "A_L", "L_wind"))
-_FUJIWARA = tuple(tuple(None if name is None else (name,) + area for name, area in zip(row, _AREAS))
+_FUJIWARA = Rows(tuple(None if name is None else (name,) + area for name, area in zip(row, _AREAS))
                   for row in (("X1", None, None), ("X3", None, None), ("X5", None, None), (None, None, None),
                               (None, "Y1", "N1"), (None, "Y3", "N3"), (None, "Y5", None), (None, None, "N2")))
 _CONSTANT = (("X0",) + _AREAS[0], None, None)
 # aoa = 2 pi - gamma_A: cos(k aoa) = sin(pi/2 - k gamma_A), sin(k aoa) = sin(-k gamma_A)
 _PHASES = (_HALF_PI,) * 4 + (None,) * 4
 _MINUS_HARMONICS = tuple(-h for h in _HARMONICS) * 2
+_WIND = (_PHASES, _MINUS_HARMONICS, _CONSTANT, _FUJIWARA)
 
 
 def wind_forces(U_A: torch.Tensor, gamma_A: torch.Tensor, c) -> torch.Tensor:
-    """(X_A [N], Y_A [N], N_A [N m]) (..., 3), see `wind_force`."""
-    harmonics = torch.sin(torch.addcmul(coefficient_vector(c, _PHASES, U_A), gamma_A[..., None],
-                                        coefficient_vector(c, _MINUS_HARMONICS, U_A)))  # (..., 8)
-    C = torch.addmm(coefficient_vector(c, _CONSTANT, U_A), harmonics.reshape(-1, 8),
-                    coefficient_matrix(c, _FUJIWARA, U_A)).view(U_A.shape + (3,))
-    return C * (U_A * U_A)[..., None]
+    """(X_A [N], Y_A [N], N_A [N m]) (..., 3) from U_A [m/s], gamma_A [rad], each (..., 1);
+    see `wind_force`."""
+    phases, harmonic, constant, matrix = coefficient_vectors(c, _WIND, U_A)
+    harmonics = torch.sin(torch.addcmul(phases, gamma_A, harmonic))  # (..., 8)
+    C = torch.addmm(constant, harmonics.reshape(-1, 8), matrix).view(U_A.shape[:-1] + (3,))
+    return C * (U_A * U_A)
 
 
 def wind_force(U_A, gamma_A, c):
@@ -84,4 +85,4 @@ def wind_force(U_A, gamma_A, c):
     A_T U_A^2 C_X, Y_A = 1/2 rho_air A_L U_A^2 C_Y, N_A = 1/2 rho_air A_L L_wind U_A^2 C_N.
     """
     c = view_of(c, U_A)
-    return wind_forces(U_A, gamma_A, c).unbind(-1)
+    return wind_forces(U_A[..., None], gamma_A[..., None], c).unbind(-1)
