@@ -56,6 +56,7 @@ def derived_constants(c, names) -> dict:
         out["f_alpha"] = 6.13 * c.lambda_R / (2.25 + c.lambda_R)
         # Kitagawa's propeller term: (n D k_xPR)^2 8 |K_T| / pi = n^2 |K_T| kitagawa_jet [m^2]
         out["kitagawa_jet"] = 8.0 * (c.D * c.k_xPR) ** 2 / math.pi
+        out["kitagawa_jet_eps2"] = out["kitagawa_jet"] / (c.epsilon * c.epsilon)
         out["minus_gamma_P"], out["minus_gamma_N"] = -c.gamma_P, -c.gamma_N
     if "H_R" in have or "H_R" in out:
         out["eta"] = c.D / out["H_R"] if "H_R" in out else c.D / c.H_R
@@ -117,7 +118,7 @@ def derived_constants(c, names) -> dict:
 # every name `derived_constants` may give
 DERIVED_NAMES = frozenset((
     "q", "qL", "L_pp2", "L_pp3", "half_L", "D2", "D4", "P2", "dX_0", "dX_0_pi", "C_D_L", "C_D_L2", "H_R",
-    "kappa", "f_alpha", "kitagawa_jet", "minus_gamma_P", "minus_gamma_N",
+    "kappa", "f_alpha", "kitagawa_jet", "kitagawa_jet_eps2", "minus_gamma_P", "minus_gamma_N",
     "eta", "one_minus_eta", "half_rho_A_R", "l_R_nd", "minus_l_R_nd", "eps2_eta", "eps2_one_minus_eta",
     "jet_D2", "one_plus_aH", "one_minus_tR", "N_R_lever",
     "minus_one_plus_aH", "minus_one_minus_tR", "minus_N_R_lever", "one_minus_tP", "one_minus_tP_rho",

@@ -78,17 +78,14 @@ def crossflow_integrals(v: torch.Tensor, b: torch.Tensor, L, L3=None, half=None)
     return torch.where(same_sign, i1_same, i1_cross), torch.where(same_sign, i2_same, i2_cross)
 
 
-# the hull's forces as an (..., 11) feature vector times an (11, 3) coefficient matrix:
-# features (v, r, X0 U) x (u, |u|, r) (outer product, row-major), then (I1, I2)
+# the hull's forces as an (..., 8) feature vector times an (8, 3) coefficient matrix:
+# features (v, v, v, r, r, X0 U) * (u, |u|, r, u, |u|, u), then (I1, I2)
 _HULL = ((None, None, ("qL", "N_v")),             # v u
          (None, ("q", "Y_v"), None),              # v |u|
          (("q", "X_vr", "L_pp"), None, None),     # v r
          (None, ("q", "Y_r", "L_pp"), None),      # r u
          (None, None, ("qL", "N_r", "L_pp")),     # r |u|
-         (None, None, None),                      # r r
          ("q", None, None),                       # X0 U u
-         (None, None, None),                      # X0 U |u|
-         (None, None, None),                      # X0 U r
          (None, (-1.0, "q", "C_D_L"), None),      # I1
          (None, None, (-1.0, "qL", "C_D_L2")))    # I2
 # the cross-flow integrals as lanes (I1 of b = C_rY r, I2 of b = C_rN r), h = L/2 [m]:
@@ -134,10 +131,9 @@ def hull_forces(m: Motion, c, quadrature: str = "exact") -> torch.Tensor:
         integrals = torch.stack([i1, i2], -1)
     else:
         integrals = crossflow_lanes(v, r, c, m.k, m.smooth)
-    left = torch.cat([v, r, X0 * m.U_guarded], -1)
-    right = torch.cat([u, u.abs(), r], -1)
-    features = torch.cat([(left[..., :, None] * right[..., None, :]).flatten(-2), integrals], -1)
-    return features @ coefficient_matrix(c, _HULL, u)
+    u_abs = u.abs()
+    products = torch.cat([v, v, v, r, r, X0 * m.U_guarded], -1) * torch.cat([u, u_abs, r, u, u_abs, u], -1)
+    return torch.cat([products, integrals], -1) @ coefficient_matrix(c, _HULL, u)
 
 
 def hull_force(u: torch.Tensor, v: torch.Tensor, r: torch.Tensor, c,

@@ -110,11 +110,14 @@ def motion_from(u, v, r, c, n=None, delta=None, psi=None, U_T=None, zeta=None,
                   beta_hat, k, smooth)
 
 
+_SIX, _FOUR, _TWO = [1] * 6, [1] * 4, [1] * 2
+
+
 def motion_of(state: torch.Tensor, inputs: torch.Tensor, c) -> Motion:
     """`Motion` of state (..., 6) = (x, u, y, v, psi, r) and inputs (..., 4) = (n, delta,
     U_T, zeta)."""
-    _, u, _, v, psi, r = state.split(1, -1)
-    n, delta, U_T, zeta = inputs.split(1, -1)
+    _, u, _, v, psi, r = state.split_with_sizes(_SIX, -1)  # (split(1) costs twice as much)
+    n, delta, U_T, zeta = inputs.split_with_sizes(_FOUR, -1)
     return motion_from(u, v, r, c, n, delta, psi, U_T, zeta, needs_smooth(c, state, inputs))
 
 

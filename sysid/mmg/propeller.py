@@ -35,8 +35,9 @@ def inflow_of(m: Motion, c) -> PropellerState:
     # lateral inflow at the propeller s = v' + x'_P r' (v' = v / U, r' = r L / U); below
     # the speed guard v' = r' = 1e-7
     s = torch.where(m.slow, c.slow_lateral_inflow, torch.addcmul(m.v, c.x_P_L, m.r) / m.U_guarded)
-    # 1 - w_P = 1 - w_P0 + tau |s| + C_P s^2, for u > 0 only, within [TINY, 1]
-    one_minus_wP = torch.addcmul(torch.addcmul(c.one_minus_wP0, c.tau, s.abs()), c.C_P, s * s)
+    # 1 - w_P = 1 - w_P0 + |s| (tau + C_P |s|), for u > 0 only, within [TINY, 1]
+    s_abs = s.abs()
+    one_minus_wP = torch.addcmul(c.one_minus_wP0, torch.addcmul(c.tau, c.C_P, s_abs), s_abs)
     one_minus_wP = torch.where(u > k.zero, one_minus_wP.clamp(k.tiny, k.one), k.one)
 
     n_stopped = n.abs() < k.tiny
@@ -47,8 +48,10 @@ def inflow_of(m: Motion, c) -> PropellerState:
     J = torch.where(moving_ahead, J_s * one_minus_wP, J_s)
     K_T_ahead = torch.addcmul(c.k0, torch.addcmul(c.k1, c.k2, J), J)
     K_T_reverse = torch.where(J_s >= c.C10, torch.addcmul(c.C6, c.C7, J_s), c.C3)
-    K_T = torch.where(n > k.tiny, K_T_ahead, torch.where(n < k.minus_tiny, K_T_reverse, k.zero))
-    return PropellerState(one_minus_wP, J_s, J, K_T, K_T_ahead, n * n, n >= k.zero, moving_ahead)
+    turning_ahead = n >= k.zero
+    # 0 for |n| < TINY, K_T(J) ahead, the CMT line in reverse rotation
+    K_T = torch.where(n_stopped, k.zero, torch.where(turning_ahead, K_T_ahead, K_T_reverse))
+    return PropellerState(one_minus_wP, J_s, J, K_T, K_T_ahead, n * n, turning_ahead, moving_ahead)
 
 
 def propeller_inflow(u, v, r, n, c) -> PropellerState:

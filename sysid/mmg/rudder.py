@@ -43,13 +43,16 @@ def inflow_of(m: Motion, c, prop: PropellerState) -> RudderInflow:
     core = torch.addcmul(u_p, c.kappa, jet - u_p)
     outer = u_p2 * c.eps2_one_minus_eta  # (1 - eta) (epsilon u_p)^2 [m^2/s^2], in both forms
     u_R_yoshimura = _sqrt(torch.addcmul(outer, core * core, c.eps2_eta), smooth)
-    # Kitagawa (otherwise, u >= 0): u1 = epsilon u_p + n D k_xPR sqrt(8 |K_T| / pi),
-    # s = eta u1 |u1| + (1 - eta) (epsilon u_p)^2 + C_PR u^2, u_R = sign(s) sqrt(|s|)
-    u2 = u_p * c.epsilon
-    race = K_T.abs() * c.kitagawa_jet
-    u1 = torch.addcmul(u2, n, safe_sqrt(race) if smooth else torch.sqrt(race))
-    s = torch.addcmul(torch.addcmul(outer, u1 * u1.abs(), c.eta), c.C_PR, u * u)
-    u_R_kitagawa = torch.sign(s) * (safe_sqrt(s.abs()) if smooth else torch.sqrt(s.abs()))
+    # Kitagawa (otherwise, u >= 0): u1 = epsilon u_p + n D k_xPR sqrt(8 |K_T| / pi)
+    # (= epsilon u1' below), s = eta u1 |u1| + (1 - eta) (epsilon u_p)^2 + C_PR u^2,
+    # u_R = sign(s) sqrt(|s|)
+    race = K_T.abs() * c.kitagawa_jet_eps2  # (n D k_xPR / epsilon)^2 8 |K_T| / pi / n^2
+    u1 = torch.addcmul(u_p, n, safe_sqrt(race) if smooth else torch.sqrt(race))
+    s = torch.addcmul(torch.addcmul(outer, u1 * u1.abs(), c.eps2_eta), c.C_PR, u * u)
+    if smooth:
+        u_R_kitagawa = torch.sign(s) * safe_sqrt(s.abs())
+    else:
+        u_R_kitagawa = torch.copysign(torch.sqrt(s.abs()), s)
     ahead = prop.turning_ahead if prop.turning_ahead is not None else n >= k.zero
     moving_ahead = prop.moving_ahead if prop.moving_ahead is not None else u >= k.zero
     u_R = torch.where(ahead & (K_T > k.zero), u_R_yoshimura, torch.where(moving_ahead, u_R_kitagawa, u))

@@ -13,7 +13,7 @@ import torch
 
 from sysid.mmg.coefficients import Rows, coefficient_vectors, view_of
 from sysid.mmg.guards import safe_atan2
-from sysid.mmg.motion import Motion, as_channels, motion_of_channels
+from sysid.mmg.motion import _TWO, Motion, as_channels, motion_of_channels
 
 TWO_PI = 2.0 * math.pi
 
@@ -30,16 +30,19 @@ def relative_wind_of(m: Motion) -> RelativeWind:
     """`relative_wind` of a `Motion` (with psi, U_T and zeta), fields (..., 1)."""
     k = m.k
     course = m.psi + m.beta_hat
-    # 'from' vector of the relative wind = true 'from' vector + ship velocity (earth frame):
-    # rows (zeta, course) x columns (cos, sin), the cosines as sin(x + pi/2)
-    angles = torch.cat([m.zeta, course], -1)[..., None]
-    trig = torch.sin(angles + k.cos_sin_phase)
-    speeds = torch.cat([m.U_T, m.U_guarded], -1)[..., None]
-    W_x, W_y = (speeds * trig).sum(-2).split(1, -1)
-    U_A = torch.hypot(W_x, W_y)
+    # 'from' vector of the relative wind = true 'from' vector + ship velocity (earth frame)
+    if m.smooth:  # real arithmetic (gradients, compiled code): rows (zeta, course) x (cos, sin)
+        angles = torch.cat([m.zeta, course], -1)[..., None]
+        trig = torch.sin(angles + k.cos_sin_phase)  # the cosines as sin(x + pi/2)
+        speeds = torch.cat([m.U_T, m.U_guarded], -1)[..., None]
+        W_x, W_y = (speeds * trig).sum(-2).split_with_sizes(_TWO, -1)
+        U_A, direction = torch.hypot(W_x, W_y), safe_atan2(W_y, W_x)
+    else:  # as complex numbers W_x + i W_y: fewer operations
+        W = torch.polar(m.U_T, m.zeta) + torch.polar(m.U_guarded, course)
+        U_A, direction = W.abs(), W.angle()
     # the angle before reduction to [0, 2 pi): from the relative 'from' vector; below the
     # speed guard the true wind's; without true wind (wins) the drift angle's
-    angle = torch.where(m.slow, m.zeta, safe_atan2(W_y, W_x) if m.smooth else torch.atan2(W_y, W_x)) - m.psi
+    angle = torch.where(m.slow, m.zeta, direction) - m.psi
     angle = torch.where(m.U_T < k.speed_guard, m.beta_hat, angle)
     return RelativeWind(U_A, torch.remainder(angle, k.two_pi))
 
@@ -72,7 +75,10 @@ def wind_forces(U_A: torch.Tensor, gamma_A: torch.Tensor, c) -> torch.Tensor:
     see `wind_force`."""
     phases, harmonic, constant, matrix = coefficient_vectors(c, _WIND, U_A)
     harmonics = torch.sin(torch.addcmul(phases, gamma_A, harmonic))  # (..., 8)
-    C = torch.addmm(constant, harmonics.reshape(-1, 8), matrix).view(U_A.shape[:-1] + (3,))
+    if harmonics.dim() == 2:
+        C = torch.addmm(constant, harmonics, matrix)
+    else:
+        C = torch.addmm(constant, harmonics.reshape(-1, 8), matrix).view(U_A.shape[:-1] + (3,))
     return C * (U_A * U_A)
 
 
