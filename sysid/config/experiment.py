@@ -138,6 +138,7 @@ class TrainingOptions(_Options):
     lr_patience: int = 10
     lambda_v: float = 1.0
     lambda_F: float = 1e-3
+    force_band: float = 0.2        # the output constraint's band: F_NN free within this share of |F_MMG| (Eq. 17)
     lambda_L2: float = 1e-6
     patience: int = 40
     max_minutes: float = 0.0       # 0: off; > 0: a safety limit whose hit fails the run
@@ -358,6 +359,7 @@ def _validate(exp: Experiment, src: str) -> None:
         (0 < t.lr_factor <= 1, "[training] lr_factor must be in (0, 1]"),
         (t.lr_patience >= 0, "[training] lr_patience must be >= 0"),
         (min(t.lambda_v, t.lambda_F, t.lambda_L2) >= 0, "[training] lambdas must be >= 0"),
+        (t.force_band >= 0, "[training] force_band must be >= 0 (the paper's 0.2)"),
         (t.patience >= 1, "[training] patience must be >= 1"),
         (t.objective_s >= 0, "[training] objective_s must be >= 0 (0: the training steps T)"),
         (t.max_minutes >= 0, "[training] max_minutes must be >= 0 (0: no wall-clock limit)"),

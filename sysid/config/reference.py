@@ -109,6 +109,9 @@ KEYS: dict[tuple[str, str], KeyDoc] = {
                                          "window, each channel divided by its variance."),
     ("training", "lambda_F"): KeyDoc("", "Weight of the output penalty that keeps the FNN's force small "
                                          "against the MMG's (hybrid only)."),
+    ("training", "force_band"): KeyDoc("", "The output constraint's band (Eq. 17): the penalty is zero while every "
+                                           "component of the FNN's force stays within this share of the MMG's; "
+                                           "the paper's 0.2 (hybrid only)."),
     ("training", "lambda_L2"): KeyDoc("", "Weight of the squared norm of the FNN's weights."),
     ("training", "patience"): KeyDoc("epochs", "Early stopping: training ends after this many epochs without a "
                                                "better validation loss; the best epoch's weights are kept."),

@@ -299,12 +299,14 @@ def rollout_errors(model, batch: WindowSet) -> torch.Tensor:
     return pred[1:, ..., VEL] - batch.states[1:, ..., VEL]
 
 
-def multistep_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor | None = None):
+def multistep_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor | None = None,
+                   band: float = 0.2):
     """(L_v, L_F) of Eqs. (15)-(17) as means over windows and steps: Euler rollouts of T steps
     from each window's first recorded state with its recorded inputs.
 
     `model` is a force model, or `PerMember` of a hybrid (then every FNN member rolls out
-    the same windows and the losses are means over members too). L_F is 0 without `w_F`.
+    the same windows and the losses are means over members too). L_F is 0 without `w_F`;
+    `band` is the output constraint's share of |F_MMG| (Eq. 17).
     """
     states, inputs = batch.states, batch.inputs
     if isinstance(model, PerMember):
@@ -320,7 +322,7 @@ def multistep_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor
     if w_F is None:
         return loss_v, loss_v.new_zeros(())
     f_nn, f_mmg = forces.correction, forces.mmg
-    return loss_v, output_penalty(f_nn, f_mmg, w_F).mean()
+    return loss_v, output_penalty(f_nn, f_mmg, w_F, band).mean()
 
 
 class Trainer:
@@ -389,7 +391,7 @@ class Trainer:
             sums = np.zeros(3)
             for lo in range(0, len(train), t.batch_size):
                 batch = train.select(order[lo:lo + t.batch_size])
-                loss_v, loss_F = multistep_loss(model, batch, w_v, w_F)
+                loss_v, loss_F = multistep_loss(model, batch, w_v, w_F, t.force_band)
                 loss = t.lambda_v * loss_v + t.lambda_F * loss_F + t.lambda_L2 * self._l2(model)
                 if not torch.isfinite(loss):
                     raise TrainingError(f"{self.experiment.source}: [training] the {label} loss became "

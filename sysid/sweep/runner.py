@@ -13,6 +13,9 @@ what is done from its own verified run directories.
 from __future__ import annotations
 
 import math
+import os
+import signal
+import threading
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -178,7 +181,9 @@ def run_trials(trials: list[TrialSpec], out: Path, data: TrialData, session: Ses
         tune_config=tune.TuneConfig(max_concurrent_trials=session.concurrency, reuse_actors=True,
                                     scheduler=scheduler),
         run_config=_run_config(tune, storage, max_retries, [progress, *callbacks]))
-    return _outcomes(tuner.fit(), lambda c: trials[int(c["trial"])].path)
+    with _ctrl_c_ends_tune():
+        grid = tuner.fit()
+    return _outcomes(grid, lambda c: trials[int(c["trial"])].path)
 
 
 def _plain(value):
@@ -234,10 +239,47 @@ def run_optuna(spec, out: Path, data: TrialData, session: Session, storage: Tune
                                     max_concurrent_trials=session.concurrency,
                                     reuse_actors=True, scheduler=scheduler),
         run_config=_run_config(tune, storage, spec.max_retries, [progress, *callbacks]))
-    return _outcomes(tuner.fit(), lambda c: point_of(spec, c))
+    with _ctrl_c_ends_tune():
+        grid = tuner.fit()
+    return _outcomes(grid, lambda c: point_of(spec, c))
+
+
+@contextmanager
+def _ctrl_c_ends_tune() -> Iterator[None]:
+    """Ctrl-C (SIGINT) during ``Tuner.fit`` stops Tune gracefully and then raises
+    `KeyboardInterrupt`, so that nothing takes an interrupted sweep or reproduction for a
+    finished one (Tune's own SIGINT handler returns as if the trials had ended). Tune's
+    graceful stop is its SIGUSR1; a second Ctrl-C interrupts at once."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    interrupted = threading.Event()
+    previous = signal.getsignal(signal.SIGINT)
+
+    def stop_tune(signum, frame):
+        interrupted.set()
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        if signal.getsignal(signal.SIGUSR1) in (signal.SIG_DFL, signal.SIG_IGN, None):
+            raise KeyboardInterrupt  # Tune's loop has not started: nothing to stop gracefully
+        os.kill(os.getpid(), signal.SIGUSR1)
+
+    own_handler = os.environ.get("TUNE_DISABLE_SIGINT_HANDLER")
+    os.environ["TUNE_DISABLE_SIGINT_HANDLER"] = "1"
+    signal.signal(signal.SIGINT, stop_tune)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if own_handler is None:
+            os.environ.pop("TUNE_DISABLE_SIGINT_HANDLER", None)
+        else:
+            os.environ["TUNE_DISABLE_SIGINT_HANDLER"] = own_handler
+    if interrupted.is_set():
+        raise KeyboardInterrupt
 
 
 def _outcomes(grid, key: Callable[[dict], str]) -> Outcomes:
+    """What Tune ended without a complete run."""
     outcomes = Outcomes()
     for result in grid:
         outcomes.configs.append(dict(result.config))

@@ -85,6 +85,9 @@ def test_penalty_is_zero_inside_the_band_and_grows_outside():
     assert float(output_penalty(out2, f_mmg, w)) == pytest.approx(2.0)  # linear growth, sign-blind
     both = torch.tensor([[3.0, 6.0, 2.0]])
     assert float(output_penalty(both, f_mmg, w)) == pytest.approx(1.0 + 0.5 * 2.0 + 2.0 * 1.0)
+    # [training] force_band widens or narrows the band: 0.5 |F_MMG| = (5, 10, 2.5)
+    assert float(output_penalty(both, f_mmg, w, band=0.5)) == 0.0
+    assert float(output_penalty(out1, f_mmg, w, band=0.0)) == pytest.approx(3.0)
 
 
 def test_knn_threshold_is_the_alpha_quantile_of_leave_one_out_distances():

@@ -132,6 +132,28 @@ def test_sweep_killed_part_way_resumes_without_training_a_trial_twice(tmp_path, 
     assert again.returncode == 2 and "differs from" in text
 
 
+@pytest.mark.slow
+def test_ctrl_c_during_the_trials_ends_the_sweep_as_interrupted(tmp_path, dataset_dir):
+    """Tune catches SIGINT and returns with trials pending: sysid must not take that for a
+    finished sweep (no results, no summary; exit 130 and the --resume note)."""
+    pytest.importorskip("ray.tune")
+    path = _sweep(tmp_path, dataset_dir, "seeds = [0, 1]\n[vary]\n'training.learning_rate' = [1e-3, 3e-3]\n")
+    out = tmp_path / "sweep"
+    env = {**os.environ, "SYSID_DATA": str(dataset_dir.parent)}
+    sweep = _sysid("sweep", str(path), "-o", str(out), "--workers", "1", env=env, start_new_session=True)
+    deadline = time.time() + 300
+    while time.time() < deadline and sweep.poll() is None:
+        if any(e["event"] == "trained" for e in read_journal(out)):
+            break
+        time.sleep(0.5)
+    assert sweep.poll() is None, sweep.communicate()[0][-2000:]
+    os.kill(sweep.pid, signal.SIGINT)  # Ctrl-C reaches the driver
+    log = sweep.communicate(timeout=300)[0]
+    assert sweep.returncode == 130, log[-3000:]
+    assert "interrupted" in log
+    assert not (out / "results.csv").exists() and not (out / "summary.json").exists()
+
+
 def test_shipped_sweep_files_are_valid():
     from pathlib import Path
     root = Path(__file__).resolve().parents[2] / "configs" / "sweeps"
