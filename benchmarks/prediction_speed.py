@@ -8,13 +8,19 @@ Prints, ours (eager and compiled) next to the lab's `mmg-1p1r-simulator`:
 3. one 100 s prediction at dt 1 s from a recorded state with the recorded inputs: the
    lab's classical RK4 beside ours (RK4 and Euler) for MMG, NN-only and hybrid models
    (kNN gate in input and in feature space, bank of the D2 training samples);
-4. the one-time cost: compiling each step (or loading it from the disk cache).
+4. the one-time cost: compiling each step (or loading it from the disk cache);
+5. the eager MMG against the lab, interleaved: one right-hand-side call and one 100 s RK4
+   prediction (dt 1 s), as speed ratios (the eager path: the Python API, every first call);
+6. a compiled 600 s maneuver at dt 0.1 s (35 deg turning circle, 6000 closed-loop RK4
+   steps) of --maneuver-model (a run directory of a trained model, e.g. a hybrid, or a ship
+   name; default: the Esso Osaka's MMG), once the loop is compiled or loaded from the cache.
 
 Timings alternate ours and the lab's call by call and report medians, so a busy machine
 slows both alike: compare ratios, within one run. The lab simulator is optional (found in
 $SYSID_SHARED/peers or ../shared/peers); without it the lab's columns are skipped.
 
     python benchmarks/prediction_speed.py [--threads 1] [--batch-threads 2] [--bank 20000] [--cold] [--run RUN_DIR ...]
+        [--sections 12356] [--maneuver-model RUN_DIR]
 """
 from __future__ import annotations
 
@@ -169,7 +175,9 @@ def main() -> None:
     parser.add_argument("--run", action="append", default=[], help="benchmark these run directories instead")
     parser.add_argument("--cold", action="store_true", help="empty compile cache (measures compile time)")
     parser.add_argument("--repeats", type=int, default=200)
-    parser.add_argument("--sections", default="123", help="which sections to run (default 123)")
+    parser.add_argument("--sections", default="12356", help="which sections to run (default 12356)")
+    parser.add_argument("--maneuver-model", default="esso_osaka",
+                        help="section 6: run directory of a trained model (a hybrid: the issue's case) or a ship name")
     parser.add_argument("--all-methods", action="store_true",
                         help="RK4 and Euler for every model (default: both for MMG, RK4, the lab's rule, for the others)")
     args = parser.parse_args()
@@ -192,6 +200,10 @@ def main() -> None:
         batched(lab, sorted({args.threads, args.batch_threads}))
     if "3" in args.sections:
         predictions(args, x0_np, inputs_np, lab, mmg)
+    if "5" in args.sections:
+        eager_against_lab(mmg, x0_np, inputs_np, lab, args.repeats)
+    if "6" in args.sections:
+        compiled_maneuver(args.maneuver_model)
     print("\n4. Training throughput: see the training benchmark (hook: benchmarks/training_speed.py)")
     hook = Path(__file__).with_name("training_speed.py")
     if hook.is_file():
@@ -279,6 +291,55 @@ def predictions(args, x0_np, inputs_np, lab, mmg) -> None:
             gap = np.abs(predict(mmg, x0, inputs, 1.0, Integrator("rk4", compiled=True)).numpy() - lab_pred())
         print(f"   MMG RK4, ours vs lab: max |difference| {gap[:, [1, 3, 5]].max():.1e} in u, v, r "
               f"(exact vs 100-point Simpson cross-flow)")
+
+
+def eager_against_lab(mmg, x0_np, inputs_np, lab, repeats: int) -> None:
+    """Section 5: the eager MMG (float64, one state) beside the lab, calls interleaved."""
+    from sysid import integrate
+    from sysid.dynamics.equations import derivative
+    print("\n5. Eager MMG against the lab, interleaved (float64, one state)")
+    if lab is None:
+        print("   (no lab simulator: skipped)")
+        return
+    x1, u1 = torch.tensor(x0_np)[None], torch.tensor(inputs_np[0])[None]
+    x0, inputs = torch.tensor(x0_np), torch.tensor(inputs_np)
+
+    def lab_pred():
+        s = x0_np[None].copy()
+        for k in range(100):
+            s = lab.rk4_step(1.0, 0.0, s, *inputs_np[k])
+        return s
+
+    with torch.no_grad():
+        rhs = medians({"eager": lambda: derivative(mmg, x1, u1),
+                       "lab": lambda: lab.rhs(0.0, x0_np[None], *inputs_np[0])}, repeats * 5)
+        rk4 = medians({"eager": lambda: integrate(mmg, x0, inputs, 1.0, "rk4"), "lab": lab_pred}, 15, seconds=10.0)
+    print(f"   one RHS call:        eager {rhs['eager'] * 1e6:7.0f} us, lab {rhs['lab'] * 1e6:7.0f} us: "
+          f"eager/lab speed {rhs['lab'] / rhs['eager']:.2f}x")
+    print(f"   100 s RK4, dt 1 s:   eager {rk4['eager'] * 1e3:7.1f} ms, lab {rk4['lab'] * 1e3:7.1f} ms: "
+          f"eager/lab speed {rk4['lab'] / rk4['eager']:.2f}x")
+
+
+def compiled_maneuver(model_name: str) -> None:
+    """Section 6: one compiled 600 s maneuver (35 deg turning, dt 0.1 s), median of 3."""
+    from sysid.maneuvers import TurningCircle, default_conditions, load_maneuver_model, simulate_maneuvers
+    from sysid.maneuvers.closed_loop import compiled_loop
+    print("\n6. Compiled 600 s maneuver at dt 0.1 s (35 deg turning circle, starboard)")
+    subject = load_maneuver_model(model_name)
+    conditions, _ = default_conditions(subject.model, subject.ship, dt=0.1, duration=600.0)
+    if compiled_loop(subject.model, conditions.method) is None:
+        print("   compiled loop unavailable (SYSID_COMPILE=0 or no C++ compiler): skipped")
+        return
+    maneuver = [TurningCircle(35.0)]
+    _, first = timed_first_call(lambda: simulate_maneuvers(subject.model, maneuver, conditions, compiled=True))
+    times = []
+    for _ in range(3):
+        start = time.perf_counter()
+        simulate_maneuvers(subject.model, maneuver, conditions, compiled=True)
+        times.append(time.perf_counter() - start)
+    took = statistics.median(times)
+    print(f"   {subject.label} ({subject.kind}): {conditions.steps} steps in {took:.3f} s "
+          f"({'within' if took <= 1.0 else 'over'} 1 s); compile or cache load and first run {first:.1f} s")
 
 
 def _row(times: dict, unit: str, scale: float) -> None:

@@ -19,6 +19,7 @@ from torch import nn
 from torchdiffeq import odeint
 
 from sysid.dynamics.integrators import Integrator, IntegratorLike, Method, rollout
+from sysid.mmg.coefficients import Rows, coefficient_matrix, view_of
 from sysid.mmg.model import ForceBreakdown
 
 _ODEINT_NAME = {Method.EULER: "euler", Method.RK4_38: "rk4"}  # torchdiffeq's public names
@@ -27,14 +28,13 @@ _ODEINT_NAME = {Method.EULER: "euler", Method.RK4_38: "rk4"}  # torchdiffeq's pu
 def acceleration_channels(u, v, r, X, Y, N, c):
     """(u_dot, v_dot, r_dot), each (...,), from Eq. (4) for u, v [m/s], r [rad/s] and
     X, Y [N], N [N m], each (...,); `c` provides m, m_x, m_y, I_zz_J_zz [kg, kg m^2], x_G [m]."""
-    m, xG = c.m, c.x_G
-    mxG = m * xG
-    u_dot = (X + (m + c.m_y) * v * r + mxG * r * r) / (m + c.m_x)
+    c = view_of(c, u)
+    m_x, m_y, mxG = c.m_plus_mx, c.m_plus_my, c.mxG  # m + m_x, m + m_y, m x_G
+    u_dot = (X + m_y * v * r + mxG * r * r) / m_x
     # [[m+m_y, x_G m], [x_G m, I+J+x_G^2 m]] (v_dot, r_dot) = (Y - (m+m_x) u r, N - x_G m u r)
-    a11, a12, a22 = m + c.m_y, mxG, c.I_zz_J_zz + xG * xG * m
-    b1 = Y - (m + c.m_x) * u * r
+    a11, a12, a22, det = m_y, mxG, c.a22, c.det
+    b1 = Y - m_x * u * r
     b2 = N - mxG * u * r
-    det = a11 * a22 - a12 * a12
     v_dot = (a22 * b1 - a12 * b2) / det
     r_dot = (a11 * b2 - a12 * b1) / det
     return u_dot, v_dot, r_dot
@@ -64,12 +64,47 @@ def required_force(state: torch.Tensor, acceleration: torch.Tensor, c) -> torch.
 def derivative_channels(state: torch.Tensor, force, c) -> tuple[torch.Tensor, ...]:
     """(x_dot, u_dot, y_dot, v_dot, psi_dot, r_dot), each (...,), Eqs. (1) and (4), from
     state (..., 6) and force = (X, Y, N), each (...,) [N, N, N m]."""
-    u, v, psi, r = state[..., 1], state[..., 3], state[..., 4], state[..., 5]
+    _, u, _, v, psi, r = state.unbind(-1)
     u_dot, v_dot, r_dot = acceleration_channels(u, v, r, *force, c)
     cos_psi, sin_psi = torch.cos(psi), torch.sin(psi)
     x_dot = u * cos_psi - v * sin_psi
     y_dot = u * sin_psi + v * cos_psi
     return x_dot, u_dot, y_dot, v_dot, r, r_dot
+
+
+# dx/dt (..., 6) as features (..., 16) times a (16, 6) matrix of the mass terms: features
+# (X, Y, N, u r, v r, r r, u cos psi, u sin psi, v cos psi, v sin psi, x, u, y, v, psi, r)
+_NONE6 = (None,) * 6
+_RATE = ((None, "eom_X_u", None, None, None, None),        # X
+         (None, None, None, "eom_Y_v", None, "eom_N_v"),   # Y
+         (None, None, None, "eom_N_v", None, "eom_N_r"),   # N
+         (None, None, None, "eom_ur_v", None, "eom_ur_r"),  # u r
+         (None, "eom_vr_u", None, None, None, None),       # v r
+         (None, "eom_rr_u", None, None, None, None),       # r r
+         (1.0, None, None, None, None, None),              # u cos psi -> x_dot
+         (None, None, 1.0, None, None, None),              # u sin psi -> y_dot
+         (None, None, 1.0, None, None, None),              # v cos psi -> y_dot
+         (-1.0, None, None, None, None, None),             # v sin psi -> x_dot
+         _NONE6, _NONE6, _NONE6, _NONE6, _NONE6,           # x, u, y, v, psi
+         (None, None, None, None, 1.0, None))              # r -> psi_dot
+
+
+def motion_rate(state: torch.Tensor, forces, motion, c) -> torch.Tensor:
+    """dx/dt (..., 6), Eqs. (1) and (4), from state (..., 6), the force components, each
+    (..., 3) = (X, Y, N) [N, N, N m] (summed in the product), and the forward's
+    `sysid.mmg.motion.Motion` (u, v, psi, r as (..., 1), constants): one product with a
+    matrix of the mass terms (`derived_constants`' ``eom_*``)."""
+    coriolis = state[..., 1::2] * motion.r                        # (u r, v r, r r)
+    cos_sin = torch.sin(motion.psi + motion.k.cos_sin_phase)      # (cos psi, sin psi)
+    features = torch.cat([*forces, coriolis, motion.u * cos_sin, motion.v * cos_sin, state], -1)
+    return features @ _rate_matrix(c, len(forces), state)
+
+
+_RATES = {count: Rows(_RATE[:3] * count + _RATE[3:]) for count in range(1, 6)}  # by number of components
+
+
+def _rate_matrix(c, components: int, like: torch.Tensor) -> torch.Tensor:
+    return coefficient_matrix(c, _RATES[components], like)
 
 
 def state_derivative(state: torch.Tensor, force: torch.Tensor, c) -> torch.Tensor:
@@ -78,14 +113,18 @@ def state_derivative(state: torch.Tensor, force: torch.Tensor, c) -> torch.Tenso
 
 
 def derivative(force_model: nn.Module, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
-    """dx/dt (..., 6) of any force model at state (..., 6) with inputs (..., 4)."""
-    return state_derivative(state, force_model(state, inputs).total, force_model.coefficients)
+    """dx/dt (..., 6) of any force model at state (..., 6) with inputs (..., 4) (through
+    `lean_derivative`: the same numbers as from the model's `ForceBreakdown`)."""
+    return lean_derivative(force_model, state, inputs)
 
 
 def lean_derivative(force_model: nn.Module, state: torch.Tensor, inputs: torch.Tensor, dim: int = -1) -> torch.Tensor:
     """`derivative` through the model's ``force_channels`` (X, Y, N as separate tensors, no
     force breakdown) where it has one: the same numbers with fewer, larger operations
     (what compiled steps run). dx/dt is stacked along `dim` (0: channels first, (6, ...))."""
+    rate = getattr(force_model, "rate", None)
+    if rate is not None and (dim == -1 or dim == state.dim() - 1) and not torch.compiler.is_compiling():
+        return rate(state, inputs)  # one product for the equations of motion (eager)
     channels = getattr(force_model, "force_channels", None)
     force = channels(state, inputs)[0] if channels is not None else force_model(state, inputs).total.unbind(-1)
     return torch.stack(derivative_channels(state, force, force_model.coefficients), dim)
@@ -116,9 +155,16 @@ class ShipDynamics(nn.Module):
             self.record.append(forces)
         return state_derivative(state, forces.total, self.force_model.coefficients), forces
 
+    def rate(self, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
+        """dx/dt (..., 6): without a record, by `lean_derivative` (the same numbers, fewer
+        operations: no force breakdown is built)."""
+        if self.record is None:
+            return lean_derivative(self.force_model, state, inputs)
+        return self.derivative(state, inputs)[0]
+
     def forward(self, tau: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
         k = min(max(int(tau), 0), self.inputs.shape[0] - 1)  # tau >= 0: int() is floor
-        return self.dt * self.derivative(state, self.inputs[k])[0]
+        return self.dt * self.rate(state, self.inputs[k])
 
 
 def check_shapes(x0: torch.Tensor, inputs: torch.Tensor) -> None:
@@ -157,7 +203,7 @@ def integrate(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt
                          "integrator through sysid.fast.compiled.predict")
     rhs = ShipDynamics(force_model, inputs, dt, record)
     if integrator.method not in _ODEINT_NAME:  # classical RK4: a plain step loop
-        return rollout(lambda x, u: rhs.derivative(x, u)[0], x0, inputs, dt, integrator.method)
+        return rollout(rhs.rate, x0, inputs, dt, integrator.method)
     tau = torch.arange(inputs.shape[0], dtype=x0.dtype, device=x0.device)
     options = {"perturb": True} if integrator.method is not Method.EULER else None
     return odeint(rhs, x0, tau, method=_ODEINT_NAME[integrator.method], options=options)

@@ -8,10 +8,13 @@ when bounds are given.
 """
 from __future__ import annotations
 
+import math
+from types import SimpleNamespace
 from typing import Iterable, Mapping
 
 import torch
 from torch import nn
+from torch._C._functorch import is_functorch_wrapped_tensor
 
 from sysid.mmg.ship import Ship, parameter_name
 from sysid.errors import ShipDefinitionError
@@ -21,6 +24,151 @@ def raw_value(value: torch.Tensor, low: float, high: float) -> torch.Tensor:
     """The unconstrained raw value whose ``low + (high-low)*sigmoid(raw)`` is `value`."""
     frac = (value - low) / (high - low)
     return torch.log(frac / (1 - frac))
+
+
+def derived_constants(c, names) -> dict:
+    """Constants every forward would otherwise recompute from the coefficients, by the same
+    expressions as the force functions wrote them (so the numbers are the same to the bit):
+    q = 1/2 rho L_pp d [kg/m], q L_pp [kg], D^2, D^4 [m^2, m^4], P^2 [m^2], the rudder's
+    H_R, eta, kappa, f_alpha and the mass terms of the equations of motion. `c` holds the
+    coefficients (`names`) as 0-d tensors; only the names the ship has are derived."""
+    have = {name: None for name in names}
+    out = {}
+    if "rho" in have and "L_pp" in have and "d" in have:
+        out["q"] = 0.5 * c.rho * c.L_pp * c.d
+        out["qL"] = out["q"] * c.L_pp
+        out["L_pp2"] = c.L_pp * c.L_pp
+        out["L_pp3"] = c.L_pp ** 3
+        out["half_L"] = 0.5 * c.L_pp
+    if "D" in have:
+        out["D2"], out["D4"] = c.D ** 2, c.D ** 4
+    if "P" in have:
+        out["P2"] = c.P ** 2
+    if "X_0F" in have and "X_0A" in have:
+        out["dX_0"] = c.X_0A - c.X_0F
+        out["dX_0_pi"] = out["dX_0"] / math.pi
+    if "C_D" in have:
+        out["C_D_L"] = c.C_D / c.L_pp
+        out["C_D_L2"] = c.C_D / (c.L_pp * c.L_pp)
+    if "lambda_R" in have:  # four-quadrant rudder: span, Fujii's normal-force gradient
+        out["H_R"] = torch.sqrt(c.A_R * c.lambda_R)
+        out["kappa"] = c.k_x / c.epsilon
+        out["f_alpha"] = 6.13 * c.lambda_R / (2.25 + c.lambda_R)
+        # Kitagawa's propeller term: (n D k_xPR)^2 8 |K_T| / pi = n^2 |K_T| kitagawa_jet [m^2]
+        out["kitagawa_jet"] = 8.0 * (c.D * c.k_xPR) ** 2 / math.pi
+        out["kitagawa_jet_eps2"] = out["kitagawa_jet"] / (c.epsilon * c.epsilon)
+        out["minus_gamma_P"], out["minus_gamma_N"] = -c.gamma_P, -c.gamma_N
+    if "H_R" in have or "H_R" in out:
+        out["eta"] = c.D / out["H_R"] if "H_R" in out else c.D / c.H_R
+        out["one_minus_eta"] = 1.0 - out["eta"]
+        out["half_rho_A_R"] = 0.5 * c.rho * c.A_R
+        out["l_R_nd"] = c.l_R / c.L_pp
+        out["minus_l_R_nd"] = -out["l_R_nd"]
+        # u_R^2 = epsilon^2 (eta core^2 + (1 - eta) u_P^2); the propeller race 8 K_T (n D)^2 / pi
+        out["eps2_eta"] = c.epsilon * c.epsilon * out["eta"]
+        out["eps2_one_minus_eta"] = c.epsilon * c.epsilon * out["one_minus_eta"]
+        out["jet_D2"] = 8.0 * out["D2"] / math.pi
+    if "a_H" in have:
+        out["one_plus_aH"] = 1.0 + c.a_H
+        out["one_minus_tR"] = 1.0 - c.t_R
+        out["N_R_lever"] = c.x_R + c.a_H * c.x_H
+        out["minus_one_plus_aH"] = -out["one_plus_aH"]
+        out["minus_one_minus_tR"] = -out["one_minus_tR"]
+        out["minus_N_R_lever"] = -out["N_R_lever"]
+    if "t_P" in have:
+        out["one_minus_tP"] = 1.0 - c.t_P
+        out["one_minus_tP_rho"] = out["one_minus_tP"] * c.rho
+        out["rho_D4"] = c.rho * out["D4"]
+        out["one_minus_tP_rho_D4"] = out["one_minus_tP_rho"] * out["D4"]
+    if "w_P0" in have:
+        out["one_minus_wP0"] = 1.0 - c.w_P0
+        out["minus_w_P0"] = -c.w_P0
+    if "x_P" in have:
+        out["minus_x_P"] = -c.x_P
+        out["x_P_L"] = c.x_P * c.L_pp  # m
+        # the four-quadrant wake's lateral inflow below the speed guard (v' = r' = 1e-7)
+        out["slow_lateral_inflow"] = 1e-7 + c.x_P * 1e-7
+    if "C_2_plus" in have:
+        out["wake_plus"] = out["one_minus_wP0"] * (c.C_2_plus - 1.0)
+        out["wake_minus"] = out["one_minus_wP0"] * (c.C_2_minus - 1.0)
+        out["minus_C_1"] = -c.C_1
+    if "rho_air" in have:
+        out["half_rho_air"] = 0.5 * c.rho_air
+    if "m" in have:
+        m, xG = c.m, c.x_G
+        out["m_plus_mx"] = m + c.m_x
+        out["m_plus_my"] = m + c.m_y
+        out["mxG"] = m * xG
+        out["a22"] = c.I_zz_J_zz + xG * xG * m
+        out["det"] = out["m_plus_my"] * out["a22"] - out["mxG"] * out["mxG"]
+        # Eq. (4) solved: u_dot = X/(m+m_x) + (m+m_y)/(m+m_x) v r + m x_G/(m+m_x) r^2,
+        # (v_dot, r_dot) = [[a22, -mxG], [-mxG, m+m_y]] (Y - (m+m_x) u r, N - mxG u r) / det
+        det, mx, my, mxG = out["det"], out["m_plus_mx"], out["m_plus_my"], out["mxG"]
+        out["eom_X_u"] = 1.0 / mx
+        out["eom_vr_u"] = my / mx
+        out["eom_rr_u"] = mxG / mx
+        out["eom_Y_v"] = out["a22"] / det
+        out["eom_N_v"] = -mxG / det
+        out["eom_ur_v"] = (mxG * mxG - out["a22"] * mx) / det
+        out["eom_N_r"] = my / det
+        out["eom_ur_r"] = mxG * (mx - my) / det
+    return out
+
+
+# every name `derived_constants` may give
+DERIVED_NAMES = frozenset((
+    "q", "qL", "L_pp2", "L_pp3", "half_L", "D2", "D4", "P2", "dX_0", "dX_0_pi", "C_D_L", "C_D_L2", "H_R",
+    "kappa", "f_alpha", "kitagawa_jet", "kitagawa_jet_eps2", "minus_gamma_P", "minus_gamma_N",
+    "eta", "one_minus_eta", "half_rho_A_R", "l_R_nd", "minus_l_R_nd", "eps2_eta", "eps2_one_minus_eta",
+    "jet_D2", "one_plus_aH", "one_minus_tR", "N_R_lever",
+    "minus_one_plus_aH", "minus_one_minus_tR", "minus_N_R_lever", "one_minus_tP", "one_minus_tP_rho",
+    "rho_D4", "one_minus_tP_rho_D4", "one_minus_wP0", "minus_w_P0", "minus_x_P", "x_P_L",
+    "slow_lateral_inflow", "wake_plus", "wake_minus", "minus_C_1", "half_rho_air",
+    "m_plus_mx", "m_plus_my", "mxG", "a22", "det", "eom_X_u", "eom_vr_u", "eom_rr_u", "eom_Y_v",
+    "eom_N_v", "eom_ur_v", "eom_N_r", "eom_ur_r"))
+
+
+def _constant(value: torch.Tensor, dtype: torch.dtype | None):
+    """A constant 0-d tensor in `dtype` (the dtype of the states it multiplies: an operation
+    on two dtypes costs a cast), or the tensor itself where autograd or a functorch
+    transform must see it."""
+    if value.requires_grad or is_functorch_wrapped_tensor(value) or type(value) not in (torch.Tensor, nn.Parameter):
+        return value
+    value = value.detach()
+    return value if dtype is None or value.dtype == dtype else value.to(dtype)
+
+
+def coefficient_view(values: Mapping[str, torch.Tensor], dtype: torch.dtype | None = None,
+                     plain: bool = True) -> SimpleNamespace:
+    """Attribute access to `values` (0-d tensors) and their `derived_constants`; with
+    `plain`, constants detached and in `dtype` (no operation between two coefficients per
+    forward, no module lookup, no cast)."""
+    view = SimpleNamespace(**values)
+    view.__dict__.update(derived_constants(view, values))
+    if plain:
+        view.__dict__.update({k: _constant(v, dtype) for k, v in view.__dict__.items()})
+    every = list(view.__dict__.values())
+    view.requires_grad = any(v.requires_grad for v in every)        # autograd may pass
+    view.wrapped = any(is_functorch_wrapped_tensor(v) for v in every)  # a torch.func transform
+    view.dtype = dtype
+    return view
+
+
+class _WatchedTensors(dict):
+    """A module's ``_buffers``/``_parameters`` that counts replacements (`to`, `double`,
+    `torch.func.functional_call` write here), so cached values know when they are stale."""
+
+    def __init__(self, *args):
+        super().__init__(*args)
+        self.changes = 0
+
+    def __setitem__(self, key, value):
+        self.changes += 1
+        super().__setitem__(key, value)
+
+    def __delitem__(self, key):
+        self.changes += 1
+        super().__delitem__(key)
 
 
 class Coefficients(nn.Module):
@@ -61,6 +209,47 @@ class Coefficients(nn.Module):
                 setattr(self, f"raw_{name}", nn.Parameter(value))
             else:
                 self.register_buffer(name, value)
+        self._watch()
+
+    def _watch(self):
+        if not isinstance(self._buffers, _WatchedTensors):
+            self._buffers = _WatchedTensors(self._buffers)
+            self._parameters = _WatchedTensors(self._parameters)
+            self._loads = 0   # bumped by assign, load_state_dict and _apply
+            self._view_key, self._views = None, {}
+
+    def values_view(self, dtype: torch.dtype | None = None) -> SimpleNamespace:
+        """The coefficients (``view.X_vr``) and their derived constants (`derived_constants`)
+        for states of `dtype` (default: the coefficients'): constants as detached 0-d
+        tensors of that dtype, tensors with their history where autograd or a functorch
+        transform must see them (trainable coefficients with gradient on, swapped-in
+        values). Cached until a coefficient changes (`assign`, `load_state_dict`, an
+        optimizer step on a trainable one, `to`, `functional_call`)."""
+        if torch.compiler.is_compiling():  # traced code reads the module (derived names too)
+            return self
+        self._watch()
+        raws = [self._parameters[f"raw_{n}"] for n in self.trainable_names]
+        live = torch.is_grad_enabled() and any(p.requires_grad for p in raws)
+        key = (self._buffers.changes, self._parameters.changes, self._loads,
+               tuple(p._version for p in raws))
+        if key != self._view_key:
+            self._view_key, self._views = key, {}
+        view = None if live else self._views.get(dtype)
+        if view is None:
+            view = coefficient_view({name: getattr(self, name) for name in self.names}, dtype)
+            if not live:
+                self._views[dtype] = view
+        return view
+
+    def _load_from_state_dict(self, *args, **kwargs):
+        self._watch()
+        self._loads += 1
+        super()._load_from_state_dict(*args, **kwargs)
+
+    def _apply(self, fn, recurse=True):
+        self._watch()
+        self._loads += 1
+        return super()._apply(fn, recurse)
 
     def __getattr__(self, name: str):
         if name in self.__dict__.get("trainable_names", ()):
@@ -69,7 +258,20 @@ class Coefficients(nn.Module):
                 low, high = self._bounds[name]
                 return low + (high - low) * torch.sigmoid(raw)
             return raw
-        return super().__getattr__(name)
+        try:
+            return super().__getattr__(name)
+        except AttributeError:
+            if (name.startswith("_") or name not in DERIVED_NAMES or "names" not in self.__dict__
+                    or self.__dict__.get("_deriving")):
+                raise
+            self.__dict__["_deriving"] = True
+            try:
+                derived = derived_constants(self, self.names)
+            finally:
+                self.__dict__["_deriving"] = False
+            if name not in derived:
+                raise
+            return derived[name]
 
     def assign(self, values: Mapping[str, float]) -> None:
         """Set coefficients to these values (physical units, e.g. identified ones): a
@@ -86,6 +288,8 @@ class Coefficients(nn.Module):
                     raw.copy_(target)
                 else:
                     super().__getattr__(name).fill_(float(value))
+        self._watch()
+        self._loads += 1
 
     def values(self) -> dict[str, float]:
         """Current value of every parameter, as plain floats."""
@@ -104,11 +308,112 @@ class PackedCoefficients(nn.Module):
         super().__init__()
         self.ship_name = coefficients.ship_name
         self.names = coefficients.names
-        self.index = {name: i for i, name in enumerate(self.names)}
-        self.register_buffer("values", torch.stack([getattr(coefficients, n).detach() for n in self.names]))
+        with torch.no_grad():
+            derived = derived_constants(coefficients, coefficients.names)
+        every = {**{n: getattr(coefficients, n).detach() for n in self.names}, **derived}
+        self.index = {name: i for i, name in enumerate(every)}  # coefficients, then derived constants
+        self.register_buffer("values", torch.stack([v.to(coefficients_dtype(coefficients)) for v in every.values()]))
 
     def __getattr__(self, name: str):
         index = self.__dict__.get("index", {})
         if name in index:
             return super().__getattr__("values")[index[name]]
         return super().__getattr__(name)
+
+    def values_view(self, dtype: torch.dtype | None = None) -> "PackedCoefficients":
+        """Itself: coefficients and derived constants are entries of ``values``."""
+        return self
+
+
+def coefficients_dtype(coefficients) -> torch.dtype:
+    """The dtype of a `Coefficients`' values."""
+    return next(iter(coefficients.state_dict().values())).dtype
+
+
+def view_of(c, like: torch.Tensor | None = None) -> SimpleNamespace:
+    """`c` as a values view: itself if it is one, else its ``values_view`` (a
+    `Coefficients` or `PackedCoefficients`) for states like `like`."""
+    return c if type(c) is SimpleNamespace else c.values_view(None if like is None else like.dtype)
+
+
+def _cached(c, names, like: torch.Tensor) -> torch.Tensor | None:
+    """The vector or matrix of `names` (a module-level tuple: keyed by its identity) cached
+    in the values view `c` for `like`'s dtype and device, or None."""
+    if type(c) is not SimpleNamespace:
+        return None
+    found = c.__dict__.get("_vectors", _EMPTY).get(id(names))
+    if found is not None and found[0] is names and found[1] is like.dtype and found[2] == like.get_device():
+        return found[3]
+    return None
+
+
+_EMPTY: dict = {}
+
+
+def coefficient_vector(c: SimpleNamespace, names: tuple, like: torch.Tensor) -> torch.Tensor:
+    """(k,) the values of `names` in `like`'s dtype and device (a name may be a tuple of
+    names: their product, in that order; None: 0; a float: itself): one tensor, cached in the view while
+    every value is a constant (keyed by the identity of `names`, a constant tuple); stacked
+    anew (through autograd) otherwise."""
+    found = _cached(c, names, like)
+    if found is not None:
+        return found
+    compiling = torch.compiler.is_compiling()
+    zero = torch.zeros((), dtype=like.dtype, device=like.device)
+
+    def value(name):
+        if name is None:
+            return zero
+        if isinstance(name, float):
+            return torch.full((), name, dtype=like.dtype, device=like.device)  # an op, not a lifted constant
+        if isinstance(name, tuple):
+            out = value(name[0])
+            for other in name[1:]:
+                out = out * value(other)
+            return out
+        return torch.as_tensor(getattr(c, name), device=like.device).to(like.dtype)
+    values = [value(n) for n in names]
+    stacked = torch.stack(values)
+    # only plain constants are kept (a traced value, e.g. under torch.export, never is)
+    if (not compiling and type(stacked) is torch.Tensor
+            and not any(v.requires_grad or is_functorch_wrapped_tensor(v) for v in values)):
+        _keep(c, names, like, stacked)
+    return stacked
+
+
+def _keep(c, names, like: torch.Tensor, value: torch.Tensor) -> None:
+    if type(c) is SimpleNamespace:
+        cache = c.__dict__.setdefault("_vectors", {})
+        if len(cache) > 512:  # names built anew per call (not module constants): keep none
+            cache.clear()
+        cache[id(names)] = (names, like.dtype, like.get_device(), value)
+
+
+def coefficient_matrix(c: SimpleNamespace, rows: tuple, like: torch.Tensor) -> torch.Tensor:
+    """(k, m) from k rows of m names (as `coefficient_vector`), cached alike."""
+    found = _cached(c, rows, like)
+    if found is not None:
+        return found
+    flat = coefficient_vector(c, tuple(n for row in rows for n in row), like).view(len(rows), -1)
+    if not torch.compiler.is_compiling() and type(flat) is torch.Tensor and not flat.requires_grad \
+            and not is_functorch_wrapped_tensor(flat):
+        _keep(c, rows, like, flat)
+    return flat
+
+
+class Rows(tuple):
+    """Rows of names: a matrix in `coefficient_vectors` (see `coefficient_matrix`)."""
+
+
+def coefficient_vectors(c: SimpleNamespace, groups: tuple, like: torch.Tensor) -> tuple:
+    """`coefficient_vector` of each names tuple of `groups` (a module-level tuple;
+    `coefficient_matrix` of each `Rows`), cached together: one look-up for all."""
+    found = _cached(c, groups, like)
+    if found is not None:
+        return found
+    vectors = tuple(coefficient_matrix(c, names, like) if isinstance(names, Rows) else
+                    coefficient_vector(c, names, like) for names in groups)
+    if not torch.compiler.is_compiling() and all(type(v) is torch.Tensor and not v.requires_grad
+                                                 and not is_functorch_wrapped_tensor(v) for v in vectors):
+        _keep(c, groups, like, vectors)
+    return vectors

@@ -8,6 +8,11 @@ Each family is one module of `sysid.mmg` behind one interface per component:
 * rudder: ``force(u, v, r, n, delta, c, propeller_inflow) -> (X, Y, N)``
 * wind (optional section): ``force(U_A, gamma_A, c) -> (X, Y, N)``
 
+and the same on one forward's shared `sysid.mmg.motion.Motion` (what `MMG` calls: speed and
+drift angle computed once, forces as one (..., 3) tensor): ``forces(motion, c[, quadrature |
+inflow]) -> (..., 3)`` and, for propellers, ``inflow_of(motion, c) -> PropellerState``
+(wind: ``forces(U_A, gamma_A, c) -> (..., 3)``),
+
 and a table ``parameters``: name -> (section of the ship file, low, high), the keys the
 family needs. Units: u, v [m/s], r [rad/s], n [rps], delta [rad]; X, Y [N], N [N m].
 
@@ -131,7 +136,7 @@ FUJIWARA_WIND: Table = {
     **{k: ("wind", -10.0, 10.0) for k in ("X0", "X1", "X3", "X5", "Y1", "Y3", "Y5", "N1", "N2", "N3")},
 }
 
-Functions = tuple[Callable, "Callable | None"]  # (force, inflow)
+Functions = tuple[Callable, "Callable | None", Callable, "Callable | None"]  # (force, inflow, forces, inflow_of)
 
 
 @dataclass(frozen=True)
@@ -142,10 +147,11 @@ class ForceFamily:
     name : the value of ``model = ...`` in the ship file.
     parameters : name -> (section, low, high) of every key it needs.
     summary : one line for messages and ``sysid ship check``.
-    functions : imports the family's module (torch) and gives (force, inflow); called on
-        first use of `force` or `inflow`.
+    functions : imports the family's module (torch) and gives (force, inflow, forces,
+        inflow_of); called on first use of any of them.
     force : the force function (signature by component, see the module docstring).
     inflow : the propeller's inflow function (propeller families only, else None).
+    forces, inflow_of : the same on a `Motion`, forces as (..., 3).
     """
 
     component: str
@@ -162,10 +168,18 @@ class ForceFamily:
     def inflow(self) -> Callable | None:
         return self.functions()[1]
 
+    @functools.cached_property
+    def forces(self) -> Callable:
+        return self.functions()[2]
+
+    @functools.cached_property
+    def inflow_of(self) -> Callable | None:
+        return self.functions()[3]
+
 
 def _yoshimura_hull() -> Functions:
     from sysid.mmg import hull
-    return hull.hull_force, None
+    return hull.hull_force, None, hull.hull_forces, None
 
 
 def _standard_hull() -> Functions:
@@ -173,34 +187,39 @@ def _standard_hull() -> Functions:
 
     def force(u, v, r, c, quadrature="exact"):  # no cross-flow integral: quadrature unused
         return hull_standard.hull_force_standard(u, v, r, c)
-    return force, None
+
+    def forces(motion, c, quadrature="exact"):
+        return hull_standard.hull_forces_standard(motion, c)
+    return force, None, forces, None
 
 
 def _four_quadrant_propeller() -> Functions:
     from sysid.mmg import propeller
-    return propeller.propeller_force, propeller.propeller_inflow
+    return propeller.propeller_force, propeller.propeller_inflow, propeller.propeller_forces, propeller.inflow_of
 
 
 def _standard_propeller(wake: str) -> Functions:
     from sysid.mmg import propeller_standard as p
     wake_fn = getattr(p, wake)
     return (functools.partial(p.propeller_force_standard, wake=wake_fn),
-            functools.partial(p.propeller_inflow_standard, wake=wake_fn))
+            functools.partial(p.propeller_inflow_standard, wake=wake_fn),
+            p.propeller_forces_standard,
+            functools.partial(p.inflow_standard_of, wake=wake_fn))
 
 
 def _four_quadrant_rudder() -> Functions:
     from sysid.mmg import rudder
-    return rudder.rudder_force, None
+    return rudder.rudder_force, None, rudder.rudder_forces, None
 
 
 def _standard_rudder() -> Functions:
     from sysid.mmg import rudder_standard
-    return rudder_standard.rudder_force_standard, None
+    return rudder_standard.rudder_force_standard, None, rudder_standard.rudder_forces_standard, None
 
 
 def _fujiwara_wind() -> Functions:
     from sysid.mmg import wind
-    return wind.wind_force, None
+    return wind.wind_force, None, wind.wind_forces, None
 
 
 _FAMILIES = [
@@ -234,7 +253,7 @@ def family(component: str, name: str) -> ForceFamily:
     """The family `name` of `component`, its functions loaded (imports torch); KeyError if
     unknown."""
     found = FAMILIES[component][name]
-    found.force  # noqa: B018 (load the functions now, not inside a traced call)
+    found.force, found.inflow, found.forces, found.inflow_of  # noqa: B018 (load the functions now, not inside a traced call)
     return found
 
 

@@ -14,7 +14,33 @@ from __future__ import annotations
 
 import torch
 
-from sysid.mmg.guards import SPEED_GUARD, safe_div
+from sysid.mmg.coefficients import coefficient_matrix, view_of
+from sysid.mmg.motion import Motion, motion_of_channels
+
+
+# features (..., 16) times a (16, 3) coefficient matrix, with w = (v, rL) [m/s]:
+# U^2, w x w (4, row-major), U w (2), (w x w) x w / U (8), v^4 / U^2
+_Y = lambda name: (None, ("q", name), ("qL", name.replace("Y_", "N_")))  # noqa: E731
+_ROWS = (((-1.0, "q", "R_0"), None, None),                                 # U^2
+         (("q", "X_vv"), None, None), (("q", "X_vr"), None, None),          # v v, v rL
+         (None, None, None), (("q", "X_rr"), None, None),                   # rL v, rL rL
+         _Y("Y_v"), _Y("Y_r"),                                              # U v, U rL
+         _Y("Y_vvv"), _Y("Y_vvr"), (None, None, None), _Y("Y_vrr"),         # v v v, v v rL, v rL v, v rL rL
+         (None, None, None), (None, None, None), (None, None, None), _Y("Y_rrr"),  # rL v v .. rL rL rL
+         (("q", "X_vvvv"), None, None))                                     # v^4 / U^2
+
+
+def hull_forces_standard(m: Motion, c) -> torch.Tensor:
+    """(X_H, Y_H, N_H) (..., 3) [N, N, N m] of a `Motion` (see `hull_force_standard`)."""
+    k, U = m.k, m.U
+    inverse_U = torch.where(m.slow, k.zero, m.U_guarded.reciprocal())  # 1/m/s, 0 below the guard
+    w = torch.cat([m.v, m.r * c.L_pp], -1)
+    w2 = (w[..., :, None] * w[..., None, :]).flatten(-2)
+    w3 = (w2[..., :, None] * w[..., None, :]).flatten(-2) * inverse_U
+    v2 = w2[..., :1]
+    U2 = m.u * m.u + m.v * m.v if m.smooth else U * U  # m^2/s^2 (a finite gradient at rest)
+    features = torch.cat([U2, w2, w * U, w3, v2 * v2 * (inverse_U * inverse_U)], -1)
+    return features @ coefficient_matrix(c, _ROWS, U)
 
 
 def hull_force_standard(u: torch.Tensor, v: torch.Tensor, r: torch.Tensor, c
@@ -25,17 +51,5 @@ def hull_force_standard(u: torch.Tensor, v: torch.Tensor, r: torch.Tensor, c
     (`sysid.mmg.families`).
     Any batch shape; float32 or float64.
     """
-    L = c.L_pp
-    q = 0.5 * c.rho * L * c.d  # kg/m
-    U2 = u * u + v * v
-    U = torch.sqrt(U2)
-    moving = U >= SPEED_GUARD
-    rL = r * L  # m/s
-    # U^2 * monomials of (v', r'): degree 2 -> no U, degree 3 -> /U, degree 4 -> /U^2
-    X_nd = (-c.R_0 * U2 + c.X_vv * v * v + c.X_vr * v * rL + c.X_rr * rL * rL
-            + c.X_vvvv * safe_div(v ** 4, U2, moving))
-    cubic_Y = c.Y_vvv * v ** 3 + c.Y_vvr * v * v * rL + c.Y_vrr * v * rL * rL + c.Y_rrr * rL ** 3
-    cubic_N = c.N_vvv * v ** 3 + c.N_vvr * v * v * rL + c.N_vrr * v * rL * rL + c.N_rrr * rL ** 3
-    Y_nd = (c.Y_v * v + c.Y_r * rL) * U + safe_div(cubic_Y, U, moving)
-    N_nd = (c.N_v * v + c.N_r * rL) * U + safe_div(cubic_N, U, moving)
-    return q * X_nd, q * Y_nd, q * L * N_nd
+    c = view_of(c, u)
+    return hull_forces_standard(motion_of_channels(u, v, r, c), c).unbind(-1)

@@ -14,7 +14,8 @@ from torch import nn
 from sysid.errors import ShipDefinitionError
 from sysid.mmg.coefficients import Coefficients
 from sysid.mmg.families import family
-from sysid.mmg.wind import relative_wind
+from sysid.mmg.motion import as_channels, motion_of
+from sysid.mmg.wind import relative_wind_of
 from sysid.mmg.ship import Ship
 
 
@@ -73,35 +74,54 @@ class MMG(nn.Module):
         self.families = {component: family(component, name) for component, name in ship.models.items()}
         self.coefficients = Coefficients(ship, trainable, bounds, dtype)
 
-    def components(self, state: torch.Tensor, inputs: torch.Tensor):
-        """((X, Y, N) of hull, propeller, rudder, wind or None), relative wind: each (...,)."""
-        c = self.coefficients
-        u, v, psi, r = state[..., 1], state[..., 3], state[..., 4], state[..., 5]
-        n, delta, U_T, zeta = inputs.unbind(-1)
+    def components(self, state: torch.Tensor, inputs: torch.Tensor, relative: bool = True):
+        """(hull, propeller, rudder, wind or None), each (..., 3) = (X, Y, N) [N, N, N m], the
+        relative wind (None unless `relative` or a wind force needs it) and the forward's
+        `Motion`."""
+        return self._components(state, inputs, self.coefficients.values_view(state.dtype), relative)
+
+    def _components(self, state, inputs, c, relative: bool):
+        m = motion_of(state, inputs, c)
         families = self.families
-        hull = families["hull"].force(u, v, r, c, self.quadrature)
-        prop_state = families["propeller"].inflow(u, v, r, n, c)
-        propeller = families["propeller"].force(u, v, r, n, c, prop_state)
-        rudder = families["rudder"].force(u, v, r, n, delta, c, prop_state)
-        wind_rel = relative_wind(u, v, psi, U_T, zeta)
-        wind = families["wind"].force(wind_rel.U_A, wind_rel.gamma_A, c) if "wind" in families else None
-        return (hull, propeller, rudder, wind), wind_rel
+        hull = families["hull"].forces(m, c, self.quadrature)
+        propeller_family = families["propeller"]
+        prop_state = propeller_family.inflow_of(m, c)
+        propeller = propeller_family.forces(m, c, prop_state)
+        rudder = families["rudder"].forces(m, c, prop_state)
+        wind_family = families.get("wind")
+        wind_rel = relative_wind_of(m) if relative or wind_family is not None else None
+        wind = wind_family.forces(wind_rel.U_A, wind_rel.gamma_A, c) if wind_family is not None else None
+        return (hull, propeller, rudder, wind), wind_rel, m
 
     def forward(self, state: torch.Tensor, inputs: torch.Tensor) -> ForceBreakdown:
         """Force breakdown for state (..., 6) = (x, u, y, v, psi, r) and inputs (..., 4)
         = (n_prop [rps], delta_rudder [rad], wind_velo_true [m/s], wind_dir_true [rad])."""
-        (hull, propeller, rudder, wind), wind_rel = self.components(state, inputs)
-        hull = torch.stack(hull, -1)
-        wind = torch.zeros_like(hull) if wind is None else torch.stack(wind, -1)
-        return ForceBreakdown(hull, torch.stack(propeller, -1), torch.stack(rudder, -1), wind,
-                              torch.zeros_like(hull), torch.stack(wind_rel, -1))
+        (hull, propeller, rudder, wind), wind_rel, _ = self.components(state, inputs)
+        zero = torch.zeros_like(hull)
+        return ForceBreakdown(hull, propeller, rudder, zero if wind is None else wind, zero,
+                              torch.cat(wind_rel, -1))
+
+    def total_force(self, state: torch.Tensor, inputs: torch.Tensor, relative: bool = True):
+        """F_MMG (..., 3) = (X, Y, N) [N, N, N m] (the sum of `forward`'s components in the
+        same order), the relative wind (None unless `relative` or a wind force needs it) and
+        the forward's `Motion`."""
+        return self._total_force(state, inputs, self.coefficients.values_view(state.dtype), relative)
+
+    def _total_force(self, state, inputs, c, relative: bool):
+        (hull, propeller, rudder, wind), wind_rel, m = self._components(state, inputs, c, relative)
+        total = hull + propeller + rudder
+        return (total if wind is None else total + wind), wind_rel, m
 
     def force_channels(self, state: torch.Tensor, inputs: torch.Tensor):
-        """(X, Y, N) of F_MMG, each (...,) [N, N, N m], and the relative wind: the sums of
-        `forward`'s components in the same order, without (..., 3) stacks (fewer, larger
-        operations in compiled code)."""
-        (hull, propeller, rudder, wind), wind_rel = self.components(state, inputs)
-        total = tuple(h + p + r for h, p, r in zip(hull, propeller, rudder))
-        if wind is not None:
-            total = tuple(t + w for t, w in zip(total, wind))
-        return total, wind_rel
+        """(X, Y, N) of F_MMG, each (...,) [N, N, N m], and the relative wind (`total_force`
+        as channels)."""
+        total, wind_rel, _ = self.total_force(state, inputs)
+        return total.unbind(-1), as_channels(wind_rel)
+
+    def rate(self, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
+        """dx/dt (..., 6) at state (..., 6) with inputs (..., 4): `total_force` and the
+        equations of motion (`sysid.dynamics.equations.motion_rate`)."""
+        from sysid.dynamics.equations import motion_rate
+        c = self.coefficients.values_view(state.dtype)
+        forces, _, m = self._components(state, inputs, c, False)
+        return motion_rate(state, [f for f in forces if f is not None], m, c)

@@ -23,29 +23,51 @@ from __future__ import annotations
 
 import torch
 
-from sysid.mmg.guards import SPEED_GUARD, TINY, safe_atan2, safe_div
+from sysid.mmg.coefficients import coefficient_vector, view_of
+from sysid.mmg.guards import SPEED_GUARD, choose, safe_atan2, safe_div
+from sysid.mmg.motion import Motion, as_channels, as_lanes, motion_of_channels
 from sysid.mmg.propeller import PropellerState
 
 
 def drift_angles(u, v, r, L):
     """beta = atan2(-v_m, u) [rad] (positive: flow from port ahead) and r' = r L / U [-];
     both 0 below the speed guard."""
-    U = torch.sqrt(u * u + v * v)
+    U = torch.hypot(u, v)
     moving = U >= SPEED_GUARD
-    beta = torch.where(moving, safe_atan2(-v, u), torch.zeros_like(u))
+    beta = torch.where(moving, safe_atan2(-v, u), 0.0)
     r_nd = safe_div(r * L, U, moving)
     return beta, r_nd
 
 
-def wake_yasukawa(beta_P, c):
-    """1 - w_P [-] with the C_1/C_2 correction of Yasukawa & Yoshimura (2015)."""
-    C_2 = torch.where(beta_P > 0, c.C_2_plus + 0.0 * beta_P, c.C_2_minus + 0.0 * beta_P)
-    return (1.0 - c.w_P0) * (1.0 + (1.0 - torch.exp(-c.C_1 * beta_P.abs())) * (C_2 - 1.0))
+def wake_yasukawa(beta_P, c, k=None):
+    """1 - w_P [-] with the C_1/C_2 correction of Yasukawa & Yoshimura (2015):
+    (1 - w_P0) (1 + (1 - exp(-C_1 |beta_P|)) (C_2 - 1)), C_2 = C_2_plus for beta_P > 0."""
+    if k is None:
+        C_2 = choose(beta_P > 0, c.C_2_plus, c.C_2_minus, beta_P)
+        return c.one_minus_wP0 * (1.0 + (1.0 - torch.exp(-c.C_1 * beta_P.abs())) * (C_2 - 1.0))
+    rise = k.one - torch.exp(beta_P.abs() * c.minus_C_1)
+    return torch.addcmul(c.one_minus_wP0, rise, choose(beta_P > k.zero, c.wake_plus, c.wake_minus, beta_P))
 
 
-def wake_gaussian(beta_P, c):
+def wake_gaussian(beta_P, c, k=None):
     """1 - w_P [-] with w_P = w_P0 exp(-4 beta_P^2) (shipmmg's form)."""
-    return 1.0 - c.w_P0 * torch.exp(-4.0 * beta_P * beta_P)
+    if k is None:
+        return 1.0 - c.w_P0 * torch.exp(-4.0 * beta_P * beta_P)
+    return torch.addcmul(k.one, c.minus_w_P0, torch.exp(beta_P * beta_P * k.minus_four))  # k: constants
+
+
+def inflow_standard_of(m: Motion, c, wake=wake_yasukawa) -> PropellerState:
+    """`propeller_inflow_standard` of a `Motion` (drift angle and r' kept for the rudder)."""
+    k, u, n = m.k, m.u, m.n
+    beta = torch.where(m.slow, k.zero, -m.beta_hat)
+    r_nd = torch.where(m.slow, k.zero, m.r * c.L_pp / m.U_guarded)
+    one_minus_wP = wake(torch.addcmul(beta, c.minus_x_P, r_nd), c, k)
+    turning = n.abs() >= k.tiny
+    nD = n * c.D
+    J_s = torch.where(turning, u / (torch.where(turning, nD, k.one) if m.smooth else nD), k.zero)
+    J = J_s * one_minus_wP
+    K_T = torch.addcmul(c.k0, torch.addcmul(c.k1, c.k2, J), J)
+    return PropellerState(one_minus_wP, J_s, J, K_T, n2=n * n, beta=beta, r_nd=r_nd)
 
 
 def propeller_inflow_standard(u, v, r, n, c, wake=wake_yasukawa) -> PropellerState:
@@ -53,21 +75,21 @@ def propeller_inflow_standard(u, v, r, n, c, wake=wake_yasukawa) -> PropellerSta
 
     Returns the `PropellerState` every rudder model reads (J_s = u / (n D) [-]).
     """
-    beta, r_nd = drift_angles(u, v, r, c.L_pp)
-    one_minus_wP = wake(beta - c.x_P * r_nd, c)
-    turning = n.abs() >= TINY
-    nD = n * c.D
-    J_s = safe_div(u, nD, turning)
-    J = J_s * one_minus_wP
-    K_T = c.k0 + c.k1 * J + c.k2 * J * J
-    return PropellerState(one_minus_wP, J_s, J, K_T)
+    c = view_of(c, u)
+    return as_channels(inflow_standard_of(motion_of_channels(u, v, r, c, n), c, wake))
+
+
+def propeller_forces_standard(m: Motion, c, inflow: PropellerState) -> torch.Tensor:
+    """(X_P, 0, 0) (..., 3) [N, N, N m] of a `Motion` (see `propeller_force_standard`)."""
+    n2 = inflow.n2 if inflow.n2 is not None else m.n * m.n
+    X_P = inflow.K_T * n2 * c.one_minus_tP_rho_D4
+    return X_P * coefficient_vector(c, (1.0, None, None), X_P)
 
 
 def propeller_force_standard(u, v, r, n, c, inflow: PropellerState | None = None,
                              wake=wake_yasukawa):
     """X_P [N], Y_P = 0 [N], N_P = 0 [N m]; `c` provides rho, D, t_P and the inflow terms."""
-    if inflow is None:
-        inflow = propeller_inflow_standard(u, v, r, n, c, wake)
-    X_P = (1.0 - c.t_P) * c.rho * n * n * c.D ** 4 * inflow.K_T
-    zero = torch.zeros_like(X_P)
-    return X_P, zero, zero
+    c = view_of(c, u)
+    m = motion_of_channels(u, v, r, c, n)
+    inflow = inflow_standard_of(m, c, wake) if inflow is None else as_lanes(inflow)
+    return propeller_forces_standard(m, c, inflow).unbind(-1)

@@ -13,39 +13,55 @@ Unlike the paper, l_R here is in metres (l'_R L_pp), like the other lengths of t
 """
 from __future__ import annotations
 
-import math
-
 import torch
 
-from sysid.mmg.guards import safe_atan2, safe_sqrt
+from sysid.mmg.coefficients import view_of
+from sysid.mmg.guards import choose, safe_atan2, safe_sqrt
+from sysid.mmg.motion import Motion, as_channels, as_lanes, motion_of_channels
 from sysid.mmg.propeller import PropellerState
-from sysid.mmg.propeller_standard import drift_angles
-from sysid.mmg.rudder import RudderInflow
+from sysid.mmg.rudder import RudderInflow, normal_force, rudder_lanes
+
+
+def inflow_standard_of(m: Motion, c, prop: PropellerState) -> RudderInflow:
+    """u_R, v_R [m/s], alpha_R [rad] of a `Motion` (F_N left to `rudder_lanes`)."""
+    k, smooth = m.k, m.smooth
+    u_P = m.u * prop.one_minus_wP
+    u_P2 = u_P * u_P
+    n2 = prop.n2 if prop.n2 is not None else m.n * m.n
+    jet = torch.addcmul(u_P2, prop.K_T * n2, c.jet_D2)
+    jet = safe_sqrt(jet) if smooth else torch.sqrt(torch.clamp(jet, min=0.0))
+    core = torch.addcmul(u_P, c.kappa, jet - u_P)
+    u_R = torch.addcmul(core * core * c.eps2_eta, c.eps2_one_minus_eta, u_P2)
+    u_R = safe_sqrt(u_R) if smooth else torch.sqrt(torch.clamp(u_R, min=0.0))
+    beta, r_nd = prop.beta, prop.r_nd
+    if beta is None:
+        beta = torch.where(m.slow, k.zero, -m.beta_hat)
+        r_nd = torch.where(m.slow, k.zero, m.r * c.L_pp / m.U_guarded)
+    beta_R = torch.addcmul(beta, c.minus_l_R_nd, r_nd)
+    gamma_R = choose(beta_R < k.zero, c.gamma_R_minus, c.gamma_R_plus, beta_R)
+    v_R = m.U * gamma_R * beta_R
+    alpha_R = m.delta - (safe_atan2(v_R, u_R) if smooth else torch.atan2(v_R, u_R))
+    return RudderInflow(u_R, v_R, alpha_R, None)
+
+
+def rudder_forces_standard(m: Motion, c, prop: PropellerState) -> torch.Tensor:
+    """(X_R, Y_R, N_R) (..., 3) [N, N, N m] of a `Motion` (see `rudder_force_standard`)."""
+    return rudder_lanes(inflow_standard_of(m, c, prop), m.delta, c)
 
 
 def rudder_inflow_standard(u, v, r, n, delta, c, prop: PropellerState) -> RudderInflow:
     """u_R, v_R [m/s], alpha_R [rad], F_N [N]; u, v [m/s], r [rad/s], n [rps], delta [rad]."""
-    eta = c.D / c.H_R
-    u_P = u * prop.one_minus_wP
-    jet = safe_sqrt(u_P * u_P + 8.0 * prop.K_T * n * n * c.D ** 2 / math.pi)
-    core = u_P + c.kappa * (jet - u_P)
-    u_R = c.epsilon * safe_sqrt(eta * core * core + (1.0 - eta) * u_P * u_P)
-    beta, r_nd = drift_angles(u, v, r, c.L_pp)
-    beta_R = beta - c.l_R / c.L_pp * r_nd
-    gamma_R = torch.where(beta_R < 0, c.gamma_R_minus + 0.0 * beta_R, c.gamma_R_plus + 0.0 * beta_R)
-    U = torch.sqrt(u * u + v * v)
-    v_R = U * gamma_R * beta_R
-    alpha_R = delta - safe_atan2(v_R, u_R)
-    F_N = 0.5 * c.rho * c.A_R * (u_R * u_R + v_R * v_R) * c.f_alpha * torch.sin(alpha_R)
-    return RudderInflow(u_R, v_R, alpha_R, F_N)
+    c = view_of(c, u)
+    inflow = as_channels(inflow_standard_of(motion_of_channels(u, v, r, c, n, delta), c, as_lanes(prop)))
+    return inflow._replace(F_N=normal_force(inflow, c))
 
 
 def rudder_force_standard(u, v, r, n, delta, c, prop: PropellerState,
                           inflow: RudderInflow | None = None):
     """X_R [N], Y_R [N], N_R [N m about midship] from the rudder normal force."""
+    c = view_of(c, u)
     if inflow is None:
-        inflow = rudder_inflow_standard(u, v, r, n, delta, c, prop)
-    F_N = inflow.F_N
-    cos_d, sin_d = torch.cos(delta), torch.sin(delta)
-    return (-(1.0 - c.t_R) * F_N * sin_d, -(1.0 + c.a_H) * F_N * cos_d,
-            -(c.x_R + c.a_H * c.x_H) * F_N * cos_d)
+        inflow = inflow_standard_of(motion_of_channels(u, v, r, c, n, delta), c, as_lanes(prop))
+    else:
+        inflow = as_lanes(inflow)
+    return rudder_lanes(inflow, delta[..., None], c).unbind(-1)
