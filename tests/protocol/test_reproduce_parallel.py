@@ -8,7 +8,7 @@ from sysid.protocol.reproduce import reproduce
 
 @pytest.mark.slow
 def test_parallel_workers_give_the_same_tables(dataset_dir, tmp_path):
-    tiny = {"training": {"epochs": 1, "warm_start_epochs": 1, "batch_size": 512}}
+    tiny = {"training": {"epochs": 2, "warm_start_epochs": 3, "batch_size": 512}}
     names = ["mmg_lab", "nn_D1", "hybrid_D1"]
     one = reproduce(tmp_path / "one", only=names, overrides=tiny, progress=False, log=lambda m: None, jobs=1)
     two = reproduce(tmp_path / "two", only=names, overrides=tiny, progress=False, log=lambda m: None, jobs=2)
