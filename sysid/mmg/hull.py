@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import torch
 
-from sysid.mmg.coefficients import coefficient_matrix, coefficient_vectors, view_of
+from sysid.mmg.coefficient_lookup import coefficient_matrix, coefficient_vectors, view_of
 from sysid.mmg.guards import safe_div
 from sysid.mmg.motion import Motion, motion_of_channels
 

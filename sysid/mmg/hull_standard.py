@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import torch
 
-from sysid.mmg.coefficients import coefficient_matrix, view_of
+from sysid.mmg.coefficient_lookup import coefficient_matrix, view_of
 from sysid.mmg.motion import Motion, motion_of_channels
 
 

@@ -118,10 +118,11 @@ class MMG(nn.Module):
         total, wind_rel, _ = self.total_force(state, inputs)
         return total.unbind(-1), as_channels(wind_rel)
 
-    def rate(self, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
-        """dx/dt (..., 6) at state (..., 6) with inputs (..., 4): `total_force` and the
-        equations of motion (`sysid.dynamics.equations.motion_rate`)."""
-        from sysid.dynamics.equations import motion_rate
+    def rate_terms(self, state: torch.Tensor, inputs: torch.Tensor):
+        """What the equations of motion need for dx/dt at state (..., 6) with inputs (..., 4),
+        in one forward: the force components present, each (..., 3) = (X, Y, N) [N, N, N m],
+        the forward's `sysid.mmg.motion.Motion` and the coefficients' values view
+        (`sysid.dynamics.equations.motion_rate` takes them)."""
         c = self.coefficients.values_view(state.dtype)
         forces, _, m = self._components(state, inputs, c, False)
-        return motion_rate(state, [f for f in forces if f is not None], m, c)
+        return [f for f in forces if f is not None], m, c

@@ -10,7 +10,7 @@ from typing import NamedTuple
 
 import torch
 
-from sysid.mmg.coefficients import coefficient_vectors, view_of
+from sysid.mmg.coefficient_lookup import coefficient_vectors, view_of
 from sysid.mmg.motion import Motion, as_channels, as_lanes, motion_of_channels
 
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import torch
 
-from sysid.mmg.coefficients import view_of
+from sysid.mmg.coefficient_lookup import view_of
 from sysid.mmg.guards import choose, safe_atan2, safe_sqrt
 from sysid.mmg.motion import Motion, as_channels, as_lanes, motion_of_channels
 from sysid.mmg.propeller import PropellerState

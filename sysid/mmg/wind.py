@@ -11,7 +11,7 @@ from typing import NamedTuple
 
 import torch
 
-from sysid.mmg.coefficients import Rows, coefficient_vectors, view_of
+from sysid.mmg.coefficient_lookup import Rows, coefficient_vectors, view_of
 from sysid.mmg.guards import safe_atan2
 from sysid.mmg.motion import _TWO, Motion, as_channels, motion_of_channels
 
