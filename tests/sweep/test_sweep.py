@@ -70,6 +70,16 @@ def _sysid(*args, **kwargs):
                             stderr=subprocess.STDOUT, text=True, **kwargs)
 
 
+def _wait_for_a_trained_trial(proc, out, timeout: float = 300.0) -> None:
+    """Until the sweep `proc` writing `out` has trained one trial; it must still be running."""
+    deadline = time.time() + timeout
+    while time.time() < deadline and proc.poll() is None:
+        if any(e["event"] == "trained" for e in read_journal(out)):
+            break
+        time.sleep(0.5)
+    assert proc.poll() is None, proc.communicate()[0][-2000:]
+
+
 @pytest.mark.slow
 def test_sweep_killed_part_way_resumes_without_training_a_trial_twice(tmp_path, dataset_dir):
     pytest.importorskip("ray.tune")
@@ -78,12 +88,7 @@ def test_sweep_killed_part_way_resumes_without_training_a_trial_twice(tmp_path, 
     out = tmp_path / "sweep"
     env = {**os.environ, "SYSID_DATA": str(dataset_dir.parent)}
     first = _sysid("sweep", str(path), "-o", str(out), "--workers", "2", env=env, start_new_session=True)
-    deadline = time.time() + 300
-    while time.time() < deadline and first.poll() is None:
-        if any(e["event"] == "trained" for e in read_journal(out)):
-            break
-        time.sleep(0.5)
-    assert first.poll() is None, first.communicate()[0][-2000:]
+    _wait_for_a_trained_trial(first, out)
     os.killpg(first.pid, signal.SIGKILL)  # the whole sweep, Ray's workers too
     first.wait()
     trained_before = [e["trial"] for e in read_journal(out) if e["event"] == "trained"]
@@ -141,12 +146,7 @@ def test_ctrl_c_during_the_trials_ends_the_sweep_as_interrupted(tmp_path, datase
     out = tmp_path / "sweep"
     env = {**os.environ, "SYSID_DATA": str(dataset_dir.parent)}
     sweep = _sysid("sweep", str(path), "-o", str(out), "--workers", "1", env=env, start_new_session=True)
-    deadline = time.time() + 300
-    while time.time() < deadline and sweep.poll() is None:
-        if any(e["event"] == "trained" for e in read_journal(out)):
-            break
-        time.sleep(0.5)
-    assert sweep.poll() is None, sweep.communicate()[0][-2000:]
+    _wait_for_a_trained_trial(sweep, out)
     os.kill(sweep.pid, signal.SIGINT)  # Ctrl-C reaches the driver
     log = sweep.communicate(timeout=300)[0]
     assert sweep.returncode == 130, log[-3000:]
