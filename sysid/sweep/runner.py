@@ -263,17 +263,17 @@ def _ctrl_c_ends_tune() -> Iterator[None]:
             raise KeyboardInterrupt  # Tune's loop has not started: nothing to stop gracefully
         os.kill(os.getpid(), signal.SIGUSR1)
 
-    own_handler = os.environ.get("TUNE_DISABLE_SIGINT_HANDLER")
+    tune_setting = os.environ.get("TUNE_DISABLE_SIGINT_HANDLER")
     os.environ["TUNE_DISABLE_SIGINT_HANDLER"] = "1"
     signal.signal(signal.SIGINT, stop_tune)
     try:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
-        if own_handler is None:
+        if tune_setting is None:
             os.environ.pop("TUNE_DISABLE_SIGINT_HANDLER", None)
         else:
-            os.environ["TUNE_DISABLE_SIGINT_HANDLER"] = own_handler
+            os.environ["TUNE_DISABLE_SIGINT_HANDLER"] = tune_setting
     if interrupted.is_set():
         raise KeyboardInterrupt
 
