@@ -20,10 +20,22 @@ from sysid.mmg.ship import Ship, parameter_name
 from sysid.errors import ShipDefinitionError
 
 
+def _number_like(x: torch.Tensor, number: float) -> torch.Tensor:
+    """`number` as a 0-d tensor of x's dtype and device. Under `torch.func.jvp` a Python
+    number combined with a 0-d float32 tensor gives the result a float64 tangent (PyTorch
+    2.13), which a later product with float32 operands refuses; a tensor of x's dtype does not."""
+    return torch.full((), number, dtype=x.dtype, device=x.device)
+
+
+def bounded_value(raw: torch.Tensor, low: float, high: float) -> torch.Tensor:
+    """``low + (high-low)*sigmoid(raw)``: the value of a bounded trainable coefficient."""
+    return _number_like(raw, low) + _number_like(raw, high - low) * torch.sigmoid(raw)
+
+
 def raw_value(value: torch.Tensor, low: float, high: float) -> torch.Tensor:
     """The unconstrained raw value whose ``low + (high-low)*sigmoid(raw)`` is `value`."""
-    frac = (value - low) / (high - low)
-    return torch.log(frac / (1 - frac))
+    frac = (value - _number_like(value, low)) / _number_like(value, high - low)
+    return torch.log(frac / (_number_like(value, 1.0) - frac))
 
 
 def derived_constants(c, names) -> dict:
@@ -255,8 +267,7 @@ class Coefficients(nn.Module):
         if name in self.__dict__.get("trainable_names", ()):
             raw = super().__getattr__(f"raw_{name}")
             if name in self._bounds:
-                low, high = self._bounds[name]
-                return low + (high - low) * torch.sigmoid(raw)
+                return bounded_value(raw, *self._bounds[name])
             return raw
         try:
             return super().__getattr__(name)

@@ -167,3 +167,21 @@ def test_hybrid_model_with_a_silent_correction_gives_the_mmg_sigma():
     res = coefficient_uncertainty(hybrid, windows, NAMES, weights=w)
     plain = coefficient_uncertainty(MMG(ship), windows, NAMES, weights=w)
     np.testing.assert_allclose(res.std_error, plain.std_error, rtol=1e-10)
+
+
+@pytest.mark.parametrize("ship_name", ["kvlcc2_l7", "esso_osaka"])
+def test_float32_windows_with_bounded_coefficients_give_the_float64_errors(ship_name):
+    """Training windows are float32 (the hybrid's dtype): bounded coefficients keep a float32
+    Jacobian under jacfwd and give the float64 standard errors to float32 precision."""
+    ship = load_ship(ship_name)
+    windows = _one_step_windows(ship, count=30)
+    w = torch.tensor([1.0, 4.0, 100.0], dtype=torch.float64)
+    bounds = {"Y_v": (-1.0, 0.0), "N_r": (-0.3, 0.1), "Y_r": (-0.5, 0.5), "N_v": (-0.5, 0.1)}
+    names = ["Y_v", "Y_r", "N_v", "N_r"]
+    exact = coefficient_uncertainty(MMG(ship, trainable=names, bounds=bounds), windows, names, weights=w)
+    single = SimpleNamespace(states=windows.states.float(), inputs=windows.inputs.float(), dt=windows.dt)
+    res = coefficient_uncertainty(MMG(ship, trainable=names, bounds=bounds, dtype=torch.float32), single, names,
+                                  weights=w.float())
+    np.testing.assert_allclose(res.estimate, exact.estimate, rtol=1e-6)
+    np.testing.assert_allclose(res.std_error, exact.std_error, rtol=2e-2)
+    assert all(s > 0 for s in exact.std_error)
