@@ -4,7 +4,7 @@ import math
 import pytest
 import torch
 
-from sysid.fast.knn_index import IndexedGate, k_smallest_mean, k_smallest_means, leaf_partition, neighbourhood_groups
+from sysid.fast.knn_index import IndexedGate, indexed_gate, k_smallest_mean, k_smallest_means, leaf_partition, neighbourhood_groups
 from sysid.hybrid.knn_gate import KNNGate
 
 
@@ -198,3 +198,16 @@ def test_decisions_in_many_dimensions_equal_the_scan_and_rarely_need_it(feature_
     near, lower = index._box_bounds_tier(queries[left])
     decided = (near <= threshold - tol[left]) | (lower > threshold + tol[left])
     assert int(left.sum()) > 100 and decided.double().mean() > 0.9
+
+
+def test_the_index_is_built_once_per_bank(gate_and_queries):
+    """A compiled maneuver asks for the index at every call: the same index until the
+    gate's bank is refitted, then a new one that decides as the new bank's scan."""
+    gate, queries = gate_and_queries
+    gate = KNNGate(k=gate.k, alpha=gate.alpha, features=9, dtype=torch.float64).fit(gate.bank[:2000])
+    first = indexed_gate(gate)
+    assert indexed_gate(gate) is first
+    gate.fit(gate.bank[:1500])
+    again = indexed_gate(gate)
+    assert again is not first and again.scan_bank.shape[0] == 1500
+    assert torch.equal(torch.cat([again(q[None])[1] for q in queries[:100]]), gate(queries[:100])[1])
