@@ -4,7 +4,7 @@ import math
 import pytest
 import torch
 
-from sysid.fast.knn_index import IndexedGate, k_smallest_mean, k_smallest_means, leaf_partition, neighbourhood_groups
+from sysid.fast.knn_index import IndexedGate, indexed_gate, k_smallest_mean, k_smallest_means, leaf_partition, neighbourhood_groups
 from sysid.hybrid.knn_gate import KNNGate
 
 
@@ -20,6 +20,21 @@ def gate_and_queries():
     gate = KNNGate(k=10, alpha=0.95, features=9, dtype=torch.float64).fit(bank)
     tq = torch.rand(600, 2, generator=g, dtype=torch.float64) * 6 - 3  # partly beyond the sheet
     queries = sheet(tq) + 0.05 * torch.randn(600, 9, generator=g, dtype=torch.float64)
+    return gate, queries
+
+
+@pytest.fixture(scope="module")
+def feature_gate_and_queries():
+    """A gate on 4000 points of a curved 3-d manifold in 64-d (as an FNN's tanh features
+    of few-degree-of-freedom inputs), and queries on it, beside it and far off it."""
+    g = torch.Generator().manual_seed(7)
+    weights = torch.randn(3, 64, generator=g, dtype=torch.float64)
+    features = lambda p: torch.tanh(p @ weights)
+    bank = features(torch.rand(4000, 3, generator=g, dtype=torch.float64) * 2 - 1)
+    bank = bank + 0.01 * torch.randn(4000, 64, generator=g, dtype=torch.float64)
+    gate = KNNGate(k=10, alpha=0.95, features=64, dtype=torch.float64).fit(bank)
+    p = torch.rand(500, 3, generator=g, dtype=torch.float64) * 3 - 1.5  # 70 % of the cube beyond the bank
+    queries = features(p) + 0.02 * torch.randn(500, 64, generator=g, dtype=torch.float64)
     return gate, queries
 
 
@@ -58,7 +73,6 @@ def test_tier_two_bounds_hold_the_whole_bank_distance(gate_and_queries):
         upper, lower = index._box_bounds_tier(queries)
         assert bool((lower <= whole * (1 + 1e-12)).all()) and bool((upper >= whole * (1 - 1e-12)).all())
     torch.testing.assert_close(upper, whole, rtol=1e-13, atol=0)  # all leaves searched: exact
-    torch.testing.assert_close(index._nearest_leaves_tier(queries)[0], whole, rtol=1e-13, atol=0)  # many dimensions
     torch.testing.assert_close(lower, whole, rtol=1e-13, atol=0)
     index = IndexedGate(gate, leaf=64)
     slots = index.points_t.transpose(1, 2)  # (C, S, F), padding far away
@@ -146,3 +160,54 @@ def test_compiled_index_decides_as_the_gate_scan(gate_and_queries):
     scan = compile_cached(_Decision(IndexedGate(gate, margin=math.inf)), (queries[:1],), "test-gate")  # tier 3 only
     signed = torch.cat([scan(q[None]) for q in queries[:100]])
     assert torch.equal(signed > 0, exact_on[:100])
+
+
+def test_principal_boxes_bound_every_distance_in_many_dimensions(feature_gate_and_queries):
+    """In 64 features the boxes are taken in principal components and the remainder's
+    norm: each box's bound is below the distance to each of its leaf's points, and the
+    nearest boxes' bounds bracket d_kNN of the whole bank (equal when all are searched)."""
+    gate, queries = feature_gate_and_queries
+    index = IndexedGate(gate, leaf=64)
+    assert index.projected and index.box_low_t.shape[0] == 17
+    slots = index.points_t.transpose(1, 2)  # (C, S, F), padding far away
+    d2 = (queries[:40, None, None, :] - slots).pow(2).sum(3)  # (40, C, S)
+    assert bool((index.box_bounds(queries[:40])[:, :, None] <= d2 * (1 + 1e-12)).all())
+    whole = gate.distance(queries)
+    for boxes in (4, 16, 1000):
+        upper, lower = IndexedGate(gate, leaf=64, boxes=boxes)._box_bounds_tier(queries)
+        assert bool((lower <= whole * (1 + 1e-12)).all()) and bool((upper >= whole * (1 - 1e-12)).all())
+    torch.testing.assert_close(upper, whole, rtol=1e-12, atol=0)
+    torch.testing.assert_close(lower, whole, rtol=1e-12, atol=0)
+
+
+def test_decisions_in_many_dimensions_equal_the_scan_and_rarely_need_it(feature_gate_and_queries):
+    """Decisions equal the whole-bank scan row by row; tier 2 (16 of about 64 leaves)
+    decides almost every row tier 1 leaves open, the rows off the manifold included, so
+    the scan runs for few."""
+    gate, queries = feature_gate_and_queries
+    index = IndexedGate(gate)
+    exact_d, exact_on = gate(queries)
+    assert 0.2 < exact_on.double().mean() < 0.8  # both decisions occur
+    rows = [index(q[None]) for q in queries]
+    assert torch.equal(torch.cat([r[1] for r in rows]), exact_on)
+    threshold = gate.threshold
+    upper = index._upper(queries)
+    err = (index.rounding * ((queries * queries).sum(1) + index.bank_sq_max)).sqrt()
+    tol = index.margin * threshold + err
+    left = ~(upper <= threshold - tol)  # left open by tier 1
+    near, lower = index._box_bounds_tier(queries[left])
+    decided = (near <= threshold - tol[left]) | (lower > threshold + tol[left])
+    assert int(left.sum()) > 100 and decided.double().mean() > 0.9
+
+
+def test_the_index_is_built_once_per_bank(gate_and_queries):
+    """A compiled maneuver asks for the index at every call: the same index until the
+    gate's bank is refitted, then a new one that decides as the new bank's scan."""
+    gate, queries = gate_and_queries
+    gate = KNNGate(k=gate.k, alpha=gate.alpha, features=9, dtype=torch.float64).fit(gate.bank[:2000])
+    first = indexed_gate(gate)
+    assert indexed_gate(gate) is first
+    gate.fit(gate.bank[:1500])
+    again = indexed_gate(gate)
+    assert again is not first and again.scan_bank.shape[0] == 1500
+    assert torch.equal(torch.cat([again(q[None])[1] for q in queries[:100]]), gate(queries[:100])[1])
