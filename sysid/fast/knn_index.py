@@ -7,24 +7,24 @@ to three tiers, each only where the one before leaves the decision open:
 
 1. an upper bound from the neighbourhood of the leaf whose centre is nearest to z (in the
    box coordinates of tier 2; that leaf and its `probe` - 1 nearest leaves, precomputed):
-   its points fall into k disjoint groups (slot s of a leaf in group s mod k), and the mean over groups of the
-   distance to each group's nearest point is the mean distance to k distinct bank
-   points, so at least d_kNN(z). At or below the threshold: on. One nearest-centre
-   search and one minimum per group, contiguous over each leaf's points, so compiled
-   code runs it as a few vectorized loops with few buffers; in distribution it decides
-   almost every row;
+   its points fall into k disjoint groups (slot s of a leaf in group s mod k), and the
+   mean over groups of the distance to each group's nearest point is the mean distance to
+   k distinct bank points, so at least d_kNN(z). At or below the threshold: on. One
+   nearest-centre search and one minimum per group, contiguous over each leaf's points, so
+   compiled code runs it as a few vectorized loops with few buffers; in distribution it
+   decides almost every row;
 2. bounds from the `boxes` leaves nearest to z by their bounding boxes (each leaf's
    coordinate-wise minimum and maximum, a lower bound on the distance to any of its
    points): the mean distance to the k nearest points among them is an upper bound, and
-   with every other point at least L away (the next box's bound) the mean of
-   min(n_i, L) over their k smallest distances n_i is a lower bound (the whole bank's
-   i-th nearest distance is below L only if the i nearest all lie in the chosen leaves).
-   Upper bound at or below the threshold: on; lower bound above it: off. Both equal
-   d_kNN when L is past the k-th distance. In more than `BOX_DIMENSIONS` coordinates
-   (the FNN's 64 or 128 features), where boxes in the features bound loosely, the boxes
-   are taken in `PRINCIPAL` leading principal components of the bank plus the norm of
-   the remainder: an orthogonal projection shortens every distance, and two remainders'
-   norms differ by at most their distance, so these boxes bound too, and tightly where the bank has few
+   with every other point at least L away (the next box's bound) the mean of min(n_i, L)
+   over their k smallest distances n_i is a lower bound (the whole bank's i-th nearest
+   distance is below L only if the i nearest all lie in the chosen leaves). Upper bound at
+   or below the threshold: on; lower bound above it: off. Both equal d_kNN when L is past
+   the k-th distance. In more than `BOX_DIMENSIONS` coordinates (the FNN's 64 or 128
+   features), where boxes in the features bound loosely, the boxes are taken in
+   `PRINCIPAL` leading principal components of the bank plus the norm of the remainder: an
+   orthogonal projection shortens every distance, and two remainders' norms differ by at
+   most their distance, so these boxes bound too, and tightly where the bank has few
    degrees of freedom (a 35 deg turning circle and a 20/20 zig-zag of the shipped hybrid
    D2, 128 features, dt 1 s: 1.5 % of the stages left open for the scan, the rest decided
    from 16 of 256 leaves);
@@ -60,12 +60,6 @@ def k_smallest_means(d2: torch.Tensor, k: int, cap: torch.Tensor) -> tuple[torch
         return inf, inf
     near = torch.topk(d2.clamp_min(0.0), k, dim=1, largest=False, sorted=True).values  # (B, k)
     return near.sqrt().mean(1), torch.minimum(near, cap[:, None]).sqrt().mean(1)
-
-
-def k_smallest_mean(d2: torch.Tensor, k: int) -> torch.Tensor:
-    """Mean of sqrt of the k smallest of d2 (B, M) [squared distances] along dim 1, (B,);
-    +inf with fewer than k finite values."""
-    return k_smallest_means(d2, k, torch.full(d2.shape[:1], math.inf, dtype=d2.dtype, device=d2.device))[0]
 
 
 def leaf_partition(points: torch.Tensor, leaf: int) -> list[torch.Tensor]:
@@ -289,8 +283,4 @@ def indexed_gate(gate: KNNGate) -> IndexedGate:
     """The `IndexedGate` of `gate`, built once per bank (kept on the gate until its bank is
     replaced or modified): building one partitions the bank, about 1 s for the shipped
     hybrid D2's 10 k features of 128, which every compiled maneuver would otherwise pay."""
-    cached = gate.__dict__.get("_indexed_cache")  # (bank tensor, its version, index)
-    if cached is None or cached[0] is not gate.bank or cached[1] != gate.bank._version:
-        cached = (gate.bank, gate.bank._version, IndexedGate(gate))
-        gate.__dict__["_indexed_cache"] = cached
-    return cached[2]
+    return gate.per_bank("indexed", lambda: IndexedGate(gate))

@@ -41,13 +41,17 @@ class KNNGate(nn.Module):
         self.register_buffer("threshold", torch.tensor(math.inf, dtype=dtype))
         self.register_buffer("train_distances", torch.zeros(0, dtype=dtype))
 
-    def _bank_sq(self) -> torch.Tensor:
-        """|b|^2 of every bank vector, cached until the bank tensor is replaced or modified."""
-        cached = self.__dict__.get("_bank_sq_cache")  # (bank tensor, its version, norms)
+    def per_bank(self, name: str, build):
+        """`build()`, kept under `name` until the bank tensor is replaced or modified."""
+        cache = self.__dict__.setdefault("_per_bank", {})
+        cached = cache.get(name)  # (bank tensor, its version, value)
         if cached is None or cached[0] is not self.bank or cached[1] != self.bank._version:
-            cached = (self.bank, self.bank._version, (self.bank * self.bank).sum(1))
-            self.__dict__["_bank_sq_cache"] = cached
+            cached = cache[name] = (self.bank, self.bank._version, build())
         return cached[2]
+
+    def _bank_sq(self) -> torch.Tensor:
+        """|b|^2 of every bank vector (N,), cached for the current bank."""
+        return self.per_bank("bank_sq", lambda: (self.bank * self.bank).sum(1))
 
     def _distances(self, z: torch.Tensor, exclude_self: bool) -> torch.Tensor:
         flat = z.reshape(-1, z.shape[-1]).to(self.bank.dtype)
