@@ -134,7 +134,9 @@ def test_a_node_lost_mid_sweep_is_replaced_and_no_trial_restarts(cluster, datase
     from sysid.sweep.plan import sweep_trials
 
     nodes, work = cluster
-    path = _sweep_file(work, dataset_dir, "lost", epochs=20)
+    # 100 epochs (about 9 s on a quiet machine) leave the kill below well inside the first trial,
+    # also when other tests load the machine (with 20, the trial once ended before the kill)
+    path = _sweep_file(work, dataset_dir, "lost", epochs=100)
     out = work / "lost_out"
     env = {**nodes.env, "SYSID_DATA": str(dataset_dir.parent)}
     first_worker, _ = nodes.worker_view([])
