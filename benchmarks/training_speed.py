@@ -2,12 +2,14 @@
 
 Prints, per data set and batch size: time per minibatch (forward + backward + Adam step of
 T = 5 Euler steps of the hybrid right-hand side), window-steps per second and epochs per
-second; with --converge also the wall time of a whole training to its early stop; with
+second; with --members K the time of a step that trains K networks side by side (the
+FNN's member axis; what K seeds trained in one process would cost) beside one network;
+with --converge also the wall time of a whole training to its early stop; with
 --parts the CPU time of the pieces of an epoch and of the seed ensembles' evaluation, each
 beside the way it was done before (interleaved repeats, medians of process CPU time, which a
 machine shared with other jobs disturbs less than wall time).
 
-    python benchmarks/training_speed.py [--data DIR] [--threads 1] [--converge] [--parts]
+    python benchmarks/training_speed.py [--data DIR] [--threads 1] [--members K] [--converge] [--parts]
 """
 from __future__ import annotations
 
@@ -28,10 +30,11 @@ from sysid.identify.trainer import Trainer, multistep_loss, split_windows
 CONFIGS = {"D1": "configs/experiments/hybrid_D1.toml", "D2": "configs/experiments/hybrid_D2.toml"}
 
 
-def minibatch_seconds(exp, train, batch: int, repeats: int = 8) -> float:
-    """Mean wall time [s] of one training step on `batch` windows."""
+def minibatch_seconds(exp, train, batch: int, repeats: int = 8, members: int | None = None) -> float:
+    """Mean wall time [s] of one training step on `batch` windows (`members` networks side
+    by side, each on the same windows; default: the config's)."""
     mmg = build_mmg(exp, torch.float32).requires_grad_(False)
-    net = ForceCorrection(exp.network.hidden, torch.float32, exp.network.members)
+    net = ForceCorrection(exp.network.hidden, torch.float32, members or exp.network.members)
     model = PerMember(CorrectedModel(mmg, net, None, True, exp.gate.space))
     w_v = 1.0 / train.states[:, :, [1, 3, 5]].reshape(-1, 3).var(0)
     w_F = torch.ones(3)
@@ -166,6 +169,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", default=None)
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--members", type=int, default=0,
+                        help="also time a step of K networks side by side against one, at the config's batch")
     parser.add_argument("--converge", action="store_true", help="also train each config to its early stop")
     parser.add_argument("--parts", action="store_true", help="CPU time of an epoch's pieces, before and after")
     args = parser.parse_args()
@@ -188,6 +193,14 @@ def main() -> None:
             steps_per_epoch = -(-len(train) // batch)
             print(f"{batch:6d} {1e3 * seconds:9.1f} {min(batch, len(train)) * t.steps / seconds:15.0f} "
                   f"{1.0 / (seconds * steps_per_epoch):9.2f}")
+        if args.members > 1:
+            one, many = [], []
+            for _ in range(3):  # interleaved, medians
+                one.append(minibatch_seconds(exp, train, t.batch_size, members=1))
+                many.append(minibatch_seconds(exp, train, t.batch_size, members=args.members))
+            a, b = statistics.median(one), statistics.median(many)
+            print(f"{args.members} networks side by side, batch {t.batch_size}: {1e3 * b:.1f} ms/step against "
+                  f"{1e3 * a:.1f} for one ({b / a:.2f}x the time for {args.members}x the networks)")
         if args.parts:
             parts(exp, runs, train, val, args.data)
         if args.converge:

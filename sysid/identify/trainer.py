@@ -257,7 +257,11 @@ def implied_residual(model: CorrectedModel, windows: WindowSet, pairs: int = 2
     return s, need - f_mmg, f_mmg
 
 
-def output_penalty(f_nn: torch.Tensor, f_mmg: torch.Tensor, w_F: torch.Tensor, band: float = 0.2) -> torch.Tensor:
+PAPER_FORCE_BAND = 0.2  # the output constraint's band of Eq. (17): 20 % of |F_MMG|
+
+
+def output_penalty(f_nn: torch.Tensor, f_mmg: torch.Tensor, w_F: torch.Tensor,
+                   band: float = PAPER_FORCE_BAND) -> torch.Tensor:
     """Eq. (17): w_F^T (|F_NN| - band |F_MMG|)^+ per sample, (..., 3) -> (...).
 
     Zero while every component of F_NN stays within `band` (20 %) of the MMG force's
@@ -300,7 +304,7 @@ def rollout_errors(model, batch: WindowSet) -> torch.Tensor:
 
 
 def multistep_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor | None = None,
-                   band: float = 0.2):
+                   band: float = PAPER_FORCE_BAND):
     """(L_v, L_F) of Eqs. (15)-(17) as means over windows and steps: Euler rollouts of T steps
     from each window's first recorded state with its recorded inputs.
 
