@@ -1,7 +1,7 @@
 """Training throughput of the multi-step loss on the real data (D1, D2), one process.
 
 Prints, per data set and batch size: time per minibatch (forward + backward + Adam step of
-T = 5 Euler steps of the hybrid right-hand side), window-steps per second and epochs per
+the config's T Euler steps of the hybrid right-hand side), window-steps per second and epochs per
 second; with --members K the time of a step that trains K networks side by side (the
 FNN's member axis; what K seeds trained in one process would cost) beside one network;
 with --converge also the wall time of a whole training to its early stop; with

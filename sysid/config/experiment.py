@@ -123,6 +123,9 @@ class NetworkOptions:
     members: int = 1               # networks averaged (1 = the paper's single FNN)
 
 
+PAPER_FORCE_BAND = 0.2  # the output constraint's band of Eq. (17): 20 % of |F_MMG|
+
+
 @dataclass(frozen=True)
 class TrainingOptions(_Options):
     steps: int = 5
@@ -138,7 +141,7 @@ class TrainingOptions(_Options):
     lr_patience: int = 10
     lambda_v: float = 1.0
     lambda_F: float = 1e-3
-    force_band: float = 0.2        # the output constraint's band: F_NN free within this share of |F_MMG| (Eq. 17)
+    force_band: float = PAPER_FORCE_BAND  # the output constraint's band: F_NN free within this share of |F_MMG| (Eq. 17)
     lambda_L2: float = 1e-6
     patience: int = 40
     max_minutes: float = 0.0       # 0: off; > 0: a safety limit whose hit fails the run

@@ -59,7 +59,7 @@ from sysid.device import resolve_device
 from sysid.dynamics.equations import integrate, integrate_with_forces, required_force
 from sysid.errors import ConfigError, DataError, TrainingError
 from sysid.config.choices import DType, Method, ModelKind, Solver, Stage, StartStates, Validation
-from sysid.config.experiment import Experiment
+from sysid.config.experiment import PAPER_FORCE_BAND, Experiment
 from sysid.identify.levenberg_marquardt import fit_uncertainty, identify_levenberg_marquardt, start_state_check
 from sysid.hybrid.force_models import CorrectedModel, PerMember, build_mmg, correction_of
 from sysid.hybrid.knn_gate import KNNGate
@@ -255,9 +255,6 @@ def implied_residual(model: CorrectedModel, windows: WindowSet, pairs: int = 2
         f_mmg = forces.mmg if model.physics else torch.zeros_like(need)
         s = correction_inputs(x, inp, forces.relative_wind)
     return s, need - f_mmg, f_mmg
-
-
-PAPER_FORCE_BAND = 0.2  # the output constraint's band of Eq. (17): 20 % of |F_MMG|
 
 
 def output_penalty(f_nn: torch.Tensor, f_mmg: torch.Tensor, w_F: torch.Tensor,
