@@ -56,7 +56,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from sysid.data.columns import ColumnMap, parse_columns
+from sysid.config.column_map import ColumnMap, parse_columns
 from sysid.config.choices import Choice, DType, GateSpace, Method, ModelKind, Solver, Stage, StartStates, Validation
 from sysid.errors import ConfigError
 from sysid.mmg.ship import parameter_name

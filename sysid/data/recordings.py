@@ -20,7 +20,7 @@ import pandas as pd
 import torch
 
 from preprocessing.schema import PROCESSED, PROCESSED_CHANNEL, PROCESSED_PLAUSIBLE_ABS
-from sysid.data.columns import QUANTITY, RELATIVE_WIND, SI_UNIT, ColumnMap
+from sysid.data.columns import QUANTITY, RELATIVE_WIND, SI_UNIT, ColumnMap, to_channels
 from sysid.data.csvfiles import LOG_SUFFIXES, read_table
 from sysid.errors import DataError
 from sysid.mmg.wind import relative_wind
@@ -76,7 +76,7 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
     if not (rate > 0 and np.isfinite(rate)):
         raise DataError(f"{path}: rate {rate} Hz: must be > 0")
     raw = read_table(path, "a processed run with the header 'name [unit]', or columns named in [data.columns]")
-    frame = columns.to_channels(raw, path)
+    frame = to_channels(columns, raw, path)
     # trailing all-empty rows (zigzag 13_50_28 ends with 327 of them) are dropped
     recorded = [c for c in frame.columns if c not in RELATIVE_WIND or frame[c].notna().any()]
     values = frame[recorded].to_numpy(dtype=float)

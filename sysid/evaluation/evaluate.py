@@ -8,7 +8,6 @@ pooled over the windows of a file.
 """
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -25,19 +24,9 @@ from sysid.dynamics.equations import eager_predict
 from sysid.dynamics.integrators import Integrator, IntegratorLike
 from sysid.config.checks import whole_samples
 from sysid.errors import DataError
+from sysid.records.columns import METRICS_COLUMNS, TRACE_COLUMNS, trace_name  # noqa: F401 (their home before)
 from sysid.state import FORCE, FORCE_COMPONENTS, INPUTS, STATE, VELOCITY_INDEX
 
-# one row per file and horizon; RMSE of u, v_m [m/s] and r [rad/s]
-METRICS_COLUMNS = ["scenario", "file", "horizon_s", "n_windows", "rmse_u", "rmse_v", "rmse_r"]
-# one row per window step of a trace (see `trace_frame`)
-TRACE_COLUMNS = (
-    ["window", "t", "t_rel"]
-    + [f"obs_{c}" for c in STATE]
-    + [f"pred_{c}" for c in STATE]
-    + list(INPUTS) + ["wind_velo_relative", "wind_dir_relative"]  # relative wind of the predicted state
-    + [f"{a}{key}" for key in FORCE_COMPONENTS.values() for a in FORCE]  # N, N m
-    + ["knn_distance", "gate_on"]  # NaN / 1 where the model has no gate
-)
 SCENARIO_OF = {Path(v).stem: k for k, v in TEST_FILES.items()}
 
 
@@ -129,12 +118,6 @@ class Evaluation:
     metrics: pd.DataFrame
     traces: dict[str, pd.DataFrame]
     gate_off_share: dict[str, float]
-
-
-def trace_name(file_stem: str, horizon_s: float) -> str:
-    """File name of a trace: ``{file_stem}_h{H}.csv``."""
-    safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", file_stem)
-    return f"{safe}_h{int(round(horizon_s))}.csv"
 
 
 def trace_frame(model: nn.Module, pred: WindowPrediction) -> pd.DataFrame:

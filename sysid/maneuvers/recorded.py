@@ -29,9 +29,9 @@ from torch import nn
 
 from sysid.data.datasets import TEST_FILES, data_dir
 from sysid.data.recordings import Run, read_run
+from sysid.dynamics.equations import eager_predict
 from sysid.dynamics.integrators import IntegratorLike, Method
 from sysid.errors import DataError
-from sysid.fast.compiled import predict
 from sysid.maneuvers.any_model import load_maneuver_model
 from sysid.maneuvers.base import Maneuver, Side, TurningCircle, ZigZag
 from sysid.maneuvers.indices import INDEX_COLUMNS, KIND_INDICES, Track, maneuver_indices
@@ -104,7 +104,7 @@ def _predictions(model: nn.Module, runs: Sequence[Run], starts: Sequence[int], m
         u = r.inputs[s:]
         inputs.append(np.concatenate([u, np.repeat(u[-1:], longest - len(u), 0)]))
     u = torch.tensor(np.stack(inputs, 1), dtype=torch.float64)
-    states = predict(model, x0, u, runs[0].dt, method)
+    states = eager_predict(model, x0, u, runs[0].dt, method)
     out = []
     for i, n in enumerate(lengths):
         share = gate_off_share(model, states[:n - 1, i], u[:n - 1, i])

@@ -29,16 +29,6 @@ from sysid.mmg.motion import Motion, as_channels, as_lanes, motion_of_channels
 from sysid.mmg.propeller import PropellerState
 
 
-def drift_angles(u, v, r, L):
-    """beta = atan2(-v_m, u) [rad] (positive: flow from port ahead) and r' = r L / U [-];
-    both 0 below the speed guard."""
-    U = torch.hypot(u, v)
-    moving = U >= SPEED_GUARD
-    beta = torch.where(moving, safe_atan2(-v, u), 0.0)
-    r_nd = safe_div(r * L, U, moving)
-    return beta, r_nd
-
-
 def wake_yasukawa(beta_P, c, k=None):
     """1 - w_P [-] with the C_1/C_2 correction of Yasukawa & Yoshimura (2015):
     (1 - w_P0) (1 + (1 - exp(-C_1 |beta_P|)) (C_2 - 1)), C_2 = C_2_plus for beta_P > 0."""

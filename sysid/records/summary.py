@@ -1,8 +1,9 @@
-"""summary.json of a run directory as a typed record (`RunSummary`), key for key.
+"""summary.json of a run directory as a typed record (`RunSummary`), key for key, and the
+run's validation loss in words (`VAL_LOSS_DEFINITION`). Torch-free.
 
 Written by `sysid.runs.rundir.write_run`, read by `sysid.runs.directory.RunDir.read_summary`
 (the report, sweeps, seed runs and the CLI read it there). Keys it does not know are kept
-(`extra`, see `sysid.runs.records`): a run written by a newer sysid still opens. Runs written
+(`extra`, see `sysid.records.base`): a run written by a newer sysid still opens. Runs written
 before a key existed read it as its default.
 """
 from __future__ import annotations
@@ -11,9 +12,32 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from sysid.runs.records import JsonRecord
+from sysid.records.base import JsonRecord
 
 LEGACY_VAL_LOSS = "val_loss"  # val_loss_multistep's key in runs written before it was renamed
+# summary.json's "val_loss_definition": the run's one validation loss (`sysid.identify.trainer`)
+VAL_LOSS_DEFINITION = (
+    "val_loss_multistep: mean over the validation windows and their steps k = 1..K of "
+    "sum over u, v_m, r of w_j (predicted_j - recorded_j)^2, w_j = 1 / variance of channel j in the "
+    "training windows; Euler rollouts from each window's recorded first state with its recorded inputs; "
+    "K = [training] steps, or objective_s / dt; the final model, kNN gate included. Validation windows: "
+    "the validation blocks of the training logs, or whole validation logs: [data] validation, or the training "
+    "logs held out by [training] validation = \"files\" (never a test file).")
+
+
+def start_state_verdict(start_states: str, largest: str, largest_sigma: float | None, agrees: bool) -> str:
+    """A start-state check (`sysid.identify.levenberg_marquardt.StartStateCheck.verdict`, and
+    summary.json's ``identification.start_state_check``) in one clause, the same in the
+    training log and the report: how far the estimates move in sigma (`largest_sigma`, None:
+    no finite sigma; `largest`: that coefficient) and whether that stays within the ± 2 sigma."""
+    if largest_sigma is None:
+        return f"with start states {start_states}: no estimate has a finite σ to compare with"
+    said = (f"with start states {start_states} the estimates move by at most "
+            f"{abs(largest_sigma):.1f}σ ({largest})")
+    if agrees:
+        return said + ", within the ± 2σ"
+    return (said + ": beyond the ± 2σ, so the data carry noisy start states or a model-structure error "
+            "and the ± 2σ, which measures the noise only, is a lower bound on the uncertainty")
 
 
 @dataclass(frozen=True)
@@ -61,7 +85,6 @@ class StartStateCheckSummary(JsonRecord):
 
     def verdict(self) -> str:
         """The check in one clause (the training log's and the report's wording)."""
-        from sysid.identify.levenberg_marquardt import start_state_verdict  # torch: only when asked
         return start_state_verdict(self.start_states, self.largest, self.largest_sigma, self.agrees)
 
 
@@ -157,8 +180,8 @@ class VerdictCell(JsonRecord):
 @dataclass(frozen=True)
 class VerdictSummary(JsonRecord):
     """"verdict": the run against its physics baselines
-    (`sysid.evaluation.verdict.BaselineVerdict.to_dict`); `baseline_verdict` gives it back
-    as that dataclass."""
+    (`sysid.evaluation.verdict.BaselineVerdict.to_dict`; ``BaselineVerdict.from_dict(
+    summary.to_json())`` gives it back as that dataclass)."""
 
     model: str
     baselines: tuple[str, ...]
@@ -169,11 +192,6 @@ class VerdictSummary(JsonRecord):
     statement: str
     cells: tuple[VerdictCell, ...]
     extra: dict[str, Any] = field(default_factory=dict)
-
-    def baseline_verdict(self):
-        """The verdict as `sysid.evaluation.verdict.BaselineVerdict`."""
-        from sysid.evaluation.verdict import BaselineVerdict  # torch: only when asked
-        return BaselineVerdict.from_dict(self.to_json())
 
 
 @dataclass(frozen=True)

@@ -44,12 +44,6 @@ def _broken(frame: pd.DataFrame, column: str, scale: float = 1.0) -> tuple[np.nd
     return np.concatenate(ts), np.concatenate(ys)
 
 
-def _measured(frame: pd.DataFrame, column: str, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """The measurement along the whole file (duplicates at window joints dropped)."""
-    m = frame.drop_duplicates("t").sort_values("t")
-    return m["t"].to_numpy(), m[column].to_numpy() * scale
-
-
 def _canvas(into: FigureBase | None, size: tuple[float, float]) -> FigureBase:
     """Draw into `into` (a PDF page's sub-figure) or a new constrained-layout figure of
     `size` [in]."""

@@ -14,7 +14,7 @@ from sysid.protocol.paper import run_label
 from sysid.report.quality import quality_rows
 from sysid.report.source import ReportSource, RunRecord
 from sysid.runs.reproduction import Reproduction
-from sysid.runs.summary import RunSummary, StartStateCheckSummary
+from sysid.records.summary import RunSummary, StartStateCheckSummary
 from sysid.store.versions import software_versions
 
 MODEL_TEXT = {

@@ -20,9 +20,9 @@ from sysid.data.splits import PAPER_TEST_STEMS
 from sysid.evaluation.verdict import BaselineVerdict, seed_mean_verdict
 from sysid.store.manifest import has_manifest, verify_manifest
 from sysid.runs.directory import RunDir, read_table
-from sysid.runs.records import read_json_object
+from sysid.records.base import read_json_object
 from sysid.runs.reproduction import Reproduction
-from sysid.runs.summary import RunSummary
+from sysid.records.summary import RunSummary
 from sysid.sweep.summary import SweepSummary
 from sysid.protocol.seeds import seed_metrics
 
@@ -52,7 +52,7 @@ class RunRecord:
         if self.summary.verdict is None:
             return None
         try:
-            return self.summary.verdict.baseline_verdict()
+            return BaselineVerdict.from_dict(self.summary.verdict.to_json())
         except (KeyError, TypeError, ValueError) as exc:
             raise CheckpointError(f"{self.run_dir.summary}: malformed verdict ({exc})") from None
 

@@ -25,7 +25,7 @@ A **run directory** (``sysid train CONFIG -o runs/NAME``)::
                         "k": (), "alpha": ()}
     history.csv        stage, epoch, train_loss, train_velocity, train_penalty, early_stopping_loss
                        (L_v on the validation windows during training, before the kNN gate), seconds
-    metrics.csv        `sysid.evaluation.evaluate.METRICS_COLUMNS`
+    metrics.csv        `sysid.records.columns.METRICS_COLUMNS`
     baseline_metrics.csv  the physics baselines on the same test logs: "baseline" (its label,
                        `sysid.evaluation.verdict`) + METRICS_COLUMNS; with a verdict and test logs
     traces/            one CSV per (file, horizon): ``{file_stem}_h{H}.csv``, `TRACE_COLUMNS`
@@ -34,7 +34,7 @@ A **run directory** (``sysid train CONFIG -o runs/NAME``)::
 Untrained MMG-only runs have no model.pt, knn.pt or history.csv. A run is written into a
 staging directory and moved into place complete (`write_run`); it is read through
 `sysid.runs.directory.RunDir`, which refuses a run whose manifest is missing or disagrees
-with its files. summary.json is `sysid.runs.summary.RunSummary`, knn.pt
+with its files. summary.json is `sysid.records.summary.RunSummary`, knn.pt
 `sysid.runs.knn_bank.KnnBank`.
 
 A **reproduction directory** (``sysid reproduce -o OUTDIR``)::
@@ -69,11 +69,10 @@ from sysid.config.experiment import Experiment, ship_overrides
 from sysid.store.files import write_csv, write_text
 from sysid.mmg.model import MMG
 from sysid.hybrid.force_models import CorrectedModel, build_model
-from sysid.identify.trainer import VAL_LOSS_DEFINITION
 from sysid.runs.directory import BASELINE_METRICS_COLUMNS, RunDir
 from sysid.runs.knn_bank import KnnBank
-from sysid.runs.summary import (DataSummary, GateSummary, IdentificationSummary, RunSummary, TrainingDetails,
-                                UncertaintySummary, VerdictSummary)
+from sysid.records.summary import (VAL_LOSS_DEFINITION, DataSummary, GateSummary, IdentificationSummary, RunSummary,
+                                   TrainingDetails, UncertaintySummary, VerdictSummary)
 from sysid.runs.tensor_files import save_tensors
 from sysid.store.staging import staged_directory
 from sysid.store.versions import software_versions
