@@ -14,7 +14,7 @@ Every such decision goes into the report. Time stamps are snapped to the nominal
 from __future__ import annotations
 
 import os
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 
 import numpy as np
 import pandas as pd

@@ -12,6 +12,7 @@ from sysid import logs
 from sysid.cli.app import app
 from sysid.cli.interrupts import on_interrupt
 from sysid.cli.outputs import claim, experiment_inputs
+from sysid.config.choices import Solver
 from sysid.store.target import OutputKind
 
 
@@ -85,7 +86,7 @@ def train(
     if mlflow:
         from sysid.tracking import EpochLogger, Tracker, config_params
         tracker = Tracker(mlflow, exp.experiment.name)
-        tracked = tracker.start(output.name, config_params(exp.to_toml()),
+        tracked = tracker.start(output.name, config_params(exp),
                                 tags={"sysid.kind": "run", "sysid.output": str(output.resolve())})
     try:
         result = run_experiment(exp, output, tests, runs, data, log=logs.indented(), resume=resume,
@@ -107,7 +108,7 @@ def train(
     detail = ""
     if t is not None:
         steps = []
-        if (t.identification or {}).get("solver") == "levenberg_marquardt":  # no epochs in that stage
+        if (t.identification or {}).get("solver") == Solver.LEVENBERG_MARQUARDT:  # no epochs in that stage
             steps.append(f"{t.identification['iterations']} Levenberg-Marquardt iterations")
         if not steps or "train" in t.stopped:
             steps.append(f"{t.epochs} epochs, best {t.best_epoch}")

@@ -50,6 +50,7 @@ the config file that names it (`load_experiment`); a resolved config holds absol
 from __future__ import annotations
 
 import dataclasses
+import enum
 import math
 import os
 from dataclasses import dataclass, field, fields
@@ -228,20 +229,36 @@ class Experiment:
             changes[name] = dataclasses.replace(getattr(self, name), **values)
         return dataclasses.replace(self, **changes)
 
+    def to_table(self) -> dict[str, dict[str, Any]]:
+        """The resolved config as the TOML document `to_toml` writes (every default filled
+        in): section -> option -> plain value (choices as their words, arrays as lists), as
+        ``tomllib.loads(exp.to_toml())`` reads it back."""
+        return {section.name: {f.name: _plain(getattr(getattr(self, section.name), f.name))
+                               for f in fields(getattr(self, section.name))}
+                for section in fields(self) if section.name != "source"}
+
     def to_toml(self) -> str:
         """The resolved config as TOML (every default filled in)."""
         lines = []
-        for section in fields(self):
-            if section.name == "source":
-                continue
-            lines.append(f"[{section.name}]")
-            for f in fields(getattr(self, section.name)):
-                value = getattr(getattr(self, section.name), f.name)
-                if isinstance(value, ColumnMap):
-                    value = value.as_table()
-                lines.append(f"{f.name} = {_toml_value(value)}")
+        for section, options in self.to_table().items():
+            lines.append(f"[{section}]")
+            lines += [f"{name} = {_toml_value(value)}" for name, value in options.items()]
             lines.append("")
         return "\n".join(lines)
+
+
+def _plain(value: Any) -> Any:
+    """An option's value as TOML data: a choice as its word, a tuple as a list, a column
+    map as its ``[data.columns]`` table."""
+    if isinstance(value, ColumnMap):
+        return value.as_table()
+    if isinstance(value, enum.Enum):
+        return value.value
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    return value
 
 
 def _toml_value(value: Any) -> str:

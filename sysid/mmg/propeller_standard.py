@@ -24,7 +24,7 @@ from __future__ import annotations
 import torch
 
 from sysid.mmg.coefficient_lookup import coefficient_vector, view_of
-from sysid.mmg.guards import SPEED_GUARD, choose, safe_atan2, safe_div
+from sysid.mmg.guards import choose
 from sysid.mmg.motion import Motion, as_channels, as_lanes, motion_of_channels
 from sysid.mmg.propeller import PropellerState
 

@@ -201,7 +201,7 @@ def load_ship(name_or_path: str | os.PathLike = "esso_osaka",
     models = _read_models(doc, src)
     spec = active_parameters(models)
     params: dict[str, float] = {}
-    for name, (section, low, high) in spec.items():
+    for name, (section, _low, _high) in spec.items():
         table = doc.get(section)
         if not isinstance(table, dict):
             raise ShipDefinitionError(f"{src}: missing section [{section}]")

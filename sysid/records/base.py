@@ -5,7 +5,8 @@ naming the file and the field; `to_json` gives back the object key for key, in t
 the dataclass fields, so that ``json.dumps(record.to_json(), indent=2)`` writes the bytes
 sysid has always written. The field types drive both directions: a field typed as another
 record (or a tuple of them) nests, ``tuple[...]`` is a JSON array, ``dict[str, ...]`` an
-object with free keys (file names, coefficient names), ``X | None`` may be null.
+object with free keys (file names, coefficient names), ``X | None`` may be null, and a closed
+choice (`sysid.config.choices.Choice`) is its enum, written as the same word it was read from.
 
 Unknown keys are kept, not refused: they are written by a newer sysid (a block added to a
 summary) and a reader must still open such a run. They live in `extra` and are written after
@@ -14,6 +15,7 @@ the known keys, in their order.
 from __future__ import annotations
 
 import dataclasses
+import enum
 import json
 import os
 import types
@@ -129,6 +131,12 @@ def _parse(value: Any, hint: Any, source: str, at: str) -> Any:
         return _parse(value, inner, source, at)
     if isinstance(hint, type) and issubclass(hint, JsonRecord):
         return hint.from_json(value, source, at)
+    if isinstance(hint, type) and issubclass(hint, enum.StrEnum):
+        words = [m.value for m in hint]
+        if not isinstance(value, str) or value not in words:
+            raise CheckpointError(f"{source}: {at}: expected one of {', '.join(words)}, got {_kind(value)} "
+                                  f"{value!r:.40}; {FIX}")
+        return hint(value)
     if origin is tuple:
         if not isinstance(value, list):
             raise CheckpointError(f"{source}: {at}: expected an array, got {_kind(value)}; {FIX}")
@@ -150,6 +158,8 @@ def _plain(value: Any) -> Any:
     """A field value as JSON data (records to objects, tuples to arrays)."""
     if isinstance(value, JsonRecord):
         return value.to_json()
+    if isinstance(value, enum.Enum):
+        return value.value
     if isinstance(value, (tuple, list)):
         return [_plain(v) for v in value]
     if isinstance(value, dict):

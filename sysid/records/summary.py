@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from sysid.config.choices import GateSpace, ModelKind, Solver, StartStates
 from sysid.records.base import JsonRecord
 
 LEGACY_VAL_LOSS = "val_loss"  # val_loss_multistep's key in runs written before it was renamed
@@ -73,7 +74,7 @@ class StartStateCheckSummary(JsonRecord):
     """"identification.start_state_check": the Levenberg-Marquardt fit again with the other
     start-state treatment, its distance from the configured fit in sigma and its validation loss."""
 
-    start_states: str                         # the other treatment: "recorded" | "estimated"
+    start_states: StartStates                 # the other treatment
     coefficients: dict[str, float]
     difference_sigma: dict[str, float | None]  # (other - configured) / sigma; None: no finite sigma
     largest: str
@@ -96,8 +97,8 @@ class IdentificationSummary(JsonRecord):
     start_state_check."""
 
     SPARSE = True
-    solver: str | None = None                # "gradient" | "levenberg_marquardt"
-    start_states: str | None = None          # "recorded" | "estimated"
+    solver: Solver | None = None
+    start_states: StartStates | None = None
     prior_weight: float | None = None
     iterations: int | None = None
     epochs: int | None = None
@@ -118,7 +119,7 @@ class GateSummary(JsonRecord):
     SPARSE = True
     k: int | None = None
     alpha: float | None = None
-    space: str | None = None                 # "features" | "inputs"
+    space: GateSpace | None = None
     bank: int | None = None
     threshold: float | None = None
     off_share: dict[str, float] | None = None
@@ -246,7 +247,7 @@ class RunSummary(JsonRecord):
     """
 
     name: str
-    model: str = "mmg"                       # "mmg" | "nn" | "hybrid"
+    model: ModelKind = ModelKind.MMG
     status: str = "complete"
     dataset: str | None = None
     ship: str | None = None

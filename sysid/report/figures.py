@@ -234,7 +234,7 @@ def trajectories(traces: list[ModelTrace], L: float, B: float, title: str,
 
 def _spans(t: np.ndarray, flag: np.ndarray) -> list[tuple[float, float]]:
     """Intervals [s] where `flag` holds, each sample covering [t - 0.5, t + 0.5] s."""
-    spans, start = [], None
+    spans, start, prev = [], None, 0.0  # prev: the sample before; read only after one
     for ti, f in zip(t, flag):
         if f and start is None:
             start = ti
@@ -329,7 +329,7 @@ def fnn_error_scatter(groups: list[tuple[str, str, pd.DataFrame]], title: str,
     pairs = [("X", "u", "|X_NN| [N]", "|error of u| [m/s]"), ("Y", "v", "|Y_NN| [N]", "|error of v_m| [m/s]"),
              ("N", "r", "|N_NN| [N m]", "|error of r| [rad/s]")]
     for ax, (axis, col, xlabel, ylabel) in zip(axes, pairs):
-        for label, colour, frame in groups:
+        for _label, colour, frame in groups:
             ax.scatter(np.abs(frame[f"{axis}NN"]), np.abs(frame[f"pred_{col}"] - frame[f"obs_{col}"]),
                        s=4, color=colour, alpha=0.35, lw=0, rasterized=len(frame) > 5000)
         ax.set_xlabel(xlabel)
@@ -347,7 +347,7 @@ def loss_curves(histories: list[tuple[str, str, pd.DataFrame, int | None]], titl
     fig = _canvas(into, (10.0, 4.6))
     ax = fig.subplots()
     positive, marked = True, set()
-    for label, colour, hist, best in histories:
+    for _label, colour, hist, best in histories:
         x = hist["epoch"].to_numpy()
         last = np.ones(len(hist), dtype=bool)
         if "stage" in hist.columns and hist["stage"].nunique() > 1:  # stages restart their epochs

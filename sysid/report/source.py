@@ -70,9 +70,9 @@ class RunRecord:
         return RunDir(self.path)
 
     @property
-    def model(self) -> str:
-        """"mmg", "nn" or "hybrid"."""
-        return self.summary.model.lower()
+    def model(self) -> ModelKind:
+        """The run's model (written "mmg", "nn" or "hybrid"; checked by `read_run_dir`)."""
+        return ModelKind(self.summary.model.lower())
 
     @property
     def dataset(self) -> str:
@@ -166,7 +166,7 @@ class ReportSource:
 
 def _run_order(run: RunRecord) -> tuple:
     """MMG (paper X'vr first), NN, hybrid; data sets in order."""
-    return (list(ModelKind).index(ModelKind(run.model)), run.name != "mmg_paper", run.dataset, run.name)
+    return (list(ModelKind).index(run.model), run.name != "mmg_paper", run.dataset, run.name)
 
 
 def read_run_dir(path: Path) -> RunRecord:

@@ -38,7 +38,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -132,7 +131,7 @@ class SweepSpec:
 
 def base_document(exp: Experiment) -> dict:
     """An experiment as a TOML document (every option filled in)."""
-    return tomllib.loads(exp.to_toml())
+    return exp.to_table()
 
 
 def apply_values(base: Experiment, values: dict[str, Any], seed: int, name: str,
