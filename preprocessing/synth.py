@@ -84,7 +84,7 @@ def truth_from_processed(run: pd.DataFrame) -> pd.DataFrame:
     x = run["x_position_mid"].iloc[0] + cumulative_trapezoid(ex, t, initial=0.0)
     y = run["y_position_mid"].iloc[0] + cumulative_trapezoid(ey, t, initial=0.0)
     ut, gt = run["wind_velo_true"].to_numpy(float), run["wind_dir_true"].to_numpy(float)
-    ua, ga = anemometer.apparent_at(*flow_velocity(ut, gt), u, v, r, psi, (0.0, 0.0))
+    ua, ga = anemometer.apparent_at(*flow_velocity(ut, gt), u, v, r, psi, (0.0, 0.0))  # type: ignore[call-arg]
     out = pd.DataFrame({
         "t": t, "x_position_mid": x, "u_velo": u, "y_position_mid": y, "vm_velo": v,
         "psi_hat": wrap_pi(psi), "r_angvelo": r, "n_prop": run["n_prop"].to_numpy(float),
@@ -162,7 +162,7 @@ def synthesise(run: pd.DataFrame, layout: SensorLayout, settings: SynthSettings 
             cols[f"gnss_{name}_lat"], cols[f"gnss_{name}_lon"] = la, lo
         gnss_cols = [c for c in cols if c.startswith("gnss_")]
     else:
-        for k, val in ant.items():
+        for k, val in ant.items():  # type: ignore[assignment]
             cols[f"gnss_{k}"] = val
         gnss_cols = [f"gnss_{k}" for k in ant]
     cols["fog_yaw_rate"] = fog
@@ -218,7 +218,7 @@ def score(segments: list[pd.DataFrame], truth: pd.DataFrame, dropouts=(), margin
                      ("x", "x_position_mid"), ("y", "y_position_mid"),
                      ("wind_speed", "wind_velo_true"), ("wind_rel_speed", "wind_velo_relative_mid")):
         out[key] = rms(est[col] - tru[col])
-    out["pos"] = float(np.hypot(out["x"], out["y"]))
+    out["pos"] = float(np.hypot(out["x"], out["y"]))  # type: ignore[assignment]
     for key, sp, col in (("wind_dir_deg", "wind_velo_true", "wind_dir_true"),
                          ("wind_rel_dir_deg", "wind_velo_relative_mid", "wind_dir_relative_mid")):
         m = tru[sp].to_numpy() >= min_wind

@@ -125,8 +125,8 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(INTERRUPTED)
     except Exception as exc:
         if _is_usage_error(exc):
-            exc.show()
-            sys.exit(exc.exit_code)
+            exc.show()  # type: ignore[attr-defined]
+            sys.exit(exc.exit_code)  # type: ignore[attr-defined]
         if _is_abort(exc):  # click turns Ctrl-C into Abort
             typer.secho(f"interrupted: {interrupt_note()}", fg=typer.colors.YELLOW, err=True)
             sys.exit(INTERRUPTED)

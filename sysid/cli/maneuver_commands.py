@@ -52,7 +52,7 @@ def parse_maneuvers(turning: list[str], zigzag: list[str], crash_stop: bool, sid
     sides = (Side.STARBOARD, Side.PORT) if side == "both" else (Side(side),)
     if not (turning or zigzag or crash_stop):
         return imo_maneuvers(sides)
-    out = []
+    out: list[TurningCircle | ZigZag | CrashStop] = []
     for text in turning:
         angle = _number("--turning", text, "deg")
         out += [TurningCircle(angle, s) for s in sides]

@@ -80,7 +80,7 @@ def synth_raw(
         seed=seed, gnss_noise=gnss_noise, gnss_correlated=gnss_correlated, outliers=outliers,
         dropouts=tuple(_parse_dropout(d) for item in (dropout or []) for d in item.split(",")),
         dropout_rows=dropout_rows,
-        latlon=latlon, **kwargs)
+        latlon=latlon, **kwargs)  # type: ignore[arg-type]
     try:
         run = synth.read_processed(processed)
         room = max(0, len(run) - 2 * synth.OUTLIER_MARGIN)
@@ -150,8 +150,8 @@ def preprocess(
             work = functools.partial(pipeline.process_file, layout=layout, settings=settings, outdir=str(staging))
             results = in_workers(work, paths, jobs, on_result=lambda r: bar.update())
         else:
-            for p in paths:
-                results.append(pipeline.process_file(p, layout, settings, str(staging)))
+            for p in paths:  # type: ignore[assignment]
+                results.append(pipeline.process_file(p, layout, settings, str(staging)))  # type: ignore[arg-type]
                 bar.update()
         bar.close()
         if not any(r["ok"] for r in results):

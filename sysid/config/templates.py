@@ -160,7 +160,7 @@ def _data_keys() -> set[str]:
 
 # keys `sysid init` sets for the user's project (others keep the typed config's default)
 def _project_values(name: str, ship_file: str) -> dict[tuple[str, str], object]:
-    values = {("experiment", "name"): name, ("experiment", "model"): "hybrid", ("experiment", "ship"): ship_file}
+    values: dict[tuple[str, str], object] = {("experiment", "name"): name, ("experiment", "model"): "hybrid", ("experiment", "ship"): ship_file}
     if "train" in _data_keys():  # training and test logs named in the config
         values.update({("data", "train"): ["logs/*.csv"], ("data", "test"): ["test/*.csv"]})
     else:

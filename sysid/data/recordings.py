@@ -159,7 +159,7 @@ def _quality_issues(t: np.ndarray, values: np.ndarray, period: float):
         suspect.append((float(t[i]), float(t[i + 1])))
     frozen = (np.diff(values[:, 1]) == 0) & (np.diff(values[:, 5]) == 0)  # x and psi unchanged
     run_len = max(2, int(round(1.0 / period)))
-    i = 0
+    i = 0  # type: ignore[assignment]
     while i < len(frozen):
         if frozen[i]:
             j = i

@@ -42,7 +42,7 @@ class Integrator:
     @classmethod
     def of(cls, value: "IntegratorLike") -> "Integrator":
         """An `Integrator` from an `Integrator`, a `Method` or a method name."""
-        return value if isinstance(value, cls) else cls(Method.parse(value))
+        return value if isinstance(value, Integrator) else cls(Method.parse(value))
 
 
 IntegratorLike = Union[Integrator, Method, str]

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -67,7 +67,7 @@ def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
     """Predict the protocol windows of every run in one batched integration (compiled
     when `method` is a compiled `Integrator`: only then is `sysid.fast` imported)."""
     integrator = Integrator.of(method)
-    predict = eager_predict
+    predict: Callable[..., torch.Tensor] = eager_predict
     if integrator.compiled:
         from sysid.fast.compiled import predict
     chunks, meta = [], []

@@ -311,7 +311,7 @@ class StartStateCheck:
 
 
 def start_state_check(model: nn.Module, windows, names: Sequence[str], fit: LevenbergMarquardtFit,
-                      sigma: Sequence[float], weights: torch.Tensor | None = None, method: Method = Method.EULER,
+                      sigma: Sequence[float] | np.ndarray, weights: torch.Tensor | None = None, method: Method = Method.EULER,
                       prior: Mapping[str, float] | None = None, prior_weight: float = 0.0,
                       iterations: int = 40) -> StartStateCheck:
     """Fit `names` again with the other start-state treatment than `fit`'s, from the values

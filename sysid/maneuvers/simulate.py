@@ -80,7 +80,7 @@ def default_conditions(model: nn.Module, ship: Ship, *, speed: float | None = No
     else:
         sources["duration"] = "given"
     sources["wind"] = "calm water" if wind_speed == 0.0 else "given"
-    return Conditions(speed, rps, rudder_rate, dt, duration, wind_speed, wind_direction, method), sources
+    return Conditions(speed, rps, rudder_rate, dt, duration, wind_speed, wind_direction, method), sources  # type: ignore[arg-type]
 
 
 def ahead_only(model: nn.Module) -> bool:

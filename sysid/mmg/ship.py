@@ -279,7 +279,7 @@ def _load_sensors(table: object, src: str) -> SensorLayout:
         if key not in table:
             raise ShipDefinitionError(f"{src}: [sensors] {key} is missing")
     try:
-        return SensorLayout(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in table.items()})
+        return SensorLayout(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in table.items()})  # type: ignore[arg-type]
     except (TypeError, ValueError) as exc:
         raise ShipDefinitionError(f"{src}: {exc}") from None
 

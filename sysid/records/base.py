@@ -51,6 +51,8 @@ class JsonRecord:
     """
 
     SPARSE: ClassVar[bool] = False
+    __dataclass_fields__: ClassVar[dict[str, Any]]  # every subclass is a dataclass
+    extra: dict[str, Any]
 
     @classmethod
     def from_json(cls, data: Any, source: str = "", at: str = "") -> typing.Self:
@@ -71,7 +73,7 @@ class JsonRecord:
                 raise CheckpointError(f"{source}: key {key!r} is missing; {FIX}")
             elif not _has_default(f):
                 values[f.name] = None
-        return cls(**values, extra={k: v for k, v in data.items() if k not in known})
+        return cls(**values, extra={k: v for k, v in data.items() if k not in known})  # type: ignore[call-arg]
 
     @classmethod
     def read(cls, path: str | os.PathLike) -> typing.Self:

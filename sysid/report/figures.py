@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 import pandas as pd
+from matplotlib.artist import Artist
 from matplotlib.figure import Figure, FigureBase
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
@@ -50,7 +52,7 @@ def _canvas(into: FigureBase | None, size: tuple[float, float]) -> FigureBase:
     return into if into is not None else Figure(figsize=size, layout="constrained")
 
 
-def _legend_top(fig: Figure, handles, ncol: int | None = None) -> None:
+def _legend_top(fig: FigureBase, handles: Sequence[Artist], ncol: int | None = None) -> None:
     """Figure legend in its own row under the axes (the title stays alone on top)."""
     fig.legend(handles=handles, loc="outside lower center", ncol=ncol or min(len(handles), 6),
                frameon=False, fontsize=8)
@@ -79,7 +81,7 @@ def error_boxplots(traces: list[ModelTrace], title: str, into: FigureBase | None
                       ha="right", fontsize=8)
         ax.set_ylabel(f"|error of {name}| [{unit}]")
         ax.set_title(name)
-    handles = [Patch(facecolor=t.colour, edgecolor="black", label=t.label) for t in traces]
+    handles: list[Artist] = [Patch(facecolor=t.colour, edgecolor="black", label=t.label) for t in traces]
     handles += [Line2D([], [], color="black", label="median"),
                 Line2D([], [], marker="D", ls="", markerfacecolor="white", markeredgecolor="black",
                        label="mean")]
@@ -256,7 +258,7 @@ def knn_distance(trace: ModelTrace, threshold: float | None, title: str,
     frame = trace.frame.sort_values(["window", "t_rel"])
     t, d = _broken(frame, "knn_distance")
     ax.plot(t, d, color=KNN_LINE, lw=1.1)
-    handles = [Line2D([], [], color=KNN_LINE, label="kNN distance")]
+    handles: list[Artist] = [Line2D([], [], color=KNN_LINE, label="kNN distance")]
     if threshold is not None:
         ax.axhline(threshold, color=THRESHOLD, ls="--", lw=1.4)
         handles.append(Line2D([], [], color=THRESHOLD, ls="--", label=f"threshold {threshold:.3g}"))
@@ -448,7 +450,7 @@ def seed_boxplots(models: list[SeedSpread], scenarios: list[str], title: str,
         ax.set_xticks(range(len(scenarios)), scenarios, rotation=35, ha="right", fontsize=8)
         ax.set_ylabel(f"RMSE of {name} [{unit}]")
         ax.set_title(name)
-    handles = [Patch(facecolor=m.colour, edgecolor="black", label=m.label) for m in models]
+    handles: list[Artist] = [Patch(facecolor=m.colour, edgecolor="black", label=m.label) for m in models]
     handles.append(Line2D([], [], marker=".", ls="", color="black", label="one seed"))
     if paper:
         handles.append(Line2D([], [], color="black", lw=1.6, label="paper's hybrid"))
