@@ -137,7 +137,8 @@ def preprocess(
         stems[p.stem] = p
     for p in raw:
         if not p.is_file():
-            raise DataError(f"{p}: file not found")
+            from sysid.data.csvfiles import not_a_file
+            raise DataError(f"{p}: {not_a_file(p)}")
     target = claim(outdir, OutputKind.PREPROCESSING, [*raw, ship_file(ship)], overwrite)  # before any work
     layout = load_ship(ship).sensors
     paths = [str(p) for p in raw]

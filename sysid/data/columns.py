@@ -133,7 +133,7 @@ class ColumnMap:
                 else:
                     missing.append(spec)
                 continue
-            values = pd.to_numeric(frame[spec.column], errors="coerce")
+            values = _numbers(frame[spec.column], channel, path)
             text = frame[spec.column].notna() & values.isna()
             if text.any():
                 row = int(np.argmax(text.to_numpy()))
@@ -165,6 +165,23 @@ class ColumnMap:
             return f"constant {spec.constant:g} {SI_UNIT[channel]}"
         named = _BRACKET.search(spec.column) and not spec.unit  # the unit is in the column's name
         return f"column {spec.column!r}" if named else f"column {spec.column!r} [{spec.resolved_unit}]"
+
+
+def _numbers(column: pd.Series, channel: str, path) -> pd.Series:
+    """A log's column as numbers: a time column of timestamps or durations in seconds (from
+    the first sample); a boolean or date column for any other channel is a `DataError`."""
+    if channel == "t" and pd.api.types.is_datetime64_any_dtype(column):
+        return (column - column.iloc[0]).dt.total_seconds()
+    if channel == "t" and pd.api.types.is_timedelta64_dtype(column):
+        return column.dt.total_seconds()
+    kind = ("true/false values" if pd.api.types.is_bool_dtype(column)
+            or (column.dtype == object and column.map(lambda v: isinstance(v, (bool, np.bool_))).any())
+            else "dates or durations" if pd.api.types.is_datetime64_any_dtype(column)
+            or pd.api.types.is_timedelta64_dtype(column) else None)
+    if kind is not None:
+        raise DataError(f"{path}: column {column.name!r} (channel {channel}) holds {kind}, not numbers "
+                        f"in {SI_UNIT[channel]}; map channel {channel} to a numeric column in [data.columns]")
+    return pd.to_numeric(column, errors="coerce")
 
 
 def parse_columns(table: Any, source: str) -> ColumnMap:
@@ -209,4 +226,10 @@ def parse_columns(table: Any, source: str) -> ColumnMap:
     twice = sorted({c for c in columns if columns.count(c) > 1})
     if twice:
         raise ConfigError(f"{where} column {twice[0]!r} is mapped onto more than one channel")
+    mapped = {s.channel for s in specs}
+    for spec in specs:  # a column that is also the default of a channel left unmapped: read twice
+        other = next((c for c, name in DEFAULT_COLUMNS.items() if name == spec.column and c not in mapped), None)
+        if other is not None:
+            raise ConfigError(f"{where} {spec.channel} = {spec.column!r}: that column is also read for channel "
+                              f"{other} (its default column); map {other} to its own column too")
     return ColumnMap(tuple(specs), source)
