@@ -66,13 +66,40 @@ class SynthResult:
 
 
 def read_processed(path) -> pd.DataFrame:
-    """A processed-schema CSV with bare column names."""
-    df = pd.read_csv(path)
-    df.columns = [c.split(" [")[0].strip() for c in df.columns]
+    """A processed-schema CSV with bare column names (`processed_run`)."""
+    return processed_run(pd.read_csv(path), path)
+
+
+def processed_run(df: pd.DataFrame, path) -> pd.DataFrame:
+    """A processed run read from `path` with bare column names, checked: every channel
+    present, every cell a finite number, time strictly increasing (`schema.RawLogError`
+    naming the file, column and row otherwise). All-empty rows are dropped."""
+    df = df.copy()
+    df.columns = [str(c).split(" [")[0].strip() for c in df.columns]
     missing = [c for c in schema.PROCESSED if c not in df.columns]
     if missing:
         raise schema.RawLogError(f"{path}: column {missing[0]}: missing from processed run")
-    return df.dropna(how="all").reset_index(drop=True)
+    kept = df.dropna(how="all")
+    rows = kept.index.to_numpy() + 2   # data rows of the file (the header is row 1)
+    df = kept.reset_index(drop=True)
+    if len(df) < 2:
+        raise schema.RawLogError(f"{path}: fewer than two data rows")
+    used = [c for c in schema.PROCESSED if "relative" not in c]   # the relative wind is recomputed
+    values = df[used].apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
+    bad = ~np.isfinite(values)
+    if bad.any():
+        row, col = np.argwhere(bad)[0]
+        raise schema.RawLogError(f"{path}: column {used[col]} is empty, NaN or not a number at "
+                                 f"data row {rows[row]} ({int(bad.any(axis=1).sum())} bad rows); a truth is built "
+                                 "from complete rows only: fill or cut them")
+    t = values[:, used.index("t")]
+    step = np.diff(t)
+    if (step <= 0).any():
+        k = int(np.argmax(step <= 0)) + 1
+        raise schema.RawLogError(f"{path}: column t is not strictly increasing at data row {rows[k]} "
+                                 f"(t = {t[k]:g} s after {t[k - 1]:g} s): remove the repeated or earlier time")
+    df[used] = values
+    return df
 
 
 def truth_from_processed(run: pd.DataFrame) -> pd.DataFrame:

@@ -75,11 +75,13 @@ def run(argv: list[str]) -> None:
     embedding)."""
     command = typer.main.get_command(app)
     _with_epilog(command)
+    failed = True
     try:
         code = command(args=common_options_first(expand_multi_value(list(argv))), prog_name="sysid",
                        standalone_mode=False)
+        failed = isinstance(code, int) and code != 0
     finally:
-        release()  # the output locks the command took
+        release(failed)  # the output locks the command took; a failed command's new empty folders
     # typer >= 0.29 turns Ctrl-C into Exit(130) and, outside standalone mode, returns the code
     if code == INTERRUPTED:
         raise KeyboardInterrupt

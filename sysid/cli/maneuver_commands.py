@@ -81,6 +81,9 @@ def parse_wind(text: str | None) -> tuple[float, float]:
     speed, direction = _number("--wind", parts[0], "m/s"), _number("--wind", parts[1], "deg")
     if not 0.0 <= speed <= 100.0:
         raise _error(f"--wind {text!r}: speed {speed:g} m/s must be in [0, 100]")
+    if not -360.0 <= direction <= 360.0:  # far beyond, cos and sin of it are rounding noise
+        raise _error(f"--wind {text!r}: direction {direction:g} deg must be in [-360, 360] (the direction the "
+                     "wind comes from, e.g. 45)")
     return speed, math.radians(direction)
 
 

@@ -46,6 +46,10 @@ def train(
     if threads is not None:
         checks.threads("--threads", threads)
     exp = load_experiment(config)
+    if exp.ensemble.members:  # a run of averaged trained runs: nothing to train, and no weights of its own
+        raise ConfigError(f"{config}: [ensemble] members: sysid train trains one model, and its run would name "
+                          "members relative to a run directory they are not beside; remove [ensemble] (an "
+                          "ensemble of seeds is written by sysid reproduce --seeds N)")
     if epochs is not None:
         exp = exp.replace(training={"epochs": epochs})
     if threads is not None:

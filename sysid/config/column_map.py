@@ -163,4 +163,10 @@ def parse_columns(table: Any, source: str) -> ColumnMap:
     twice = sorted({c for c in columns if columns.count(c) > 1})
     if twice:
         raise ConfigError(f"{where} column {twice[0]!r} is mapped onto more than one channel")
+    mapped = {s.channel for s in specs}
+    for spec in specs:  # a column that is also the default of a channel left unmapped: read twice
+        other = next((c for c, name in DEFAULT_COLUMNS.items() if name == spec.column and c not in mapped), None)
+        if other is not None:
+            raise ConfigError(f"{where} {spec.channel} = {spec.column!r}: that column is also read for channel "
+                              f"{other} (its default column); map {other} to its own column too")
     return ColumnMap(tuple(specs), source)

@@ -31,7 +31,7 @@ def to_channels(columns: ColumnMap, frame: pd.DataFrame, path) -> pd.DataFrame:
             else:
                 missing.append(spec)
             continue
-        values = pd.to_numeric(frame[spec.column], errors="coerce")
+        values = _numbers(frame[spec.column], channel, path)
         text = frame[spec.column].notna() & values.isna()
         if text.any():
             row = int(np.argmax(text.to_numpy()))
@@ -55,3 +55,20 @@ def to_channels(columns: ColumnMap, frame: pd.DataFrame, path) -> pd.DataFrame:
                         f"{', '.join(map(repr, frame.columns[:16]))}{', ...' if len(frame.columns) > 16 else ''})"
                         f"; {fix}")
     return pd.DataFrame(out, index=frame.index)
+
+
+def _numbers(column: pd.Series, channel: str, path) -> pd.Series:
+    """A log's column as numbers: a time column of timestamps or durations in seconds (from
+    the first sample); a boolean or date column for any other channel is a `DataError`."""
+    if channel == "t" and pd.api.types.is_datetime64_any_dtype(column):
+        return (column - column.iloc[0]).dt.total_seconds()
+    if channel == "t" and pd.api.types.is_timedelta64_dtype(column):
+        return column.dt.total_seconds()
+    kind = ("true/false values" if pd.api.types.is_bool_dtype(column)
+            or (column.dtype == object and column.map(lambda v: isinstance(v, (bool, np.bool_))).any())
+            else "dates or durations" if pd.api.types.is_datetime64_any_dtype(column)
+            or pd.api.types.is_timedelta64_dtype(column) else None)
+    if kind is not None:
+        raise DataError(f"{path}: column {column.name!r} (channel {channel}) holds {kind}, not numbers "
+                        f"in {SI_UNIT[channel]}; map channel {channel} to a numeric column in [data.columns]")
+    return pd.to_numeric(column, errors="coerce")

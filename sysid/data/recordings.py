@@ -21,7 +21,7 @@ import torch
 
 from preprocessing.schema import PROCESSED, PROCESSED_CHANNEL, PROCESSED_PLAUSIBLE_ABS
 from sysid.data.columns import QUANTITY, RELATIVE_WIND, SI_UNIT, ColumnMap, to_channels
-from sysid.data.csvfiles import LOG_SUFFIXES, read_table
+from sysid.data.csvfiles import LOG_SUFFIXES, not_a_file, read_table
 from sysid.errors import DataError
 from sysid.mmg.wind import relative_wind
 from sysid.state import INPUTS, STATE
@@ -218,6 +218,8 @@ def expand_paths(items: Iterable[str | os.PathLike]) -> list[Path]:
             out += found
         elif p.is_file():
             out.append(p)
+        elif p.exists():
+            raise DataError(f"{p}: {not_a_file(p)}")
         else:
             raise DataError(f"{p}: no such file or directory")
     return out

@@ -77,7 +77,7 @@ def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
             dt = run.dt
         elif abs(run.dt - dt) > 1e-9:
             raise DataError(f"{run.path}: sample period {run.dt} s differs from {dt} s of the other files")
-        H = whole_samples("horizon", horizon_s, run.dt, DataError)
+        H = window_samples("horizon", horizon_s, run.dt, DataError)
         starts = protocol_windows(len(run), H)
         meta.append((run, H, starts))
         if len(starts):
@@ -106,8 +106,22 @@ def short_runs(runs: Sequence[Run], horizons: Sequence[float], name: str = "--ho
                error: type[Exception] = DataError) -> list[tuple[Run, float]]:
     """(run, horizon [s]) pairs where the run holds fewer samples than one window: their
     metrics rows would be empty. Every horizon must be a whole number of every run's
-    samples (else `error` naming `name`)."""
+    samples, at least two: a window of one sample is its start state alone, no step is
+    predicted and its RMSE is 0 by construction (else `error` naming `name`)."""
+    for h in horizons:
+        for run in runs:
+            window_samples(name, h, run.dt, error)
     return [(run, h) for h in horizons for run in runs if len(run) < whole_samples(name, h, run.dt, error)]
+
+
+def window_samples(name: str, horizon_s: float, dt: float, error: type[Exception] = DataError) -> int:
+    """The samples of one window of `horizon_s` [s] (its start state and H - 1 predicted
+    steps, `dt` [s] apart): a whole number >= 2, else `error` naming `name`."""
+    H = whole_samples(name, horizon_s, dt, error)
+    if H < 2:
+        raise error(f"{name} {horizon_s:g}: a window of one {dt:g}-s sample is its start state alone, so "
+                    f"nothing is predicted and its RMSE is 0; give a horizon of at least {2 * dt:g} s")
+    return H
 
 
 @dataclass

@@ -201,7 +201,12 @@ def split_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction
         if validation_runs:
             part_of = np.full(len(run), any(run is v for v in validation_runs))
         else:
-            part_of = _block_parts(len(run), int(round(block_s / run.dt)), val_fraction, rng)
+            block = int(round(block_s / run.dt))
+            if block < length:  # no window would lie wholly in one block: none in either part
+                raise ConfigError(f"[training] block_s = {block_s:g} s: a validation block holds {block} of the "
+                                  f"data's {run.dt:g}-s samples, fewer than one {length}-sample training window; "
+                                  f"set block_s >= {length * run.dt:g} s (default 30)")
+            part_of = _block_parts(len(run), block, val_fraction, rng)
         starts = sliding_windows(len(run), length, stride)
         ends = starts + length - 1
         counts = {}

@@ -102,12 +102,22 @@ def save_model(model: torch.nn.Module, run_dir: Path) -> None:
             KnnBank.of(model.gate).save(run.knn)
 
 
-def load_model(run_dir: str | os.PathLike, dtype: torch.dtype = torch.float64):
-    """(experiment, model) of a run directory; clear errors for a missing or corrupt one."""
+def load_model(run_dir: str | os.PathLike, dtype: torch.dtype = torch.float64, _within: tuple[Path, ...] = ()):
+    """(experiment, model) of a run directory; clear errors for a missing or corrupt one, and
+    for an ensemble whose members lead back to itself."""
     run = RunDir.open(run_dir)
     exp = run.read_experiment()
     if exp.ensemble.members:
-        members = [load_model((run.path / member).resolve(), dtype)[1] for member in exp.ensemble.members]
+        here = run.path.resolve()
+        chain = (*_within, here)
+        members = []
+        for member in exp.ensemble.members:
+            path = (run.path / member).resolve()
+            if path in chain:
+                raise CheckpointError(f"{run.config}: [ensemble] members names {member!r}, which is "
+                                      f"{'this run itself' if path == here else f'the ensemble {path} it belongs to'}"
+                                      "; an ensemble's members are other run directories: remove it from the list")
+            members.append(load_model(path, dtype, chain)[1])
         return exp, SeedEnsemble(members)
     model = build_model(exp, dtype)
     if not exp.needs_training:
