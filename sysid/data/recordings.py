@@ -10,6 +10,7 @@ units, and downsamples by taking every k-th sample from the first one (t = 0, 1,
 from __future__ import annotations
 
 import glob
+import logging
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,6 +22,7 @@ import torch
 
 from preprocessing.schema import PROCESSED, PROCESSED_CHANNEL, PROCESSED_PLAUSIBLE_ABS
 from sysid.data.columns import QUANTITY, RELATIVE_WIND, SI_UNIT, ColumnMap
+from sysid.data.consistency import TrackCheck, check_track, report_checks
 from sysid.data.csvfiles import LOG_SUFFIXES, read_table
 from sysid.errors import DataError
 from sysid.mmg.wind import relative_wind
@@ -30,6 +32,7 @@ from sysid.state import INPUTS, STATE
 COLUMNS = {f"{name} [{unit}]": PROCESSED_CHANNEL[name] for name, unit in PROCESSED.items()}
 HEADER = {channel: header for header, channel in COLUMNS.items()}
 _LIMITS = PROCESSED_PLAUSIBLE_ABS
+_log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -46,6 +49,8 @@ class Run:
     suspect : (t_start, t_end) [s] intervals of frozen GNSS or time gaps.
     sha256 : SHA-256 of the source file when known (a run shipped to a node without the
     file carries it); None: hashed from `path` when needed.
+    track : the log's channels against its own GNSS track (`sysid.data.consistency`), at the
+    file's own rate.
     """
 
     name: str
@@ -58,6 +63,7 @@ class Run:
     issues: list[str] = field(default_factory=list)
     suspect: list[tuple[float, float]] = field(default_factory=list)
     sha256: str | None = None
+    track: TrackCheck | None = None
 
     def __len__(self) -> int:
         return len(self.t)
@@ -67,10 +73,14 @@ class Run:
         return float(self.t[-1] - self.t[0]) if len(self.t) else 0.0
 
 
-def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | None = None) -> Run:
+def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | None = None,
+             warn=_log.warning) -> Run:
     """Read and check a processed run (CSV or Parquet), downsampled to `rate` [Hz] by taking
     samples. `columns` maps the log's own column names and units onto the channels
-    (``[data.columns]``; default: the processed schema's headers)."""
+    (``[data.columns]``; default: the processed schema's headers). The log is checked
+    against its own GNSS track (`sysid.data.consistency`): a clear mismatch is a
+    `DataError` naming the file, the channel and the factor; a marginal one, or a log
+    without a track, goes to `warn` (None: silent)."""
     path = Path(path)
     columns = columns if columns is not None else ColumnMap()
     if not (rate > 0 and np.isfinite(rate)):
@@ -108,6 +118,9 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
             raise DataError(f"{path}: {columns.describe(name)} (channel {name}) reaches {peak:.4g} "
                             f"{SI_UNIT[name]}, beyond {limit}: wrong units? name its unit in [data.columns], "
                             f"e.g. {name} = {{ column = \"...\", unit = \"{_UNIT_HINT[QUANTITY[name]]}\" }}")
+    c = {name: frame[name].to_numpy() for name in ("x", "y", "psi", "u", "v", "r")}
+    track = check_track(path, t, c["x"], c["y"], c["psi"], c["u"], c["v"], c["r"], columns)
+    report_checks([track], warn)
     period = float(np.median(steps))
     stride = int(round(1.0 / rate / period))
     if stride < 1 or abs(stride * period * rate - 1.0) > 1e-3:
@@ -124,7 +137,24 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
         inputs=sel[:, [frame.columns.get_loc(c) for c in list(INPUTS)]],
         relative_wind=sel[:, [frame.columns.get_loc("wind_velo_relative"),
                               frame.columns.get_loc("wind_dir_relative")]],
-        dt=period * stride, issues=issues, suspect=suspect)
+        dt=period * stride, issues=issues, suspect=suspect, track=track)
+
+
+def read_runs(paths: Iterable[str | os.PathLike], rate: float = 1.0, columns: ColumnMap | None = None,
+              warn=_log.warning) -> list[Run]:
+    """`read_run` of each file; the errors of all files (a clear mismatch with its track
+    in several logs, ...) as one `DataError`, a line per file. Logs without a track are
+    named once."""
+    runs, errors = [], []
+    for path in paths:
+        try:
+            runs.append(read_run(path, rate, columns, warn=None))
+        except DataError as exc:
+            errors.append(str(exc))
+    if errors:
+        raise DataError("\n".join(errors))
+    report_checks([r.track for r in runs if r.track is not None], warn)
+    return runs
 
 
 _UNIT_HINT = {"speed": "knots", "angle": "deg", "angular rate": "deg/s", "revolutions": "rpm"}

@@ -28,7 +28,7 @@ import torch
 from torch import nn
 
 from sysid.data.datasets import TEST_FILES, data_dir
-from sysid.data.recordings import Run, read_run
+from sysid.data.recordings import Run, read_runs
 from sysid.dynamics.integrators import IntegratorLike, Method
 from sysid.errors import DataError
 from sysid.fast.compiled import predict
@@ -50,8 +50,8 @@ HOLD_S = 5.0  # [s] a zig-zag's first order is the first stretch this long near 
 def recorded_test_runs(data: str | os.PathLike | None = None, rate: float = 1.0) -> dict[str, Run]:
     """The protocol's turning and zig-zag test runs (scenario -> `Run` at `rate` [Hz])."""
     root = data_dir(data)
-    return {name: read_run(root / path, rate) for name, path in TEST_FILES.items()
-            if name.startswith(("Turning", "Zigzag"))}
+    names = [name for name in TEST_FILES if name.startswith(("Turning", "Zigzag"))]
+    return dict(zip(names, read_runs([root / TEST_FILES[n] for n in names], rate)))
 
 
 def recorded_maneuver(run: Run, scenario: str = "") -> tuple[Maneuver, int]:

@@ -16,7 +16,7 @@ import pandas as pd
 import torch
 
 from sysid.identify.checkpoint import TrainingCheckpoint
-from sysid.data.recordings import Run, read_run
+from sysid.data.recordings import Run, read_runs
 from sysid.data.datasets import test_files
 from sysid.data.splits import TEST, TRAINING, VALIDATION, check_disjoint_runs, data_split, provenance
 from sysid.device import compute_threads
@@ -52,13 +52,12 @@ class RunResult:
 
 def training_runs(exp: Experiment, data: str | os.PathLike | None = None) -> list[Run]:
     """The experiment's training logs (``[data] train`` or its data set), read and checked."""
-    return [read_run(f, exp.data.rate, exp.data.columns) for f in data_split(exp, data).train]
+    return read_runs(data_split(exp, data).train, exp.data.rate, exp.data.columns)
 
 
 def validation_runs(exp: Experiment) -> list[Run]:
     """The experiment's ``[data] validation`` logs, read (empty: validation blocks of the training logs)."""
-    return [read_run(f, exp.data.rate, exp.data.columns) for f in data_split(exp).validation] \
-        if exp.data.validation else []
+    return read_runs(data_split(exp).validation, exp.data.rate, exp.data.columns) if exp.data.validation else []
 
 
 def evaluation_runs(exp: Experiment, data: str | os.PathLike | None = None) -> list[Run]:
@@ -66,7 +65,7 @@ def evaluation_runs(exp: Experiment, data: str | os.PathLike | None = None) -> l
     paper data set, else none. Read only to evaluate."""
     split = data_split(exp, data)
     columns = exp.data.columns if split.test_source == "files" else None
-    return [read_run(f, exp.data.rate, columns) for f in split.test]
+    return read_runs(split.test, exp.data.rate, columns)
 
 
 def physics_baselines(exp: Experiment, model: torch.nn.Module, dtype: torch.dtype,
@@ -103,7 +102,7 @@ def cached_test_runs(data: str | os.PathLike | None = None) -> list[Run]:
     process and data directory."""
     key = ("tests", None if data is None else str(data))
     if key not in _READ:
-        _READ[key] = [read_run(p) for p in test_files(data).values()]
+        _READ[key] = read_runs(test_files(data).values())
     return _READ[key]
 
 
