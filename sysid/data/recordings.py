@@ -85,22 +85,7 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
     columns = columns if columns is not None else ColumnMap()
     if not (rate > 0 and np.isfinite(rate)):
         raise DataError(f"{path}: rate {rate} Hz: must be > 0")
-    raw = read_table(path, "a processed run with the header 'name [unit]', or columns named in [data.columns]")
-    frame = columns.to_channels(raw, path)
-    # trailing all-empty rows (zigzag 13_50_28 ends with 327 of them) are dropped
-    recorded = [c for c in frame.columns if c not in RELATIVE_WIND or frame[c].notna().any()]
-    values = frame[recorded].to_numpy(dtype=float)
-    filled = ~np.isnan(values[:, 1:]).all(axis=1)
-    last = int(np.nonzero(filled)[0][-1]) + 1 if filled.any() else 0
-    frame, values = frame.iloc[:last], values[:last]
-    if len(frame) < 2:
-        raise DataError(f"{path}: fewer than two data rows")
-    bad = ~np.isfinite(values)
-    if bad.any():
-        row, col = np.argwhere(bad)[0]
-        channel = recorded[col]
-        raise DataError(f"{path}: {columns.describe(channel)} (channel {channel}) is empty, NaN or inf at data "
-                        f"row {row + 2} ({int(bad.any(axis=1).sum())} bad rows)")
+    frame, recorded = _channels(path, columns)
     if len(recorded) < len(frame.columns):  # no relative wind recorded: from the state and true wind
         frame = frame.assign(**dict(zip(RELATIVE_WIND, _relative_wind(frame))))
     values = frame.to_numpy(dtype=float)
@@ -110,6 +95,9 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
         row = int(np.argmax(steps <= 0)) + 1
         raise DataError(f"{path}: {columns.describe('t')} (channel t) is not strictly increasing at data row "
                         f"{row + 2} (t = {t[row]} s)")
+    c = {name: frame[name].to_numpy() for name in ("x", "y", "psi", "u", "v", "r")}
+    track = check_track(path, t, c["x"], c["y"], c["psi"], c["u"], c["v"], c["r"], columns)
+    report_checks([track], warn)
     for name, limit in _LIMITS.items():
         peak = np.abs(frame[name].to_numpy()).max()
         if name == "psi" and peak > limit and _turns_at_yaw_rate(t, frame["psi"].to_numpy(), frame["r"].to_numpy()):
@@ -118,9 +106,6 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
             raise DataError(f"{path}: {columns.describe(name)} (channel {name}) reaches {peak:.4g} "
                             f"{SI_UNIT[name]}, beyond {limit}: wrong units? name its unit in [data.columns], "
                             f"e.g. {name} = {{ column = \"...\", unit = \"{_UNIT_HINT[QUANTITY[name]]}\" }}")
-    c = {name: frame[name].to_numpy() for name in ("x", "y", "psi", "u", "v", "r")}
-    track = check_track(path, t, c["x"], c["y"], c["psi"], c["u"], c["v"], c["r"], columns)
-    report_checks([track], warn)
     period = float(np.median(steps))
     stride = int(round(1.0 / rate / period))
     if stride < 1 or abs(stride * period * rate - 1.0) > 1e-3:
@@ -155,6 +140,41 @@ def read_runs(paths: Iterable[str | os.PathLike], rate: float = 1.0, columns: Co
         raise DataError("\n".join(errors))
     report_checks([r.track for r in runs if r.track is not None], warn)
     return runs
+
+
+def _channels(path: Path, columns: ColumnMap) -> tuple[pd.DataFrame, list[str]]:
+    """(the log's channels (`ColumnMap.to_channels`) without trailing all-empty rows, the
+    channels recorded); `DataError` for fewer than two rows or an empty cell inside."""
+    raw = read_table(path, "a processed run with the header 'name [unit]', or columns named in [data.columns]")
+    frame = columns.to_channels(raw, path)
+    # trailing all-empty rows (zigzag 13_50_28 ends with 327 of them) are dropped
+    recorded = [c for c in frame.columns if c not in RELATIVE_WIND or frame[c].notna().any()]
+    values = frame[recorded].to_numpy(dtype=float)
+    filled = ~np.isnan(values[:, 1:]).all(axis=1)
+    last = int(np.nonzero(filled)[0][-1]) + 1 if filled.any() else 0
+    frame, values = frame.iloc[:last], values[:last]
+    if len(frame) < 2:
+        raise DataError(f"{path}: fewer than two data rows")
+    bad = ~np.isfinite(values)
+    if bad.any():
+        row, col = np.argwhere(bad)[0]
+        channel = recorded[col]
+        raise DataError(f"{path}: {columns.describe(channel)} (channel {channel}) is empty, NaN or inf at data "
+                        f"row {row + 2} ({int(bad.any(axis=1).sum())} bad rows)")
+    return frame, recorded
+
+
+def log_track(path: str | os.PathLike, columns: ColumnMap | None = None) -> TrackCheck:
+    """A log's channels against its own GNSS track (`sysid.data.consistency.check_track`)
+    at the file's own rate, whatever the other checks of `read_run` say; `DataError` when
+    the channels cannot be read."""
+    path = Path(path)
+    columns = columns if columns is not None else ColumnMap()
+    frame, _ = _channels(path, columns)
+    c = {name: frame[name].to_numpy() for name in ("t", "x", "y", "psi", "u", "v", "r")}
+    if (np.diff(c["t"]) <= 0).any():
+        return TrackCheck(path, reason="time not strictly increasing")
+    return check_track(path, c["t"], c["x"], c["y"], c["psi"], c["u"], c["v"], c["r"], columns)
 
 
 _UNIT_HINT = {"speed": "knots", "angle": "deg", "angular rate": "deg/s", "revolutions": "rpm"}
