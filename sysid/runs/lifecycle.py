@@ -6,12 +6,14 @@ from ``[data] test`` or, for a paper data set, the paper's six (`sysid.data.spli
 """
 from __future__ import annotations
 
+import logging
 import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
+import numpy as np
 import pandas as pd
 import torch
 
@@ -26,6 +28,7 @@ from sysid.evaluation.verdict import (IDENTIFIED_MMG, SHIP_FILE_MMG, BaselineVer
                                       window_score)
 from sysid.config.experiment import Experiment
 from sysid.hybrid.force_models import CorrectedModel, build_mmg, build_model
+from sysid.mmg.coverage import outside_force_models
 from sysid.runs.rundir import write_run
 from sysid.identify.trainer import EpochReport, Trainer, TrainingSummary, held_out_validation
 from sysid.config.checks import threads
@@ -66,6 +69,21 @@ def evaluation_runs(exp: Experiment, data: str | os.PathLike | None = None) -> l
     split = data_split(exp, data)
     columns = exp.data.columns if split.test_source == "files" else None
     return read_runs(split.test, exp.data.rate, columns)
+
+
+def warn_outside_force_models(exp: Experiment, runs: Sequence[Run]) -> list[str]:
+    """Warn (and return) the shares of training samples outside what the ship file's force
+    models cover (`sysid.mmg.coverage`): astern revolutions under a one-quadrant propeller,
+    rudder angles beyond the standard rudder's range."""
+    if not runs:
+        return []
+    states = np.concatenate([r.states for r in runs])
+    inputs = np.concatenate([r.inputs for r in runs])
+    ship = build_mmg(exp).ship
+    found = outside_force_models(ship.models, states[:, 1], inputs[:, 0], inputs[:, 1])
+    for line in found:
+        logging.getLogger(__name__).warning(f"training logs: {line} ({ship.source or ship.name})")
+    return found
 
 
 def physics_baselines(exp: Experiment, model: torch.nn.Module, dtype: torch.dtype,
@@ -173,6 +191,7 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
                 log("validation: the held-out training logs " + "; ".join(
                     f"{group}: {', '.join(names)}" for group, names in held_out.groups.items()))
             check_disjoint_runs({TRAINING: runs, VALIDATION: validation, TEST: tests}, exp.source)
+            warn_outside_force_models(exp, runs)
             try:
                 trainer = Trainer(exp, progress=progress, log=log, checkpoint=checkpoint_path(out_dir),
                                   resume=resume, on_epoch=on_epoch).fit(runs, validation)
