@@ -21,9 +21,9 @@ import pandas as pd
 import torch
 
 from preprocessing.schema import PROCESSED, PROCESSED_CHANNEL, PROCESSED_PLAUSIBLE_ABS
-from sysid.data.columns import QUANTITY, RELATIVE_WIND, SI_UNIT, ColumnMap
+from sysid.data.columns import QUANTITY, RELATIVE_WIND, SI_UNIT, ColumnMap, to_channels
 from sysid.data.consistency import TrackCheck, check_track, report_checks
-from sysid.data.csvfiles import LOG_SUFFIXES, read_table
+from sysid.data.csvfiles import LOG_SUFFIXES, not_a_file, read_table
 from sysid.errors import DataError
 from sysid.mmg.wind import relative_wind
 from sysid.state import INPUTS, STATE
@@ -146,7 +146,7 @@ def _channels(path: Path, columns: ColumnMap) -> tuple[pd.DataFrame, list[str]]:
     """(the log's channels (`ColumnMap.to_channels`) without trailing all-empty rows, the
     channels recorded); `DataError` for fewer than two rows or an empty cell inside."""
     raw = read_table(path, "a processed run with the header 'name [unit]', or columns named in [data.columns]")
-    frame = columns.to_channels(raw, path)
+    frame = to_channels(columns, raw, path)
     # trailing all-empty rows (zigzag 13_50_28 ends with 327 of them) are dropped
     recorded = [c for c in frame.columns if c not in RELATIVE_WIND or frame[c].notna().any()]
     values = frame[recorded].to_numpy(dtype=float)
@@ -209,7 +209,7 @@ def _quality_issues(t: np.ndarray, values: np.ndarray, period: float):
         suspect.append((float(t[i]), float(t[i + 1])))
     frozen = (np.diff(values[:, 1]) == 0) & (np.diff(values[:, 5]) == 0)  # x and psi unchanged
     run_len = max(2, int(round(1.0 / period)))
-    i = 0
+    i = 0  # type: ignore[assignment]
     while i < len(frozen):
         if frozen[i]:
             j = i
@@ -268,6 +268,8 @@ def expand_paths(items: Iterable[str | os.PathLike]) -> list[Path]:
             out += found
         elif p.is_file():
             out.append(p)
+        elif p.exists():
+            raise DataError(f"{p}: {not_a_file(p)}")
         else:
             raise DataError(f"{p}: no such file or directory")
     return out

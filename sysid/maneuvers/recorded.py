@@ -38,9 +38,9 @@ from torch import nn
 
 from sysid.data.datasets import TEST_FILES, data_dir
 from sysid.data.recordings import Run, read_runs
-from sysid.dynamics.integrators import IntegratorLike, Method
+from sysid.dynamics.equations import eager_predict
+from sysid.dynamics.integrators import Method
 from sysid.errors import DataError
-from sysid.fast.compiled import predict
 from sysid.maneuvers.any_model import load_maneuver_model
 from sysid.maneuvers.base import Conditions, Maneuver, Side, TurningCircle, ZigZag
 from sysid.maneuvers.indices import INDEX_COLUMNS, KIND_INDICES, Track, maneuver_indices, zigzag_overshoots
@@ -146,7 +146,7 @@ def _predictions(model: nn.Module, runs: Sequence[Run], starts: Sequence[int], m
         u = r.inputs[s:]
         inputs.append(np.concatenate([u, np.repeat(u[-1:], longest - len(u), 0)]))
     u = torch.tensor(np.stack(inputs, 1), dtype=torch.float64)
-    states = predict(model, x0, u, runs[0].dt, method)
+    states = eager_predict(model, x0, u, runs[0].dt, method)
     maneuvers = maneuvers if maneuvers is not None else [None] * len(runs)
     out = []
     for i, n in enumerate(lengths):
@@ -196,7 +196,7 @@ def like_for_like(maneuver: Maneuver, track: Track, rudder: np.ndarray, closed: 
 
 
 def record_comparison(models: Mapping[str, Sequence[nn.Module]], runs: Mapping[str, Run],
-                      method: IntegratorLike = "euler", closed_loop_dt: float = CLOSED_LOOP_DT) -> pd.DataFrame:
+                      method: Method | str = "euler", closed_loop_dt: float = CLOSED_LOOP_DT) -> pd.DataFrame:
     """`RECORD_COLUMNS` rows: for each run (scenario -> `Run`) the record's indices, then
     each model's (label -> its models: one, or several seeds whose indices are averaged,
     with their standard deviation in ``<index>_std``) indices of it, like for like (the
@@ -275,7 +275,7 @@ def _predicted_run(path: Path, runs: Sequence[Run], starts: Sequence[int], metho
 
 
 def write_record_comparison(out_dir: str | os.PathLike, run_dirs: Mapping[str, str | os.PathLike],
-                            data: str | os.PathLike | None = None, method: IntegratorLike = "euler",
+                            data: str | os.PathLike | None = None, method: Method | str = "euler",
                             workers: int = 1, threads: int = 1, closed_loop_dt: float = CLOSED_LOOP_DT) -> Path:
     """``out_dir/maneuver_indices.csv``: `record_comparison` of the protocol's turning and
     zig-zag test runs (1 Hz) and the models of `run_dirs` (label -> run directory or folder
