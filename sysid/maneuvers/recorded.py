@@ -188,7 +188,7 @@ def like_for_like(maneuver: Maneuver, track: Track, rudder: np.ndarray, closed: 
     `track` between its heading-triggered reversals; and the peaks beyond the check angle
     of `track` between the reversals of the recorded `rudder` (the open-loop peaks)."""
     values = maneuver_indices(maneuver, track, rudder).as_dict()
-    if maneuver.kind != "zigzag":
+    if not isinstance(maneuver, ZigZag):
         return {**values, **dict.fromkeys(OPEN_LOOP_COLUMNS, math.nan)}
     peaks = dict(zip(OPEN_LOOP_COLUMNS, zigzag_overshoots(track, maneuver.check_deg, rudder)))
     imo = closed if closed is not None else maneuver_indices(maneuver, track).as_dict()
