@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -19,7 +18,7 @@ import torch
 from torch import nn
 
 from sysid.data.recordings import Run, protocol_windows, stack_windows
-from sysid.data.datasets import TEST_FILES
+from sysid.data.scenario import scenario_of
 from sysid.config.choices import Method
 from sysid.dynamics.equations import eager_predict
 from sysid.dynamics.integrators import Integrator, IntegratorLike
@@ -38,7 +37,6 @@ TRACE_COLUMNS = (
     + [f"{a}{key}" for key in FORCE_COMPONENTS.values() for a in FORCE]  # N, N m
     + ["knn_distance", "gate_on"]  # NaN / 1 where the model has no gate
 )
-SCENARIO_OF = {Path(v).stem: k for k, v in TEST_FILES.items()}
 
 
 @dataclass
@@ -59,9 +57,10 @@ class WindowPrediction:
 
     def metrics_row(self, horizon_s: float) -> dict:
         """A `METRICS_COLUMNS` row (NaN RMSE without windows); the scenario is the
-        protocol's name of a test file, else empty."""
+        protocol's name of a test file, else the maneuver the log records
+        (`sysid.data.scenario.scenario_of`)."""
         rmse = self.rmse() if len(self.starts) else np.full(3, np.nan)
-        return {"scenario": SCENARIO_OF.get(self.run.name, ""), "file": self.run.name,
+        return {"scenario": scenario_of(self.run), "file": self.run.name,
                 "horizon_s": horizon_s, "n_windows": len(self.starts),
                 "rmse_u": rmse[0], "rmse_v": rmse[1], "rmse_r": rmse[2]}
 

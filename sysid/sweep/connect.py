@@ -15,9 +15,11 @@ from __future__ import annotations
 import logging
 import os
 import socket
+import sys
 import tempfile
 from contextlib import contextmanager
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable, Iterator
 
 from sysid.errors import ConfigError
@@ -160,6 +162,60 @@ def join_error(target: RayTarget, exc: BaseException, log_text: str = "") -> Con
     return ConfigError(f"{where}: cannot join the Ray cluster ({last})")
 
 
+def package_dir() -> Path:
+    """The folder of the sysid package this process runs (this module's grandparent)."""
+    return Path(__file__).resolve().parents[1]
+
+
+def installed_package_dir() -> Path | None:
+    """Where ``import sysid`` leads without the working directory and the script's folder
+    on the path: the installed package (None: none is installed)."""
+    from importlib.machinery import PathFinder
+
+    script = Path(os.path.realpath(sys.argv[0])).parent if sys.argv and sys.argv[0] else None
+    local = {Path.cwd().resolve(), script}
+    path = [p for p in sys.path if p and Path(p).resolve() not in local]
+    spec = PathFinder.find_spec("sysid", path)
+    finders = [f for f in sys.meta_path if f is not PathFinder and hasattr(f, "find_spec")]
+    for finder in finders:
+        if spec is not None and spec.origin:
+            break
+        try:
+            spec = finder.find_spec("sysid", None)
+        except Exception:  # another package's finder: not ours to judge
+            spec = None
+    return Path(spec.origin).resolve().parent if spec is not None and spec.origin else None
+
+
+def shadowing_folder() -> Path | None:
+    """The folder whose ``sysid`` this process runs in place of the installed one (started
+    from a folder holding one, e.g. ``python -m sysid`` in a clone), else None."""
+    installed = installed_package_dir()
+    return package_dir().parent if installed is not None and installed != package_dir() else None
+
+
+def note_shadowing(log: Callable[[str], None]) -> None:
+    """One line when this process runs another sysid than the installed one (`shadowing_folder`)."""
+    folder = shadowing_folder()
+    if folder is not None:
+        log(f"note: {folder}: its folder sysid is running, not the installed sysid ({installed_package_dir()}); "
+            "a cluster's nodes run their installed sysid: start sysid from another folder to run that one")
+
+
+@contextmanager
+def _code_directory() -> Iterator[None]:
+    """This process's working directory set, while Ray starts, to the folder that holds the
+    sysid package it runs: Ray puts the driver's working directory first on every worker's
+    ``sys.path``, so a folder named ``sysid`` where the command was started (a clone, a
+    project folder) would otherwise be what the trials import."""
+    here = os.getcwd()
+    os.chdir(package_dir().parent)
+    try:
+        yield
+    finally:
+        os.chdir(here)
+
+
 def running_cluster() -> str | None:
     """The address of a Ray cluster `ray start` left running on this machine, if any."""
     try:
@@ -175,6 +231,7 @@ def start_ray(workers: int, address: str | None, log: Callable[[str], None] = pr
     CPUs; True if this call started or joined (the caller shuts it down)."""
     ray, _ = import_ray()
     target = ray_target(address)
+    note_shadowing(log)
     # trial failures are reported by the progress lines and the results table, not tracebacks
     for name in ("ray", "ray.tune", "ray.air", "ray.train"):
         logging.getLogger(name).setLevel(logging.CRITICAL)
@@ -185,11 +242,12 @@ def start_ray(workers: int, address: str | None, log: Callable[[str], None] = pr
         if other:
             log(f"note: a Ray cluster runs on this machine ({other}); this run starts a local Ray of its own "
                 "(--address auto joins that cluster)")
-        ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False,
-                 logging_level=logging.ERROR, object_store_memory=200 * 1024**2, configure_logging=True)
+        with _code_directory():
+            ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False,
+                     logging_level=logging.ERROR, object_store_memory=200 * 1024**2, configure_logging=True)
         return True
     check_reachable(target)
-    with _env(RAY_gcs_server_port_wait_time_s=str(JOIN_RETRIES)), _quiet_stderr() as captured:
+    with _env(RAY_gcs_server_port_wait_time_s=str(JOIN_RETRIES)), _quiet_stderr() as captured, _code_directory():
         try:
             ray.init(address=target.address, log_to_driver=False, logging_level=logging.ERROR)
         except Exception as exc:  # Ray's ConnectionError/RuntimeError/AuthenticationError

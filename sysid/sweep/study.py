@@ -111,6 +111,14 @@ def optuna_history(spec: SweepSpec, out: Path) -> tuple[list[tuple[dict, float]]
     return evaluated, pending
 
 
+def needs_paper_data(spec: SweepSpec, experiments) -> bool:
+    """Whether a trial of the sweep trains on the paper's data set D1/D2 (``[experiment]
+    dataset`` without ``[data] train`` logs, in the base, a planned trial, or an axis)."""
+    if any(a.key == "experiment.dataset" for a in spec.axes):
+        return True
+    return any(e.needs_training and e.experiment.dataset and not e.data.train for e in experiments)
+
+
 def _seed_dirs(spec: SweepSpec, values: dict) -> dict[str, str]:
     return {f"seed{s}": make_trial(spec, values, s).path for s in spec.seeds}
 
@@ -133,10 +141,12 @@ def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = Non
 
     started = time.perf_counter()
     out = Path(out)
-    root = data_root(data)  # a clear error before Ray starts when the data are missing
     check_output(spec, out, resume, overwrite)
     planned = sweep_trials(spec) if spec.search is not Search.OPTUNA else []
-    trial_data = read_trial_data(_experiments(spec, planned), root)
+    experiments = _experiments(spec, planned)
+    # the paper's data set only when a configuration names one (a clear error before Ray starts)
+    root = data_root(data) if needs_paper_data(spec, experiments) else None
+    trial_data = read_trial_data(experiments, root)
     tracker = None
     if mlflow or spec.mlflow:
         from sysid.tracking import Tracker
