@@ -79,10 +79,25 @@ def _host_port(address: str) -> tuple[str, int] | None:
     return host.strip("[]"), int(port)
 
 
+def resolved(target: RayTarget) -> RayTarget:
+    """``auto`` as the address of the cluster ``ray start`` started on this machine (the one
+    Ray records in its temporary directory), never a Ray that a process started for itself
+    (another sweep's private local Ray): one line when there is none."""
+    if target.address != "auto":
+        return target
+    address = running_cluster()
+    if address is None:
+        raise ConfigError(f"{target.source} auto: no Ray cluster started with `ray start` runs on this machine "
+                          "(the private Ray of another sweep is never joined); start one with `ray start --head`, "
+                          "give its HOST:PORT, or leave --address out for a local Ray of this sweep's own")
+    return RayTarget(address, target.source)
+
+
 def check_reachable(target: RayTarget, timeout: float = PROBE_TIMEOUT_S) -> None:
     """Refuse (one line, within `timeout` s) a HOST:PORT whose host does not resolve or
     where nothing accepts a connection. ``auto`` and URIs (``ray://``) are left to Ray."""
-    if target.address is None or target.address == "auto" or "://" in target.address:
+    target = resolved(target)
+    if target.address is None or "://" in target.address:
         return
     host, port = _host_port(target.address)
     where = f"{target.source} {target.address}"
@@ -246,6 +261,7 @@ def start_ray(workers: int, address: str | None, log: Callable[[str], None] = pr
             ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False,
                      logging_level=logging.ERROR, object_store_memory=200 * 1024**2, configure_logging=True)
         return True
+    target = resolved(target)
     check_reachable(target)
     with _env(RAY_gcs_server_port_wait_time_s=str(JOIN_RETRIES)), _quiet_stderr() as captured, _code_directory():
         try:

@@ -38,6 +38,7 @@ from sysid.sweep.plan import make_trial, sweep_trials
 from sysid.sweep.results import SweepResults, collect_results, scanned_trials, write_results
 from sysid.sweep.summary import SweepSummary
 from sysid.sweep.runner import Outcomes, TuneStorage, make_scheduler, ray_session, run_optuna, run_trials
+from sysid.sweep.runner import tune_storage as tune_storage_of
 from sysid.sweep.spec import SweepSpec
 from sysid.sweep.trial import TrialSpec, read_trial_data
 
@@ -112,11 +113,23 @@ def optuna_history(spec: SweepSpec, out: Path) -> tuple[list[tuple[dict, float]]
 
 
 def needs_paper_data(spec: SweepSpec, experiments) -> bool:
-    """Whether a trial of the sweep trains on the paper's data set D1/D2 (``[experiment]
-    dataset`` without ``[data] train`` logs, in the base, a planned trial, or an axis)."""
+    """Whether the sweep names the paper's data set D1/D2 (``[experiment] dataset`` in the
+    base, a planned trial, or an axis)."""
     if any(a.key == "experiment.dataset" for a in spec.axes):
         return True
-    return any(e.needs_training and e.experiment.dataset and not e.data.train for e in experiments)
+    return any(e.experiment.dataset for e in experiments)
+
+
+def sweep_inputs(spec: SweepSpec, experiments, root) -> list[Path]:
+    """What a sweep reads: its sweep file, base config, every log of its configurations and
+    the folders holding those logs (no output goes there)."""
+    from sysid.data.splits import data_split
+
+    paths = [Path(spec.source), spec.base_path]
+    for exp in experiments:
+        for files in data_split(exp, root).parts().values():
+            paths += [Path(f) for f in files] + [Path(f).parent for f in files]
+    return list(dict.fromkeys(paths))
 
 
 def _seed_dirs(spec: SweepSpec, values: dict) -> dict[str, str]:
@@ -151,7 +164,8 @@ def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = Non
     if mlflow or spec.mlflow:
         from sysid.tracking import Tracker
         tracker = Tracker(mlflow or spec.mlflow, spec.name)
-    tune_storage = TuneStorage(storage, spec.name) if storage else TuneStorage(str(out.resolve()))
+    tune_storage = (tune_storage_of(storage, spec.name, out, sweep_inputs(spec, experiments, root)) if storage
+                    else TuneStorage(str(out.resolve())))
     scheduler = make_scheduler(spec.scheduler, spec.most_epochs * (len(spec.seeds) if spec.search is Search.OPTUNA else 1))
     existed = out.is_dir()
     where = f" on {address}" if address else (f" on {os.environ['RAY_ADDRESS']}" if os.environ.get("RAY_ADDRESS") else "")
