@@ -17,6 +17,7 @@ import os
 import socket
 import sys
 import tempfile
+import threading
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +27,8 @@ from sysid.errors import ConfigError
 
 INSTALL_HINT = "Ray is needed for sweeps and seed studies: pip install \"sysid[sweep]\" (ray[tune], optuna)"
 PROBE_TIMEOUT_S = 5.0    # TCP connect to the cluster's head before Ray is asked to join it
+WATCH_PERIOD_S = 2.0     # how often a running sweep checks that the cluster's head answers
+WATCH_MISSES = 3         # unanswered checks in a row: the cluster is gone
 JOIN_RETRIES = 10        # Ray's attempts (about 1 s each) to reach the head's GCS
 AUTH_HINT = ("the cluster uses token authentication: set RAY_AUTH_MODE=token and the cluster's token in "
              "RAY_AUTH_TOKEN (or RAY_AUTH_TOKEN_PATH naming a file holding it; default ~/.ray/auth_token)")
@@ -229,6 +232,66 @@ def _code_directory() -> Iterator[None]:
         yield
     finally:
         os.chdir(here)
+
+
+def head_answers(address: str, timeout: float = PROBE_TIMEOUT_S) -> bool:
+    """Whether something accepts a TCP connection at a ``HOST:PORT`` address."""
+    host_port = _host_port(address)
+    if host_port is None:
+        return True   # a URI (ray://): Ray's own client reports its loss
+    try:
+        with socket.create_connection(host_port, timeout=timeout):
+            return True
+    except OSError:
+        return False
+
+
+_LOST_CLEANUPS: list[Callable[[], None]] = []
+
+
+def on_cluster_lost(cleanup: Callable[[], None]) -> None:
+    """Run `cleanup` (e.g. release the output's lock) if the cluster goes away mid-run and
+    the process must end at once (`watch_head`); later registrations run first."""
+    _LOST_CLEANUPS.append(cleanup)
+
+
+def lost_line(target: RayTarget, note: str) -> str:
+    return (f"{target.source} {target.address}: the Ray cluster went away while the sweep ran (its head no "
+            f"longer answers); {note}")
+
+
+@contextmanager
+def watch_head(target: RayTarget, note: Callable[[], str], cleanup: Callable[[], None] = lambda: None,
+               period: float = WATCH_PERIOD_S, misses: int = WATCH_MISSES) -> Iterator[None]:
+    """While the block runs, check every `period` s that the cluster's head answers; after
+    `misses` failures in a row, run `cleanup` and the `on_cluster_lost` cleanups, print one line (`note`:
+    what was kept) and end the process with exit code 2, before Ray's own loss of the
+    head ends it without a word. Nothing is watched for a local Ray."""
+    target = resolved(target)
+    if target.address is None or _host_port(target.address) is None:
+        yield
+        return
+    stop = threading.Event()
+
+    def watch() -> None:
+        failed = 0
+        while not stop.wait(period):
+            failed = 0 if head_answers(target.address, min(period, PROBE_TIMEOUT_S)) else failed + 1
+            if failed >= misses and not stop.is_set():
+                for step in [cleanup, *reversed(_LOST_CLEANUPS)]:
+                    try:
+                        step()
+                    except Exception:  # the line and the exit come first
+                        pass
+                os.write(2, f"error: {lost_line(target, note())}\n".encode())
+                os._exit(2)
+
+    thread = threading.Thread(target=watch, name="sysid-watch-head", daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
 
 
 def running_cluster() -> str | None:

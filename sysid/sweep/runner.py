@@ -175,10 +175,15 @@ class Session:
 
 
 @contextmanager
-def ray_session(out: Path, workers: int | None, address: str | None, log: Callable[[str], None]) -> Iterator[Session]:
+def ray_session(out: Path, workers: int | None, address: str | None, log: Callable[[str], None],
+                lost_note: Callable[[], str] = lambda: "nothing was kept",
+                lost_cleanup: Callable[[], None] = lambda: None) -> Iterator[Session]:
     """Ray started or joined for the sweep, and the sweep's inbox on this node; Ray is shut
-    down afterwards if this session started it."""
-    from sysid.sweep.connect import ray_target
+    down afterwards if this session started it. A joined cluster whose head stops
+    answering ends the sweep with one line (`sysid.sweep.connect.watch_head`: `lost_cleanup`
+    first, `lost_note` says what was kept), or a `ClusterLostError` when Ray's calls fail first."""
+    from sysid.errors import ClusterLostError
+    from sysid.sweep.connect import head_answers, lost_line, ray_target, resolved, watch_head
 
     ray, _ = import_ray()
     local = ray_target(address).address is None
@@ -193,7 +198,14 @@ def ray_session(out: Path, workers: int | None, address: str | None, log: Callab
         if not local and not ray.cluster_resources().get("CPU"):
             log(f"note: {ray_target(address).describe()} has no CPU for trials yet; the trials wait for nodes "
                 "to join (Ctrl-C stops)")
-        yield Session(inbox, name, (workers or default_workers()) if local else workers)
+        target = resolved(ray_target(address))
+        try:
+            with watch_head(target, lost_note, lost_cleanup):
+                yield Session(inbox, name, (workers or default_workers()) if local else workers)
+        except Exception as exc:
+            if not local and target.address and not head_answers(target.address):
+                raise ClusterLostError(lost_line(target, lost_note())) from exc
+            raise
     finally:
         if started:
             ray.shutdown()

@@ -174,11 +174,20 @@ def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = Non
         log(f"sweep {spec.name}: optuna resumes from {len(evaluated)} finished configurations "
             f"({len(pending)} with seeds left) in {out / 'trials'}; Tune's saved search state is not read")
     parent, outcomes = None, Outcomes()
+
+    def lost_note() -> str:
+        if (out / JOURNAL).exists():
+            return f"the trials finished so far are kept in {out / 'trials'}: rerun with --resume on a running cluster"
+        return "nothing was written"
+
+    def lost_cleanup() -> None:
+        if not resume:
+            _remove_unstarted(out, existed)
     try:
         if spec.search is Search.OPTUNA:
             log(f"sweep {spec.name}: optuna, {spec.samples} configurations x {len(spec.seeds)} seeds{where}")
             if len(evaluated) < spec.samples:
-                with ray_session(out, workers, address, log) as session:
+                with ray_session(out, workers, address, log, lost_note, lost_cleanup) as session:
                     write_output(spec, out, resume)
                     callbacks = []
                     if tracker is not None:
@@ -198,7 +207,7 @@ def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = Non
             log(f"sweep {spec.name}: {spec.search}, {len(trials) // len(spec.seeds)} configurations x "
                 f"{len(spec.seeds)} seeds = {len(trials)} trials{where}"
                 + (f", scheduler {spec.scheduler.kind}" if spec.scheduler.kind != "none" else ""))
-            with ray_session(out, workers, address, log) as session:
+            with ray_session(out, workers, address, log, lost_note, lost_cleanup) as session:
                 write_output(spec, out, resume)
                 callbacks = []
                 if tracker is not None:

@@ -15,25 +15,27 @@ VALIDATION = "berthing_12-Nov-2020_13_09_11.csv"
 SYSID = str(Path(sys.executable).with_name("sysid"))   # the console script: the installed sysid
 
 
-def own_sweep_project(project: Path, dataset_dir: Path, epochs: int = 2) -> Path:
-    """Write the project into `project`; returns its sweep file."""
+def own_sweep_project(project: Path, dataset_dir: Path, epochs: int = 2, logs_folder: str = "my logs",
+                      name: str = "own") -> Path:
+    """Write the project into `project` (the logs in `logs_folder`, the sweep named `name`);
+    returns its sweep file."""
     (project / "sysid").mkdir(parents=True)
     (project / "sysid" / "__init__.py").write_text(
         "raise ImportError('this folder is not sysid: the installed sysid was to be imported')\n")
-    logs = project / "my logs"
+    logs = project / logs_folder
     logs.mkdir()
-    for i, name in enumerate(TRAIN):
-        write_own_log(dataset_dir / "berthing" / name, logs / f"harbour_{i}.csv")
+    for i, log in enumerate(TRAIN):
+        write_own_log(dataset_dir / "berthing" / log, logs / f"harbour_{i}.csv")
     write_own_log(dataset_dir / "berthing" / VALIDATION, logs / "harbour_check.csv")
     (project / "base.toml").write_text(
         "[experiment]\nname = 'mine'\nmodel = 'hybrid'\nseed = 0\n"
-        "[data]\ntrain = ['my logs/harbour_0.csv', 'my logs/harbour_1.csv']\n"
-        "validation = ['my logs/harbour_check.csv']\n"
+        f"[data]\ntrain = ['{logs_folder}/harbour_0.csv', '{logs_folder}/harbour_1.csv']\n"
+        f"validation = ['{logs_folder}/harbour_check.csv']\n"
         + columns_table() +
         f"[network]\nhidden = [8]\n[training]\nepochs = {epochs}\nwarm_start_epochs = 1\nbatch_size = 64\n"
         "[gate]\nk = 3\nspace = 'inputs'\n[evaluation]\nhorizons = [30.0]\n")
     sweep = project / "own.toml"
-    sweep.write_text("[sweep]\nname = 'own'\nbase = 'base.toml'\nseeds = [0]\nmax_retries = 1\n"
+    sweep.write_text(f"[sweep]\nname = '{name}'\nbase = 'base.toml'\nseeds = [0]\nmax_retries = 1\n"
                      "[vary]\n'training.learning_rate' = [1e-3, 3e-3]\n")
     return sweep
 
