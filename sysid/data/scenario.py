@@ -131,11 +131,11 @@ def recognise(run: Run) -> Scenario:
         first = int(np.flatnonzero(swung)[0])          # the first execute: the base course
         held = np.flatnonzero(np.abs(delta) >= HELD_SHARE * amplitude)
         over_at = np.flatnonzero(swung)
-        at = []                                         # the last sample the old side was held
-        for before, end in zip(over_at[switches - 1], over_at[switches]):
+        held_at = []                                    # the last sample the old side was held
+        for before in over_at[switches - 1]:            # the last sample over on the old side
             old_side = held[(held <= before) & (np.sign(delta[held]) == np.sign(delta[before]))]
-            at.append(old_side[-1] if len(old_side) else before)
-        at = np.asarray(at)
+            held_at.append(old_side[-1] if len(old_side) else before)
+        at = np.asarray(held_at, dtype=int)
         leaving = (psi[at] + psi[np.minimum(at + 1, len(psi) - 1)]) / 2   # between two samples
         deviation = float(np.median(np.abs(leaving - psi[first])))
         return Scenario(Maneuver.ZIGZAG, _rounded(amplitude), _rounded(deviation))
