@@ -226,7 +226,7 @@ def like_for_like(maneuver: Maneuver, track: Track, rudder: np.ndarray, closed: 
     `track` between its heading-triggered reversals; and the peaks beyond the check angle
     of `track` between the reversals of the recorded `rudder` (the open-loop peaks)."""
     values = maneuver_indices(maneuver, track, rudder).as_dict()
-    if maneuver.kind != "zigzag":
+    if not isinstance(maneuver, ZigZag):
         return {**values, **dict.fromkeys(OPEN_LOOP_COLUMNS, math.nan)}
     peaks = dict(zip(OPEN_LOOP_COLUMNS, zigzag_overshoots(track, maneuver.check_deg, rudder)))
     imo = closed if closed is not None else maneuver_indices(maneuver, track).as_dict()
@@ -277,8 +277,8 @@ def recorded_maneuver_runs(runs: Sequence[Run]) -> tuple[dict[str, Run], list[Ru
         except DataError:
             other.append(run)
             continue
-        angle = f"{maneuver.rudder_deg:g}/{maneuver.check_deg:g}" if maneuver.kind == "zigzag" else \
-            f"{maneuver.rudder_deg:g}"
+        angle = f"{maneuver.rudder_deg:g}/{maneuver.check_deg:g}" if isinstance(maneuver, ZigZag) else \
+            f"{getattr(maneuver, 'rudder_deg', 0.0):g}"
         found[f"{maneuver.kind} {angle} {run.name}"] = run
     return found, other
 

@@ -242,10 +242,11 @@ class VerdictTable:
     losses: str = ""   # "val_loss_multistep: hybrid 0.05772, MMG (ship file) 0.05870"
 
 
-def verdict_table(verdict: Verdict, model: str, units: DisplayUnits = DisplayUnits()) -> VerdictTable:
+def verdict_table(verdict: Verdict, model: str, units: DisplayUnits | None = None) -> VerdictTable:
     """The first page's table of a `BaselineVerdict`: RMSE of the model (± its std over
     seeds) and of each baseline with the model's change against it, deciding split first;
-    in `units` (the user's ``[data.columns]`` units; SI by default)."""
+    in `units` (the user's ``[data.columns]`` units; None: SI)."""
+    units = units if units is not None else DisplayUnits()
     header = ["Split", "Horizon [s]", "Channel", f"{model} RMSE"]
     for b in verdict.baselines:
         header += [f"{b} RMSE", f"change vs {b}"]
