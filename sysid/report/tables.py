@@ -194,21 +194,27 @@ def run_table(run: RunRecord, paper: bool = True) -> RmseTable:
     baselines = _baseline_rmse(run)
     horizons = run.horizons()
     label = run_label(run.name, run.model, run.dataset)
+    units = DisplayUnits() if paper else DisplayUnits.of_config(run.config)  # the paper's tables are SI
+
+    def shown(values, i):
+        return units.value(COMPONENTS[i], values[i]) if values else None
+
     table = RmseTable("table_run", f"RMSE of {label}" + (" beside its physics baselines" if baselines else "")
-                      + " (u, v_m [m/s]; r [rad/s])", [f"{h} s" for h in horizons])
+                      + f" (u [{units.unit('u')}], v_m [{units.unit('v_m')}], r [{units.unit('r')}])",
+                      [f"{h} s" for h in horizons])
     for scenario in _scenario_order(s for s, _ in rmse):
         cells = []
         for horizon in horizons:
             values = rmse.get((scenario, horizon))
             ref = paper_rmse(_paper_scenario(scenario), run.model, run.dataset, horizon) if paper else None
             for i in range(3):
-                cells.append(Cell(values[i] if values else None, ref[i] if ref else None))
+                cells.append(Cell(shown(values, i), ref[i] if ref else None))
         table.rows.append(TableRow(scenario, label, model_colour(run.name, run.model, run.dataset), cells))
         for j, (baseline, values_of) in enumerate(baselines.items()):
             cells = []
             for horizon in horizons:
                 values = values_of.get((scenario, horizon))
-                cells += [Cell(values[i] if values else None, None) for i in range(3)]
+                cells += [Cell(shown(values, i), None) for i in range(3)]
             table.rows.append(TableRow(scenario, baseline, BASELINE_COLOURS[j % len(BASELINE_COLOURS)], cells))
     _mark_best(table.rows)
     return table

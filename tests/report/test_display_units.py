@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import pandas as pd
 import pytest
 
 from own_logs import OWN_COLUMNS
@@ -45,3 +46,27 @@ def test_verdict_table_in_knots_and_deg_per_s():
     assert si["u [m/s]"][3] == "0.01850"
     assert units.verdict_cells(_verdict()) == ("u at 30 s: 0.03596 against 0.04996 knots; "
                                                "r at 30 s: 0.2292 against 0.2865 deg/s")
+
+
+def test_run_table_in_the_run_s_units(tmp_path):
+    """A run whose config reads u in knots: the report's RMSE table shows u in knots (the
+    metrics file stays SI); r and v_m in SI; the same run without [data.columns] in SI."""
+    from synthetic_rundir import measured_runs, write_run
+
+    from sysid.report.source import read_run_dir
+    from sysid.report.tables import run_table
+    from sysid.store.manifest import write_manifest
+
+    runs = {k: v for k, v in measured_runs(0.3).items() if k == "Berthing"}
+    out = write_run(tmp_path / "run", "hybrid_D2", runs, horizons=(30,))
+    si = run_table(read_run_dir(out), paper=False)
+    config = out / "config.toml"
+    config.write_text(config.read_text() + '\n[data.columns]\nu = { column = "u_velo [m/s]", unit = "knots" }\n')
+    write_manifest(out, "run")
+    own = run_table(read_run_dir(out), paper=False)
+    assert "(u [knots], v_m [m/s], r [rad/s])" in own.title and "(u [m/s], v_m [m/s], r [rad/s])" in si.title
+    for a, b in zip(si.rows, own.rows):
+        assert b.cells[0].ours == pytest.approx(a.cells[0].ours / KNOT, rel=1e-12)  # u
+        assert (b.cells[1].ours, b.cells[2].ours) == (a.cells[1].ours, a.cells[2].ours)  # v_m, r
+    metrics = pd.read_csv(out / "metrics.csv")
+    assert metrics["rmse_u"].iloc[0] == pytest.approx(si.rows[0].cells[0].ours, rel=1e-12)
