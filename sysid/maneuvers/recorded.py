@@ -38,6 +38,7 @@ from torch import nn
 
 from sysid.data.datasets import TEST_FILES, data_dir
 from sysid.data.recordings import Run, read_runs
+from sysid.data.scenario import FOLDERS, Maneuver as Kind, recognise
 from sysid.dynamics.equations import eager_predict
 from sysid.dynamics.integrators import Method
 from sysid.errors import DataError
@@ -68,49 +69,21 @@ def recorded_test_runs(data: str | os.PathLike | None = None, rate: float = 1.0)
     return dict(zip(names, read_runs([root / TEST_FILES[n] for n in names], rate)))
 
 
-MIN_ORDER_DEG = 5.0   # [deg] a run whose largest rudder angle is smaller is no maneuver
-MIN_REVERSALS = 2     # a zig-zag: at least three alternating stretches at the rudder order
-TURN_DEG = 180.0      # [deg] a turning circle: heading change while the rudder holds its order
-
-
 def recognised_kind(run: Run) -> str | None:
-    """"zigzag", "turning" or None, from the rudder and heading alone. Stretches: the rudder
-    held 2 s or more at the run's order (>= 90 % of its 95th-percentile |delta|, at least
-    `MIN_ORDER_DEG`) on one side. A zig-zag: `MIN_REVERSALS` or more reversals in a row, each
-    straight from one side's stretch to the other's (within 2 s) once the heading has turned
-    at least half the order toward the side the rudder held, from the heading where the
-    series began. A turning circle: the heading turns `TURN_DEG` or more within one stretch."""
-    rudder = run.inputs[:, 1]
-    order = float(np.percentile(np.abs(rudder), 95))
-    if order < math.radians(MIN_ORDER_DEG):
-        return None
-    at = np.where(np.abs(rudder) >= 0.9 * order, np.sign(rudder), 0.0)
-    cut = np.nonzero(np.diff(at) != 0)[0] + 1
-    bounds = np.concatenate(([0], cut, [len(at)]))
-    held = [(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:]) if at[a] != 0 and (b - a) * run.dt >= 2.0]
-    heading = np.unwrap(run.states[:, 4])
-    chain, best, origin = 0, 0, None
-    for (a, b), (c, _) in zip(held[:-1], held[1:]):
-        origin = heading[a] if chain == 0 else origin
-        turned = at[a] * (heading[c] - origin)
-        if at[c] == -at[a] and (c - b) * run.dt <= 2.0 and turned >= 0.5 * order:
-            chain += 1
-            best = max(best, chain)
-        else:
-            chain = 0
-    if best >= MIN_REVERSALS:
-        return "zigzag"
-    if any(abs(heading[b - 1] - heading[a]) >= math.radians(TURN_DEG) for a, b in held):
-        return "turning"
-    return None
+    """"turning", "zigzag" or None: the maneuver `sysid.data.scenario.recognise` finds in
+    the run's rudder, propeller and heading."""
+    kind = recognise(run).kind
+    return kind.value if kind in (Kind.TURNING, Kind.ZIGZAG) else None
 
 
 def recorded_maneuver(run: Run, scenario: str = "") -> tuple[Maneuver, int]:
     """(the maneuver of a recorded run, the sample index of its execute). The kind comes
-    from the scenario name or the file's folder (``turning/``, ``zigzag/``), else from the
-    rudder and heading (`recognised_kind`)."""
-    text = f"{scenario} {run.path.parent.name} {run.name}".lower()
-    kind = "zigzag" if "zigzag" in text else "turning" if ("turn" in text) else recognised_kind(run)
+    from the scenario name (else the file's name: ``turn...``, ``zigzag...``), the file's
+    folder (``turning/``, ``zigzag/``), else the signals (`recognised_kind`)."""
+    named = scenario.lower() or run.name.lower()  # "Zigzag 20/20", "turn_14-Sep-..."
+    folder = FOLDERS.get(run.path.parent.name.lower())
+    kind = ("zigzag" if "zigzag" in named else "turning" if "turn" in named
+            else folder.value if folder in (Kind.TURNING, Kind.ZIGZAG) else recognised_kind(run))
     if kind is None:
         raise DataError(f"{run.path}: not a turning or zig-zag run (name it in the scenario or keep it in "
                         "a turning/ or zigzag/ folder)")
