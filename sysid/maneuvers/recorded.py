@@ -111,8 +111,8 @@ def recorded_maneuver(run: Run, scenario: str = "") -> tuple[Maneuver, int]:
     angle = float(round(math.degrees(order)))
     if kind == "turning":
         return TurningCircle(angle, side), execute
-    named = re.search(r"(\d+(?:\.\d+)?)\s*/\s*(\d+(?:\.\d+)?)", scenario)
-    rudder_deg, check_deg = (float(named[1]), float(named[2])) if named else (angle, angle)
+    pair = re.search(r"(\d+(?:\.\d+)?)\s*/\s*(\d+(?:\.\d+)?)", scenario)
+    rudder_deg, check_deg = (float(pair[1]), float(pair[2])) if pair else (angle, angle)
     return ZigZag(rudder_deg, check_deg, side), execute
 
 
