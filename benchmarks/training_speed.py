@@ -20,6 +20,7 @@ import time
 import torch
 
 from sysid.data.datasets import data_root
+from sysid.dynamics.integrators import Integrator
 from sysid.errors import DataError
 from sysid.config.experiment import load_experiment
 from sysid.runs.lifecycle import training_runs
@@ -161,8 +162,8 @@ def parts(exp, runs, train, val, data=None) -> None:
     separate = SeedEnsemble(members)
     separate._shared_mmg = False
     side_by_side("seed ensemble (5 hybrids), test evaluation",
-                 lambda: evaluate_model(separate, tests, exp.evaluation.horizons, exp.evaluation.integrator),
-                 lambda: evaluate_model(shared, tests, exp.evaluation.horizons, exp.evaluation.integrator), 3)
+                 lambda: evaluate_model(separate, tests, exp.evaluation.horizons, Integrator(exp.evaluation.integrator)),
+                 lambda: evaluate_model(shared, tests, exp.evaluation.horizons, Integrator(exp.evaluation.integrator)), 3)
 
 
 def main() -> None:

@@ -18,7 +18,7 @@ import torch
 from torch import nn
 from torchdiffeq import odeint
 
-from sysid.dynamics.integrators import Integrator, IntegratorLike, Method, rollout
+from sysid.dynamics.integrators import EULER, Integrator, IntegratorLike, Method, rollout
 from sysid.mmg.coefficient_lookup import Rows, coefficient_matrix, view_of
 from sysid.mmg.model import ForceBreakdown
 
@@ -210,12 +210,12 @@ def integrate(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt
 
 
 def eager_predict(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
-                  method: IntegratorLike = Method.EULER) -> torch.Tensor:
+                  integrator: Integrator = EULER) -> torch.Tensor:
     """States (T, ..., 6) predicted from x0 (..., 6) with inputs (T, ..., 4), no gradient:
     `integrate` under ``torch.no_grad()``. A compiled `Integrator` is refused here (it is
     `sysid.fast.compiled.predict`'s)."""
     with torch.no_grad():
-        return integrate(force_model, x0, inputs, dt, method)
+        return integrate(force_model, x0, inputs, dt, integrator)
 
 
 @dataclass
@@ -238,14 +238,14 @@ def stack_forces(calls: list[ForceBreakdown]) -> ForceBreakdown:
 
 
 def integrate_with_forces(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
-                          method: IntegratorLike = Method.EULER) -> Trajectory:
+                          method: Method = Method.EULER) -> Trajectory:
     """`integrate` (not compiled) that also returns every call's forces, stacked.
 
     The training loss uses it with Euler: states from torchdiffeq's `odeint`, F_NN and
     F_MMG of each step for the output penalty (paper Eq. 17).
     """
     record: list[ForceBreakdown] = []
-    states = integrate(force_model, x0, inputs, dt, Integrator.of(method).method, record=record)
+    states = integrate(force_model, x0, inputs, dt, method, record=record)
     if not record:
         raise ValueError("no steps: inputs need at least two rows")
     return Trajectory(states, stack_forces(record))

@@ -36,16 +36,19 @@ class Integrator:
     method: Method = Method.EULER
     compiled: bool = False
 
-    def __post_init__(self):
+    def __post_init__(self):  # the public constructor takes a rule's name too: ``Integrator("rk4")``
         object.__setattr__(self, "method", Method.parse(self.method))
 
     @classmethod
     def of(cls, value: "IntegratorLike") -> "Integrator":
-        """An `Integrator` from an `Integrator`, a `Method` or a method name."""
-        return value if isinstance(value, Integrator) else cls(Method.parse(value))
+        """An `Integrator` from an `Integrator`, a `Method` or a method name: the public entry
+        points (`sysid.dynamics.equations.integrate`, `sysid.fast.compiled.predict`) call it
+        once; the layers below take the `Integrator` or its `Method`."""
+        return value if isinstance(value, Integrator) else cls(value)  # type: ignore[arg-type]
 
 
 IntegratorLike = Union[Integrator, Method, str]
+EULER = Integrator(Method.EULER)  # the paper's rule, eager: the default of the layers below the public entries
 
 
 def euler_step(f: RightHandSide, x: torch.Tensor, dt: float) -> torch.Tensor:

@@ -18,9 +18,8 @@ from torch import nn
 
 from sysid.data.recordings import Run, protocol_windows, stack_windows
 from sysid.data.scenario import scenario_of
-from sysid.config.choices import Method
 from sysid.dynamics.equations import eager_predict
-from sysid.dynamics.integrators import Integrator, IntegratorLike
+from sysid.dynamics.integrators import EULER, Integrator
 from sysid.config.checks import whole_samples
 from sysid.errors import DataError
 from sysid.records.columns import METRICS_COLUMNS, TRACE_COLUMNS, trace_name  # noqa: F401 (their home before)
@@ -61,11 +60,10 @@ class WindowPrediction:
 
 
 def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
-                    method: IntegratorLike = Method.EULER, dtype=torch.float64,
+                    integrator: Integrator = EULER, dtype=torch.float64,
                     device: str | torch.device = "cpu") -> list[WindowPrediction]:
     """Predict the protocol windows of every run in one batched integration (compiled
-    when `method` is a compiled `Integrator`: only then is `sysid.fast` imported)."""
-    integrator = Integrator.of(method)
+    when `integrator` is compiled: only then is `sysid.fast` imported)."""
     predict: Callable[..., torch.Tensor] = eager_predict
     if integrator.compiled:
         from sysid.fast.compiled import predict
@@ -159,11 +157,11 @@ def trace_frame(model: nn.Module, pred: WindowPrediction) -> pd.DataFrame:
 
 
 def evaluate_model(model: nn.Module, runs: Sequence[Run], horizons: Sequence[float],
-                   method: IntegratorLike = Method.EULER, traces: bool = True) -> Evaluation:
+                   integrator: Integrator = EULER, traces: bool = True) -> Evaluation:
     """The protocol's windowed RMSE per file and horizon, with per-step traces."""
     rows, frames, shares = [], {}, {}
     for horizon in horizons:
-        for pred in predict_windows(model, runs, horizon, method):
+        for pred in predict_windows(model, runs, horizon, integrator):
             rows.append(pred.metrics_row(horizon))
             if traces and len(pred.starts):
                 frame = trace_frame(model, pred)

@@ -37,11 +37,11 @@ class ClosedLoopStep(nn.Module):
     after the step (B, 6), orders after it (B, 2), inputs held over it (B, 4), the kNN
     gate's decision at the step's start (B, 1): 1 on, 0 off, NaN for a model without a gate)."""
 
-    def __init__(self, force_model: nn.Module, method: Method | str):
+    def __init__(self, force_model: nn.Module, method: Method):
         super().__init__()
         self.derivative = Derivative(force_model)
         self.orders = ManeuverOrders()
-        self.method = Method.parse(method)
+        self.method = method
 
     def forward(self, state, orders, parameters, t, dt):
         inputs, after = self.orders(state, orders, parameters, t, dt)
@@ -94,7 +94,7 @@ def source_digest() -> str:
 
 
 def run_eager(model: nn.Module, x0: torch.Tensor, orders0: torch.Tensor, parameters: torch.Tensor,
-              steps: int, dt: float, method: Method | str) -> torch.Tensor:
+              steps: int, dt: float, method: Method) -> torch.Tensor:
     """Record (steps, B, `RECORD`) of `steps` closed-loop steps of all B maneuvers at once."""
     step = ClosedLoopStep(model, method)
     dt_t = torch.tensor(dt, dtype=x0.dtype)
@@ -113,14 +113,13 @@ def _notice(message: str) -> None:
         print(message, file=sys.stderr, flush=True)
 
 
-def compiled_loop(model: nn.Module, method: Method | str, dtype: torch.dtype = torch.float64
+def compiled_loop(model: nn.Module, method: Method, dtype: torch.dtype = torch.float64
                   ) -> Callable[..., torch.Tensor] | None:
     """The compiled `ClosedLoopRollout` of `model` for one maneuver at a time (batch 1), from
     this process's memory, the disk cache, or compiled now (one notice line); None where
     compilation is off or fails (the caller runs `run_eager`)."""
     from sysid.fast.compiled import compile_cached, fingerprint  # the compiled path: only where it is chosen
     from sysid.fast.prepared import prepared
-    method = Method.parse(method)
     module = ClosedLoopRollout(ClosedLoopStep(prepared(model, 1), method), CAPACITY, source_digest())
     examples = (torch.zeros(1, 6, dtype=dtype), torch.zeros(1, 2, dtype=dtype),
                 torch.zeros(1, len(COLUMNS), dtype=dtype), torch.zeros((), dtype=dtype),

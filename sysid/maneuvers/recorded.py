@@ -40,7 +40,7 @@ from sysid.data.datasets import TEST_FILES, data_dir
 from sysid.data.recordings import Run, read_runs
 from sysid.data.scenario import FOLDERS, Maneuver as Kind, recognise
 from sysid.dynamics.equations import eager_predict
-from sysid.dynamics.integrators import Method
+from sysid.dynamics.integrators import Integrator, Method
 from sysid.errors import DataError
 from sysid.maneuvers.any_model import load_maneuver_model
 from sysid.maneuvers.base import Conditions, Maneuver, Side, TurningCircle, ZigZag
@@ -157,7 +157,7 @@ def _predictions(model: nn.Module, runs: Sequence[Run], starts: Sequence[int], m
         u = r.inputs[s:]
         inputs.append(np.concatenate([u, np.repeat(u[-1:], longest - len(u), 0)]))
     u = torch.tensor(np.stack(inputs, 1), dtype=torch.float64)
-    states = eager_predict(model, x0, u, runs[0].dt, method)
+    states = eager_predict(model, x0, u, runs[0].dt, Integrator(method))
     maneuvers = maneuvers if maneuvers is not None else [None] * len(runs)
     out = []
     for i, n in enumerate(lengths):
@@ -207,12 +207,11 @@ def like_for_like(maneuver: Maneuver, track: Track, rudder: np.ndarray, closed: 
 
 
 def record_comparison(models: Mapping[str, Sequence[nn.Module]], runs: Mapping[str, Run],
-                      method: Method | str = "euler", closed_loop_dt: float = CLOSED_LOOP_DT) -> pd.DataFrame:
+                      method: Method = Method.EULER, closed_loop_dt: float = CLOSED_LOOP_DT) -> pd.DataFrame:
     """`RECORD_COLUMNS` rows: for each run (scenario -> `Run`) the record's indices, then
     each model's (label -> its models: one, or several seeds whose indices are averaged,
     with their standard deviation in ``<index>_std``) indices of it, like for like (the
     module's docstring; zig-zags closed loop at step `closed_loop_dt` [s])."""
-    method = Method.parse(method)
     starts, maneuvers = _execute_starts(runs), _maneuvers(runs)
     predicted = {label: [_predictions(m, list(runs.values()), starts, method, maneuvers, closed_loop_dt)
                          for m in members]
@@ -312,7 +311,7 @@ def _predicted_run(path: Path, runs: Sequence[Run], starts: Sequence[int], metho
 
 
 def write_record_comparison(out_dir: str | os.PathLike, run_dirs: Mapping[str, str | os.PathLike],
-                            data: str | os.PathLike | None = None, method: Method | str = "euler",
+                            data: str | os.PathLike | None = None, method: Method = Method.EULER,
                             workers: int = 1, threads: int = 1, closed_loop_dt: float = CLOSED_LOOP_DT) -> Path:
     """``out_dir/maneuver_indices.csv``: `record_comparison` of the protocol's turning and
     zig-zag test runs (1 Hz) and the models of `run_dirs` (label -> run directory or folder
@@ -323,7 +322,6 @@ def write_record_comparison(out_dir: str | os.PathLike, run_dirs: Mapping[str, s
     if workers <= 1:
         frame = record_comparison(run_models(run_dirs), runs, method, closed_loop_dt)
         return write_csv(frame, Path(out_dir) / RECORD_FILE, float_format="%.6g")
-    method = Method.parse(method)
     starts = _execute_starts(runs)
     paths = {label: model_paths(path) for label, path in run_dirs.items()}
     items = [p for found in paths.values() for p in found]

@@ -50,7 +50,7 @@ MAX_LENGTHS_PER_STEP = 0.1   # ship lengths run per integration step, at most
 def default_conditions(model: nn.Module, ship: Ship, *, speed: float | None = None, rps: float | None = None,
                        rudder_rate: float | None = None, dt: float = 0.1, duration: float | None = None,
                        wind_speed: float = 0.0, wind_direction: float = 0.0,
-                       method: Method | str = Method.RK4) -> tuple[Conditions, dict[str, str]]:
+                       method: Method = Method.RK4) -> tuple[Conditions, dict[str, str]]:
     """`Conditions` with every value not given taken from the ship file or the model, and
     where each came from: approach speed [m/s] from ``[maneuvering] approach_speed``;
     revolutions [rps] that hold it in straight running (`straight_running_rps`); rudder
@@ -88,7 +88,7 @@ def default_conditions(model: nn.Module, ship: Ship, *, speed: float | None = No
     else:
         sources["duration"] = "given"
     sources["wind"] = "calm water" if wind_speed == 0.0 else "given"
-    return Conditions(speed, rps, rudder_rate, dt, duration, wind_speed, wind_direction, method), sources  # type: ignore[arg-type]
+    return Conditions(speed, rps, rudder_rate, dt, duration, wind_speed, wind_direction, method), sources
 
 
 def ahead_only(model: nn.Module) -> bool:

@@ -14,6 +14,7 @@ from typing import Callable, Sequence
 import pandas as pd
 
 from sysid.data.recordings import Run
+from sysid.dynamics.integrators import Integrator
 from sysid.device import compute_threads
 from sysid.evaluation.evaluate import evaluate_model
 from sysid.config.experiment import Experiment
@@ -117,7 +118,7 @@ def write_ensemble(name: str, exp: Experiment, group: SeedGroup, out: Path, test
     started = time.perf_counter()
     members = [load_model(out / "runs" / name / f"seed{seed}")[1] for seed in group.seeds]
     model = SeedEnsemble(members)
-    evaluation = evaluate_model(model, tests, exp.evaluation.horizons, exp.evaluation.integrator)
+    evaluation = evaluate_model(model, tests, exp.evaluation.horizons, Integrator(exp.evaluation.integrator))
     target = ensemble_name(name, exp.experiment.dataset)
     ens = exp.replace(experiment={"name": target},
                       ensemble={"members": tuple(f"../{name}/seed{seed}" for seed in group.seeds)})

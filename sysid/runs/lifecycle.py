@@ -22,6 +22,7 @@ from sysid.data.recordings import Run, read_runs
 from sysid.data.datasets import test_files
 from sysid.data.splits import TEST, TRAINING, VALIDATION, check_disjoint_runs, data_split, provenance
 from sysid.device import compute_threads
+from sysid.dynamics.integrators import Integrator
 from sysid.errors import ConfigError, TrainingError
 from sysid.evaluation.evaluate import Evaluation, evaluate_model, short_runs
 from sysid.evaluation.verdict import (IDENTIFIED_MMG, SHIP_FILE_MMG, BaselineVerdict, baseline_verdict,
@@ -107,7 +108,7 @@ def scores_on_tests(exp: Experiment, model: torch.nn.Module, evaluation: Evaluat
         return None
     scores = {"model": evaluation.metrics}
     for label, baseline in physics_baselines(exp, model, torch.float64).items():
-        scores[label] = evaluate_model(baseline, tests, exp.evaluation.horizons, exp.evaluation.integrator,
+        scores[label] = evaluate_model(baseline, tests, exp.evaluation.horizons, Integrator(exp.evaluation.integrator),
                                        traces=False).metrics
     return scores
 
@@ -208,7 +209,7 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
             model = trainer.model_.cpu().double()
         else:
             model = build_model(exp)
-        evaluation = evaluate_model(model, tests, exp.evaluation.horizons, exp.evaluation.integrator)
+        evaluation = evaluate_model(model, tests, exp.evaluation.horizons, Integrator(exp.evaluation.integrator))
         verdict, baseline_metrics = None, None
         if validation_scores is not None:
             scores = scores_on_tests(exp, model, evaluation, tests)

@@ -21,6 +21,8 @@ import pytest
 
 from own_sweep import SYSID, no_paper_data, own_sweep_project, validation_files
 from ray_cluster import LocalCluster, namespaces_allowed
+from sysid.config.choices import Method
+from sysid.dynamics.integrators import Integrator
 from sysid.sweep.inbox import read_journal
 from tiny_experiment import tiny_experiment, tiny_test_file
 
@@ -82,7 +84,8 @@ def test_runs_trained_where_nothing_is_shared_arrive_complete(cluster, dataset_d
         assert pd.read_csv(run / "metrics.csv").empty  # a sweep scores on no test file
         # the worker node's model, evaluated here, scores as the same model evaluated in this process
         _, model = load_model(run)
-        recorded = evaluate_model(model, [read_run(tiny_test_file(dataset_dir))], [30.0], "euler", traces=False).metrics
+        recorded = evaluate_model(model, [read_run(tiny_test_file(dataset_dir))], [30.0], Integrator(Method.EULER),
+                                  traces=False).metrics
         ours = pd.read_csv(metrics)
         for c in ("rmse_u", "rmse_v", "rmse_r"):
             assert ours[c].iloc[0] == pytest.approx(recorded[c].iloc[0], rel=1e-5)
