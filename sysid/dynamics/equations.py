@@ -19,6 +19,7 @@ from torch import nn
 from torchdiffeq import odeint
 
 from sysid.dynamics.integrators import EULER, Integrator, IntegratorLike, Method, rollout
+from sysid.mmg.capture import captured
 from sysid.mmg.coefficient_lookup import Rows, coefficient_matrix, view_of
 from sysid.mmg.model import ForceBreakdown
 
@@ -123,7 +124,7 @@ def lean_derivative(force_model: nn.Module, state: torch.Tensor, inputs: torch.T
     force breakdown) where it has one: the same numbers with fewer, larger operations
     (what compiled steps run). dx/dt is stacked along `dim` (0: channels first, (6, ...))."""
     rate_terms = getattr(force_model, "rate_terms", None)
-    if rate_terms is not None and (dim == -1 or dim == state.dim() - 1) and not torch.compiler.is_compiling():
+    if rate_terms is not None and (dim == -1 or dim == state.dim() - 1) and not captured():
         return motion_rate(state, *rate_terms(state, inputs))  # one product for the equations of motion (eager)
     channels = getattr(force_model, "force_channels", None)
     force = channels(state, inputs)[0] if channels is not None else force_model(state, inputs).total.unbind(-1)

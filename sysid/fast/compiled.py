@@ -38,6 +38,7 @@ from sysid.config.choices import Method
 from sysid.dynamics.equations import check_shapes, eager_predict
 from sysid.dynamics.integrators import Integrator, IntegratorLike, run_steps
 from sysid.fast.prepared import prepared
+from sysid.mmg.capture import capturing
 from sysid.store.files import atomic_path
 from sysid.state import INPUTS, STATE
 from sysid.fast.stepper import Derivative, Rollout, Step
@@ -126,12 +127,14 @@ def fingerprint(module: nn.Module, example_inputs: Sequence[torch.Tensor], optio
 def export_program(module: nn.Module, example_inputs: Sequence[torch.Tensor]) -> torch.export.ExportedProgram:
     """`torch.export` capture of `module` at these (static) input shapes, without gradient.
 
-    Plain attributes the trace assigned (caches such as the kNN bank norms, which would
-    hold traced tensors afterwards) are put back as they were.
+    The force model is told it is captured (`sysid.mmg.capture.capturing`: constants made by
+    operations, nothing cached, the guards' gradient-safe forms). Plain attributes the trace
+    assigned (caches such as the kNN bank norms, which would hold traced tensors afterwards)
+    are put back as they were.
     """
     saved = [(sub, dict(vars(sub))) for sub in module.modules()]
     try:
-        with torch.no_grad(), warnings.catch_warnings():
+        with torch.no_grad(), capturing(), warnings.catch_warnings():
             warnings.filterwarnings("ignore", message=".*assigned during export", category=UserWarning)
             return torch.export.export(module, tuple(example_inputs))
     finally:

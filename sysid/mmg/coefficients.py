@@ -14,8 +14,8 @@ from typing import Iterable, Mapping
 
 import torch
 from torch import nn
-from torch._C._functorch import is_functorch_wrapped_tensor
 
+from sysid.mmg.capture import captured, transformed
 from sysid.mmg.ship import Ship, parameter_name
 from sysid.errors import ShipDefinitionError
 
@@ -144,7 +144,7 @@ def _constant(value: torch.Tensor, dtype: torch.dtype | None):
     """A constant 0-d tensor in `dtype` (the dtype of the states it multiplies: an operation
     on two dtypes costs a cast), or the tensor itself where autograd or a functorch
     transform must see it."""
-    if value.requires_grad or is_functorch_wrapped_tensor(value) or type(value) not in (torch.Tensor, nn.Parameter):
+    if value.requires_grad or transformed(value) or type(value) not in (torch.Tensor, nn.Parameter):
         return value
     value = value.detach()
     return value if dtype is None or value.dtype == dtype else value.to(dtype)
@@ -161,7 +161,7 @@ def coefficient_view(values: Mapping[str, torch.Tensor], dtype: torch.dtype | No
         view.__dict__.update({k: _constant(v, dtype) for k, v in view.__dict__.items()})
     every = list(view.__dict__.values())
     view.requires_grad = any(v.requires_grad for v in every)        # autograd may pass
-    view.wrapped = any(is_functorch_wrapped_tensor(v) for v in every)  # a torch.func transform
+    view.wrapped = any(transformed(v) for v in every)  # a torch.func transform
     view.dtype = dtype
     return view
 
@@ -237,7 +237,7 @@ class Coefficients(nn.Module):
         transform must see them (trainable coefficients with gradient on, swapped-in
         values). Cached until a coefficient changes (`assign`, `load_state_dict`, an
         optimizer step on a trainable one, `to`, `functional_call`)."""
-        if torch.compiler.is_compiling():  # traced code reads the module (derived names too)
+        if captured():  # traced code reads the module (derived names too)
             return self
         self._watch()
         raws = [self._parameters[f"raw_{n}"] for n in self.trainable_names]

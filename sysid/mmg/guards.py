@@ -6,7 +6,8 @@ poisons the result; these helpers keep every branch finite.
 from __future__ import annotations
 
 import torch
-from torch._C._functorch import is_functorch_wrapped_tensor
+
+from sysid.mmg.capture import captured, transformed
 
 TINY = 2.2e-16  # the simulator's machine-epsilon guards (numpy.finfo(float).eps)
 SPEED_GUARD = 1e-5  # m/s, below it the simulator replaces U by 1e-7
@@ -16,9 +17,9 @@ def constant(x: torch.Tensor) -> bool:
     """True where no derivative can pass through `x` (no autograd history, not inside a
     `torch.func` transform): the guards' second branch is not needed then. (Compiled
     code keeps the guarded form; Inductor fuses it.)"""
-    if torch.compiler.is_compiling():
+    if captured():
         return False
-    return not x.requires_grad and not is_functorch_wrapped_tensor(x)
+    return not x.requires_grad and not transformed(x)
 
 
 def choose(condition: torch.Tensor, a, b, like: torch.Tensor) -> torch.Tensor:

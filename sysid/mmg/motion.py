@@ -11,8 +11,8 @@ import math
 from typing import NamedTuple, TypeVar
 
 import torch
-from torch._C._functorch import is_functorch_wrapped_tensor
 
+from sysid.mmg.capture import captured, transformed
 from sysid.mmg.guards import SPEED_GUARD, TINY, safe_atan2
 
 LOW_SPEED = 1e-7  # m/s, the simulator's U below the speed guard
@@ -48,7 +48,7 @@ _TENSORS: dict[tuple, Constants] = {}
 def constants(like: torch.Tensor) -> Constants:
     """The forward's `Constants` as tensors of `like`'s dtype and device: made once, or,
     while compiling, by operations of the traced code (never lifted tensor constants)."""
-    if torch.compiler.is_compiling():
+    if captured():
         return Constants(*[_made(value, like) for value in _VALUES])
     key = (like.dtype, like.device)
     found = _TENSORS.get(key)
@@ -85,13 +85,13 @@ def needs_smooth(c, *tensors) -> bool:
     """True where a derivative may pass through the forward (compiling, a functorch
     transform, or autograd on a state, input or coefficient): the guards' gradient-safe
     forms are used then; otherwise their plain forms (the same values, fewer operations)."""
-    if torch.compiler.is_compiling() or getattr(c, "wrapped", False):
+    if captured() or getattr(c, "wrapped", False):
         return True
     grad = torch.is_grad_enabled()
     if grad and getattr(c, "requires_grad", False):
         return True
     for t in tensors:
-        if t is not None and ((grad and t.requires_grad) or is_functorch_wrapped_tensor(t)):
+        if t is not None and ((grad and t.requires_grad) or transformed(t)):
             return True
     return False
 
