@@ -26,6 +26,13 @@ class CheckpointError(SysidError):
     """A run directory or checkpoint is missing or corrupt."""
 
 
+class RecordError(CheckpointError):
+    """A JSON record of a run or reproduction directory (``summary.json`` and the like,
+    `sysid.records.base`) is not readable JSON, not an object, or a key is missing or of the
+    wrong type: the message names the file and the key. A `CheckpointError`, since such a
+    directory is corrupt."""
+
+
 class IncompleteOutputError(SysidError):
     """An output directory (run, preprocessing, reproduction) is incomplete or was changed
     after it was written: no manifest, a listed file missing, or a checksum mismatch."""

@@ -1,7 +1,7 @@
 """JSON objects of a run or reproduction directory mirrored by frozen dataclasses.
 
 A `JsonRecord` is parsed once, where the file is read (`from_json`), with one error line
-naming the file and the field; `to_json` gives back the object key for key, in the order of
+naming the file and the field (`sysid.errors.RecordError`); `to_json` gives back the object key for key, in the order of
 the dataclass fields, so that ``json.dumps(record.to_json(), indent=2)`` writes the bytes
 sysid has always written. The field types drive both directions: a field typed as another
 record (or a tuple of them) nests, ``tuple[...]`` is a JSON array, ``dict[str, ...]`` an
@@ -23,21 +23,21 @@ import typing
 from pathlib import Path
 from typing import Any, ClassVar, Union
 
-from sysid.errors import CheckpointError
+from sysid.errors import RecordError
 
 FIX = "the file was changed or comes from another program; write it again with sysid"
 
 
 def read_json_object(path: Path) -> dict:
-    """The JSON object in `path`, or `CheckpointError` naming the file."""
+    """The JSON object in `path`, or `RecordError` naming the file."""
     if not path.is_file():
-        raise CheckpointError(f"{path}: file not found")
+        raise RecordError(f"{path}: file not found")
     try:
         data = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise CheckpointError(f"{path}: not valid JSON ({exc})") from None
+        raise RecordError(f"{path}: not valid JSON ({exc})") from None
     if not isinstance(data, dict):
-        raise CheckpointError(f"{path}: expected a JSON object")
+        raise RecordError(f"{path}: expected a JSON object")
     return data
 
 
@@ -59,7 +59,7 @@ class JsonRecord:
         """Parse `data` (a JSON object) read from the file `source`; `at` is its key path
         in that file ("gate"), both named in errors."""
         if not isinstance(data, dict):
-            raise CheckpointError(f"{source}: {at or 'the file'}: expected an object, got {_kind(data)}; {FIX}")
+            raise RecordError(f"{source}: {at or 'the file'}: expected an object, got {_kind(data)}; {FIX}")
         hints = _hints(cls)
         known, values = set(), {}
         for f in dataclasses.fields(cls):
@@ -70,14 +70,14 @@ class JsonRecord:
             if f.name in data:
                 values[f.name] = _parse(data[f.name], hints[f.name], source, key)
             elif not _has_default(f) and not cls.SPARSE:
-                raise CheckpointError(f"{source}: key {key!r} is missing; {FIX}")
+                raise RecordError(f"{source}: key {key!r} is missing; {FIX}")
             elif not _has_default(f):
                 values[f.name] = None
         return cls(**values, extra={k: v for k, v in data.items() if k not in known})  # type: ignore[call-arg]
 
     @classmethod
     def read(cls, path: str | os.PathLike) -> typing.Self:
-        """The record in the JSON file at `path`; `CheckpointError` naming the file and key."""
+        """The record in the JSON file at `path`; `RecordError` naming the file and key."""
         return cls.from_json(read_json_object(Path(path)), str(path))
 
     def to_text(self) -> str:
@@ -136,23 +136,23 @@ def _parse(value: Any, hint: Any, source: str, at: str) -> Any:
     if isinstance(hint, type) and issubclass(hint, enum.StrEnum):
         words = [m.value for m in hint]
         if not isinstance(value, str) or value not in words:
-            raise CheckpointError(f"{source}: {at}: expected one of {', '.join(words)}, got {_kind(value)} "
+            raise RecordError(f"{source}: {at}: expected one of {', '.join(words)}, got {_kind(value)} "
                                   f"{value!r:.40}; {FIX}")
         return hint(value)
     if origin is tuple:
         if not isinstance(value, list):
-            raise CheckpointError(f"{source}: {at}: expected an array, got {_kind(value)}; {FIX}")
+            raise RecordError(f"{source}: {at}: expected an array, got {_kind(value)}; {FIX}")
         return tuple(_parse(v, args[0], source, f"{at}[{i}]") for i, v in enumerate(value))
     if origin is dict:
         if not isinstance(value, dict):
-            raise CheckpointError(f"{source}: {at}: expected an object, got {_kind(value)}; {FIX}")
+            raise RecordError(f"{source}: {at}: expected an object, got {_kind(value)}; {FIX}")
         return {k: _parse(v, args[1], source, f"{at}.{k}") for k, v in value.items()}
     fits = {bool: lambda v: isinstance(v, bool),
             int: lambda v: isinstance(v, int) and not isinstance(v, bool),
             float: lambda v: isinstance(v, (int, float)) and not isinstance(v, bool),
             str: lambda v: isinstance(v, str)}[hint]
     if not fits(value):
-        raise CheckpointError(f"{source}: {at}: expected {_SCALARS[hint]}, got {_kind(value)} {value!r:.40}; {FIX}")
+        raise RecordError(f"{source}: {at}: expected {_SCALARS[hint]}, got {_kind(value)} {value!r:.40}; {FIX}")
     return value  # as read (an integral float stays 1.0, an int 1): written back the same
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from sysid.config.choices import Solver
-from sysid.errors import CheckpointError
+from sysid.errors import CheckpointError, RecordError
 from sysid.evaluation.verdict import BaselineVerdict
 from sysid.runs.directory import RunDir
 from sysid.runs.records import JsonRecord
@@ -129,10 +129,23 @@ def test_a_malformed_summary_is_one_line_naming_the_file_and_key(hybrid_run, tmp
     change(data)
     path = tmp_path / "summary.json"
     path.write_text(json.dumps(data))
-    with pytest.raises(CheckpointError, match=message) as err:
+    with pytest.raises(RecordError, match=message) as err:
         RunSummary.read(path)
     said = str(err.value)
     assert said.startswith(f"{path}: ") and "\n" not in said and "write it again" in said
+    assert isinstance(err.value, CheckpointError)  # a corrupt run directory, as every caller catches it
+
+
+@pytest.mark.parametrize("text, message", [
+    ('{"name": "hybrid_D2", ', r"not valid JSON \(Expecting property name"),
+    ("[1, 2]", r"expected a JSON object"),
+])
+def test_a_summary_that_is_not_a_json_object_is_a_record_error_naming_the_file(tmp_path, text, message):
+    path = tmp_path / "summary.json"
+    path.write_text(text)
+    with pytest.raises(RecordError, match=message) as err:
+        RunSummary.read(path)
+    assert str(err.value).startswith(f"{path}: ") and "\n" not in str(err.value)
 
 
 def test_reproduce_warns_for_every_run_below_its_baseline(hybrid_run, tmp_path, capsys):
