@@ -11,6 +11,8 @@ with --compiled the step whose hybrid right-hand side (MMG, FNN, equations of mo
 torch.compile'd function (Inductor; its caches persist in TORCHINDUCTOR_CACHE_DIR, so a second
 run of this script measures the warm start) beside today's eager step, interleaved, with the
 time of its first step (the compile, or the cache load) and the two losses;
+with --ops the aten operations dispatched by one right-hand-side call of the training loss
+(forward with the force record, its backward) and by the MMG's forward alone;
 with --converge also the wall time of a whole training to its early stop; with
 --parts the CPU time of the pieces of an epoch and of the seed ensembles' evaluation, each
 beside the way it was done before (interleaved repeats, medians of process CPU time, which a
@@ -159,6 +161,40 @@ def compiled_comparison(exp, train, batch: int, repeats: int = 5) -> None:
           f"{first_step:.1f} s (compile or cache load; cache {os.environ.get('TORCHINDUCTOR_CACHE_DIR', 'default')}); "
           f"{1e3 * b:.1f} ms/step against eager {1e3 * a:.1f} ({a / b:.2f}x); losses (L_v, L_F) "
           f"{after[0]:.6g}, {after[1]:.6g} against {before[0]:.6g}, {before[1]:.6g}")
+
+
+def operation_counts(exp, train, batch: int) -> None:
+    """Aten operations dispatched by one training right-hand-side call (K = 1, `batch` rows)."""
+    from torch.utils._python_dispatch import TorchDispatchMode
+    from sysid.dynamics.equations import ShipDynamics
+
+    class Count(TorchDispatchMode):
+        def __init__(self):
+            super().__init__()
+            self.n = 0
+
+        def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+            self.n += 1
+            return func(*args, **(kwargs or {}))
+
+    mmg = build_mmg(exp, torch.float32).requires_grad_(False)
+    net = ForceCorrection(exp.network.hidden, torch.float32, 1)
+    chunk = train.select(torch.arange(min(batch, len(train))))
+    x = chunk.states[1].unsqueeze(0).clone().requires_grad_(True)  # a state inside a rollout
+    inputs = chunk.inputs.unsqueeze(1)
+    rhs = ShipDynamics(PerMember(CorrectedModel(mmg, net, None, True, exp.gate.space)), inputs, chunk.dt, [])
+    rhs(torch.tensor(0.0), x)  # the coefficient views are made on a first call
+    counts = {}
+    for label, fn in (("MMG forward (F_MMG)", lambda: mmg.total_force(x, inputs[1])),
+                      ("right-hand side with the force record", lambda: rhs(torch.tensor(1.0), x))):
+        with Count() as c:
+            out = fn()
+        counts[label] = c.n
+    with Count() as c:
+        out.sum().backward()
+    counts["its backward"] = c.n
+    print(f"aten operations per right-hand-side call, batch {len(chunk)}: "
+          + ", ".join(f"{k} {v}" for k, v in counts.items()))
 
 
 def network_flops(widths: list[int], rows: int, steps: int) -> tuple[float, float]:
@@ -326,6 +362,7 @@ def main() -> None:
                         help="also the step at the config's batch beside its arithmetic limit (interleaved)")
     parser.add_argument("--compiled", action="store_true",
                         help="also the step with a torch.compile'd right-hand side beside today's eager step")
+    parser.add_argument("--ops", action="store_true", help="also count the operations of one right-hand-side call")
     parser.add_argument("--converge", action="store_true", help="also train each config to its early stop")
     parser.add_argument("--parts", action="store_true", help="CPU time of an epoch's pieces, before and after")
     args = parser.parse_args()
@@ -373,6 +410,8 @@ def main() -> None:
                   f"{forward / 1e9:.3f} GFLOP forward, {both / 1e9:.3f} with the backward; that arithmetic alone "
                   f"{1e3 * b:.1f} ms ({both / b / 1e9:.1f} GFLOP/s) against the step's {1e3 * a:.1f} ms "
                   f"({a / b:.1f}x the limit)")
+        if args.ops:
+            operation_counts(exp, train, t.batch_size)
         if args.compiled:
             compiled_comparison(exp, train, t.batch_size)
         if args.parts:
