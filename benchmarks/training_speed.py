@@ -195,6 +195,33 @@ def operation_counts(exp, train, batch: int) -> None:
     counts["its backward"] = c.n
     print(f"aten operations per right-hand-side call, batch {len(chunk)}: "
           + ", ".join(f"{k} {v}" for k, v in counts.items()))
+    # what a hand-derived backward of the MMG could save at most: its forward without autograd
+    # (plain guard forms) against its forward and backward through autograd, interleaved
+    with Count() as c:
+        with torch.no_grad():
+            mmg.total_force(x, inputs[1])
+    plain_ops = c.n
+    weights = torch.randn(x.shape[:-1] + (3,))
+
+    def autograd_pass():
+        x.grad = None
+        (mmg.total_force(x, inputs[1])[0] * weights).sum().backward()
+
+    def plain_pass():
+        with torch.no_grad():
+            mmg.total_force(x, inputs[1])
+    def whole_pass():
+        x.grad = None
+        rhs.record.clear()
+        rhs(torch.tensor(1.0), x).sum().backward()
+    times = {"whole": [], "autograd": [], "plain": []}
+    for _ in range(5):
+        for label, fn in (("whole", whole_pass), ("autograd", autograd_pass), ("plain", plain_pass)):
+            times[label] += cpu_ms(lambda: [fn() for _ in range(10)], 1)
+    w, a, b = (statistics.median(times[k]) / 10 for k in ("whole", "autograd", "plain"))
+    print(f"CPU ms per call, batch {len(chunk)}: the right-hand side forward and backward {w:.2f}, of which the MMG's "
+          f"{a:.2f} through autograd; the MMG's forward without autograd {b:.2f} ({plain_ops} operations, "
+          f"{a / b:.1f}x less than through autograd)")
 
 
 def network_flops(widths: list[int], rows: int, steps: int) -> tuple[float, float]:
