@@ -409,8 +409,11 @@ def main() -> None:
                                          t.block_s, exp.experiment.seed)
         print(f"\n{name}: {len(train)} training windows of {t.steps} steps (config batch {t.batch_size})")
         print(f"{'batch':>6} {'ms/step':>9} {'window-steps/s':>15} {'epochs/s':>9}")
-        batches = ([int(b) for b in args.batches.split(",")] if args.batches
-                   else [128, 512, t.batch_size, 1024, len(train)])
+        try:
+            batches = ([int(b) for b in args.batches.split(",")] if args.batches
+                       else [128, 512, t.batch_size, 1024, len(train)])
+        except ValueError:
+            raise SystemExit(f"training_speed: --batches {args.batches!r}: give whole numbers separated by commas")
         for batch in sorted(set(batches)):
             seconds = minibatch_seconds(exp, train, batch)
             steps_per_epoch = -(-len(train) // batch)
