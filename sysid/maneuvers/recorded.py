@@ -80,9 +80,9 @@ def recorded_maneuver(run: Run, scenario: str = "") -> tuple[Maneuver, int]:
     """(the maneuver of a recorded run, the sample index of its execute). The kind comes
     from the scenario name (else the file's name: ``turn...``, ``zigzag...``), the file's
     folder (``turning/``, ``zigzag/``), else the signals (`recognised_kind`)."""
-    named = scenario.lower() or run.name.lower()  # "Zigzag 20/20", "turn_14-Sep-..."
+    label = scenario.lower() if scenario else run.name.lower()[:6]  # "Zigzag 20/20"; "turn_14-Sep-..."
     folder = FOLDERS.get(run.path.parent.name.lower())
-    kind = ("zigzag" if "zigzag" in named else "turning" if "turn" in named
+    kind = ("zigzag" if "zigzag" in label else "turning" if "turn" in label[:4] or " turn" in label
             else folder.value if folder in (Kind.TURNING, Kind.ZIGZAG) else recognised_kind(run))
     if kind is None:
         raise DataError(f"{run.path}: not a turning or zig-zag run (name it in the scenario or keep it in "
