@@ -70,12 +70,20 @@ def recorded_test_runs(data: str | os.PathLike | None = None, rate: float = 1.0)
 
 def recorded_maneuver(run: Run, scenario: str = "") -> tuple[Maneuver, int]:
     """(the maneuver of a recorded run, the sample index of its execute). The kind comes
-    from the scenario name or the file's folder (``turning/``, ``zigzag/``)."""
+    from the scenario name or the file's folder (``turning/``, ``zigzag/``), else from the
+    maneuver its rudder and heading record (`sysid.data.scenario.recognise`)."""
+    from sysid.data.scenario import Maneuver as Recorded, recognise
+
     text = f"{scenario} {run.path.parent.name} {run.name}".lower()
     kind = "zigzag" if "zigzag" in text else "turning" if ("turn" in text) else None
+    found = None
     if kind is None:
-        raise DataError(f"{run.path}: not a turning or zig-zag run (name it in the scenario or keep it in "
-                        "a turning/ or zigzag/ folder)")
+        found = recognise(run)
+        kind = {Recorded.ZIGZAG: "zigzag", Recorded.TURNING: "turning"}.get(found.kind)
+    if kind is None:
+        raise DataError(f"{run.path}: not a turning or zig-zag run (its rudder and heading record "
+                        f"{found.name if found else 'neither'}; name it in the scenario or keep it in a turning/ "
+                        "or zigzag/ folder)")
     rudder = run.inputs[:, 1]
     order = float(np.percentile(np.abs(rudder), 95))
     if order < math.radians(1.0):
@@ -101,7 +109,12 @@ def recorded_maneuver(run: Run, scenario: str = "") -> tuple[Maneuver, int]:
     if kind == "turning":
         return TurningCircle(angle, side), execute
     named = re.search(r"(\d+(?:\.\d+)?)\s*/\s*(\d+(?:\.\d+)?)", scenario)
-    rudder_deg, check_deg = (float(named[1]), float(named[2])) if named else (angle, angle)
+    if named:
+        rudder_deg, check_deg = float(named[1]), float(named[2])
+    elif found is not None and found.heading_deg is not None:   # the check angle the record shows
+        rudder_deg, check_deg = angle, found.heading_deg
+    else:
+        rudder_deg, check_deg = angle, angle
     return ZigZag(rudder_deg, check_deg, side), execute
 
 
