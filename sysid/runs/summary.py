@@ -157,8 +157,10 @@ class VerdictCell(JsonRecord):
 @dataclass(frozen=True)
 class VerdictSummary(JsonRecord):
     """"verdict": the run against its physics baselines
-    (`sysid.evaluation.verdict.BaselineVerdict.to_dict`); `baseline_verdict` gives it back
-    as that dataclass."""
+    (`sysid.evaluation.verdict.BaselineVerdict.to_dict`): the rule's outcome and judgement per
+    baseline (`sysid.evaluation.judgement.Judgement`), the per-window evidence, the pooled cells;
+    `baseline_verdict` gives it back as that dataclass. A run written before the rule has no
+    outcome or judgements: its beats_baseline stands."""
 
     model: str
     baselines: tuple[str, ...]
@@ -168,6 +170,10 @@ class VerdictSummary(JsonRecord):
     val_loss_multistep: dict[str, float]      # "model" or a baseline label -> validation loss
     statement: str
     cells: tuple[VerdictCell, ...]
+    outcome: str | None = None                # "beats" | "worse" | "not_distinguishable" | "diverged"; None: before the rule
+    judgements: dict[str, Any] = field(default_factory=dict)             # baseline -> `Judgement.to_dict`
+    validation_judgements: dict[str, Any] = field(default_factory=dict)  # the same on the validation windows
+    evidence: dict[str, Any] = field(default_factory=dict)               # split -> baseline -> paired per-window cells
     extra: dict[str, Any] = field(default_factory=dict)
 
     def baseline_verdict(self):
