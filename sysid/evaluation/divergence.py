@@ -3,7 +3,8 @@ range of the training data.
 
 The rule (docs: How sysid judges a model): a predicted state diverged when any of its six
 channels is not finite, or when its speed sqrt(u^2 + v_m^2) exceeds `DIVERGENCE_FACTOR` times
-the largest speed in the training logs, or its |r| that factor times their largest |r|.
+the largest speed in the training logs and in the window's own record, or its |r| that
+factor times their largest |r|.
 Without training logs (an MMG used as defined) only non-finite states count.
 """
 from __future__ import annotations
@@ -33,7 +34,12 @@ class PhysicalRange:
         """The range of `runs` (`sysid.data.recordings.Run`); None without runs."""
         if not runs:
             return None
-        vel = np.concatenate([np.asarray(run.states)[:, list(VELOCITY_INDEX)] for run in runs])
+        return cls.of_states(np.concatenate([np.asarray(run.states) for run in runs]), factor)
+
+    @classmethod
+    def of_states(cls, states: np.ndarray, factor: float = DIVERGENCE_FACTOR) -> "PhysicalRange | None":
+        """The range of states (N, 6); None without a finite one."""
+        vel = np.asarray(states, dtype=float)[:, list(VELOCITY_INDEX)]
         vel = vel[np.all(np.isfinite(vel), axis=1)]
         if not len(vel):
             return None
@@ -44,16 +50,23 @@ class PhysicalRange:
 
 
 def diverged_windows(predicted: np.ndarray, t: np.ndarray, log: str, horizon_s: float,
-                     limits: PhysicalRange | None = None) -> tuple[np.ndarray, Divergence | None]:
+                     limits: PhysicalRange | None = None,
+                     observed: np.ndarray | None = None) -> tuple[np.ndarray, Divergence | None]:
     """(W,) True for each window whose prediction diverged, and where it first did (the
     earliest time over the windows), or None.
 
-    predicted : (H, W, 6) predicted states (`sysid.state.STATE`); t : (H, W) log time [s].
+    predicted, observed : (H, W, 6) predicted and recorded states (`sysid.state.STATE`); t :
+    (H, W) log time [s]. The range is the training logs' (`limits`), widened to the recorded
+    states of these windows: a prediction as fast as the record never counts as diverged.
     """
     predicted = np.asarray(predicted, dtype=float)
     H, W = predicted.shape[:2]
     if not W:
         return np.zeros(0, dtype=bool), None
+    if limits is not None and observed is not None:
+        seen = PhysicalRange.of_states(np.asarray(observed, dtype=float).reshape(-1, predicted.shape[-1]))
+        if seen is not None:
+            limits = PhysicalRange(max(limits.speed, seen.speed), max(limits.yaw_rate, seen.yaw_rate), limits.factor)
     bad_finite = ~np.all(np.isfinite(predicted), axis=-1)                    # (H, W)
     bad = bad_finite.copy()
     speed = yaw = None
@@ -71,10 +84,10 @@ def diverged_windows(predicted: np.ndarray, t: np.ndarray, log: str, horizon_s: 
         channel, reason = "", "non-finite"
     elif speed is not None and speed[step, window]:
         value = float(np.hypot(predicted[step, window, VELOCITY_INDEX[0]], predicted[step, window, VELOCITY_INDEX[1]]))
-        channel, reason = "speed", (f"{value:.3g} m/s, beyond {limits.factor:g} x the training logs' largest "
-                                    f"speed {limits.speed:.3g} m/s")
+        channel, reason = "speed", (f"{value:.3g} m/s, beyond {limits.factor:g} x the largest speed of the "
+                                    f"training logs and this record, {limits.speed:.3g} m/s")
     else:
         value = float(abs(predicted[step, window, VELOCITY_INDEX[2]]))
-        channel, reason = "r", (f"|r| {value:.3g} rad/s, beyond {limits.factor:g} x the training logs' largest "
-                                f"{limits.yaw_rate:.3g} rad/s")
+        channel, reason = "r", (f"|r| {value:.3g} rad/s, beyond {limits.factor:g} x the largest |r| of the "
+                                f"training logs and this record, {limits.yaw_rate:.3g} rad/s")
     return flags, Divergence(log, float(horizon_s), float(np.asarray(t)[step, window]), channel, reason)

@@ -90,7 +90,7 @@ class WindowPrediction:
     def errors(self, horizon_s: float, limits: PhysicalRange | None = None) -> "WindowErrors":
         """This file's `WindowErrors` at `horizon_s`, divergence checked against `limits`."""
         _, divergence = diverged_windows(self.predicted.detach().cpu().numpy(), self.t, self.run.name,
-                                         horizon_s, limits)
+                                         horizon_s, limits, self.observed.detach().cpu().numpy())
         return WindowErrors(SCENARIO_OF.get(self.run.name, ""), self.run.name, float(horizon_s),
                             np.asarray(self.t[0], dtype=float), self.window_rmse(), divergence)
 

@@ -410,7 +410,7 @@ def judge(cells: Sequence[PairedCell], rule: VerdictRule = VerdictRule(), model:
     ranked = sorted((c for c in judged if math.isfinite(c.change)), key=lambda c: -c.change)
     worst = tuple(diverged[:3] + ranked[:max(0, 3 - len(diverged))])
     n_windows = sum(group[0].n_windows for group in groups.values())
-    divergences = tuple(c.divergence for c in diverged if c.divergence is not None)
+    divergences = tuple(dict.fromkeys(c.divergence for c in diverged if c.divergence is not None))
     result = Judgement(outcome, rule.confidence, rule.material, tuple(judged), change, change_low, change_high,
                        member_changes, worst, len({c.log for c in cells}), n_windows, M,
                        tuple(sorted({float(c.horizon_s) for c in cells})), "", divergences)
@@ -430,10 +430,11 @@ def _with_sentence(j: Judgement, model: str, baseline: str, material: list[CellJ
                if math.isfinite(j.change) else "no cell to compare")
     evidence = f"on {j.evidence()}"
     if j.outcome is Outcome.DIVERGED:
-        where = "; ".join(c.divergence.text() if c.divergence else c.where for c in diverged[:3])
-        more = f" and {len(diverged) - 3} more cells" if len(diverged) > 3 else ""
-        text = (f"{model} DIVERGED (non-finite or far outside the training data's range) in {where}{more}, "
-                f"so it does not beat {baseline}; {overall} in the cells that stayed finite, {evidence}.")
+        places = list(dict.fromkeys(c.divergence.text() if c.divergence else c.where for c in diverged))
+        where = "; ".join(places[:3]) + (f"; and {len(places) - 3} more" if len(places) > 3 else "")
+        finite = f"{overall} in the cells that stayed finite" if math.isfinite(j.change) else "no cell stayed finite"
+        text = (f"{model} DIVERGED (non-finite or far outside the training data's range) in {where}, "
+                f"so it does not beat {baseline}; {finite}, {evidence}.")
     elif j.outcome is Outcome.WORSE:
         why = (f"more than {tolerance} worse at {conf} confidence in {_listed(material)}" if material
                else f"worse overall at {conf} confidence")
