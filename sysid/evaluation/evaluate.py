@@ -10,10 +10,9 @@ pooled over the windows of a file. Each window's own RMSE (`WindowErrors`) feeds
 """
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -29,22 +28,10 @@ from sysid.config.checks import whole_samples
 from sysid.errors import DataError
 from sysid.evaluation.divergence import PhysicalRange, diverged_windows
 from sysid.evaluation.judgement import Divergence
+from sysid.records.columns import (METRICS_COLUMNS, REQUIRED_METRICS_COLUMNS, TRACE_COLUMNS,  # noqa: F401 (their home before)
+                                   trace_name)
 from sysid.state import FORCE, FORCE_COMPONENTS, INPUTS, STATE, VELOCITY_INDEX
 
-# one row per file and horizon; RMSE of u, v_m [m/s] and r [rad/s]; diverged: a window's
-# prediction diverged, first at diverged_at_s [s] of the log (NaN otherwise)
-METRICS_COLUMNS = ["scenario", "file", "horizon_s", "n_windows", "rmse_u", "rmse_v", "rmse_r",
-                   "diverged", "diverged_at_s"]
-REQUIRED_METRICS_COLUMNS = METRICS_COLUMNS[:7]   # what a run written before divergence was marked holds
-# one row per window step of a trace (see `trace_frame`)
-TRACE_COLUMNS = (
-    ["window", "t", "t_rel"]
-    + [f"obs_{c}" for c in STATE]
-    + [f"pred_{c}" for c in STATE]
-    + list(INPUTS) + ["wind_velo_relative", "wind_dir_relative"]  # relative wind of the predicted state
-    + [f"{a}{key}" for key in FORCE_COMPONENTS.values() for a in FORCE]  # N, N m
-    + ["knn_distance", "gate_on"]  # NaN / 1 where the model has no gate
-)
 SCENARIO_OF = {Path(v).stem: k for k, v in TEST_FILES.items()}
 
 
@@ -114,7 +101,7 @@ def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
     """Predict the protocol windows of every run in one batched integration (compiled
     when `method` is a compiled `Integrator`: only then is `sysid.fast` imported)."""
     integrator = Integrator.of(method)
-    predict = eager_predict
+    predict: Callable[..., torch.Tensor] = eager_predict
     if integrator.compiled:
         from sysid.fast.compiled import predict
     chunks, meta = [], []
@@ -124,7 +111,7 @@ def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
             dt = run.dt
         elif abs(run.dt - dt) > 1e-9:
             raise DataError(f"{run.path}: sample period {run.dt} s differs from {dt} s of the other files")
-        H = whole_samples("horizon", horizon_s, run.dt, DataError)
+        H = window_samples("horizon", horizon_s, run.dt, DataError)
         starts = protocol_windows(len(run), H)
         meta.append((run, H, starts))
         if len(starts):
@@ -153,8 +140,22 @@ def short_runs(runs: Sequence[Run], horizons: Sequence[float], name: str = "--ho
                error: type[Exception] = DataError) -> list[tuple[Run, float]]:
     """(run, horizon [s]) pairs where the run holds fewer samples than one window: their
     metrics rows would be empty. Every horizon must be a whole number of every run's
-    samples (else `error` naming `name`)."""
+    samples, at least two: a window of one sample is its start state alone, no step is
+    predicted and its RMSE is 0 by construction (else `error` naming `name`)."""
+    for h in horizons:
+        for run in runs:
+            window_samples(name, h, run.dt, error)
     return [(run, h) for h in horizons for run in runs if len(run) < whole_samples(name, h, run.dt, error)]
+
+
+def window_samples(name: str, horizon_s: float, dt: float, error: type[Exception] = DataError) -> int:
+    """The samples of one window of `horizon_s` [s] (its start state and H - 1 predicted
+    steps, `dt` [s] apart): a whole number >= 2, else `error` naming `name`."""
+    H = whole_samples(name, horizon_s, dt, error)
+    if H < 2:
+        raise error(f"{name} {horizon_s:g}: a window of one {dt:g}-s sample is its start state alone, so "
+                    f"nothing is predicted and its RMSE is 0; give a horizon of at least {2 * dt:g} s")
+    return H
 
 
 @dataclass
@@ -172,12 +173,6 @@ class Evaluation:
     def divergences(self) -> list[Divergence]:
         """Where a prediction diverged, per file and horizon."""
         return [w.divergence for w in self.windows if w.divergence is not None]
-
-
-def trace_name(file_stem: str, horizon_s: float) -> str:
-    """File name of a trace: ``{file_stem}_h{H}.csv``."""
-    safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", file_stem)
-    return f"{safe}_h{int(round(horizon_s))}.csv"
 
 
 def trace_frame(model: nn.Module, pred: WindowPrediction) -> pd.DataFrame:

@@ -233,7 +233,7 @@ def window_score(model, windows: WindowSet, w_v: torch.Tensor) -> WindowScore:
     err = rollout_errors(model, windows)
     rmse = torch.sqrt((err * err).reshape(-1, 3).mean(0))
     per_window = torch.sqrt((err * err).mean(0)).reshape(-1, 3)
-    return WindowScore(float(velocity_loss(err, w_v)), tuple(float(v) for v in rmse),
+    return WindowScore(float(velocity_loss(err, w_v)), tuple(float(v) for v in rmse),  # type: ignore[arg-type]
                        per_window.detach().cpu().double().numpy())
 
 
@@ -248,7 +248,7 @@ def pooled_rmse(metrics: pd.DataFrame) -> dict[float, tuple[float, float, float]
             continue
         out[float(horizon)] = tuple(float(np.sqrt((n * block[c].to_numpy() ** 2).sum() / n.sum()))
                                     for c in ("rmse_u", "rmse_v", "rmse_r"))
-    return out
+    return out  # type: ignore[return-value]
 
 
 def test_cells(model: "Evaluation", baseline: "Evaluation") -> list[PairedCell]:
