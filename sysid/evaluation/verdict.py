@@ -112,6 +112,16 @@ class BaselineVerdict:
         ratios = [c.model / c.baselines[baseline] for c in self.deciding if c.baselines[baseline] > 0]
         return math.exp(float(np.mean(np.log(ratios)))) - 1.0 if ratios else math.nan
 
+    def member_spread(self, split: str, log: str, horizon_s: float, channel: str) -> float | None:
+        """The std over seeds (members) of the model's RMSE in one cell [m/s or rad/s]; None
+        with one seed or without the evidence."""
+        for cells in self.evidence.get(split, {}).values():
+            for c in cells:
+                if (c.log, float(c.horizon_s), c.channel) == (log, float(horizon_s), channel) and len(c.model) > 1:
+                    return float(np.std(np.sqrt(np.mean(c.model**2, axis=1)), ddof=1))
+            return None
+        return None
+
     @property
     def outcome(self) -> Outcome | None:
         """The worst outcome over the baselines (DIVERGED, WORSE, NOT_DISTINGUISHABLE, BEATS);
@@ -281,7 +291,7 @@ def validation_cells(model: WindowScore, baseline: WindowScore, horizon_s: float
 def judged(model: str, label: str, cells: Sequence[PairedCell], rule: VerdictRule, seeds: int = 1) -> Judgement:
     """`judge` with the sentence's names: "The hybrid" against "its physics baseline MMG (ship file)"."""
     name = MODEL_NAMES.get(model, model)
-    spread = f" (over {seeds} seeds)" if seeds > 1 else ""
+    spread = f" (mean over {seeds} seeds)" if seeds > 1 else ""
     return judge(cells, rule, model=f"The {name}{spread}", baseline=f"its physics baseline {label}")
 
 

@@ -249,8 +249,10 @@ def _judged_rows(verdict: Verdict, split: str, judgements: dict) -> list[list[st
     rows = []
     for i, cell in enumerate(first.cells):
         label = split + (" (decides)" if split == verdict.decided_on else "")
+        std = verdict.member_spread(split, cell.log, cell.horizon_s, cell.channel)
+        spread = f" ± {std:.5f}" if std is not None and math.isfinite(std) else ""
         row = [label, cell.scenario or cell.log, f"{cell.horizon_s:g} s", f"{cell.channel} [{UNITS[cell.channel]}]",
-               str(cell.n_windows), format_rmse(cell.model_rmse)]
+               str(cell.n_windows), format_rmse(cell.model_rmse) + spread]
         for b in verdict.baselines:
             c = judgements[b].cells[i] if b in judgements else None
             if c is None:
