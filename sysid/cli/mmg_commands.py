@@ -231,7 +231,7 @@ def evaluate(
 ) -> None:
     """The protocol's windowed RMSE of u, v_m, r per file and horizon (MMG or a trained run)."""
     import pandas as pd
-    from sysid.data.recordings import expand_paths, read_run
+    from sysid.data.recordings import expand_paths, read_runs
     from sysid.evaluation.evaluate import evaluate_model, short_runs
     from sysid.store.files import write_csv
     from sysid.config import checks
@@ -255,7 +255,7 @@ def evaluate(
         overrides = ", ".join(f"{k}={v:g}" for k, v in model.ship.overrides.items()) or "none"
         label = f"MMG ({model.ship.name}, overrides: {overrides})"
     files = expand_paths(data)
-    runs = [read_run(f, columns=columns) for f in progress(files, desc="reading", unit="files", quiet=len(files) < 4)]
+    runs = read_runs(progress(files, desc="reading", unit="files", quiet=len(files) < 4), columns=columns)
     short = short_runs(runs, horizon)
     for h in horizon:
         if sum(s == h for _, s in short) == len(runs):

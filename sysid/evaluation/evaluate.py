@@ -11,7 +11,6 @@ pooled over the windows of a file. Each window's own RMSE (`WindowErrors`) feeds
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
@@ -20,7 +19,7 @@ import torch
 from torch import nn
 
 from sysid.data.recordings import Run, protocol_windows, stack_windows
-from sysid.data.datasets import TEST_FILES
+from sysid.data.scenario import scenario_of
 from sysid.config.choices import Method
 from sysid.dynamics.equations import eager_predict
 from sysid.dynamics.integrators import Integrator, IntegratorLike
@@ -32,7 +31,6 @@ from sysid.records.columns import (METRICS_COLUMNS, REQUIRED_METRICS_COLUMNS, TR
                                    trace_name)
 from sysid.state import FORCE, FORCE_COMPONENTS, INPUTS, STATE, VELOCITY_INDEX
 
-SCENARIO_OF = {Path(v).stem: k for k, v in TEST_FILES.items()}
 
 
 @dataclass
@@ -53,9 +51,10 @@ class WindowPrediction:
 
     def metrics_row(self, horizon_s: float, divergence: Divergence | None = None) -> dict:
         """A `METRICS_COLUMNS` row (NaN RMSE without windows); the scenario is the
-        protocol's name of a test file, else empty; `divergence` marks it."""
+        protocol's name of a test file, else the maneuver the log records
+        (`sysid.data.scenario.scenario_of`); `divergence` marks it."""
         rmse = self.rmse() if len(self.starts) else np.full(3, np.nan)
-        return {"scenario": SCENARIO_OF.get(self.run.name, ""), "file": self.run.name,
+        return {"scenario": scenario_of(self.run), "file": self.run.name,
                 "horizon_s": horizon_s, "n_windows": len(self.starts),
                 "rmse_u": rmse[0], "rmse_v": rmse[1], "rmse_r": rmse[2],
                 "diverged": divergence is not None,
@@ -78,7 +77,7 @@ class WindowPrediction:
         """This file's `WindowErrors` at `horizon_s`, divergence checked against `limits`."""
         _, divergence = diverged_windows(self.predicted.detach().cpu().numpy(), self.t, self.run.name,
                                          horizon_s, limits, self.observed.detach().cpu().numpy())
-        return WindowErrors(SCENARIO_OF.get(self.run.name, ""), self.run.name, float(horizon_s),
+        return WindowErrors(scenario_of(self.run), self.run.name, float(horizon_s),
                             np.asarray(self.t[0], dtype=float), self.window_rmse(), divergence)
 
 

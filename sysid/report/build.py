@@ -31,6 +31,7 @@ from sysid.report.chosen_settings import chosen_section  # noqa: E402
 from sysid.report.quality import quality_rows  # noqa: E402
 from sysid.report.source import ReportSource, read_source  # noqa: E402
 from sysid.protocol.paper import run_label  # noqa: E402
+from sysid.data.display_units import DisplayUnits  # noqa: E402
 from sysid.report.tables import build_tables, verdict_table  # noqa: E402
 from sysid.report.maneuver_tables import record_plain_table  # noqa: E402
 from sysid.report.plain_tables import table_figure  # noqa: E402
@@ -100,8 +101,8 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
     settings = [(run_label(r.name, r.model, r.dataset), changed_settings(r)) for r in source.runs]
     chosen = chosen_section(source)
     verdict = source.verdict
-    first = verdict_table(verdict, run_label(source.runs[0].name, source.runs[0].model, source.runs[0].dataset)) \
-        if verdict is not None else None
+    first = verdict_table(verdict, run_label(source.runs[0].name, source.runs[0].model, source.runs[0].dataset),
+                          DisplayUnits.of_config(source.runs[0].config)) if verdict is not None else None
     built = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     title = f"sysid accuracy report: {source.title}"
 
@@ -139,18 +140,18 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
             say(f"figure {number}/{len(plan.figures)}: {spec.title}")
         n_pages = pdf.page
         pdf.close()
-
-    html = render_html(
-        title=title,
-        subtitle=("PARTIAL " if source.missing_runs else "") + f"{SUBTITLES[source.kind]} "
-                 f"- built {built}",
-        summary=summary,
-        runs=[{"row": row, "colour": model_colour(r.name, r.model, r.dataset, i)}
-              for i, (row, r) in enumerate(zip(rows, source.runs))],
-        methods=methods, tables=tables, plain_tables=plain, figures=html_figures, notes=notes, quality=quality,
-        verdict=first, settings=settings, chosen=chosen,
-        version=sysid.__version__, source=str(source.path), built=built)
-    html_path = write_text(html, out_dir / "report.html")
+        # the HTML is written before the PDF is moved into place: a failure (a full disk) keeps neither
+        html = render_html(
+            title=title,
+            subtitle=("PARTIAL " if source.missing_runs else "") + f"{SUBTITLES[source.kind]} "
+                     f"- built {built}",
+            summary=summary,
+            runs=[{"row": row, "colour": model_colour(r.name, r.model, r.dataset, i)}
+                  for i, (row, r) in enumerate(zip(rows, source.runs))],
+            methods=methods, tables=tables, plain_tables=plain, figures=html_figures, notes=notes, quality=quality,
+            verdict=first, settings=settings, chosen=chosen,
+            version=sysid.__version__, source=str(source.path), built=built)
+        html_path = write_text(html, out_dir / "report.html")
     return ReportPaths(html_path, pdf_path, len(html_figures), n_pages, notes,
                        time.perf_counter() - started)
 
