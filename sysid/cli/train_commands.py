@@ -33,6 +33,7 @@ def train(
     The run directory is moved into place only when complete (with a manifest); an
     interrupted training leaves no run, only its checkpoint for --resume.
     """
+    from sysid.data.display_units import DisplayUnits
     from sysid.data.recordings import expand_paths
     from sysid.config import checks
     from sysid.config.choices import Validation
@@ -123,6 +124,10 @@ def train(
             typer.echo("verdict: " + result.verdict.statement())
         else:  # the last line, on stderr
             typer.secho(result.verdict.warning(), fg=typer.colors.YELLOW, err=True)
+        units = DisplayUnits.of(exp.data.columns)
+        if not units.si and units.verdict_cells(result.verdict):  # the user's units ([data.columns])
+            typer.echo(f"verdict in your units (vs {result.verdict.baselines[0]}): "
+                       f"{units.verdict_cells(result.verdict)}", err=not result.verdict.beats_baseline)
 
 
 @app.command()
@@ -196,13 +201,18 @@ def reproduce(
 
 
 def _warn_below_baseline(output: Path) -> None:
-    """A WARNING on stderr for every run of a reproduction that does not beat its physics
-    baseline (`RunSummary.beats_baseline` false), with its verdict's statement."""
+    """Every run's verdict: a WARNING on stderr for a run of a reproduction that does not beat
+    its physics baseline (`RunSummary.beats_baseline` false), a "verdict:" line otherwise,
+    each with its verdict's statement (evidence, interval and worst cells)."""
     from sysid.runs.directory import RunDir
 
     runs = output / "runs"
     for path in sorted(runs.glob("**/summary.json")):
         summary = RunDir(path.parent).read_summary()
-        if summary.beats_baseline is False and summary.verdict is not None:
+        if summary.verdict is None:
+            continue
+        if summary.beats_baseline is False:
             typer.secho(f"WARNING: run {path.parent.relative_to(runs)}: {summary.verdict.statement}",
                         fg=typer.colors.YELLOW, err=True)
+        else:
+            typer.echo(f"verdict: run {path.parent.relative_to(runs)}: {summary.verdict.statement}")

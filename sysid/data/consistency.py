@@ -200,15 +200,15 @@ def check_track(path: str | Path, t: np.ndarray, x: np.ndarray, y: np.ndarray, p
         verdict = _grade(name, k, corr)
         hint = unit_hint(name, k, columns.spec(name).resolved_unit) if verdict is not Verdict.CONSISTENT else ""
         found[name] = ChannelCheck(name, k, corr, kept, verdict, hint)
-    r = found["r"]
-    if r.verdict is not Verdict.UNCHECKED and 0 < r.factor < 1.0 and not r.hint:  # psi in a smaller unit
-        psi_hint = unit_hint("psi", 1.0 / r.factor, columns.spec("psi").resolved_unit)
+    rate = found["r"]
+    if rate.verdict is not Verdict.UNCHECKED and 0 < rate.factor < 1.0 and not rate.hint:  # psi in a smaller unit
+        psi_hint = unit_hint("psi", 1.0 / rate.factor, columns.spec("psi").resolved_unit)
         if psi_hint:
-            return TrackCheck(path, (ChannelCheck("psi", 1.0 / r.factor, r.correlation, r.samples, Verdict.MISMATCH,
+            return TrackCheck(path, (ChannelCheck("psi", 1.0 / rate.factor, rate.correlation, rate.samples, Verdict.MISMATCH,
                                                   psi_hint),))
-    if r.verdict is Verdict.MISMATCH and r.factor < 0 and abs(r.correlation) >= CORRELATION_CLEAR and \
+    if rate.verdict is Verdict.MISMATCH and rate.factor < 0 and abs(rate.correlation) >= CORRELATION_CLEAR and \
             Verdict.MISMATCH in (found["u"].verdict, found["v"].verdict):  # the heading counted to port
-        return TrackCheck(path, (ChannelCheck("psi", r.factor, r.correlation, r.samples, Verdict.MISMATCH,
+        return TrackCheck(path, (ChannelCheck("psi", rate.factor, rate.correlation, rate.samples, Verdict.MISMATCH,
                                               "heading counted anticlockwise (toward port)?"),))
     bad = [found[n] for n in CHECKED if found[n].verdict is Verdict.MISMATCH]
     moving = [found[n] for n in CHECKED if found[n].verdict is not Verdict.UNCHECKED]

@@ -7,7 +7,6 @@ import math
 
 import pandas as pd
 
-from sysid.maneuvers.indices import KIND_INDICES
 from sysid.maneuvers.recorded import RECORD_INDICES
 from sysid.report.plain_tables import PlainTable, number
 
