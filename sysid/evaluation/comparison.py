@@ -229,3 +229,28 @@ def _table(contenders: Sequence[Contender], errors: Sequence[WindowErrors], verd
                     "decision": cell.decision.value if cell else ("reference" if not reference else ""),
                 })
     return pd.DataFrame(rows, columns=TABLE_COLUMNS)
+
+
+def judge_against_baselines(model: Contender, baselines: Sequence[Contender], runs: Sequence[Run],
+                            horizons: Sequence[float], method: IntegratorLike = Method.EULER,
+                            rule: VerdictRule = VerdictRule()) -> tuple[list[WindowErrors], dict[str, Judgement]]:
+    """A model beside each of its physics baselines on the same windows (``sysid evaluate
+    RUN``): the per-window errors of all of them, and the model's `Judgement` against each
+    baseline (label -> judgement)."""
+    errors = window_errors([model, *baselines], runs, horizons, method)
+    return errors, {b.label: judge(paired_cells(errors, model.label, b.label), rule, model=model.label,
+                                   baseline=b.label) for b in baselines}
+
+
+def metrics_of(errors: Sequence[WindowErrors], label: str) -> pd.DataFrame:
+    """The protocol's metrics table (`sysid.evaluation.evaluate.METRICS_COLUMNS`) of one
+    model from its per-window errors: RMSE pooled over every window point (members pooled)."""
+    from sysid.evaluation.evaluate import METRICS_COLUMNS
+
+    rows = []
+    for e in errors:
+        err = e.errors[label]
+        rmse = np.sqrt(np.mean(err**2, axis=(0, 1))) if e.n_windows else np.full(3, np.nan)
+        rows.append({"scenario": e.scenario if e.scenario != e.log else "", "file": e.log, "horizon_s": e.horizon_s,
+                     "n_windows": e.n_windows, "rmse_u": rmse[0], "rmse_v": rmse[1], "rmse_r": rmse[2]})
+    return pd.DataFrame(rows, columns=METRICS_COLUMNS)

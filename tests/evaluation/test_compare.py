@@ -122,3 +122,53 @@ def test_compare_hybrid_nn_and_ship_mmg_on_two_held_back_logs(project, dataset_d
     assert bad.code == 2 and len(bad.error_lines) == 1 and "--against" in bad.error_lines[0]
     assert not (project / "cmp_x").exists()
     shutil.rmtree(out)
+
+
+def _si_runs(dataset_dir):
+    """The held-back logs read in SI from the dataset, under the user's names."""
+    from sysid.data.recordings import read_run
+
+    runs = []
+    for name, (source, role) in LOGS.items():
+        if role == "held back":
+            run = read_run(dataset_dir / source)
+            run.name = Path(name).stem
+            runs.append(run)
+    return runs
+
+
+@pytest.mark.slow
+def test_evaluate_scores_remapped_logs_with_a_config_and_a_run_beside_its_baseline(project, dataset_dir, capsys,
+                                                                                      monkeypatch):
+    from sysid.evaluation.evaluate import evaluate_model
+    from sysid.mmg import MMG
+    from sysid.mmg.ship import load_ship
+
+    monkeypatch.chdir(project)
+    truth = evaluate_model(MMG(load_ship("esso_osaka")), _si_runs(dataset_dir), (30.0, 100.0), traces=False).metrics
+    # the baseline MMG on the user's logs (knots, deg, deg/s, rpm): the config's columns, test logs and horizons
+    done = in_process(capsys, "evaluate", "--model", "mmg", "--config", "hybrid.toml", "-o", "mmg.csv")
+    assert done.code == 0, done.err
+    scored = pd.read_csv(project / "mmg.csv")
+    assert list(scored.file) == list(truth.file) and list(scored.horizon_s) == [30.0, 30.0, 100.0, 100.0]
+    for column in ("rmse_u", "rmse_v", "rmse_r"):
+        np.testing.assert_allclose(scored[column], truth[column], rtol=1e-5)
+    assert list(scored.n_windows) == list(truth.n_windows)
+    # without the config the same logs are refused in one line naming the columns to map
+    refused = in_process(capsys, "evaluate", "--model", "mmg", "--data", "logs/zigzag_b.csv", "-o", "x.csv")
+    assert refused.code == 2 and len(refused.error_lines) == 1 and "[data.columns]" in refused.error_lines[0]
+
+    # a run on its own [data] test logs: the model, its baseline on the same windows, the verdict
+    run = in_process(capsys, "evaluate", "runs/hybrid", "-o", "hybrid.csv")
+    assert run.code == 0, run.err
+    lines = run.out.splitlines()
+    at = lines.index("beside its physics baseline(s), on the same windows:")
+    baseline_rows = [line.split() for line in lines[at + 2:] if "MMG (ship file)" in line]
+    assert len(baseline_rows) == 4
+    for row, expected in zip(baseline_rows, truth.itertuples(index=False)):
+        assert row[0] == expected.file and float(row[1]) == expected.horizon_s
+        assert [float(v) for v in row[-3:]] == pytest.approx([expected.rmse_u, expected.rmse_v, expected.rmse_r],
+                                                              abs=6e-6)
+    verdict = (run.out + run.err).splitlines()
+    assert any(line.startswith(("verdict: The hybrid", "WARNING: The hybrid")) and "MMG (ship file)" in line
+               and "2 logs" in line for line in verdict)
