@@ -5,7 +5,9 @@ A processed file (CSV or Parquet) has the 13 columns of the processed schema, he
 public FRT-DS-ESSO files) or 1 Hz (``sysid preprocess`` output), or any columns and units
 that a config's ``[data.columns]`` maps onto the channels (`sysid.data.columns`). `read_run`
 drops trailing all-empty rows, rejects NaN inside the run, non-monotonic time and wrong
-units, and downsamples by taking every k-th sample from the first one (t = 0, 1, 2 s).
+units, and downsamples by taking every k-th sample from the first one (t = 0, 1, 2 s), saying so
+once per process (a 10 Hz log read at 1 Hz); a rate that is not a whole number of the file's
+samples per step, or above the file's own, is refused.
 """
 from __future__ import annotations
 
@@ -22,6 +24,7 @@ import torch
 from preprocessing.schema import PROCESSED, PROCESSED_CHANNEL, PROCESSED_PLAUSIBLE_ABS
 from sysid.data.columns import QUANTITY, RELATIVE_WIND, SI_UNIT, ColumnMap
 from sysid.data.csvfiles import LOG_SUFFIXES, read_table
+from sysid import logs
 from sysid.errors import DataError
 from sysid.mmg.wind import relative_wind
 from sysid.state import INPUTS, STATE
@@ -44,6 +47,7 @@ class Run:
     U_A [m/s], gamma_A [rad] as recorded.
     dt : sample period [s]; issues : data-quality findings (gaps, frozen GNSS, ...);
     suspect : (t_start, t_end) [s] intervals of frozen GNSS or time gaps.
+    stride : samples of the file per sample of the run (10: a 10 Hz file read at 1 Hz).
     sha256 : SHA-256 of the source file when known (a run shipped to a node without the
     file carries it); None: hashed from `path` when needed.
     """
@@ -58,6 +62,7 @@ class Run:
     issues: list[str] = field(default_factory=list)
     suspect: list[tuple[float, float]] = field(default_factory=list)
     sha256: str | None = None
+    stride: int = 1
 
     def __len__(self) -> int:
         return len(self.t)
@@ -87,10 +92,9 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
         raise DataError(f"{path}: fewer than two data rows")
     bad = ~np.isfinite(values)
     if bad.any():
-        row, col = np.argwhere(bad)[0]
-        channel = recorded[col]
-        raise DataError(f"{path}: {columns.describe(channel)} (channel {channel}) is empty, NaN or inf at data "
-                        f"row {row + 2} ({int(bad.any(axis=1).sum())} bad rows)")
+        listed = "; ".join(f"{columns.describe(channel)} (channel {channel}) is empty, NaN or inf at data row "
+                           f"{int(np.argmax(bad[:, j])) + 2}" for j, channel in enumerate(recorded) if bad[:, j].any())
+        raise DataError(f"{path}: {listed} ({int(bad.any(axis=1).sum())} bad rows)")
     if len(recorded) < len(frame.columns):  # no relative wind recorded: from the state and true wind
         frame = frame.assign(**dict(zip(RELATIVE_WIND, _relative_wind(frame))))
     values = frame.to_numpy(dtype=float)
@@ -100,19 +104,27 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
         row = int(np.argmax(steps <= 0)) + 1
         raise DataError(f"{path}: {columns.describe('t')} (channel t) is not strictly increasing at data row "
                         f"{row + 2} (t = {t[row]} s)")
+    beyond = []
     for name, limit in _LIMITS.items():
         peak = np.abs(frame[name].to_numpy()).max()
         if name == "psi" and peak > limit and _turns_at_yaw_rate(t, frame["psi"].to_numpy(), frame["r"].to_numpy()):
             continue  # an unwrapped heading in radians (a simulated turn): it changes at r
         if peak > limit:
-            raise DataError(f"{path}: {columns.describe(name)} (channel {name}) reaches {peak:.4g} "
-                            f"{SI_UNIT[name]}, beyond {limit}: wrong units? name its unit in [data.columns], "
-                            f"e.g. {name} = {{ column = \"...\", unit = \"{_UNIT_HINT[QUANTITY[name]]}\" }}")
+            beyond.append((name, peak, limit))
+    if beyond:  # every channel in the wrong units, in one line
+        listed = "; ".join(f"{columns.describe(name)} (channel {name}) reaches {peak:.4g} {SI_UNIT[name]}, "
+                           f"beyond {limit}" for name, peak, limit in beyond)
+        hints = ", ".join(f"{name} = {{ column = \"...\", unit = \"{_UNIT_HINT[QUANTITY[name]]}\" }}"
+                          for name, _, _ in beyond)
+        raise DataError(f"{path}: {listed}: wrong units? name {'its unit' if len(beyond) == 1 else 'their units'} "
+                        f"in [data.columns], e.g. {hints}")
     period = float(np.median(steps))
     stride = int(round(1.0 / rate / period))
     if stride < 1 or abs(stride * period * rate - 1.0) > 1e-3:
         raise DataError(f"{path}: rate {rate:g} Hz is not a whole number of this file's {period:g}-s samples "
                         f"per step; choose a rate that divides {1.0 / period:g} Hz")
+    if stride > 1:
+        _note_resampled(path, 1.0 / period, rate, stride)
     issues, suspect = _quality_issues(t, values, period)
     sel = values[::stride]
     if len(sel) < 2:
@@ -124,7 +136,21 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
         inputs=sel[:, [frame.columns.get_loc(c) for c in list(INPUTS)]],
         relative_wind=sel[:, [frame.columns.get_loc("wind_velo_relative"),
                               frame.columns.get_loc("wind_dir_relative")]],
-        dt=period * stride, issues=issues, suspect=suspect)
+        dt=period * stride, issues=issues, suspect=suspect, stride=stride)
+
+
+_NOTED: set[tuple[float, float]] = set()   # (file rate, read rate) pairs already said, once per process
+
+
+def _note_resampled(path: Path, file_rate: float, rate: float, stride: int) -> None:
+    """Say once per process and pair of rates that logs are read at a lower rate than they
+    were written (a stage line naming the first such file)."""
+    key = (round(file_rate, 6), round(rate, 6))
+    if key in _NOTED:
+        return
+    _NOTED.add(key)
+    logs.info(f"{path.name} (and any other log at {file_rate:g} Hz): read at {rate:g} Hz, every {stride}th sample "
+              f"from the first (processed logs are already smoothed, so no filter); [data] rate sets the rate")
 
 
 _UNIT_HINT = {"speed": "knots", "angle": "deg", "angular rate": "deg/s", "revolutions": "rpm"}
