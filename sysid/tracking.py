@@ -16,12 +16,13 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
 from pathlib import Path
-from typing import Any
-
+from typing import TYPE_CHECKING, Any
 
 from sysid.errors import ConfigError
+
+if TYPE_CHECKING:
+    from sysid.config.experiment import Experiment
 
 INSTALL_HINT = "MLflow tracking needs the tracking extra: pip install \"sysid[tracking]\" (mlflow)"
 PARAM_BATCH = 100   # MLflow takes at most 100 parameters per call
@@ -41,9 +42,9 @@ def tracking_uri(where: str | os.PathLike) -> str:
     return path.as_uri()
 
 
-def config_params(config_toml: str) -> dict[str, str]:
+def config_params(exp: Experiment) -> dict[str, str]:
     """Every option of a resolved experiment config as ``section.option`` -> text."""
-    doc = tomllib.loads(config_toml)
+    doc = exp.to_table()
     return {f"{section}.{key}": str(value)[:500] for section, table in doc.items() if isinstance(table, dict)
             for key, value in table.items()}
 

@@ -76,11 +76,13 @@ def run(argv: list[str]) -> None:
     embedding)."""
     command = typer.main.get_command(app)
     _with_epilog(command)
+    failed = True
     try:
         code = command(args=common_options_first(expand_multi_value(list(argv))), prog_name="sysid",
                        standalone_mode=False)
+        failed = isinstance(code, int) and code != 0
     finally:
-        release()  # the output locks the command took
+        release(failed)  # the output locks the command took; a failed command's new empty folders
     # typer >= 0.29 turns Ctrl-C into Exit(130) and, outside standalone mode, returns the code
     if code == INTERRUPTED:
         raise KeyboardInterrupt
@@ -126,8 +128,8 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(INTERRUPTED)
     except Exception as exc:
         if _is_usage_error(exc):
-            exc.show()
-            sys.exit(exc.exit_code)
+            exc.show()  # type: ignore[attr-defined]
+            sys.exit(exc.exit_code)  # type: ignore[attr-defined]
         if _is_abort(exc):  # click turns Ctrl-C into Abort
             typer.secho(f"interrupted: {interrupt_note()}", fg=typer.colors.YELLOW, err=True)
             sys.exit(INTERRUPTED)

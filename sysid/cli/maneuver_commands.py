@@ -52,7 +52,7 @@ def parse_maneuvers(turning: list[str], zigzag: list[str], crash_stop: bool, sid
     sides = (Side.STARBOARD, Side.PORT) if side == "both" else (Side(side),)
     if not (turning or zigzag or crash_stop):
         return imo_maneuvers(sides)
-    out = []
+    out: list[TurningCircle | ZigZag | CrashStop] = []
     for text in turning:
         angle = _number("--turning", text, "deg")
         out += [TurningCircle(angle, s) for s in sides]
@@ -81,6 +81,9 @@ def parse_wind(text: str | None) -> tuple[float, float]:
     speed, direction = _number("--wind", parts[0], "m/s"), _number("--wind", parts[1], "deg")
     if not 0.0 <= speed <= 100.0:
         raise _error(f"--wind {text!r}: speed {speed:g} m/s must be in [0, 100]")
+    if not -360.0 <= direction <= 360.0:  # far beyond, cos and sin of it are rounding noise
+        raise _error(f"--wind {text!r}: direction {direction:g} deg must be in [-360, 360] (the direction the "
+                     "wind comes from, e.g. 45)")
     return speed, math.radians(direction)
 
 

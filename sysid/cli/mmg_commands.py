@@ -7,6 +7,7 @@ from typing import List, Optional
 
 import typer
 
+from sysid import logs
 from sysid.cli.app import app
 from sysid.cli.outputs import claim, ship_file
 from sysid.store.target import OutputKind
@@ -93,7 +94,10 @@ def _read_force_inputs(path: Path):
 
 
 # beyond these a state is not a ship model's: the forces are computed but flagged
-PLAUSIBLE = {"u": 20.0, "v": 20.0, "r": 3.0, "n_prop": 200.0, "wind_velo_true": 60.0}
+PLAUSIBLE = {"u": 20.0, "v": 20.0, "r": 3.0, "n_prop": 200.0, "wind_velo_true": 60.0,
+             "delta_rudder": 1.0}   # rad: no rudder turns 57 deg; 35 is a hard-over angle in degrees
+_UNIT_HINT = {"delta_rudder": " (degrees? the column is in rad)", "r": " (deg/s? the column is in rad/s)",
+              "n_prop": " (rpm? the column is in rps)"}
 
 
 @app.command()
@@ -135,13 +139,15 @@ def forces(
         beyond = np.abs(numeric[name].to_numpy()) > limit
         if beyond.any():
             typer.secho(f"warning: {input_csv}: column {name!r} beyond {limit:g} on {int(beyond.sum())} row(s) "
-                        f"(first at data row {int(np.argmax(beyond)) + 2}): not a ship model's state; "
-                        "forces computed but implausible", fg=typer.colors.YELLOW, err=True)
+                        f"(first at data row {int(np.argmax(beyond)) + 2}): not a ship model's state"
+                        f"{_UNIT_HINT.get(name, '')}; forces computed but implausible", fg=typer.colors.YELLOW,
+                        err=True)
     writing = progress(total=len(result), desc="writing", unit="rows", quiet=len(result) < 100_000)
     write_float_csv(result, output, on_block=writing.update)
     writing.close()
-    typer.echo(f"forces: {len(result)} rows, ship {model.ship.name}, {quadrature} cross-flow -> {output} "
-               f"({time.perf_counter() - start:.2f} s)")
+    if not logs.is_quiet():  # -q: warnings and errors only
+        typer.echo(f"forces: {len(result)} rows, ship {model.ship.name}, {quadrature} cross-flow -> {output} "
+                   f"({time.perf_counter() - start:.2f} s)")
 
 
 @app.command()
@@ -181,6 +187,13 @@ def simulate(
         raise DataError(f"{log}: --horizon {horizon} s from {run.t[i0]:.1f} s runs past the end "
                         f"({run.t[-1]:.1f} s)")
     sl = slice(i0, i0 + steps + 1)
+    uneven = np.abs(np.diff(run.t[sl]) - run.dt) > 1e-3 * run.dt
+    if uneven.any():  # the model steps by dt on the recorded inputs: they must be dt apart
+        k = i0 + int(np.argmax(uneven))
+        raise DataError(f"{log}: samples at t = {run.t[k]:.6g} and {run.t[k + 1]:.6g} s are "
+                        f"{run.t[k + 1] - run.t[k]:.6g} s apart, not the {run.dt:g} s of --rate {rate:g} Hz "
+                        f"({int(uneven.sum())} uneven step(s) in the {horizon:g}-s horizon); choose a --start "
+                        "and --horizon inside an evenly sampled stretch, or resample the log")
     x0 = torch.as_tensor(run.states[i0], dtype=torch.float64)
     inputs = torch.as_tensor(run.inputs[sl], dtype=torch.float64)
     with torch.no_grad():

@@ -12,6 +12,7 @@ from sysid import logs
 from sysid.cli.app import app
 from sysid.cli.interrupts import on_interrupt
 from sysid.cli.outputs import claim, experiment_inputs
+from sysid.config.choices import Solver
 from sysid.store.target import OutputKind
 
 
@@ -45,6 +46,10 @@ def train(
     if threads is not None:
         checks.threads("--threads", threads)
     exp = load_experiment(config)
+    if exp.ensemble.members:  # a run of averaged trained runs: nothing to train, and no weights of its own
+        raise ConfigError(f"{config}: [ensemble] members: sysid train trains one model, and its run would name "
+                          "members relative to a run directory they are not beside; remove [ensemble] (an "
+                          "ensemble of seeds is written by sysid reproduce --seeds N)")
     if epochs is not None:
         exp = exp.replace(training={"epochs": epochs})
     if threads is not None:
@@ -85,7 +90,7 @@ def train(
     if mlflow:
         from sysid.tracking import EpochLogger, Tracker, config_params
         tracker = Tracker(mlflow, exp.experiment.name)
-        tracked = tracker.start(output.name, config_params(exp.to_toml()),
+        tracked = tracker.start(output.name, config_params(exp),
                                 tags={"sysid.kind": "run", "sysid.output": str(output.resolve())})
     try:
         result = run_experiment(exp, output, tests, runs, data, log=logs.indented(), resume=resume,
@@ -107,7 +112,7 @@ def train(
     detail = ""
     if t is not None:
         steps = []
-        if (t.identification or {}).get("solver") == "levenberg_marquardt":  # no epochs in that stage
+        if (t.identification or {}).get("solver") == Solver.LEVENBERG_MARQUARDT:  # no epochs in that stage
             steps.append(f"{t.identification['iterations']} Levenberg-Marquardt iterations")
         if not steps or "train" in t.stopped:
             steps.append(f"{t.epochs} epochs, best {t.best_epoch}")

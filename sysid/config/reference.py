@@ -215,7 +215,7 @@ def _type_name(hint) -> str:
 def _default(f: dataclasses.Field):
     if f.default is not dataclasses.MISSING:
         return f.default
-    return f.default_factory()  # type: ignore[misc]
+    return f.default_factory()  # type: ignore[operator]
 
 
 def sections() -> list[tuple[str, type]]:

@@ -22,9 +22,9 @@ import pandas as pd
 import torch
 
 from preprocessing.schema import PROCESSED, PROCESSED_CHANNEL, PROCESSED_PLAUSIBLE_ABS
-from sysid.data.columns import QUANTITY, RELATIVE_WIND, SI_UNIT, ColumnMap
-from sysid.data.csvfiles import LOG_SUFFIXES, read_table
 from sysid import logs
+from sysid.data.columns import QUANTITY, RELATIVE_WIND, SI_UNIT, ColumnMap, to_channels
+from sysid.data.csvfiles import LOG_SUFFIXES, not_a_file, read_table
 from sysid.errors import DataError
 from sysid.mmg.wind import relative_wind
 from sysid.state import INPUTS, STATE
@@ -81,7 +81,7 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
     if not (rate > 0 and np.isfinite(rate)):
         raise DataError(f"{path}: rate {rate} Hz: must be > 0")
     raw = read_table(path, "a processed run with the header 'name [unit]', or columns named in [data.columns]")
-    frame = columns.to_channels(raw, path)
+    frame = to_channels(columns, raw, path)
     # trailing all-empty rows (zigzag 13_50_28 ends with 327 of them) are dropped
     recorded = [c for c in frame.columns if c not in RELATIVE_WIND or frame[c].notna().any()]
     values = frame[recorded].to_numpy(dtype=float)
@@ -185,7 +185,7 @@ def _quality_issues(t: np.ndarray, values: np.ndarray, period: float):
         suspect.append((float(t[i]), float(t[i + 1])))
     frozen = (np.diff(values[:, 1]) == 0) & (np.diff(values[:, 5]) == 0)  # x and psi unchanged
     run_len = max(2, int(round(1.0 / period)))
-    i = 0
+    i = 0  # type: ignore[assignment]
     while i < len(frozen):
         if frozen[i]:
             j = i
@@ -244,6 +244,8 @@ def expand_paths(items: Iterable[str | os.PathLike]) -> list[Path]:
             out += found
         elif p.is_file():
             out.append(p)
+        elif p.exists():
+            raise DataError(f"{p}: {not_a_file(p)}")
         else:
             raise DataError(f"{p}: no such file or directory")
     return out

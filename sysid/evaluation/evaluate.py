@@ -8,10 +8,9 @@ pooled over the windows of a file.
 """
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -25,19 +24,9 @@ from sysid.dynamics.equations import eager_predict
 from sysid.dynamics.integrators import Integrator, IntegratorLike
 from sysid.config.checks import whole_samples
 from sysid.errors import DataError
+from sysid.records.columns import METRICS_COLUMNS, TRACE_COLUMNS, trace_name  # noqa: F401 (their home before)
 from sysid.state import FORCE, FORCE_COMPONENTS, INPUTS, STATE, VELOCITY_INDEX
 
-# one row per file and horizon; RMSE of u, v_m [m/s] and r [rad/s]
-METRICS_COLUMNS = ["scenario", "file", "horizon_s", "n_windows", "rmse_u", "rmse_v", "rmse_r"]
-# one row per window step of a trace (see `trace_frame`)
-TRACE_COLUMNS = (
-    ["window", "t", "t_rel"]
-    + [f"obs_{c}" for c in STATE]
-    + [f"pred_{c}" for c in STATE]
-    + list(INPUTS) + ["wind_velo_relative", "wind_dir_relative"]  # relative wind of the predicted state
-    + [f"{a}{key}" for key in FORCE_COMPONENTS.values() for a in FORCE]  # N, N m
-    + ["knn_distance", "gate_on"]  # NaN / 1 where the model has no gate
-)
 SCENARIO_OF = {Path(v).stem: k for k, v in TEST_FILES.items()}
 
 
@@ -78,7 +67,7 @@ def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
     """Predict the protocol windows of every run in one batched integration (compiled
     when `method` is a compiled `Integrator`: only then is `sysid.fast` imported)."""
     integrator = Integrator.of(method)
-    predict = eager_predict
+    predict: Callable[..., torch.Tensor] = eager_predict
     if integrator.compiled:
         from sysid.fast.compiled import predict
     chunks, meta = [], []
@@ -88,7 +77,7 @@ def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
             dt = run.dt
         elif abs(run.dt - dt) > 1e-9:
             raise DataError(f"{run.path}: sample period {run.dt} s differs from {dt} s of the other files")
-        H = whole_samples("horizon", horizon_s, run.dt, DataError)
+        H = window_samples("horizon", horizon_s, run.dt, DataError)
         starts = protocol_windows(len(run), H)
         meta.append((run, H, starts))
         if len(starts):
@@ -117,8 +106,22 @@ def short_runs(runs: Sequence[Run], horizons: Sequence[float], name: str = "--ho
                error: type[Exception] = DataError) -> list[tuple[Run, float]]:
     """(run, horizon [s]) pairs where the run holds fewer samples than one window: their
     metrics rows would be empty. Every horizon must be a whole number of every run's
-    samples (else `error` naming `name`)."""
+    samples, at least two: a window of one sample is its start state alone, no step is
+    predicted and its RMSE is 0 by construction (else `error` naming `name`)."""
+    for h in horizons:
+        for run in runs:
+            window_samples(name, h, run.dt, error)
     return [(run, h) for h in horizons for run in runs if len(run) < whole_samples(name, h, run.dt, error)]
+
+
+def window_samples(name: str, horizon_s: float, dt: float, error: type[Exception] = DataError) -> int:
+    """The samples of one window of `horizon_s` [s] (its start state and H - 1 predicted
+    steps, `dt` [s] apart): a whole number >= 2, else `error` naming `name`."""
+    H = whole_samples(name, horizon_s, dt, error)
+    if H < 2:
+        raise error(f"{name} {horizon_s:g}: a window of one {dt:g}-s sample is its start state alone, so "
+                    f"nothing is predicted and its RMSE is 0; give a horizon of at least {2 * dt:g} s")
+    return H
 
 
 @dataclass
@@ -129,12 +132,6 @@ class Evaluation:
     metrics: pd.DataFrame
     traces: dict[str, pd.DataFrame]
     gate_off_share: dict[str, float]
-
-
-def trace_name(file_stem: str, horizon_s: float) -> str:
-    """File name of a trace: ``{file_stem}_h{H}.csv``."""
-    safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", file_stem)
-    return f"{safe}_h{int(round(horizon_s))}.csv"
 
 
 def trace_frame(model: nn.Module, pred: WindowPrediction) -> pd.DataFrame:

@@ -179,7 +179,7 @@ def window_score(model, windows: WindowSet, w_v: torch.Tensor) -> WindowScore:
     """`WindowScore` of `model` on `windows` (Euler rollouts, as in training)."""
     err = rollout_errors(model, windows)
     rmse = torch.sqrt((err * err).reshape(-1, 3).mean(0))
-    return WindowScore(float(velocity_loss(err, w_v)), tuple(float(v) for v in rmse))
+    return WindowScore(float(velocity_loss(err, w_v)), tuple(float(v) for v in rmse))  # type: ignore[arg-type]
 
 
 def pooled_rmse(metrics: pd.DataFrame) -> dict[float, tuple[float, float, float]]:
@@ -193,7 +193,7 @@ def pooled_rmse(metrics: pd.DataFrame) -> dict[float, tuple[float, float, float]
             continue
         out[float(horizon)] = tuple(float(np.sqrt((n * block[c].to_numpy() ** 2).sum() / n.sum()))
                                     for c in ("rmse_u", "rmse_v", "rmse_r"))
-    return out
+    return out  # type: ignore[return-value]
 
 
 def baseline_verdict(model: str, validation: Mapping[str, WindowScore] | None, validation_horizon_s: float,

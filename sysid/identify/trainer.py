@@ -65,15 +65,9 @@ from sysid.hybrid.force_models import CorrectedModel, PerMember, build_mmg, corr
 from sysid.hybrid.knn_gate import KNNGate
 from sysid.state import VELOCITY_INDEX
 from sysid.identify.uncertainty import coefficient_uncertainty
+from sysid.records.summary import VAL_LOSS_DEFINITION  # noqa: F401 (its home before: the run's validation loss)
 
 VEL = list(VELOCITY_INDEX)
-VAL_LOSS_DEFINITION = (
-    "val_loss_multistep: mean over the validation windows and their steps k = 1..K of "
-    "sum over u, v_m, r of w_j (predicted_j - recorded_j)^2, w_j = 1 / variance of channel j in the "
-    "training windows; Euler rollouts from each window's recorded first state with its recorded inputs; "
-    "K = [training] steps, or objective_s / dt; the final model, kNN gate included. Validation windows: "
-    "the validation blocks of the training logs, or whole validation logs: [data] validation, or the training "
-    "logs held out by [training] validation = \"files\" (never a test file).")
 _LOG = logging.getLogger(__name__)
 
 
@@ -207,7 +201,12 @@ def split_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction
         if validation_runs:
             part_of = np.full(len(run), any(run is v for v in validation_runs))
         else:
-            part_of = _block_parts(len(run), int(round(block_s / run.dt)), val_fraction, rng)
+            block = int(round(block_s / run.dt))
+            if block < length:  # no window would lie wholly in one block: none in either part
+                raise ConfigError(f"[training] block_s = {block_s:g} s: a validation block holds {block} of the "
+                                  f"data's {run.dt:g}-s samples, fewer than one {length}-sample training window; "
+                                  f"set block_s >= {length * run.dt:g} s (default 30)")
+            part_of = _block_parts(len(run), block, val_fraction, rng)
         starts = sliding_windows(len(run), length, stride)
         ends = starts + length - 1
         counts = {}

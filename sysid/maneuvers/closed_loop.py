@@ -24,8 +24,6 @@ from torch import nn
 from torch._higher_order_ops.while_loop import while_loop
 
 from sysid.dynamics.integrators import STEP_RULES, Method
-from sysid.fast.compiled import compile_cached, fingerprint
-from sysid.fast.prepared import prepared
 from sysid.fast.stepper import Derivative
 from sysid.maneuvers.controllers import COLUMNS, ManeuverOrders
 
@@ -120,6 +118,8 @@ def compiled_loop(model: nn.Module, method: Method | str, dtype: torch.dtype = t
     """The compiled `ClosedLoopRollout` of `model` for one maneuver at a time (batch 1), from
     this process's memory, the disk cache, or compiled now (one notice line); None where
     compilation is off or fails (the caller runs `run_eager`)."""
+    from sysid.fast.compiled import compile_cached, fingerprint  # the compiled path: only where it is chosen
+    from sysid.fast.prepared import prepared
     method = Method.parse(method)
     module = ClosedLoopRollout(ClosedLoopStep(prepared(model, 1), method), CAPACITY, source_digest())
     examples = (torch.zeros(1, 6, dtype=dtype), torch.zeros(1, 2, dtype=dtype),

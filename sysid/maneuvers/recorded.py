@@ -29,9 +29,9 @@ from torch import nn
 
 from sysid.data.datasets import TEST_FILES, data_dir
 from sysid.data.recordings import Run, read_run
-from sysid.dynamics.integrators import IntegratorLike, Method
+from sysid.dynamics.equations import eager_predict
+from sysid.dynamics.integrators import Method
 from sysid.errors import DataError
-from sysid.fast.compiled import predict
 from sysid.maneuvers.any_model import load_maneuver_model
 from sysid.maneuvers.base import Maneuver, Side, TurningCircle, ZigZag
 from sysid.maneuvers.indices import INDEX_COLUMNS, KIND_INDICES, Track, maneuver_indices
@@ -104,7 +104,7 @@ def _predictions(model: nn.Module, runs: Sequence[Run], starts: Sequence[int], m
         u = r.inputs[s:]
         inputs.append(np.concatenate([u, np.repeat(u[-1:], longest - len(u), 0)]))
     u = torch.tensor(np.stack(inputs, 1), dtype=torch.float64)
-    states = predict(model, x0, u, runs[0].dt, method)
+    states = eager_predict(model, x0, u, runs[0].dt, method)
     out = []
     for i, n in enumerate(lengths):
         share = gate_off_share(model, states[:n - 1, i], u[:n - 1, i])
@@ -133,7 +133,7 @@ def _execute_starts(runs: Mapping[str, Run]) -> list[int]:
 
 
 def record_comparison(models: Mapping[str, Sequence[nn.Module]], runs: Mapping[str, Run],
-                      method: IntegratorLike = "euler") -> pd.DataFrame:
+                      method: Method | str = "euler") -> pd.DataFrame:
     """`RECORD_COLUMNS` rows: for each run (scenario -> `Run`) the record's indices, then
     each model's (label -> its models: one, or several seeds whose indices are averaged,
     with their standard deviation in ``<index>_std``) prediction of it from the execute."""
@@ -209,7 +209,7 @@ def _predicted_run(path: Path, runs: Sequence[Run], starts: Sequence[int], metho
 
 
 def write_record_comparison(out_dir: str | os.PathLike, run_dirs: Mapping[str, str | os.PathLike],
-                            data: str | os.PathLike | None = None, method: IntegratorLike = "euler",
+                            data: str | os.PathLike | None = None, method: Method | str = "euler",
                             workers: int = 1, threads: int = 1) -> Path:
     """``out_dir/maneuver_indices.csv``: `record_comparison` of the protocol's turning and
     zig-zag test runs (1 Hz) and the models of `run_dirs` (label -> run directory or folder

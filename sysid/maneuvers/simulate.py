@@ -44,6 +44,9 @@ def default_rudder_rate(ship: Ship) -> tuple[float, str]:
     return FULL_SCALE_RUDDER_RATE, "2.32 deg/s (ship file gives no scale: taken as full scale)"
 
 
+MAX_LENGTHS_PER_STEP = 0.1   # ship lengths run per integration step, at most
+
+
 def default_conditions(model: nn.Module, ship: Ship, *, speed: float | None = None, rps: float | None = None,
                        rudder_rate: float | None = None, dt: float = 0.1, duration: float | None = None,
                        wind_speed: float = 0.0, wind_direction: float = 0.0,
@@ -62,6 +65,11 @@ def default_conditions(model: nn.Module, ship: Ship, *, speed: float | None = No
     else:
         sources["speed"] = "given"
     check_number("approach speed", speed, "m/s", positive=True)  # before the search for revolutions
+    longest = MAX_LENGTHS_PER_STEP * float(ship["L_pp"]) / speed
+    if dt > longest:  # a turn of a few steps: its indices are not resolved (and may not exist)
+        raise ManeuverError(f"dt {dt:g} s: the ship runs {speed * dt / float(ship['L_pp']):.2g} ship lengths per "
+                            f"step at {speed:g} m/s; a maneuver is resolved with at most {MAX_LENGTHS_PER_STEP:g} "
+                            f"L per step: give dt <= {longest:.3g} s")
     check_number("wind speed", wind_speed, "m/s", low=0.0)
     check_number("wind direction", wind_direction, "rad")
     if rps is None:
@@ -80,7 +88,7 @@ def default_conditions(model: nn.Module, ship: Ship, *, speed: float | None = No
     else:
         sources["duration"] = "given"
     sources["wind"] = "calm water" if wind_speed == 0.0 else "given"
-    return Conditions(speed, rps, rudder_rate, dt, duration, wind_speed, wind_direction, method), sources
+    return Conditions(speed, rps, rudder_rate, dt, duration, wind_speed, wind_direction, method), sources  # type: ignore[arg-type]
 
 
 def ahead_only(model: nn.Module) -> bool:

@@ -153,7 +153,7 @@ def reproduction_tables(source: ReportSource) -> list[RmseTable]:
     relabelled = []
     for run in runs:
         labels = scenario_files(run)
-        metrics = run.metrics.assign(scenario=run.metrics["file"].astype(str).map(lambda f: labels[Path(f).stem]))
+        metrics = run.metrics.assign(scenario=run.metrics["file"].astype(str).map(lambda f: labels[Path(f).stem]))  # noqa: B023
         relabelled.append((run.name, run.model, run.dataset, metrics))
     long = comparison_table(relabelled, datasets)
     colour = {}

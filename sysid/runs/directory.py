@@ -3,7 +3,8 @@ of them. The report, sweeps, seed runs, model loading and the CLI open a run her
 
 Every read is checked: a missing or corrupt file raises `CheckpointError` naming it, and a
 run whose manifest is missing or disagrees with its files is refused by `RunDir.open`
-(`IncompleteOutputError`).
+(`IncompleteOutputError`). A pure reader: importing it loads neither torch nor training
+code (the weights and the kNN bank are read with torch only when asked for).
 """
 from __future__ import annotations
 
@@ -11,20 +12,18 @@ import os
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import pandas as pd
 
 from sysid.config.experiment import Experiment, load_experiment
 from sysid.errors import CheckpointError, ConfigError, IncompleteOutputError
-from sysid.evaluation.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
-from sysid.runs.knn_bank import KnnBank
-from sysid.runs.summary import RunSummary
-from sysid.runs.tensor_files import check_finite, load_tensors
+from sysid.records.columns import BASELINE_METRICS_COLUMNS, HISTORY_COLUMNS, METRICS_COLUMNS, TRACE_COLUMNS, trace_name
+from sysid.records.summary import RunSummary
 from sysid.store.manifest import MANIFEST, has_manifest, verify_manifest
 
-BASELINE_METRICS_COLUMNS = ["baseline"] + METRICS_COLUMNS  # the physics baselines on the same test logs
-HISTORY_COLUMNS = ["epoch", "train_loss", "early_stopping_loss"]
+if TYPE_CHECKING:
+    from sysid.runs.knn_bank import KnnBank
 
 
 def read_table(path: Path, columns: list[str], required: bool = True) -> pd.DataFrame | None:
@@ -87,7 +86,7 @@ class RunDir:
     knn = _file("knn.pt", "`KnnBank` (hybrid and NN runs with a gate)")
     standardization = _file("standardization.json", "the FNN's input and output mean and std")
     history = _file("history.csv", "losses per stage and epoch (trained runs only)")
-    metrics = _file("metrics.csv", "`sysid.evaluation.evaluate.METRICS_COLUMNS`")
+    metrics = _file("metrics.csv", "`sysid.records.columns.METRICS_COLUMNS`")
     baseline_metrics = _file("baseline_metrics.csv", "the physics baselines on the same test logs "
                              "(`BASELINE_METRICS_COLUMNS`; runs with a verdict and test logs)")
     traces = _file("traces", "one CSV per (test file, horizon)")
@@ -144,6 +143,7 @@ class RunDir:
 
     def read_model_state(self) -> dict:
         """model.pt: the state dict (plain tensors, all finite)."""
+        from sysid.runs.tensor_files import check_finite, load_tensors  # torch: only when asked
         state = load_tensors(self.model)
         if not isinstance(state, dict):
             raise CheckpointError(f"{self.model}: not a state dict")
@@ -152,4 +152,5 @@ class RunDir:
 
     def read_knn_bank(self, width: int | None = None) -> KnnBank:
         """knn.pt, checked (`KnnBank`); `width`: F of the model's gate vectors, if known."""
+        from sysid.runs.knn_bank import KnnBank  # torch: only when asked
         return KnnBank.load(self.knn, width)

@@ -19,7 +19,7 @@ import threading
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Callable, Iterator, Sequence
 
 from sysid.errors import ConfigError
 from sysid.sweep.connect import import_ray, start_ray
@@ -60,7 +60,7 @@ def progress_callback(total: int, names: Callable[[dict], str], log: Callable[[s
     claims of every Tune trial that ends in the inbox named `inbox`."""
     _, tune = import_ray()
 
-    class SweepProgress(tune.Callback):
+    class SweepProgress(tune.Callback):  # type: ignore[name-defined]
         def __init__(self):
             self.running, self.done, self.failed, self.stopped, self.retried = set(), 0, 0, 0, 0
             self.best = (math.inf, "")
@@ -167,7 +167,7 @@ def ray_session(out: Path, workers: int | None, address: str | None, log: Callab
 
 
 def run_trials(trials: list[TrialSpec], out: Path, data: TrialData, session: Session, max_retries: int = 2,
-               storage: TuneStorage | None = None, scheduler=None, callbacks: list = (),
+               storage: TuneStorage | None = None, scheduler=None, callbacks: Sequence = (),
                log: Callable[[str], None] = print, prefix: str = "sweep") -> Outcomes:
     """Run `trials` (one Tune trial each, one CPU each) in a `ray_session`; trials already
     complete in `out` are reused. Returns what Tune ended without a complete run."""
@@ -204,7 +204,7 @@ def trial_space(tune, trials: list[TrialSpec]) -> dict:
 
 
 def run_optuna(spec, out: Path, data: TrialData, session: Session, storage: TuneStorage | None = None, scheduler=None,
-               callbacks: list = (), evaluated: list[tuple[dict, float]] = (), pending: list[dict] = (),
+               callbacks: Sequence = (), evaluated: Sequence[tuple[dict, float]] = (), pending: Sequence[dict] = (),
                log: Callable[[str], None] = print) -> Outcomes:
     """Optuna's search (through Ray Tune): ``samples`` configurations, each trial training
     every seed of the sweep and reporting their mean validation loss. A resumed search

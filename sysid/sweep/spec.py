@@ -38,7 +38,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -50,7 +49,7 @@ from sysid.config.experiment import Experiment, load_experiment, parse_experimen
 
 SCHEDULERS = ("none", "asha", "median")
 # scheduler -> {setting: (default, smallest allowed, integer?)}; times in epochs
-SCHEDULER_SETTINGS = {
+SCHEDULER_SETTINGS: dict[str, dict[str, tuple[float, float, bool]]] = {
     "none": {},
     "asha": {"grace_period": (1, 1, True), "reduction_factor": (3.0, 1.0 + 1e-9, False), "brackets": (1, 1, True)},
     "median": {"grace_period": (1, 1, True), "min_samples_required": (3, 1, True)},
@@ -132,7 +131,7 @@ class SweepSpec:
 
 def base_document(exp: Experiment) -> dict:
     """An experiment as a TOML document (every option filled in)."""
-    return tomllib.loads(exp.to_toml())
+    return exp.to_table()
 
 
 def apply_values(base: Experiment, values: dict[str, Any], seed: int, name: str,

@@ -98,7 +98,7 @@ def optuna_history(spec: SweepSpec, out: Path) -> tuple[list[tuple[dict, float]]
     for trial in scanned_trials(spec, out):
         by_point.setdefault(trial.point, []).append(trial)
     evaluated, pending = [], []
-    for point, trials in by_point.items():
+    for trials in by_point.values():
         config = config_of(spec, trials[0].values)
         if config is None:
             continue

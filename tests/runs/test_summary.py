@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from sysid.errors import CheckpointError
+from sysid.evaluation.verdict import BaselineVerdict
 from sysid.runs.directory import RunDir
 from sysid.runs.records import JsonRecord
 from sysid.runs.summary import RunSummary
@@ -73,7 +74,7 @@ def test_hybrid_summary_agrees_with_the_runs_other_files(hybrid_run):
     assert summary.identified_uncertainty.names == ("N_r",)
     assert summary.identified_uncertainty.estimate[0] == pytest.approx(summary.identified["N_r"])
     assert summary.val_loss_multistep > 0 and summary.objective == summary.val_loss_multistep
-    verdict = summary.verdict.baseline_verdict()         # the typed block gives back the trainer's verdict
+    verdict = BaselineVerdict.from_dict(summary.verdict.to_json())  # the typed block gives back the trainer's verdict
     assert summary.beats_baseline == summary.verdict.beats_baseline == verdict.beats_baseline
     assert summary.verdict.statement == verdict.statement()
     assert summary.data.training == "files" and summary.data.test_set == "files"
