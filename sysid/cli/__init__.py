@@ -26,6 +26,7 @@ from sysid.cli import export_commands  # noqa: E402,F401
 from sysid.cli import sweep_commands  # noqa: E402,F401
 from sysid.cli import maneuver_commands  # noqa: E402,F401
 from sysid.cli import compare_commands  # noqa: E402,F401
+from sysid.cli import logs_commands  # noqa: E402,F401
 
 
 MULTI_VALUE_OPTIONS = ("--data", "--turning", "--zigzag")

@@ -79,7 +79,7 @@ def compare(
     from sysid.config import checks
     from sysid.config.choices import Method
     from sysid.config.experiment import load_experiment
-    from sysid.data.recordings import expand_paths, read_run
+    from sysid.data.recordings import expand_paths, read_runs
     from sysid.data.splits import data_split
     from sysid.device import compute_threads
     from sysid.evaluation.comparison import BASELINE, FIRST, Contender, compare as run_compare
@@ -154,8 +154,7 @@ def compare(
     chosen = [Contender(label, members, kind, ships[key]) for label, members, kind, key, _ in rows]
 
     with compute_threads(1 if threads is None else threads):
-        runs = [read_run(f, rate, columns) for f in progress(files, desc="reading", unit="logs",
-                                                             quiet=len(files) < 4)]
+        runs = read_runs(progress(files, desc="reading", unit="logs", quiet=len(files) < 4), rate, columns)
         short = short_runs(runs, horizons)
         for h in horizons:
             if sum(s == h for _, s in short) == len(runs):

@@ -237,7 +237,7 @@ def evaluate(
     verdict (docs: How sysid judges a model)."""
     import pandas as pd
     from sysid.config.experiment import load_experiment
-    from sysid.data.recordings import expand_paths, read_run
+    from sysid.data.recordings import expand_paths, read_runs
     from sysid.data.splits import data_split
     from sysid.evaluation.evaluate import evaluate_model, short_runs
     from sysid.store.files import write_csv
@@ -276,7 +276,7 @@ def evaluate(
                                                                      else "esso_osaka"))
     claim(output, OutputKind.FILE, [run_dir, config, *files, ship_input])
     rate = source.data.rate if source is not None else 1.0
-    runs = [read_run(f, rate, columns) for f in progress(files, desc="reading", unit="files", quiet=len(files) < 4)]
+    runs = read_runs(progress(files, desc="reading", unit="files", quiet=len(files) < 4), rate, columns)
     short = short_runs(runs, horizons)
     for h in horizons:
         if sum(s == h for _, s in short) == len(runs):

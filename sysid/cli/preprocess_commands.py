@@ -165,12 +165,35 @@ def preprocess(
             for r in results:
                 typer.secho(f"error: {r['error']}", fg=typer.colors.RED, err=True)
             raise SystemExit(1)  # nothing to move into place: no output directory at all
+        _check_tracks(results)  # a clear mismatch: nothing moved into place
     order = {p: i for i, p in enumerate(paths)}
     results.sort(key=lambda r: order[r["file"]])
     _summary(results, outdir, time.perf_counter() - start)
     failed = [r for r in results if not r["ok"]]
     if failed:
         raise SystemExit(1)  # (typer.Exit is swallowed by standalone_mode=False)
+
+
+def _check_tracks(results: list[dict]) -> None:
+    """Each processed output against its own GNSS track (`sysid.data.consistency`): a clear
+    mismatch is a `DataError`, a line per output naming the raw log; a marginal one a warning."""
+    from sysid import logs
+    from sysid.data.consistency import Verdict
+    from sysid.data.recordings import log_track
+
+    errors = []
+    for r in results:
+        for out in r.get("outputs", []) if r["ok"] else []:
+            if not out.endswith(".csv"):
+                continue
+            found = log_track(out)
+            where = f"{r['file']}: its processed log {Path(out).name}"
+            errors += [f"{where}: {c.sentence()} (the raw log's units or signs; docs: Input formats)"
+                       for c in found.worst(Verdict.MISMATCH)]
+            for c in found.worst(Verdict.MARGINAL):
+                logs.warning(f"{where}: {c.sentence()} (marginal; docs: Input formats, the track check)")
+    if errors:
+        raise DataError("\n".join(errors))
 
 
 def _summary(results: list[dict], outdir: Path, seconds: float) -> None:

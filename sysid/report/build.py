@@ -139,18 +139,18 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
             say(f"figure {number}/{len(plan.figures)}: {spec.title}")
         n_pages = pdf.page
         pdf.close()
-
-    html = render_html(
-        title=title,
-        subtitle=("PARTIAL " if source.missing_runs else "") + f"{SUBTITLES[source.kind]} "
-                 f"- built {built}",
-        summary=summary,
-        runs=[{"row": row, "colour": model_colour(r.name, r.model, r.dataset, i)}
-              for i, (row, r) in enumerate(zip(rows, source.runs))],
-        methods=methods, tables=tables, plain_tables=plain, figures=html_figures, notes=notes, quality=quality,
-        verdict=first, settings=settings, chosen=chosen,
-        version=sysid.__version__, source=str(source.path), built=built)
-    html_path = write_text(html, out_dir / "report.html")
+        # the HTML is written before the PDF is moved into place: a failure (a full disk) keeps neither
+        html = render_html(
+            title=title,
+            subtitle=("PARTIAL " if source.missing_runs else "") + f"{SUBTITLES[source.kind]} "
+                     f"- built {built}",
+            summary=summary,
+            runs=[{"row": row, "colour": model_colour(r.name, r.model, r.dataset, i)}
+                  for i, (row, r) in enumerate(zip(rows, source.runs))],
+            methods=methods, tables=tables, plain_tables=plain, figures=html_figures, notes=notes, quality=quality,
+            verdict=first, settings=settings, chosen=chosen,
+            version=sysid.__version__, source=str(source.path), built=built)
+        html_path = write_text(html, out_dir / "report.html")
     return ReportPaths(html_path, pdf_path, len(html_figures), n_pages, notes,
                        time.perf_counter() - started)
 

@@ -6,17 +6,19 @@ from ``[data] test`` or, for a paper data set, the paper's six (`sysid.data.spli
 """
 from __future__ import annotations
 
+import logging
 import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
+import numpy as np
 import pandas as pd
 import torch
 
 from sysid.identify.checkpoint import TrainingCheckpoint
-from sysid.data.recordings import Run, read_run
+from sysid.data.recordings import Run, read_runs
 from sysid.data.datasets import test_files
 from sysid.data.splits import TEST, TRAINING, VALIDATION, check_disjoint_runs, data_split, provenance
 from sysid.device import compute_threads
@@ -26,6 +28,7 @@ from sysid.evaluation.verdict import (IDENTIFIED_MMG, SHIP_FILE_MMG, BaselineVer
                                       window_score)
 from sysid.config.experiment import Experiment
 from sysid.hybrid.force_models import CorrectedModel, build_mmg, build_model
+from sysid.mmg.coverage import outside_force_models
 from sysid.runs.rundir import write_run
 from sysid.identify.trainer import EpochReport, Trainer, TrainingSummary, held_out_validation
 from sysid.config.checks import threads
@@ -52,13 +55,12 @@ class RunResult:
 
 def training_runs(exp: Experiment, data: str | os.PathLike | None = None) -> list[Run]:
     """The experiment's training logs (``[data] train`` or its data set), read and checked."""
-    return [read_run(f, exp.data.rate, exp.data.columns) for f in data_split(exp, data).train]
+    return read_runs(data_split(exp, data).train, exp.data.rate, exp.data.columns)
 
 
 def validation_runs(exp: Experiment) -> list[Run]:
     """The experiment's ``[data] validation`` logs, read (empty: validation blocks of the training logs)."""
-    return [read_run(f, exp.data.rate, exp.data.columns) for f in data_split(exp).validation] \
-        if exp.data.validation else []
+    return read_runs(data_split(exp).validation, exp.data.rate, exp.data.columns) if exp.data.validation else []
 
 
 def evaluation_runs(exp: Experiment, data: str | os.PathLike | None = None) -> list[Run]:
@@ -66,7 +68,22 @@ def evaluation_runs(exp: Experiment, data: str | os.PathLike | None = None) -> l
     paper data set, else none. Read only to evaluate."""
     split = data_split(exp, data)
     columns = exp.data.columns if split.test_source == "files" else None
-    return [read_run(f, exp.data.rate, columns) for f in split.test]
+    return read_runs(split.test, exp.data.rate, columns)
+
+
+def warn_outside_force_models(exp: Experiment, runs: Sequence[Run]) -> list[str]:
+    """Warn (and return) the shares of training samples outside what the ship file's force
+    models cover (`sysid.mmg.coverage`): astern revolutions under a one-quadrant propeller,
+    rudder angles beyond the standard rudder's range."""
+    if not runs:
+        return []
+    states = np.concatenate([r.states for r in runs])
+    inputs = np.concatenate([r.inputs for r in runs])
+    ship = build_mmg(exp).ship
+    found = outside_force_models(ship.models, states[:, 1], inputs[:, 0], inputs[:, 1])
+    for line in found:
+        logging.getLogger(__name__).warning(f"training logs: {line} ({ship.source or ship.name})")
+    return found
 
 
 def physics_baselines(exp: Experiment, model: torch.nn.Module, dtype: torch.dtype,
@@ -103,7 +120,7 @@ def cached_test_runs(data: str | os.PathLike | None = None) -> list[Run]:
     process and data directory."""
     key = ("tests", None if data is None else str(data))
     if key not in _READ:
-        _READ[key] = [read_run(p) for p in test_files(data).values()]
+        _READ[key] = read_runs(test_files(data).values())
     return _READ[key]
 
 
@@ -174,6 +191,7 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
                 log("validation: the held-out training logs " + "; ".join(
                     f"{group}: {', '.join(names)}" for group, names in held_out.groups.items()))
             check_disjoint_runs({TRAINING: runs, VALIDATION: validation, TEST: tests}, exp.source)
+            warn_outside_force_models(exp, runs)
             try:
                 trainer = Trainer(exp, progress=progress, log=log, checkpoint=checkpoint_path(out_dir),
                                   resume=resume, on_epoch=on_epoch).fit(runs, validation)

@@ -25,7 +25,7 @@ from typing import Any, Callable, Iterable
 
 import torch
 
-from sysid.data.recordings import Run, read_run
+from sysid.data.recordings import Run, read_runs
 from sysid.data.datasets import test_files
 from sysid.data.splits import file_sha256
 from sysid.errors import DataError
@@ -92,7 +92,7 @@ def read_trial_data(experiments: Iterable[Experiment], root: str | os.PathLike |
     for exp in experiments:
         if exp.needs_training and data_key(exp) not in training:
             training[data_key(exp)] = hashed(training_runs(exp, root))
-    test_runs = hashed(read_run(p) for p in test_files(root).values()) if tests else ()
+    test_runs = hashed(read_runs(test_files(root).values())) if tests else ()
     return TrialData(test_runs, training, str(root) if root is not None else None)
 
 
