@@ -90,21 +90,21 @@ def test_column_errors_name_the_file_the_column_and_the_fix(dataset_dir, tmp_pat
 
 
 def test_every_bad_column_is_named_in_one_line(dataset_dir, tmp_path):
-    """Degrees read as radians in two columns (heading, rudder), text in two columns: each
+    """Degrees read as radians in two columns (rudder, true wind direction), text in two columns: each
     problem is one error naming every column it concerns."""
     import pandas as pd
 
     own = write_own_log(dataset_dir / BERTHING, tmp_path / "own.csv")
     table = _table()
     as_radians = {**table, "delta_rudder": {"column": "rudder", "unit": "rad"},
-                  "psi": {"column": "heading", "unit": "rad"}}
+                  "wind_dir_true": {"column": "true wind from", "unit": "rad"}}
     with pytest.raises(DataError) as found:
         read_run(own, columns=parse_columns(as_radians, "exp.toml"))
     line = str(found.value)
     assert "\n" not in line and line.count("reaches") == 2
-    assert "column 'heading' [rad] (channel psi) reaches" in line
+    assert "column 'true wind from' [rad] (channel wind_dir_true) reaches" in line
     assert "column 'rudder' [rad] (channel delta_rudder) reaches" in line
-    assert 'psi = { column = "...", unit = "deg" }' in line and 'delta_rudder = { column = "...", unit = "deg" }' in line
+    assert 'wind_dir_true = { column = "...", unit = "deg" }' in line and 'delta_rudder = { column = "...", unit = "deg" }' in line
     frame = pd.read_csv(own, dtype=str)
     frame.loc[3, "shaft"], frame.loc[5, "heading"] = "12 rpm", "NNE"
     texts = tmp_path / "texts.csv"
