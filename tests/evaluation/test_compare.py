@@ -172,3 +172,32 @@ def test_evaluate_scores_remapped_logs_with_a_config_and_a_run_beside_its_baseli
     verdict = (run.out + run.err).splitlines()
     assert any(line.startswith(("verdict: The hybrid", "WARNING: The hybrid")) and "MMG (ship file)" in line
                and "2 logs" in line for line in verdict)
+
+
+@pytest.mark.slow
+def test_maneuver_puts_the_users_recorded_zigzag_beside_the_model(project, dataset_dir, capsys, monkeypatch):
+    """``sysid maneuver SHIP --recorded LOG --config EXP``: the user's zig-zag (knots, deg) read
+    through the config's [data.columns]; its indices in recorded.csv are those of the same
+    record read in SI from the dataset; a log that is no turning circle or zig-zag is one line."""
+    from sysid.data.recordings import read_run
+    from sysid.maneuvers.recorded import record_comparison
+    from sysid.mmg import MMG
+    from sysid.mmg.ship import load_ship
+
+    monkeypatch.chdir(project)
+    done = in_process(capsys, "maneuver", "esso_osaka", "-o", "man", "--zigzag", "10/10", "--side", "starboard",
+                      "--dt", "0.5", "--duration", "60", "--eager", "--no-report",
+                      "--recorded", "logs/zigzag_b.csv", "--config", "hybrid.toml")
+    assert done.code == 0, done.err
+    assert "recorded runs beside the model (recorded.csv):" in done.out
+    ours = pd.read_csv(project / "man" / "recorded.csv")
+    si = read_run(dataset_dir / LOGS["zigzag_b.csv"][0])
+    truth = record_comparison({"esso_osaka": [MMG(load_ship("esso_osaka"))]}, {"zigzag_b": si})
+    assert list(ours.model) == list(truth.model) == ["recorded", "esso_osaka"]
+    for column in ("first_overshoot_deg", "second_overshoot_deg"):
+        np.testing.assert_allclose(ours[column], truth[column], rtol=1e-5)   # the CSV keeps 6 digits
+    assert ours.maneuver.iloc[0] == truth.maneuver.iloc[0] and ours.maneuver.iloc[0].startswith("zigzag_")
+    refused = in_process(capsys, "maneuver", "esso_osaka", "-o", "man2", "--recorded", "logs/harbour_3.csv",
+                         "--config", "hybrid.toml", "--no-report")
+    assert refused.code == 2 and len(refused.error_lines) == 1 and "harbour_3.csv" in refused.error_lines[0]
+    assert not (project / "man2").exists()
