@@ -107,13 +107,11 @@ def maneuver(
     integrator: str = typer.Option("rk4", "--integrator", help="rk4 (classical) or euler."),
     compiled: bool = typer.Option(True, "--compiled/--eager", help="Compiled loop (compiled once per model, cached) "
                                                                    "or the eager step."),
-    recorded: Optional[List[Path]] = typer.Option(None, "--recorded", help="Your recorded turning circles and "
-                                                   "zig-zags (files, folders or patterns; several may follow one "
-                                                   "--recorded): their IMO indices beside the model's, in "
-                                                   "recorded.csv. A log's kind comes from its name or folder "
-                                                   "(turn..., zigzag...)."),
-    config: Optional[Path] = typer.Option(None, "--config", help="Experiment config whose [data.columns] and "
-                                                                 "[data] rate read the --recorded logs."),
+    recorded: Optional[List[Path]] = typer.Option(None, "--recorded", help="Logs or folders of logs: their turning "
+                                                  "circles and zig-zags (recognised from rudder and heading) beside "
+                                                  "the model's, like for like (recorded_indices.csv)."),
+    config: Optional[Path] = typer.Option(None, "--config", help="Experiment config whose [data.columns] maps the "
+                                                                 "--recorded logs' columns and units."),
     report: bool = typer.Option(True, "--report/--no-report", help="Write report.html and report.pdf too."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output directory (all of it)."),
 ) -> None:
@@ -138,26 +136,9 @@ def maneuver(
     wind_speed, wind_direction = parse_wind(wind)
     maneuvers = parse_maneuvers(turning or [], zigzag or [], crash_stop, side)
     source = model if model.is_dir() else ship_file(model)  # what the command reads
-    records = None
-    if recorded:
-        from sysid.config.experiment import load_experiment
-        from sysid.data.recordings import expand_paths
-
-        exp = load_experiment(config) if config is not None else None
-        records = expand_paths(recorded)
-    elif config is not None:
-        raise _error("--config reads the --recorded logs: name them with --recorded")
-    target = claim(output, OutputKind.MANEUVERS, [source, config, *(records or [])], overwrite)  # a bad -o fails now
+    target = claim(output, OutputKind.MANEUVERS, [source, *(recorded or []), config], overwrite)  # a bad -o fails now
     subject = load_maneuver_model(model)
-    record_runs = None
-    if records:
-        from sysid.data.recordings import read_runs
-        from sysid.maneuvers.recorded import recorded_maneuver
-
-        runs = read_runs(records, exp.data.rate if exp else 1.0, exp.data.columns if exp else None)
-        record_runs = {run.name: run for run in runs}
-        for name, run in record_runs.items():
-            recorded_maneuver(run, name)   # not a turning circle or zig-zag: one line now, before simulating
+    logged = _recorded_runs(recorded or [], config)
     if not (turning or zigzag or crash_stop) and ahead_only(subject.model):
         maneuvers = [m for m in maneuvers if m.kind != "crash_stop"]
         typer.echo(f"maneuver: no crash stop: the propeller model {subject.ship.models.get('propeller')!r} is for "
@@ -181,23 +162,16 @@ def maneuver(
     seconds = time.perf_counter() - simulated
     summary = summary_document(subject.label, subject.kind, subject.ship, conditions, sources, results, compiled,
                                seconds, subject.spread)
-    beside = None
-    if record_runs:
-        from sysid.maneuvers.recorded import record_comparison
-
-        members = [m for _, m in subject.members] if subject.spread == "seeds" else [subject.model]
-        beside = record_comparison({subject.label: members}, record_runs)
     with target.staged() as staging:
         write_maneuvers(staging, results, subject.ship, conditions, summary)
-        if beside is not None:
-            from sysid.store.files import write_csv
-            write_csv(beside, staging / RECORDED_FILE, float_format="%.6g")
+        if logged:
+            compared = _against_record(staging, subject, logged)
         if report:
             from sysid.report.maneuver_report import build_maneuver_report
             build_maneuver_report(staging)
     _print_results(output, results)
-    if beside is not None:
-        _print_recorded(beside)
+    if logged:
+        _print_record(compared)
     for r in results:
         if r.gate_off_share is not None and r.gate_off_share > MOSTLY_OUTSIDE:
             typer.secho(f"  {r.maneuver.name}: kNN gate off on {100 * r.gate_off_share:.0f} % of the steps: the "
@@ -206,17 +180,49 @@ def maneuver(
     typer.echo(f"maneuver: {output} ({seconds:.1f} s simulating, {time.perf_counter() - start:.1f} s in all)")
 
 
-RECORDED_FILE = "recorded.csv"   # the recorded runs' indices beside the model's (`RECORD_COLUMNS`)
+def _recorded_runs(paths: list[Path], config: Optional[Path]):
+    """label -> run of the turning circles and zig-zags among the logs of `paths` (read
+    and checked, through the config's [data.columns]); {} without --recorded."""
+    if not paths:
+        if config is not None:
+            raise _error("--config maps the columns of --recorded logs: give --recorded too")
+        return {}
+    from sysid.data.recordings import expand_paths, read_runs
+    from sysid.maneuvers.recorded import recorded_maneuver_runs
+
+    columns = None
+    if config is not None:
+        from sysid.config.experiment import load_experiment
+        columns = load_experiment(config).data.columns
+    runs = read_runs(expand_paths(paths), columns=columns)
+    found, other = recorded_maneuver_runs(runs)
+    if not found:
+        raise _error(f"--recorded: none of the {len(runs)} log(s) is a turning circle or a zig-zag (recognised "
+                     "from the rudder and heading: docs/maneuvers.md)")
+    typer.echo(f"maneuver: {len(found)} recorded maneuver(s) in {len(runs)} log(s): {', '.join(found)}"
+               + (f"; {len(other)} other log(s) left out" if other else ""))
+    return found
 
 
-def _print_recorded(frame) -> None:
+def _against_record(staging: Path, subject, logged):
+    """recorded_indices.csv in `staging`: the logged maneuvers' indices beside the model's
+    (`sysid.maneuvers.recorded.record_comparison`); the frame."""
+    from sysid.maneuvers.recorded import record_comparison
+    from sysid.store.files import write_csv
+
+    members = [m for _, m in subject.members] if subject.spread == "seeds" else [subject.model]
+    frame = record_comparison({subject.label: members}, logged)
+    write_csv(frame, staging / "recorded_indices.csv", float_format="%.6g")
+    return frame
+
+
+def _print_record(frame) -> None:
     import pandas as pd
-    from sysid.maneuvers.recorded import side_by_side
+    from sysid.maneuvers.recorded import differences
 
-    table = side_by_side(frame)
-    typer.echo(f"recorded runs beside the model ({RECORDED_FILE}):")
+    wide = differences(frame).drop(columns=["maneuver"])
     with pd.option_context("display.width", 160, "display.max_columns", 20, "display.float_format", "{:.3f}".format):
-        typer.echo(table.to_string(index=False, na_rep=""))
+        typer.echo(wide.to_string(index=False, na_rep=""))
 
 
 def _print_results(output: Path, results) -> None:

@@ -9,7 +9,6 @@ pooled over the windows of a file.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
@@ -18,7 +17,7 @@ import torch
 from torch import nn
 
 from sysid.data.recordings import Run, protocol_windows, stack_windows
-from sysid.data.datasets import TEST_FILES
+from sysid.data.scenario import scenario_of
 from sysid.config.choices import Method
 from sysid.dynamics.equations import eager_predict
 from sysid.dynamics.integrators import Integrator, IntegratorLike
@@ -27,7 +26,6 @@ from sysid.errors import DataError
 from sysid.records.columns import METRICS_COLUMNS, TRACE_COLUMNS, trace_name  # noqa: F401 (their home before)
 from sysid.state import FORCE, FORCE_COMPONENTS, INPUTS, STATE, VELOCITY_INDEX
 
-SCENARIO_OF = {Path(v).stem: k for k, v in TEST_FILES.items()}
 
 
 @dataclass
@@ -48,9 +46,10 @@ class WindowPrediction:
 
     def metrics_row(self, horizon_s: float) -> dict:
         """A `METRICS_COLUMNS` row (NaN RMSE without windows); the scenario is the
-        protocol's name of a test file, else empty."""
+        protocol's name of a test file, else the maneuver the log records
+        (`sysid.data.scenario.scenario_of`)."""
         rmse = self.rmse() if len(self.starts) else np.full(3, np.nan)
-        return {"scenario": SCENARIO_OF.get(self.run.name, ""), "file": self.run.name,
+        return {"scenario": scenario_of(self.run), "file": self.run.name,
                 "horizon_s": horizon_s, "n_windows": len(self.starts),
                 "rmse_u": rmse[0], "rmse_v": rmse[1], "rmse_r": rmse[2]}
 

@@ -38,6 +38,7 @@ from torch import nn
 
 from sysid.data.datasets import TEST_FILES, data_dir
 from sysid.data.recordings import Run, read_runs
+from sysid.data.scenario import FOLDERS, Maneuver as Kind, recognise
 from sysid.dynamics.equations import eager_predict
 from sysid.dynamics.integrators import Method
 from sysid.errors import DataError
@@ -68,11 +69,21 @@ def recorded_test_runs(data: str | os.PathLike | None = None, rate: float = 1.0)
     return dict(zip(names, read_runs([root / TEST_FILES[n] for n in names], rate)))
 
 
+def recognised_kind(run: Run) -> str | None:
+    """"turning", "zigzag" or None: the maneuver `sysid.data.scenario.recognise` finds in
+    the run's rudder, propeller and heading."""
+    kind = recognise(run).kind
+    return kind.value if kind in (Kind.TURNING, Kind.ZIGZAG) else None
+
+
 def recorded_maneuver(run: Run, scenario: str = "") -> tuple[Maneuver, int]:
     """(the maneuver of a recorded run, the sample index of its execute). The kind comes
-    from the scenario name or the file's folder (``turning/``, ``zigzag/``)."""
-    text = f"{scenario} {run.path.parent.name} {run.name}".lower()
-    kind = "zigzag" if "zigzag" in text else "turning" if ("turn" in text) else None
+    from the scenario name (else the file's name: ``turn...``, ``zigzag...``), the file's
+    folder (``turning/``, ``zigzag/``), else the signals (`recognised_kind`)."""
+    named = scenario.lower() or run.name.lower()  # "Zigzag 20/20", "turn_14-Sep-..."
+    folder = FOLDERS.get(run.path.parent.name.lower())
+    kind = ("zigzag" if "zigzag" in named else "turning" if "turn" in named
+            else folder.value if folder in (Kind.TURNING, Kind.ZIGZAG) else recognised_kind(run))
     if kind is None:
         raise DataError(f"{run.path}: not a turning or zig-zag run (name it in the scenario or keep it in "
                         "a turning/ or zigzag/ folder)")
@@ -100,8 +111,8 @@ def recorded_maneuver(run: Run, scenario: str = "") -> tuple[Maneuver, int]:
     angle = float(round(math.degrees(order)))
     if kind == "turning":
         return TurningCircle(angle, side), execute
-    named = re.search(r"(\d+(?:\.\d+)?)\s*/\s*(\d+(?:\.\d+)?)", scenario)
-    rudder_deg, check_deg = (float(named[1]), float(named[2])) if named else (angle, angle)
+    pair = re.search(r"(\d+(?:\.\d+)?)\s*/\s*(\d+(?:\.\d+)?)", scenario)
+    rudder_deg, check_deg = (float(pair[1]), float(pair[2])) if pair else (angle, angle)
     return ZigZag(rudder_deg, check_deg, side), execute
 
 
@@ -227,6 +238,32 @@ def compared(predicted: Mapping[str, Sequence[Predictions]], runs: Mapping[str, 
     frame = pd.DataFrame(rows, columns=RECORD_COLUMNS)
     frame.loc[frame.model == RECORDED, "n_members"] = 0
     return frame
+
+
+def recorded_maneuver_runs(runs: Sequence[Run]) -> tuple[dict[str, Run], list[Run]]:
+    """(label -> run for the runs recognised as turning circles or zig-zags, by
+    `recorded_maneuver`: "zigzag 20/20 NAME", "turning 35 NAME"; the other runs)."""
+    found, other = {}, []
+    for run in runs:
+        try:
+            maneuver, _ = recorded_maneuver(run)
+        except DataError:
+            other.append(run)
+            continue
+        angle = f"{maneuver.rudder_deg:g}/{maneuver.check_deg:g}" if isinstance(maneuver, ZigZag) else \
+            f"{getattr(maneuver, 'rudder_deg', 0.0):g}"
+        found[f"{maneuver.kind} {angle} {run.name}"] = run
+    return found, other
+
+
+def differences(frame: pd.DataFrame) -> pd.DataFrame:
+    """`side_by_side` of a `record_comparison` frame with, per model, its difference from
+    the record (``<model> - recorded``) in the index's unit."""
+    wide = side_by_side(frame)
+    models = [m for m in dict.fromkeys(frame.model) if m != RECORDED]
+    for m in models:
+        wide[f"{m} - {RECORDED}"] = wide[m] - wide[RECORDED]
+    return wide
 
 
 def side_by_side(frame: pd.DataFrame) -> pd.DataFrame:

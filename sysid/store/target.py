@@ -145,12 +145,7 @@ class OutputTarget:
     def check(self) -> None:
         """Refuse this target if it is an input, holds one, lies in one or in a sealed
         directory, is a link, or exists and may not be replaced; create its parent."""
-        for path in dict.fromkeys([self.path, *self.written()]):
-            self._check_link(path)
-        for path in self.written():
-            self._check_inputs(path, same=True)
-            self._check_sealed(path)
-            self._check_inputs(path, same=False)
+        self.check_place()
         if self.kind is OutputKind.SWEEP:
             self._check_sweep()
         elif self.kind.sealed:
@@ -168,6 +163,18 @@ class OutputTarget:
                 raise OutputError(f"{self.path}: already exists; it is written beside {self.companion}: pass "
                                   "--overwrite to replace it, or choose another output path")
             check_parent(self.path)
+
+    def check_place(self, sealed: bool = True) -> None:
+        """The rules for where any output may go, whatever is there: not a link, not one of
+        the inputs, holding none and inside none, and (with `sealed`) not inside a
+        directory sysid sealed."""
+        for path in dict.fromkeys([self.path, *self.written()]):
+            self._check_link(path)
+        for path in self.written():
+            self._check_inputs(path, same=True)
+            if sealed:
+                self._check_sealed(path)
+            self._check_inputs(path, same=False)
 
     def _check_link(self, path: Path) -> None:
         if path.is_symlink():
