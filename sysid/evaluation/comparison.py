@@ -23,8 +23,9 @@ from torch import nn
 
 from sysid.config.choices import Method
 from sysid.data.recordings import Run
+from sysid.data.scenario import scenario_of
 from sysid.dynamics.integrators import IntegratorLike
-from sysid.evaluation.evaluate import SCENARIO_OF, predict_windows
+from sysid.evaluation.evaluate import predict_windows
 from sysid.evaluation.judgement import CHANNELS, UNITS, Divergence, Judgement, PairedCell, VerdictRule, judge
 from sysid.state import VELOCITY_INDEX
 
@@ -69,12 +70,6 @@ class WindowErrors:
     @property
     def n_windows(self) -> int:
         return int(self.window_start_s.size)
-
-
-def scenario_of(run: Run) -> str:
-    """The scenario a log stands for: the paper's name of one of its test files, else the
-    log's own name."""
-    return SCENARIO_OF.get(run.name, run.name)
 
 
 def _per_window_rmse(observed: torch.Tensor, predicted: torch.Tensor) -> np.ndarray:
@@ -251,6 +246,6 @@ def metrics_of(errors: Sequence[WindowErrors], label: str) -> pd.DataFrame:
     for e in errors:
         err = e.errors[label]
         rmse = np.sqrt(np.mean(err**2, axis=(0, 1))) if e.n_windows else np.full(3, np.nan)
-        rows.append({"scenario": e.scenario if e.scenario != e.log else "", "file": e.log, "horizon_s": e.horizon_s,
+        rows.append({"scenario": e.scenario, "file": e.log, "horizon_s": e.horizon_s,
                      "n_windows": e.n_windows, "rmse_u": rmse[0], "rmse_v": rmse[1], "rmse_r": rmse[2]})
     return pd.DataFrame(rows, columns=METRICS_COLUMNS)
