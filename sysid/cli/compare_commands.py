@@ -80,7 +80,8 @@ def compare(
     from sysid.config.choices import Method
     from sysid.config.experiment import load_experiment
     from sysid.data.recordings import expand_paths, read_runs
-    from sysid.data.splits import data_split
+    from sysid.data.datasets import test_files
+    from sysid.data.splits import config_paths
     from sysid.device import compute_threads
     from sysid.evaluation.comparison import BASELINE, FIRST, Contender, compare as run_compare
     from sysid.evaluation.evaluate import short_runs
@@ -104,10 +105,10 @@ def compare(
         raise DataError("compare: give at least two models (the first is the reference), or --against baseline")
     if data:
         files = expand_paths(data)
-    elif exp is not None and exp.data.test:
-        files = list(data_split(exp).test)
+    elif exp is not None and exp.data.test:   # only the test logs need to exist here
+        files = list(config_paths(exp.data.test, "test", exp.source))
     elif exp is not None and exp.experiment.dataset:
-        files = list(data_split(exp).test)   # the paper's six test files
+        files = list(test_files().values())   # the paper's six test files
     else:
         raise DataError("compare: no logs to compare on: name them with --data, or give --config with [data] test")
     horizons = tuple(horizon) if horizon else (exp.evaluation.horizons if exp is not None else (30.0, 100.0))

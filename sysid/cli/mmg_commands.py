@@ -238,7 +238,8 @@ def evaluate(
     import pandas as pd
     from sysid.config.experiment import load_experiment
     from sysid.data.recordings import expand_paths, read_runs
-    from sysid.data.splits import data_split
+    from sysid.data.datasets import test_files
+    from sysid.data.splits import config_paths
     from sysid.evaluation.evaluate import evaluate_model, short_runs
     from sysid.store.files import write_csv
     from sysid.config import checks
@@ -264,9 +265,10 @@ def evaluate(
     source = exp if exp is not None else run_exp   # where the logs, horizons and integrator come from
     if data:
         files, columns = expand_paths(data), source.data.columns if source is not None else None
-    elif source is not None and (source.data.test or source.experiment.dataset):
-        split = data_split(source)
-        files, columns = list(split.test), source.data.columns if split.test_source == "files" else None
+    elif source is not None and source.data.test:   # only the test logs need to exist here
+        files, columns = list(config_paths(source.data.test, "test", source.source)), source.data.columns
+    elif source is not None and source.experiment.dataset:
+        files, columns = list(test_files().values()), None   # the paper's six, in the processed schema
     else:
         raise DataError("evaluate: no logs: name them with --data, or give --config EXP (or a run) whose "
                         "[data] test lists them")

@@ -205,3 +205,36 @@ def test_maneuver_puts_the_users_recorded_zigzag_beside_the_model(project, datas
                          "--config", "hybrid.toml", "--no-report")
     assert refused.code == 2 and len(refused.error_lines) == 1 and "--recorded" in refused.error_lines[0]
     assert not (project / "man2").exists()
+
+
+@pytest.mark.slow
+def test_an_identified_mmg_run_with_validation_logs_evaluates_again(project, dataset_dir, capsys, monkeypatch):
+    """An MMG with N_r identified, validated on its own log, evaluated again later on its test
+    logs: only the test logs must still be there (its validation log has moved away)."""
+    from sysid.evaluation.evaluate import evaluate_model
+    from sysid.mmg import MMG
+    from sysid.mmg.ship import load_ship
+
+    monkeypatch.chdir(project)
+    text = _config("mmg", {"train": ["logs/harbour_1.csv", "logs/zigzag_a.csv"], "validation": ["logs/harbour_2.csv"],
+                           "held back": ["logs/zigzag_b.csv"]})
+    (project / "mmg_id.toml").write_text(text + '[identify]\nparameters = ["N_r"]\nepochs = 2\n')
+    trained = in_process(capsys, "train", "mmg_id.toml", "-o", "runs/mmg_id", "--threads", "1")
+    assert trained.code == 0, trained.err
+    moved = project / "harbour_2.moved"
+    (project / "logs" / "harbour_2.csv").rename(moved)
+    try:
+        again = in_process(capsys, "evaluate", "runs/mmg_id", "-o", "mmg_id.csv")
+    finally:
+        moved.rename(project / "logs" / "harbour_2.csv")
+    assert again.code == 0, again.err
+    scored = pd.read_csv(project / "mmg_id.csv")
+    written = pd.read_csv(project / "runs" / "mmg_id" / "metrics.csv")   # what training scored
+    np.testing.assert_allclose(scored[["rmse_u", "rmse_v", "rmse_r"]], written[["rmse_u", "rmse_v", "rmse_r"]],
+                               rtol=1e-5)
+    truth = evaluate_model(MMG(load_ship("esso_osaka")), _si_runs(dataset_dir)[:1], (30.0, 100.0),
+                           traces=False).metrics
+    rows = [line.split() for line in again.out.splitlines() if "MMG (ship file)" in line and "zigzag_b" in line]
+    assert [float(r[-3]) for r in rows] == pytest.approx(list(truth.rmse_u), abs=6e-6)
+    assert any("The identified MMG" in line and "MMG (ship file)" in line
+               for line in (again.out + again.err).splitlines() if line.startswith(("verdict:", "WARNING:")))
