@@ -265,5 +265,46 @@ def markdown() -> str:
     return "\n".join(lines)
 
 
+MARKER = "<!-- generated: config-reference (python -m sysid.config.reference --write); edit above this line -->"
+
+
+def generated_page(page: str, marker: str, generated: str) -> str:
+    """A docs page whose part below its `marker` line is `generated`: the text above the
+    marker kept as written, the marker, then the generated text (one newline at the end)."""
+    if marker not in page:
+        raise ValueError(f"the page has no line {marker!r}")
+    return page[:page.index(marker) + len(marker)] + "\n\n" + generated.strip("\n") + "\n"
+
+
+def regenerate(path, marker: str, generated: str, write: bool) -> bool:
+    """Whether the page at `path` is what `generated_page` makes of it; with `write`, make
+    it so."""
+    from pathlib import Path
+
+    path = Path(path)
+    page = path.read_text()
+    wanted = generated_page(page, marker, generated)
+    if write and wanted != page:
+        path.write_text(wanted)
+    return wanted == page
+
+
+PAGE = "docs/reference/config.md"   # relative to the repository's root
+
+
+def main(argv=None) -> int:
+    """``python -m sysid.config.reference``: print the reference; ``--write`` writes it into
+    ``docs/reference/config.md`` below its marker; ``--check`` exits 1 when that page differs."""
+    import sys
+    from pathlib import Path
+
+    args = sys.argv[1:] if argv is None else list(argv)
+    if not {"--write", "--check"} & set(args):
+        print(markdown())
+        return 0
+    same = regenerate(Path(__file__).resolve().parents[2] / PAGE, MARKER, markdown(), "--write" in args)
+    return 0 if same or "--write" in args else 1
+
+
 if __name__ == "__main__":
-    print(markdown())
+    raise SystemExit(main())

@@ -153,6 +153,9 @@ class VerdictRule:
             raise ValueError("material >= 0, min_windows >= 1 and resamples >= 100, please")
 
 
+DEFAULT_RULE = VerdictRule()   # the stated rule: 95 % confidence, 10 % material
+
+
 @dataclass(frozen=True)
 class CellJudgement:
     """One cell decided: RMSE of model and baseline pooled over its windows (and members)
@@ -350,7 +353,7 @@ def judge(cells: Sequence[PairedCell], rule: VerdictRule = VerdictRule(), model:
     point_logs: list[float] = []
     ratios: list[np.ndarray] = []                  # (R,) resampled RMSE ratio per compared cell
     member_logs: list[np.ndarray] = []             # (M,) log-ratio of each member alone, per judged cell
-    for (log, h), group in groups.items():
+    for (log, _h), group in groups.items():
         W = group[0].n_windows
         windows = _counts(rng, W, R)
         for c in group:
@@ -378,8 +381,14 @@ def judge(cells: Sequence[PairedCell], rule: VerdictRule = VerdictRule(), model:
                 point_logs.append(math.log(change + 1))
                 member_logs.append(0.5 * np.log(np.mean(c.model**2, axis=1) / mse_b))
     if ratios:   # every compared cell's interval, in one call
-        bounds = iter(np.quantile(np.stack(ratios, 1), [alpha, 1 - alpha], axis=0).T - 1)
-        judged = [_decided(c, *next(bounds), rule) if math.isfinite(c.change) else c for c in judged]
+        bounds = iter(np.quantile(np.stack(ratios, 1), [alpha, 1 - alpha], axis=0).T - 1)   # (cells, 2)
+        decided: list[CellJudgement] = []
+        for cell in judged:
+            if math.isfinite(cell.change):
+                low, high = next(bounds)
+                cell = _decided(cell, float(low), float(high), rule)
+            decided.append(cell)
+        judged = decided
 
     # overall: geometric mean of the judged cells' ratios, logs resampled with replacement
     logs = sorted(log_ratios)

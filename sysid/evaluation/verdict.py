@@ -26,7 +26,7 @@ import pandas as pd
 import torch
 
 from sysid.dynamics.rollouts import WindowSet, rollout_errors, velocity_loss
-from sysid.evaluation.judgement import (CHANNELS, UNITS, Divergence, Judgement, Outcome, PairedCell, VerdictRule,
+from sysid.evaluation.judgement import (CHANNELS, DEFAULT_RULE, UNITS, Divergence, Judgement, Outcome, PairedCell, VerdictRule,
                                         judge, percent_text)
 
 if TYPE_CHECKING:
@@ -296,7 +296,7 @@ def judged(model: str, label: str, cells: Sequence[PairedCell], rule: VerdictRul
 
 
 def baseline_verdict(model: str, validation: Mapping[float, Mapping[str, WindowScore]] | None,
-                     test: Mapping[str, "Evaluation"] | None, rule: VerdictRule = VerdictRule()) -> BaselineVerdict:
+                     test: Mapping[str, "Evaluation"] | None, rule: VerdictRule = DEFAULT_RULE) -> BaselineVerdict:
     """The verdict from scores keyed "model" and by baseline label (`SHIP_FILE_MMG`, ...):
     `validation` window scores per horizon [s], `test` evaluations on the test logs (None or
     empty: not available). A label's validation loss is the mean over the horizons, as
@@ -340,7 +340,7 @@ def verdict_of(model: str, labels: tuple[str, ...], cells: tuple[ChannelCell, ..
     return BaselineVerdict(model, labels, cells, losses, decided, seeds, judgements, on_validation, evidence)
 
 
-def seed_mean_verdict(verdicts: Sequence[BaselineVerdict], rule: VerdictRule = VerdictRule()) -> BaselineVerdict:
+def seed_mean_verdict(verdicts: Sequence[BaselineVerdict], rule: VerdictRule = DEFAULT_RULE) -> BaselineVerdict:
     """The verdict of several seeds of one experiment: every seed is a member of the model
     (the bootstrap draws seeds too; their spread is shown); a baseline the same in every seed
     (the ship file's MMG) counts once, one identified per seed counts every seed. The pooled
