@@ -33,6 +33,7 @@ def train(
     The run directory is moved into place only when complete (with a manifest); an
     interrupted training leaves no run, only its checkpoint for --resume.
     """
+    from sysid.data.display_units import DisplayUnits
     from sysid.data.recordings import expand_paths
     from sysid.config import checks
     from sysid.config.choices import Validation
@@ -123,6 +124,10 @@ def train(
             typer.echo("verdict: " + result.verdict.statement())
         else:  # the last line, on stderr
             typer.secho(result.verdict.warning(), fg=typer.colors.YELLOW, err=True)
+        units = DisplayUnits.of(exp.data.columns)
+        if not units.si and units.verdict_cells(result.verdict):  # the user's units ([data.columns])
+            typer.echo(f"verdict in your units (vs {result.verdict.baselines[0]}): "
+                       f"{units.verdict_cells(result.verdict)}", err=not result.verdict.beats_baseline)
 
 
 @app.command()

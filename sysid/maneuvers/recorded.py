@@ -38,6 +38,7 @@ from torch import nn
 
 from sysid.data.datasets import TEST_FILES, data_dir
 from sysid.data.recordings import Run, read_runs
+from sysid.data.scenario import FOLDERS, Maneuver as Kind, recognise
 from sysid.dynamics.equations import eager_predict
 from sysid.dynamics.integrators import Method
 from sysid.errors import DataError
@@ -70,16 +71,16 @@ def recorded_test_runs(data: str | os.PathLike | None = None, rate: float = 1.0)
 
 def recorded_maneuver(run: Run, scenario: str = "") -> tuple[Maneuver, int]:
     """(the maneuver of a recorded run, the sample index of its execute). The kind comes
-    from the scenario name or the file's folder (``turning/``, ``zigzag/``), else from the
-    maneuver its rudder and heading record (`sysid.data.scenario.recognise`)."""
-    from sysid.data.scenario import Maneuver as Recorded, recognise
-
-    text = f"{scenario} {run.path.parent.name} {run.name}".lower()
-    kind = "zigzag" if "zigzag" in text else "turning" if ("turn" in text) else None
+    from the scenario name (else the file's name: ``turn...``, ``zigzag...``), the file's
+    folder (``turning/``, ``zigzag/``), else the signals (`sysid.data.scenario.recognise`)."""
+    label = scenario.lower() if scenario else run.name.lower()[:6]  # "Zigzag 20/20"; "turn_14-Sep-..."
+    folder = FOLDERS.get(run.path.parent.name.lower())
+    kind = ("zigzag" if "zigzag" in label else "turning" if "turn" in label[:4] or " turn" in label
+            else folder.value if folder in (Kind.TURNING, Kind.ZIGZAG) else None)
     found = None
     if kind is None:
         found = recognise(run)
-        kind = {Recorded.ZIGZAG: "zigzag", Recorded.TURNING: "turning"}.get(found.kind)
+        kind = found.kind.value if found.kind in (Kind.TURNING, Kind.ZIGZAG) else None
     if kind is None:
         raise DataError(f"{run.path}: not a turning or zig-zag run (its rudder and heading record "
                         f"{found.name if found else 'neither'}; name it in the scenario or keep it in a turning/ "
@@ -108,9 +109,9 @@ def recorded_maneuver(run: Run, scenario: str = "") -> tuple[Maneuver, int]:
     angle = float(round(math.degrees(order)))
     if kind == "turning":
         return TurningCircle(angle, side), execute
-    named = re.search(r"(\d+(?:\.\d+)?)\s*/\s*(\d+(?:\.\d+)?)", scenario)
-    if named:
-        rudder_deg, check_deg = float(named[1]), float(named[2])
+    pair = re.search(r"(\d+(?:\.\d+)?)\s*/\s*(\d+(?:\.\d+)?)", scenario)
+    if pair:
+        rudder_deg, check_deg = float(pair[1]), float(pair[2])
     elif found is not None and found.heading_deg is not None:   # the check angle the record shows
         rudder_deg, check_deg = angle, found.heading_deg
     else:
@@ -240,6 +241,32 @@ def compared(predicted: Mapping[str, Sequence[Predictions]], runs: Mapping[str, 
     frame = pd.DataFrame(rows, columns=RECORD_COLUMNS)
     frame.loc[frame.model == RECORDED, "n_members"] = 0
     return frame
+
+
+def recorded_maneuver_runs(runs: Sequence[Run]) -> tuple[dict[str, Run], list[Run]]:
+    """(label -> run for the runs recognised as turning circles or zig-zags, by
+    `recorded_maneuver`: "zigzag 20/20 NAME", "turning 35 NAME"; the other runs)."""
+    found, other = {}, []
+    for run in runs:
+        try:
+            maneuver, _ = recorded_maneuver(run)
+        except DataError:
+            other.append(run)
+            continue
+        angle = f"{maneuver.rudder_deg:g}/{maneuver.check_deg:g}" if isinstance(maneuver, ZigZag) else \
+            f"{getattr(maneuver, 'rudder_deg', 0.0):g}"
+        found[f"{maneuver.kind} {angle} {run.name}"] = run
+    return found, other
+
+
+def differences(frame: pd.DataFrame) -> pd.DataFrame:
+    """`side_by_side` of a `record_comparison` frame with, per model, its difference from
+    the record (``<model> - recorded``) in the index's unit."""
+    wide = side_by_side(frame)
+    models = [m for m in dict.fromkeys(frame.model) if m != RECORDED]
+    for m in models:
+        wide[f"{m} - {RECORDED}"] = wide[m] - wide[RECORDED]
+    return wide
 
 
 def side_by_side(frame: pd.DataFrame) -> pd.DataFrame:

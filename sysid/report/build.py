@@ -31,6 +31,7 @@ from sysid.report.chosen_settings import chosen_section  # noqa: E402
 from sysid.report.quality import quality_rows  # noqa: E402
 from sysid.report.source import ReportSource, read_source  # noqa: E402
 from sysid.protocol.paper import run_label  # noqa: E402
+from sysid.data.display_units import DisplayUnits  # noqa: E402
 from sysid.report.tables import build_tables, verdict_table  # noqa: E402
 from sysid.report.maneuver_tables import record_plain_table  # noqa: E402
 from sysid.report.plain_tables import table_figure  # noqa: E402
@@ -100,8 +101,8 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
     settings = [(run_label(r.name, r.model, r.dataset), changed_settings(r)) for r in source.runs]
     chosen = chosen_section(source)
     verdict = source.verdict
-    first = verdict_table(verdict, run_label(source.runs[0].name, source.runs[0].model, source.runs[0].dataset)) \
-        if verdict is not None else None
+    first = verdict_table(verdict, run_label(source.runs[0].name, source.runs[0].model, source.runs[0].dataset),
+                          DisplayUnits.of_config(source.runs[0].config)) if verdict is not None else None
     built = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     title = f"sysid accuracy report: {source.title}"
 

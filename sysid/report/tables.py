@@ -7,13 +7,15 @@ of each column is marked best.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from sysid.protocol.paper import SCENARIO_ORDER, comparison_table, model_label, paper_rmse, run_label, scenario_key
 from sysid.report.palette import model_colour
-from sysid.evaluation.verdict import UNITS, BaselineVerdict as Verdict, percent_text
+from sysid.data.display_units import DisplayUnits
+from sysid.evaluation.verdict import BaselineVerdict as Verdict, percent_text
 from sysid.report.source import ReportSource, RunRecord
 
 COMPONENTS = ("u", "v_m", "r")
@@ -192,21 +194,27 @@ def run_table(run: RunRecord, paper: bool = True) -> RmseTable:
     baselines = _baseline_rmse(run)
     horizons = run.horizons()
     label = run_label(run.name, run.model, run.dataset)
+    units = DisplayUnits() if paper else DisplayUnits.of_config(run.config)  # the paper's tables are SI
+
+    def shown(values, i):
+        return units.value(COMPONENTS[i], values[i]) if values else None
+
     table = RmseTable("table_run", f"RMSE of {label}" + (" beside its physics baselines" if baselines else "")
-                      + " (u, v_m [m/s]; r [rad/s])", [f"{h} s" for h in horizons])
+                      + f" (u [{units.unit('u')}], v_m [{units.unit('v_m')}], r [{units.unit('r')}])",
+                      [f"{h} s" for h in horizons])
     for scenario in _scenario_order(s for s, _ in rmse):
         cells = []
         for horizon in horizons:
             values = rmse.get((scenario, horizon))
             ref = paper_rmse(_paper_scenario(scenario), run.model, run.dataset, horizon) if paper else None
             for i in range(3):
-                cells.append(Cell(values[i] if values else None, ref[i] if ref else None))
+                cells.append(Cell(shown(values, i), ref[i] if ref else None))
         table.rows.append(TableRow(scenario, label, model_colour(run.name, run.model, run.dataset), cells))
         for j, (baseline, values_of) in enumerate(baselines.items()):
             cells = []
             for horizon in horizons:
                 values = values_of.get((scenario, horizon))
-                cells += [Cell(values[i] if values else None, None) for i in range(3)]
+                cells += [Cell(shown(values, i), None) for i in range(3)]
             table.rows.append(TableRow(scenario, baseline, BASELINE_COLOURS[j % len(BASELINE_COLOURS)], cells))
     _mark_best(table.rows)
     return table
@@ -240,21 +248,24 @@ class VerdictTable:
     losses: str = ""   # "val_loss_multistep: hybrid 0.05772, MMG (ship file) 0.05870"
 
 
-def verdict_table(verdict: Verdict, model: str) -> VerdictTable:
+def verdict_table(verdict: Verdict, model: str, units: DisplayUnits | None = None) -> VerdictTable:
     """The first page's table of a `BaselineVerdict`: RMSE of the model (± its std over
-    seeds) and of each baseline with the model's change against it, deciding split first."""
+    seeds) and of each baseline with the model's change against it, deciding split first;
+    in `units` (the user's ``[data.columns]`` units; None: SI)."""
+    units = units if units is not None else DisplayUnits()
     header = ["Split", "Horizon [s]", "Channel", f"{model} RMSE"]
     for b in verdict.baselines:
         header += [f"{b} RMSE", f"change vs {b}"]
     order = sorted(verdict.cells, key=lambda c: (c.split != verdict.decided_on, c.horizon_s))
     rows = []
     for c in order:
-        spread = f" ± {c.model_std:.5f}" if c.model_std is not None and math.isfinite(c.model_std) else ""
+        shown = functools.partial(units.value, c.channel)
+        spread = f" ± {shown(c.model_std):.5f}" if c.model_std is not None and math.isfinite(c.model_std) else ""
         row = [c.split + (" (decides)" if c.split == verdict.decided_on else ""), f"{c.horizon_s:g}",
-               f"{c.channel} [{UNITS[c.channel]}]", format_rmse(c.model) + spread]
+               f"{c.channel} [{units.unit(c.channel)}]", format_rmse(shown(c.model)) + spread]
         for b in verdict.baselines:
             change = c.change(b)
-            row += [format_rmse(c.baselines[b]), percent_text(change)]
+            row += [format_rmse(shown(c.baselines[b])), percent_text(change)]
         rows.append(row)
     losses = ", ".join(f"{model if k == 'model' else k} {v:.5f}" for k, v in verdict.val_loss_multistep.items()
                        if math.isfinite(v))

@@ -25,6 +25,7 @@ from typing import Any, Callable, Iterable
 
 import torch
 
+from sysid.config.choices import Solver
 from sysid.data.recordings import Run, read_runs
 from sysid.data.datasets import test_files
 from sysid.data.splits import file_sha256
@@ -170,7 +171,7 @@ def _history_metrics(rows: list[dict], summary: RunSummary | None = None) -> lis
     Levenberg-Marquardt's one row is not an epoch and is left out."""
     solver = summary.identification.solver if summary is not None and summary.identification is not None else None
     return [epoch_metrics(r["stage"], r["epoch"], r["train_loss"], r["early_stopping_loss"]) for r in rows
-            if not (r["stage"] == "identify" and solver == "levenberg_marquardt")]
+            if not (r["stage"] == "identify" and solver == Solver.LEVENBERG_MARQUARDT)]
 
 
 def _checkpoint_history(blob: bytes, source: str) -> list[dict]:

@@ -154,3 +154,18 @@ def test_logs_check_prints_the_table(tmp_path, dataset_dir, capsys):
     assert rows[("r_flipped.csv", "r")][4] == "mismatch" and float(rows[("r_flipped.csv", "r")][2]) < -0.98
     assert rows[("knots.csv", "r")][4] == "ok"
     assert out[-1] == "logs check: 2 log(s), 2 clear mismatch(es), 0 marginal, 0 unreadable, 0 without a track"
+
+
+def test_preprocess_output_is_checked(tmp_path, dataset_dir):
+    """`sysid preprocess` checks each processed log it wrote: a clear mismatch names the raw
+    log and the output (nothing is moved into place); a consistent output passes."""
+    from sysid.cli.preprocess_commands import _check_tracks
+    from sysid.errors import DataError
+    knots, _ = _spoiled(tmp_path, dataset_dir)
+    good = dataset_dir / TURN
+    _check_tracks([{"ok": True, "file": "raw/good.csv", "outputs": [str(good), str(tmp_path / "good.report.json")]}])
+    with pytest.raises(DataError) as bad:
+        _check_tracks([{"ok": True, "file": "raw/run3.csv", "outputs": [str(knots)]},
+                       {"ok": False, "file": "raw/broken.csv", "error": "raw/broken.csv: no GNSS"}])
+    assert str(bad.value).startswith("raw/run3.csv: its processed log knots.csv: u is 1.93 x the track's speed")
+    assert "knots under an m/s name?" in str(bad.value) and "\n" not in str(bad.value)
