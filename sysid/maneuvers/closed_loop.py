@@ -166,7 +166,7 @@ def run_compiled(loop: Callable[..., torch.Tensor], x0: torch.Tensor, orders0: t
         n = rows[0].shape[0]
         if n < LOOP_ROWS:
             rows = [torch.cat((t, t[:1].expand(LOOP_ROWS - n, -1))) for t in rows]
-        groups.append(_run_group(loop, *rows, steps, dt)[:, :n])
+        groups.append(_run_group(loop, rows[0], rows[1], rows[2], steps, dt)[:, :n])
     return torch.cat(groups, 1)
 
 

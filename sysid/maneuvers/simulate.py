@@ -22,7 +22,6 @@ from torch import nn
 from sysid.dynamics.integrators import Method
 from sysid.maneuvers.any_model import ManeuverModel, ship_of
 from sysid.maneuvers.base import Conditions, Maneuver, ManeuverError, ManeuverResult, check_number
-from sysid.fast.compiled import enabled, recorded_seconds
 from sysid.maneuvers.closed_loop import compiled_loop, loop_is_cached, run_compiled, run_eager
 from sysid.maneuvers.controllers import initial_orders, order_parameters
 from sysid.maneuvers.indices import Track, maneuver_indices
@@ -147,6 +146,7 @@ class LoopChoice:
 
 def _start_costs(label: str) -> tuple[float, str]:
     """(cold start [s] to reckon with, what a cold and a warm start cost here, as words)."""
+    from sysid.fast.compiled import recorded_seconds
     cold, warm = recorded_seconds(label, "compile"), recorded_seconds(label, "load")
     words = (f"a cold start (compiling) {'took ' + format(cold, '.0f') if cold is not None else 'takes about ' + format(COMPILE_GUESS_S, '.0f')} s"
              f"{' here' if cold is not None else ''}, a warm one (from the cache) "
@@ -172,6 +172,7 @@ def choose_loop(models: Sequence[nn.Module], maneuvers: Sequence[Maneuver], cond
     would take longer than compiling the loops that are not."""
     if compiled is not None:
         return LoopChoice(bool(compiled), f"{'compiled' if compiled else 'eager'} loop (as asked)")
+    from sysid.fast.compiled import enabled
     if not enabled():
         return LoopChoice(False, "eager loop (compilation is off: SYSID_COMPILE=0)")
     label = f"maneuver-{conditions.method.name.lower()}"
