@@ -631,6 +631,17 @@ class Trainer:
         Sets ``model_``, ``history_``,
         ``summary_``, ``validation_windows_`` (the windows of ``val_loss_multistep``) and
         ``velocity_weights_`` (w_v (3,), 1 / variance of u, v_m, r in the training windows)."""
+        prepared = self.prepare(runs, validation)
+        stage = None
+        if prepared.trains:
+            stage = self.train(prepared.model, prepared.params, prepared.train, prepared.val, prepared.w_v,
+                               prepared.w_F)
+        return self.finish(prepared, stage)
+
+    def prepare(self, runs: Sequence[Run], validation: Sequence[Run] = ()) -> "Prepared":
+        """Stages 1-4 of `fit` (split, identification before training, standardisation, warm
+        start, or their results from a checkpoint of the training stage): what stage 5 and
+        `finish` need. `sysid.identify.side_by_side` trains several seeds' stage 5 at once."""
         exp = self.experiment
         if not validation and (held_out := held_out_validation(exp, runs)) is not None:
             runs, validation = held_out.train, held_out.validation
@@ -673,7 +684,7 @@ class Trainer:
             summary.identified_uncertainty, summary.identification = uncertainty, estimator
         if identify and not joint:
             mmg.requires_grad_(False)
-        model, stopping_best = mmg, None
+        prepared = Prepared(runs, dtype, device, started, train, val, samples, w_v, mmg)
         if kind is not ModelKind.MMG and summary.failure is None:
             net = ForceCorrection(exp.network.hidden, dtype, exp.network.members).to(device)
             model = CorrectedModel(mmg, net, None, physics=(kind is ModelKind.HYBRID), gate_space=exp.gate.space)
@@ -691,11 +702,23 @@ class Trainer:
                 with torch.no_grad():
                     summary.warm_val_loss = float(multistep_loss(PerMember(model), val, w_v)[0])
                 self.log(f"after warm start: validation loss {summary.warm_val_loss:.5f}")
-            params = list(net.parameters()) + (list(mmg.parameters()) if identify and joint else [])
+            prepared.params = list(net.parameters()) + (list(mmg.parameters()) if identify and joint else [])
             if resumed_in == "train":  # buffers (standardisation) first: w_F depends on them
                 PerMember(model).load_state_dict(self._resume.model)
-            w_F = 1.0 / net.output_std if kind is ModelKind.HYBRID else None
-            stage = self.train(model, params, train, val, w_v, w_F)
+            prepared.model = model
+            prepared.w_F = 1.0 / net.output_std if kind is ModelKind.HYBRID else None
+        return prepared
+
+    def finish(self, prepared: "Prepared", stage: StageResult | None) -> "Trainer":
+        """Stage 6 and the run's validation loss after the training stage `stage` (None: no
+        training stage, MMG-only or a failure before it); returns self, fitted."""
+        exp, t = self.experiment, self.experiment.training
+        model = prepared.model if prepared.model is not None else prepared.mmg
+        summary, val, w_v = self._summary, prepared.val, prepared.w_v
+        identify, joint = bool(exp.identify.parameters), exp.identify.stage is Stage.JOINT
+        stopping_best = None
+        if stage is not None and prepared.model is not None:
+            net = prepared.model.correction_net
             stopping_best = stage.best_loss if exp.gate.enabled else None
             self._history += stage.history
             summary.stopped["train"] = stage.stopped
@@ -705,15 +728,17 @@ class Trainer:
             if net.members > 1:
                 self.log(f"mean of {net.members} networks: validation loss {summary.ensemble_val_loss:.5f}")
             if identify and joint:
-                summary.identified = self._coefficients(mmg)
-                summary.identified_uncertainty = self.uncertainty(model, runs, dtype, device, w_v)
+                summary.identified = self._coefficients(prepared.mmg)
+                summary.identified_uncertainty = self.uncertainty(model, prepared.runs, prepared.dtype,
+                                                                  prepared.device, w_v)
                 summary.identification = self._gradient_estimator(stage, joint=True)
             if exp.gate.enabled:
-                summary.gate = self.fit_gate(model, samples, dtype)
+                summary.gate = self.fit_gate(model, prepared.samples, prepared.dtype)
         self.velocity_weights_ = w_v
         self.validation_windows_ = val
         if summary.failure is None:
-            summary.val_loss_multistep = self.objective(model, runs, val, w_v, dtype, device)
+            summary.val_loss_multistep = self.objective(model, prepared.runs, val, w_v, prepared.dtype,
+                                                        prepared.device)
             horizon = t.objective_s if t.objective_s > 0 else t.steps * val.dt
             self.log(f"val_loss_multistep {summary.val_loss_multistep:.5f}: the final model"
                      + (" (kNN gate on)" if summary.gate else "") + f" on {len(self.validation_windows_)} "
@@ -722,6 +747,32 @@ class Trainer:
                         "before the gate" if stopping_best is not None else ""))
         self.history_ = pd.DataFrame(self._history)
         summary.epochs = int(self.history_["epoch"].max()) if len(self._history) else 0
-        summary.train_seconds = time.perf_counter() - started
+        summary.train_seconds = time.perf_counter() - prepared.started
         self.model_, self.summary_ = model, summary
         return self
+
+
+@dataclass
+class Prepared:
+    """What `Trainer.prepare` leaves for the training stage and `Trainer.finish`: the training
+    logs `runs` (held-out validation logs removed), dtype, device, the start time
+    (``time.perf_counter``), the windows, the training samples, w_v (3,), the MMG, and for a
+    learned model still to train (``trains``): the model, the trained parameters and w_F (3,)
+    (None: NN-only)."""
+
+    runs: Sequence[Run]
+    dtype: torch.dtype
+    device: torch.device
+    started: float
+    train: WindowSet
+    val: WindowSet
+    samples: tuple[torch.Tensor, torch.Tensor]
+    w_v: torch.Tensor
+    mmg: torch.nn.Module
+    model: CorrectedModel | None = None
+    params: list = field(default_factory=list)
+    w_F: torch.Tensor | None = None
+
+    @property
+    def trains(self) -> bool:
+        return self.model is not None
