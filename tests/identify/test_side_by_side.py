@@ -8,6 +8,7 @@ import torch
 
 from sysid.config.experiment import parse_experiment
 from sysid.data.recordings import read_runs
+from sysid.device import compute_threads
 from sysid.errors import ConfigError
 from sysid.hybrid.force_models import PerMember
 from sysid.identify.checkpoint import TrainingCheckpoint
@@ -26,6 +27,12 @@ def _experiment(seed: int, **training):
                         "learning_rate": 1e-2, "lr_factor": 0.5, "lr_patience": 1, **training},
            "gate": {"k": 5, "space": "inputs"}}
     return parse_experiment(doc)
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    with compute_threads(1):  # as `sysid train` trains
+        yield
 
 
 @pytest.fixture(scope="module")
