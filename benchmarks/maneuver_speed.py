@@ -14,12 +14,23 @@ Prints, for each maneuver (35 deg turning, 10/10 zig-zag, crash stop) of the mod
 
 Without --run the Esso Osaka's MMG is timed (no trained model at hand). Compare within one
 run: the machine is shared and its speed drifts.
+
+Side by side with an older checkout (``--against``): the whole command ``sysid maneuver MODEL
+--turning 35 --zigzag 20/20 --side starboard`` (one turning circle and one zig-zag, the
+default duration 80 L/U0, indices, tables, report) of this code with its default settings
+and of the older code with ``--eager`` (its eager path), each in a fresh process with a
+fresh empty compile cache (``SYSID_CACHE``, ``TORCHINDUCTOR_CACHE_DIR``: cold caches), in
+turn, ``--repeats`` times; wall times and their ratio:
+
+    python benchmarks/maneuver_speed.py --run runs/hybrid_D2 --against /path/to/old/checkout [--duration 690]
 """
 from __future__ import annotations
 
 import argparse
 import os
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -34,10 +45,14 @@ def main() -> None:
     parser.add_argument("--run", type=Path, help="run directory of a trained model (default: the Esso Osaka's MMG)")
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--duration", type=float, default=600.0, help="[s]")
+    parser.add_argument("--duration", type=float, default=None,
+                        help="[s] (default: 600 s; with --against the command's default, 80 L/U0)")
     parser.add_argument("--dt", type=float, default=0.1, help="[s]")
     parser.add_argument("--cold", action="store_true", help="compile into an empty cache (the one-time cost)")
+    parser.add_argument("--against", type=Path, help="an older checkout: time `sysid maneuver` side by side")
     args = parser.parse_args()
+    if args.against:
+        return side_by_side(args)
     torch.set_num_threads(args.threads)
     if args.cold:
         os.environ["SYSID_CACHE"] = tempfile.mkdtemp(prefix="sysid-cache-")
@@ -47,7 +62,7 @@ def main() -> None:
     from sysid.maneuvers.simulate import ahead_only
 
     subject = load_maneuver_model(args.run if args.run else "esso_osaka")
-    conditions, sources = default_conditions(subject.model, subject.ship, dt=args.dt, duration=args.duration)
+    conditions, sources = default_conditions(subject.model, subject.ship, dt=args.dt, duration=args.duration or 600.0)
     maneuvers = [TurningCircle(35.0), ZigZag(10.0, 10.0)] + ([] if ahead_only(subject.model) else [CrashStop()])
     print(f"model {subject.label} ({subject.kind}), U0 {conditions.speed:g} m/s, n {conditions.rps:.4g} rps "
           f"({sources['rps']}), {conditions.duration:g} s at dt {conditions.dt:g} s = {conditions.steps} RK4 steps, "
@@ -78,6 +93,43 @@ def main() -> None:
         gate = "-" if result.gate_off_share is None else f"{100 * result.gate_off_share:.0f} %"
         print(f"{maneuver.name:24s} {compiled:14.3f} s {1e3 * per_step:12.2f} ms {per_step * conditions.steps:11.1f} s "
               f"{per_step * conditions.steps / compiled:17.0f}x {gate:>9s}")
+
+
+def timed_command(root: Path, extra: list[str], model: str, duration: float | None, threads: int) -> tuple[float, str]:
+    """(wall time [s], the output's path line) of ``sysid maneuver`` from `root` in a fresh
+    process with empty caches; a turning circle and a zig-zag to starboard."""
+    with tempfile.TemporaryDirectory(prefix="maneuver-speed-") as tmp:
+        env = dict(os.environ, PYTHONPATH=str(root), SYSID_CACHE=str(Path(tmp) / "sysid"),
+                   TORCHINDUCTOR_CACHE_DIR=str(Path(tmp) / "inductor"), OMP_NUM_THREADS=str(threads))
+        command = [sys.executable, "-m", "sysid", "maneuver", model, "-o", str(Path(tmp) / "out"), "--turning", "35",
+                   "--zigzag", "20/20", "--side", "starboard", *extra]
+        if duration is not None:
+            command += ["--duration", f"{duration:g}"]
+        start = time.perf_counter()
+        done = subprocess.run(command, env=env, capture_output=True, text=True, cwd=tmp)
+        took = time.perf_counter() - start
+        if done.returncode != 0:
+            raise SystemExit(f"{root}: sysid maneuver failed:\n{done.stderr[-2000:]}")
+        lines = [line for line in done.stdout.splitlines() if line.startswith("maneuver: ")]
+        return took, " | ".join(lines[1:])
+
+
+def side_by_side(args) -> None:
+    """`sysid maneuver` of this code (default settings) and of ``--against`` (--eager), in
+    turn, cold caches each: median wall times and their ratio."""
+    model = str(args.run.resolve()) if args.run else "esso_osaka"
+    runs = {"today (--against, --eager)": (args.against.resolve(), ["--eager"]),
+            "this code (default settings)": (ROOT, [])}
+    times: dict[str, list[float]] = {name: [] for name in runs}
+    print(f"sysid maneuver {model} --turning 35 --zigzag 20/20 --side starboard"
+          f"{'' if args.duration is None else f' --duration {args.duration:g}'}; cold caches, {args.threads} thread(s)")
+    for repeat in range(args.repeats):
+        for name, (root, extra) in (runs.items() if repeat % 2 == 0 else reversed(runs.items())):
+            took, said = timed_command(root, extra, model, args.duration, args.threads)
+            times[name].append(took)
+            print(f"  {name}: {took:.1f} s   {said}", flush=True)
+    old, new = (statistics.median(v) for v in times.values())
+    print(f"median: today {old:.1f} s, this code {new:.1f} s: {old / new:.1f}x faster")
 
 
 if __name__ == "__main__":

@@ -25,10 +25,11 @@ from sysid.cli import init_commands  # noqa: E402,F401
 from sysid.cli import export_commands  # noqa: E402,F401
 from sysid.cli import sweep_commands  # noqa: E402,F401
 from sysid.cli import maneuver_commands  # noqa: E402,F401
+from sysid.cli import compare_commands  # noqa: E402,F401
 from sysid.cli import logs_commands  # noqa: E402,F401
 
 
-MULTI_VALUE_OPTIONS = ("--data", "--turning", "--zigzag")
+MULTI_VALUE_OPTIONS = ("--data", "--turning", "--zigzag", "--recorded")
 
 
 def expand_multi_value(argv: list[str]) -> list[str]:

@@ -105,8 +105,10 @@ def maneuver(
     duration: Optional[float] = typer.Option(None, "--duration", help="Time after the execute [s] (default: 80 L/U0)."),
     wind: Optional[str] = typer.Option(None, "--wind", help="True wind SPEED,DIRECTION [m/s, deg from]; calm."),
     integrator: str = typer.Option("rk4", "--integrator", help="rk4 (classical) or euler."),
-    compiled: bool = typer.Option(True, "--compiled/--eager", help="Compiled loop (compiled once per model, cached) "
-                                                                   "or the eager step."),
+    compiled: Optional[bool] = typer.Option(None, "--compiled/--eager", show_default=False,
+                                            help="Force the compiled loop (compiled once per model, cached) or the "
+                                                 "eager step (default: the compiled loop only where it saves time: "
+                                                 "in the cache, or enough steps to repay compiling it)."),
     recorded: Optional[List[Path]] = typer.Option(None, "--recorded", help="Logs or folders of logs: their turning "
                                                   "circles and zig-zags (recognised from rudder and heading) beside "
                                                   "the model's, like for like (recorded_indices.csv)."),
@@ -119,7 +121,7 @@ def maneuver(
     from sysid.config.choices import Method
     from sysid.maneuvers import default_conditions, load_maneuver_model, run_maneuvers
     from sysid.maneuvers.outputs import MOSTLY_OUTSIDE, summary_document, write_maneuvers
-    from sysid.maneuvers.simulate import ahead_only
+    from sysid.maneuvers.simulate import ahead_only, choose_loop
     from sysid.cli.outputs import claim, ship_file
     from sysid.store.target import OutputKind
 
@@ -154,10 +156,12 @@ def maneuver(
     typer.echo(f"maneuver: {len(maneuvers)} maneuvers of {subject.label} ({subject.kind}{members}); "
                f"U0 {conditions.speed:.4g} m/s ({sources['speed']}), n {conditions.rps:.4g} rps ({sources['rps']}), "
                f"rudder rate {conditions.rudder_rate:.3g} deg/s ({sources['rudder_rate']}), dt {conditions.dt:g} s, "
-               f"{conditions.duration:g} s ({sources['duration']}), {conditions.method.value}, "
-               f"{'compiled' if compiled else 'eager'}")
+               f"{conditions.duration:g} s ({sources['duration']}), {conditions.method.value}")
     on_interrupt(f"nothing written to {output} (it is moved into place only when complete)")
     simulated = time.perf_counter()
+    choice = choose_loop([subject.model, *(m for _, m in subject.members)], maneuvers, conditions, compiled)
+    typer.echo(f"maneuver: {choice.reason}")
+    compiled = choice.compiled
     results = run_maneuvers(subject, maneuvers, conditions, compiled=compiled)
     seconds = time.perf_counter() - simulated
     summary = summary_document(subject.label, subject.kind, subject.ship, conditions, sources, results, compiled,

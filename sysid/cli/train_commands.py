@@ -201,13 +201,18 @@ def reproduce(
 
 
 def _warn_below_baseline(output: Path) -> None:
-    """A WARNING on stderr for every run of a reproduction that does not beat its physics
-    baseline (`RunSummary.beats_baseline` false), with its verdict's statement."""
+    """Every run's verdict: a WARNING on stderr for a run of a reproduction that does not beat
+    its physics baseline (`RunSummary.beats_baseline` false), a "verdict:" line otherwise,
+    each with its verdict's statement (evidence, interval and worst cells)."""
     from sysid.runs.directory import RunDir
 
     runs = output / "runs"
     for path in sorted(runs.glob("**/summary.json")):
         summary = RunDir(path.parent).read_summary()
-        if summary.beats_baseline is False and summary.verdict is not None:
+        if summary.verdict is None:
+            continue
+        if summary.beats_baseline is False:
             typer.secho(f"WARNING: run {path.parent.relative_to(runs)}: {summary.verdict.statement}",
                         fg=typer.colors.YELLOW, err=True)
+        else:
+            typer.echo(f"verdict: run {path.parent.relative_to(runs)}: {summary.verdict.statement}")

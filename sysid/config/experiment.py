@@ -150,7 +150,7 @@ class TrainingOptions(_Options):
     max_minutes: float = 0.0       # 0: off; > 0: a safety limit whose hit fails the run
     threads: int = 1               # torch intra-op threads; 0: one per core
     warm_start_epochs: int = 150   # one-step regression on the implied residual force
-    objective_s: float = 0.0       # horizon [s] of val_loss_multistep (the run's validation loss); 0: T steps
+    objective_s: float = 0.0       # horizon [s] of val_loss_multistep (the run's validation loss); 0: [evaluation] horizons
     dtype: DType = DType.FLOAT32
     device: str = "auto"           # auto (CUDA when present) | cpu | cuda | cuda:N
 
@@ -383,7 +383,7 @@ def _validate(exp: Experiment, src: str) -> None:
         (min(t.lambda_v, t.lambda_F, t.lambda_L2) >= 0, "[training] lambdas must be >= 0"),
         (t.force_band >= 0, "[training] force_band must be >= 0 (the paper's 0.2)"),
         (t.patience >= 1, "[training] patience must be >= 1"),
-        (t.objective_s >= 0, "[training] objective_s must be >= 0 (0: the training steps T)"),
+        (t.objective_s >= 0, "[training] objective_s must be >= 0 (0: the [evaluation] horizons)"),
         (t.max_minutes >= 0, "[training] max_minutes must be >= 0 (0: no wall-clock limit)"),
         (t.threads >= 0, "[training] threads must be >= 0 (0: one per core)"),
         (re.fullmatch(r"auto|cpu|cuda(:\d{1,3})?", t.device) is not None,
@@ -406,6 +406,9 @@ def _validate(exp: Experiment, src: str) -> None:
         (0 <= t.split_seed < 2 ** 32, f"[training] split_seed = {t.split_seed}: must be >= 0 and < 2^32 (4294967296)"),
         (len(exp.evaluation.horizons) > 0, "[evaluation] horizons must list at least one horizon [s]"),
         (all(h > 0 for h in exp.evaluation.horizons), "[evaluation] horizons must be > 0"),
+        (exp.data.rate <= 0 or all(h * exp.data.rate >= 2 - 1e-9 for h in exp.evaluation.horizons),
+         f"[evaluation] horizons must be >= 2 samples at [data] rate ({2 / exp.data.rate if exp.data.rate > 0 else 2:g} "
+         "s): a window of one sample is its start state alone, nothing is predicted and its RMSE is 0"),
         (all(w <= MAX_WIDTH for w in exp.network.hidden), f"[network] hidden widths must be <= {MAX_WIDTH}"),
         (exp.network.members <= MAX_MEMBERS, f"[network] members must be <= {MAX_MEMBERS}"),
         (t.steps <= 10_000, "[training] steps must be <= 10000"),

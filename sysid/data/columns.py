@@ -17,7 +17,7 @@ def to_channels(columns: ColumnMap, frame: pd.DataFrame, path) -> pd.DataFrame:
     The relative wind, when neither mapped nor present, is NaN here (`read_run`
     computes it from the state). Raises `DataError` naming the file, the column and
     the fix."""
-    out, missing = {}, []
+    out, missing, text_cells, unknown_units = {}, [], [], []
     mapped = {s.channel for s in columns.specs}
     where = f" ([data.columns] in {columns.source})" if columns.source and columns.specs else ""
     for channel in CHANNELS:
@@ -33,27 +33,31 @@ def to_channels(columns: ColumnMap, frame: pd.DataFrame, path) -> pd.DataFrame:
             continue
         values = _numbers(frame[spec.column], channel, path)
         text = frame[spec.column].notna() & values.isna()
-        if text.any():
+        if text.any():   # every such column is named in one error below
             row = int(np.argmax(text.to_numpy()))
-            raise DataError(f"{path}: column {spec.column!r} (channel {channel}) holds "
-                            f"{frame[spec.column].iloc[row]!r} at data row {row + 2}, not a number; "
-                            "write numbers only (no units or text in the cells)")
+            text_cells.append(f"column {spec.column!r} (channel {channel}) holds "
+                              f"{frame[spec.column].iloc[row]!r} at data row {row + 2}")
+            continue
         try:
             factor = spec.factor
         except ConfigError as exc:  # a unit in a header the config did not name
-            raise DataError(f"{path}: column {spec.column!r}: {str(exc).split(': ', 1)[-1]}; "
-                            f"set its unit in [data.columns]{where}") from None
+            unknown_units.append(f"column {spec.column!r}: {str(exc).split(': ', 1)[-1]}")
+            continue
         out[channel] = values.to_numpy(dtype=float) * factor
     if missing:
         first = missing[0]
         fix = (f"correct {first.channel} in [data.columns]{where}" if first.channel in mapped else
                f"map the file's columns onto the channels in the config's [data.columns], e.g. "
                f"{first.channel} = {{ column = \"...\", unit = \"{SI_UNIT[first.channel]}\" }}")
-        listed = ", ".join(f"{s.column!r} for channel {s.channel}" for s in missing[:4])
-        more = f" and {len(missing) - 4} more" if len(missing) > 4 else ""
-        raise DataError(f"{path}: no column {listed}{more} (the file has "
+        listed = ", ".join(f"{s.column!r} for channel {s.channel}" for s in missing)
+        raise DataError(f"{path}: no column {listed} (the file has "
                         f"{', '.join(map(repr, frame.columns[:16]))}{', ...' if len(frame.columns) > 16 else ''})"
                         f"; {fix}")
+    if text_cells:
+        raise DataError(f"{path}: not a number in {len(text_cells)} column(s): {'; '.join(text_cells)}; "
+                        "write numbers only (no units or text in the cells)")
+    if unknown_units:
+        raise DataError(f"{path}: {'; '.join(unknown_units)}; set the unit(s) in [data.columns]{where}")
     return pd.DataFrame(out, index=frame.index)
 
 

@@ -5,7 +5,9 @@ A processed file (CSV or Parquet) has the 13 columns of the processed schema, he
 public FRT-DS-ESSO files) or 1 Hz (``sysid preprocess`` output), or any columns and units
 that a config's ``[data.columns]`` maps onto the channels (`sysid.data.columns`). `read_run`
 drops trailing all-empty rows, rejects NaN inside the run, non-monotonic time and wrong
-units, and downsamples by taking every k-th sample from the first one (t = 0, 1, 2 s).
+units, and downsamples by taking every k-th sample from the first one (t = 0, 1, 2 s), saying so
+once per process (a 10 Hz log read at 1 Hz); a rate that is not a whole number of the file's
+samples per step, or above the file's own, is refused.
 """
 from __future__ import annotations
 
@@ -47,6 +49,7 @@ class Run:
     U_A [m/s], gamma_A [rad] as recorded.
     dt : sample period [s]; issues : data-quality findings (gaps, frozen GNSS, ...);
     suspect : (t_start, t_end) [s] intervals of frozen GNSS or time gaps.
+    stride : samples of the file per sample of the run (10: a 10 Hz file read at 1 Hz).
     sha256 : SHA-256 of the source file when known (a run shipped to a node without the
     file carries it); None: hashed from `path` when needed.
     track : the log's channels against its own GNSS track (`sysid.data.consistency`), at the
@@ -64,6 +67,7 @@ class Run:
     suspect: list[tuple[float, float]] = field(default_factory=list)
     sha256: str | None = None
     track: TrackCheck | None = None
+    stride: int = 1
 
     def __len__(self) -> int:
         return len(self.t)
@@ -98,19 +102,27 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
     c = {name: frame[name].to_numpy() for name in ("x", "y", "psi", "u", "v", "r")}
     track = check_track(path, t, c["x"], c["y"], c["psi"], c["u"], c["v"], c["r"], columns)
     report_checks([track], warn)
+    beyond = []
     for name, limit in _LIMITS.items():
         peak = np.abs(frame[name].to_numpy()).max()
         if name == "psi" and peak > limit and _turns_at_yaw_rate(t, frame["psi"].to_numpy(), frame["r"].to_numpy()):
             continue  # an unwrapped heading in radians (a simulated turn): it changes at r
         if peak > limit:
-            raise DataError(f"{path}: {columns.describe(name)} (channel {name}) reaches {peak:.4g} "
-                            f"{SI_UNIT[name]}, beyond {limit}: wrong units? name its unit in [data.columns], "
-                            f"e.g. {name} = {{ column = \"...\", unit = \"{_UNIT_HINT[QUANTITY[name]]}\" }}")
+            beyond.append((name, peak, limit))
+    if beyond:  # every channel in the wrong units, in one line
+        listed = "; ".join(f"{columns.describe(name)} (channel {name}) reaches {peak:.4g} {SI_UNIT[name]}, "
+                           f"beyond {limit}" for name, peak, limit in beyond)
+        hints = ", ".join(f"{name} = {{ column = \"...\", unit = \"{_UNIT_HINT[QUANTITY[name]]}\" }}"
+                          for name, _, _ in beyond)
+        raise DataError(f"{path}: {listed}: wrong units? name {'its unit' if len(beyond) == 1 else 'their units'} "
+                        f"in [data.columns], e.g. {hints}")
     period = float(np.median(steps))
     stride = int(round(1.0 / rate / period))
     if stride < 1 or abs(stride * period * rate - 1.0) > 1e-3:
         raise DataError(f"{path}: rate {rate:g} Hz is not a whole number of this file's {period:g}-s samples "
                         f"per step; choose a rate that divides {1.0 / period:g} Hz")
+    if stride > 1:
+        _note_resampled(path, 1.0 / period, rate, stride)
     issues, suspect = _quality_issues(t, values, period)
     sel = values[::stride]
     if len(sel) < 2:
@@ -122,7 +134,21 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
         inputs=sel[:, [frame.columns.get_loc(c) for c in list(INPUTS)]],
         relative_wind=sel[:, [frame.columns.get_loc("wind_velo_relative"),
                               frame.columns.get_loc("wind_dir_relative")]],
-        dt=period * stride, issues=issues, suspect=suspect, track=track)
+        dt=period * stride, issues=issues, suspect=suspect, track=track, stride=stride)
+
+
+_NOTED: set[tuple[float, float]] = set()   # (file rate, read rate) pairs already said, once per process
+
+
+def _note_resampled(path: Path, file_rate: float, rate: float, stride: int) -> None:
+    """Say once per process and pair of rates that logs are read at a lower rate than they
+    were written (a stage line naming the first such file)."""
+    key = (round(file_rate, 6), round(rate, 6))
+    if key in _NOTED:
+        return
+    _NOTED.add(key)
+    _log.info(f"{path.name} (and any other log at {file_rate:g} Hz): read at {rate:g} Hz, every {stride}th sample "
+              f"from the first (processed logs are already smoothed, so no filter); [data] rate sets the rate")
 
 
 def read_runs(paths: Iterable[str | os.PathLike], rate: float = 1.0, columns: ColumnMap | None = None,
@@ -156,11 +182,10 @@ def _channels(path: Path, columns: ColumnMap) -> tuple[pd.DataFrame, list[str]]:
     if len(frame) < 2:
         raise DataError(f"{path}: fewer than two data rows")
     bad = ~np.isfinite(values)
-    if bad.any():
-        row, col = np.argwhere(bad)[0]
-        channel = recorded[col]
-        raise DataError(f"{path}: {columns.describe(channel)} (channel {channel}) is empty, NaN or inf at data "
-                        f"row {row + 2} ({int(bad.any(axis=1).sum())} bad rows)")
+    if bad.any():   # every channel with an empty cell, in one line
+        listed = "; ".join(f"{columns.describe(channel)} (channel {channel}) is empty, NaN or inf at data row "
+                           f"{int(np.argmax(bad[:, j])) + 2}" for j, channel in enumerate(recorded) if bad[:, j].any())
+        raise DataError(f"{path}: {listed} ({int(bad.any(axis=1).sum())} bad rows)")
     return frame, recorded
 
 

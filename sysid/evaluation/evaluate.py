@@ -4,11 +4,13 @@ and the per-step traces behind the report's figures.
 Every window of every file is integrated in one batched call: each window starts from the
 recorded state at its first sample, runs H-1 Euler steps of dt = 1 s with the recorded
 inputs held over each step, and is scored at its H points (first included) on u, v_m, r,
-pooled over the windows of a file.
+pooled over the windows of a file. Each window's own RMSE (`WindowErrors`) feeds the verdict
+(`sysid.evaluation.judgement`); a window whose prediction diverged
+(`sysid.evaluation.divergence`) marks its row ``diverged`` and keeps it.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 import numpy as np
@@ -23,7 +25,10 @@ from sysid.dynamics.equations import eager_predict
 from sysid.dynamics.integrators import Integrator, IntegratorLike
 from sysid.config.checks import whole_samples
 from sysid.errors import DataError
-from sysid.records.columns import METRICS_COLUMNS, TRACE_COLUMNS, trace_name  # noqa: F401 (their home before)
+from sysid.evaluation.divergence import PhysicalRange, diverged_windows
+from sysid.evaluation.judgement import Divergence
+from sysid.records.columns import (METRICS_COLUMNS, REQUIRED_METRICS_COLUMNS, TRACE_COLUMNS,  # noqa: F401 (their home before)
+                                   trace_name)
 from sysid.state import FORCE, FORCE_COMPONENTS, INPUTS, STATE, VELOCITY_INDEX
 
 
@@ -44,20 +49,49 @@ class WindowPrediction:
     predicted: torch.Tensor
     inputs: torch.Tensor
 
-    def metrics_row(self, horizon_s: float) -> dict:
+    def metrics_row(self, horizon_s: float, divergence: Divergence | None = None) -> dict:
         """A `METRICS_COLUMNS` row (NaN RMSE without windows); the scenario is the
         protocol's name of a test file, else the maneuver the log records
-        (`sysid.data.scenario.scenario_of`)."""
+        (`sysid.data.scenario.scenario_of`); `divergence` marks it."""
         rmse = self.rmse() if len(self.starts) else np.full(3, np.nan)
         return {"scenario": scenario_of(self.run), "file": self.run.name,
                 "horizon_s": horizon_s, "n_windows": len(self.starts),
-                "rmse_u": rmse[0], "rmse_v": rmse[1], "rmse_r": rmse[2]}
+                "rmse_u": rmse[0], "rmse_v": rmse[1], "rmse_r": rmse[2],
+                "diverged": divergence is not None,
+                "diverged_at_s": divergence.time_s if divergence is not None else np.nan}
 
     def rmse(self) -> np.ndarray:
         """Pooled RMSE of (u [m/s], v_m [m/s], r [rad/s]) over every window point."""
         idx = list(VELOCITY_INDEX)
         err = (self.predicted[..., idx] - self.observed[..., idx]).reshape(-1, 3)
         return torch.sqrt((err**2).mean(0)).detach().cpu().numpy()
+
+    def window_rmse(self) -> np.ndarray:
+        """(W, 3) RMSE of (u [m/s], v_m [m/s], r [rad/s]) of each window over its H points:
+        their mean square is the pooled `rmse`'s."""
+        idx = list(VELOCITY_INDEX)
+        err = self.predicted[..., idx] - self.observed[..., idx]
+        return torch.sqrt((err**2).mean(0)).detach().cpu().numpy().reshape(-1, 3)
+
+    def errors(self, horizon_s: float, limits: PhysicalRange | None = None) -> "WindowErrors":
+        """This file's `WindowErrors` at `horizon_s`, divergence checked against `limits`."""
+        _, divergence = diverged_windows(self.predicted.detach().cpu().numpy(), self.t, self.run.name,
+                                         horizon_s, limits, self.observed.detach().cpu().numpy())
+        return WindowErrors(scenario_of(self.run), self.run.name, float(horizon_s),
+                            np.asarray(self.t[0], dtype=float), self.window_rmse(), divergence)
+
+
+@dataclass(frozen=True, eq=False)
+class WindowErrors:
+    """One file at one horizon, window by window: start time [s] (W,), RMSE of u, v_m [m/s]
+    and r [rad/s] (W, 3), and where its prediction diverged (None: it did not)."""
+
+    scenario: str
+    file: str
+    horizon_s: float
+    start_s: np.ndarray
+    rmse: np.ndarray
+    divergence: Divergence | None = None
 
 
 def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
@@ -125,12 +159,19 @@ def window_samples(name: str, horizon_s: float, dt: float, error: type[Exception
 
 @dataclass
 class Evaluation:
-    """Metrics (`METRICS_COLUMNS`), traces (file name -> `TRACE_COLUMNS` frame) and the
-    share of steps on which the kNN gate switched the FNN off, per trace."""
+    """Metrics (`METRICS_COLUMNS`), traces (file name -> `TRACE_COLUMNS` frame), the
+    share of steps on which the kNN gate switched the FNN off, per trace, and every file's
+    per-window errors at every horizon (`WindowErrors`, in the metrics' row order)."""
 
     metrics: pd.DataFrame
     traces: dict[str, pd.DataFrame]
     gate_off_share: dict[str, float]
+    windows: list[WindowErrors] = field(default_factory=list)
+
+    @property
+    def divergences(self) -> list[Divergence]:
+        """Where a prediction diverged, per file and horizon."""
+        return [w.divergence for w in self.windows if w.divergence is not None]
 
 
 def trace_frame(model: nn.Module, pred: WindowPrediction) -> pd.DataFrame:
@@ -159,15 +200,20 @@ def trace_frame(model: nn.Module, pred: WindowPrediction) -> pd.DataFrame:
 
 
 def evaluate_model(model: nn.Module, runs: Sequence[Run], horizons: Sequence[float],
-                   method: IntegratorLike = Method.EULER, traces: bool = True) -> Evaluation:
-    """The protocol's windowed RMSE per file and horizon, with per-step traces."""
-    rows, frames, shares = [], {}, {}
+                   method: IntegratorLike = Method.EULER, traces: bool = True,
+                   limits: PhysicalRange | None = None) -> Evaluation:
+    """The protocol's windowed RMSE per file and horizon, with per-step traces and per-window
+    errors; a prediction non-finite or beyond `limits` (the training logs' range) is marked
+    diverged in its row."""
+    rows, frames, shares, windows = [], {}, {}, []
     for horizon in horizons:
         for pred in predict_windows(model, runs, horizon, method):
-            rows.append(pred.metrics_row(horizon))
+            errors = pred.errors(horizon, limits)
+            windows.append(errors)
+            rows.append(pred.metrics_row(horizon, errors.divergence))
             if traces and len(pred.starts):
                 frame = trace_frame(model, pred)
                 name = trace_name(pred.run.name, horizon)
                 frames[name] = frame
                 shares[name] = float(1.0 - frame["gate_on"].mean())
-    return Evaluation(pd.DataFrame(rows, columns=METRICS_COLUMNS), frames, shares)
+    return Evaluation(pd.DataFrame(rows, columns=METRICS_COLUMNS), frames, shares, windows)

@@ -22,7 +22,9 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import json
 import os
+import statistics
 import sys
 import time
 import warnings
@@ -182,15 +184,53 @@ def cached_package(module: nn.Module, example_inputs: Sequence[torch.Tensor], la
                    log: Callable[[str], None] | None = None, options: dict | None = None) -> Path:
     """Path of the AOTInductor package of `module` for inputs shaped like `example_inputs`,
     from the disk cache or compiled now and cached (raises where compilation fails)."""
-    key = fingerprint(module, example_inputs, options)
-    path = cache_dir() / f"{label}-{key}.pt2"
+    path = package_path(module, example_inputs, label, options)
     if not path.is_file():
         start = time.perf_counter()
         (log or _stderr)(f"sysid: compiling {label} for {tuple(example_inputs[0].shape)} "
                          f"{example_inputs[0].dtype} (once; cached in {path.parent}) ...")
         compile_package(export_program(module, example_inputs), path, metadata, options)
-        (log or _stderr)(f"sysid: compiled {label} in {time.perf_counter() - start:.0f} s")
+        seconds = time.perf_counter() - start
+        record_seconds(label, "compile", seconds)
+        (log or _stderr)(f"sysid: compiled {label} in {seconds:.0f} s")
     return path
+
+
+TIMINGS = "timings.jsonl"  # in the cache: how long compiling (a cold start) and loading (warm) took here
+
+
+def record_seconds(label: str, kind: str, seconds: float) -> None:
+    """Append what a cold start ("compile") or a warm one ("load") of `label` took on this
+    machine to the cache's `TIMINGS` (best effort: a read-only cache records nothing)."""
+    try:
+        with open(cache_dir() / TIMINGS, "a") as f:
+            f.write(json.dumps({"label": label, "kind": kind, "seconds": round(float(seconds), 3)}) + "\n")
+    except OSError:
+        pass
+
+
+def recorded_seconds(label: str, kind: str) -> float | None:
+    """Median of the last five recorded `kind` ("compile" or "load") times of `label` [s],
+    or None when none is recorded."""
+    try:
+        lines = (cache_dir() / TIMINGS).read_text().splitlines()
+    except OSError:
+        return None
+    values = []
+    for line in lines:
+        try:
+            row = json.loads(line)
+        except ValueError:
+            continue
+        if row.get("label") == label and row.get("kind") == kind:
+            values.append(float(row["seconds"]))
+    return statistics.median(values[-5:]) if values else None
+
+
+def package_path(module: nn.Module, example_inputs: Sequence[torch.Tensor], label: str,
+                 options: dict | None = None) -> Path:
+    """Where the disk cache keeps (or would keep) the package of `module` for these inputs."""
+    return cache_dir() / f"{label}-{fingerprint(module, example_inputs, options)}.pt2"
 
 
 def compile_cached(module: nn.Module, example_inputs: Sequence[torch.Tensor], label: str,
@@ -201,7 +241,11 @@ def compile_cached(module: nn.Module, example_inputs: Sequence[torch.Tensor], la
     if not enabled():
         return None
     try:
-        return load_package(cached_package(module, example_inputs, label, metadata, log, options))
+        path = cached_package(module, example_inputs, label, metadata, log, options)
+        start = time.perf_counter()
+        loaded = load_package(path)
+        record_seconds(label, "load", time.perf_counter() - start)
+        return loaded
     except Exception as exc:  # no compiler, export limits: eager gives the same numbers
         message = f"{label}: {type(exc).__name__}: {str(exc)[:300]}"
         if message not in _failed:

@@ -233,6 +233,8 @@ class IndexedGate(nn.Module):
         tol = self.margin * threshold.abs() + err
         on = upper <= threshold - tol
         k = min(self.k, self.bank_sq.shape[0])
+        if not torch.compiler.is_compiling():  # eager: the same tiers as plain branches
+            return self._eager_tiers(z, flat, upper, on, threshold, tol, k)
 
         def bounded(flat, upper, threshold, tol):  # tier 2, and tier 3 where it leaves rows open
             near, lower = self._box_bounds_tier(flat)
@@ -252,6 +254,19 @@ class IndexedGate(nn.Module):
 
         d, admitted = torch.cond((~on).any(), bounded, neighbourhood, (flat, upper, threshold, tol))
         return d.reshape(z.shape[:-1]), admitted.reshape(z.shape[:-1])
+
+    def _eager_tiers(self, z, flat, upper, on, threshold, tol, k):
+        """`forward`'s tiers 2 and 3 as Python branches (eager: `torch.cond` outside a
+        compiled program costs a trace per call); the same numbers and decisions."""
+        shape = z.shape[:-1]
+        if bool(on.all()):
+            return upper.reshape(shape), on.reshape(shape)
+        near, lower = self._box_bounds_tier(flat)
+        open_rows = (near > threshold - tol) & (lower <= threshold + tol)
+        if bool(open_rows.any()):
+            scan = nearest_distances(flat, self.scan_bank, self.bank_sq, k).mean(1)
+            return scan.reshape(shape), (scan <= threshold).reshape(shape)
+        return near.reshape(shape), (near <= threshold - tol).reshape(shape)
 
 
 def neighbourhood_groups(index: "IndexedGate", leaf: int) -> list[torch.Tensor]:

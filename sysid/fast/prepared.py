@@ -42,3 +42,13 @@ def prepared(model: nn.Module, batch: int) -> nn.Module:
     if isinstance(members, nn.ModuleList):
         return _with_module(model, "members", nn.ModuleList([prepared(m, batch) for m in members]))
     return packed(with_indexed_gate(model, batch))
+
+
+def indexed(model: nn.Module, batch: int) -> nn.Module:
+    """`model` with its fitted kNN gate (each member's, for an ensemble) replaced by an
+    `IndexedGate` for `batch` rows, coefficients as they are: what eager steps run (the
+    same decisions; packed coefficients only pay inside compiled code)."""
+    members = getattr(model, "members", None)
+    if isinstance(members, nn.ModuleList):
+        return _with_module(model, "members", nn.ModuleList([indexed(m, batch) for m in members]))
+    return with_indexed_gate(model, batch)

@@ -18,7 +18,7 @@ import torch
 from torch import nn
 
 from sysid.config.choices import Method
-from sysid.dynamics.equations import lean_derivative
+from sysid.dynamics.equations import derivative_channels, lean_derivative
 from sysid.dynamics.integrators import STEP_RULES
 
 
@@ -38,6 +38,18 @@ class Derivative(nn.Module):
         if self.channels_first:
             return lean_derivative(self.force_model, state.T, inputs.T, 0)
         return lean_derivative(self.force_model, state, inputs)
+
+    def with_gate(self, state: torch.Tensor, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """(dx/dt (B, 6), the kNN gate's decision (B,): True where F_NN applies, None
+        without a gate) at states (B, 6) with inputs (B, 4): one evaluation of the FNN and
+        the gate where the model gives both (``gated_force_channels``), else the model's
+        ``gate_decision`` beside the derivative. dx/dt equals `forward`'s."""
+        gated = getattr(self.force_model, "gated_force_channels", None)
+        if gated is None:
+            decide = getattr(self.force_model, "gate_decision", None)
+            return self(state, inputs), decide(state, inputs) if decide is not None else None
+        force, _, on = gated(state, inputs)
+        return torch.stack(derivative_channels(state, force, self.force_model.coefficients), -1), on
 
 
 class Step(nn.Module):

@@ -116,15 +116,21 @@ class CorrectedModel(nn.Module):
     def force_channels(self, state: torch.Tensor, inputs: torch.Tensor):
         """(X, Y, N) of F_MMG + F_NN (hybrid) or F_NN (NN-only), each (...,) [N, N, N m],
         and the relative wind: `forward`'s total without its (..., 3) stacks."""
+        return self.gated_force_channels(state, inputs)[:2]
+
+    def gated_force_channels(self, state: torch.Tensor, inputs: torch.Tensor):
+        """`force_channels` and the kNN gate's decision (...,) (True: F_NN applied; None
+        without a fitted gate), from one evaluation of the FNN and the gate."""
         if self.physics:
             total, wind = self.mmg.force_channels(state, inputs)
         else:
             total, wind = None, relative_wind(state[..., 1], state[..., 3], state[..., 4],
                                               inputs[..., 2], inputs[..., 3])
-        f_nn = self._correction(state, inputs, torch.stack(wind, -1))[0].unbind(-1)
+        f_nn, _, on = self._correction(state, inputs, torch.stack(wind, -1))
+        f_nn = f_nn.unbind(-1)
         if total is None:  # 0 + F_NN = F_NN
-            return f_nn, wind
-        return tuple(t + f for t, f in zip(total, f_nn)), wind
+            return f_nn, wind, on
+        return tuple(t + f for t, f in zip(total, f_nn)), wind, on
 
 
 class PerMember(nn.Module):

@@ -29,9 +29,10 @@
    standardised inputs (``[gate] space``).
 
 The run's one validation loss is ``val_loss_multistep`` (`VAL_LOSS_DEFINITION`): L_v of the
-final model as it predicts (kNN gate included) on the validation windows, over T steps or
-``[training] objective_s``. The early-stopping loss is the same sum during training, before
-the gate exists, so the two differ by what the gate changes (and by objective_s).
+final model as it predicts (kNN gate included) on validation windows of each ``[evaluation]
+horizons`` (the verdict's horizons; ``[training] objective_s`` when set), averaged over the
+horizons. The early-stopping loss is the same sum over the training windows' T steps during
+training, before the gate exists.
 """
 from __future__ import annotations
 
@@ -57,6 +58,7 @@ from sysid.data.recordings import Run, duplicate_runs, sliding_windows, stack_wi
 from sysid.data.splits import HeldOutFiles, hold_out_files
 from sysid.device import resolve_device
 from sysid.dynamics.equations import integrate, integrate_with_forces, required_force
+from sysid.dynamics.rollouts import WindowSet, rollout_errors, velocity_loss  # noqa: F401 (the trainer's names too)
 from sysid.errors import ConfigError, DataError, TrainingError
 from sysid.config.choices import DType, Method, ModelKind, Solver, Stage, StartStates, Validation
 from sysid.config.experiment import PAPER_FORCE_BAND, Experiment
@@ -69,22 +71,6 @@ from sysid.records.summary import VAL_LOSS_DEFINITION  # noqa: F401 (its home be
 
 VEL = list(VELOCITY_INDEX)
 _LOG = logging.getLogger(__name__)
-
-
-@dataclass
-class WindowSet:
-    """Windows (L, W, 6) states and (L, W, 4) inputs, L = T + 1 samples at dt [s]."""
-
-    states: torch.Tensor
-    inputs: torch.Tensor
-    dt: float
-
-    def __len__(self) -> int:
-        return self.states.shape[1]
-
-    def select(self, index: torch.Tensor) -> "WindowSet":
-        index = index.to(self.states.device)
-        return WindowSet(self.states[:, index], self.inputs[:, index], self.dt)
 
 
 @dataclass
@@ -170,6 +156,14 @@ def _block_parts(n: int, block: int, val_fraction: float, rng: np.random.Generat
     val_blocks = np.zeros(n_blocks, dtype=bool)
     val_blocks[rng.choice(n_blocks, n_val, replace=False)] = True
     return np.repeat(val_blocks, math.ceil(n / n_blocks))[:n]
+
+
+def objective_horizons(exp: Experiment) -> tuple[float, ...]:
+    """The horizons [s] of ``val_loss_multistep``: ``[training] objective_s`` when set, else
+    ``[evaluation] horizons``, the horizons the verdict judges on the test logs (one
+    definition of good for validation, sweeps and the verdict)."""
+    t = exp.training
+    return (float(t.objective_s),) if t.objective_s > 0 else tuple(float(h) for h in exp.evaluation.horizons)
 
 
 def split_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction: float,
@@ -283,20 +277,6 @@ def adam(params, lr: float) -> torch.optim.Adam:
 def weight_norm(net: ForceCorrection) -> torch.Tensor:
     """||theta||^2 of the FNN weights (Eq. 13), per member (losses are means over members)."""
     return sum((w * w).sum() for w in net.weights) / net.members
-
-
-def velocity_loss(err: torch.Tensor, w_v: torch.Tensor) -> torch.Tensor:
-    """L_v (Eq. 15): the mean over windows and steps of sum_j w_j err_j^2; err (T, ..., 3)
-    velocity errors (u, v_m [m/s], r [rad/s]), w_v (3,) their weights."""
-    return ((err * err) * w_v).sum(-1).mean()
-
-
-def rollout_errors(model, batch: WindowSet) -> torch.Tensor:
-    """(T, W, 3) velocity errors (u, v_m [m/s], r [rad/s]) of Euler rollouts of T steps from
-    each window's first recorded state with its recorded inputs (no gradient)."""
-    with torch.no_grad():
-        pred = integrate(model, batch.states[0], batch.inputs, batch.dt, "euler")
-    return pred[1:, ..., VEL] - batch.states[1:, ..., VEL]
 
 
 def multistep_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor | None = None,
@@ -612,16 +592,31 @@ class Trainer:
 
     def objective(self, model, runs: Sequence[Run], val: WindowSet, w_v, dtype, device) -> float:
         """The run's validation loss ``val_loss_multistep`` (`VAL_LOSS_DEFINITION`): L_v of the
-        final model (gate included) over the training windows' T steps, or over ``[training]
-        objective_s`` seconds, a horizon that stays the same when T varies (sweeps compare T
-        on it). Validation windows only; they are kept as ``validation_windows_``."""
+        final model (gate included) on validation windows of each of its horizons
+        (`objective_horizons`), averaged over the horizons the validation data hold a window
+        of; T steps when they hold none. The windows are kept per horizon as
+        ``validation_sets_`` (the first as ``validation_windows_``)."""
         exp, t = self.experiment, self.experiment.training
-        if t.objective_s > 0:
-            steps = max(1, int(round(t.objective_s / val.dt)))
-            val = split_windows(runs, steps, t.stride_s, t.val_fraction, exp.data.exclude_suspect, dtype,
-                                t.block_s, exp.experiment.seed, device, self._validation_runs)[1]
-        self.validation_windows_ = val
-        return float(velocity_loss(rollout_errors(model, val), w_v))
+        sets: dict[float, WindowSet] = {}
+        for horizon in objective_horizons(exp):
+            # objective_s: that many seconds of steps; an evaluation horizon: windows of as many
+            # samples as the test windows (H = h / dt points, first included)
+            steps = max(1, int(round(horizon / val.dt)) - (0 if t.objective_s > 0 else 1))
+            try:
+                windows = split_windows(runs, steps, t.stride_s, t.val_fraction, exp.data.exclude_suspect, dtype,
+                                        t.block_s, exp.experiment.seed, device, self._validation_runs)[1]
+            except DataError:   # none that long
+                windows = None
+            if windows is not None and len(windows):
+                sets[horizon] = windows
+            else:
+                self.log(f"val_loss_multistep: no validation window of {horizon:g} s (the validation blocks or "
+                         "logs are shorter); that horizon is left out")
+        if not sets:
+            sets[round(t.steps * val.dt, 6)] = val
+        self.validation_sets_ = sets
+        self.validation_windows_ = next(iter(sets.values()))
+        return float(np.mean([float(velocity_loss(rollout_errors(model, w), w_v)) for w in sets.values()]))
 
     # -- the estimator ---------------------------------------------------------------
     def fit(self, runs: Sequence[Run], validation: Sequence[Run] = ()) -> "Trainer":
@@ -736,13 +731,13 @@ class Trainer:
                 summary.gate = self.fit_gate(model, prepared.samples, prepared.dtype)
         self.velocity_weights_ = w_v
         self.validation_windows_ = val
+        self.validation_sets_ = {round(t.steps * val.dt, 6): val}
         if summary.failure is None:
             summary.val_loss_multistep = self.objective(model, prepared.runs, val, w_v, prepared.dtype,
                                                         prepared.device)
-            horizon = t.objective_s if t.objective_s > 0 else t.steps * val.dt
+            judged = " and ".join(f"{len(w)} of {h:g} s" for h, w in self.validation_sets_.items())
             self.log(f"val_loss_multistep {summary.val_loss_multistep:.5f}: the final model"
-                     + (" (kNN gate on)" if summary.gate else "") + f" on {len(self.validation_windows_)} "
-                     f"validation windows of {horizon:g} s"
+                     + (" (kNN gate on)" if summary.gate else "") + f" on validation windows: {judged}"
                      + (f"; the early-stopping loss {stopping_best:.5f} is the network's during training, "
                         "before the gate" if stopping_best is not None else ""))
         self.history_ = pd.DataFrame(self._history)

@@ -21,13 +21,13 @@ from typing import Callable
 
 import torch
 from torch import nn
-from torch._higher_order_ops.while_loop import while_loop
 
 from sysid.dynamics.integrators import STEP_RULES, Method
 from sysid.fast.stepper import Derivative
 from sysid.maneuvers.controllers import COLUMNS, ManeuverOrders
 
 CAPACITY = 512  # steps per call of the compiled loop
+LOOP_ROWS = 8  # maneuvers side by side in one compiled loop (IMO's five and a crash stop fit)
 RECORD = 6 + 2 + 4 + 1  # per step: state after it, controller state after it, inputs held over it, gate on
 _compiled: dict[str, Callable | None] = {}
 
@@ -45,9 +45,17 @@ class ClosedLoopStep(nn.Module):
 
     def forward(self, state, orders, parameters, t, dt):
         inputs, after = self.orders(state, orders, parameters, t, dt)
-        following = STEP_RULES[self.method](lambda x: self.derivative(x, inputs), state, dt)
-        decide = getattr(self.derivative.force_model, "gate_decision", None)
-        on = decide(state, inputs) if decide is not None else None
+        first: list = []  # the gate's decision at the step's start, from the rule's first stage
+
+        def rate(x):
+            if first:
+                return self.derivative(x, inputs)
+            dx, on = self.derivative.with_gate(x, inputs)
+            first.append(on)
+            return dx
+
+        following = STEP_RULES[self.method](rate, state, dt)
+        on = first[0]
         gate = torch.full_like(state[:, :1], math.nan) if on is None else on.to(state.dtype)[:, None]
         return following, after, inputs, gate
 
@@ -79,7 +87,7 @@ class ClosedLoopRollout(nn.Module):
             record.index_copy_(0, k.reshape(1), torch.cat((x, o, u, g), -1)[None])  # in place, as in Rollout
             return k + 1, x, o
 
-        last = while_loop(more, advance, (k0, x0, orders0))[1]
+        last = torch.while_loop(more, advance, (k0, x0, orders0))[1]
         return record, last
 
 
@@ -96,7 +104,8 @@ def source_digest() -> str:
 def run_eager(model: nn.Module, x0: torch.Tensor, orders0: torch.Tensor, parameters: torch.Tensor,
               steps: int, dt: float, method: Method | str) -> torch.Tensor:
     """Record (steps, B, `RECORD`) of `steps` closed-loop steps of all B maneuvers at once."""
-    step = ClosedLoopStep(model, method)
+    from sysid.fast.prepared import indexed  # the gate's leaf index
+    step = ClosedLoopStep(indexed(model, x0.shape[0]), method)
     dt_t = torch.tensor(dt, dtype=x0.dtype)
     out = torch.empty((steps, x0.shape[0], RECORD), dtype=x0.dtype)
     x, o = x0, orders0
@@ -113,28 +122,55 @@ def _notice(message: str) -> None:
         print(message, file=sys.stderr, flush=True)
 
 
+def _loop_module(model: nn.Module, method: Method, dtype: torch.dtype):
+    """(the `ClosedLoopRollout` compiled for `LOOP_ROWS` maneuvers, its example inputs, label)."""
+    from sysid.fast.prepared import prepared
+    module = ClosedLoopRollout(ClosedLoopStep(prepared(model, LOOP_ROWS), method), CAPACITY, source_digest())
+    rows = LOOP_ROWS
+    examples = (torch.zeros(rows, 6, dtype=dtype), torch.zeros(rows, 2, dtype=dtype),
+                torch.zeros(rows, len(COLUMNS), dtype=dtype), torch.zeros((), dtype=dtype),
+                torch.full((), 0.1, dtype=dtype), torch.tensor(CAPACITY, dtype=torch.int64))
+    return module, examples, f"maneuver-{method.name.lower()}"
+
+
+def loop_is_cached(model: nn.Module, method: Method | str, dtype: torch.dtype = torch.float64) -> bool:
+    """True when `compiled_loop` would not compile: the loop is in this process's memory or
+    in the disk cache (a warm start)."""
+    from sysid.fast.compiled import fingerprint, package_path
+    module, examples, label = _loop_module(model, Method.parse(method), dtype)
+    key = fingerprint(module, examples)
+    return _compiled.get(key) is not None or package_path(module, examples, label).is_file()
+
+
 def compiled_loop(model: nn.Module, method: Method | str, dtype: torch.dtype = torch.float64
                   ) -> Callable[..., torch.Tensor] | None:
-    """The compiled `ClosedLoopRollout` of `model` for one maneuver at a time (batch 1), from
-    this process's memory, the disk cache, or compiled now (one notice line); None where
-    compilation is off or fails (the caller runs `run_eager`)."""
+    """The compiled `ClosedLoopRollout` of `model` for up to `LOOP_ROWS` maneuvers side by
+    side, from this process's memory, the disk cache, or compiled now (one notice line);
+    None where compilation is off or fails (the caller runs `run_eager`)."""
     from sysid.fast.compiled import compile_cached, fingerprint  # the compiled path: only where it is chosen
-    from sysid.fast.prepared import prepared
-    method = Method.parse(method)
-    module = ClosedLoopRollout(ClosedLoopStep(prepared(model, 1), method), CAPACITY, source_digest())
-    examples = (torch.zeros(1, 6, dtype=dtype), torch.zeros(1, 2, dtype=dtype),
-                torch.zeros(1, len(COLUMNS), dtype=dtype), torch.zeros((), dtype=dtype),
-                torch.full((), 0.1, dtype=dtype), torch.tensor(CAPACITY, dtype=torch.int64))
+    module, examples, label = _loop_module(model, Method.parse(method), dtype)
     key = fingerprint(module, examples)
     if key not in _compiled:
-        _compiled[key] = compile_cached(module, examples, f"maneuver-{method.name.lower()}", log=_notice)
+        _compiled[key] = compile_cached(module, examples, label, log=_notice)
     return _compiled[key]
 
 
 def run_compiled(loop: Callable[..., torch.Tensor], x0: torch.Tensor, orders0: torch.Tensor,
                  parameters: torch.Tensor, steps: int, dt: float) -> torch.Tensor:
-    """Record (steps, 1, `RECORD`) of one maneuver through a compiled loop, `CAPACITY` steps
-    per call, each call from the last state and controller state of the one before."""
+    """Record (steps, B, `RECORD`) of B maneuvers through a compiled loop: `LOOP_ROWS` of
+    them side by side (the last group padded with copies of its first row), `CAPACITY`
+    steps per call, each call from the last state and controller state of the one before."""
+    groups = []
+    for lo in range(0, x0.shape[0], LOOP_ROWS):
+        rows = [t[lo:lo + LOOP_ROWS] for t in (x0, orders0, parameters)]
+        n = rows[0].shape[0]
+        if n < LOOP_ROWS:
+            rows = [torch.cat((t, t[:1].expand(LOOP_ROWS - n, -1))) for t in rows]
+        groups.append(_run_group(loop, rows[0], rows[1], rows[2], steps, dt)[:, :n])
+    return torch.cat(groups, 1)
+
+
+def _run_group(loop, x0, orders0, parameters, steps: int, dt: float) -> torch.Tensor:
     dt_t = torch.tensor(dt, dtype=x0.dtype)
     x, o, parts, done = x0, orders0, [], 0
     while done < steps:

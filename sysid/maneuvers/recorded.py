@@ -69,24 +69,22 @@ def recorded_test_runs(data: str | os.PathLike | None = None, rate: float = 1.0)
     return dict(zip(names, read_runs([root / TEST_FILES[n] for n in names], rate)))
 
 
-def recognised_kind(run: Run) -> str | None:
-    """"turning", "zigzag" or None: the maneuver `sysid.data.scenario.recognise` finds in
-    the run's rudder, propeller and heading."""
-    kind = recognise(run).kind
-    return kind.value if kind in (Kind.TURNING, Kind.ZIGZAG) else None
-
-
 def recorded_maneuver(run: Run, scenario: str = "") -> tuple[Maneuver, int]:
     """(the maneuver of a recorded run, the sample index of its execute). The kind comes
     from the scenario name (else the file's name: ``turn...``, ``zigzag...``), the file's
-    folder (``turning/``, ``zigzag/``), else the signals (`recognised_kind`)."""
-    named = scenario.lower() or run.name.lower()  # "Zigzag 20/20", "turn_14-Sep-..."
+    folder (``turning/``, ``zigzag/``), else the signals (`sysid.data.scenario.recognise`)."""
+    label = scenario.lower() if scenario else run.name.lower()[:6]  # "Zigzag 20/20"; "turn_14-Sep-..."
     folder = FOLDERS.get(run.path.parent.name.lower())
-    kind = ("zigzag" if "zigzag" in named else "turning" if "turn" in named
-            else folder.value if folder in (Kind.TURNING, Kind.ZIGZAG) else recognised_kind(run))
+    kind = ("zigzag" if "zigzag" in label else "turning" if "turn" in label[:4] or " turn" in label
+            else folder.value if folder in (Kind.TURNING, Kind.ZIGZAG) else None)
+    found = None
     if kind is None:
-        raise DataError(f"{run.path}: not a turning or zig-zag run (name it in the scenario or keep it in "
-                        "a turning/ or zigzag/ folder)")
+        found = recognise(run)
+        kind = found.kind.value if found.kind in (Kind.TURNING, Kind.ZIGZAG) else None
+    if kind is None:
+        raise DataError(f"{run.path}: not a turning or zig-zag run (its rudder and heading record "
+                        f"{found.name if found else 'neither'}; name it in the scenario or keep it in a turning/ "
+                        "or zigzag/ folder)")
     rudder = run.inputs[:, 1]
     order = float(np.percentile(np.abs(rudder), 95))
     if order < math.radians(1.0):
@@ -112,7 +110,12 @@ def recorded_maneuver(run: Run, scenario: str = "") -> tuple[Maneuver, int]:
     if kind == "turning":
         return TurningCircle(angle, side), execute
     pair = re.search(r"(\d+(?:\.\d+)?)\s*/\s*(\d+(?:\.\d+)?)", scenario)
-    rudder_deg, check_deg = (float(pair[1]), float(pair[2])) if pair else (angle, angle)
+    if pair:
+        rudder_deg, check_deg = float(pair[1]), float(pair[2])
+    elif found is not None and found.heading_deg is not None:   # the check angle the record shows
+        rudder_deg, check_deg = angle, found.heading_deg
+    else:
+        rudder_deg, check_deg = angle, angle
     return ZigZag(rudder_deg, check_deg, side), execute
 
 

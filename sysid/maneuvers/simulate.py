@@ -11,6 +11,8 @@ gate's share along the way, and the spread over an ensemble's members or seeds.
 from __future__ import annotations
 
 import math
+import time
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
@@ -20,7 +22,7 @@ from torch import nn
 from sysid.dynamics.integrators import Method
 from sysid.maneuvers.any_model import ManeuverModel, ship_of
 from sysid.maneuvers.base import Conditions, Maneuver, ManeuverError, ManeuverResult, check_number
-from sysid.maneuvers.closed_loop import compiled_loop, run_compiled, run_eager
+from sysid.maneuvers.closed_loop import compiled_loop, loop_is_cached, run_compiled, run_eager
 from sysid.maneuvers.controllers import initial_orders, order_parameters
 from sysid.maneuvers.indices import Track, maneuver_indices
 from sysid.maneuvers.straight import straight_running_rps
@@ -29,6 +31,8 @@ from sysid.mmg.ship import Ship
 FULL_SCALE_RUDDER_RATE = 2.32  # deg/s: 65 deg in 28 s (SOLAS II-1/29), at full scale
 DURATION_L_OVER_U = 80.0       # default duration [s]: this many times L/U0
 GATE_CHUNK = 1024              # rows per call when the kNN gate is evaluated along a maneuver
+COMPILE_GUESS_S = 120.0        # [s] a cold start of a compiled loop where none is recorded (2 cores)
+PROBE_STEPS = 8                # eager steps timed to reckon a whole eager run
 
 
 def default_rudder_rate(ship: Ship) -> tuple[float, str]:
@@ -131,16 +135,79 @@ def _results(maneuvers: Sequence[Maneuver], conditions: Conditions, x0: torch.Te
     return out
 
 
+@dataclass(frozen=True)
+class LoopChoice:
+    """Which loop runs the maneuvers (compiled: True for the compiled loop) and why, in
+    one line (with what a cold and a warm start of the compiled loop cost where known)."""
+
+    compiled: bool
+    reason: str
+
+
+def _start_costs(label: str) -> tuple[float, str]:
+    """(cold start [s] to reckon with, what a cold and a warm start cost here, as words)."""
+    from sysid.fast.compiled import recorded_seconds
+    cold, warm = recorded_seconds(label, "compile"), recorded_seconds(label, "load")
+    words = (f"a cold start (compiling) {'took ' + format(cold, '.0f') if cold is not None else 'takes about ' + format(COMPILE_GUESS_S, '.0f')} s"
+             f"{' here' if cold is not None else ''}, a warm one (from the cache) "
+             f"{'about ' + format(warm, '.1f') + ' s' if warm is not None else 'seconds'}")
+    return (cold if cold is not None else COMPILE_GUESS_S), words
+
+
+def eager_seconds_per_step(model: nn.Module, maneuvers: Sequence[Maneuver], conditions: Conditions) -> float:
+    """Wall time [s] of one eager closed-loop step of all `maneuvers` side by side, timed
+    over `PROBE_STEPS` steps after one (which builds the gate's index)."""
+    x0, orders, parameters = _start(maneuvers, conditions)
+    run_eager(model, x0, orders, parameters, 1, conditions.dt, conditions.method)
+    start = time.perf_counter()
+    run_eager(model, x0, orders, parameters, PROBE_STEPS, conditions.dt, conditions.method)
+    return (time.perf_counter() - start) / PROBE_STEPS
+
+
+def choose_loop(models: Sequence[nn.Module], maneuvers: Sequence[Maneuver], conditions: Conditions,
+                compiled: bool | None = None) -> LoopChoice:
+    """The loop for simulating `maneuvers` with each of `models`: as asked (`compiled`
+    True or False); otherwise (None) the compiled loop only where it saves time: every
+    model's loop is in the cache (a warm start), or the eager steps (timed over a few)
+    would take longer than compiling the loops that are not."""
+    if compiled is not None:
+        return LoopChoice(bool(compiled), f"{'compiled' if compiled else 'eager'} loop (as asked)")
+    from sysid.fast.compiled import enabled
+    if not enabled():
+        return LoopChoice(False, "eager loop (compilation is off: SYSID_COMPILE=0)")
+    label = f"maneuver-{conditions.method.name.lower()}"
+    cold = [m for m in models if not loop_is_cached(m, conditions.method)]
+    reckoned, costs = _start_costs(label)
+    if not cold:
+        return LoopChoice(True, f"compiled loop: in the cache ({costs})")
+    eager = eager_seconds_per_step(models[0], maneuvers, conditions) * conditions.steps * len(models)
+    compiling = reckoned * len(cold)
+    if eager > compiling:
+        return LoopChoice(True, f"compiled loop: the eager one would take about {eager:.0f} s, compiling "
+                                f"{len(cold)} loop(s) about {compiling:.0f} s ({costs})")
+    return LoopChoice(False, f"eager loop: about {eager:.0f} s, less than compiling {len(cold)} loop(s) "
+                             f"({costs}; --compiled compiles them for later runs)")
+
+
+def _start(maneuvers: Sequence[Maneuver], conditions: Conditions):
+    """(x0 (B, 6), controller state (B, 2), parameters (B, P)) at the execute."""
+    dtype = torch.float64
+    x0 = torch.zeros(len(maneuvers), 6, dtype=dtype)
+    x0[:, 1] = conditions.speed
+    return x0, initial_orders(maneuvers, dtype), order_parameters(maneuvers, conditions, dtype)
+
+
 def simulate_maneuvers(model: nn.Module, maneuvers: Sequence[Maneuver], conditions: Conditions, *,
-                       compiled: bool = False, label: str = "model") -> list[ManeuverResult]:
+                       compiled: bool | None = False, label: str = "model") -> list[ManeuverResult]:
     """Each maneuver from straight running at the approach speed (x = y = psi = 0, u = U0,
     v_m = r = 0, rudder amidships) for `conditions.duration`, closed loop, with its indices
     and the kNN gate's off share.
 
-    Eager: all maneuvers at once, one batched step per time step. ``compiled=True``: one
-    maneuver at a time through the model's compiled loop (`sysid.maneuvers.closed_loop`;
-    compiled once per model and rule, cached on disk, one notice line on stderr), or eager
-    where compilation is off or unavailable; the numbers agree to round-off.
+    Eager: all maneuvers at once, one batched step per time step. ``compiled=True``: up to
+    `LOOP_ROWS` maneuvers side by side through the model's compiled loop
+    (`sysid.maneuvers.closed_loop`; compiled once per model and rule, cached on disk, one
+    notice line on stderr), or eager where compilation is off or unavailable; the numbers
+    agree to round-off. ``compiled=None``: as `choose_loop` decides.
     """
     if not maneuvers:
         return []
@@ -148,24 +215,24 @@ def simulate_maneuvers(model: nn.Module, maneuvers: Sequence[Maneuver], conditio
         raise ManeuverError(f"crash stop: the propeller model {ship_of(model).models.get('propeller')!r} of "
                             f"{ship_of(model).name} is for ahead motion only (no astern thrust); a crash stop needs "
                             "a four-quadrant propeller")
-    dtype = torch.float64
-    x0 = torch.zeros(len(maneuvers), 6, dtype=dtype)
-    x0[:, 1] = conditions.speed
-    orders = initial_orders(maneuvers, dtype)
-    parameters = order_parameters(maneuvers, conditions, dtype)
-    loop = compiled_loop(model, conditions.method, dtype) if compiled else None
+    if compiled is None:
+        compiled = choose_loop([model], maneuvers, conditions).compiled
+    x0, orders, parameters = _start(maneuvers, conditions)
+    loop = compiled_loop(model, conditions.method, x0.dtype) if compiled else None
     if loop is None:
         record = run_eager(model, x0, orders, parameters, conditions.steps, conditions.dt, conditions.method)
     else:
-        record = torch.cat([run_compiled(loop, x0[b:b + 1], orders[b:b + 1], parameters[b:b + 1], conditions.steps,
-                                         conditions.dt) for b in range(len(maneuvers))], 1)
+        record = run_compiled(loop, x0, orders, parameters, conditions.steps, conditions.dt)
     return _results(maneuvers, conditions, x0, record, label)
 
 
 def run_maneuvers(subject: ManeuverModel, maneuvers: Sequence[Maneuver], conditions: Conditions, *,
-                  compiled: bool = False) -> list[ManeuverResult]:
+                  compiled: bool | None = False) -> list[ManeuverResult]:
     """`simulate_maneuvers` of the subject's model, and of each member (an ensemble's
-    members, a folder's seeds) into each result's ``members``: the spread of the indices."""
+    members, a folder's seeds) into each result's ``members``: the spread of the indices.
+    ``compiled=None``: one `choose_loop` for the model and its members."""
+    if compiled is None:
+        compiled = choose_loop([subject.model, *(m for _, m in subject.members)], maneuvers, conditions).compiled
     results = simulate_maneuvers(subject.model, maneuvers, conditions, compiled=compiled, label=subject.label)
     for label, member in subject.members:
         for result, own in zip(results, simulate_maneuvers(member, maneuvers, conditions, compiled=compiled,

@@ -7,8 +7,11 @@ import re
 
 from sysid.state import FORCE, FORCE_COMPONENTS, INPUTS, STATE
 
-# metrics.csv: one row per file and horizon; RMSE of u, v_m [m/s] and r [rad/s]
-METRICS_COLUMNS = ["scenario", "file", "horizon_s", "n_windows", "rmse_u", "rmse_v", "rmse_r"]
+# metrics.csv: one row per file and horizon; RMSE of u, v_m [m/s] and r [rad/s]; diverged: a
+# window's prediction diverged, first at diverged_at_s [s] of the log (NaN otherwise)
+METRICS_COLUMNS = ["scenario", "file", "horizon_s", "n_windows", "rmse_u", "rmse_v", "rmse_r",
+                   "diverged", "diverged_at_s"]
+REQUIRED_METRICS_COLUMNS = METRICS_COLUMNS[:7]   # what a run written before divergence was marked holds
 # baseline_metrics.csv: the physics baselines on the same test logs, each under its label
 BASELINE_METRICS_COLUMNS = ["baseline"] + METRICS_COLUMNS
 # history.csv: the columns every trained run has (losses are multi-step losses, dimensionless)

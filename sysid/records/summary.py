@@ -21,7 +21,9 @@ VAL_LOSS_DEFINITION = (
     "val_loss_multistep: mean over the validation windows and their steps k = 1..K of "
     "sum over u, v_m, r of w_j (predicted_j - recorded_j)^2, w_j = 1 / variance of channel j in the "
     "training windows; Euler rollouts from each window's recorded first state with its recorded inputs; "
-    "K = [training] steps, or objective_s / dt; the final model, kNN gate included. Validation windows: "
+    "K = h / dt for each horizon h of [evaluation] horizons (or [training] objective_s when set) that the "
+    "validation data hold a window of, the losses averaged over those horizons (T = [training] steps when none "
+    "fits); the final model, kNN gate included. Validation windows: "
     "the validation blocks of the training logs, or whole validation logs: [data] validation, or the training "
     "logs held out by [training] validation = \"files\" (never a test file).")
 
@@ -182,7 +184,10 @@ class VerdictCell(JsonRecord):
 class VerdictSummary(JsonRecord):
     """"verdict": the run against its physics baselines
     (`sysid.evaluation.verdict.BaselineVerdict.to_dict`; ``BaselineVerdict.from_dict(
-    summary.to_json())`` gives it back as that dataclass)."""
+    summary.to_json())`` gives it back as that dataclass): the rule's outcome and judgement
+    per baseline (`sysid.evaluation.judgement.Judgement`), the per-window evidence, the
+    pooled cells. A run written before the rule has no outcome or judgements: its
+    beats_baseline stands."""
 
     model: str
     baselines: tuple[str, ...]
@@ -192,6 +197,10 @@ class VerdictSummary(JsonRecord):
     val_loss_multistep: dict[str, float]      # "model" or a baseline label -> validation loss
     statement: str
     cells: tuple[VerdictCell, ...]
+    outcome: str | None = None                # "beats" | "worse" | "not_distinguishable" | "diverged"; None: before the rule
+    judgements: dict[str, Any] = field(default_factory=dict)             # baseline -> `Judgement.to_dict`
+    validation_judgements: dict[str, Any] = field(default_factory=dict)  # the same on the validation windows
+    evidence: dict[str, Any] = field(default_factory=dict)               # split -> baseline -> paired per-window cells
     extra: dict[str, Any] = field(default_factory=dict)
 
 

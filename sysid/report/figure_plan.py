@@ -55,9 +55,10 @@ def _colour(run: RunRecord, index: int = 0) -> str:
 
 
 def _pick(preferred: list[str], available: list[str]) -> list[str]:
-    """The preferred scenarios the source has (any spelling), else its first scenario."""
+    """The preferred scenarios the source has (any spelling), else every scenario it has
+    (a user's own test logs: one figure each)."""
     found = [_find(s, available) for s in preferred]
-    return [s for s in found if s is not None] or available[:1]
+    return [s for s in found if s is not None] or list(available)
 
 
 def _find(scenario: str, available: list[str]) -> str | None:
@@ -139,7 +140,7 @@ def _error_figures(c: _Context) -> None:
 def _series_figures(c: _Context) -> None:
     """Figs. 6-9: actuators, relative wind and states over one 100 s window."""
     series = [(_find(s, c.scenarios), t0) for s, t0 in SERIES_WINDOWS if _find(s, c.scenarios)]
-    for scenario, start in series or [(s, 0.0) for s in c.scenarios[:1]]:
+    for scenario, start in series or [(s, 0.0) for s in c.scenarios]:
         traces = _traces(c.compared, scenario, c.long) if c.long else []
         span = f"{start:.0f}-{start + c.long:.0f} s" if c.long else ""
         missing = "no traces in the source"

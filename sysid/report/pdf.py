@@ -46,7 +46,8 @@ def text_blocks(title: str, summary, rows, methods, quality, notes, verdict: Ver
     blocks: list[tuple[str, ...]] = [("h1", title)]
     if verdict is not None:
         blocks += [("h2", "Verdict"), ("p", ("" if verdict.beats else "WARNING: ") + verdict.statement)]
-        blocks += [("kv", f"{r[0]}, {r[1]} s, {r[2]}", " | ".join(f"{h} {v}" for h, v in zip(verdict.header[3:], r[3:])))
+        k = verdict.key_columns
+        blocks += [("kv", ", ".join(r[:k]), " | ".join(f"{h} {v}" for h, v in zip(verdict.header[k:], r[k:])))
                    for r in verdict.rows]
         blocks += [("small", verdict.losses)] if verdict.losses else []
     blocks += [("h2", "Summary")] + [("kv", k, str(v)) for k, v in summary]

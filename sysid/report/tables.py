@@ -15,6 +15,7 @@ from pathlib import Path
 from sysid.protocol.paper import SCENARIO_ORDER, comparison_table, model_label, paper_rmse, run_label, scenario_key
 from sysid.report.palette import model_colour
 from sysid.data.display_units import DisplayUnits
+from sysid.evaluation.judgement import interval_text
 from sysid.evaluation.verdict import BaselineVerdict as Verdict, percent_text
 from sysid.report.source import ReportSource, RunRecord
 
@@ -238,35 +239,68 @@ def _baseline_rmse(run: RunRecord) -> dict[str, dict[tuple[str, int], tuple[floa
 
 @dataclass
 class VerdictTable:
-    """Page 1: the verdict sentence and the model beside its baselines per split, horizon
-    and channel. header and rows are text cells; `beats` False marks a warning."""
+    """Page 1: the verdict sentence and its evidence, cell by cell: per split, log, horizon
+    and channel the windows, the model's RMSE, each baseline's, the change with its interval
+    and the rule's decision. header and rows are text cells, the first `key_columns` naming
+    the cell; `beats` False marks a warning."""
 
     statement: str
     beats: bool
     header: list[str]
     rows: list[list[str]]
     losses: str = ""   # "val_loss_multistep: hybrid 0.05772, MMG (ship file) 0.05870"
+    key_columns: int = 4
+
+
+def _judged_rows(verdict: Verdict, split: str, judgements: dict, units: DisplayUnits) -> list[list[str]]:
+    first = next(iter(judgements.values()))
+    rows = []
+    for i, cell in enumerate(first.cells):
+        label = split + (" (decides)" if split == verdict.decided_on else "")
+        shown = functools.partial(units.value, cell.channel)
+        std = verdict.member_spread(split, cell.log, cell.horizon_s, cell.channel)
+        spread = f" ± {shown(std):.5f}" if std is not None and math.isfinite(std) else ""
+        row = [label, cell.scenario or cell.log, f"{cell.horizon_s:g} s",
+               f"{cell.channel} [{units.unit(cell.channel)}]", str(cell.n_windows),
+               format_rmse(shown(cell.model_rmse)) + spread]
+        for b in verdict.baselines:
+            c = judgements[b].cells[i] if b in judgements else None
+            if c is None:
+                row += ["-", "-", "-"]
+                continue
+            interval = f" ({interval_text(c.change_low, c.change_high)})" if math.isfinite(c.change_low) else ""
+            row += [format_rmse(shown(c.baseline_rmse)), percent_text(c.change) + interval, c.decision.value]
+        rows.append(row)
+    return rows
 
 
 def verdict_table(verdict: Verdict, model: str, units: DisplayUnits | None = None) -> VerdictTable:
-    """The first page's table of a `BaselineVerdict`: RMSE of the model (± its std over
-    seeds) and of each baseline with the model's change against it, deciding split first;
-    in `units` (the user's ``[data.columns]`` units; None: SI)."""
+    """The first page's table of a `BaselineVerdict`: every judged cell (deciding split
+    first) with its windows, the RMSE of the model (± its std over seeds) and of each
+    baseline, the model's change against it with its interval and the decision; a run
+    written before the rule shows its pooled cells. RMSE in `units` (the user's
+    ``[data.columns]`` units; None: SI)."""
     units = units if units is not None else DisplayUnits()
-    header = ["Split", "Horizon [s]", "Channel", f"{model} RMSE"]
+    header = ["Split", "Log", "Horizon", "Channel", "Windows", f"{model} RMSE"]
+    conf = next((f"{100 * j.confidence:g} %" for j in verdict.judgements.values()), "95 %")
     for b in verdict.baselines:
-        header += [f"{b} RMSE", f"change vs {b}"]
-    order = sorted(verdict.cells, key=lambda c: (c.split != verdict.decided_on, c.horizon_s))
+        header += [f"{b} RMSE", f"change vs {b} ({conf} interval)", "decision"]
     rows = []
-    for c in order:
-        shown = functools.partial(units.value, c.channel)
-        spread = f" ± {shown(c.model_std):.5f}" if c.model_std is not None and math.isfinite(c.model_std) else ""
-        row = [c.split + (" (decides)" if c.split == verdict.decided_on else ""), f"{c.horizon_s:g}",
-               f"{c.channel} [{units.unit(c.channel)}]", format_rmse(shown(c.model)) + spread]
-        for b in verdict.baselines:
-            change = c.change(b)
-            row += [format_rmse(shown(c.baselines[b])), percent_text(change)]
-        rows.append(row)
+    if verdict.judgements:
+        rows += _judged_rows(verdict, verdict.decided_on, verdict.judgements, units)
+        if verdict.decided_on != "validation" and verdict.validation_judgements:
+            rows += _judged_rows(verdict, "validation", verdict.validation_judgements, units)
+    else:
+        order = sorted(verdict.cells, key=lambda c: (c.split != verdict.decided_on, c.horizon_s))
+        for c in order:
+            shown = functools.partial(units.value, c.channel)
+            spread = f" ± {shown(c.model_std):.5f}" if c.model_std is not None and math.isfinite(c.model_std) else ""
+            row = [c.split + (" (decides)" if c.split == verdict.decided_on else ""), "all (pooled)",
+                   f"{c.horizon_s:g} s", f"{c.channel} [{units.unit(c.channel)}]", "-",
+                   format_rmse(shown(c.model)) + spread]
+            for b in verdict.baselines:
+                row += [format_rmse(shown(c.baselines[b])), percent_text(c.change(b)), "-"]
+            rows.append(row)
     losses = ", ".join(f"{model if k == 'model' else k} {v:.5f}" for k, v in verdict.val_loss_multistep.items()
                        if math.isfinite(v))
     return VerdictTable(verdict.statement(), verdict.beats_baseline, header, rows,

@@ -18,7 +18,8 @@ import pandas as pd
 
 from sysid.config.experiment import Experiment, load_experiment
 from sysid.errors import CheckpointError, ConfigError, IncompleteOutputError
-from sysid.records.columns import BASELINE_METRICS_COLUMNS, HISTORY_COLUMNS, METRICS_COLUMNS, TRACE_COLUMNS, trace_name
+from sysid.records.columns import (BASELINE_METRICS_COLUMNS, HISTORY_COLUMNS, METRICS_COLUMNS,  # noqa: F401
+                                   REQUIRED_METRICS_COLUMNS, TRACE_COLUMNS, trace_name)
 from sysid.records.summary import RunSummary
 from sysid.store.manifest import MANIFEST, has_manifest, verify_manifest
 
@@ -41,6 +42,16 @@ def read_table(path: Path, columns: list[str], required: bool = True) -> pd.Data
     if missing:
         raise CheckpointError(f"{path}: missing column(s) {missing}")
     return frame
+
+
+def with_divergence(frame: pd.DataFrame) -> pd.DataFrame:
+    """A metrics table with its ``diverged`` and ``diverged_at_s`` columns (False, NaN when
+    absent: a run written before divergence was marked)."""
+    if "diverged" not in frame.columns:
+        frame = frame.assign(diverged=False)
+    if "diverged_at_s" not in frame.columns:
+        frame = frame.assign(diverged_at_s=float("nan"))
+    return frame.assign(diverged=frame["diverged"].fillna(False).astype(bool))
 
 
 def _file(name: str, what: str) -> property:
@@ -119,12 +130,14 @@ class RunDir:
             raise CheckpointError(f"{self.path}: bad run config ({exc})") from None
 
     def read_metrics(self) -> pd.DataFrame:
-        """metrics.csv as written (RMSE of u, v_m [m/s] and r [rad/s])."""
-        return read_table(self.metrics, METRICS_COLUMNS)
+        """metrics.csv as written (RMSE of u, v_m [m/s] and r [rad/s]); a run written before
+        divergence was marked reads as not diverged."""
+        return with_divergence(read_table(self.metrics, REQUIRED_METRICS_COLUMNS))
 
     def read_baseline_metrics(self) -> pd.DataFrame | None:
         """baseline_metrics.csv (`BASELINE_METRICS_COLUMNS`), None for a run without one."""
-        return read_table(self.baseline_metrics, BASELINE_METRICS_COLUMNS, required=False)
+        frame = read_table(self.baseline_metrics, ["baseline"] + REQUIRED_METRICS_COLUMNS, required=False)
+        return with_divergence(frame) if frame is not None else None
 
     def read_history(self) -> pd.DataFrame | None:
         """history.csv, None for an untrained run. Runs written before ``val_loss_multistep``

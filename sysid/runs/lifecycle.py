@@ -23,6 +23,7 @@ from sysid.data.datasets import test_files
 from sysid.data.splits import TEST, TRAINING, VALIDATION, check_disjoint_runs, data_split, provenance
 from sysid.device import compute_threads
 from sysid.errors import ConfigError, TrainingError
+from sysid.evaluation.divergence import PhysicalRange
 from sysid.evaluation.evaluate import Evaluation, evaluate_model, short_runs
 from sysid.evaluation.verdict import (IDENTIFIED_MMG, SHIP_FILE_MMG, BaselineVerdict, baseline_verdict,
                                       window_score)
@@ -100,15 +101,15 @@ def physics_baselines(exp: Experiment, model: torch.nn.Module, dtype: torch.dtyp
 
 
 def scores_on_tests(exp: Experiment, model: torch.nn.Module, evaluation: Evaluation,
-                tests: Sequence[Run]) -> dict[str, pd.DataFrame] | None:
-    """Metrics tables of the model (its `evaluation`) and of each physics baseline on the
-    test logs (None without test logs)."""
+                    tests: Sequence[Run], limits: PhysicalRange | None = None) -> dict[str, Evaluation] | None:
+    """Evaluations of the model (its `evaluation`) and of each physics baseline on the test
+    logs, divergence checked against `limits` (None without test logs)."""
     if not tests:
         return None
-    scores = {"model": evaluation.metrics}
+    scores = {"model": evaluation}
     for label, baseline in physics_baselines(exp, model, torch.float64).items():
         scores[label] = evaluate_model(baseline, tests, exp.evaluation.horizons, exp.evaluation.integrator,
-                                       traces=False).metrics
+                                       traces=False, limits=limits)
     return scores
 
 
@@ -177,7 +178,7 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
     """
     check_experiment_fits(exp, tests)
     started = time.perf_counter()
-    history, training, validation_scores, horizon = None, None, None, 0.0
+    history, training, validation_scores = None, None, None
     runs: list[Run] = []
     validation = list(validation) if validation is not None else []
     held_out = None
@@ -199,22 +200,26 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
                 TrainingCheckpoint(checkpoint_path(out_dir), exp.to_toml()).remove()
                 raise
             history, training = trainer.history_, trainer.summary_
-            if training.failure is None:  # in the training dtype, as val_loss_multistep
-                windows = trainer.validation_windows_
-                scored = {"model": trainer.model_, **physics_baselines(exp, trainer.model_, windows.states.dtype,
-                                                                        windows.states.device)}
-                validation_scores = {k: window_score(m, windows, trainer.velocity_weights_) for k, m in scored.items()}
-                horizon = round((windows.states.shape[0] - 1) * windows.dt, 6)  # s
+            if training.failure is None:  # in the training dtype, as val_loss_multistep, at its horizons
+                validation_scores = {}
+                for horizon, windows in trainer.validation_sets_.items():
+                    scored = {"model": trainer.model_, **physics_baselines(exp, trainer.model_, windows.states.dtype,
+                                                                            windows.states.device)}
+                    validation_scores[horizon] = {k: window_score(m, windows, trainer.velocity_weights_)
+                                                  for k, m in scored.items()}
             model = trainer.model_.cpu().double()
         else:
             model = build_model(exp)
-        evaluation = evaluate_model(model, tests, exp.evaluation.horizons, exp.evaluation.integrator)
+        limits = PhysicalRange.of_runs(runs)   # the training logs' range: beyond it a prediction diverged
+        evaluation = evaluate_model(model, tests, exp.evaluation.horizons, exp.evaluation.integrator, limits=limits)
+        for divergence in evaluation.divergences:
+            log(f"WARNING: the prediction diverged on {divergence.text()}")
         verdict, baseline_metrics = None, None
         if validation_scores is not None:
-            scores = scores_on_tests(exp, model, evaluation, tests)
-            verdict = baseline_verdict(str(exp.experiment.model), validation_scores, horizon, scores)
+            scores = scores_on_tests(exp, model, evaluation, tests, limits)
+            verdict = baseline_verdict(str(exp.experiment.model), validation_scores, scores)
             if scores:
-                baseline_metrics = pd.concat([m.assign(baseline=label) for label, m in scores.items()
+                baseline_metrics = pd.concat([e.metrics.assign(baseline=label) for label, e in scores.items()
                                               if label != "model"], ignore_index=True)
     source = "files" if exp.data.train else (exp.experiment.dataset if exp.needs_training else "-")
     data_used = provenance(source, runs, validation, tests, exp.training.val_fraction, exp.training.block_s,

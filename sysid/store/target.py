@@ -53,6 +53,7 @@ class OutputKind(str, Enum):
     REPRODUCTION = "reproduction"
     SWEEP = "sweep"
     MANEUVERS = "maneuvers"
+    COMPARISON = "comparison"
     REPORT = "report"
 
     @property

@@ -70,3 +70,21 @@ def test_a_straight_run_and_a_short_log_named_by_its_folder():
     assert recognise(straight).kind is Maneuver.STRAIGHT and scenario_of(straight) == "Straight"
     short = _run("b", t[:20], np.zeros(20), np.zeros(20), np.full(20, 10.0), "/logs/zigzag/b.csv")
     assert recognise(short).kind is Maneuver.ZIGZAG and recognise(short).source == "folder"
+
+
+def test_a_recorded_maneuver_in_no_named_folder_is_recognised_from_its_signals(dataset_dir, tmp_path):
+    """`sysid maneuver` on a user's recorded runs named log_*.csv in a folder that names no
+    maneuver: the turn and the zig-zag (with its 20/20 angles) come from the signals, as the
+    paper names these test files."""
+    from sysid.maneuvers.base import TurningCircle, ZigZag
+    from sysid.maneuvers.recorded import recorded_maneuver
+
+    zigzag = read_run(dataset_dir / TEST_FILES["Zigzag 20/20"])
+    turn = read_run(dataset_dir / TEST_FILES["Turning 35"])
+    moved = {"log_1": zigzag, "log_2": turn}
+    runs = {n: Run(n, tmp_path / "trials" / f"{n}.csv", r.t, r.states, r.inputs, r.relative_wind, r.dt)
+            for n, r in moved.items()}
+    maneuver, _ = recorded_maneuver(runs["log_1"])
+    assert isinstance(maneuver, ZigZag) and (maneuver.rudder_deg, maneuver.check_deg) == (20.0, 20.0)
+    maneuver, _ = recorded_maneuver(runs["log_2"])
+    assert isinstance(maneuver, TurningCircle) and maneuver.rudder_deg == 35.0

@@ -37,13 +37,13 @@ def test_own_units_from_the_columns_table():
 def test_verdict_table_in_knots_and_deg_per_s():
     units = DisplayUnits({"u": ("knots", KNOT), "r": ("deg/s", math.pi / 180.0)})
     table = verdict_table(_verdict(), "hybrid", units)
-    rows = {r[2]: r for r in table.rows}
-    assert rows["u [knots]"][3:5] == [f"{0.0185 / KNOT:.5f}", f"{0.0257 / KNOT:.5f}"] == ["0.03596", "0.04996"]
-    assert rows["r [deg/s]"][3:5] == ["0.22918", "0.28648"]
-    assert rows["v_m [m/s]"][3:5] == ["0.00900", "0.01100"]  # not mapped: SI
-    assert rows["u [knots]"][5] == verdict_table(_verdict(), "hybrid").rows[0][5]  # the change is unit-free
-    si = {r[2]: r for r in verdict_table(_verdict(), "hybrid").rows}
-    assert si["u [m/s]"][3] == "0.01850"
+    rows = {r[3]: r for r in table.rows}      # split, log, horizon, channel, windows, model, baseline, change
+    assert rows["u [knots]"][5:7] == [f"{0.0185 / KNOT:.5f}", f"{0.0257 / KNOT:.5f}"] == ["0.03596", "0.04996"]
+    assert rows["r [deg/s]"][5:7] == ["0.22918", "0.28648"]
+    assert rows["v_m [m/s]"][5:7] == ["0.00900", "0.01100"]  # not mapped: SI
+    assert rows["u [knots]"][7] == verdict_table(_verdict(), "hybrid").rows[0][7]  # the change is unit-free
+    si = {r[3]: r for r in verdict_table(_verdict(), "hybrid").rows}
+    assert si["u [m/s]"][5] == "0.01850"
     assert units.verdict_cells(_verdict()) == ("u at 30 s: 0.03596 against 0.04996 knots; "
                                                "r at 30 s: 0.2292 against 0.2865 deg/s")
 
