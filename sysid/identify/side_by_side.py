@@ -258,20 +258,11 @@ def _end_epoch(seed: _Seed, model: PerMember, train_sums: np.ndarray, val_v: flo
 
 
 def _result(seed: _Seed) -> StageResult:
-    """`Trainer._optimize`'s end: the best state restored, the failure and the log line."""
-    trainer = seed.trainer
+    """`Trainer._optimize`'s end: the best state restored, a hit time limit, the log line."""
     model = seed.prepared.model
     assert model is not None
-    stopped = seed.stopped or "epoch limit"
-    if seed.best_state is not None:
-        PerMember(model).load_state_dict(seed.best_state)
-    if stopped == "time limit":
-        trainer._summary.failure = (f"wall-clock limit of {trainer.experiment.training.max_minutes:g} min "
-                                    f"([training] max_minutes) hit in stage {LABEL} at epoch {len(seed.history)}")
-        trainer.log(f"FAILED: {trainer._summary.failure}")
-    trainer.log(f"{LABEL}: {len(seed.history)} epochs, best early-stopping loss {seed.best:.5f} at epoch "
-                f"{seed.best_epoch} ({stopped}; validation windows, before any kNN gate)")
-    return StageResult(seed.history, seed.best_epoch, seed.best, stopped)
+    stage = StageResult(seed.history, seed.best_epoch, seed.best, seed.stopped or "epoch limit")
+    return seed.trainer._end_stage(PerMember(model), LABEL, stage, seed.best_state)
 
 
 def train_side_by_side(seeds: Sequence[_Seed]) -> list[StageResult]:

@@ -410,15 +410,20 @@ class Trainer:
                 break
         if hasattr(bar, "close"):
             bar.close()
+        return self._end_stage(model, label, StageResult(history, best_epoch, best, stopped), best_state)
+
+    def _end_stage(self, model, label: str, stage: StageResult, best_state: dict | None) -> StageResult:
+        """A stage's end: its best state restored into `model`, a hit time limit recorded as
+        the run's failure, one log line; returns `stage`."""
         if best_state is not None:
             model.load_state_dict(best_state)
-        if stopped == "time limit":
+        if stage.stopped == "time limit":
             self._summary.failure = (f"wall-clock limit of {self.experiment.training.max_minutes:g} min "
-                                     f"([training] max_minutes) hit in stage {label} at epoch {len(history)}")
+                                     f"([training] max_minutes) hit in stage {label} at epoch {len(stage.history)}")
             self.log(f"FAILED: {self._summary.failure}")
-        self.log(f"{label}: {len(history)} epochs, best early-stopping loss {best:.5f} at epoch {best_epoch} "
-                 f"({stopped}; validation windows, before any kNN gate)")
-        return StageResult(history, best_epoch, best, stopped)
+        self.log(f"{label}: {len(stage.history)} epochs, best early-stopping loss {stage.best_loss:.5f} at epoch "
+                 f"{stage.best_epoch} ({stage.stopped}; validation windows, before any kNN gate)")
+        return stage
 
     def _bar(self, epochs, label: str, total: int, done: int):
         """tqdm on a terminal; elsewhere the epochs plain (progress then comes as log lines)."""
