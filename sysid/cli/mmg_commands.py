@@ -276,7 +276,7 @@ def evaluate(
     chosen = _integrator(integrator or (str(source.evaluation.integrator) if source is not None else "euler"), compiled)
     ship_input = None if run_dir is not None else ship_file(ship or (exp.experiment.ship if exp is not None
                                                                      else "esso_osaka"))
-    claim(output, OutputKind.FILE, [run_dir, config, *files, ship_input])
+    claim(output, OutputKind.FILE, [run_dir, config, *(data or []), *files, ship_input])  # --data folders too
     rate = source.data.rate if source is not None else 1.0
     runs = read_runs(progress(files, desc="reading", unit="files", quiet=len(files) < 4), rate, columns)
     short = short_runs(runs, horizons)

@@ -223,7 +223,7 @@ def shared_rows(a: Run, b: Run, length: int = SHARED_ROWS) -> tuple[int, int, in
         breaks = np.flatnonzero(~equal)
         start = int(breaks[breaks < k].max() + 1) if (breaks < k).any() else 0
         stop = int(breaks[breaks >= k + n].min()) if (breaks >= k + n).any() else rows
-        return first_a + start, first_b + start, stop - start
+        return int(first_a + start), int(first_b + start), int(stop - start)
     return None
 
 

@@ -318,3 +318,9 @@ def test_preprocess_onto_a_full_disk(sysid, files, tmp_path, monkeypatch):
     out = tmp_path / "processed"
     line = assert_refused(sysid("preprocess", raw, "-o", out), 2, f"{out}: no space left on device", absent=(out,))
     assert leftovers(tmp_path) == [] and "raw.csv" not in line.split(":")[0]
+
+
+def test_train_refuses_evaluation_horizons_of_one_sample(sysid, files, tmp_path):
+    config = write_config(tmp_path / "h1.toml", files, evaluation={"horizons": "[1.0, 30.0]"})
+    assert_refused(sysid("train", config, "-o", tmp_path / "run"), 2,
+                   "h1.toml: [evaluation] horizons must be >= 2 samples at [data] rate (2 s)", absent=(tmp_path / "run",))
