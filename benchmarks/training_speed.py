@@ -4,16 +4,27 @@ Prints, per data set and batch size: time per minibatch (forward + backward + Ad
 the config's T Euler steps of the hybrid right-hand side), window-steps per second and epochs per
 second; with --members K the time of a step that trains K networks side by side (the
 FNN's member axis; what K seeds trained in one process would cost) beside one network;
+with --limit the step at the config's batch beside its arithmetic limit (the FLOP count of the
+FNN's products and the measured time of that arithmetic alone: the products and tanh of T
+forward steps and their backward, without the MMG, the integrator or autograd's bookkeeping);
+with --compiled the step whose hybrid right-hand side (MMG, FNN, equations of motion) is one
+torch.compile'd function (Inductor; its caches persist in TORCHINDUCTOR_CACHE_DIR, so a second
+run of this script measures the warm start) beside today's eager step, interleaved, with the
+time of its first step (the compile, or the cache load) and the two losses;
+with --ops the aten operations dispatched by one right-hand-side call of the training loss
+(forward with the force record, its backward) and by the MMG's forward alone;
 with --converge also the wall time of a whole training to its early stop; with
 --parts the CPU time of the pieces of an epoch and of the seed ensembles' evaluation, each
 beside the way it was done before (interleaved repeats, medians of process CPU time, which a
 machine shared with other jobs disturbs less than wall time).
 
-    python benchmarks/training_speed.py [--data DIR] [--threads 1] [--members K] [--converge] [--parts]
+    python benchmarks/training_speed.py [--data DIR] [--threads 1] [--only D2] [--batches 256] [--members K]
+        [--limit] [--converge] [--parts]
 """
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import time
 
@@ -50,6 +61,206 @@ def minibatch_seconds(exp, train, batch: int, repeats: int = 8, members: int | N
 
     for _ in range(2):
         step()
+    start = time.perf_counter()
+    for _ in range(repeats):
+        step()
+    return (time.perf_counter() - start) / repeats
+
+
+def compiled_comparison(exp, train, batch: int, repeats: int = 5) -> None:
+    """Today's eager step and the step with a compiled right-hand side, interleaved (medians),
+    on the same network, windows and losses (batch `batch`, K = 1)."""
+    from torchdiffeq import odeint
+    from sysid.dynamics.equations import derivative_channels
+    from sysid.hybrid.correction import correction_inputs
+    from sysid.identify.trainer import VEL, adam, output_penalty, velocity_loss
+    from sysid.mmg.coefficients import PackedCoefficients
+
+    mmg = build_mmg(exp, torch.float32).requires_grad_(False)
+    net = ForceCorrection(exp.network.hidden, torch.float32, 1)
+    model = PerMember(CorrectedModel(mmg, net, None, True, exp.gate.space))
+    w_v = 1.0 / train.states[:, :, [1, 3, 5]].reshape(-1, 3).var(0)
+    w_F = 1.0 / net.output_std
+    opt = adam(net.parameters(), 1e-3)
+    chunk = train.select(torch.arange(min(batch, len(train))))
+    packed = PackedCoefficients(mmg.coefficients)
+    index = dict(packed.index)
+
+    class Values:  # the packed coefficients read by name, in the compiled function
+        def __init__(self, values):
+            self.values = values
+
+        def __getattr__(self, name):
+            return self.values[index[name]]
+
+        def values_view(self, dtype=None):
+            return self
+
+    def rate(state, inputs, values, mu_s, sd_s, mu_F, sd_F, *layers):
+        c = Values(values)
+        f_mmg, wind, _ = mmg._total_force(state, inputs, c, True)
+        z = (correction_inputs(state, inputs, torch.cat(wind, -1)) - mu_s) / sd_s
+        for i in range(0, len(layers), 2):
+            z = torch.baddbmm(layers[i + 1].unsqueeze(1), z.reshape(1, -1, z.shape[-1]), layers[i])
+            z = torch.tanh(z) if i + 2 < len(layers) else z
+        f_nn = z.reshape(*state.shape[:-1], 3) * sd_F + mu_F
+        total = (f_mmg + f_nn).unbind(-1)
+        return torch.stack(derivative_channels(state, total, c), -1), f_nn, f_mmg
+    compiled = torch.compile(rate, dynamic=False)
+
+    class Rate(torch.nn.Module):
+        def __init__(self, inputs, record):
+            super().__init__()
+            self.inputs, self.record = inputs, record
+
+        def forward(self, tau, x):
+            k = min(max(int(tau), 0), self.inputs.shape[0] - 1)
+            layers = [t for pair in zip(net.weights, net.biases) for t in pair]
+            dx, f_nn, f_mmg = compiled(x, self.inputs[k], packed.values, net.input_mean, net.input_std,
+                                       net.output_mean, net.output_std, *layers)
+            self.record.append((f_nn, f_mmg))
+            return chunk.dt * dx
+
+    def compiled_loss():
+        states, inputs, record = chunk.states.unsqueeze(1), chunk.inputs.unsqueeze(1), []
+        tau = torch.arange(inputs.shape[0], dtype=states.dtype)
+        pred = odeint(Rate(inputs, record), states[0], tau, method="euler")
+        loss_v = velocity_loss(pred[1:, ..., VEL] - states[1:, ..., VEL], w_v)
+        f_nn, f_mmg = (torch.stack(f) for f in zip(*record))
+        return loss_v, output_penalty(f_nn, f_mmg, w_F).mean()
+
+    def step(loss_fn):
+        def run():
+            loss_v, loss_F = loss_fn()
+            loss = loss_v + exp.training.lambda_F * loss_F
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+        return run
+    eager = step(lambda: multistep_loss(model, chunk, w_v, w_F))
+    fast = step(compiled_loss)
+    with torch.no_grad():
+        before = [float(v) for v in multistep_loss(model, chunk, w_v, w_F)]
+    start = time.perf_counter()
+    with torch.no_grad():
+        after = [float(v) for v in compiled_loss()]
+    first_forward = time.perf_counter() - start
+    start = time.perf_counter()
+    fast()
+    first_step = time.perf_counter() - start
+    times = {"eager": [], "compiled": []}
+    for _ in range(3):
+        for label, fn in (("eager", eager), ("compiled", fast)):
+            fn()
+            start = time.perf_counter()
+            for _ in range(repeats):
+                fn()
+            times[label].append((time.perf_counter() - start) / repeats)
+    a, b = statistics.median(times["eager"]), statistics.median(times["compiled"])
+    print(f"compiled right-hand side, batch {len(chunk)}: first no-gradient call {first_forward:.1f} s and first step "
+          f"{first_step:.1f} s (compile or cache load; cache {os.environ.get('TORCHINDUCTOR_CACHE_DIR', 'default')}); "
+          f"{1e3 * b:.1f} ms/step against eager {1e3 * a:.1f} ({a / b:.2f}x); losses (L_v, L_F) "
+          f"{after[0]:.6g}, {after[1]:.6g} against {before[0]:.6g}, {before[1]:.6g}")
+
+
+def operation_counts(exp, train, batch: int) -> None:
+    """Aten operations dispatched by one training right-hand-side call (K = 1, `batch` rows)."""
+    from torch.utils._python_dispatch import TorchDispatchMode
+    from sysid.dynamics.equations import ShipDynamics
+
+    class Count(TorchDispatchMode):
+        def __init__(self):
+            super().__init__()
+            self.n = 0
+
+        def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+            self.n += 1
+            return func(*args, **(kwargs or {}))
+
+    mmg = build_mmg(exp, torch.float32).requires_grad_(False)
+    net = ForceCorrection(exp.network.hidden, torch.float32, 1)
+    chunk = train.select(torch.arange(min(batch, len(train))))
+    x = chunk.states[1].unsqueeze(0).clone().requires_grad_(True)  # a state inside a rollout
+    inputs = chunk.inputs.unsqueeze(1)
+    rhs = ShipDynamics(PerMember(CorrectedModel(mmg, net, None, True, exp.gate.space)), inputs, chunk.dt, [])
+    rhs(torch.tensor(0.0), x)  # the coefficient views are made on a first call
+    counts = {}
+    for label, fn in (("MMG forward (F_MMG)", lambda: mmg.total_force(x, inputs[1])),
+                      ("right-hand side with the force record", lambda: rhs(torch.tensor(1.0), x))):
+        with Count() as c:
+            out = fn()
+        counts[label] = c.n
+    with Count() as c:
+        out.sum().backward()
+    counts["its backward"] = c.n
+    print(f"aten operations per right-hand-side call, batch {len(chunk)}: "
+          + ", ".join(f"{k} {v}" for k, v in counts.items()))
+    # what a hand-derived backward of the MMG could save at most: its forward without autograd
+    # (plain guard forms) against its forward and backward through autograd, interleaved
+    with Count() as c:
+        with torch.no_grad():
+            mmg.total_force(x, inputs[1])
+    plain_ops = c.n
+    weights = torch.randn(x.shape[:-1] + (3,))
+
+    def autograd_pass():
+        x.grad = None
+        (mmg.total_force(x, inputs[1])[0] * weights).sum().backward()
+
+    def plain_pass():
+        with torch.no_grad():
+            mmg.total_force(x, inputs[1])
+    def whole_pass():
+        x.grad = None
+        rhs.record.clear()
+        rhs(torch.tensor(1.0), x).sum().backward()
+    times = {"whole": [], "autograd": [], "plain": []}
+    for _ in range(5):
+        for label, fn in (("whole", whole_pass), ("autograd", autograd_pass), ("plain", plain_pass)):
+            times[label] += cpu_ms(lambda: [fn() for _ in range(10)], 1)
+    w, a, b = (statistics.median(times[k]) / 10 for k in ("whole", "autograd", "plain"))
+    print(f"CPU ms per call, batch {len(chunk)}: the right-hand side forward and backward {w:.2f}, of which the MMG's "
+          f"{a:.2f} through autograd; the MMG's forward without autograd {b:.2f} ({plain_ops} operations, "
+          f"{a / b:.1f}x less than through autograd)")
+
+
+def network_flops(widths: list[int], rows: int, steps: int) -> tuple[float, float]:
+    """(forward, forward + backward) FLOP of the FNN's products for `rows` windows over `steps`
+    Euler steps: 2 n_in n_out per row and layer forward; backward twice that (the gradient of
+    the weights and of the layer's input, which the rollout needs for every layer)."""
+    forward = sum(2.0 * a * b for a, b in zip(widths[:-1], widths[1:])) * rows * steps
+    return forward, 3.0 * forward
+
+
+def arithmetic_seconds(widths: list[int], rows: int, steps: int, repeats: int = 8) -> float:
+    """Mean wall time [s] of the arithmetic of one training step alone: per Euler step the
+    FNN's products and tanh forward, then per step and layer the two backward products and the
+    tanh derivative, on (rows, width) float32 tensors made once (no autograd, no MMG, no
+    integrator): the floor an implementation of the step could reach on this machine."""
+    gen = torch.Generator().manual_seed(0)
+    weights = [torch.randn(a, b, generator=gen) / a ** 0.5 for a, b in zip(widths[:-1], widths[1:])]
+    x = torch.randn(rows, widths[0], generator=gen)
+    grads = [torch.empty_like(w) for w in weights]
+
+    def step():
+        saved = []
+        for _ in range(steps):
+            z = x
+            for i, w in enumerate(weights):
+                saved.append(z)
+                z = z @ w
+                if i < len(weights) - 1:
+                    z = torch.tanh(z)
+        g = torch.ones(rows, widths[-1])
+        for _ in range(steps):
+            gi = g
+            for i in range(len(weights) - 1, -1, -1):
+                z = saved[i]
+                torch.mm(z.t(), gi, out=grads[i])
+                gi = gi @ weights[i].t()
+                if i > 0:
+                    gi = gi * (1.0 - z * z)  # tanh' from the saved activation
+    step()
     start = time.perf_counter()
     for _ in range(repeats):
         step()
@@ -171,6 +382,14 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--members", type=int, default=0,
                         help="also time a step of K networks side by side against one, at the config's batch")
+    parser.add_argument("--only", choices=sorted(CONFIGS), action="append", help="these data sets only (default: all)")
+    parser.add_argument("--batches", default=None,
+                        help="comma-separated batch sizes of the table (default: 128, 512, the config's, 1024, all)")
+    parser.add_argument("--limit", action="store_true",
+                        help="also the step at the config's batch beside its arithmetic limit (interleaved)")
+    parser.add_argument("--compiled", action="store_true",
+                        help="also the step with a torch.compile'd right-hand side beside today's eager step")
+    parser.add_argument("--ops", action="store_true", help="also count the operations of one right-hand-side call")
     parser.add_argument("--converge", action="store_true", help="also train each config to its early stop")
     parser.add_argument("--parts", action="store_true", help="CPU time of an epoch's pieces, before and after")
     args = parser.parse_args()
@@ -181,6 +400,8 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     print(f"torch {torch.__version__}, {args.threads} thread(s)")
     for name, path in CONFIGS.items():
+        if args.only and name not in args.only:
+            continue
         exp = load_experiment(path)
         runs = training_runs(exp, args.data)
         t = exp.training
@@ -188,7 +409,12 @@ def main() -> None:
                                          t.block_s, exp.experiment.seed)
         print(f"\n{name}: {len(train)} training windows of {t.steps} steps (config batch {t.batch_size})")
         print(f"{'batch':>6} {'ms/step':>9} {'window-steps/s':>15} {'epochs/s':>9}")
-        for batch in sorted({128, 512, t.batch_size, 1024, len(train)}):
+        try:
+            batches = ([int(b) for b in args.batches.split(",")] if args.batches
+                       else [128, 512, t.batch_size, 1024, len(train)])
+        except ValueError:
+            raise SystemExit(f"training_speed: --batches {args.batches!r}: give whole numbers separated by commas")
+        for batch in sorted(set(batches)):
             seconds = minibatch_seconds(exp, train, batch)
             steps_per_epoch = -(-len(train) // batch)
             print(f"{batch:6d} {1e3 * seconds:9.1f} {min(batch, len(train)) * t.steps / seconds:15.0f} "
@@ -201,6 +427,23 @@ def main() -> None:
             a, b = statistics.median(one), statistics.median(many)
             print(f"{args.members} networks side by side, batch {t.batch_size}: {1e3 * b:.1f} ms/step against "
                   f"{1e3 * a:.1f} for one ({b / a:.2f}x the time for {args.members}x the networks)")
+        if args.limit:
+            widths = [9, *exp.network.hidden, 3]
+            rows = min(t.batch_size, len(train))
+            step, floor = [], []
+            for _ in range(3):  # interleaved, medians
+                step.append(minibatch_seconds(exp, train, t.batch_size))
+                floor.append(arithmetic_seconds(widths, rows, t.steps))
+            a, b = statistics.median(step), statistics.median(floor)
+            forward, both = network_flops(widths, rows, t.steps)
+            print(f"arithmetic limit, batch {rows}, T = {t.steps}, FNN {'-'.join(map(str, widths))}: "
+                  f"{forward / 1e9:.3f} GFLOP forward, {both / 1e9:.3f} with the backward; that arithmetic alone "
+                  f"{1e3 * b:.1f} ms ({both / b / 1e9:.1f} GFLOP/s) against the step's {1e3 * a:.1f} ms "
+                  f"({a / b:.1f}x the limit)")
+        if args.ops:
+            operation_counts(exp, train, t.batch_size)
+        if args.compiled:
+            compiled_comparison(exp, train, t.batch_size)
         if args.parts:
             parts(exp, runs, train, val, args.data)
         if args.converge:

@@ -14,7 +14,7 @@ Every such decision goes into the report. Time stamps are snapped to the nominal
 from __future__ import annotations
 
 import os
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 
 import numpy as np
 import pandas as pd
@@ -383,7 +383,11 @@ def process_file(path: str, layout: SensorLayout, settings: PreprocessSettings, 
     try:
         result = Pipeline(layout, settings).run(path)
         stem = os.path.splitext(os.path.basename(path))[0]
-        outputs = writer.write_segments(outdir, stem, result.segments, result.report)
+        try:
+            outputs = writer.write_segments(outdir, stem, result.segments, result.report)
+        except OSError as exc:  # the output's fault (a full disk), not the log's: the caller stops
+            return {"file": str(path), "ok": False, "write_error": exc.errno,
+                    "error": f"writing the output of {path} failed: {exc.strerror or exc}"}
         return {"file": str(path), "ok": True, "outputs": [str(p) for p in outputs],
                 "report": result.report}
     except RawLogError as exc:

@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from preprocessing.channels import PROCESSED, PROCESSED_CHANNEL  # noqa: F401 (the processed schema, re-exported)
+
 
 class RawLogError(ValueError):
     """A raw log cannot be processed: missing column, wrong unit, bad time, bad geometry."""
@@ -34,21 +36,6 @@ RAW_LATLON = {"gnss_fore_lat": "deg", "gnss_fore_lon": "deg",
               "gnss_aft_lat": "deg", "gnss_aft_lon": "deg"}
 RAW_OPTIONAL = {"gnss_fore_fix": "-", "gnss_aft_fix": "-"}
 
-# processed schema, in the public files' column order
-PROCESSED = {
-    "t": "s", "x_position_mid": "m", "u_velo": "m/s", "y_position_mid": "m", "vm_velo": "m/s",
-    "psi_hat": "rad", "r_angvelo": "rad/s", "n_prop": "rps", "delta_rudder": "rad",
-    "wind_velo_relative_mid": "m/s", "wind_dir_relative_mid": "rad",
-    "wind_velo_true": "m/s", "wind_dir_true": "rad",
-}
-
-# processed column -> the channel name of sysid's state and inputs (`sysid.state`)
-PROCESSED_CHANNEL = {
-    "t": "t", "x_position_mid": "x", "u_velo": "u", "y_position_mid": "y", "vm_velo": "v",
-    "psi_hat": "psi", "r_angvelo": "r", "n_prop": "n_prop", "delta_rudder": "delta_rudder",
-    "wind_velo_relative_mid": "wind_velo_relative", "wind_dir_relative_mid": "wind_dir_relative",
-    "wind_velo_true": "wind_velo_true", "wind_dir_true": "wind_dir_true",
-}
 # plausibility limits of a processed run (channel names, SI); beyond means wrong units. A
 # heading beyond one turn either way is degrees (processed headings are wrapped) unless it
 # changes at the yaw rate (unwrapped radians, `sysid.data.read_run`); 3 rad/s (172 deg/s) is

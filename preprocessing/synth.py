@@ -66,13 +66,40 @@ class SynthResult:
 
 
 def read_processed(path) -> pd.DataFrame:
-    """A processed-schema CSV with bare column names."""
-    df = pd.read_csv(path)
-    df.columns = [c.split(" [")[0].strip() for c in df.columns]
+    """A processed-schema CSV with bare column names (`processed_run`)."""
+    return processed_run(pd.read_csv(path), path)
+
+
+def processed_run(df: pd.DataFrame, path) -> pd.DataFrame:
+    """A processed run read from `path` with bare column names, checked: every channel
+    present, every cell a finite number, time strictly increasing (`schema.RawLogError`
+    naming the file, column and row otherwise). All-empty rows are dropped."""
+    df = df.copy()
+    df.columns = [str(c).split(" [")[0].strip() for c in df.columns]
     missing = [c for c in schema.PROCESSED if c not in df.columns]
     if missing:
         raise schema.RawLogError(f"{path}: column {missing[0]}: missing from processed run")
-    return df.dropna(how="all").reset_index(drop=True)
+    kept = df.dropna(how="all")
+    rows = kept.index.to_numpy() + 2   # data rows of the file (the header is row 1)
+    df = kept.reset_index(drop=True)
+    if len(df) < 2:
+        raise schema.RawLogError(f"{path}: fewer than two data rows")
+    used = [c for c in schema.PROCESSED if "relative" not in c]   # the relative wind is recomputed
+    values = df[used].apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
+    bad = ~np.isfinite(values)
+    if bad.any():
+        row, col = np.argwhere(bad)[0]
+        raise schema.RawLogError(f"{path}: column {used[col]} is empty, NaN or not a number at "
+                                 f"data row {rows[row]} ({int(bad.any(axis=1).sum())} bad rows); a truth is built "
+                                 "from complete rows only: fill or cut them")
+    t = values[:, used.index("t")]
+    step = np.diff(t)
+    if (step <= 0).any():
+        k = int(np.argmax(step <= 0)) + 1
+        raise schema.RawLogError(f"{path}: column t is not strictly increasing at data row {rows[k]} "
+                                 f"(t = {t[k]:g} s after {t[k - 1]:g} s): remove the repeated or earlier time")
+    df[used] = values
+    return df
 
 
 def truth_from_processed(run: pd.DataFrame) -> pd.DataFrame:
@@ -84,7 +111,7 @@ def truth_from_processed(run: pd.DataFrame) -> pd.DataFrame:
     x = run["x_position_mid"].iloc[0] + cumulative_trapezoid(ex, t, initial=0.0)
     y = run["y_position_mid"].iloc[0] + cumulative_trapezoid(ey, t, initial=0.0)
     ut, gt = run["wind_velo_true"].to_numpy(float), run["wind_dir_true"].to_numpy(float)
-    ua, ga = anemometer.apparent_at(*flow_velocity(ut, gt), u, v, r, psi, (0.0, 0.0))
+    ua, ga = anemometer.apparent_at(*flow_velocity(ut, gt), u, v, r, psi, (0.0, 0.0))  # type: ignore[call-arg]
     out = pd.DataFrame({
         "t": t, "x_position_mid": x, "u_velo": u, "y_position_mid": y, "vm_velo": v,
         "psi_hat": wrap_pi(psi), "r_angvelo": r, "n_prop": run["n_prop"].to_numpy(float),
@@ -162,7 +189,7 @@ def synthesise(run: pd.DataFrame, layout: SensorLayout, settings: SynthSettings 
             cols[f"gnss_{name}_lat"], cols[f"gnss_{name}_lon"] = la, lo
         gnss_cols = [c for c in cols if c.startswith("gnss_")]
     else:
-        for k, val in ant.items():
+        for k, val in ant.items():  # type: ignore[assignment]
             cols[f"gnss_{k}"] = val
         gnss_cols = [f"gnss_{k}" for k in ant]
     cols["fog_yaw_rate"] = fog
@@ -218,7 +245,7 @@ def score(segments: list[pd.DataFrame], truth: pd.DataFrame, dropouts=(), margin
                      ("x", "x_position_mid"), ("y", "y_position_mid"),
                      ("wind_speed", "wind_velo_true"), ("wind_rel_speed", "wind_velo_relative_mid")):
         out[key] = rms(est[col] - tru[col])
-    out["pos"] = float(np.hypot(out["x"], out["y"]))
+    out["pos"] = float(np.hypot(out["x"], out["y"]))  # type: ignore[assignment]
     for key, sp, col in (("wind_dir_deg", "wind_velo_true", "wind_dir_true"),
                          ("wind_rel_dir_deg", "wind_velo_relative_mid", "wind_dir_relative_mid")):
         m = tru[sp].to_numpy() >= min_wind

@@ -7,11 +7,14 @@ model, `integrate` for (differentiable) trajectories, `predict` for fast predict
 train``), `sysid.protocol.reproduce.reproduce` the paper's protocol; `RunDir` opens a run
 directory (``RunDir.open("runs/hybrid_D2").read_summary()``: its typed `RunSummary`).
 
-Subpackages in layers, each importing only those before it (tests/test_import_graph.py):
-`store` (files, manifests), `mmg` (ship files, force families, the force model) → `config`
-(the closed choices and experiment configs, torch-free) → `dynamics`, `hybrid`, `data` →
-`identify` → `evaluation` → `runs` → `sweep` → `protocol` → `report` → `cli`; `fast` (the
-compiled path and export) is loaded only by the CLI and by a compiled prediction.
+Subpackages in layers, each importing only those before it (`LAYERS` in
+tests/test_import_graph.py, docs/layout.md): `preprocessing`, `errors`, `state`, `logs`,
+`workers`, `bundled` → `progress`, `store` (files, manifests) → `mmg` (ship files, force
+families, the force model) → `config` (the closed choices and experiment configs, no torch,
+no pandas) → `records` (what a run directory holds, no torch), `device` → `dynamics`,
+`hybrid`, `data` → `fast` (the compiled path and export; imported by the CLI, elsewhere only
+where compilation is chosen) → `identify`, `evaluation` → `runs` → `tracking` → `sweep` →
+`maneuvers` → `protocol` → `report` → `cli`.
 
 The names are loaded on first use, so ``import sysid`` (and ``sysid --help``) does not pay
 for torch.
@@ -28,7 +31,7 @@ _HOME = {
     "ShipDynamics": "sysid.dynamics.equations", "integrate": "sysid.dynamics.equations",
     "predict": "sysid.fast.compiled", "Integrator": "sysid.dynamics.integrators", "Method": "sysid.config.choices",
     "state_derivative": "sysid.dynamics.equations", "body_acceleration": "sysid.dynamics.equations",
-    "RunDir": "sysid.runs.directory", "RunSummary": "sysid.runs.summary",
+    "RunDir": "sysid.runs.directory", "RunSummary": "sysid.records.summary",
 }
 
 __all__ = ["Ship", "load_ship", "MMG", "ForceBreakdown", "ShipDynamics", "integrate", "predict", "Integrator", "Method",

@@ -32,8 +32,3 @@ def bundled_dir(kind: str) -> Path:
     if kind not in KINDS:
         raise ValueError(f"unknown kind of bundled file {kind!r}: choose one of {', '.join(KINDS)}")
     return configs_root() / kind
-
-
-def bundled_names(kind: str, suffix: str = ".toml") -> list[str]:
-    """Names (file stems) of the bundled files of one kind, sorted."""
-    return sorted(p.stem for p in bundled_dir(kind).glob(f"*{suffix}"))

@@ -40,3 +40,7 @@ class OutputError(SysidError):
 
 class TrainingError(SysidError):
     """Training cannot produce a model: a non-finite loss (too high a learning rate, bad data)."""
+
+
+class ClusterLostError(SysidError):
+    """The Ray cluster a sweep joined went away while it ran (its head stopped answering)."""

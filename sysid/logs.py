@@ -67,11 +67,6 @@ def is_quiet() -> bool:
     return LOGGER.level >= logging.WARNING
 
 
-def is_verbose() -> bool:
-    """``-v`` was given."""
-    return LOGGER.level != logging.NOTSET and LOGGER.level <= logging.DEBUG
-
-
 def info(message: str) -> None:
     """A stage line (stdout; time-stamped in a file; hidden by ``-q``)."""
     LOGGER.info(message)

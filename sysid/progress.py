@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import Iterable, Iterator, TextIO
+from typing import Iterable, Iterator, Sized, TextIO
 
 from sysid import logs
 
@@ -21,7 +21,7 @@ class LineProgress:
     def __init__(self, iterable: Iterable | None = None, total: int | None = None, desc: str = "",
                  unit: str = "it", every_s: float = 5.0, stream: TextIO | None = None):
         self.iterable = iterable
-        self.total = total if total is not None else (len(iterable) if hasattr(iterable, "__len__") else None)
+        self.total = total if total is not None else (len(iterable) if isinstance(iterable, Sized) else None)
         self.desc, self.unit, self.every_s = desc, unit, every_s
         self.stream = stream or sys.stderr
         self.n = 0

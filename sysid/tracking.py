@@ -16,12 +16,14 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
+import re
 from pathlib import Path
-from typing import Any
-
+from typing import TYPE_CHECKING, Any
 
 from sysid.errors import ConfigError
+
+if TYPE_CHECKING:
+    from sysid.config.experiment import Experiment
 
 INSTALL_HINT = "MLflow tracking needs the tracking extra: pip install \"sysid[tracking]\" (mlflow)"
 PARAM_BATCH = 100   # MLflow takes at most 100 parameters per call
@@ -41,17 +43,25 @@ def tracking_uri(where: str | os.PathLike) -> str:
     return path.as_uri()
 
 
-def config_params(config_toml: str) -> dict[str, str]:
+def config_params(exp: Experiment) -> dict[str, str]:
     """Every option of a resolved experiment config as ``section.option`` -> text."""
-    doc = tomllib.loads(config_toml)
+    doc = exp.to_table()
     return {f"{section}.{key}": str(value)[:500] for section, table in doc.items() if isinstance(table, dict)
             for key, value in table.items()}
+
+
+def metric_key(part) -> str:
+    """A scenario or log name as part of an MLflow metric key (letters, digits, ``_ - . /``
+    and spaces; anything else becomes ``_``; an unnamed scenario is ``-``)."""
+    text = "" if part is None or (isinstance(part, float) and math.isnan(part)) else str(part)
+    return re.sub(r"[^A-Za-z0-9_\-. /]", "_", text) or "-"
 
 
 def run_metrics(run_dir: Path) -> dict[str, float]:
     """The final metrics of a run directory: its summary's numbers (the objective as
     ``final_val_loss``, `RunSummary.objective`; ``val_loss`` is the per-epoch history) and the test RMSE of every
-    scenario and horizon (``rmse_u/Berthing/30s``)."""
+    test log and horizon, keyed by the log's scenario and name
+    (``rmse_u/Berthing/berthing_12-Nov-2020_11_49_21/30s``: no two logs share a key)."""
     from sysid.runs.directory import RunDir
 
     run = RunDir(run_dir)
@@ -66,7 +76,7 @@ def run_metrics(run_dir: Path) -> dict[str, float]:
         for c in ("u", "v", "r"):
             value = getattr(row, f"rmse_{c}")
             if math.isfinite(value):
-                metrics[f"rmse_{c}/{row.scenario}/{row.horizon_s:g}s"] = float(value)
+                metrics[f"rmse_{c}/{metric_key(row.scenario)}/{metric_key(row.file)}/{row.horizon_s:g}s"] = float(value)
     return metrics
 
 

@@ -25,9 +25,11 @@ from sysid.cli import init_commands  # noqa: E402,F401
 from sysid.cli import export_commands  # noqa: E402,F401
 from sysid.cli import sweep_commands  # noqa: E402,F401
 from sysid.cli import maneuver_commands  # noqa: E402,F401
+from sysid.cli import compare_commands  # noqa: E402,F401
+from sysid.cli import logs_commands  # noqa: E402,F401
 
 
-MULTI_VALUE_OPTIONS = ("--data", "--turning", "--zigzag")
+MULTI_VALUE_OPTIONS = ("--data", "--turning", "--zigzag", "--recorded")
 
 
 def expand_multi_value(argv: list[str]) -> list[str]:
@@ -75,11 +77,13 @@ def run(argv: list[str]) -> None:
     embedding)."""
     command = typer.main.get_command(app)
     _with_epilog(command)
+    failed = True
     try:
         code = command(args=common_options_first(expand_multi_value(list(argv))), prog_name="sysid",
                        standalone_mode=False)
+        failed = isinstance(code, int) and code != 0
     finally:
-        release()  # the output locks the command took
+        release(failed)  # the output locks the command took; a failed command's new empty folders
     # typer >= 0.29 turns Ctrl-C into Exit(130) and, outside standalone mode, returns the code
     if code == INTERRUPTED:
         raise KeyboardInterrupt
@@ -125,8 +129,8 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(INTERRUPTED)
     except Exception as exc:
         if _is_usage_error(exc):
-            exc.show()
-            sys.exit(exc.exit_code)
+            exc.show()  # type: ignore[attr-defined]
+            sys.exit(exc.exit_code)  # type: ignore[attr-defined]
         if _is_abort(exc):  # click turns Ctrl-C into Abort
             typer.secho(f"interrupted: {interrupt_note()}", fg=typer.colors.YELLOW, err=True)
             sys.exit(INTERRUPTED)

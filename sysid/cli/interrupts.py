@@ -12,7 +12,7 @@ from contextlib import contextmanager
 from typing import Callable, Iterator
 
 _DEFAULT = "nothing was written (outputs are moved into place only when complete)"
-_note = _DEFAULT
+_note: str | Callable[[], str] = _DEFAULT
 
 
 def on_interrupt(note: str | Callable[[], str]) -> None:

@@ -52,7 +52,7 @@ def parse_maneuvers(turning: list[str], zigzag: list[str], crash_stop: bool, sid
     sides = (Side.STARBOARD, Side.PORT) if side == "both" else (Side(side),)
     if not (turning or zigzag or crash_stop):
         return imo_maneuvers(sides)
-    out = []
+    out: list[TurningCircle | ZigZag | CrashStop] = []
     for text in turning:
         angle = _number("--turning", text, "deg")
         out += [TurningCircle(angle, s) for s in sides]
@@ -81,6 +81,9 @@ def parse_wind(text: str | None) -> tuple[float, float]:
     speed, direction = _number("--wind", parts[0], "m/s"), _number("--wind", parts[1], "deg")
     if not 0.0 <= speed <= 100.0:
         raise _error(f"--wind {text!r}: speed {speed:g} m/s must be in [0, 100]")
+    if not -360.0 <= direction <= 360.0:  # far beyond, cos and sin of it are rounding noise
+        raise _error(f"--wind {text!r}: direction {direction:g} deg must be in [-360, 360] (the direction the "
+                     "wind comes from, e.g. 45)")
     return speed, math.radians(direction)
 
 
@@ -106,6 +109,11 @@ def maneuver(
                                             help="Force the compiled loop (compiled once per model, cached) or the "
                                                  "eager step (default: the compiled loop only where it saves time: "
                                                  "in the cache, or enough steps to repay compiling it)."),
+    recorded: Optional[List[Path]] = typer.Option(None, "--recorded", help="Logs or folders of logs: their turning "
+                                                  "circles and zig-zags (recognised from rudder and heading) beside "
+                                                  "the model's, like for like (recorded_indices.csv)."),
+    config: Optional[Path] = typer.Option(None, "--config", help="Experiment config whose [data.columns] maps the "
+                                                                 "--recorded logs' columns and units."),
     report: bool = typer.Option(True, "--report/--no-report", help="Write report.html and report.pdf too."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output directory (all of it)."),
 ) -> None:
@@ -130,8 +138,9 @@ def maneuver(
     wind_speed, wind_direction = parse_wind(wind)
     maneuvers = parse_maneuvers(turning or [], zigzag or [], crash_stop, side)
     source = model if model.is_dir() else ship_file(model)  # what the command reads
-    target = claim(output, OutputKind.MANEUVERS, [source], overwrite)  # a bad -o fails now
+    target = claim(output, OutputKind.MANEUVERS, [source, *(recorded or []), config], overwrite)  # a bad -o fails now
     subject = load_maneuver_model(model)
+    logged = _recorded_runs(recorded or [], config)
     if not (turning or zigzag or crash_stop) and ahead_only(subject.model):
         maneuvers = [m for m in maneuvers if m.kind != "crash_stop"]
         typer.echo(f"maneuver: no crash stop: the propeller model {subject.ship.models.get('propeller')!r} is for "
@@ -159,16 +168,65 @@ def maneuver(
                                seconds, subject.spread)
     with target.staged() as staging:
         write_maneuvers(staging, results, subject.ship, conditions, summary)
+        if logged:
+            compared = _against_record(staging, subject, logged)
         if report:
             from sysid.report.maneuver_report import build_maneuver_report
             build_maneuver_report(staging)
     _print_results(output, results)
+    if logged:
+        _print_record(compared)
     for r in results:
         if r.gate_off_share is not None and r.gate_off_share > MOSTLY_OUTSIDE:
             typer.secho(f"  {r.maneuver.name}: kNN gate off on {100 * r.gate_off_share:.0f} % of the steps: the "
                         "maneuver runs mostly outside the training data (the FNN is switched off there)",
                         fg=typer.colors.YELLOW)
     typer.echo(f"maneuver: {output} ({seconds:.1f} s simulating, {time.perf_counter() - start:.1f} s in all)")
+
+
+def _recorded_runs(paths: list[Path], config: Optional[Path]):
+    """label -> run of the turning circles and zig-zags among the logs of `paths` (read
+    and checked, through the config's [data.columns]); {} without --recorded."""
+    if not paths:
+        if config is not None:
+            raise _error("--config maps the columns of --recorded logs: give --recorded too")
+        return {}
+    from sysid.data.recordings import expand_paths, read_runs
+    from sysid.maneuvers.recorded import recorded_maneuver_runs
+
+    columns = None
+    if config is not None:
+        from sysid.config.experiment import load_experiment
+        columns = load_experiment(config).data.columns
+    runs = read_runs(expand_paths(paths), columns=columns)
+    found, other = recorded_maneuver_runs(runs)
+    if not found:
+        raise _error(f"--recorded: none of the {len(runs)} log(s) is a turning circle or a zig-zag (recognised "
+                     "from the rudder and heading: docs/maneuvers.md)")
+    typer.echo(f"maneuver: {len(found)} recorded maneuver(s) in {len(runs)} log(s): {', '.join(found)}"
+               + (f"; {len(other)} other log(s) left out" if other else ""))
+    return found
+
+
+def _against_record(staging: Path, subject, logged):
+    """recorded_indices.csv in `staging`: the logged maneuvers' indices beside the model's
+    (`sysid.maneuvers.recorded.record_comparison`); the frame."""
+    from sysid.maneuvers.recorded import record_comparison
+    from sysid.store.files import write_csv
+
+    members = [m for _, m in subject.members] if subject.spread == "seeds" else [subject.model]
+    frame = record_comparison({subject.label: members}, logged)
+    write_csv(frame, staging / "recorded_indices.csv", float_format="%.6g")
+    return frame
+
+
+def _print_record(frame) -> None:
+    import pandas as pd
+    from sysid.maneuvers.recorded import differences
+
+    wide = differences(frame).drop(columns=["maneuver"])
+    with pd.option_context("display.width", 160, "display.max_columns", 20, "display.float_format", "{:.3f}".format):
+        typer.echo(wide.to_string(index=False, na_rep=""))
 
 
 def _print_results(output: Path, results) -> None:

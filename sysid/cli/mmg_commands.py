@@ -7,6 +7,7 @@ from typing import List, Optional
 
 import typer
 
+from sysid import logs
 from sysid.cli.app import app
 from sysid.cli.outputs import claim, ship_file
 from sysid.store.target import OutputKind
@@ -93,7 +94,10 @@ def _read_force_inputs(path: Path):
 
 
 # beyond these a state is not a ship model's: the forces are computed but flagged
-PLAUSIBLE = {"u": 20.0, "v": 20.0, "r": 3.0, "n_prop": 200.0, "wind_velo_true": 60.0}
+PLAUSIBLE = {"u": 20.0, "v": 20.0, "r": 3.0, "n_prop": 200.0, "wind_velo_true": 60.0,
+             "delta_rudder": 1.0}   # rad: no rudder turns 57 deg; 35 is a hard-over angle in degrees
+_UNIT_HINT = {"delta_rudder": " (degrees? the column is in rad)", "r": " (deg/s? the column is in rad/s)",
+              "n_prop": " (rpm? the column is in rps)"}
 
 
 @app.command()
@@ -135,13 +139,15 @@ def forces(
         beyond = np.abs(numeric[name].to_numpy()) > limit
         if beyond.any():
             typer.secho(f"warning: {input_csv}: column {name!r} beyond {limit:g} on {int(beyond.sum())} row(s) "
-                        f"(first at data row {int(np.argmax(beyond)) + 2}): not a ship model's state; "
-                        "forces computed but implausible", fg=typer.colors.YELLOW, err=True)
+                        f"(first at data row {int(np.argmax(beyond)) + 2}): not a ship model's state"
+                        f"{_UNIT_HINT.get(name, '')}; forces computed but implausible", fg=typer.colors.YELLOW,
+                        err=True)
     writing = progress(total=len(result), desc="writing", unit="rows", quiet=len(result) < 100_000)
     write_float_csv(result, output, on_block=writing.update)
     writing.close()
-    typer.echo(f"forces: {len(result)} rows, ship {model.ship.name}, {quadrature} cross-flow -> {output} "
-               f"({time.perf_counter() - start:.2f} s)")
+    if not logs.is_quiet():  # -q: warnings and errors only
+        typer.echo(f"forces: {len(result)} rows, ship {model.ship.name}, {quadrature} cross-flow -> {output} "
+                   f"({time.perf_counter() - start:.2f} s)")
 
 
 @app.command()
@@ -181,6 +187,13 @@ def simulate(
         raise DataError(f"{log}: --horizon {horizon} s from {run.t[i0]:.1f} s runs past the end "
                         f"({run.t[-1]:.1f} s)")
     sl = slice(i0, i0 + steps + 1)
+    uneven = np.abs(np.diff(run.t[sl]) - run.dt) > 1e-3 * run.dt
+    if uneven.any():  # the model steps by dt on the recorded inputs: they must be dt apart
+        k = i0 + int(np.argmax(uneven))
+        raise DataError(f"{log}: samples at t = {run.t[k]:.6g} and {run.t[k + 1]:.6g} s are "
+                        f"{run.t[k + 1] - run.t[k]:.6g} s apart, not the {run.dt:g} s of --rate {rate:g} Hz "
+                        f"({int(uneven.sum())} uneven step(s) in the {horizon:g}-s horizon); choose a --start "
+                        "and --horizon inside an evenly sampled stretch, or resample the log")
     x0 = torch.as_tensor(run.states[i0], dtype=torch.float64)
     inputs = torch.as_tensor(run.inputs[sl], dtype=torch.float64)
     with torch.no_grad():
@@ -206,45 +219,68 @@ def simulate(
 @app.command()
 def evaluate(
     run_dir: Optional[Path] = typer.Argument(None, help="A run directory (sysid train); omit with --model mmg."),
-    data: List[Path] = typer.Option(..., "--data", help="Processed files or directories (repeatable; several may follow one --data)."),
-    horizon: List[float] = typer.Option([30.0, 100.0], "--horizon", help="Horizon [s] (repeatable)."),
+    data: Optional[List[Path]] = typer.Option(None, "--data", help="Processed files or directories (repeatable; several may follow one --data; default: the [data] test logs of --config, else of the run)."),
+    horizon: Optional[List[float]] = typer.Option(None, "--horizon", help="Horizon [s] (repeatable; default: the config's [evaluation] horizons, else 30 and 100)."),
     output: Path = typer.Option(..., "-o", "--output", help="Metrics CSV."),
     model_kind: str = typer.Option("mmg", "--model", help="mmg (the physical model alone)."),
-    integrator: str = typer.Option("euler", "--integrator", help="euler (the protocol's) or rk4."),
-    ship: str = ShipOption,
+    config: Optional[Path] = typer.Option(None, "--config", help="Experiment config: its [data.columns] and [data] rate read the logs, its [data] test logs, [evaluation] horizons and integrator are the defaults; with --model mmg its ship and [mmg] overrides are the MMG's."),
+    integrator: Optional[str] = typer.Option(None, "--integrator", help="euler (the protocol's) or rk4 (default: the config's, else euler)."),
+    ship: Optional[str] = typer.Option(None, "--ship", help="Ship name (configs/ships/NAME.toml) or path to a ship TOML (default: the config's, else esso_osaka)."),
     set_: Optional[List[str]] = SetOption,
     quadrature: str = QuadratureOption,
     compiled: bool = CompiledOption,
 ) -> None:
-    """The protocol's windowed RMSE of u, v_m, r per file and horizon (MMG or a trained run)."""
+    """The protocol's windowed RMSE of u, v_m, r per file and horizon (MMG or a trained run).
+
+    A trained run is shown beside its physics baselines (the ship file's MMG with the run's
+    [mmg] overrides; the identified MMG under a hybrid's FNN) on the same windows, with its
+    verdict (docs: How sysid judges a model)."""
     import pandas as pd
-    from sysid.data.recordings import expand_paths, read_run
+    from sysid.config.experiment import load_experiment
+    from sysid.data.recordings import expand_paths, read_runs
+    from sysid.data.datasets import test_files
+    from sysid.data.splits import config_paths
     from sysid.evaluation.evaluate import evaluate_model, short_runs
     from sysid.store.files import write_csv
     from sysid.config import checks
     from sysid.progress import progress
 
-    chosen = _integrator(integrator, compiled)
-    for h in horizon:
+    for h in horizon or ():
         checks.DURATION.check("--horizon", h)
     start = time.perf_counter()
-    claim(output, OutputKind.FILE, [run_dir, *data, None if run_dir is not None else ship_file(ship)])
-    columns = None
+    exp = load_experiment(config) if config is not None else None
     if run_dir is not None:
         from sysid.runs.rundir import load_model
-        exp, model = load_model(run_dir)
-        label = f"{exp.experiment.model} run {run_dir}"
-        columns = exp.data.columns  # the logs' column names and units, as in training
+        run_exp, model = load_model(run_dir)
+        label = f"{run_exp.experiment.model} run {run_dir}"
     else:
         if model_kind != "mmg":
             raise DataError(f"--model {model_kind!r}: give a run directory for trained models, or --model mmg")
-        model = _model(ship, set_, quadrature)
-        overrides = ", ".join(f"{k}={v:g}" for k, v in model.ship.overrides.items()) or "none"
-        label = f"MMG ({model.ship.name}, overrides: {overrides})"
-    files = expand_paths(data)
-    runs = [read_run(f, columns=columns) for f in progress(files, desc="reading", unit="files", quiet=len(files) < 4)]
-    short = short_runs(runs, horizon)
-    for h in horizon:
+        run_exp = None
+        ship_name = ship or (exp.experiment.ship if exp is not None else "esso_osaka")
+        overrides = [f"{k}={v!r}" for k, v in (exp.mmg.overrides.items() if exp is not None and not ship else ())]
+        model = _model(ship_name, overrides + list(set_ or []), quadrature)
+        shown = ", ".join(f"{k}={v:g}" for k, v in model.ship.overrides.items()) or "none"
+        label = f"MMG ({model.ship.name}, overrides: {shown})"
+    source = exp if exp is not None else run_exp   # where the logs, horizons and integrator come from
+    if data:
+        files, columns = expand_paths(data), source.data.columns if source is not None else None
+    elif source is not None and source.data.test:   # only the test logs need to exist here
+        files, columns = list(config_paths(source.data.test, "test", source.source)), source.data.columns
+    elif source is not None and source.experiment.dataset:
+        files, columns = list(test_files().values()), None   # the paper's six, in the processed schema
+    else:
+        raise DataError("evaluate: no logs: name them with --data, or give --config EXP (or a run) whose "
+                        "[data] test lists them")
+    horizons = list(horizon) if horizon else list(source.evaluation.horizons if source is not None else (30.0, 100.0))
+    chosen = _integrator(integrator or (str(source.evaluation.integrator) if source is not None else "euler"), compiled)
+    ship_input = None if run_dir is not None else ship_file(ship or (exp.experiment.ship if exp is not None
+                                                                     else "esso_osaka"))
+    claim(output, OutputKind.FILE, [run_dir, config, *files, ship_input])
+    rate = source.data.rate if source is not None else 1.0
+    runs = read_runs(progress(files, desc="reading", unit="files", quiet=len(files) < 4), rate, columns)
+    short = short_runs(runs, horizons)
+    for h in horizons:
         if sum(s == h for _, s in short) == len(runs):
             longest = max(r.duration for r in runs)
             raise DataError(f"--horizon {h:g} s: no file is long enough for one window "
@@ -252,9 +288,43 @@ def evaluate(
     for run, h in short:
         typer.secho(f"warning: {run.path}: {len(run)} samples ({run.duration:.0f} s), fewer than one {h:g}-s "
                     "window: its metrics row is empty (n_windows 0)", fg=typer.colors.YELLOW, err=True)
-    table = evaluate_model(model, runs, horizon, chosen, traces=False).metrics
+    table = evaluate_model(model, runs, horizons, chosen, traces=False).metrics
     write_csv(table, output, float_format="%.6g")
     with pd.option_context("display.width", 120, "display.float_format", "{:.5f}".format):
         typer.echo(table.to_string(index=False))
-    typer.echo(f"evaluate: {len(runs)} file(s), horizons {', '.join(f'{h:g}' for h in horizon)} s, "
+    typer.echo(f"evaluate: {len(runs)} file(s), horizons {', '.join(f'{h:g}' for h in horizons)} s, "
                f"{label} -> {output} ({time.perf_counter() - start:.1f} s)")
+    if run_exp is not None:
+        _beside_baselines(run_exp, model, runs, horizons, chosen)
+
+
+def _beside_baselines(exp, model, runs, horizons, method) -> None:
+    """The run's physics baselines on the same windows, their RMSE printed beside the
+    model's, and the model's verdict against each (last line; stderr when not beaten)."""
+    import pandas as pd
+    import torch
+    from sysid.evaluation.comparison import Contender, judge_against_baselines, metrics_of
+    from sysid.evaluation.verdict import MODEL_NAMES
+    from sysid.runs.lifecycle import physics_baselines
+
+    baselines = physics_baselines(exp, model, torch.float64)
+    if not baselines:
+        typer.echo("verdict: none: an MMG used as defined is itself the physics baseline")
+        return
+    name = f"The {MODEL_NAMES.get(str(exp.experiment.model), str(exp.experiment.model))}"
+    errors, verdicts = judge_against_baselines(Contender(name, (model,)),
+                                               [Contender(k, (m,)) for k, m in baselines.items()],
+                                               runs, horizons, method)
+    rows = [metrics_of(errors, name).assign(model=name[4:])]
+    rows += [metrics_of(errors, label).assign(model=label) for label in baselines]
+    side = pd.concat(rows, ignore_index=True)[["file", "horizon_s", "n_windows", "model", "rmse_u", "rmse_v", "rmse_r"]]
+    with pd.option_context("display.width", 140, "display.float_format", "{:.5f}".format):
+        order = {(e.log, e.horizon_s): i for i, e in enumerate(errors)}   # horizon, then the logs' order
+        side = side.iloc[sorted(range(len(side)), key=lambda i: order[(side.file[i], side.horizon_s[i])])]
+        typer.echo("beside its physics baseline(s), on the same windows:\n" + side.to_string(index=False))
+    for judgement in verdicts.values():
+        if judgement.beats:
+            typer.echo("verdict: " + judgement.sentence)
+        else:
+            typer.secho("WARNING: " + judgement.sentence, fg=typer.colors.YELLOW, err=True)
+

@@ -10,6 +10,7 @@ from contextlib import ExitStack
 from pathlib import Path
 
 _held = ExitStack()
+_made: list[Path] = []   # folders the command's outputs created, deepest first: removed if it fails
 
 
 def hold(target):
@@ -22,14 +23,25 @@ def hold(target):
 def claim(path: str | os.PathLike, kind, inputs=(), overwrite: bool = False, **options):
     """The command's output target (`OutputTarget.checked`: `kind` an `OutputKind`), checked
     and held (`hold`)."""
-    from sysid.store.target import OutputTarget
+    from sysid.store.target import OutputKind, OutputTarget
 
+    folder = Path(path) if OutputKind(kind) is OutputKind.REPORT else Path(path).parent
+    missing = [p for p in [folder.absolute(), *folder.absolute().parents] if not p.exists()]
+    _made.extend(missing)  # before the check, which creates them
     return hold(OutputTarget.checked(path, kind, inputs, overwrite, **options))
 
 
-def release() -> None:
-    """Release every lock the command took (its lock files removed)."""
+def release(failed: bool = False) -> None:
+    """Release every lock the command took (its lock files removed); `failed`: also remove
+    the folders its outputs created, if still empty (a refused command leaves no folder)."""
     _held.close()
+    if failed:
+        for folder in _made:
+            try:
+                os.rmdir(folder)
+            except OSError:  # not empty, or gone: left as it is
+                pass
+    _made.clear()
 
 
 def ship_file(name_or_path: str | os.PathLike) -> Path | None:

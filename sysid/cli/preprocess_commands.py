@@ -59,6 +59,7 @@ def synth_raw(
     """Synthesise a raw 10 Hz log (and its truth) from a processed run."""
     from preprocessing import synth
     from preprocessing.schema import RawLogError
+    from sysid.data.csvfiles import read_csv_table
     from sysid.store.files import write_csv
     from sysid.mmg.ship import load_ship
     from sysid.config import checks
@@ -80,9 +81,10 @@ def synth_raw(
         seed=seed, gnss_noise=gnss_noise, gnss_correlated=gnss_correlated, outliers=outliers,
         dropouts=tuple(_parse_dropout(d) for item in (dropout or []) for d in item.split(",")),
         dropout_rows=dropout_rows,
-        latlon=latlon, **kwargs)
+        latlon=latlon, **kwargs)  # type: ignore[arg-type]
     try:
-        run = synth.read_processed(processed)
+        run = synth.processed_run(read_csv_table(processed, "a processed run with the header 'name [unit]'"),
+                                  processed)
         room = max(0, len(run) - 2 * synth.OUTLIER_MARGIN)
         checks.Range(0, room, whole=True, reason=f"rows of {processed} away from its ends").check("--outliers", outliers)
         result = synth.synthesise(run, layout, settings)
@@ -137,7 +139,8 @@ def preprocess(
         stems[p.stem] = p
     for p in raw:
         if not p.is_file():
-            raise DataError(f"{p}: file not found")
+            from sysid.data.csvfiles import not_a_file
+            raise DataError(f"{p}: {not_a_file(p)}")
     target = claim(outdir, OutputKind.PREPROCESSING, [*raw, ship_file(ship)], overwrite)  # before any work
     layout = load_ship(ship).sensors
     paths = [str(p) for p in raw]
@@ -150,20 +153,47 @@ def preprocess(
             work = functools.partial(pipeline.process_file, layout=layout, settings=settings, outdir=str(staging))
             results = in_workers(work, paths, jobs, on_result=lambda r: bar.update())
         else:
-            for p in paths:
-                results.append(pipeline.process_file(p, layout, settings, str(staging)))
+            for p in paths:  # type: ignore[assignment]
+                results.append(pipeline.process_file(p, layout, settings, str(staging)))  # type: ignore[arg-type]
                 bar.update()
         bar.close()
+        unwritten = next((r for r in results if r.get("write_error") is not None), None)
+        if unwritten is not None:  # the output cannot be written (a full disk): no file is kept
+            from sysid.store.files import write_failure
+            raise write_failure(OSError(unwritten["write_error"], unwritten["error"]), outdir)
         if not any(r["ok"] for r in results):
             for r in results:
                 typer.secho(f"error: {r['error']}", fg=typer.colors.RED, err=True)
             raise SystemExit(1)  # nothing to move into place: no output directory at all
+        _check_tracks(results)  # a clear mismatch: nothing moved into place
     order = {p: i for i, p in enumerate(paths)}
     results.sort(key=lambda r: order[r["file"]])
     _summary(results, outdir, time.perf_counter() - start)
     failed = [r for r in results if not r["ok"]]
     if failed:
         raise SystemExit(1)  # (typer.Exit is swallowed by standalone_mode=False)
+
+
+def _check_tracks(results: list[dict]) -> None:
+    """Each processed output against its own GNSS track (`sysid.data.consistency`): a clear
+    mismatch is a `DataError`, a line per output naming the raw log; a marginal one a warning."""
+    from sysid import logs
+    from sysid.data.consistency import Verdict
+    from sysid.data.recordings import log_track
+
+    errors = []
+    for r in results:
+        for out in r.get("outputs", []) if r["ok"] else []:
+            if not out.endswith(".csv"):
+                continue
+            found = log_track(out)
+            where = f"{r['file']}: its processed log {Path(out).name}"
+            errors += [f"{where}: {c.sentence()} (the raw log's units or signs; docs: Input formats)"
+                       for c in found.worst(Verdict.MISMATCH)]
+            for c in found.worst(Verdict.MARGINAL):
+                logs.warning(f"{where}: {c.sentence()} (marginal; docs: Input formats, the track check)")
+    if errors:
+        raise DataError("\n".join(errors))
 
 
 def _summary(results: list[dict], outdir: Path, seconds: float) -> None:

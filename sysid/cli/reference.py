@@ -26,7 +26,8 @@ def _command_markdown(command, ctx, path: str) -> list[str]:
 def markdown() -> str:
     """Every command of `sysid`, with its usage, help and options, as Markdown."""
     root = typer.main.get_command(app)
-    root_ctx = root.context_class(root, info_name="sysid")
+    # a fixed width: the page is the same whatever terminal generates it
+    root_ctx = root.context_class(root, info_name="sysid", terminal_width=100, max_content_width=100)
     lines = [_cell(EPILOG), "", "## `sysid`", "", "```", root.get_usage(root_ctx), "```", "",
              "| option | meaning |", "|---|---|"]
     lines += [f"| `{_cell(o)}` | {_cell(t)} |" for o, t in filter(None, (p.get_help_record(root_ctx)
@@ -46,5 +47,25 @@ def markdown() -> str:
     return "\n".join(lines)
 
 
+MARKER = "<!-- generated: cli-reference (python -m sysid.cli.reference --write); edit above this line -->"
+PAGE = "docs/reference/cli.md"   # relative to the repository's root
+
+
+def main(argv=None) -> int:
+    """``python -m sysid.cli.reference``: print the reference; ``--write`` writes it into
+    ``docs/reference/cli.md`` below its marker; ``--check`` exits 1 when that page differs."""
+    import sys
+    from pathlib import Path
+
+    from sysid.config.reference import regenerate
+
+    args = sys.argv[1:] if argv is None else list(argv)
+    if not {"--write", "--check"} & set(args):
+        print(markdown())
+        return 0
+    same = regenerate(Path(__file__).resolve().parents[2] / PAGE, MARKER, markdown(), "--write" in args)
+    return 0 if same or "--write" in args else 1
+
+
 if __name__ == "__main__":
-    print(markdown())
+    raise SystemExit(main())

@@ -21,8 +21,8 @@ def sweep(
     workers: Optional[int] = typer.Option(None, "--workers", help="Trials side by side (default: one per core locally, one per CPU on a cluster)."),
     resume: bool = typer.Option(False, "--resume", help="Continue an interrupted sweep: finished trials are kept."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing sweep directory."),
-    data: Optional[Path] = typer.Option(None, "--data", help="Dataset root (default: SYSID_DATA or ../shared/data/frt-ds-esso)."),
-    storage: Optional[str] = typer.Option(None, "--storage", help="Tune's experiment here (a shared path or a URI such as s3://bucket/dir) instead of OUTPUT/tune."),
+    data: Optional[Path] = typer.Option(None, "--data", help="The paper's FRT-DS-ESSO root, read only when the config names dataset = \"D1\" or \"D2\" (default: SYSID_DATA or ../shared/data/frt-ds-esso)."),
+    storage: Optional[str] = typer.Option(None, "--storage", help="Tune's experiment in STORAGE/NAME ([sweep] name) instead of OUTPUT/tune: a folder (the rules of -o: not an input, nor a folder of the sweep's logs) or a URI such as s3://bucket/dir."),
     mlflow: Optional[str] = typer.Option(None, "--mlflow", help="Log the sweep and every trial to this MLflow tracking URI (a path: a file store); overrides [tracking] mlflow."),
 ) -> None:
     """Train every configuration x seed of a sweep on Ray Tune; choose on validation loss.
@@ -47,6 +47,9 @@ def sweep(
     inputs = [sweep_file, spec.base_path, *experiment_inputs(spec.base, data)]
     claim(output, OutputKind.SWEEP, inputs, overwrite, resume=resume)
     on_interrupt(f"finished trials are kept in {output}/trials; rerun with --resume to continue the sweep")
+    from sysid.cli.outputs import release
+    from sysid.sweep.connect import on_cluster_lost
+    on_cluster_lost(release)   # a cluster lost mid-sweep ends the process: its lock goes first
     results, summary = run_sweep(spec, output, workers, address, resume, overwrite, data,
                                  log=logs.info, storage=storage, mlflow=mlflow)
     if len(results.points):

@@ -12,6 +12,7 @@ from sysid import logs
 from sysid.cli.app import app
 from sysid.cli.interrupts import on_interrupt
 from sysid.cli.outputs import claim, experiment_inputs
+from sysid.config.choices import Solver
 from sysid.store.target import OutputKind
 
 
@@ -32,6 +33,7 @@ def train(
     The run directory is moved into place only when complete (with a manifest); an
     interrupted training leaves no run, only its checkpoint for --resume.
     """
+    from sysid.data.display_units import DisplayUnits
     from sysid.data.recordings import expand_paths
     from sysid.config import checks
     from sysid.config.choices import Validation
@@ -45,6 +47,10 @@ def train(
     if threads is not None:
         checks.threads("--threads", threads)
     exp = load_experiment(config)
+    if exp.ensemble.members:  # a run of averaged trained runs: nothing to train, and no weights of its own
+        raise ConfigError(f"{config}: [ensemble] members: sysid train trains one model, and its run would name "
+                          "members relative to a run directory they are not beside; remove [ensemble] (an "
+                          "ensemble of seeds is written by sysid reproduce --seeds N)")
     if epochs is not None:
         exp = exp.replace(training={"epochs": epochs})
     if threads is not None:
@@ -85,7 +91,7 @@ def train(
     if mlflow:
         from sysid.tracking import EpochLogger, Tracker, config_params
         tracker = Tracker(mlflow, exp.experiment.name)
-        tracked = tracker.start(output.name, config_params(exp.to_toml()),
+        tracked = tracker.start(output.name, config_params(exp),
                                 tags={"sysid.kind": "run", "sysid.output": str(output.resolve())})
     try:
         result = run_experiment(exp, output, tests, runs, data, log=logs.indented(), resume=resume,
@@ -107,7 +113,7 @@ def train(
     detail = ""
     if t is not None:
         steps = []
-        if (t.identification or {}).get("solver") == "levenberg_marquardt":  # no epochs in that stage
+        if (t.identification or {}).get("solver") == Solver.LEVENBERG_MARQUARDT:  # no epochs in that stage
             steps.append(f"{t.identification['iterations']} Levenberg-Marquardt iterations")
         if not steps or "train" in t.stopped:
             steps.append(f"{t.epochs} epochs, best {t.best_epoch}")
@@ -118,6 +124,10 @@ def train(
             typer.echo("verdict: " + result.verdict.statement())
         else:  # the last line, on stderr
             typer.secho(result.verdict.warning(), fg=typer.colors.YELLOW, err=True)
+        units = DisplayUnits.of(exp.data.columns)
+        if not units.si and units.verdict_cells(result.verdict):  # the user's units ([data.columns])
+            typer.echo(f"verdict in your units (vs {result.verdict.baselines[0]}): "
+                       f"{units.verdict_cells(result.verdict)}", err=not result.verdict.beats_baseline)
 
 
 @app.command()
@@ -191,13 +201,18 @@ def reproduce(
 
 
 def _warn_below_baseline(output: Path) -> None:
-    """A WARNING on stderr for every run of a reproduction that does not beat its physics
-    baseline (`RunSummary.beats_baseline` false), with its verdict's statement."""
+    """Every run's verdict: a WARNING on stderr for a run of a reproduction that does not beat
+    its physics baseline (`RunSummary.beats_baseline` false), a "verdict:" line otherwise,
+    each with its verdict's statement (evidence, interval and worst cells)."""
     from sysid.runs.directory import RunDir
 
     runs = output / "runs"
     for path in sorted(runs.glob("**/summary.json")):
         summary = RunDir(path.parent).read_summary()
-        if summary.beats_baseline is False and summary.verdict is not None:
+        if summary.verdict is None:
+            continue
+        if summary.beats_baseline is False:
             typer.secho(f"WARNING: run {path.parent.relative_to(runs)}: {summary.verdict.statement}",
                         fg=typer.colors.YELLOW, err=True)
+        else:
+            typer.echo(f"verdict: run {path.parent.relative_to(runs)}: {summary.verdict.statement}")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from dataclasses import dataclass
 
 from sysid.errors import OptionError
@@ -124,3 +125,22 @@ def whole_samples(name: str, seconds: float, dt: float, error: ErrorType = Optio
         raise error(f"{name} {shown(seconds)}: not a whole number of the data's {dt:g}-s samples "
                     f"(the nearest is {whole:g} s)")
     return samples
+
+
+# a name that becomes one file or folder name: ASCII only, no separator, never "." or ".."
+_COMPONENT = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.,=+-]*")
+_STRICT_COMPONENT = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]*")
+MAX_COMPONENT = 120
+
+
+def path_component(name: str, value, error: ErrorType = OptionError, strict: bool = False) -> str:
+    """`value` if it is a safe single path component (a file or folder name on any system):
+    ASCII letters A-Z a-z and digits 0-9 first, then those and ``_ - . , = +`` (`strict`:
+    ``_`` and ``-`` only), at most `MAX_COMPONENT` characters; else `error` stating that rule."""
+    allowed = "'_' and '-'" if strict else "'_', '-', '.', ',', '=' and '+'"
+    rule = _STRICT_COMPONENT if strict else _COMPONENT
+    if not isinstance(value, str) or not rule.fullmatch(value) or len(value) > MAX_COMPONENT:
+        raise error(f"{name} = {value!r}: a name here becomes a file or folder name, so it is ASCII letters "
+                    f"(A-Z, a-z) and digits (0-9) followed by those, {allowed}, at most {MAX_COMPONENT} "
+                    "characters (no spaces, accents or other scripts, no '/')")
+    return value

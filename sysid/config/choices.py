@@ -8,6 +8,7 @@ of ``summary.json``, so they are written out as the same strings they were read 
 from __future__ import annotations
 
 import enum
+import typing
 
 
 class Choice(enum.StrEnum):
@@ -29,7 +30,7 @@ class Choice(enum.StrEnum):
         return ", ".join(m.value for m in cls.offered())
 
     @classmethod
-    def parse(cls, value: "Choice | str", where: str | None = None, offered_only: bool = False):
+    def parse(cls, value: "Choice | str", where: str | None = None, offered_only: bool = False) -> typing.Self:
         """The member named `value` (or `value` itself); ValueError naming the choices
         otherwise: ``"{where} = 'x': choose one of a, b"`` (``"--option 'x': ..."`` for an
         option). `offered_only`: only the members a config or command line may name."""
@@ -39,7 +40,7 @@ class Choice(enum.StrEnum):
         if isinstance(value, str) and not isinstance(value, Choice):
             for member in choices:
                 if member.value == value:
-                    return member
+                    return typing.cast(typing.Self, member)
         listing = ", ".join(m.value for m in choices)
         where = where or cls.what()
         said = f"{where} {value!r}" if where.startswith("--") else f"{where} = {value!r}"  # an option, a key

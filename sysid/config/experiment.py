@@ -50,14 +50,17 @@ the config file that names it (`load_experiment`); a resolved config holds absol
 from __future__ import annotations
 
 import dataclasses
+import enum
 import math
 import os
+import re
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from sysid.data.columns import ColumnMap, parse_columns
+from sysid.config.column_map import ColumnMap, parse_columns
 from sysid.config.choices import Choice, DType, GateSpace, Method, ModelKind, Solver, Stage, StartStates, Validation
+from sysid.config.checks import path_component
 from sysid.errors import ConfigError
 from sysid.mmg.ship import parameter_name
 from sysid.store.toml_file import read_toml
@@ -147,7 +150,7 @@ class TrainingOptions(_Options):
     max_minutes: float = 0.0       # 0: off; > 0: a safety limit whose hit fails the run
     threads: int = 1               # torch intra-op threads; 0: one per core
     warm_start_epochs: int = 150   # one-step regression on the implied residual force
-    objective_s: float = 0.0       # horizon [s] of val_loss_multistep (the run's validation loss); 0: T steps
+    objective_s: float = 0.0       # horizon [s] of val_loss_multistep (the run's validation loss); 0: [evaluation] horizons
     dtype: DType = DType.FLOAT32
     device: str = "auto"           # auto (CUDA when present) | cpu | cuda | cuda:N
 
@@ -228,20 +231,36 @@ class Experiment:
             changes[name] = dataclasses.replace(getattr(self, name), **values)
         return dataclasses.replace(self, **changes)
 
+    def to_table(self) -> dict[str, dict[str, Any]]:
+        """The resolved config as the TOML document `to_toml` writes (every default filled
+        in): section -> option -> plain value (choices as their words, arrays as lists), as
+        ``tomllib.loads(exp.to_toml())`` reads it back."""
+        return {section.name: {f.name: _plain(getattr(getattr(self, section.name), f.name))
+                               for f in fields(getattr(self, section.name))}
+                for section in fields(self) if section.name != "source"}
+
     def to_toml(self) -> str:
         """The resolved config as TOML (every default filled in)."""
         lines = []
-        for section in fields(self):
-            if section.name == "source":
-                continue
-            lines.append(f"[{section.name}]")
-            for f in fields(getattr(self, section.name)):
-                value = getattr(getattr(self, section.name), f.name)
-                if isinstance(value, ColumnMap):
-                    value = value.as_table()
-                lines.append(f"{f.name} = {_toml_value(value)}")
+        for section, options in self.to_table().items():
+            lines.append(f"[{section}]")
+            lines += [f"{name} = {_toml_value(value)}" for name, value in options.items()]
             lines.append("")
         return "\n".join(lines)
+
+
+def _plain(value: Any) -> Any:
+    """An option's value as TOML data: a choice as its word, a tuple as a list, a column
+    map as its ``[data.columns]`` table."""
+    if isinstance(value, ColumnMap):
+        return value.as_table()
+    if isinstance(value, enum.Enum):
+        return value.value
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    return value
 
 
 def _toml_value(value: Any) -> str:
@@ -364,11 +383,11 @@ def _validate(exp: Experiment, src: str) -> None:
         (min(t.lambda_v, t.lambda_F, t.lambda_L2) >= 0, "[training] lambdas must be >= 0"),
         (t.force_band >= 0, "[training] force_band must be >= 0 (the paper's 0.2)"),
         (t.patience >= 1, "[training] patience must be >= 1"),
-        (t.objective_s >= 0, "[training] objective_s must be >= 0 (0: the training steps T)"),
+        (t.objective_s >= 0, "[training] objective_s must be >= 0 (0: the [evaluation] horizons)"),
         (t.max_minutes >= 0, "[training] max_minutes must be >= 0 (0: no wall-clock limit)"),
         (t.threads >= 0, "[training] threads must be >= 0 (0: one per core)"),
-        (t.device == "auto" or t.device == "cpu" or t.device.startswith("cuda"),
-         "[training] device must be auto, cpu or cuda[:N]"),
+        (re.fullmatch(r"auto|cpu|cuda(:\d{1,3})?", t.device) is not None,
+         f"[training] device = {t.device!r}: must be auto, cpu, cuda or cuda:N (N the GPU's number, e.g. cuda:0)"),
         (g.k >= 1, "[gate] k must be >= 1"),
         (0.0 < g.alpha < 1.0, "[gate] alpha must be in (0, 1)"),
         (i.solver is Solver.LEVENBERG_MARQUARDT or i.start_states is StartStates.RECORDED,
@@ -383,8 +402,8 @@ def _validate(exp: Experiment, src: str) -> None:
          "the FNN) needs solver = \"gradient\""),
         (i.solver is Solver.GRADIENT or bool(i.parameters),
          "[identify] solver = \"levenberg_marquardt\" needs parameters to identify"),
-        (e.seed >= 0, f"[experiment] seed = {e.seed}: must be >= 0"),
-        (t.split_seed >= 0, f"[training] split_seed = {t.split_seed}: must be >= 0"),
+        (0 <= e.seed < 2 ** 32, f"[experiment] seed = {e.seed}: must be >= 0 and < 2^32 (4294967296)"),
+        (0 <= t.split_seed < 2 ** 32, f"[training] split_seed = {t.split_seed}: must be >= 0 and < 2^32 (4294967296)"),
         (len(exp.evaluation.horizons) > 0, "[evaluation] horizons must list at least one horizon [s]"),
         (all(h > 0 for h in exp.evaluation.horizons), "[evaluation] horizons must be > 0"),
         (all(w <= MAX_WIDTH for w in exp.network.hidden), f"[network] hidden widths must be <= {MAX_WIDTH}"),
@@ -497,7 +516,9 @@ def load_experiment(path: str | os.PathLike) -> Experiment:
     resolve against the file's directory, wherever the command runs."""
     path = Path(path)
     doc, _ = read_toml(path, "config file", ConfigError)
-    return parse_experiment(doc, str(path), path.resolve().parent)
+    exp = parse_experiment(doc, str(path), path.resolve().parent)
+    path_component(f"{path}: [experiment] name", exp.experiment.name, ConfigError)
+    return exp
 
 
 def ship_overrides(exp: Experiment) -> dict[str, float]:

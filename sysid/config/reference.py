@@ -122,8 +122,9 @@ KEYS: dict[tuple[str, str], KeyDoc] = {
     ("training", "warm_start_epochs"): KeyDoc("epochs", "Before the multi-step training, the FNN regresses the "
                                                         "force the MMG leaves unexplained, one step at a time; "
                                                         "0: no warm start."),
-    ("training", "objective_s"): KeyDoc("s", "Horizon of the run's final validation loss (`val_loss` in "
-                                             "summary.json, what sweeps rank on); 0: the training windows' T steps."),
+    ("training", "objective_s"): KeyDoc("s", "Horizon of the run's final validation loss (`val_loss_multistep` in "
+                                             "summary.json, what sweeps rank on); 0: the `[evaluation] horizons`, "
+                                             "the horizons the verdict judges (one definition of good)."),
     ("training", "dtype"): KeyDoc("", "Floating-point type of training: `float32` or `float64`."),
     ("training", "device"): KeyDoc("", "`auto` (CUDA when present, else CPU), `cpu`, `cuda` or `cuda:N`."),
     ("gate", "enabled"): KeyDoc("", "Use the kNN gate: the FNN's correction is switched off where the state is "
@@ -149,8 +150,10 @@ KEYS: dict[tuple[str, str], KeyDoc] = {
     ("identify", "prior_weight"): KeyDoc("", "lambda >= 0 of a pull toward the ship file's values "
                                              "(levenberg_marquardt only); 0: none."),
     ("identify", "iterations"): KeyDoc("", "Iteration limit of levenberg_marquardt."),
-    ("evaluation", "horizons"): KeyDoc("s", "Prediction horizons of the test scores (RMSE of u, v_m, r over "
-                                            "consecutive windows of each test file)."),
+    ("evaluation", "horizons"): KeyDoc("s", "Prediction horizons that define a good model: the test scores (RMSE "
+                                            "of u, v_m, r over consecutive windows of each test file) and the "
+                                            "verdict are at them, and so is the validation loss sweeps rank on "
+                                            "(unless `[training] objective_s` is set)."),
     ("evaluation", "integrator"): KeyDoc("", "Integration rule of the test predictions: `euler` (as trained, "
                                              "the paper's) or `rk4`."),
     ("ensemble", "members"): KeyDoc("", "Run directories (relative to this run's) whose models' forces are "
@@ -215,7 +218,7 @@ def _type_name(hint) -> str:
 def _default(f: dataclasses.Field):
     if f.default is not dataclasses.MISSING:
         return f.default
-    return f.default_factory()  # type: ignore[misc]
+    return f.default_factory()  # type: ignore[operator]
 
 
 def sections() -> list[tuple[str, type]]:
@@ -262,5 +265,46 @@ def markdown() -> str:
     return "\n".join(lines)
 
 
+MARKER = "<!-- generated: config-reference (python -m sysid.config.reference --write); edit above this line -->"
+
+
+def generated_page(page: str, marker: str, generated: str) -> str:
+    """A docs page whose part below its `marker` line is `generated`: the text above the
+    marker kept as written, the marker, then the generated text (one newline at the end)."""
+    if marker not in page:
+        raise ValueError(f"the page has no line {marker!r}")
+    return page[:page.index(marker) + len(marker)] + "\n\n" + generated.strip("\n") + "\n"
+
+
+def regenerate(path, marker: str, generated: str, write: bool) -> bool:
+    """Whether the page at `path` is what `generated_page` makes of it; with `write`, make
+    it so."""
+    from pathlib import Path
+
+    path = Path(path)
+    page = path.read_text()
+    wanted = generated_page(page, marker, generated)
+    if write and wanted != page:
+        path.write_text(wanted)
+    return wanted == page
+
+
+PAGE = "docs/reference/config.md"   # relative to the repository's root
+
+
+def main(argv=None) -> int:
+    """``python -m sysid.config.reference``: print the reference; ``--write`` writes it into
+    ``docs/reference/config.md`` below its marker; ``--check`` exits 1 when that page differs."""
+    import sys
+    from pathlib import Path
+
+    args = sys.argv[1:] if argv is None else list(argv)
+    if not {"--write", "--check"} & set(args):
+        print(markdown())
+        return 0
+    same = regenerate(Path(__file__).resolve().parents[2] / PAGE, MARKER, markdown(), "--write" in args)
+    return 0 if same or "--write" in args else 1
+
+
 if __name__ == "__main__":
-    print(markdown())
+    raise SystemExit(main())

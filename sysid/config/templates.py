@@ -160,7 +160,7 @@ def _data_keys() -> set[str]:
 
 # keys `sysid init` sets for the user's project (others keep the typed config's default)
 def _project_values(name: str, ship_file: str) -> dict[tuple[str, str], object]:
-    values = {("experiment", "name"): name, ("experiment", "model"): "hybrid", ("experiment", "ship"): ship_file}
+    values: dict[tuple[str, str], object] = {("experiment", "name"): name, ("experiment", "model"): "hybrid", ("experiment", "ship"): ship_file}
     if "train" in _data_keys():  # training and test logs named in the config
         values.update({("data", "train"): ["logs/*.csv"], ("data", "test"): ["test/*.csv"]})
     else:
@@ -243,11 +243,13 @@ def project_files(folder: str | Path, ship: str = "my_ship") -> Project:
     """The ship file, experiment config and next steps of a project in `folder` whose ship is
     called `ship` (a file name without ``.toml``: letters, digits, ``_`` and ``-``)."""
     if not NAME.match(ship):
-        raise ConfigError(f"--ship {ship!r}: a ship name is letters, digits, '_' and '-' (it names the "
-                          f"file {ship}.toml); choose e.g. --ship my_tanker")
+        raise ConfigError(f"--ship {ship!r}: a ship name becomes the file name {ship}.toml, so it is ASCII "
+                          "letters (A-Z, a-z) and digits (0-9) followed by those, '_' and '-' (no spaces, accents "
+                          "or other scripts); choose e.g. --ship my_tanker")
     folder = Path(folder)
     ship_file, config_file = f"{ship}.toml", "experiment.toml"
-    name = folder.resolve().name or "experiment"
+    # the experiment's name is the folder's, made a safe file name (`sysid.config.checks.path_component`)
+    name = re.sub(r"[^A-Za-z0-9_.,=+-]", "_", folder.resolve().name).lstrip("._,=+-")[:100] or "experiment"
     steps = next_steps(str(folder), ship_file, config_file)
     return Project(folder, {ship_file: ship_template(ship), config_file: experiment_template(name, ship_file),
                             "NEXT_STEPS.md": steps}, steps)

@@ -1,2 +1,3 @@
 """Processed recordings: runs and windows (`recordings`), the paper's datasets and test files
-(`datasets`), and reading a user's CSV with one clear error (`csvfiles`)."""
+(`datasets`), the maneuver a log records (`scenario`), and reading a user's CSV with one
+clear error (`csvfiles`)."""

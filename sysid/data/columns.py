@@ -1,212 +1,78 @@
-"""A log's own column names and units mapped onto sysid's channels (``[data.columns]``).
-
-sysid reads 13 channels (`CHANNELS`), in SI units: ``t`` [s], ``x``, ``y`` [m], ``u``, ``v``
-(v_m at midship) [m/s], ``psi`` [rad], ``r`` [rad/s], ``n_prop`` [rps], ``delta_rudder``
-[rad], ``wind_velo_true``, ``wind_velo_relative`` [m/s], ``wind_dir_true``,
-``wind_dir_relative`` [rad]. By default a channel is the processed schema's column (``u_velo
-[m/s]``, ...). ``[data.columns]`` names another column, and its unit, per channel::
-
-    [data.columns]
-    t = "time"                                   # a column name; unit: the "[...]" in it, else SI
-    u = { column = "STW", unit = "knots" }       # a column and its unit, converted to m/s
-    psi = { column = "heading", unit = "deg" }
-    n_prop = { column = "shaft", unit = "rpm" }
-    wind_velo_true = 0.0                         # a number: the channel is constant (SI)
-
-Without relative-wind columns the relative wind is computed from the state and true wind.
-Every error names the file, the column and the fix.
-"""
+"""A log's columns read as sysid's channels (`to_channels`) through the config's
+`sysid.config.column_map.ColumnMap` (``[data.columns]``; its names stay importable here)."""
 from __future__ import annotations
-
-import math
-import re
-from dataclasses import dataclass, field
-from typing import Any, Mapping
 
 import numpy as np
 import pandas as pd
 
-from preprocessing.schema import PROCESSED, PROCESSED_CHANNEL
+from sysid.config.column_map import (CHANNELS, DEFAULT_COLUMNS, QUANTITY, RELATIVE_WIND, SI_UNIT,  # noqa: F401
+                                     UNITS, ColumnMap, ColumnSpec, parse_columns, unit_factor)
 from sysid.errors import ConfigError, DataError
 
-# channel -> the processed schema's header (the default column)
-DEFAULT_COLUMNS = {channel: f"{name} [{PROCESSED[name]}]" for name, channel in PROCESSED_CHANNEL.items()}
-CHANNELS = tuple(DEFAULT_COLUMNS)
-RELATIVE_WIND = ("wind_velo_relative", "wind_dir_relative")
 
-# quantity -> {unit spelling: factor to SI}
-UNITS: dict[str, dict[str, float]] = {
-    "time": {"s": 1.0, "sec": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0},
-    "length": {"m": 1.0, "km": 1000.0, "ft": 0.3048, "nmi": 1852.0},
-    "speed": {"m/s": 1.0, "knots": 1852.0 / 3600.0, "knot": 1852.0 / 3600.0, "kn": 1852.0 / 3600.0,
-              "kt": 1852.0 / 3600.0, "kts": 1852.0 / 3600.0, "km/h": 1.0 / 3.6, "ft/s": 0.3048},
-    "angle": {"rad": 1.0, "deg": math.pi / 180.0, "degrees": math.pi / 180.0, "°": math.pi / 180.0},
-    "angular rate": {"rad/s": 1.0, "deg/s": math.pi / 180.0, "°/s": math.pi / 180.0,
-                     "deg/min": math.pi / 180.0 / 60.0, "rad/min": 1.0 / 60.0},
-    "revolutions": {"rps": 1.0, "1/s": 1.0, "hz": 1.0, "rev/s": 1.0, "rpm": 1.0 / 60.0, "1/min": 1.0 / 60.0,
-                    "rev/min": 1.0 / 60.0},
-}
-QUANTITY = {"t": "time", "x": "length", "y": "length", "u": "speed", "v": "speed", "psi": "angle",
-            "r": "angular rate", "n_prop": "revolutions", "delta_rudder": "angle",
-            "wind_velo_relative": "speed", "wind_dir_relative": "angle", "wind_velo_true": "speed",
-            "wind_dir_true": "angle"}
-SI_UNIT = {channel: PROCESSED[name] for name, channel in PROCESSED_CHANNEL.items()}
-_ALIASES = {"degree": "deg", "degs": "deg", "deg/sec": "deg/s", "rad/sec": "rad/s", "m/sec": "m/s",
-            "degrees/s": "deg/s", "knt": "kn"}
-_BRACKET = re.compile(r"\[([^\]]+)\]\s*$")
+def to_channels(columns: ColumnMap, frame: pd.DataFrame, path) -> pd.DataFrame:
+    """The log's columns (`frame`, read from `path`) as sysid's channels by `columns`
+    (`CHANNELS` order, SI units, float).
 
-
-def unit_factor(unit: str, channel: str, where: str) -> float:
-    """The factor taking `unit` to the channel's SI unit, or `ConfigError` naming the units
-    the channel takes."""
-    quantity = QUANTITY[channel]
-    factors = UNITS[quantity]
-    key = unit.strip().lower()
-    key = _ALIASES.get(key, key)
-    if key in factors:
-        return factors[key]
-    other = next((q for q, table in UNITS.items() if key in table), None)
-    what = f"is a unit of {other}" if other else "is not a unit sysid knows"
-    raise ConfigError(f"{where}: unit {unit!r} {what}; channel {channel} is a{'n' if quantity[0] in 'aeiou' else ''} "
-                      f"{quantity}: use one of {', '.join(dict.fromkeys(factors))}")
-
-
-@dataclass(frozen=True)
-class ColumnSpec:
-    """Where one channel comes from: a column of the log in `unit`, or a constant (SI)."""
-
-    channel: str
-    column: str = ""
-    unit: str = ""                 # "" : the "[unit]" in the column name, else the SI unit
-    constant: float | None = None  # the channel's value everywhere [SI], instead of a column
-
-    @property
-    def factor(self) -> float:
-        return unit_factor(self.resolved_unit, self.channel, f"[data.columns] {self.channel}")
-
-    @property
-    def resolved_unit(self) -> str:
-        if self.unit:
-            return self.unit
-        found = _BRACKET.search(self.column)
-        return found.group(1) if found else SI_UNIT[self.channel]
-
-    def as_toml(self) -> Any:
-        if self.constant is not None:
-            return self.constant
-        return {"column": self.column, "unit": self.unit} if self.unit else self.column
-
-
-@dataclass(frozen=True)
-class ColumnMap:
-    """Channel -> `ColumnSpec` for the channels a config maps; the others keep the processed
-    schema's columns (`DEFAULT_COLUMNS`). `source` names the config in error messages."""
-
-    specs: tuple[ColumnSpec, ...] = ()
-    source: str = field(default="", compare=False)
-
-    def spec(self, channel: str) -> ColumnSpec:
-        mine = next((s for s in self.specs if s.channel == channel), None)
-        return mine if mine is not None else ColumnSpec(channel, DEFAULT_COLUMNS[channel])
-
-    def as_table(self) -> dict:
-        """The ``[data.columns]`` table this map was read from (for the resolved config)."""
-        return {s.channel: s.as_toml() for s in self.specs}
-
-    def to_channels(self, frame: pd.DataFrame, path) -> pd.DataFrame:
-        """The log's columns as sysid's channels (`CHANNELS` order, SI units, float).
-
-        The relative wind, when neither mapped nor present, is NaN here (`read_run`
-        computes it from the state). Raises `DataError` naming the file, the column and
-        the fix."""
-        out, missing = {}, []
-        mapped = {s.channel for s in self.specs}
-        where = f" ([data.columns] in {self.source})" if self.source and self.specs else ""
-        for channel in CHANNELS:
-            spec = self.spec(channel)
-            if spec.constant is not None:
-                out[channel] = np.full(len(frame), float(spec.constant))
-                continue
-            if spec.column not in frame.columns:
-                if channel in RELATIVE_WIND and channel not in mapped:  # computed by read_run
-                    out[channel] = np.full(len(frame), np.nan)
-                else:
-                    missing.append(spec)
-                continue
-            values = pd.to_numeric(frame[spec.column], errors="coerce")
-            text = frame[spec.column].notna() & values.isna()
-            if text.any():
-                row = int(np.argmax(text.to_numpy()))
-                raise DataError(f"{path}: column {spec.column!r} (channel {channel}) holds "
-                                f"{frame[spec.column].iloc[row]!r} at data row {row + 2}, not a number; "
-                                "write numbers only (no units or text in the cells)")
-            try:
-                factor = spec.factor
-            except ConfigError as exc:  # a unit in a header the config did not name
-                raise DataError(f"{path}: column {spec.column!r}: {str(exc).split(': ', 1)[-1]}; "
-                                f"set its unit in [data.columns]{where}") from None
-            out[channel] = values.to_numpy(dtype=float) * factor
-        if missing:
-            first = missing[0]
-            fix = (f"correct {first.channel} in [data.columns]{where}" if first.channel in mapped else
-                   f"map the file's columns onto the channels in the config's [data.columns], e.g. "
-                   f"{first.channel} = {{ column = \"...\", unit = \"{SI_UNIT[first.channel]}\" }}")
-            listed = ", ".join(f"{s.column!r} for channel {s.channel}" for s in missing[:4])
-            more = f" and {len(missing) - 4} more" if len(missing) > 4 else ""
-            raise DataError(f"{path}: no column {listed}{more} (the file has "
-                            f"{', '.join(map(repr, frame.columns[:16]))}{', ...' if len(frame.columns) > 16 else ''})"
-                            f"; {fix}")
-        return pd.DataFrame(out, index=frame.index)
-
-    def describe(self, channel: str) -> str:
-        """How a channel is read, for messages: "column 'STW' [knots]" or "constant 0"."""
-        spec = self.spec(channel)
+    The relative wind, when neither mapped nor present, is NaN here (`read_run`
+    computes it from the state). Raises `DataError` naming the file, the column and
+    the fix."""
+    out, missing, text_cells, unknown_units = {}, [], [], []
+    mapped = {s.channel for s in columns.specs}
+    where = f" ([data.columns] in {columns.source})" if columns.source and columns.specs else ""
+    for channel in CHANNELS:
+        spec = columns.spec(channel)
         if spec.constant is not None:
-            return f"constant {spec.constant:g} {SI_UNIT[channel]}"
-        named = _BRACKET.search(spec.column) and not spec.unit  # the unit is in the column's name
-        return f"column {spec.column!r}" if named else f"column {spec.column!r} [{spec.resolved_unit}]"
-
-
-def parse_columns(table: Any, source: str) -> ColumnMap:
-    """``[data.columns]`` of a config (a TOML table) to a checked `ColumnMap`; errors name
-    the config, the channel and the fix."""
-    where = f"{source}: [data.columns]"
-    if not isinstance(table, Mapping):
-        raise ConfigError(f"{where} must be a table of channel = column (or {{ column, unit }})")
-    specs = []
-    for channel, value in table.items():
-        if channel not in CHANNELS:
-            raise ConfigError(f"{where} unknown channel {channel!r} (channels: {', '.join(CHANNELS)})")
-        here = f"{where} {channel}"
-        if isinstance(value, bool):
-            raise ConfigError(f"{here}: expected a column name, {{ column = \"...\", unit = \"...\" }} "
-                              f"or a number, got {value!r}")
-        if isinstance(value, (int, float)):
-            if not math.isfinite(value):
-                raise ConfigError(f"{here}: a constant must be finite, got {value!r}")
-            if channel == "t":
-                raise ConfigError(f"{here}: time cannot be a constant; name the time column")
-            specs.append(ColumnSpec(channel, constant=float(value)))
+            out[channel] = np.full(len(frame), float(spec.constant))
             continue
-        if isinstance(value, str):
-            spec = ColumnSpec(channel, value)
-        elif isinstance(value, Mapping):
-            unknown = set(value) - {"column", "unit"}
-            if unknown:
-                raise ConfigError(f"{here}: unknown key(s) {sorted(unknown)} (known: column, unit)")
-            if not isinstance(value.get("column"), str) or not value["column"]:
-                raise ConfigError(f"{here}: column must name a column of the log, got {value.get('column')!r}")
-            unit = value.get("unit", "")
-            if not isinstance(unit, str):
-                raise ConfigError(f"{here}: unit must be a string such as \"{SI_UNIT[channel]}\", got {unit!r}")
-            spec = ColumnSpec(channel, value["column"], unit)
-        else:
-            raise ConfigError(f"{here}: expected a column name or {{ column = \"...\", unit = \"...\" }}, "
-                              f"got {value!r}")
-        unit_factor(spec.resolved_unit, channel, here)  # a wrong unit fails now
-        specs.append(spec)
-    columns = [s.column for s in specs if s.constant is None]
-    twice = sorted({c for c in columns if columns.count(c) > 1})
-    if twice:
-        raise ConfigError(f"{where} column {twice[0]!r} is mapped onto more than one channel")
-    return ColumnMap(tuple(specs), source)
+        if spec.column not in frame.columns:
+            if channel in RELATIVE_WIND and channel not in mapped:  # computed by read_run
+                out[channel] = np.full(len(frame), np.nan)
+            else:
+                missing.append(spec)
+            continue
+        values = _numbers(frame[spec.column], channel, path)
+        text = frame[spec.column].notna() & values.isna()
+        if text.any():   # every such column is named in one error below
+            row = int(np.argmax(text.to_numpy()))
+            text_cells.append(f"column {spec.column!r} (channel {channel}) holds "
+                              f"{frame[spec.column].iloc[row]!r} at data row {row + 2}")
+            continue
+        try:
+            factor = spec.factor
+        except ConfigError as exc:  # a unit in a header the config did not name
+            unknown_units.append(f"column {spec.column!r}: {str(exc).split(': ', 1)[-1]}")
+            continue
+        out[channel] = values.to_numpy(dtype=float) * factor
+    if missing:
+        first = missing[0]
+        fix = (f"correct {first.channel} in [data.columns]{where}" if first.channel in mapped else
+               f"map the file's columns onto the channels in the config's [data.columns], e.g. "
+               f"{first.channel} = {{ column = \"...\", unit = \"{SI_UNIT[first.channel]}\" }}")
+        listed = ", ".join(f"{s.column!r} for channel {s.channel}" for s in missing)
+        raise DataError(f"{path}: no column {listed} (the file has "
+                        f"{', '.join(map(repr, frame.columns[:16]))}{', ...' if len(frame.columns) > 16 else ''})"
+                        f"; {fix}")
+    if text_cells:
+        raise DataError(f"{path}: not a number in {len(text_cells)} column(s): {'; '.join(text_cells)}; "
+                        "write numbers only (no units or text in the cells)")
+    if unknown_units:
+        raise DataError(f"{path}: {'; '.join(unknown_units)}; set the unit(s) in [data.columns]{where}")
+    return pd.DataFrame(out, index=frame.index)
+
+
+def _numbers(column: pd.Series, channel: str, path) -> pd.Series:
+    """A log's column as numbers: a time column of timestamps or durations in seconds (from
+    the first sample); a boolean or date column for any other channel is a `DataError`."""
+    if channel == "t" and pd.api.types.is_datetime64_any_dtype(column):
+        return (column - column.iloc[0]).dt.total_seconds()
+    if channel == "t" and pd.api.types.is_timedelta64_dtype(column):
+        return column.dt.total_seconds()
+    kind = ("true/false values" if pd.api.types.is_bool_dtype(column)
+            or (column.dtype == object and column.map(lambda v: isinstance(v, (bool, np.bool_))).any())
+            else "dates or durations" if pd.api.types.is_datetime64_any_dtype(column)
+            or pd.api.types.is_timedelta64_dtype(column) else None)
+    if kind is not None:
+        raise DataError(f"{path}: column {column.name!r} (channel {channel}) holds {kind}, not numbers "
+                        f"in {SI_UNIT[channel]}; map channel {channel} to a numeric column in [data.columns]")
+    return pd.to_numeric(column, errors="coerce")

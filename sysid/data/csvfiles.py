@@ -14,6 +14,23 @@ from sysid.errors import DataError
 _UTF16_MARKS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE, codecs.BOM_UTF32_LE, codecs.BOM_UTF32_BE)
 
 
+def not_a_file(path: str | os.PathLike) -> str:
+    """Why `path`, which is no regular file, cannot be read: "file not found", or what it is
+    instead (a named pipe, a socket, a device)."""
+    import stat
+
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return "file not found"
+    kinds = ((stat.S_ISFIFO, "a named pipe"), (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"),
+             (stat.S_ISBLK, "a block device"))
+    kind = next((name for test, name in kinds if test(mode)), None)
+    if kind is None:
+        return "file not found"
+    return f"is {kind}, not a regular file; sysid reads a log more than once: save it to a file and give that"
+
+
 def text_problem(path: Path) -> str | None:
     """Why the file is no UTF-8 text (None when it looks like text), from its first 64 KiB."""
     with open(path, "rb") as fh:
@@ -36,7 +53,7 @@ def read_csv_table(path: str | os.PathLike, expect: str = "a CSV with a header r
     """A CSV file as a DataFrame, or `DataError` naming the file and what is wrong."""
     path = Path(path)
     if not path.is_file():
-        raise DataError(f"{path}: file not found")
+        raise DataError(f"{path}: {not_a_file(path)}")
     problem = text_problem(path)
     if problem:
         raise DataError(f"{path}: {problem} (expected {expect})")
@@ -58,7 +75,7 @@ def read_parquet_table(path: str | os.PathLike, expect: str = "a Parquet table")
     """A Parquet file as a DataFrame (pandas with pyarrow), or `DataError` naming the file."""
     path = Path(path)
     if not path.is_file():
-        raise DataError(f"{path}: file not found")
+        raise DataError(f"{path}: {not_a_file(path)}")
     try:
         import pyarrow  # noqa: F401  (pandas reads Parquet through it)
     except ImportError:

@@ -5,11 +5,14 @@ A processed file (CSV or Parquet) has the 13 columns of the processed schema, he
 public FRT-DS-ESSO files) or 1 Hz (``sysid preprocess`` output), or any columns and units
 that a config's ``[data.columns]`` maps onto the channels (`sysid.data.columns`). `read_run`
 drops trailing all-empty rows, rejects NaN inside the run, non-monotonic time and wrong
-units, and downsamples by taking every k-th sample from the first one (t = 0, 1, 2 s).
+units, and downsamples by taking every k-th sample from the first one (t = 0, 1, 2 s), saying so
+once per process (a 10 Hz log read at 1 Hz); a rate that is not a whole number of the file's
+samples per step, or above the file's own, is refused.
 """
 from __future__ import annotations
 
 import glob
+import logging
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,8 +23,9 @@ import pandas as pd
 import torch
 
 from preprocessing.schema import PROCESSED, PROCESSED_CHANNEL, PROCESSED_PLAUSIBLE_ABS
-from sysid.data.columns import QUANTITY, RELATIVE_WIND, SI_UNIT, ColumnMap
-from sysid.data.csvfiles import LOG_SUFFIXES, read_table
+from sysid.data.columns import QUANTITY, RELATIVE_WIND, SI_UNIT, ColumnMap, to_channels
+from sysid.data.consistency import TrackCheck, check_track, report_checks
+from sysid.data.csvfiles import LOG_SUFFIXES, not_a_file, read_table
 from sysid.errors import DataError
 from sysid.mmg.wind import relative_wind
 from sysid.state import INPUTS, STATE
@@ -30,6 +34,7 @@ from sysid.state import INPUTS, STATE
 COLUMNS = {f"{name} [{unit}]": PROCESSED_CHANNEL[name] for name, unit in PROCESSED.items()}
 HEADER = {channel: header for header, channel in COLUMNS.items()}
 _LIMITS = PROCESSED_PLAUSIBLE_ABS
+_log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -44,8 +49,11 @@ class Run:
     U_A [m/s], gamma_A [rad] as recorded.
     dt : sample period [s]; issues : data-quality findings (gaps, frozen GNSS, ...);
     suspect : (t_start, t_end) [s] intervals of frozen GNSS or time gaps.
+    stride : samples of the file per sample of the run (10: a 10 Hz file read at 1 Hz).
     sha256 : SHA-256 of the source file when known (a run shipped to a node without the
     file carries it); None: hashed from `path` when needed.
+    track : the log's channels against its own GNSS track (`sysid.data.consistency`), at the
+    file's own rate.
     """
 
     name: str
@@ -58,6 +66,8 @@ class Run:
     issues: list[str] = field(default_factory=list)
     suspect: list[tuple[float, float]] = field(default_factory=list)
     sha256: str | None = None
+    track: TrackCheck | None = None
+    stride: int = 1
 
     def __len__(self) -> int:
         return len(self.t)
@@ -67,30 +77,19 @@ class Run:
         return float(self.t[-1] - self.t[0]) if len(self.t) else 0.0
 
 
-def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | None = None) -> Run:
+def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | None = None,
+             warn=_log.warning) -> Run:
     """Read and check a processed run (CSV or Parquet), downsampled to `rate` [Hz] by taking
     samples. `columns` maps the log's own column names and units onto the channels
-    (``[data.columns]``; default: the processed schema's headers)."""
+    (``[data.columns]``; default: the processed schema's headers). The log is checked
+    against its own GNSS track (`sysid.data.consistency`): a clear mismatch is a
+    `DataError` naming the file, the channel and the factor; a marginal one, or a log
+    without a track, goes to `warn` (None: silent)."""
     path = Path(path)
     columns = columns if columns is not None else ColumnMap()
     if not (rate > 0 and np.isfinite(rate)):
         raise DataError(f"{path}: rate {rate} Hz: must be > 0")
-    raw = read_table(path, "a processed run with the header 'name [unit]', or columns named in [data.columns]")
-    frame = columns.to_channels(raw, path)
-    # trailing all-empty rows (zigzag 13_50_28 ends with 327 of them) are dropped
-    recorded = [c for c in frame.columns if c not in RELATIVE_WIND or frame[c].notna().any()]
-    values = frame[recorded].to_numpy(dtype=float)
-    filled = ~np.isnan(values[:, 1:]).all(axis=1)
-    last = int(np.nonzero(filled)[0][-1]) + 1 if filled.any() else 0
-    frame, values = frame.iloc[:last], values[:last]
-    if len(frame) < 2:
-        raise DataError(f"{path}: fewer than two data rows")
-    bad = ~np.isfinite(values)
-    if bad.any():
-        row, col = np.argwhere(bad)[0]
-        channel = recorded[col]
-        raise DataError(f"{path}: {columns.describe(channel)} (channel {channel}) is empty, NaN or inf at data "
-                        f"row {row + 2} ({int(bad.any(axis=1).sum())} bad rows)")
+    frame, recorded = _channels(path, columns)
     if len(recorded) < len(frame.columns):  # no relative wind recorded: from the state and true wind
         frame = frame.assign(**dict(zip(RELATIVE_WIND, _relative_wind(frame))))
     values = frame.to_numpy(dtype=float)
@@ -100,19 +99,30 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
         row = int(np.argmax(steps <= 0)) + 1
         raise DataError(f"{path}: {columns.describe('t')} (channel t) is not strictly increasing at data row "
                         f"{row + 2} (t = {t[row]} s)")
+    c = {name: frame[name].to_numpy() for name in ("x", "y", "psi", "u", "v", "r")}
+    track = check_track(path, t, c["x"], c["y"], c["psi"], c["u"], c["v"], c["r"], columns)
+    report_checks([track], warn)
+    beyond = []
     for name, limit in _LIMITS.items():
         peak = np.abs(frame[name].to_numpy()).max()
         if name == "psi" and peak > limit and _turns_at_yaw_rate(t, frame["psi"].to_numpy(), frame["r"].to_numpy()):
             continue  # an unwrapped heading in radians (a simulated turn): it changes at r
         if peak > limit:
-            raise DataError(f"{path}: {columns.describe(name)} (channel {name}) reaches {peak:.4g} "
-                            f"{SI_UNIT[name]}, beyond {limit}: wrong units? name its unit in [data.columns], "
-                            f"e.g. {name} = {{ column = \"...\", unit = \"{_UNIT_HINT[QUANTITY[name]]}\" }}")
+            beyond.append((name, peak, limit))
+    if beyond:  # every channel in the wrong units, in one line
+        listed = "; ".join(f"{columns.describe(name)} (channel {name}) reaches {peak:.4g} {SI_UNIT[name]}, "
+                           f"beyond {limit}" for name, peak, limit in beyond)
+        hints = ", ".join(f"{name} = {{ column = \"...\", unit = \"{_UNIT_HINT[QUANTITY[name]]}\" }}"
+                          for name, _, _ in beyond)
+        raise DataError(f"{path}: {listed}: wrong units? name {'its unit' if len(beyond) == 1 else 'their units'} "
+                        f"in [data.columns], e.g. {hints}")
     period = float(np.median(steps))
     stride = int(round(1.0 / rate / period))
     if stride < 1 or abs(stride * period * rate - 1.0) > 1e-3:
         raise DataError(f"{path}: rate {rate:g} Hz is not a whole number of this file's {period:g}-s samples "
                         f"per step; choose a rate that divides {1.0 / period:g} Hz")
+    if stride > 1:
+        _note_resampled(path, 1.0 / period, rate, stride)
     issues, suspect = _quality_issues(t, values, period)
     sel = values[::stride]
     if len(sel) < 2:
@@ -124,7 +134,72 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
         inputs=sel[:, [frame.columns.get_loc(c) for c in list(INPUTS)]],
         relative_wind=sel[:, [frame.columns.get_loc("wind_velo_relative"),
                               frame.columns.get_loc("wind_dir_relative")]],
-        dt=period * stride, issues=issues, suspect=suspect)
+        dt=period * stride, issues=issues, suspect=suspect, track=track, stride=stride)
+
+
+_NOTED: set[tuple[float, float]] = set()   # (file rate, read rate) pairs already said, once per process
+
+
+def _note_resampled(path: Path, file_rate: float, rate: float, stride: int) -> None:
+    """Say once per process and pair of rates that logs are read at a lower rate than they
+    were written (a stage line naming the first such file)."""
+    key = (round(file_rate, 6), round(rate, 6))
+    if key in _NOTED:
+        return
+    _NOTED.add(key)
+    _log.info(f"{path.name} (and any other log at {file_rate:g} Hz): read at {rate:g} Hz, every {stride}th sample "
+              f"from the first (processed logs are already smoothed, so no filter); [data] rate sets the rate")
+
+
+def read_runs(paths: Iterable[str | os.PathLike], rate: float = 1.0, columns: ColumnMap | None = None,
+              warn=_log.warning) -> list[Run]:
+    """`read_run` of each file; the errors of all files (a clear mismatch with its track
+    in several logs, ...) as one `DataError`, a line per file. Logs without a track are
+    named once."""
+    runs, errors = [], []
+    for path in paths:
+        try:
+            runs.append(read_run(path, rate, columns, warn=None))
+        except DataError as exc:
+            errors.append(str(exc))
+    if errors:
+        raise DataError("\n".join(errors))
+    report_checks([r.track for r in runs if r.track is not None], warn)
+    return runs
+
+
+def _channels(path: Path, columns: ColumnMap) -> tuple[pd.DataFrame, list[str]]:
+    """(the log's channels (`ColumnMap.to_channels`) without trailing all-empty rows, the
+    channels recorded); `DataError` for fewer than two rows or an empty cell inside."""
+    raw = read_table(path, "a processed run with the header 'name [unit]', or columns named in [data.columns]")
+    frame = to_channels(columns, raw, path)
+    # trailing all-empty rows (zigzag 13_50_28 ends with 327 of them) are dropped
+    recorded = [c for c in frame.columns if c not in RELATIVE_WIND or frame[c].notna().any()]
+    values = frame[recorded].to_numpy(dtype=float)
+    filled = ~np.isnan(values[:, 1:]).all(axis=1)
+    last = int(np.nonzero(filled)[0][-1]) + 1 if filled.any() else 0
+    frame, values = frame.iloc[:last], values[:last]
+    if len(frame) < 2:
+        raise DataError(f"{path}: fewer than two data rows")
+    bad = ~np.isfinite(values)
+    if bad.any():   # every channel with an empty cell, in one line
+        listed = "; ".join(f"{columns.describe(channel)} (channel {channel}) is empty, NaN or inf at data row "
+                           f"{int(np.argmax(bad[:, j])) + 2}" for j, channel in enumerate(recorded) if bad[:, j].any())
+        raise DataError(f"{path}: {listed} ({int(bad.any(axis=1).sum())} bad rows)")
+    return frame, recorded
+
+
+def log_track(path: str | os.PathLike, columns: ColumnMap | None = None) -> TrackCheck:
+    """A log's channels against its own GNSS track (`sysid.data.consistency.check_track`)
+    at the file's own rate, whatever the other checks of `read_run` say; `DataError` when
+    the channels cannot be read."""
+    path = Path(path)
+    columns = columns if columns is not None else ColumnMap()
+    frame, _ = _channels(path, columns)
+    c = {name: frame[name].to_numpy() for name in ("t", "x", "y", "psi", "u", "v", "r")}
+    if (np.diff(c["t"]) <= 0).any():
+        return TrackCheck(path, reason="time not strictly increasing")
+    return check_track(path, c["t"], c["x"], c["y"], c["psi"], c["u"], c["v"], c["r"], columns)
 
 
 _UNIT_HINT = {"speed": "knots", "angle": "deg", "angular rate": "deg/s", "revolutions": "rpm"}
@@ -159,7 +234,7 @@ def _quality_issues(t: np.ndarray, values: np.ndarray, period: float):
         suspect.append((float(t[i]), float(t[i + 1])))
     frozen = (np.diff(values[:, 1]) == 0) & (np.diff(values[:, 5]) == 0)  # x and psi unchanged
     run_len = max(2, int(round(1.0 / period)))
-    i = 0
+    i = 0  # type: ignore[assignment]
     while i < len(frozen):
         if frozen[i]:
             j = i
@@ -218,6 +293,8 @@ def expand_paths(items: Iterable[str | os.PathLike]) -> list[Path]:
             out += found
         elif p.is_file():
             out.append(p)
+        elif p.exists():
+            raise DataError(f"{p}: {not_a_file(p)}")
         else:
             raise DataError(f"{p}: no such file or directory")
     return out

@@ -173,21 +173,84 @@ def hold_out_files(runs: Sequence[Run], fraction: float, seed: int) -> HeldOutFi
                         {g: sorted(v) for g, v in sorted(groups.items())})
 
 
+SHARED_ROWS = 30   # consecutive samples two logs of different parts may not have in common
+
+
+def _row_keys(run: Run) -> np.ndarray:
+    """One 64-bit key per sample of `run`: its states and inputs to 1e-6 (in their SI units),
+    so a copy through another format or unit (rounding at 1e-12) keeps almost every key; (n,)."""
+    values = np.nan_to_num(np.concatenate([run.states, run.inputs], axis=1), nan=1e300, posinf=1e300, neginf=-1e300)
+    grid = np.round(np.clip(values, -1e12, 1e12) * 1e6).astype(np.int64).view(np.uint64)
+    weights = np.random.default_rng(36).integers(1, 2 ** 63, size=grid.shape[1], dtype=np.uint64) | np.uint64(1)
+    with np.errstate(over="ignore"):
+        return (grid * weights).sum(axis=1, dtype=np.uint64)
+
+
+def _window_keys(keys: np.ndarray, length: int) -> np.ndarray:
+    """A key for each run of `length` consecutive samples (a polynomial hash of the sample
+    keys, wrapping at 2^64); (n - length + 1,)."""
+    powers = np.cumprod(np.full(length, 0x100000001B3, dtype=np.uint64), dtype=np.uint64)
+    with np.errstate(over="ignore"):
+        return np.lib.stride_tricks.sliding_window_view(keys, length) @ powers
+
+
+def _samples(run: Run) -> np.ndarray:
+    return np.concatenate([run.states, run.inputs], axis=1)
+
+
+def shared_rows(a: Run, b: Run, length: int = SHARED_ROWS) -> tuple[int, int, int] | None:
+    """Where `a` and `b` hold the same samples (states and inputs) in a run of at least
+    `length` consecutive rows, or the whole of the shorter of the two: (first row of `a`,
+    first row of `b`, rows in common, equal to 1e-9), or None. One log cut from another (rows
+    300 on), a copy, a copy in another format or unit all share such a run; two recordings
+    never do. Runs of `length` rows are matched by their hash (`_window_keys`), then compared."""
+    n = min(len(a), len(b), length)
+    if n < 1:
+        return None
+    keys_a, keys_b = _row_keys(a), _row_keys(b)
+    _, at_a, at_b = np.intersect1d(_window_keys(keys_a, n), _window_keys(keys_b, n), return_indices=True)
+    if not len(at_a):
+        return None
+    samples_a, samples_b = _samples(a), _samples(b)
+    for i, j in zip(at_a, at_b):
+        first_a, first_b = i - min(i, j), j - min(i, j)       # where this diagonal enters both logs
+        rows = min(len(a) - first_a, len(b) - first_b)
+        equal = np.isclose(samples_a[first_a:first_a + rows], samples_b[first_b:first_b + rows],
+                           rtol=1e-9, atol=1e-9).all(axis=1)
+        k = i - first_a                                      # the matched run's row on the diagonal
+        if not equal[k:k + n].all():
+            continue                                         # a hash collision
+        breaks = np.flatnonzero(~equal)
+        start = int(breaks[breaks < k].max() + 1) if (breaks < k).any() else 0
+        stop = int(breaks[breaks >= k + n].min()) if (breaks >= k + n).any() else rows
+        return first_a + start, first_b + start, stop - start
+    return None
+
+
 def check_disjoint_runs(parts: dict[str, Sequence[Run]], source: str = "") -> None:
-    """`DataError` naming both logs when the samples of a log of one part are those (or the
-    start) of a log of another part: the same recording under another name or format."""
+    """`DataError` naming both logs when a log of one part holds samples of a log of another
+    part: the same recording under another name or format, or a piece cut from it (a run of
+    `SHARED_ROWS` consecutive samples, or the whole shorter log, in common: `shared_rows`)."""
     where = f"{source}: " if source else ""
-    part_of = {id(run): part for part, runs in parts.items() for run in runs}
-    runs = [run for group in parts.values() for run in group]
-    by_name = {}
-    for run in runs:
-        by_name.setdefault(run.name, []).append(run)
-    for copy, original in duplicate_runs(runs):
-        for a in by_name[copy]:
-            for b in by_name[original]:
-                if a is not b and part_of[id(a)] != part_of[id(b)]:
-                    raise DataError(f"{where}{a.path} ({part_of[id(a)]}) holds the same samples as {b.path} "
-                                    f"({part_of[id(b)]}): the same recording in two parts; remove one")
+    named = [(part, run) for part, runs in parts.items() for run in runs]
+    for k, (part_a, a) in enumerate(named):
+        for part_b, b in named[k + 1:]:
+            if part_a == part_b or a is b:
+                continue
+            found = shared_rows(a, b)
+            if found is None:
+                continue
+            if part_a == TRAINING or (part_a == VALIDATION and part_b == TEST):  # name the held-out log first
+                (part_a, a), (part_b, b), found = (part_b, b), (part_a, a), (found[1], found[0], found[2])
+            i, j, n = found
+            if n == len(a) == len(b):
+                what = "the same samples as"
+            elif n == len(a):
+                what = f"the samples of rows {j + 1}-{j + n} of"
+            else:
+                what = f"in its rows {i + 1}-{i + n} the samples of rows {j + 1}-{j + n} of"
+            raise DataError(f"{where}{a.path} ({part_a}) holds {what} {b.path} ({part_b}): the same recording "
+                            "in two parts; remove one, or cut the logs so that no samples are shared")
 
 
 def provenance(source: str, train: Sequence[Run], validation: Sequence[Run], test: Sequence[Run],

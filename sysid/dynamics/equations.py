@@ -46,7 +46,7 @@ def body_acceleration(state: torch.Tensor, force: torch.Tensor, c) -> torch.Tens
     state (..., 6) = (x, u, y, v, psi, r); force (..., 3) = (X, Y, N) [N, N, N m];
     `c` provides m, m_x, m_y, I_zz_J_zz [kg, kg m^2] and x_G [m].
     """
-    return torch.stack(acceleration_channels(state[..., 1], state[..., 3], state[..., 5], *force.unbind(-1), c), -1)
+    return torch.stack(acceleration_channels(state[..., 1], state[..., 3], state[..., 5], *force.unbind(-1), c), -1)  # type: ignore[call-arg]
 
 
 def required_force(state: torch.Tensor, acceleration: torch.Tensor, c) -> torch.Tensor:
@@ -65,7 +65,7 @@ def derivative_channels(state: torch.Tensor, force, c) -> tuple[torch.Tensor, ..
     """(x_dot, u_dot, y_dot, v_dot, psi_dot, r_dot), each (...,), Eqs. (1) and (4), from
     state (..., 6) and force = (X, Y, N), each (...,) [N, N, N m]."""
     _, u, _, v, psi, r = state.unbind(-1)
-    u_dot, v_dot, r_dot = acceleration_channels(u, v, r, *force, c)
+    u_dot, v_dot, r_dot = acceleration_channels(u, v, r, *force, c)  # type: ignore[call-arg]
     cos_psi, sin_psi = torch.cos(psi), torch.sin(psi)
     x_dot = u * cos_psi - v * sin_psi
     y_dot = u * sin_psi + v * cos_psi

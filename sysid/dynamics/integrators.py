@@ -42,7 +42,7 @@ class Integrator:
     @classmethod
     def of(cls, value: "IntegratorLike") -> "Integrator":
         """An `Integrator` from an `Integrator`, a `Method` or a method name."""
-        return value if isinstance(value, cls) else cls(Method.parse(value))
+        return value if isinstance(value, Integrator) else cls(Method.parse(value))
 
 
 IntegratorLike = Union[Integrator, Method, str]
@@ -87,7 +87,7 @@ def rollout(rhs: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], x0: torch
     states = [x0]
     for k in range(inputs.shape[0] - 1):
         u = inputs[k]
-        states.append(rule(lambda x: rhs(x, u), states[-1], dt))
+        states.append(rule(lambda x: rhs(x, u), states[-1], dt))  # noqa: B023 (called within this step)
     return torch.stack(states)
 
 

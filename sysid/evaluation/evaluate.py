@@ -4,14 +4,14 @@ and the per-step traces behind the report's figures.
 Every window of every file is integrated in one batched call: each window starts from the
 recorded state at its first sample, runs H-1 Euler steps of dt = 1 s with the recorded
 inputs held over each step, and is scored at its H points (first included) on u, v_m, r,
-pooled over the windows of a file.
+pooled over the windows of a file. Each window's own RMSE (`WindowErrors`) feeds the verdict
+(`sysid.evaluation.judgement`); a window whose prediction diverged
+(`sysid.evaluation.divergence`) marks its row ``diverged`` and keeps it.
 """
 from __future__ import annotations
 
-import re
-from dataclasses import dataclass
-from pathlib import Path
-from typing import Sequence
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -19,26 +19,18 @@ import torch
 from torch import nn
 
 from sysid.data.recordings import Run, protocol_windows, stack_windows
-from sysid.data.datasets import TEST_FILES
+from sysid.data.scenario import scenario_of
 from sysid.config.choices import Method
 from sysid.dynamics.equations import eager_predict
 from sysid.dynamics.integrators import Integrator, IntegratorLike
 from sysid.config.checks import whole_samples
 from sysid.errors import DataError
+from sysid.evaluation.divergence import PhysicalRange, diverged_windows
+from sysid.evaluation.judgement import Divergence
+from sysid.records.columns import (METRICS_COLUMNS, REQUIRED_METRICS_COLUMNS, TRACE_COLUMNS,  # noqa: F401 (their home before)
+                                   trace_name)
 from sysid.state import FORCE, FORCE_COMPONENTS, INPUTS, STATE, VELOCITY_INDEX
 
-# one row per file and horizon; RMSE of u, v_m [m/s] and r [rad/s]
-METRICS_COLUMNS = ["scenario", "file", "horizon_s", "n_windows", "rmse_u", "rmse_v", "rmse_r"]
-# one row per window step of a trace (see `trace_frame`)
-TRACE_COLUMNS = (
-    ["window", "t", "t_rel"]
-    + [f"obs_{c}" for c in STATE]
-    + [f"pred_{c}" for c in STATE]
-    + list(INPUTS) + ["wind_velo_relative", "wind_dir_relative"]  # relative wind of the predicted state
-    + [f"{a}{key}" for key in FORCE_COMPONENTS.values() for a in FORCE]  # N, N m
-    + ["knn_distance", "gate_on"]  # NaN / 1 where the model has no gate
-)
-SCENARIO_OF = {Path(v).stem: k for k, v in TEST_FILES.items()}
 
 
 @dataclass
@@ -57,19 +49,49 @@ class WindowPrediction:
     predicted: torch.Tensor
     inputs: torch.Tensor
 
-    def metrics_row(self, horizon_s: float) -> dict:
+    def metrics_row(self, horizon_s: float, divergence: Divergence | None = None) -> dict:
         """A `METRICS_COLUMNS` row (NaN RMSE without windows); the scenario is the
-        protocol's name of a test file, else empty."""
+        protocol's name of a test file, else the maneuver the log records
+        (`sysid.data.scenario.scenario_of`); `divergence` marks it."""
         rmse = self.rmse() if len(self.starts) else np.full(3, np.nan)
-        return {"scenario": SCENARIO_OF.get(self.run.name, ""), "file": self.run.name,
+        return {"scenario": scenario_of(self.run), "file": self.run.name,
                 "horizon_s": horizon_s, "n_windows": len(self.starts),
-                "rmse_u": rmse[0], "rmse_v": rmse[1], "rmse_r": rmse[2]}
+                "rmse_u": rmse[0], "rmse_v": rmse[1], "rmse_r": rmse[2],
+                "diverged": divergence is not None,
+                "diverged_at_s": divergence.time_s if divergence is not None else np.nan}
 
     def rmse(self) -> np.ndarray:
         """Pooled RMSE of (u [m/s], v_m [m/s], r [rad/s]) over every window point."""
         idx = list(VELOCITY_INDEX)
         err = (self.predicted[..., idx] - self.observed[..., idx]).reshape(-1, 3)
         return torch.sqrt((err**2).mean(0)).detach().cpu().numpy()
+
+    def window_rmse(self) -> np.ndarray:
+        """(W, 3) RMSE of (u [m/s], v_m [m/s], r [rad/s]) of each window over its H points:
+        their mean square is the pooled `rmse`'s."""
+        idx = list(VELOCITY_INDEX)
+        err = self.predicted[..., idx] - self.observed[..., idx]
+        return torch.sqrt((err**2).mean(0)).detach().cpu().numpy().reshape(-1, 3)
+
+    def errors(self, horizon_s: float, limits: PhysicalRange | None = None) -> "WindowErrors":
+        """This file's `WindowErrors` at `horizon_s`, divergence checked against `limits`."""
+        _, divergence = diverged_windows(self.predicted.detach().cpu().numpy(), self.t, self.run.name,
+                                         horizon_s, limits, self.observed.detach().cpu().numpy())
+        return WindowErrors(scenario_of(self.run), self.run.name, float(horizon_s),
+                            np.asarray(self.t[0], dtype=float), self.window_rmse(), divergence)
+
+
+@dataclass(frozen=True, eq=False)
+class WindowErrors:
+    """One file at one horizon, window by window: start time [s] (W,), RMSE of u, v_m [m/s]
+    and r [rad/s] (W, 3), and where its prediction diverged (None: it did not)."""
+
+    scenario: str
+    file: str
+    horizon_s: float
+    start_s: np.ndarray
+    rmse: np.ndarray
+    divergence: Divergence | None = None
 
 
 def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
@@ -78,7 +100,7 @@ def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
     """Predict the protocol windows of every run in one batched integration (compiled
     when `method` is a compiled `Integrator`: only then is `sysid.fast` imported)."""
     integrator = Integrator.of(method)
-    predict = eager_predict
+    predict: Callable[..., torch.Tensor] = eager_predict
     if integrator.compiled:
         from sysid.fast.compiled import predict
     chunks, meta = [], []
@@ -88,7 +110,7 @@ def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
             dt = run.dt
         elif abs(run.dt - dt) > 1e-9:
             raise DataError(f"{run.path}: sample period {run.dt} s differs from {dt} s of the other files")
-        H = whole_samples("horizon", horizon_s, run.dt, DataError)
+        H = window_samples("horizon", horizon_s, run.dt, DataError)
         starts = protocol_windows(len(run), H)
         meta.append((run, H, starts))
         if len(starts):
@@ -117,24 +139,39 @@ def short_runs(runs: Sequence[Run], horizons: Sequence[float], name: str = "--ho
                error: type[Exception] = DataError) -> list[tuple[Run, float]]:
     """(run, horizon [s]) pairs where the run holds fewer samples than one window: their
     metrics rows would be empty. Every horizon must be a whole number of every run's
-    samples (else `error` naming `name`)."""
+    samples, at least two: a window of one sample is its start state alone, no step is
+    predicted and its RMSE is 0 by construction (else `error` naming `name`)."""
+    for h in horizons:
+        for run in runs:
+            window_samples(name, h, run.dt, error)
     return [(run, h) for h in horizons for run in runs if len(run) < whole_samples(name, h, run.dt, error)]
+
+
+def window_samples(name: str, horizon_s: float, dt: float, error: type[Exception] = DataError) -> int:
+    """The samples of one window of `horizon_s` [s] (its start state and H - 1 predicted
+    steps, `dt` [s] apart): a whole number >= 2, else `error` naming `name`."""
+    H = whole_samples(name, horizon_s, dt, error)
+    if H < 2:
+        raise error(f"{name} {horizon_s:g}: a window of one {dt:g}-s sample is its start state alone, so "
+                    f"nothing is predicted and its RMSE is 0; give a horizon of at least {2 * dt:g} s")
+    return H
 
 
 @dataclass
 class Evaluation:
-    """Metrics (`METRICS_COLUMNS`), traces (file name -> `TRACE_COLUMNS` frame) and the
-    share of steps on which the kNN gate switched the FNN off, per trace."""
+    """Metrics (`METRICS_COLUMNS`), traces (file name -> `TRACE_COLUMNS` frame), the
+    share of steps on which the kNN gate switched the FNN off, per trace, and every file's
+    per-window errors at every horizon (`WindowErrors`, in the metrics' row order)."""
 
     metrics: pd.DataFrame
     traces: dict[str, pd.DataFrame]
     gate_off_share: dict[str, float]
+    windows: list[WindowErrors] = field(default_factory=list)
 
-
-def trace_name(file_stem: str, horizon_s: float) -> str:
-    """File name of a trace: ``{file_stem}_h{H}.csv``."""
-    safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", file_stem)
-    return f"{safe}_h{int(round(horizon_s))}.csv"
+    @property
+    def divergences(self) -> list[Divergence]:
+        """Where a prediction diverged, per file and horizon."""
+        return [w.divergence for w in self.windows if w.divergence is not None]
 
 
 def trace_frame(model: nn.Module, pred: WindowPrediction) -> pd.DataFrame:
@@ -163,15 +200,20 @@ def trace_frame(model: nn.Module, pred: WindowPrediction) -> pd.DataFrame:
 
 
 def evaluate_model(model: nn.Module, runs: Sequence[Run], horizons: Sequence[float],
-                   method: IntegratorLike = Method.EULER, traces: bool = True) -> Evaluation:
-    """The protocol's windowed RMSE per file and horizon, with per-step traces."""
-    rows, frames, shares = [], {}, {}
+                   method: IntegratorLike = Method.EULER, traces: bool = True,
+                   limits: PhysicalRange | None = None) -> Evaluation:
+    """The protocol's windowed RMSE per file and horizon, with per-step traces and per-window
+    errors; a prediction non-finite or beyond `limits` (the training logs' range) is marked
+    diverged in its row."""
+    rows, frames, shares, windows = [], {}, {}, []
     for horizon in horizons:
         for pred in predict_windows(model, runs, horizon, method):
-            rows.append(pred.metrics_row(horizon))
+            errors = pred.errors(horizon, limits)
+            windows.append(errors)
+            rows.append(pred.metrics_row(horizon, errors.divergence))
             if traces and len(pred.starts):
                 frame = trace_frame(model, pred)
                 name = trace_name(pred.run.name, horizon)
                 frames[name] = frame
                 shares[name] = float(1.0 - frame["gate_on"].mean())
-    return Evaluation(pd.DataFrame(rows, columns=METRICS_COLUMNS), frames, shares)
+    return Evaluation(pd.DataFrame(rows, columns=METRICS_COLUMNS), frames, shares, windows)

@@ -1,45 +1,42 @@
-"""A verdict, always: a learned model beside its physics baseline(s), channel by channel.
+"""A verdict, always: a learned model beside its physics baseline(s), judged by one stated rule
+on per-log evidence (`sysid.evaluation.judgement.judge`; docs: How sysid judges a model).
 
 Baselines are the ship file's MMG (with ``[mmg] overrides``) and, when identification ran,
-the identified MMG. Each cell is the RMSE of one channel (u, v_m [m/s], r [rad/s]) at one
-horizon on one split:
+the identified MMG. The evidence is paired per-window RMSE of u, v_m [m/s] and r [rad/s]:
 
+- test: the benchmark protocol's windows of every test log at each evaluation horizon, one
+  cell per (log, horizon, channel);
 - validation: the windows of ``val_loss_multistep`` (`sysid.identify.trainer.VAL_LOSS_DEFINITION`),
-  RMSE over their predicted steps; the baselines' ``val_loss_multistep`` beside the model's;
-- test: the benchmark protocol's windows of every test log at each evaluation horizon,
-  RMSE pooled over every window point of every test log.
+  one cell per channel, over their predicted steps.
 
-On the deciding split (the test logs, or validation when there are none) the model *beats
-its baseline* when its RMSE is lower on average over the cells (geometric mean of the
-ratios, every channel and horizon alike) and no cell is more than 10 % (`MATERIAL`) worse.
+The test logs decide whenever there are any (a diverged prediction there is a DIVERGED
+verdict, never a fall back to validation); without them the validation windows decide. The
+validation windows are judged by the same rule either way. The model *beats its baseline*
+only when it beats every baseline. `ChannelCell` keeps each split's pooled RMSE per horizon
+and channel (the table beside the sentence, and the verdict of runs written before the rule).
 """
 from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from typing import Mapping, Sequence
+from typing import TYPE_CHECKING, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
 import torch
 
-from sysid.identify.trainer import WindowSet, rollout_errors, velocity_loss
+from sysid.dynamics.rollouts import WindowSet, rollout_errors, velocity_loss
+from sysid.evaluation.judgement import (CHANNELS, DEFAULT_RULE, UNITS, Divergence, Judgement, Outcome, PairedCell, VerdictRule,
+                                        judge, percent_text)
 
-CHANNELS = ("u", "v_m", "r")
-UNITS = {"u": "m/s", "v_m": "m/s", "r": "rad/s"}
+if TYPE_CHECKING:
+    from sysid.evaluation.evaluate import Evaluation
 SHIP_FILE_MMG = "MMG (ship file)"
 IDENTIFIED_MMG = "MMG (identified)"
 VALIDATION, TEST = "validation", "test"
 MODEL_NAMES = {"mmg": "identified MMG", "nn": "NN-only model", "hybrid": "hybrid"}
-MATERIAL = 0.10   # a cell this much worse than its baseline fails the verdict, whatever the average
-
-
-def percent_text(change: float) -> str:
-    """A relative change as "+20 %", "-3.4 %" (one decimal below 10 %), "-" when undefined."""
-    if not math.isfinite(change):
-        return "-"
-    pct = 100 * change
-    return f"{pct:+.1f} %" if abs(pct) < 10 else f"{pct:+.0f} %"
+MATERIAL = VerdictRule().material   # a cell this much worse than its baseline, with confidence, fails the verdict
+VALIDATION_LOG = "validation windows"
 
 
 @dataclass(frozen=True)
@@ -78,9 +75,13 @@ class BaselineVerdict:
     ``verdict``).
 
     model : "hybrid" | "nn" | "mmg" (identified); baselines : labels, the ship file's MMG
-    first; cells : every split x horizon x channel; val_loss_multistep : label ("model" or a
-    baseline) -> validation loss; decided_on : "test" or "validation"; seeds : how many
-    runs a seed-mean verdict averages (1: a single run).
+    first; cells : every split x horizon x channel, pooled; val_loss_multistep : label
+    ("model" or a baseline) -> validation loss; decided_on : "test" or "validation"; seeds :
+    how many runs a seed verdict rests on (1: a single run); judgements : baseline label ->
+    `Judgement` on the deciding split; validation_judgements : the same on the validation
+    windows; evidence : split -> baseline label -> the `PairedCell`s judged (what a seed
+    verdict judges again with every seed as a member). A verdict read from a run written
+    before the rule has no judgements and keeps its old pooled decision (`legacy_beats`).
     """
 
     model: str
@@ -89,6 +90,10 @@ class BaselineVerdict:
     val_loss_multistep: dict[str, float] = field(default_factory=dict)
     decided_on: str = TEST
     seeds: int = 1
+    judgements: dict[str, Judgement] = field(default_factory=dict)
+    validation_judgements: dict[str, Judgement] = field(default_factory=dict)
+    evidence: dict[str, dict[str, tuple[PairedCell, ...]]] = field(default_factory=dict, repr=False)
+    legacy_beats: bool | None = None
 
     @property
     def deciding(self) -> list[ChannelCell]:
@@ -96,53 +101,87 @@ class BaselineVerdict:
 
     @property
     def worse(self) -> list[tuple[ChannelCell, str]]:
-        """(cell, baseline) where the model is not better, on the deciding split."""
+        """(cell, baseline) where the pooled model RMSE is not lower, on the deciding split."""
         return [(c, b) for c in self.deciding for b in self.baselines if c.worse_than(b)]
 
-    @property
-    def material(self) -> list[tuple[ChannelCell, str]]:
-        """(cell, baseline) where the model is more than `MATERIAL` worse, on the deciding split."""
-        return [(c, b) for c, b in self.worse if c.change(b) > MATERIAL]
-
     def mean_change(self, baseline: str) -> float:
-        """The model's RMSE against the baseline's over the deciding cells: the geometric mean
-        of the ratios, minus 1 (-0.3: 30 % lower on average; every channel weighs alike)."""
+        """The overall relative change against `baseline` on the deciding split (the
+        judgement's; for an old run the geometric mean of the pooled cells' ratios, minus 1)."""
+        if baseline in self.judgements:
+            return self.judgements[baseline].change
         ratios = [c.model / c.baselines[baseline] for c in self.deciding if c.baselines[baseline] > 0]
         return math.exp(float(np.mean(np.log(ratios)))) - 1.0 if ratios else math.nan
 
+    def member_spread(self, split: str, log: str, horizon_s: float, channel: str) -> float | None:
+        """The std over seeds (members) of the model's RMSE in one cell [m/s or rad/s]; None
+        with one seed or without the evidence."""
+        for cells in self.evidence.get(split, {}).values():
+            for c in cells:
+                if (c.log, float(c.horizon_s), c.channel) == (log, float(horizon_s), channel) and len(c.model) > 1:
+                    return float(np.std(np.sqrt(np.mean(c.model**2, axis=1)), ddof=1))
+            return None
+        return None
+
+    @property
+    def outcome(self) -> Outcome | None:
+        """The worst outcome over the baselines (DIVERGED, WORSE, NOT_DISTINGUISHABLE, BEATS);
+        None for a run written before the rule."""
+        order = (Outcome.DIVERGED, Outcome.WORSE, Outcome.NOT_DISTINGUISHABLE, Outcome.BEATS)
+        found = {j.outcome for j in self.judgements.values()}
+        return next((o for o in order if o in found), None)
+
     @property
     def beats_baseline(self) -> bool:
-        """Lower RMSE than every baseline on average over the deciding cells, and no cell more
-        than `MATERIAL` worse."""
-        return (bool(self.deciding) and all(self.mean_change(b) < 0 for b in self.baselines)
-                and not self.material)
+        """The model beats every baseline under the rule (`judge`) on the deciding split."""
+        if self.judgements:
+            return all(j.beats for j in self.judgements.values())
+        return bool(self.legacy_beats)
 
     @property
     def model_name(self) -> str:
         return MODEL_NAMES.get(self.model, self.model)
 
+    @property
+    def horizons_s(self) -> tuple[float, ...]:
+        """The horizons [s] that decided."""
+        return tuple(sorted({h for j in self.judgements.values() for h in j.horizons_s}))
+
+    def decided_text(self) -> str:
+        """"Decided on the test logs at 30 s and 100 s." (what the report and log say)."""
+        hs = " and ".join(f"{h:g} s" for h in self.horizons_s)
+        if self.decided_on == TEST:
+            return f"Decided on the test logs at {hs}."
+        return f"Decided on the validation windows at {hs}: there are no test logs."
+
     def statement(self) -> str:
-        """The verdict in one or two sentences (the report's first line, the CLI's last)."""
-        where = "the test logs" if self.decided_on == TEST else "the validation windows (there is no test set)"
-        spread = f" (mean over {self.seeds} seeds)" if self.seeds > 1 else ""
-        base = " and ".join(self.baselines)
+        """The verdict in a few sentences (the report's first lines, the CLI's last)."""
+        if not self.judgements:
+            return self._legacy_statement()
+        text = " ".join(j.sentence for j in self.judgements.values()) + " " + self.decided_text()
+        if self.decided_on == TEST:
+            off = [j.outcome.value.replace("its baseline", label) for label, j in self.validation_judgements.items()
+                   if j.outcome is not Outcome.BEATS]
+            if off:
+                text += f" On the validation windows the {self.model_name} " + " and ".join(off) + "."
+        if not self.beats_baseline:
+            text += {Outcome.DIVERGED: " Use the baseline; train again with a smaller step or check the logs.",
+                     Outcome.WORSE: " Use the baseline, or train and check again, before trusting this model.",
+                     Outcome.NOT_DISTINGUISHABLE: " More test logs or windows would decide; until then the "
+                                                  "baseline is as good."}.get(self.outcome, "")
+        return text
+
+    def _legacy_statement(self) -> str:
+        where = "the test logs" if self.decided_on == TEST else "the validation windows"
         cells = self.deciding
         if not cells:
             return f"No verdict: neither test logs nor validation windows gave the {self.model_name} a score."
-        average = "; ".join(f"{percent_text(abs(self.mean_change(b)))[1:]} {'lower' if self.mean_change(b) < 0 else 'higher'}"
-                            + (f" than {b}" if len(self.baselines) > 1 else "") for b in self.baselines)
-        average = f"RMSE {average} on average over the {len(cells)} cells (u, v_m, r at {_horizons(cells)} s)"
-        worse = sorted(self.worse, key=lambda cb: -cb[0].change(cb[1]))
-        listed = "; ".join(f"{c.text(b)}" + (f" vs {b}" if len(self.baselines) > 1 else "") for c, b in worse[:4])
-        listed += "; ..." if len(worse) > 4 else ""
-        if self.beats_baseline:
-            if not worse:
-                return f"The {self.model_name}{spread} beats its physics baseline, {base}, on {where}: {average}, " \
-                       "lower in every cell."
-            return (f"The {self.model_name}{spread} beats its physics baseline, {base}, on {where}: {average}; "
-                    f"not lower in {listed}, within the {100 * MATERIAL:.0f} % tolerance.")
-        return (f"The {self.model_name}{spread} is WORSE than its physics baseline, {base}, on {where}: {listed}; "
-                f"{average}. Use the baseline, or train and check again, before trusting this model.")
+        base = " and ".join(self.baselines)
+        average = "; ".join(f"{percent_text(self.mean_change(b))} against {b}" for b in self.baselines)
+        if self.legacy_beats:
+            return (f"The {self.model_name} beats its physics baseline, {base}, on {where} (the pooled rule of "
+                    f"a run written before sysid judged per log): RMSE {average} on average.")
+        return (f"The {self.model_name} is WORSE than its physics baseline, {base}, on {where} (the pooled rule "
+                f"of a run written before sysid judged per log): RMSE {average} on average.")
 
     def warning(self) -> str | None:
         """The WARNING line for stderr, or None when the model beats its baseline."""
@@ -151,35 +190,61 @@ class BaselineVerdict:
     def to_dict(self) -> dict:
         return {"model": self.model, "baselines": list(self.baselines), "decided_on": self.decided_on,
                 "beats_baseline": self.beats_baseline, "seeds": self.seeds,
+                "outcome": self.outcome.name.lower() if self.outcome else None,
                 "val_loss_multistep": dict(self.val_loss_multistep),
-                "statement": self.statement(), "cells": [asdict(c) for c in self.cells]}
+                "statement": self.statement(), "cells": [asdict(c) for c in self.cells],
+                "judgements": {k: j.to_dict() for k, j in self.judgements.items()},
+                "validation_judgements": {k: j.to_dict() for k, j in self.validation_judgements.items()},
+                "evidence": {split: {label: [cell_to_dict(c) for c in cells] for label, cells in by.items()}
+                             for split, by in self.evidence.items()}}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> "BaselineVerdict":
         cells = tuple(ChannelCell(**{**c, "baselines": dict(c["baselines"])}) for c in d["cells"])
+        judgements = {k: Judgement.from_dict(v) for k, v in (d.get("judgements") or {}).items()}
         return cls(d["model"], tuple(d["baselines"]), cells, dict(d.get("val_loss_multistep") or {}),
-                   d.get("decided_on", TEST), int(d.get("seeds", 1)))
+                   d.get("decided_on", TEST), int(d.get("seeds", 1)), judgements,
+                   {k: Judgement.from_dict(v) for k, v in (d.get("validation_judgements") or {}).items()},
+                   {split: {label: tuple(cell_from_dict(c) for c in cells) for label, cells in by.items()}
+                    for split, by in (d.get("evidence") or {}).items()},
+                   None if judgements else bool(d.get("beats_baseline")))
 
 
-def _horizons(cells: Sequence[ChannelCell]) -> str:
-    hs = sorted({c.horizon_s for c in cells})
-    return " and ".join(f"{h:g}" for h in hs)
+def cell_to_dict(cell: PairedCell) -> dict:
+    """A `PairedCell` as JSON (non-finite errors as null)."""
+    def plain(a):
+        return [[float(v) if math.isfinite(v) else None for v in row] for row in np.atleast_2d(a)]
+    return {"log": cell.log, "scenario": cell.scenario, "horizon_s": cell.horizon_s, "channel": cell.channel,
+            "model": plain(cell.model), "baseline": plain(cell.baseline),
+            "window_start_s": [float(v) for v in cell.window_start_s],
+            "divergence": cell.divergence.to_dict() if cell.divergence else None}
+
+
+def cell_from_dict(d: Mapping) -> PairedCell:
+    def array(rows):
+        return np.array([[math.nan if v is None else v for v in row] for row in rows], dtype=float)
+    return PairedCell(str(d["log"]), str(d.get("scenario", "")), float(d["horizon_s"]), str(d["channel"]),
+                      array(d["model"]), array(d["baseline"]), np.asarray(d["window_start_s"], dtype=float),
+                      Divergence.from_dict(d["divergence"]) if d.get("divergence") else None)
 
 
 @dataclass(frozen=True)
 class WindowScore:
-    """A model on validation windows: ``val_loss_multistep`` and the RMSE of u, v_m [m/s], r
-    [rad/s] over the windows' predicted steps."""
+    """A model on validation windows: ``val_loss_multistep``, the RMSE of u, v_m [m/s], r
+    [rad/s] over the windows' predicted steps, and each window's own (W, 3)."""
 
     val_loss_multistep: float
     rmse: tuple[float, float, float]
+    window_rmse: np.ndarray | None = None
 
 
 def window_score(model, windows: WindowSet, w_v: torch.Tensor) -> WindowScore:
     """`WindowScore` of `model` on `windows` (Euler rollouts, as in training)."""
     err = rollout_errors(model, windows)
     rmse = torch.sqrt((err * err).reshape(-1, 3).mean(0))
-    return WindowScore(float(velocity_loss(err, w_v)), tuple(float(v) for v in rmse))
+    per_window = torch.sqrt((err * err).mean(0)).reshape(-1, 3)
+    return WindowScore(float(velocity_loss(err, w_v)), tuple(float(v) for v in rmse),  # type: ignore[arg-type]
+                       per_window.detach().cpu().double().numpy())
 
 
 def pooled_rmse(metrics: pd.DataFrame) -> dict[float, tuple[float, float, float]]:
@@ -193,33 +258,93 @@ def pooled_rmse(metrics: pd.DataFrame) -> dict[float, tuple[float, float, float]
             continue
         out[float(horizon)] = tuple(float(np.sqrt((n * block[c].to_numpy() ** 2).sum() / n.sum()))
                                     for c in ("rmse_u", "rmse_v", "rmse_r"))
+    return out  # type: ignore[return-value]
+
+
+def test_cells(model: "Evaluation", baseline: "Evaluation") -> list[PairedCell]:
+    """One `PairedCell` per (test log, horizon, channel) with windows: the model's and the
+    baseline's per-window RMSE on the same windows."""
+    out = []
+    for m, b in zip(model.windows, baseline.windows):
+        if (m.file, m.horizon_s) != (b.file, b.horizon_s) or not len(m.start_s):
+            continue
+        for j, channel in enumerate(CHANNELS):
+            out.append(PairedCell(m.file, m.scenario, m.horizon_s, channel, m.rmse[:, j][None, :],
+                                  b.rmse[:, j][None, :], m.start_s, m.divergence))
     return out
 
 
-def baseline_verdict(model: str, validation: Mapping[str, WindowScore] | None, validation_horizon_s: float,
-                     test: Mapping[str, pd.DataFrame] | None) -> BaselineVerdict:
+def validation_cells(model: WindowScore, baseline: WindowScore, horizon_s: float) -> list[PairedCell]:
+    """One `PairedCell` per channel on the validation windows of one horizon (one log: the
+    validation set)."""
+    if model.window_rmse is None or baseline.window_rmse is None or not len(model.window_rmse):
+        return []
+    W = len(model.window_rmse)
+    bad = ~np.all(np.isfinite(model.window_rmse), axis=1)
+    divergence = Divergence(VALIDATION_LOG, horizon_s, float(np.argmax(bad)), "", "non-finite (window "
+                            f"{int(np.argmax(bad))} of {W})") if bad.any() else None
+    return [PairedCell(VALIDATION_LOG, "", horizon_s, channel, model.window_rmse[:, j][None, :],
+                       baseline.window_rmse[:, j][None, :], np.arange(W, dtype=float), divergence)
+            for j, channel in enumerate(CHANNELS)]
+
+
+def judged(model: str, label: str, cells: Sequence[PairedCell], rule: VerdictRule, seeds: int = 1) -> Judgement:
+    """`judge` with the sentence's names: "The hybrid" against "its physics baseline MMG (ship file)"."""
+    name = MODEL_NAMES.get(model, model)
+    spread = f" (mean over {seeds} seeds)" if seeds > 1 else ""
+    return judge(cells, rule, model=f"The {name}{spread}", baseline=f"its physics baseline {label}")
+
+
+def baseline_verdict(model: str, validation: Mapping[float, Mapping[str, WindowScore]] | None,
+                     test: Mapping[str, "Evaluation"] | None, rule: VerdictRule = DEFAULT_RULE) -> BaselineVerdict:
     """The verdict from scores keyed "model" and by baseline label (`SHIP_FILE_MMG`, ...):
-    `validation` window scores, `test` metrics tables (None or empty: not available)."""
-    labels = [k for k in (validation or test or {}) if k != "model"]
+    `validation` window scores per horizon [s], `test` evaluations on the test logs (None or
+    empty: not available). A label's validation loss is the mean over the horizons, as
+    ``val_loss_multistep``."""
+    first = next(iter(validation.values())) if validation else None
+    labels = [k for k in (first or test or {}) if k != "model"]
     cells: list[ChannelCell] = []
-    if validation:
+    evidence: dict[str, dict[str, tuple[PairedCell, ...]]] = {}
+    for horizon, scores in (validation or {}).items():
         for j, channel in enumerate(CHANNELS):
-            cells.append(ChannelCell(VALIDATION, validation_horizon_s, channel, validation["model"].rmse[j],
-                                     {b: validation[b].rmse[j] for b in labels}))
+            cells.append(ChannelCell(VALIDATION, horizon, channel, scores["model"].rmse[j],
+                                     {b: scores[b].rmse[j] for b in labels}))
+        for b in labels:
+            found = validation_cells(scores["model"], scores[b], horizon)
+            evidence.setdefault(VALIDATION, {}).setdefault(b, ())
+            evidence[VALIDATION][b] += tuple(found)
+    if VALIDATION in evidence and not all(evidence[VALIDATION].values()):
+        del evidence[VALIDATION]
     if test:
-        pooled = {k: pooled_rmse(v) for k, v in test.items()}
+        pooled = {k: pooled_rmse(v.metrics) for k, v in test.items()}
         for horizon, values in pooled["model"].items():
             for j, channel in enumerate(CHANNELS):
                 cells.append(ChannelCell(TEST, horizon, channel, values[j],
-                                         {b: pooled[b][horizon][j] for b in labels}))
-    losses = {k: v.val_loss_multistep for k, v in (validation or {}).items()}
-    decided = TEST if any(c.split == TEST and c.finite for c in cells) else VALIDATION
-    return BaselineVerdict(model, tuple(labels), tuple(cells), losses, decided)
+                                         {b: pooled[b].get(horizon, (math.nan,) * 3)[j] for b in labels}))
+        by = {b: tuple(test_cells(test["model"], test[b])) for b in labels}
+        if all(by.values()):
+            evidence[TEST] = by
+    losses = {k: float(np.mean([scores[k].val_loss_multistep for scores in validation.values()]))
+              for k in (first or {})}
+    return verdict_of(model, tuple(labels), tuple(cells), losses, evidence, rule)
 
 
-def seed_mean_verdict(verdicts: Sequence[BaselineVerdict]) -> BaselineVerdict:
-    """The verdict of the seeds' mean RMSE per cell, with its std over the seeds (the
-    baselines are the same physics in every seed, so their mean is theirs)."""
+def verdict_of(model: str, labels: tuple[str, ...], cells: tuple[ChannelCell, ...], losses: dict[str, float],
+               evidence: dict[str, dict[str, tuple[PairedCell, ...]]], rule: VerdictRule,
+               seeds: int = 1) -> BaselineVerdict:
+    """Judge the evidence of every split against every baseline; the test logs decide when
+    there are any."""
+    decided = TEST if TEST in evidence else VALIDATION
+    judgements = {b: judged(model, b, cs, rule, seeds) for b, cs in evidence.get(decided, {}).items()}
+    on_validation = {b: judged(model, b, cs, rule, seeds) for b, cs in evidence.get(VALIDATION, {}).items()}
+    return BaselineVerdict(model, labels, cells, losses, decided, seeds, judgements, on_validation, evidence)
+
+
+def seed_mean_verdict(verdicts: Sequence[BaselineVerdict], rule: VerdictRule = DEFAULT_RULE) -> BaselineVerdict:
+    """The verdict of several seeds of one experiment: every seed is a member of the model
+    (the bootstrap draws seeds too; their spread is shown); a baseline the same in every seed
+    (the ship file's MMG) counts once, one identified per seed counts every seed. The pooled
+    cells are the seeds' mean with their std."""
     first = verdicts[0]
     if len(verdicts) == 1:
         return first
@@ -231,4 +356,31 @@ def seed_mean_verdict(verdicts: Sequence[BaselineVerdict]) -> BaselineVerdict:
                                  float(values.std(ddof=1))))
     losses = {k: float(np.mean([v.val_loss_multistep.get(k, math.nan) for v in verdicts]))
               for k in first.val_loss_multistep}
-    return BaselineVerdict(first.model, first.baselines, tuple(cells), losses, first.decided_on, len(verdicts))
+    evidence: dict[str, dict[str, tuple[PairedCell, ...]]] = {}
+    for split, by in first.evidence.items():
+        if not all(split in v.evidence for v in verdicts):
+            continue
+        evidence[split] = {}
+        for label, seed_cells in by.items():
+            stacked = []
+            if any(len(v.evidence[split][label]) != len(seed_cells) for v in verdicts):
+                continue
+            same_baseline = all(np.array_equal(v.evidence[split][label][i].baseline, c.baseline, equal_nan=True)
+                                for v in verdicts for i, c in enumerate(seed_cells))
+            for i, c in enumerate(seed_cells):
+                others = [v.evidence[split][label][i] for v in verdicts]
+                if any(o.key != c.key or o.n_windows != c.n_windows for o in others):
+                    break
+                stacked.append(PairedCell(c.log, c.scenario, c.horizon_s, c.channel,
+                                          np.concatenate([o.model for o in others]),
+                                          c.baseline if same_baseline else np.concatenate([o.baseline for o in others]),
+                                          c.window_start_s,
+                                          next((o.divergence for o in others if o.divergence is not None), None)))
+            else:
+                evidence[split][label] = tuple(stacked)
+        if len(evidence[split]) != len(by):
+            del evidence[split]
+    if not evidence:
+        return BaselineVerdict(first.model, first.baselines, tuple(cells), losses, first.decided_on, len(verdicts),
+                               legacy_beats=all(v.beats_baseline for v in verdicts))
+    return verdict_of(first.model, first.baselines, tuple(cells), losses, evidence, rule, len(verdicts))

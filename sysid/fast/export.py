@@ -19,6 +19,7 @@ torch alone (no sysid, no training code):
 """
 from __future__ import annotations
 
+import io
 import json
 import shutil
 import time
@@ -96,8 +97,10 @@ def export_model(model: nn.Module, path: str | Path, method: Method = Method.EUL
             shutil.copyfile(cached_package(step, examples, step_label(method), metadata, log), tmp)
         else:
             metadata["format"] = "torch.export"
-            torch.export.save(export_program(step, examples), tmp,
+            program = io.BytesIO()  # written here, not by torch's native writer (a full disk aborts that)
+            torch.export.save(export_program(step, examples), program,
                               extra_files={METADATA_FILE: json.dumps(metadata)})
+            tmp.write_bytes(program.getbuffer())
     return path
 
 

@@ -70,7 +70,7 @@ class KNNGate(nn.Module):
         """Store the training features and set the threshold (Eqs. 19-20, leave-one-out)."""
         if features.shape[0] <= self.k:
             raise ValueError(f"kNN gate: need more than k={self.k} training features, got {features.shape[0]}")
-        self.bank = features.detach().to(self.bank.dtype).clone()
+        self.bank = features.detach().to(self.bank.dtype).clone()  # type: ignore[has-type]
         d = self._distances(self.bank, exclude_self=True)
         self.train_distances = d
         ordered = torch.sort(d).values

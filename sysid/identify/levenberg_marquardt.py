@@ -61,6 +61,7 @@ from torch import nn
 from torch.func import jacfwd
 
 from sysid.config.choices import Method, StartStates
+from sysid.records.summary import start_state_verdict
 from sysid.state import VELOCITY_INDEX
 from sysid.identify.uncertainty import (CoefficientUncertainty, coefficient_uncertainty, multistep_residuals,
                                uncertainty_from_jacobian, velocity_weights)
@@ -309,23 +310,8 @@ class StartStateCheck:
                 "limit_sigma": CHECK_LIMIT, "agrees": self.agrees}
 
 
-def start_state_verdict(start_states: str, largest: str, largest_sigma: float | None, agrees: bool) -> str:
-    """A check (as `StartStateCheck.verdict` and summary.json's
-    ``identification.start_state_check`` hold it) in one clause, the same in the training
-    log and the report: how far the estimates move in sigma (`largest_sigma`, None: no
-    finite sigma; `largest`: that coefficient) and whether that stays within the ± 2 sigma."""
-    if largest_sigma is None:
-        return f"with start states {start_states}: no estimate has a finite σ to compare with"
-    said = (f"with start states {start_states} the estimates move by at most "
-            f"{abs(largest_sigma):.1f}σ ({largest})")
-    if agrees:
-        return said + ", within the ± 2σ"
-    return (said + ": beyond the ± 2σ, so the data carry noisy start states or a model-structure error "
-            "and the ± 2σ, which measures the noise only, is a lower bound on the uncertainty")
-
-
 def start_state_check(model: nn.Module, windows, names: Sequence[str], fit: LevenbergMarquardtFit,
-                      sigma: Sequence[float], weights: torch.Tensor | None = None, method: Method = Method.EULER,
+                      sigma: Sequence[float] | np.ndarray, weights: torch.Tensor | None = None, method: Method = Method.EULER,
                       prior: Mapping[str, float] | None = None, prior_weight: float = 0.0,
                       iterations: int = 40) -> StartStateCheck:
     """Fit `names` again with the other start-state treatment than `fit`'s, from the values

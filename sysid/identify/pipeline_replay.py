@@ -41,7 +41,7 @@ def noise_free(run_index: int) -> SynthSettings:
                          anemo_speed_noise=0.0, anemo_dir_noise=0.0)
 
 
-def replay_run(model: nn.Module, logged: pd.DataFrame, start: Sequence[float]) -> pd.DataFrame:
+def replay_run(model: nn.Module, logged: pd.DataFrame, start: Sequence[float] | np.ndarray) -> pd.DataFrame:
     """The model's motion under a run's logged inputs, as a processed-schema truth.
 
     logged : processed-schema columns (bare names) at the log's rate (uniform t [s]):

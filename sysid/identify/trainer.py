@@ -29,9 +29,10 @@
    standardised inputs (``[gate] space``).
 
 The run's one validation loss is ``val_loss_multistep`` (`VAL_LOSS_DEFINITION`): L_v of the
-final model as it predicts (kNN gate included) on the validation windows, over T steps or
-``[training] objective_s``. The early-stopping loss is the same sum during training, before
-the gate exists, so the two differ by what the gate changes (and by objective_s).
+final model as it predicts (kNN gate included) on validation windows of each ``[evaluation]
+horizons`` (the verdict's horizons; ``[training] objective_s`` when set), averaged over the
+horizons. The early-stopping loss is the same sum over the training windows' T steps during
+training, before the gate exists.
 """
 from __future__ import annotations
 
@@ -57,6 +58,7 @@ from sysid.data.recordings import Run, duplicate_runs, sliding_windows, stack_wi
 from sysid.data.splits import HeldOutFiles, hold_out_files
 from sysid.device import resolve_device
 from sysid.dynamics.equations import integrate, integrate_with_forces, required_force
+from sysid.dynamics.rollouts import WindowSet, rollout_errors, velocity_loss  # noqa: F401 (the trainer's names too)
 from sysid.errors import ConfigError, DataError, TrainingError
 from sysid.config.choices import DType, Method, ModelKind, Solver, Stage, StartStates, Validation
 from sysid.config.experiment import PAPER_FORCE_BAND, Experiment
@@ -65,32 +67,10 @@ from sysid.hybrid.force_models import CorrectedModel, PerMember, build_mmg, corr
 from sysid.hybrid.knn_gate import KNNGate
 from sysid.state import VELOCITY_INDEX
 from sysid.identify.uncertainty import coefficient_uncertainty
+from sysid.records.summary import VAL_LOSS_DEFINITION  # noqa: F401 (its home before: the run's validation loss)
 
 VEL = list(VELOCITY_INDEX)
-VAL_LOSS_DEFINITION = (
-    "val_loss_multistep: mean over the validation windows and their steps k = 1..K of "
-    "sum over u, v_m, r of w_j (predicted_j - recorded_j)^2, w_j = 1 / variance of channel j in the "
-    "training windows; Euler rollouts from each window's recorded first state with its recorded inputs; "
-    "K = [training] steps, or objective_s / dt; the final model, kNN gate included. Validation windows: "
-    "the validation blocks of the training logs, or whole validation logs: [data] validation, or the training "
-    "logs held out by [training] validation = \"files\" (never a test file).")
 _LOG = logging.getLogger(__name__)
-
-
-@dataclass
-class WindowSet:
-    """Windows (L, W, 6) states and (L, W, 4) inputs, L = T + 1 samples at dt [s]."""
-
-    states: torch.Tensor
-    inputs: torch.Tensor
-    dt: float
-
-    def __len__(self) -> int:
-        return self.states.shape[1]
-
-    def select(self, index: torch.Tensor) -> "WindowSet":
-        index = index.to(self.states.device)
-        return WindowSet(self.states[:, index], self.inputs[:, index], self.dt)
 
 
 @dataclass
@@ -178,6 +158,14 @@ def _block_parts(n: int, block: int, val_fraction: float, rng: np.random.Generat
     return np.repeat(val_blocks, math.ceil(n / n_blocks))[:n]
 
 
+def objective_horizons(exp: Experiment) -> tuple[float, ...]:
+    """The horizons [s] of ``val_loss_multistep``: ``[training] objective_s`` when set, else
+    ``[evaluation] horizons``, the horizons the verdict judges on the test logs (one
+    definition of good for validation, sweeps and the verdict)."""
+    t = exp.training
+    return (float(t.objective_s),) if t.objective_s > 0 else tuple(float(h) for h in exp.evaluation.horizons)
+
+
 def split_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction: float,
                   exclude_suspect: bool = True, dtype=torch.float64, block_s: float = 30.0, seed: int = 0,
                   device: str | torch.device = "cpu", validation_runs: Sequence[Run] = ()):
@@ -207,7 +195,12 @@ def split_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction
         if validation_runs:
             part_of = np.full(len(run), any(run is v for v in validation_runs))
         else:
-            part_of = _block_parts(len(run), int(round(block_s / run.dt)), val_fraction, rng)
+            block = int(round(block_s / run.dt))
+            if block < length:  # no window would lie wholly in one block: none in either part
+                raise ConfigError(f"[training] block_s = {block_s:g} s: a validation block holds {block} of the "
+                                  f"data's {run.dt:g}-s samples, fewer than one {length}-sample training window; "
+                                  f"set block_s >= {length * run.dt:g} s (default 30)")
+            part_of = _block_parts(len(run), block, val_fraction, rng)
         starts = sliding_windows(len(run), length, stride)
         ends = starts + length - 1
         counts = {}
@@ -284,20 +277,6 @@ def adam(params, lr: float) -> torch.optim.Adam:
 def weight_norm(net: ForceCorrection) -> torch.Tensor:
     """||theta||^2 of the FNN weights (Eq. 13), per member (losses are means over members)."""
     return sum((w * w).sum() for w in net.weights) / net.members
-
-
-def velocity_loss(err: torch.Tensor, w_v: torch.Tensor) -> torch.Tensor:
-    """L_v (Eq. 15): the mean over windows and steps of sum_j w_j err_j^2; err (T, ..., 3)
-    velocity errors (u, v_m [m/s], r [rad/s]), w_v (3,) their weights."""
-    return ((err * err) * w_v).sum(-1).mean()
-
-
-def rollout_errors(model, batch: WindowSet) -> torch.Tensor:
-    """(T, W, 3) velocity errors (u, v_m [m/s], r [rad/s]) of Euler rollouts of T steps from
-    each window's first recorded state with its recorded inputs (no gradient)."""
-    with torch.no_grad():
-        pred = integrate(model, batch.states[0], batch.inputs, batch.dt, "euler")
-    return pred[1:, ..., VEL] - batch.states[1:, ..., VEL]
 
 
 def multistep_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor | None = None,
@@ -613,16 +592,31 @@ class Trainer:
 
     def objective(self, model, runs: Sequence[Run], val: WindowSet, w_v, dtype, device) -> float:
         """The run's validation loss ``val_loss_multistep`` (`VAL_LOSS_DEFINITION`): L_v of the
-        final model (gate included) over the training windows' T steps, or over ``[training]
-        objective_s`` seconds, a horizon that stays the same when T varies (sweeps compare T
-        on it). Validation windows only; they are kept as ``validation_windows_``."""
+        final model (gate included) on validation windows of each of its horizons
+        (`objective_horizons`), averaged over the horizons the validation data hold a window
+        of; T steps when they hold none. The windows are kept per horizon as
+        ``validation_sets_`` (the first as ``validation_windows_``)."""
         exp, t = self.experiment, self.experiment.training
-        if t.objective_s > 0:
-            steps = max(1, int(round(t.objective_s / val.dt)))
-            val = split_windows(runs, steps, t.stride_s, t.val_fraction, exp.data.exclude_suspect, dtype,
-                                t.block_s, exp.experiment.seed, device, self._validation_runs)[1]
-        self.validation_windows_ = val
-        return float(velocity_loss(rollout_errors(model, val), w_v))
+        sets: dict[float, WindowSet] = {}
+        for horizon in objective_horizons(exp):
+            # objective_s: that many seconds of steps; an evaluation horizon: windows of as many
+            # samples as the test windows (H = h / dt points, first included)
+            steps = max(1, int(round(horizon / val.dt)) - (0 if t.objective_s > 0 else 1))
+            try:
+                windows = split_windows(runs, steps, t.stride_s, t.val_fraction, exp.data.exclude_suspect, dtype,
+                                        t.block_s, exp.experiment.seed, device, self._validation_runs)[1]
+            except DataError:   # none that long
+                windows = None
+            if windows is not None and len(windows):
+                sets[horizon] = windows
+            else:
+                self.log(f"val_loss_multistep: no validation window of {horizon:g} s (the validation blocks or "
+                         "logs are shorter); that horizon is left out")
+        if not sets:
+            sets[round(t.steps * val.dt, 6)] = val
+        self.validation_sets_ = sets
+        self.validation_windows_ = next(iter(sets.values()))
+        return float(np.mean([float(velocity_loss(rollout_errors(model, w), w_v)) for w in sets.values()]))
 
     # -- the estimator ---------------------------------------------------------------
     def fit(self, runs: Sequence[Run], validation: Sequence[Run] = ()) -> "Trainer":
@@ -713,12 +707,12 @@ class Trainer:
                 summary.gate = self.fit_gate(model, samples, dtype)
         self.velocity_weights_ = w_v
         self.validation_windows_ = val
+        self.validation_sets_ = {round(t.steps * val.dt, 6): val}
         if summary.failure is None:
             summary.val_loss_multistep = self.objective(model, runs, val, w_v, dtype, device)
-            horizon = t.objective_s if t.objective_s > 0 else t.steps * val.dt
+            judged = " and ".join(f"{len(w)} of {h:g} s" for h, w in self.validation_sets_.items())
             self.log(f"val_loss_multistep {summary.val_loss_multistep:.5f}: the final model"
-                     + (" (kNN gate on)" if summary.gate else "") + f" on {len(self.validation_windows_)} "
-                     f"validation windows of {horizon:g} s"
+                     + (" (kNN gate on)" if summary.gate else "") + f" on validation windows: {judged}"
                      + (f"; the early-stopping loss {stopping_best:.5f} is the network's during training, "
                         "before the gate" if stopping_best is not None else ""))
         self.history_ = pd.DataFrame(self._history)

@@ -23,8 +23,6 @@ import torch
 from torch import nn
 
 from sysid.dynamics.integrators import STEP_RULES, Method
-from sysid.fast.compiled import compile_cached, fingerprint, package_path
-from sysid.fast.prepared import indexed, prepared
 from sysid.fast.stepper import Derivative
 from sysid.maneuvers.controllers import COLUMNS, ManeuverOrders
 
@@ -106,6 +104,7 @@ def source_digest() -> str:
 def run_eager(model: nn.Module, x0: torch.Tensor, orders0: torch.Tensor, parameters: torch.Tensor,
               steps: int, dt: float, method: Method | str) -> torch.Tensor:
     """Record (steps, B, `RECORD`) of `steps` closed-loop steps of all B maneuvers at once."""
+    from sysid.fast.prepared import indexed  # the gate's leaf index
     step = ClosedLoopStep(indexed(model, x0.shape[0]), method)
     dt_t = torch.tensor(dt, dtype=x0.dtype)
     out = torch.empty((steps, x0.shape[0], RECORD), dtype=x0.dtype)
@@ -125,6 +124,7 @@ def _notice(message: str) -> None:
 
 def _loop_module(model: nn.Module, method: Method, dtype: torch.dtype):
     """(the `ClosedLoopRollout` compiled for `LOOP_ROWS` maneuvers, its example inputs, label)."""
+    from sysid.fast.prepared import prepared
     module = ClosedLoopRollout(ClosedLoopStep(prepared(model, LOOP_ROWS), method), CAPACITY, source_digest())
     rows = LOOP_ROWS
     examples = (torch.zeros(rows, 6, dtype=dtype), torch.zeros(rows, 2, dtype=dtype),
@@ -136,6 +136,7 @@ def _loop_module(model: nn.Module, method: Method, dtype: torch.dtype):
 def loop_is_cached(model: nn.Module, method: Method | str, dtype: torch.dtype = torch.float64) -> bool:
     """True when `compiled_loop` would not compile: the loop is in this process's memory or
     in the disk cache (a warm start)."""
+    from sysid.fast.compiled import fingerprint, package_path
     module, examples, label = _loop_module(model, Method.parse(method), dtype)
     key = fingerprint(module, examples)
     return _compiled.get(key) is not None or package_path(module, examples, label).is_file()
@@ -146,6 +147,7 @@ def compiled_loop(model: nn.Module, method: Method | str, dtype: torch.dtype = t
     """The compiled `ClosedLoopRollout` of `model` for up to `LOOP_ROWS` maneuvers side by
     side, from this process's memory, the disk cache, or compiled now (one notice line);
     None where compilation is off or fails (the caller runs `run_eager`)."""
+    from sysid.fast.compiled import compile_cached, fingerprint  # the compiled path: only where it is chosen
     module, examples, label = _loop_module(model, Method.parse(method), dtype)
     key = fingerprint(module, examples)
     if key not in _compiled:
@@ -164,7 +166,7 @@ def run_compiled(loop: Callable[..., torch.Tensor], x0: torch.Tensor, orders0: t
         n = rows[0].shape[0]
         if n < LOOP_ROWS:
             rows = [torch.cat((t, t[:1].expand(LOOP_ROWS - n, -1))) for t in rows]
-        groups.append(_run_group(loop, *rows, steps, dt)[:, :n])
+        groups.append(_run_group(loop, rows[0], rows[1], rows[2], steps, dt)[:, :n])
     return torch.cat(groups, 1)
 
 

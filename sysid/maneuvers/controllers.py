@@ -39,12 +39,12 @@ def order_parameters(maneuvers: Sequence[Maneuver], conditions: Conditions,
     for m in maneuvers:
         rudder, check, order, reversal = 0.0, math.inf, conditions.rps, 0.0
         if m.kind in ("turning", "zigzag"):
-            rudder = math.radians(m.rudder_deg)
+            rudder = math.radians(m.rudder_deg)  # type: ignore[union-attr]
         if m.kind == "zigzag":
-            check = math.radians(m.check_deg)
+            check = math.radians(m.check_deg)  # type: ignore[union-attr]
         if m.kind == "crash_stop":
-            order = -conditions.rps if m.astern_rps is None else m.astern_rps
-            reversal = m.reversal_s
+            order = -conditions.rps if m.astern_rps is None else m.astern_rps  # type: ignore[union-attr]
+            reversal = m.reversal_s  # type: ignore[union-attr]
         rows.append([rudder, check, rate, conditions.rps, order, reversal, conditions.wind_speed,
                      conditions.wind_direction, 0.0])
     return torch.tensor(rows, dtype=dtype)
@@ -52,7 +52,7 @@ def order_parameters(maneuvers: Sequence[Maneuver], conditions: Conditions,
 
 def initial_orders(maneuvers: Sequence[Maneuver], dtype: torch.dtype = torch.float64) -> torch.Tensor:
     """(B, 2) controller state at the execute: rudder amidships, order to the maneuver's side."""
-    return torch.tensor([[0.0, m.side.sign if m.kind != "crash_stop" else 1.0] for m in maneuvers], dtype=dtype)
+    return torch.tensor([[0.0, m.side.sign if m.kind != "crash_stop" else 1.0] for m in maneuvers], dtype=dtype)  # type: ignore[union-attr]
 
 
 def rate_limited(angle: torch.Tensor, order: torch.Tensor, rate_dt: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -159,7 +159,7 @@ def speed_loss_ratio(track: Track) -> float:
     """Speed loss ratio [-]: 1 - U_steady / U_0, U_steady the mean speed over the last half
     turn, U_0 the speed at the execute (NaN before 360 deg of heading change)."""
     span = _last_half_turn(track)
-    if span is None:
+    if span is None or not math.isfinite(span[0]):
         return math.nan
     first = int(math.ceil(span[0]))
     return float(1.0 - track.speed[first:].mean() / track.speed[0])

@@ -1,16 +1,25 @@
-"""The indices of recorded turning and zig-zag runs beside each model's prediction of them.
+"""The indices of recorded turning and zig-zag runs beside each model's indices of the same
+maneuver, computed the same way.
 
 A recorded run's order is its largest rudder angle (95th percentile of |delta|, rounded to
 a whole degree); the turn is the longest stretch of samples within 10 % of it, a zig-zag's
 first order the first such stretch of `HOLD_S` (the approach's course keeping never holds
 that long); the execute is the last sample before it with the rudder below half of the
-order on that side. The maneuver is a
-turning circle of that angle, or a zig-zag A/A (the dataset's zig-zags check at the rudder
-angle; a scenario name such as "Zigzag 20/20" gives both). A model predicts the run open
-loop from the recorded state at the execute with the recorded inputs (zero-order hold,
-the protocol's rate and integrator); the indices of the record and of each prediction are
-computed by the same functions (`sysid.maneuvers.indices`), the zig-zag's reversals taken
-from the recorded rudder for both.
+order on that side. The maneuver is a turning circle of that angle, or a zig-zag A/A (the
+dataset's zig-zags check at the rudder angle; a scenario name such as "Zigzag 20/20" gives
+both).
+
+Like for like: a model predicts the run from the recorded state at the execute with the
+recorded inputs (zero-order hold, the protocol's rate and integrator), which for a turning
+circle is the maneuver itself. A zig-zag's IMO overshoots are those of the model run
+closed loop from the record's approach (`approach_conditions`: surge speed and
+revolutions at the execute, the record's rudder angle, check angle and rudder rate, its
+mean true wind relative to the approach heading) with the heading-triggered reversals
+(`sysid.maneuvers.simulate`); the record's own overshoots are taken between the same
+heading-triggered reversals. The open-loop prediction's peak heading deviation beyond the
+check angle between the recorded rudder's reversals stays, under its own name
+(``open_loop_first_peak_deg``, ``open_loop_second_peak_deg``; the record's: the same peak
+of the record): under the same rudder it shows how far the model lags or leads the ship.
 """
 from __future__ import annotations
 
@@ -28,21 +37,27 @@ import torch
 from torch import nn
 
 from sysid.data.datasets import TEST_FILES, data_dir
-from sysid.data.recordings import Run, read_run
-from sysid.dynamics.integrators import IntegratorLike, Method
+from sysid.data.recordings import Run, read_runs
+from sysid.data.scenario import FOLDERS, Maneuver as Kind, recognise
+from sysid.dynamics.equations import eager_predict
+from sysid.dynamics.integrators import Method
 from sysid.errors import DataError
-from sysid.fast.compiled import predict
 from sysid.maneuvers.any_model import load_maneuver_model
-from sysid.maneuvers.base import Maneuver, Side, TurningCircle, ZigZag
-from sysid.maneuvers.indices import INDEX_COLUMNS, KIND_INDICES, Track, maneuver_indices
-from sysid.maneuvers.simulate import gate_off_share
+from sysid.maneuvers.base import Conditions, Maneuver, Side, TurningCircle, ZigZag
+from sysid.maneuvers.indices import INDEX_COLUMNS, KIND_INDICES, Track, maneuver_indices, zigzag_overshoots
+from sysid.maneuvers.simulate import gate_off_share, simulate_maneuvers
 from sysid.device import compute_threads
 from sysid.store.manifest import has_manifest
 from sysid.store.files import write_csv
 from sysid.workers import in_workers
 
-RECORD_COLUMNS = ["scenario", "file", "maneuver", "model", "n_members", *INDEX_COLUMNS,
-                  *(f"{c}_std" for c in INDEX_COLUMNS), "gate_off_share"]
+OPEN_LOOP_COLUMNS = ("open_loop_first_peak_deg", "open_loop_second_peak_deg")
+RECORD_INDEX_COLUMNS = (*INDEX_COLUMNS, *OPEN_LOOP_COLUMNS)
+# the indices of the record table per kind: a zig-zag's IMO overshoots, then the open-loop peaks
+RECORD_INDICES = {"turning": KIND_INDICES["turning"], "zigzag": (*KIND_INDICES["zigzag"], *OPEN_LOOP_COLUMNS)}
+RECORD_COLUMNS = ["scenario", "file", "maneuver", "model", "n_members", *RECORD_INDEX_COLUMNS,
+                  *(f"{c}_std" for c in RECORD_INDEX_COLUMNS), "gate_off_share"]
+CLOSED_LOOP_DT = 0.1  # [s] step of the closed-loop zig-zags (classical RK4)
 RECORDED = "recorded"  # the `model` of the record's own row
 HOLD_S = 5.0  # [s] a zig-zag's first order is the first stretch this long near the run's largest angle
 
@@ -50,18 +65,26 @@ HOLD_S = 5.0  # [s] a zig-zag's first order is the first stretch this long near 
 def recorded_test_runs(data: str | os.PathLike | None = None, rate: float = 1.0) -> dict[str, Run]:
     """The protocol's turning and zig-zag test runs (scenario -> `Run` at `rate` [Hz])."""
     root = data_dir(data)
-    return {name: read_run(root / path, rate) for name, path in TEST_FILES.items()
-            if name.startswith(("Turning", "Zigzag"))}
+    names = [name for name in TEST_FILES if name.startswith(("Turning", "Zigzag"))]
+    return dict(zip(names, read_runs([root / TEST_FILES[n] for n in names], rate)))
 
 
 def recorded_maneuver(run: Run, scenario: str = "") -> tuple[Maneuver, int]:
     """(the maneuver of a recorded run, the sample index of its execute). The kind comes
-    from the scenario name or the file's folder (``turning/``, ``zigzag/``)."""
-    text = f"{scenario} {run.path.parent.name} {run.name}".lower()
-    kind = "zigzag" if "zigzag" in text else "turning" if ("turn" in text) else None
+    from the scenario name (else the file's name: ``turn...``, ``zigzag...``), the file's
+    folder (``turning/``, ``zigzag/``), else the signals (`sysid.data.scenario.recognise`)."""
+    label = scenario.lower() if scenario else run.name.lower()[:6]  # "Zigzag 20/20"; "turn_14-Sep-..."
+    folder = FOLDERS.get(run.path.parent.name.lower())
+    kind = ("zigzag" if "zigzag" in label else "turning" if "turn" in label[:4] or " turn" in label
+            else folder.value if folder in (Kind.TURNING, Kind.ZIGZAG) else None)
+    found = None
     if kind is None:
-        raise DataError(f"{run.path}: not a turning or zig-zag run (name it in the scenario or keep it in "
-                        "a turning/ or zigzag/ folder)")
+        found = recognise(run)
+        kind = found.kind.value if found.kind in (Kind.TURNING, Kind.ZIGZAG) else None
+    if kind is None:
+        raise DataError(f"{run.path}: not a turning or zig-zag run (its rudder and heading record "
+                        f"{found.name if found else 'neither'}; name it in the scenario or keep it in a turning/ "
+                        "or zigzag/ folder)")
     rudder = run.inputs[:, 1]
     order = float(np.percentile(np.abs(rudder), 95))
     if order < math.radians(1.0):
@@ -86,16 +109,49 @@ def recorded_maneuver(run: Run, scenario: str = "") -> tuple[Maneuver, int]:
     angle = float(round(math.degrees(order)))
     if kind == "turning":
         return TurningCircle(angle, side), execute
-    named = re.search(r"(\d+(?:\.\d+)?)\s*/\s*(\d+(?:\.\d+)?)", scenario)
-    rudder_deg, check_deg = (float(named[1]), float(named[2])) if named else (angle, angle)
+    pair = re.search(r"(\d+(?:\.\d+)?)\s*/\s*(\d+(?:\.\d+)?)", scenario)
+    if pair:
+        rudder_deg, check_deg = float(pair[1]), float(pair[2])
+    elif found is not None and found.heading_deg is not None:   # the check angle the record shows
+        rudder_deg, check_deg = angle, found.heading_deg
+    else:
+        rudder_deg, check_deg = angle, angle
     return ZigZag(rudder_deg, check_deg, side), execute
 
 
-def _predictions(model: nn.Module, runs: Sequence[Run], starts: Sequence[int], method: Method
-                 ) -> list[tuple[np.ndarray, float | None]]:
+def approach_conditions(run: Run, execute: int, dt: float = CLOSED_LOOP_DT) -> Conditions:
+    """The record's approach as `Conditions` of a closed-loop maneuver: surge speed u [m/s]
+    and revolutions [rps] at the execute; rudder rate [deg/s]: the record's fastest rudder
+    move, max |d delta/dt| at the log's rate (a lower bound when the gear moves within one
+    sample); true wind: its mean speed [m/s] and circular-mean direction over the maneuver,
+    turned into the frame of the approach heading (the simulation starts at psi = 0); the
+    duration of the record after the execute [s]; RK4 at `dt` [s]."""
+    delta = np.degrees(run.inputs[:, 1])
+    rate = float(np.max(np.abs(np.diff(delta)) / np.diff(run.t)))
+    wind = run.inputs[execute:, 2:4]
+    direction = math.atan2(np.mean(np.sin(wind[:, 1])), np.mean(np.cos(wind[:, 1]))) - run.states[execute, 4]
+    return Conditions(speed=float(run.states[execute, 1]), rps=float(run.inputs[execute, 0]), rudder_rate=rate,
+                      dt=dt, duration=float(run.t[-1] - run.t[execute]), wind_speed=float(np.mean(wind[:, 0])),
+                      wind_direction=direction % (2.0 * math.pi))
+
+
+def closed_loop_indices(model: nn.Module, run: Run, maneuver: Maneuver, execute: int,
+                        dt: float = CLOSED_LOOP_DT) -> dict[str, float] | None:
+    """A zig-zag's indices of `model` run closed loop from the record's approach
+    (`approach_conditions`, step `dt` [s]); None for another maneuver (its prediction is the
+    recorded run's)."""
+    if maneuver.kind != "zigzag":
+        return None
+    return simulate_maneuvers(model, [maneuver], approach_conditions(run, execute, dt))[0].indices.as_dict()
+
+
+def _predictions(model: nn.Module, runs: Sequence[Run], starts: Sequence[int], method: Method,
+                 maneuvers: Sequence[Maneuver] | None = None, dt: float = CLOSED_LOOP_DT
+                 ) -> list[tuple[np.ndarray, float | None, dict | None]]:
     """Each run predicted from its recorded state at `starts` with its recorded inputs, all
-    runs in one batched integration (shorter ones padded with their last inputs):
-    (states (T_i, 6), kNN gate off share or None) per run."""
+    runs in one batched integration (shorter ones padded with their last inputs), and each
+    zig-zag of `maneuvers` run closed loop (`closed_loop_indices`): (states (T_i, 6), kNN
+    gate off share or None, closed-loop indices or None) per run."""
     lengths = [len(r) - s for r, s in zip(runs, starts)]
     longest = max(lengths)
     x0 = torch.tensor(np.stack([r.states[s] for r, s in zip(runs, starts)]), dtype=torch.float64)
@@ -104,17 +160,19 @@ def _predictions(model: nn.Module, runs: Sequence[Run], starts: Sequence[int], m
         u = r.inputs[s:]
         inputs.append(np.concatenate([u, np.repeat(u[-1:], longest - len(u), 0)]))
     u = torch.tensor(np.stack(inputs, 1), dtype=torch.float64)
-    states = predict(model, x0, u, runs[0].dt, method)
+    states = eager_predict(model, x0, u, runs[0].dt, method)
+    maneuvers = maneuvers if maneuvers is not None else [None] * len(runs)
     out = []
     for i, n in enumerate(lengths):
         share = gate_off_share(model, states[:n - 1, i], u[:n - 1, i])
-        out.append((states[:n, i].numpy(), share))
+        closed = closed_loop_indices(model, runs[i], maneuvers[i], starts[i], dt) if maneuvers[i] is not None else None
+        out.append((states[:n, i].numpy(), share, closed))
     return out
 
 
 def _row(scenario: str, run: Run, maneuver: Maneuver, model: str, values: list[dict], shares: list) -> dict:
     row = {"scenario": scenario, "file": run.name, "maneuver": maneuver.name, "model": model, "n_members": len(values)}
-    for c in INDEX_COLUMNS:
+    for c in RECORD_INDEX_COLUMNS:
         column = np.array([v[c] for v in values], dtype=float)
         finite = column[np.isfinite(column)]
         row[c] = float(finite.mean()) if len(finite) == len(column) else math.nan
@@ -124,7 +182,8 @@ def _row(scenario: str, run: Run, maneuver: Maneuver, model: str, values: list[d
     return row
 
 
-Predictions = list[tuple[np.ndarray, "float | None"]]  # per run: (states (T_i, 6), gate off share)
+# per run: (states (T_i, 6), gate off share, a zig-zag's closed-loop indices)
+Predictions = list[tuple[np.ndarray, "float | None", "dict | None"]]
 
 
 def _execute_starts(runs: Mapping[str, Run]) -> list[int]:
@@ -132,14 +191,34 @@ def _execute_starts(runs: Mapping[str, Run]) -> list[int]:
     return [start for _, start in (recorded_maneuver(run, scenario) for scenario, run in runs.items())]
 
 
+def _maneuvers(runs: Mapping[str, Run]) -> list[Maneuver]:
+    """Each run's maneuver (scenario -> `Run`, in order)."""
+    return [maneuver for maneuver, _ in (recorded_maneuver(run, scenario) for scenario, run in runs.items())]
+
+
+def like_for_like(maneuver: Maneuver, track: Track, rudder: np.ndarray, closed: dict | None) -> dict[str, float]:
+    """The record-table indices of one run (`RECORD_INDEX_COLUMNS`): for a zig-zag, the IMO
+    overshoots of `closed` (a model's closed-loop indices) or, for the record (None), of
+    `track` between its heading-triggered reversals; and the peaks beyond the check angle
+    of `track` between the reversals of the recorded `rudder` (the open-loop peaks)."""
+    values = maneuver_indices(maneuver, track, rudder).as_dict()
+    if not isinstance(maneuver, ZigZag):
+        return {**values, **dict.fromkeys(OPEN_LOOP_COLUMNS, math.nan)}
+    peaks = dict(zip(OPEN_LOOP_COLUMNS, zigzag_overshoots(track, maneuver.check_deg, rudder)))
+    imo = closed if closed is not None else maneuver_indices(maneuver, track).as_dict()
+    return {**values, **{k: imo[k] for k in KIND_INDICES["zigzag"]}, **peaks}
+
+
 def record_comparison(models: Mapping[str, Sequence[nn.Module]], runs: Mapping[str, Run],
-                      method: IntegratorLike = "euler") -> pd.DataFrame:
+                      method: Method | str = "euler", closed_loop_dt: float = CLOSED_LOOP_DT) -> pd.DataFrame:
     """`RECORD_COLUMNS` rows: for each run (scenario -> `Run`) the record's indices, then
     each model's (label -> its models: one, or several seeds whose indices are averaged,
-    with their standard deviation in ``<index>_std``) prediction of it from the execute."""
+    with their standard deviation in ``<index>_std``) indices of it, like for like (the
+    module's docstring; zig-zags closed loop at step `closed_loop_dt` [s])."""
     method = Method.parse(method)
-    starts = _execute_starts(runs)
-    predicted = {label: [_predictions(m, list(runs.values()), starts, method) for m in members]
+    starts, maneuvers = _execute_starts(runs), _maneuvers(runs)
+    predicted = {label: [_predictions(m, list(runs.values()), starts, method, maneuvers, closed_loop_dt)
+                         for m in members]
                  for label, members in models.items()}
     return compared(predicted, runs)
 
@@ -154,14 +233,40 @@ def compared(predicted: Mapping[str, Sequence[Predictions]], runs: Mapping[str, 
         run, (maneuver, start) = runs[scenario], found[i]
         t = run.t[start:] - run.t[start]
         rudder = run.inputs[start:, 1]
-        record = maneuver_indices(maneuver, Track.of(t, run.states[start:]), rudder).as_dict()
+        record = like_for_like(maneuver, Track.of(t, run.states[start:]), rudder, None)
         rows.append(_row(scenario, run, maneuver, RECORDED, [record], [None]))
         for label, per_member in predicted.items():
-            values = [maneuver_indices(maneuver, Track.of(t, p[i][0]), rudder).as_dict() for p in per_member]
+            values = [like_for_like(maneuver, Track.of(t, p[i][0]), rudder, p[i][2]) for p in per_member]
             rows.append(_row(scenario, run, maneuver, label, values, [p[i][1] for p in per_member]))
     frame = pd.DataFrame(rows, columns=RECORD_COLUMNS)
     frame.loc[frame.model == RECORDED, "n_members"] = 0
     return frame
+
+
+def recorded_maneuver_runs(runs: Sequence[Run]) -> tuple[dict[str, Run], list[Run]]:
+    """(label -> run for the runs recognised as turning circles or zig-zags, by
+    `recorded_maneuver`: "zigzag 20/20 NAME", "turning 35 NAME"; the other runs)."""
+    found, other = {}, []
+    for run in runs:
+        try:
+            maneuver, _ = recorded_maneuver(run)
+        except DataError:
+            other.append(run)
+            continue
+        angle = f"{maneuver.rudder_deg:g}/{maneuver.check_deg:g}" if isinstance(maneuver, ZigZag) else \
+            f"{getattr(maneuver, 'rudder_deg', 0.0):g}"
+        found[f"{maneuver.kind} {angle} {run.name}"] = run
+    return found, other
+
+
+def differences(frame: pd.DataFrame) -> pd.DataFrame:
+    """`side_by_side` of a `record_comparison` frame with, per model, its difference from
+    the record (``<model> - recorded``) in the index's unit."""
+    wide = side_by_side(frame)
+    models = [m for m in dict.fromkeys(frame.model) if m != RECORDED]
+    for m in models:
+        wide[f"{m} - {RECORDED}"] = wide[m] - wide[RECORDED]
+    return wide
 
 
 def side_by_side(frame: pd.DataFrame) -> pd.DataFrame:
@@ -170,7 +275,7 @@ def side_by_side(frame: pd.DataFrame) -> pd.DataFrame:
     rows = []
     for (scenario, maneuver), group in frame.groupby(["scenario", "maneuver"], sort=False):
         kind = "zigzag" if maneuver.startswith("zigzag") else "turning"
-        for index in KIND_INDICES[kind]:
+        for index in RECORD_INDICES[kind]:
             values = dict(zip(group.model, group[index]))
             if all(isinstance(v, float) and math.isnan(v) for v in values.values()):
                 continue
@@ -202,15 +307,16 @@ def model_paths(path: str | os.PathLike) -> list[Path]:
 
 
 def _predicted_run(path: Path, runs: Sequence[Run], starts: Sequence[int], method: Method,
-                   threads: int) -> tuple[Path, Predictions]:
+                   threads: int, maneuvers: Sequence[Maneuver] | None = None,
+                   dt: float = CLOSED_LOOP_DT) -> tuple[Path, Predictions]:
     """(path, `_predictions` of the model of one run directory): one worker's item."""
     with compute_threads(threads):
-        return path, _predictions(load_maneuver_model(path).model, runs, starts, method)
+        return path, _predictions(load_maneuver_model(path).model, runs, starts, method, maneuvers, dt)
 
 
 def write_record_comparison(out_dir: str | os.PathLike, run_dirs: Mapping[str, str | os.PathLike],
-                            data: str | os.PathLike | None = None, method: IntegratorLike = "euler",
-                            workers: int = 1, threads: int = 1) -> Path:
+                            data: str | os.PathLike | None = None, method: Method | str = "euler",
+                            workers: int = 1, threads: int = 1, closed_loop_dt: float = CLOSED_LOOP_DT) -> Path:
     """``out_dir/maneuver_indices.csv``: `record_comparison` of the protocol's turning and
     zig-zag test runs (1 Hz) and the models of `run_dirs` (label -> run directory or folder
     of seed run directories). `workers` > 1 predicts the models side by side in that many
@@ -218,14 +324,14 @@ def write_record_comparison(out_dir: str | os.PathLike, run_dirs: Mapping[str, s
     depend on it."""
     runs = recorded_test_runs(data)
     if workers <= 1:
-        frame = record_comparison(run_models(run_dirs), runs, method)
+        frame = record_comparison(run_models(run_dirs), runs, method, closed_loop_dt)
         return write_csv(frame, Path(out_dir) / RECORD_FILE, float_format="%.6g")
     method = Method.parse(method)
     starts = _execute_starts(runs)
     paths = {label: model_paths(path) for label, path in run_dirs.items()}
     items = [p for found in paths.values() for p in found]
     work = functools.partial(_predicted_run, runs=list(runs.values()), starts=starts, method=method,
-                             threads=threads)
+                             threads=threads, maneuvers=_maneuvers(runs), dt=closed_loop_dt)
     done = dict(in_workers(work, items, workers, multiprocessing.get_context("spawn")))
     frame = compared({label: [done[p] for p in found] for label, found in paths.items()}, runs)
     return write_csv(frame, Path(out_dir) / RECORD_FILE, float_format="%.6g")

@@ -24,8 +24,6 @@ from torch import nn
 from sysid.dynamics.integrators import Method
 from sysid.maneuvers.any_model import ManeuverModel, ship_of
 from sysid.maneuvers.base import Conditions, Maneuver, ManeuverError, ManeuverResult, check_number
-from sysid.fast.compiled import enabled, recorded_seconds
-from sysid.fast.prepared import indexed
 from sysid.maneuvers.closed_loop import ClosedLoopStep, compiled_loop, loop_is_cached, run_compiled, run_eager
 from sysid.maneuvers.controllers import initial_orders, order_parameters
 from sysid.maneuvers.indices import Track, maneuver_indices
@@ -52,6 +50,9 @@ def default_rudder_rate(ship: Ship) -> tuple[float, str]:
     return FULL_SCALE_RUDDER_RATE, "2.32 deg/s (ship file gives no scale: taken as full scale)"
 
 
+MAX_LENGTHS_PER_STEP = 0.1   # ship lengths run per integration step, at most
+
+
 def default_conditions(model: nn.Module, ship: Ship, *, speed: float | None = None, rps: float | None = None,
                        rudder_rate: float | None = None, dt: float = 0.1, duration: float | None = None,
                        wind_speed: float = 0.0, wind_direction: float = 0.0,
@@ -70,6 +71,11 @@ def default_conditions(model: nn.Module, ship: Ship, *, speed: float | None = No
     else:
         sources["speed"] = "given"
     check_number("approach speed", speed, "m/s", positive=True)  # before the search for revolutions
+    longest = MAX_LENGTHS_PER_STEP * float(ship["L_pp"]) / speed
+    if dt > longest:  # a turn of a few steps: its indices are not resolved (and may not exist)
+        raise ManeuverError(f"dt {dt:g} s: the ship runs {speed * dt / float(ship['L_pp']):.2g} ship lengths per "
+                            f"step at {speed:g} m/s; a maneuver is resolved with at most {MAX_LENGTHS_PER_STEP:g} "
+                            f"L per step: give dt <= {longest:.3g} s")
     check_number("wind speed", wind_speed, "m/s", low=0.0)
     check_number("wind direction", wind_direction, "rad")
     if rps is None:
@@ -88,7 +94,7 @@ def default_conditions(model: nn.Module, ship: Ship, *, speed: float | None = No
     else:
         sources["duration"] = "given"
     sources["wind"] = "calm water" if wind_speed == 0.0 else "given"
-    return Conditions(speed, rps, rudder_rate, dt, duration, wind_speed, wind_direction, method), sources
+    return Conditions(speed, rps, rudder_rate, dt, duration, wind_speed, wind_direction, method), sources  # type: ignore[arg-type]
 
 
 def ahead_only(model: nn.Module) -> bool:
@@ -144,6 +150,7 @@ def _start_costs(label: str) -> tuple[float, str]:
     """(cold start [s] to reckon with, what a cold and a warm start cost, as words): the
     cold start recorded on this machine, else `COMPILE_GUESS_S` times the machine's load
     per core (a loaded machine compiles as much slower as it steps)."""
+    from sysid.fast.compiled import recorded_seconds
     cold, warm = recorded_seconds(label, "compile"), recorded_seconds(label, "load")
     if cold is None:
         busy = max(1.0, os.getloadavg()[0] / (os.cpu_count() or 1)) if hasattr(os, "getloadavg") else 1.0
@@ -159,6 +166,7 @@ def eager_seconds_per_step(model: nn.Module, maneuvers: Sequence[Maneuver], cond
     """Wall time [s] of one eager closed-loop step of all `maneuvers` side by side: the
     median over `PROBE_STEPS` steps from the execute, each timed alone (a burst of load or
     a step the kNN gate needs its whole-bank scan for does not set it)."""
+    from sysid.fast.prepared import indexed  # the gate's leaf index, as run_eager uses it
     x, o, parameters = _start(maneuvers, conditions)
     step = ClosedLoopStep(indexed(model, x.shape[0]), conditions.method)
     dt = torch.tensor(conditions.dt, dtype=x.dtype)
@@ -179,6 +187,7 @@ def choose_loop(models: Sequence[nn.Module], maneuvers: Sequence[Maneuver], cond
     would take longer than compiling the loops that are not."""
     if compiled is not None:
         return LoopChoice(bool(compiled), f"{'compiled' if compiled else 'eager'} loop (as asked)")
+    from sysid.fast.compiled import enabled
     if not enabled():
         return LoopChoice(False, "eager loop (compilation is off: SYSID_COMPILE=0)")
     label = f"maneuver-{conditions.method.name.lower()}"

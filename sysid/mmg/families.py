@@ -255,7 +255,3 @@ def family(component: str, name: str) -> ForceFamily:
     found = FAMILIES[component][name]
     found.force, found.inflow, found.forces, found.inflow_of  # noqa: B018 (load the functions now, not inside a traced call)
     return found
-
-
-def known_models(component: str) -> list[str]:
-    return sorted(FAMILIES[component])

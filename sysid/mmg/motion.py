@@ -8,7 +8,7 @@ made once per dtype and device, so no Python float becomes a tensor inside a for
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import NamedTuple, TypeVar
 
 import torch
 from torch._C._functorch import is_functorch_wrapped_tensor
@@ -111,6 +111,7 @@ def motion_from(u, v, r, c, n=None, delta=None, psi=None, U_T=None, zeta=None,
 
 
 _SIX, _FOUR, _TWO = [1] * 6, [1] * 4, [1] * 2
+_Named = TypeVar("_Named", bound=tuple)  # a named tuple of tensors (or None)
 
 
 def motion_of(state: torch.Tensor, inputs: torch.Tensor, c) -> Motion:
@@ -127,11 +128,11 @@ def motion_of_channels(u, v, r, c, n=None, delta=None, psi=None, U_T=None, zeta=
     return motion_from(lane(u), lane(v), lane(r), c, lane(n), lane(delta), lane(psi), lane(U_T), lane(zeta))
 
 
-def as_lanes(values: NamedTuple) -> NamedTuple:
+def as_lanes(values: _Named) -> _Named:
     """A named tuple of (...,) tensors (or None) as (..., 1) lanes."""
     return type(values)(*(None if x is None else x[..., None] for x in values))
 
 
-def as_channels(values: NamedTuple) -> NamedTuple:
+def as_channels(values: _Named) -> _Named:
     """A named tuple of (..., 1) lanes (or None) as (...,) channels."""
     return type(values)(*(None if x is None else x.squeeze(-1) for x in values))

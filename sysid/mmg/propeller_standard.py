@@ -24,19 +24,9 @@ from __future__ import annotations
 import torch
 
 from sysid.mmg.coefficient_lookup import coefficient_vector, view_of
-from sysid.mmg.guards import SPEED_GUARD, choose, safe_atan2, safe_div
+from sysid.mmg.guards import choose
 from sysid.mmg.motion import Motion, as_channels, as_lanes, motion_of_channels
 from sysid.mmg.propeller import PropellerState
-
-
-def drift_angles(u, v, r, L):
-    """beta = atan2(-v_m, u) [rad] (positive: flow from port ahead) and r' = r L / U [-];
-    both 0 below the speed guard."""
-    U = torch.hypot(u, v)
-    moving = U >= SPEED_GUARD
-    beta = torch.where(moving, safe_atan2(-v, u), 0.0)
-    r_nd = safe_div(r * L, U, moving)
-    return beta, r_nd
 
 
 def wake_yasukawa(beta_P, c, k=None):

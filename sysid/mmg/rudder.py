@@ -112,10 +112,3 @@ def rudder_force(u, v, r, n, delta, c, prop: PropellerState, inflow: RudderInflo
     else:
         inflow = as_lanes(inflow)
     return rudder_lanes(inflow, delta[..., None], c).unbind(-1)
-
-
-def rudder_components(F_N, delta, c):
-    """X_R = -(1 - t_R) F_N sin(delta), Y_R = -(1 + a_H) F_N cos(delta),
-    N_R = -(x_R + a_H x_H) F_N cos(delta) [N, N, N m], from F_N [N] and delta [rad]."""
-    cos_d = torch.cos(delta)
-    return c.minus_one_minus_tR * F_N * torch.sin(delta), c.minus_one_plus_aH * F_N * cos_d, c.minus_N_R_lever * F_N * cos_d

@@ -201,7 +201,7 @@ def load_ship(name_or_path: str | os.PathLike = "esso_osaka",
     models = _read_models(doc, src)
     spec = active_parameters(models)
     params: dict[str, float] = {}
-    for name, (section, low, high) in spec.items():
+    for name, (section, _low, _high) in spec.items():
         table = doc.get(section)
         if not isinstance(table, dict):
             raise ShipDefinitionError(f"{src}: missing section [{section}]")
@@ -279,7 +279,7 @@ def _load_sensors(table: object, src: str) -> SensorLayout:
         if key not in table:
             raise ShipDefinitionError(f"{src}: [sensors] {key} is missing")
     try:
-        return SensorLayout(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in table.items()})
+        return SensorLayout(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in table.items()})  # type: ignore[arg-type]
     except (TypeError, ValueError) as exc:
         raise ShipDefinitionError(f"{src}: {exc}") from None
 

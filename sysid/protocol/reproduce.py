@@ -68,7 +68,7 @@ def markdown_table(table: pd.DataFrame, horizon: int) -> str:
                         cells.append("–")
                         continue
                     ours, ref = row[f"rmse_{c}"].iloc[0], row[f"paper_{c}"].iloc[0]
-                    spread = row[f"std_{c}"].iloc[0] if f"std_{c}" in row else np.nan
+                    spread = row[f"std_{c}"].iloc[0] if f"std_{c}" in row else np.nan  # type: ignore[assignment]
                     cells.append(f"{ours:.4f}" + ("" if np.isnan(spread) else f" ± {spread:.4f}")
                                  + ("" if np.isnan(ref) else f" ({ref:.4f})"))
             lines.append(f"| {scenario} | {model} | " + " | ".join(cells) + " |")
@@ -124,7 +124,7 @@ def scorecard(table: pd.DataFrame, baseline: str = "MMG", model: str = "Hybrid",
                    for label in (model, baseline))
 
     scores = {ds: dataset_score(table, ds, baseline, model, nn) for ds in datasets if scored(ds)}
-    return Scorecard(baseline, model, **scores)
+    return Scorecard(baseline, model, **scores)  # type: ignore[arg-type]
 
 
 def hybrid_baseline() -> tuple[str, str]:

@@ -12,7 +12,7 @@ import time
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 import matplotlib
 
@@ -31,11 +31,12 @@ from sysid.report.chosen_settings import chosen_section  # noqa: E402
 from sysid.report.quality import quality_rows  # noqa: E402
 from sysid.report.source import ReportSource, read_source  # noqa: E402
 from sysid.protocol.paper import run_label  # noqa: E402
+from sysid.data.display_units import DisplayUnits  # noqa: E402
 from sysid.report.tables import build_tables, verdict_table  # noqa: E402
 from sysid.report.maneuver_tables import record_plain_table  # noqa: E402
 from sysid.report.plain_tables import table_figure  # noqa: E402
 
-STYLE = {"font.size": 9, "axes.titlesize": 9, "axes.labelsize": 9, "axes.grid": True,
+STYLE: dict[str, Any] = {"font.size": 9, "axes.titlesize": 9, "axes.labelsize": 9, "axes.grid": True,
          "grid.alpha": 0.3, "grid.linewidth": 0.5, "legend.fontsize": 8, "lines.linewidth": 1.2,
          "font.family": "DejaVu Sans", "axes.unicode_minus": False}
 
@@ -100,8 +101,8 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
     settings = [(run_label(r.name, r.model, r.dataset), changed_settings(r)) for r in source.runs]
     chosen = chosen_section(source)
     verdict = source.verdict
-    first = verdict_table(verdict, run_label(source.runs[0].name, source.runs[0].model, source.runs[0].dataset)) \
-        if verdict is not None else None
+    first = verdict_table(verdict, run_label(source.runs[0].name, source.runs[0].model, source.runs[0].dataset),
+                          DisplayUnits.of_config(source.runs[0].config)) if verdict is not None else None
     built = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     title = f"sysid accuracy report: {source.title}"
 
@@ -112,7 +113,7 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
 
     html_figures: list[HtmlFigure] = []
     pdf_path = out_dir / "report.pdf"
-    with rc_context(STYLE), pdf_style(), atomic_path(pdf_path, ".pdf") as tmp:
+    with rc_context(STYLE), pdf_style(), atomic_path(pdf_path, ".pdf") as tmp:  # type: ignore[arg-type]
         pdf = PdfReport(tmp, title, total)
         for page in text_pages:
             pdf.add_text(page)
@@ -120,8 +121,9 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
             for i, page_rows in enumerate(pages):
                 part = f" (part {i + 1} of {len(pages)})" if len(pages) > 1 else ""
                 pdf.add_table(table, page_rows, part)
-        for table in plain:
-            pdf.add_figure(partial(table_figure, table), tuple(table_figure(table).get_size_inches()), table.title)
+        for plain_table in plain:
+            pdf.add_figure(partial(table_figure, plain_table), tuple(table_figure(plain_table).get_size_inches()),  # type: ignore[attr-defined]
+                           plain_table.title)
         say(f"tables: {len(tables) + len(plain)}; drawing {len(plan.figures)} figures")
         for number, spec in enumerate(plan.figures, 1):
             try:
@@ -133,23 +135,23 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
                 fig = _placeholder(message)
                 draw = lambda into=None, m=message: _placeholder(m, into)  # noqa: E731
             html_figures.append(HtmlFigure(number, spec.key, spec.section, spec.title, spec.caption,
-                                           figure_svg(fig, f"f{number}")))
-            pdf.add_figure(draw, tuple(fig.get_size_inches()), f"Figure {number}. {spec.title}. {spec.caption}")
+                                           figure_svg(fig, f"f{number}")))  # type: ignore[arg-type]
+            pdf.add_figure(draw, tuple(fig.get_size_inches()), f"Figure {number}. {spec.title}. {spec.caption}")  # type: ignore[attr-defined]
             say(f"figure {number}/{len(plan.figures)}: {spec.title}")
         n_pages = pdf.page
         pdf.close()
-
-    html = render_html(
-        title=title,
-        subtitle=("PARTIAL " if source.missing_runs else "") + f"{SUBTITLES[source.kind]} "
-                 f"- built {built}",
-        summary=summary,
-        runs=[{"row": row, "colour": model_colour(r.name, r.model, r.dataset, i)}
-              for i, (row, r) in enumerate(zip(rows, source.runs))],
-        methods=methods, tables=tables, plain_tables=plain, figures=html_figures, notes=notes, quality=quality,
-        verdict=first, settings=settings, chosen=chosen,
-        version=sysid.__version__, source=str(source.path), built=built)
-    html_path = write_text(html, out_dir / "report.html")
+        # the HTML is written before the PDF is moved into place: a failure (a full disk) keeps neither
+        html = render_html(
+            title=title,
+            subtitle=("PARTIAL " if source.missing_runs else "") + f"{SUBTITLES[source.kind]} "
+                     f"- built {built}",
+            summary=summary,
+            runs=[{"row": row, "colour": model_colour(r.name, r.model, r.dataset, i)}
+                  for i, (row, r) in enumerate(zip(rows, source.runs))],
+            methods=methods, tables=tables, plain_tables=plain, figures=html_figures, notes=notes, quality=quality,
+            verdict=first, settings=settings, chosen=chosen,
+            version=sysid.__version__, source=str(source.path), built=built)
+        html_path = write_text(html, out_dir / "report.html")
     return ReportPaths(html_path, pdf_path, len(html_figures), n_pages, notes,
                        time.perf_counter() - started)
 

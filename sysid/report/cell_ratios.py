@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from sysid.config.choices import ModelKind
 from sysid.protocol.paper import SCENARIO_ORDER, paper_rmse, run_label, run_variant, scenario_key
 from sysid.report.palette import model_colour
 from sysid.report.source import ReportSource, RunRecord
@@ -103,9 +104,9 @@ def paper_ratios(baseline: pd.DataFrame, dataset: str) -> pd.DataFrame:
 def baseline_run(runs: list[RunRecord]) -> RunRecord | None:
     """The MMG-only run whose MMG the hybrids correct (the same coefficient overrides as the
     first hybrid's; the lab's X'vr in the protocol), else the first MMG-only run."""
-    mmg = [r for r in runs if r.model == "mmg" and run_variant(r.name, r.dataset).startswith("mmg")
+    mmg = [r for r in runs if r.model == ModelKind.MMG and run_variant(r.name, r.dataset).startswith("mmg")
            and not r.summary.identified]
-    hybrid = next((r for r in runs if r.model == "hybrid"), None)
+    hybrid = next((r for r in runs if r.model == ModelKind.HYBRID), None)
     same = [r for r in mmg if hybrid is not None and dict(r.summary.mmg_overrides) == dict(hybrid.summary.mmg_overrides)]
     return (same or mmg or [None])[0]
 
@@ -131,7 +132,7 @@ def dataset_cells(source: ReportSource) -> list[CellRatios]:
         if not chosen:
             continue
         models = [ModelSeeds(run_label(r.name, r.model, r.dataset), model_colour(r.name, r.model, r.dataset), seed_rmse(r))
-                  for r in sorted(chosen, key=lambda r: r.model != "nn")]
+                  for r in sorted(chosen, key=lambda r: r.model != ModelKind.NN)]
         cells = relative_cells(models, baseline)
         scenarios = tuple(_paper_order(s for s in labels.values() if s in set(cells.scenario)))
         horizons = tuple(sorted(set(cells.horizon_s)))

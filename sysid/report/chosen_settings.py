@@ -10,6 +10,7 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
+from sysid.config.choices import ModelKind
 from sysid.bundled import bundled_dir
 from sysid.config.experiment import Experiment
 from sysid.protocol.paper import run_label
@@ -78,7 +79,7 @@ def settings_row(run: RunRecord) -> SettingsRow:
     hidden = _setting(run, "network", "hidden") or []
     members = int(_setting(run, "network", "members") or 1)
     network = "-".join(str(int(w)) for w in hidden) + (f", {members} members averaged" if members > 1 else "")
-    if run.model != "hybrid":
+    if run.model != ModelKind.HYBRID:
         gate = "- (no MMG to fall back to)"
     elif not _setting(run, "gate", "enabled"):
         gate = "off"
@@ -155,7 +156,7 @@ def _same(shipped, used) -> bool:
 
 def learned_runs(source: ReportSource) -> list[RunRecord]:
     """The runs with a trained network (NN-only and hybrids), ensembles of seeds left out."""
-    return [r for r in source.runs if r.model in ("nn", "hybrid")
+    return [r for r in source.runs if r.model in (ModelKind.NN, ModelKind.HYBRID)
             and not (r.config.get("ensemble") or {}).get("members")]
 
 

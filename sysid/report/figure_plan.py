@@ -14,6 +14,7 @@ from typing import Callable
 import pandas as pd
 from matplotlib.figure import FigureBase
 
+from sysid.config.choices import ModelKind
 from sysid.report import figures as F
 from sysid.protocol.paper import run_label
 from sysid.report.methods import estimator_text
@@ -54,9 +55,10 @@ def _colour(run: RunRecord, index: int = 0) -> str:
 
 
 def _pick(preferred: list[str], available: list[str]) -> list[str]:
-    """The preferred scenarios the source has (any spelling), else its first scenario."""
+    """The preferred scenarios the source has (any spelling), else every scenario it has
+    (a user's own test logs: one figure each)."""
     found = [_find(s, available) for s in preferred]
-    return [s for s in found if s is not None] or available[:1]
+    return [s for s in found if s is not None] or list(available)
 
 
 def _find(scenario: str, available: list[str]) -> str | None:
@@ -138,7 +140,7 @@ def _error_figures(c: _Context) -> None:
 def _series_figures(c: _Context) -> None:
     """Figs. 6-9: actuators, relative wind and states over one 100 s window."""
     series = [(_find(s, c.scenarios), t0) for s, t0 in SERIES_WINDOWS if _find(s, c.scenarios)]
-    for scenario, start in series or [(s, 0.0) for s in c.scenarios[:1]]:
+    for scenario, start in series or [(s, 0.0) for s in c.scenarios]:
         traces = _traces(c.compared, scenario, c.long) if c.long else []
         span = f"{start:.0f}-{start + c.long:.0f} s" if c.long else ""
         missing = "no traces in the source"
@@ -192,7 +194,7 @@ def _gate_figures(c: _Context) -> None:
 def _force_figures(c: _Context) -> None:
     """Figs. 17-20 (forces of the hybrid of the figures' data set) and Fig. 21."""
     run = next((r for r in c.hybrids if r.dataset == c.fig_dataset), c.hybrids[0] if c.hybrids else None)
-    run = run or next((r for r in c.runs if r.model == "mmg"), None)
+    run = run or next((r for r in c.runs if r.model == ModelKind.MMG), None)
     for scenario in _pick(FORCE_SCENARIOS, c.scenarios) if run else []:
         frame = run.trace(scenario, c.long) if c.long else None
         ok = frame is not None and len(frame) > 0
@@ -203,7 +205,7 @@ def _force_figures(c: _Context) -> None:
               f"{c.long} s predictions of the {scenario} test, {label} (cf. Figs. 17, 19)." if ok
               else "no trace in the source",
               partial(F.force_components, trace, f"External forces by module, {scenario} ({label})"), ok)
-        if run.model == "hybrid":
+        if run.model == ModelKind.HYBRID:
             c.add(f"force_models_{scenario}", "Forces", f"F_MMG, F_NN and their sum, {scenario}, {label}",
                   f"MMG forces (H + P + R + A), the FNN correction and their sum along the {c.long} s "
                   f"predictions of the {scenario} test, {label} (cf. Figs. 18, 20)." if ok
@@ -340,11 +342,11 @@ def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> 
         _sweep_figures(source.sweep, plan)
     runs = source.runs
     if runs:
-        datasets = sorted({r.dataset for r in runs if r.model != "mmg" and r.dataset != "-"})
+        datasets = sorted({r.dataset for r in runs if r.model != ModelKind.MMG and r.dataset != "-"})
         fig_dataset = "D2" if "D2" in datasets else (datasets[-1] if datasets else None)
         c = _Context(plan, runs, list(dict.fromkeys(s for r in runs for s in r.scenarios())),
-                     [r for r in runs if r.model == "mmg" or r.dataset == fig_dataset],
-                     [r for r in runs if r.model == "hybrid"], fig_dataset,
+                     [r for r in runs if r.model == ModelKind.MMG or r.dataset == fig_dataset],
+                     [r for r in runs if r.model == ModelKind.HYBRID], fig_dataset,
                      _horizon(runs, 30, short=True), _horizon(runs, 100, short=False), source.paper_protocol)
         if source.kind == "reproduction":
             _cell_figures(source, c)

@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 import pandas as pd
+from matplotlib.artist import Artist
 from matplotlib.figure import Figure, FigureBase
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
@@ -44,19 +46,13 @@ def _broken(frame: pd.DataFrame, column: str, scale: float = 1.0) -> tuple[np.nd
     return np.concatenate(ts), np.concatenate(ys)
 
 
-def _measured(frame: pd.DataFrame, column: str, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """The measurement along the whole file (duplicates at window joints dropped)."""
-    m = frame.drop_duplicates("t").sort_values("t")
-    return m["t"].to_numpy(), m[column].to_numpy() * scale
-
-
 def _canvas(into: FigureBase | None, size: tuple[float, float]) -> FigureBase:
     """Draw into `into` (a PDF page's sub-figure) or a new constrained-layout figure of
     `size` [in]."""
     return into if into is not None else Figure(figsize=size, layout="constrained")
 
 
-def _legend_top(fig: Figure, handles, ncol: int | None = None) -> None:
+def _legend_top(fig: FigureBase, handles: Sequence[Artist], ncol: int | None = None) -> None:
     """Figure legend in its own row under the axes (the title stays alone on top)."""
     fig.legend(handles=handles, loc="outside lower center", ncol=ncol or min(len(handles), 6),
                frameon=False, fontsize=8)
@@ -85,7 +81,7 @@ def error_boxplots(traces: list[ModelTrace], title: str, into: FigureBase | None
                       ha="right", fontsize=8)
         ax.set_ylabel(f"|error of {name}| [{unit}]")
         ax.set_title(name)
-    handles = [Patch(facecolor=t.colour, edgecolor="black", label=t.label) for t in traces]
+    handles: list[Artist] = [Patch(facecolor=t.colour, edgecolor="black", label=t.label) for t in traces]
     handles += [Line2D([], [], color="black", label="median"),
                 Line2D([], [], marker="D", ls="", markerfacecolor="white", markeredgecolor="black",
                        label="mean")]
@@ -240,7 +236,7 @@ def trajectories(traces: list[ModelTrace], L: float, B: float, title: str,
 
 def _spans(t: np.ndarray, flag: np.ndarray) -> list[tuple[float, float]]:
     """Intervals [s] where `flag` holds, each sample covering [t - 0.5, t + 0.5] s."""
-    spans, start = [], None
+    spans, start, prev = [], None, 0.0  # prev: the sample before; read only after one
     for ti, f in zip(t, flag):
         if f and start is None:
             start = ti
@@ -262,7 +258,7 @@ def knn_distance(trace: ModelTrace, threshold: float | None, title: str,
     frame = trace.frame.sort_values(["window", "t_rel"])
     t, d = _broken(frame, "knn_distance")
     ax.plot(t, d, color=KNN_LINE, lw=1.1)
-    handles = [Line2D([], [], color=KNN_LINE, label="kNN distance")]
+    handles: list[Artist] = [Line2D([], [], color=KNN_LINE, label="kNN distance")]
     if threshold is not None:
         ax.axhline(threshold, color=THRESHOLD, ls="--", lw=1.4)
         handles.append(Line2D([], [], color=THRESHOLD, ls="--", label=f"threshold {threshold:.3g}"))
@@ -335,7 +331,7 @@ def fnn_error_scatter(groups: list[tuple[str, str, pd.DataFrame]], title: str,
     pairs = [("X", "u", "|X_NN| [N]", "|error of u| [m/s]"), ("Y", "v", "|Y_NN| [N]", "|error of v_m| [m/s]"),
              ("N", "r", "|N_NN| [N m]", "|error of r| [rad/s]")]
     for ax, (axis, col, xlabel, ylabel) in zip(axes, pairs):
-        for label, colour, frame in groups:
+        for _label, colour, frame in groups:
             ax.scatter(np.abs(frame[f"{axis}NN"]), np.abs(frame[f"pred_{col}"] - frame[f"obs_{col}"]),
                        s=4, color=colour, alpha=0.35, lw=0, rasterized=len(frame) > 5000)
         ax.set_xlabel(xlabel)
@@ -353,7 +349,7 @@ def loss_curves(histories: list[tuple[str, str, pd.DataFrame, int | None]], titl
     fig = _canvas(into, (10.0, 4.6))
     ax = fig.subplots()
     positive, marked = True, set()
-    for label, colour, hist, best in histories:
+    for _label, colour, hist, best in histories:
         x = hist["epoch"].to_numpy()
         last = np.ones(len(hist), dtype=bool)
         if "stage" in hist.columns and hist["stage"].nunique() > 1:  # stages restart their epochs
@@ -454,7 +450,7 @@ def seed_boxplots(models: list[SeedSpread], scenarios: list[str], title: str,
         ax.set_xticks(range(len(scenarios)), scenarios, rotation=35, ha="right", fontsize=8)
         ax.set_ylabel(f"RMSE of {name} [{unit}]")
         ax.set_title(name)
-    handles = [Patch(facecolor=m.colour, edgecolor="black", label=m.label) for m in models]
+    handles: list[Artist] = [Patch(facecolor=m.colour, edgecolor="black", label=m.label) for m in models]
     handles.append(Line2D([], [], marker=".", ls="", color="black", label="one seed"))
     if paper:
         handles.append(Line2D([], [], color="black", lw=1.6, label="paper's hybrid"))

@@ -59,7 +59,7 @@ def render_html(*, title: str, subtitle: str, summary, runs, methods, tables: li
     `plain_tables` (`sysid.report.plain_tables.PlainTable`) follow the RMSE tables; `chosen`
     (`sysid.report.chosen_settings.ChosenSection`) is "How the settings were chosen"."""
     for table in tables:
-        table.html_rows = _html_rows(table)
+        table.html_rows = _html_rows(table)  # type: ignore[attr-defined]
     template = _ENV.get_template("report.html.j2")
     return template.render(title=title, subtitle=subtitle, summary=summary, runs=runs, methods=methods,
                            tables=tables, figures=figures, notes=notes, version=version, source=source,

@@ -111,17 +111,17 @@ def build_maneuver_report(source_dir: str | os.PathLike, out_dir: str | os.PathL
     text = paginate(text_lines([("h1", title), ("h2", "Summary")] + [("kv", k, v) for k, v in items]
                                + [("p", w) for w in warnings]))
     figures = []
-    with rc_context(STYLE), pdf_style(), atomic_path(out / "report.pdf", ".pdf") as tmp:
+    with rc_context(STYLE), pdf_style(), atomic_path(out / "report.pdf", ".pdf") as tmp:  # type: ignore[arg-type]
         pdf = PdfReport(tmp, title, len(text) + len(tables) + len(specs))
         for page in text:
             pdf.add_text(page)
         for table in tables:
             fig = table_figure(table)
-            pdf.add_figure(partial(table_figure, table), tuple(fig.get_size_inches()), table.title)
+            pdf.add_figure(partial(table_figure, table), tuple(fig.get_size_inches()), table.title)  # type: ignore[attr-defined]
         for number_, (key, name, caption, factory) in enumerate(specs, 1):
             fig = factory()
-            figures.append(HtmlFigure(number_, key, "Figures", name, caption, figure_svg(fig, f"m{number_}")))
-            pdf.add_figure(factory, tuple(fig.get_size_inches()), f"Figure {number_}. {name}. {caption}.")
+            figures.append(HtmlFigure(number_, key, "Figures", name, caption, figure_svg(fig, f"m{number_}")))  # type: ignore[arg-type]
+            pdf.add_figure(factory, tuple(fig.get_size_inches()), f"Figure {number_}. {name}. {caption}.")  # type: ignore[attr-defined]
         pages = pdf.page
         pdf.close()
     html = _ENV.get_template("maneuvers.html.j2").render(

@@ -7,14 +7,16 @@ import math
 
 import pandas as pd
 
-from sysid.maneuvers.indices import KIND_INDICES
+from sysid.maneuvers.recorded import RECORD_INDICES
 from sysid.report.plain_tables import PlainTable, number
 
 INDEX_LABELS = {"advance_m": "advance [m]", "transfer_m": "transfer [m]", "tactical_diameter_m": "tactical diam. [m]",
                 "steady_turning_diameter_m": "steady diam. [m]", "speed_loss_ratio": "speed loss [-]",
                 "initial_turning_distance_m": "initial turning [m]", "first_overshoot_deg": "1st overshoot [deg]",
                 "second_overshoot_deg": "2nd overshoot [deg]", "head_reach_m": "head reach [m]",
-                "track_reach_m": "track reach [m]"}
+                "track_reach_m": "track reach [m]",
+                "open_loop_first_peak_deg": "1st peak, open loop [deg]",
+                "open_loop_second_peak_deg": "2nd peak, open loop [deg]"}
 
 
 def indices_plain_table(indices: pd.DataFrame) -> PlainTable:
@@ -57,14 +59,16 @@ def criteria_plain_table(criteria: pd.DataFrame) -> PlainTable:
 
 def record_plain_table(frame: pd.DataFrame) -> PlainTable:
     """One row per recorded run and index that applies, one column per model (the record
-    first): the indices of the record and of each model's prediction from the record's
-    execute with the recorded inputs; ± the spread over seeds; the kNN gate's share."""
+    first): the record's indices and each model's, computed the same way
+    (`sysid.maneuvers.recorded`); ± the spread over seeds; the kNN gate's share."""
     models = list(dict.fromkeys(frame["model"]))
     rows = []
     for (scenario, maneuver), group in frame.groupby(["scenario", "maneuver"], sort=False):
         by_model = {r["model"]: r for _, r in group.iterrows()}
         kind = "zigzag" if maneuver.startswith("zigzag") else "turning"
-        for index in KIND_INDICES[kind]:
+        for index in RECORD_INDICES[kind]:
+            if index not in group:  # a table written before the open-loop peaks
+                continue
             cells = [number(by_model[m][index], 3, by_model[m].get(f"{index}_std")) if m in by_model else ""
                      for m in models]
             if not any(cells):
@@ -75,8 +79,11 @@ def record_plain_table(frame: pd.DataFrame) -> PlainTable:
             rows.append([scenario, "kNN gate off [%]", *("" if pd.isna(v) else f"{100 * v:.0f}" for v in shares)])
     return PlainTable("maneuver-record", "Standard-maneuver indices: recorded runs and predictions", ["test", "index",
                       *models], rows, [],
-                      "Each test run's IMO indices (sysid.maneuvers.indices) from the record and from each model's "
-                      "prediction of the whole run from the record's execute with the recorded inputs (1 Hz, the "
-                      "protocol's integrator; zig-zag reversals at the recorded rudder's). Lengths in m; negative "
-                      "overshoot: the predicted heading peaked before the check angle. Empty: not reached in the run. "
-                      "± : standard deviation over seeds.")
+                      "Like for like (sysid.maneuvers.recorded): a turning run's indices from the record and from "
+                      "each model's prediction of the whole run from the record's execute with the recorded inputs "
+                      "(1 Hz, the protocol's integrator). A zig-zag's IMO overshoots from the record and from each "
+                      "model run closed loop from the record's approach (speed, revolutions, rudder angle and rate, "
+                      "wind) with reversals when the heading reaches the check angle (RK4, 0.1 s). Open-loop peak: "
+                      "the heading's peak beyond the check angle between the recorded rudder's reversals, under the "
+                      "recorded rudder (negative: the model turns less than the ship did). Lengths in m. Empty: not "
+                      "reached in the run. ""± : standard deviation over seeds.")

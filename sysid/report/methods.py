@@ -6,15 +6,15 @@ import datetime as _dt
 import hashlib
 from dataclasses import dataclass
 
-import tomllib
 from pathlib import Path
 
+from sysid.config.choices import ModelKind, Solver, StartStates
 from sysid.config.experiment import Experiment
 from sysid.protocol.paper import run_label
 from sysid.report.quality import quality_rows
 from sysid.report.source import ReportSource, RunRecord
 from sysid.runs.reproduction import Reproduction
-from sysid.runs.summary import RunSummary, StartStateCheckSummary
+from sysid.records.summary import RunSummary, StartStateCheckSummary
 from sysid.store.versions import software_versions
 
 MODEL_TEXT = {
@@ -71,13 +71,13 @@ def run_rows(source: ReportSource) -> list[RunRow]:
         epochs = ("-" if not s.epochs else f"{s.epochs} (best {_or(s.best_epoch, '-')}"
                   + (f"; {why}" if why else "") + ")")
         est = s.identification
-        if est is not None and est.solver == "levenberg_marquardt" and "train" not in s.stopped:  # no epochs: LM alone
+        if est is not None and est.solver == Solver.LEVENBERG_MARQUARDT and "train" not in s.stopped:  # no epochs: LM alone
             epochs = f"{_or(est.iterations, '?')} Levenberg-Marquardt iterations" + (f" ({why})" if why else "")
         if s.failed:
             epochs += f" - {s.status.upper()}"
         dataset = "your logs" if run.dataset == "files" else run.dataset
         rows.append(RunRow(run_label(run.name, run.model, run.dataset), run.model, dataset, epochs,
-                           "-" if run.model == "mmg" else _seconds(s.train_seconds),
+                           "-" if run.model == ModelKind.MMG else _seconds(s.train_seconds),
                            config_digest(run), _or(s.created, "-")))
     return rows
 
@@ -233,9 +233,9 @@ def estimator_text(summary: RunSummary) -> str:
     if est is None or est.solver is None:
         return "± 2σ from the curvature of the multi-step loss on disjoint training windows"
     stopped = summary.stopped.get("identify")
-    starts = ("each window's start state estimated along" if est.start_states == "estimated"
+    starts = ("each window's start state estimated along" if est.start_states == StartStates.ESTIMATED
               else "each window integrated from its recorded first sample")
-    if est.solver == "levenberg_marquardt":
+    if est.solver == Solver.LEVENBERG_MARQUARDT:
         how = (f"Levenberg-Marquardt on the multi-step residuals of {_or(est.windows, '?')} disjoint training "
                f"windows, {starts}; {_or(est.iterations, '?')} iterations" + (f", {stopped}" if stopped else ""))
         if est.prior_weight:
@@ -244,7 +244,7 @@ def estimator_text(summary: RunSummary) -> str:
         how = (f"gradient (Adam) on the multi-step loss, {_or(est.stage, 'before')}, "
                f"{_or(est.epochs, '?')} epochs" + (f", {stopped}" if stopped else "") + f"; {starts}")
     return how + ("; ± 2σ: window-clustered sandwich of that estimator on disjoint training windows"
-                  + (", start states profiled out" if est.start_states == "estimated" else "")
+                  + (", start states profiled out" if est.start_states == StartStates.ESTIMATED else "")
                   + start_state_check_text(est.start_state_check))
 
 
@@ -272,7 +272,7 @@ def methods_paragraphs(source: ReportSource) -> list[str]:
         if s.mmg_overrides:
             text += " MMG coefficients changed from the ship file: " + ", ".join(
                 f"{k} = {v}" for k, v in s.mmg_overrides.items()) + "."
-        if run.model != "mmg":
+        if run.model != ModelKind.MMG:
             text += (f" Trained on {training_data_text(run)}{held_out_text(run)} ({_or(s.n_train_windows, '?')} training and "
                      f"{_or(s.n_val_windows, '?')} validation windows) for {s.epochs} epochs; "
                      f"the weights of epoch {_or(s.best_epoch, '?')} were kept "
@@ -292,7 +292,7 @@ def methods_paragraphs(source: ReportSource) -> list[str]:
         elif s.identified:
             text += " Identified coefficients: " + ", ".join(f"{k} = {v}" for k, v in _flatten(s.identified)) + "."
         gate = s.gate.to_json()
-        if run.model == "hybrid" and gate:
+        if run.model == ModelKind.HYBRID and gate:
             scalars = {k: v for k, v in gate.items() if not isinstance(v, (dict, list))}
             text += " OOD gate: " + ", ".join(f"{k} = {v}" for k, v in _flatten(scalars)) + "."
         out.append(text)
@@ -345,7 +345,7 @@ def _setting_text(key: str, value) -> str:
 def changed_settings(run: RunRecord) -> list[tuple[str, str, str]]:
     """(section.key, value, default) where the run's resolved config.toml differs from the
     defaults of `sysid.config.experiment.Experiment` (the name left out)."""
-    defaults = tomllib.loads(Experiment().to_toml())
+    defaults = Experiment().to_table()
     rows = []
     for section, values in run.config.items():
         if not isinstance(values, dict):

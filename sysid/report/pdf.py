@@ -6,9 +6,10 @@ Pages: summary and methods text, one page per RMSE table (split when long), one 
 from __future__ import annotations
 
 import textwrap
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 from matplotlib import rc_context
 from matplotlib.backends.backend_pdf import PdfPages
@@ -42,10 +43,11 @@ def text_blocks(title: str, summary, rows, methods, quality, notes, verdict: Ver
     differ from the defaults ((run label, [(key, value, default)]) pairs), how the settings
     were chosen (`sysid.report.chosen_settings.ChosenSection`), preprocessing quality rows,
     figure notes."""
-    blocks = [("h1", title)]
+    blocks: list[tuple[str, ...]] = [("h1", title)]
     if verdict is not None:
         blocks += [("h2", "Verdict"), ("p", ("" if verdict.beats else "WARNING: ") + verdict.statement)]
-        blocks += [("kv", f"{r[0]}, {r[1]} s, {r[2]}", " | ".join(f"{h} {v}" for h, v in zip(verdict.header[3:], r[3:])))
+        k = verdict.key_columns
+        blocks += [("kv", ", ".join(r[:k]), " | ".join(f"{h} {v}" for h, v in zip(verdict.header[k:], r[k:])))
                    for r in verdict.rows]
         blocks += [("small", verdict.losses)] if verdict.losses else []
     blocks += [("h2", "Summary")] + [("kv", k, str(v)) for k, v in summary]
@@ -214,7 +216,7 @@ class PdfReport:
         content_w = PAGE[0] - 2 * MARGIN
         content_h = min(PAGE[1] - 2 * MARGIN - 0.9, content_w * h / w)
         page = Figure(figsize=PAGE, layout="constrained")
-        boxes = page.subfigures(3, 3, width_ratios=[MARGIN, content_w, MARGIN],
+        boxes: Any = page.subfigures(3, 3, width_ratios=[MARGIN, content_w, MARGIN],
                                 height_ratios=[MARGIN, content_h, PAGE[1] - MARGIN - content_h])
         draw(into=boxes[1, 1])
         boxes[2, 1].text(0.0, 0.85, "\n".join(textwrap.wrap(caption, 170)), fontsize=8.5, va="top",
@@ -225,5 +227,5 @@ class PdfReport:
         self._pdf.close()
 
 
-def pdf_style() -> rc_context:
+def pdf_style() -> AbstractContextManager:
     return rc_context({"pdf.fonttype": 42, "pdf.compression": 6})

@@ -53,8 +53,8 @@ def quality_timeline(reports: list[QualityReport], title: str, into: FigureBase 
         y = n - 1 - i
         for s in r.segments:
             ax.barh(y, s.t_end - s.t_start, left=s.t_start, height=0.5, color=KEPT)
-        for s in r.dropped_segments:
-            ax.barh(y, s.t_end - s.t_start, left=s.t_start, height=0.5, color=DROPPED)
+        for d in r.dropped_segments:
+            ax.barh(y, d.t_end - d.t_start, left=d.t_start, height=0.5, color=DROPPED)
         for g in r.gaps:
             split = g.action == "split"
             h = 0.32 if split else 0.15

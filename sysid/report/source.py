@@ -20,9 +20,9 @@ from sysid.data.splits import PAPER_TEST_STEMS
 from sysid.evaluation.verdict import BaselineVerdict, seed_mean_verdict
 from sysid.store.manifest import has_manifest, verify_manifest
 from sysid.runs.directory import RunDir, read_table
-from sysid.runs.records import read_json_object
+from sysid.records.base import read_json_object
 from sysid.runs.reproduction import Reproduction
-from sysid.runs.summary import RunSummary
+from sysid.records.summary import RunSummary
 from sysid.sweep.summary import SweepSummary
 from sysid.protocol.seeds import seed_metrics
 
@@ -52,7 +52,7 @@ class RunRecord:
         if self.summary.verdict is None:
             return None
         try:
-            return self.summary.verdict.baseline_verdict()
+            return BaselineVerdict.from_dict(self.summary.verdict.to_json())
         except (KeyError, TypeError, ValueError) as exc:
             raise CheckpointError(f"{self.run_dir.summary}: malformed verdict ({exc})") from None
 
@@ -70,9 +70,9 @@ class RunRecord:
         return RunDir(self.path)
 
     @property
-    def model(self) -> str:
-        """"mmg", "nn" or "hybrid"."""
-        return self.summary.model.lower()
+    def model(self) -> ModelKind:
+        """The run's model (written "mmg", "nn" or "hybrid"; checked by `read_run_dir`)."""
+        return ModelKind(self.summary.model.lower())
 
     @property
     def dataset(self) -> str:
@@ -166,7 +166,7 @@ class ReportSource:
 
 def _run_order(run: RunRecord) -> tuple:
     """MMG (paper X'vr first), NN, hybrid; data sets in order."""
-    return (list(ModelKind).index(ModelKind(run.model)), run.name != "mmg_paper", run.dataset, run.name)
+    return (list(ModelKind).index(run.model), run.name != "mmg_paper", run.dataset, run.name)
 
 
 def read_run_dir(path: Path) -> RunRecord:

@@ -7,13 +7,16 @@ of each column is marked best.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from sysid.protocol.paper import SCENARIO_ORDER, comparison_table, model_label, paper_rmse, run_label, scenario_key
 from sysid.report.palette import model_colour
-from sysid.evaluation.verdict import UNITS, BaselineVerdict as Verdict, percent_text
+from sysid.data.display_units import DisplayUnits
+from sysid.evaluation.judgement import interval_text
+from sysid.evaluation.verdict import BaselineVerdict as Verdict, percent_text
 from sysid.report.source import ReportSource, RunRecord
 
 COMPONENTS = ("u", "v_m", "r")
@@ -153,7 +156,7 @@ def reproduction_tables(source: ReportSource) -> list[RmseTable]:
     relabelled = []
     for run in runs:
         labels = scenario_files(run)
-        metrics = run.metrics.assign(scenario=run.metrics["file"].astype(str).map(lambda f: labels[Path(f).stem]))
+        metrics = run.metrics.assign(scenario=run.metrics["file"].astype(str).map(lambda f: labels[Path(f).stem]))  # noqa: B023
         relabelled.append((run.name, run.model, run.dataset, metrics))
     long = comparison_table(relabelled, datasets)
     colour = {}
@@ -192,21 +195,27 @@ def run_table(run: RunRecord, paper: bool = True) -> RmseTable:
     baselines = _baseline_rmse(run)
     horizons = run.horizons()
     label = run_label(run.name, run.model, run.dataset)
+    units = DisplayUnits() if paper else DisplayUnits.of_config(run.config)  # the paper's tables are SI
+
+    def shown(values, i):
+        return units.value(COMPONENTS[i], values[i]) if values else None
+
     table = RmseTable("table_run", f"RMSE of {label}" + (" beside its physics baselines" if baselines else "")
-                      + " (u, v_m [m/s]; r [rad/s])", [f"{h} s" for h in horizons])
+                      + f" (u [{units.unit('u')}], v_m [{units.unit('v_m')}], r [{units.unit('r')}])",
+                      [f"{h} s" for h in horizons])
     for scenario in _scenario_order(s for s, _ in rmse):
         cells = []
         for horizon in horizons:
             values = rmse.get((scenario, horizon))
             ref = paper_rmse(_paper_scenario(scenario), run.model, run.dataset, horizon) if paper else None
             for i in range(3):
-                cells.append(Cell(values[i] if values else None, ref[i] if ref else None))
+                cells.append(Cell(shown(values, i), ref[i] if ref else None))
         table.rows.append(TableRow(scenario, label, model_colour(run.name, run.model, run.dataset), cells))
         for j, (baseline, values_of) in enumerate(baselines.items()):
             cells = []
             for horizon in horizons:
                 values = values_of.get((scenario, horizon))
-                cells += [Cell(values[i] if values else None, None) for i in range(3)]
+                cells += [Cell(shown(values, i), None) for i in range(3)]
             table.rows.append(TableRow(scenario, baseline, BASELINE_COLOURS[j % len(BASELINE_COLOURS)], cells))
     _mark_best(table.rows)
     return table
@@ -230,32 +239,68 @@ def _baseline_rmse(run: RunRecord) -> dict[str, dict[tuple[str, int], tuple[floa
 
 @dataclass
 class VerdictTable:
-    """Page 1: the verdict sentence and the model beside its baselines per split, horizon
-    and channel. header and rows are text cells; `beats` False marks a warning."""
+    """Page 1: the verdict sentence and its evidence, cell by cell: per split, log, horizon
+    and channel the windows, the model's RMSE, each baseline's, the change with its interval
+    and the rule's decision. header and rows are text cells, the first `key_columns` naming
+    the cell; `beats` False marks a warning."""
 
     statement: str
     beats: bool
     header: list[str]
     rows: list[list[str]]
     losses: str = ""   # "val_loss_multistep: hybrid 0.05772, MMG (ship file) 0.05870"
+    key_columns: int = 4
 
 
-def verdict_table(verdict: Verdict, model: str) -> VerdictTable:
-    """The first page's table of a `BaselineVerdict`: RMSE of the model (± its std over
-    seeds) and of each baseline with the model's change against it, deciding split first."""
-    header = ["Split", "Horizon [s]", "Channel", f"{model} RMSE"]
-    for b in verdict.baselines:
-        header += [f"{b} RMSE", f"change vs {b}"]
-    order = sorted(verdict.cells, key=lambda c: (c.split != verdict.decided_on, c.horizon_s))
+def _judged_rows(verdict: Verdict, split: str, judgements: dict, units: DisplayUnits) -> list[list[str]]:
+    first = next(iter(judgements.values()))
     rows = []
-    for c in order:
-        spread = f" ± {c.model_std:.5f}" if c.model_std is not None and math.isfinite(c.model_std) else ""
-        row = [c.split + (" (decides)" if c.split == verdict.decided_on else ""), f"{c.horizon_s:g}",
-               f"{c.channel} [{UNITS[c.channel]}]", format_rmse(c.model) + spread]
+    for i, cell in enumerate(first.cells):
+        label = split + (" (decides)" if split == verdict.decided_on else "")
+        shown = functools.partial(units.value, cell.channel)
+        std = verdict.member_spread(split, cell.log, cell.horizon_s, cell.channel)
+        spread = f" ± {shown(std):.5f}" if std is not None and math.isfinite(std) else ""
+        row = [label, cell.scenario or cell.log, f"{cell.horizon_s:g} s",
+               f"{cell.channel} [{units.unit(cell.channel)}]", str(cell.n_windows),
+               format_rmse(shown(cell.model_rmse)) + spread]
         for b in verdict.baselines:
-            change = c.change(b)
-            row += [format_rmse(c.baselines[b]), percent_text(change)]
+            c = judgements[b].cells[i] if b in judgements else None
+            if c is None:
+                row += ["-", "-", "-"]
+                continue
+            interval = f" ({interval_text(c.change_low, c.change_high)})" if math.isfinite(c.change_low) else ""
+            row += [format_rmse(shown(c.baseline_rmse)), percent_text(c.change) + interval, c.decision.value]
         rows.append(row)
+    return rows
+
+
+def verdict_table(verdict: Verdict, model: str, units: DisplayUnits | None = None) -> VerdictTable:
+    """The first page's table of a `BaselineVerdict`: every judged cell (deciding split
+    first) with its windows, the RMSE of the model (± its std over seeds) and of each
+    baseline, the model's change against it with its interval and the decision; a run
+    written before the rule shows its pooled cells. RMSE in `units` (the user's
+    ``[data.columns]`` units; None: SI)."""
+    units = units if units is not None else DisplayUnits()
+    header = ["Split", "Log", "Horizon", "Channel", "Windows", f"{model} RMSE"]
+    conf = next((f"{100 * j.confidence:g} %" for j in verdict.judgements.values()), "95 %")
+    for b in verdict.baselines:
+        header += [f"{b} RMSE", f"change vs {b} ({conf} interval)", "decision"]
+    rows = []
+    if verdict.judgements:
+        rows += _judged_rows(verdict, verdict.decided_on, verdict.judgements, units)
+        if verdict.decided_on != "validation" and verdict.validation_judgements:
+            rows += _judged_rows(verdict, "validation", verdict.validation_judgements, units)
+    else:
+        order = sorted(verdict.cells, key=lambda c: (c.split != verdict.decided_on, c.horizon_s))
+        for c in order:
+            shown = functools.partial(units.value, c.channel)
+            spread = f" ± {shown(c.model_std):.5f}" if c.model_std is not None and math.isfinite(c.model_std) else ""
+            row = [c.split + (" (decides)" if c.split == verdict.decided_on else ""), "all (pooled)",
+                   f"{c.horizon_s:g} s", f"{c.channel} [{units.unit(c.channel)}]", "-",
+                   format_rmse(shown(c.model)) + spread]
+            for b in verdict.baselines:
+                row += [format_rmse(shown(c.baselines[b])), percent_text(c.change(b)), "-"]
+            rows.append(row)
     losses = ", ".join(f"{model if k == 'model' else k} {v:.5f}" for k, v in verdict.val_loss_multistep.items()
                        if math.isfinite(v))
     return VerdictTable(verdict.statement(), verdict.beats_baseline, header, rows,

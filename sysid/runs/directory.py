@@ -3,7 +3,8 @@ of them. The report, sweeps, seed runs, model loading and the CLI open a run her
 
 Every read is checked: a missing or corrupt file raises `CheckpointError` naming it, and a
 run whose manifest is missing or disagrees with its files is refused by `RunDir.open`
-(`IncompleteOutputError`).
+(`IncompleteOutputError`). A pure reader: importing it loads neither torch nor training
+code (the weights and the kNN bank are read with torch only when asked for).
 """
 from __future__ import annotations
 
@@ -11,20 +12,19 @@ import os
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import pandas as pd
 
 from sysid.config.experiment import Experiment, load_experiment
 from sysid.errors import CheckpointError, ConfigError, IncompleteOutputError
-from sysid.evaluation.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
-from sysid.runs.knn_bank import KnnBank
-from sysid.runs.summary import RunSummary
-from sysid.runs.tensor_files import check_finite, load_tensors
+from sysid.records.columns import (BASELINE_METRICS_COLUMNS, HISTORY_COLUMNS, METRICS_COLUMNS,  # noqa: F401
+                                   REQUIRED_METRICS_COLUMNS, TRACE_COLUMNS, trace_name)
+from sysid.records.summary import RunSummary
 from sysid.store.manifest import MANIFEST, has_manifest, verify_manifest
 
-BASELINE_METRICS_COLUMNS = ["baseline"] + METRICS_COLUMNS  # the physics baselines on the same test logs
-HISTORY_COLUMNS = ["epoch", "train_loss", "early_stopping_loss"]
+if TYPE_CHECKING:
+    from sysid.runs.knn_bank import KnnBank
 
 
 def read_table(path: Path, columns: list[str], required: bool = True) -> pd.DataFrame | None:
@@ -42,6 +42,16 @@ def read_table(path: Path, columns: list[str], required: bool = True) -> pd.Data
     if missing:
         raise CheckpointError(f"{path}: missing column(s) {missing}")
     return frame
+
+
+def with_divergence(frame: pd.DataFrame) -> pd.DataFrame:
+    """A metrics table with its ``diverged`` and ``diverged_at_s`` columns (False, NaN when
+    absent: a run written before divergence was marked)."""
+    if "diverged" not in frame.columns:
+        frame = frame.assign(diverged=False)
+    if "diverged_at_s" not in frame.columns:
+        frame = frame.assign(diverged_at_s=float("nan"))
+    return frame.assign(diverged=frame["diverged"].fillna(False).astype(bool))
 
 
 def _file(name: str, what: str) -> property:
@@ -87,7 +97,7 @@ class RunDir:
     knn = _file("knn.pt", "`KnnBank` (hybrid and NN runs with a gate)")
     standardization = _file("standardization.json", "the FNN's input and output mean and std")
     history = _file("history.csv", "losses per stage and epoch (trained runs only)")
-    metrics = _file("metrics.csv", "`sysid.evaluation.evaluate.METRICS_COLUMNS`")
+    metrics = _file("metrics.csv", "`sysid.records.columns.METRICS_COLUMNS`")
     baseline_metrics = _file("baseline_metrics.csv", "the physics baselines on the same test logs "
                              "(`BASELINE_METRICS_COLUMNS`; runs with a verdict and test logs)")
     traces = _file("traces", "one CSV per (test file, horizon)")
@@ -120,12 +130,14 @@ class RunDir:
             raise CheckpointError(f"{self.path}: bad run config ({exc})") from None
 
     def read_metrics(self) -> pd.DataFrame:
-        """metrics.csv as written (RMSE of u, v_m [m/s] and r [rad/s])."""
-        return read_table(self.metrics, METRICS_COLUMNS)
+        """metrics.csv as written (RMSE of u, v_m [m/s] and r [rad/s]); a run written before
+        divergence was marked reads as not diverged."""
+        return with_divergence(read_table(self.metrics, REQUIRED_METRICS_COLUMNS))
 
     def read_baseline_metrics(self) -> pd.DataFrame | None:
         """baseline_metrics.csv (`BASELINE_METRICS_COLUMNS`), None for a run without one."""
-        return read_table(self.baseline_metrics, BASELINE_METRICS_COLUMNS, required=False)
+        frame = read_table(self.baseline_metrics, ["baseline"] + REQUIRED_METRICS_COLUMNS, required=False)
+        return with_divergence(frame) if frame is not None else None
 
     def read_history(self) -> pd.DataFrame | None:
         """history.csv, None for an untrained run. Runs written before ``val_loss_multistep``
@@ -144,6 +156,7 @@ class RunDir:
 
     def read_model_state(self) -> dict:
         """model.pt: the state dict (plain tensors, all finite)."""
+        from sysid.runs.tensor_files import check_finite, load_tensors  # torch: only when asked
         state = load_tensors(self.model)
         if not isinstance(state, dict):
             raise CheckpointError(f"{self.model}: not a state dict")
@@ -152,4 +165,5 @@ class RunDir:
 
     def read_knn_bank(self, width: int | None = None) -> KnnBank:
         """knn.pt, checked (`KnnBank`); `width`: F of the model's gate vectors, if known."""
+        from sysid.runs.knn_bank import KnnBank  # torch: only when asked
         return KnnBank.load(self.knn, width)

@@ -6,26 +6,30 @@ from ``[data] test`` or, for a paper data set, the paper's six (`sysid.data.spli
 """
 from __future__ import annotations
 
+import logging
 import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
+import numpy as np
 import pandas as pd
 import torch
 
 from sysid.identify.checkpoint import TrainingCheckpoint
-from sysid.data.recordings import Run, read_run
+from sysid.data.recordings import Run, read_runs
 from sysid.data.datasets import test_files
 from sysid.data.splits import TEST, TRAINING, VALIDATION, check_disjoint_runs, data_split, provenance
 from sysid.device import compute_threads
 from sysid.errors import ConfigError, TrainingError
+from sysid.evaluation.divergence import PhysicalRange
 from sysid.evaluation.evaluate import Evaluation, evaluate_model, short_runs
 from sysid.evaluation.verdict import (IDENTIFIED_MMG, SHIP_FILE_MMG, BaselineVerdict, baseline_verdict,
                                       window_score)
 from sysid.config.experiment import Experiment
 from sysid.hybrid.force_models import CorrectedModel, build_mmg, build_model
+from sysid.mmg.coverage import outside_force_models
 from sysid.runs.rundir import write_run
 from sysid.identify.trainer import EpochReport, Trainer, TrainingSummary, held_out_validation
 from sysid.config.checks import threads
@@ -52,13 +56,12 @@ class RunResult:
 
 def training_runs(exp: Experiment, data: str | os.PathLike | None = None) -> list[Run]:
     """The experiment's training logs (``[data] train`` or its data set), read and checked."""
-    return [read_run(f, exp.data.rate, exp.data.columns) for f in data_split(exp, data).train]
+    return read_runs(data_split(exp, data).train, exp.data.rate, exp.data.columns)
 
 
 def validation_runs(exp: Experiment) -> list[Run]:
     """The experiment's ``[data] validation`` logs, read (empty: validation blocks of the training logs)."""
-    return [read_run(f, exp.data.rate, exp.data.columns) for f in data_split(exp).validation] \
-        if exp.data.validation else []
+    return read_runs(data_split(exp).validation, exp.data.rate, exp.data.columns) if exp.data.validation else []
 
 
 def evaluation_runs(exp: Experiment, data: str | os.PathLike | None = None) -> list[Run]:
@@ -66,7 +69,22 @@ def evaluation_runs(exp: Experiment, data: str | os.PathLike | None = None) -> l
     paper data set, else none. Read only to evaluate."""
     split = data_split(exp, data)
     columns = exp.data.columns if split.test_source == "files" else None
-    return [read_run(f, exp.data.rate, columns) for f in split.test]
+    return read_runs(split.test, exp.data.rate, columns)
+
+
+def warn_outside_force_models(exp: Experiment, runs: Sequence[Run]) -> list[str]:
+    """Warn (and return) the shares of training samples outside what the ship file's force
+    models cover (`sysid.mmg.coverage`): astern revolutions under a one-quadrant propeller,
+    rudder angles beyond the standard rudder's range."""
+    if not runs:
+        return []
+    states = np.concatenate([r.states for r in runs])
+    inputs = np.concatenate([r.inputs for r in runs])
+    ship = build_mmg(exp).ship
+    found = outside_force_models(ship.models, states[:, 1], inputs[:, 0], inputs[:, 1])
+    for line in found:
+        logging.getLogger(__name__).warning(f"training logs: {line} ({ship.source or ship.name})")
+    return found
 
 
 def physics_baselines(exp: Experiment, model: torch.nn.Module, dtype: torch.dtype,
@@ -83,15 +101,15 @@ def physics_baselines(exp: Experiment, model: torch.nn.Module, dtype: torch.dtyp
 
 
 def scores_on_tests(exp: Experiment, model: torch.nn.Module, evaluation: Evaluation,
-                tests: Sequence[Run]) -> dict[str, pd.DataFrame] | None:
-    """Metrics tables of the model (its `evaluation`) and of each physics baseline on the
-    test logs (None without test logs)."""
+                    tests: Sequence[Run], limits: PhysicalRange | None = None) -> dict[str, Evaluation] | None:
+    """Evaluations of the model (its `evaluation`) and of each physics baseline on the test
+    logs, divergence checked against `limits` (None without test logs)."""
     if not tests:
         return None
-    scores = {"model": evaluation.metrics}
+    scores = {"model": evaluation}
     for label, baseline in physics_baselines(exp, model, torch.float64).items():
         scores[label] = evaluate_model(baseline, tests, exp.evaluation.horizons, exp.evaluation.integrator,
-                                       traces=False).metrics
+                                       traces=False, limits=limits)
     return scores
 
 
@@ -103,7 +121,7 @@ def cached_test_runs(data: str | os.PathLike | None = None) -> list[Run]:
     process and data directory."""
     key = ("tests", None if data is None else str(data))
     if key not in _READ:
-        _READ[key] = [read_run(p) for p in test_files(data).values()]
+        _READ[key] = read_runs(test_files(data).values())
     return _READ[key]
 
 
@@ -160,7 +178,7 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
     """
     check_experiment_fits(exp, tests)
     started = time.perf_counter()
-    history, training, validation_scores, horizon = None, None, None, 0.0
+    history, training, validation_scores = None, None, None
     runs: list[Run] = []
     validation = list(validation) if validation is not None else []
     held_out = None
@@ -174,6 +192,7 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
                 log("validation: the held-out training logs " + "; ".join(
                     f"{group}: {', '.join(names)}" for group, names in held_out.groups.items()))
             check_disjoint_runs({TRAINING: runs, VALIDATION: validation, TEST: tests}, exp.source)
+            warn_outside_force_models(exp, runs)
             try:
                 trainer = Trainer(exp, progress=progress, log=log, checkpoint=checkpoint_path(out_dir),
                                   resume=resume, on_epoch=on_epoch).fit(runs, validation)
@@ -181,22 +200,26 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
                 TrainingCheckpoint(checkpoint_path(out_dir), exp.to_toml()).remove()
                 raise
             history, training = trainer.history_, trainer.summary_
-            if training.failure is None:  # in the training dtype, as val_loss_multistep
-                windows = trainer.validation_windows_
-                scored = {"model": trainer.model_, **physics_baselines(exp, trainer.model_, windows.states.dtype,
-                                                                        windows.states.device)}
-                validation_scores = {k: window_score(m, windows, trainer.velocity_weights_) for k, m in scored.items()}
-                horizon = round((windows.states.shape[0] - 1) * windows.dt, 6)  # s
+            if training.failure is None:  # in the training dtype, as val_loss_multistep, at its horizons
+                validation_scores = {}
+                for horizon, windows in trainer.validation_sets_.items():
+                    scored = {"model": trainer.model_, **physics_baselines(exp, trainer.model_, windows.states.dtype,
+                                                                            windows.states.device)}
+                    validation_scores[horizon] = {k: window_score(m, windows, trainer.velocity_weights_)
+                                                  for k, m in scored.items()}
             model = trainer.model_.cpu().double()
         else:
             model = build_model(exp)
-        evaluation = evaluate_model(model, tests, exp.evaluation.horizons, exp.evaluation.integrator)
+        limits = PhysicalRange.of_runs(runs)   # the training logs' range: beyond it a prediction diverged
+        evaluation = evaluate_model(model, tests, exp.evaluation.horizons, exp.evaluation.integrator, limits=limits)
+        for divergence in evaluation.divergences:
+            log(f"WARNING: the prediction diverged on {divergence.text()}")
         verdict, baseline_metrics = None, None
         if validation_scores is not None:
-            scores = scores_on_tests(exp, model, evaluation, tests)
-            verdict = baseline_verdict(str(exp.experiment.model), validation_scores, horizon, scores)
+            scores = scores_on_tests(exp, model, evaluation, tests, limits)
+            verdict = baseline_verdict(str(exp.experiment.model), validation_scores, scores)
             if scores:
-                baseline_metrics = pd.concat([m.assign(baseline=label) for label, m in scores.items()
+                baseline_metrics = pd.concat([e.metrics.assign(baseline=label) for label, e in scores.items()
                                               if label != "model"], ignore_index=True)
     source = "files" if exp.data.train else (exp.experiment.dataset if exp.needs_training else "-")
     data_used = provenance(source, runs, validation, tests, exp.training.val_fraction, exp.training.block_s,

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from sysid.runs.records import JsonRecord
+from sysid.records.base import JsonRecord
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ A **run directory** (``sysid train CONFIG -o runs/NAME``)::
                         "k": (), "alpha": ()}
     history.csv        stage, epoch, train_loss, train_velocity, train_penalty, early_stopping_loss
                        (L_v on the validation windows during training, before the kNN gate), seconds
-    metrics.csv        `sysid.evaluation.evaluate.METRICS_COLUMNS`
+    metrics.csv        `sysid.records.columns.METRICS_COLUMNS`
     baseline_metrics.csv  the physics baselines on the same test logs: "baseline" (its label,
                        `sysid.evaluation.verdict`) + METRICS_COLUMNS; with a verdict and test logs
     traces/            one CSV per (file, horizon): ``{file_stem}_h{H}.csv``, `TRACE_COLUMNS`
@@ -34,7 +34,7 @@ A **run directory** (``sysid train CONFIG -o runs/NAME``)::
 Untrained MMG-only runs have no model.pt, knn.pt or history.csv. A run is written into a
 staging directory and moved into place complete (`write_run`); it is read through
 `sysid.runs.directory.RunDir`, which refuses a run whose manifest is missing or disagrees
-with its files. summary.json is `sysid.runs.summary.RunSummary`, knn.pt
+with its files. summary.json is `sysid.records.summary.RunSummary`, knn.pt
 `sysid.runs.knn_bank.KnnBank`.
 
 A **reproduction directory** (``sysid reproduce -o OUTDIR``)::
@@ -69,11 +69,10 @@ from sysid.config.experiment import Experiment, ship_overrides
 from sysid.store.files import write_csv, write_text
 from sysid.mmg.model import MMG
 from sysid.hybrid.force_models import CorrectedModel, build_model
-from sysid.identify.trainer import VAL_LOSS_DEFINITION
 from sysid.runs.directory import BASELINE_METRICS_COLUMNS, RunDir
 from sysid.runs.knn_bank import KnnBank
-from sysid.runs.summary import (DataSummary, GateSummary, IdentificationSummary, RunSummary, TrainingDetails,
-                                UncertaintySummary, VerdictSummary)
+from sysid.records.summary import (VAL_LOSS_DEFINITION, DataSummary, GateSummary, IdentificationSummary, RunSummary,
+                                   TrainingDetails, UncertaintySummary, VerdictSummary)
 from sysid.runs.tensor_files import save_tensors
 from sysid.store.staging import staged_directory
 from sysid.store.versions import software_versions
@@ -103,12 +102,22 @@ def save_model(model: torch.nn.Module, run_dir: Path) -> None:
             KnnBank.of(model.gate).save(run.knn)
 
 
-def load_model(run_dir: str | os.PathLike, dtype: torch.dtype = torch.float64):
-    """(experiment, model) of a run directory; clear errors for a missing or corrupt one."""
+def load_model(run_dir: str | os.PathLike, dtype: torch.dtype = torch.float64, _within: tuple[Path, ...] = ()):
+    """(experiment, model) of a run directory; clear errors for a missing or corrupt one, and
+    for an ensemble whose members lead back to itself."""
     run = RunDir.open(run_dir)
     exp = run.read_experiment()
     if exp.ensemble.members:
-        members = [load_model((run.path / member).resolve(), dtype)[1] for member in exp.ensemble.members]
+        here = run.path.resolve()
+        chain = (*_within, here)
+        members = []
+        for member in exp.ensemble.members:
+            path = (run.path / member).resolve()
+            if path in chain:
+                raise CheckpointError(f"{run.config}: [ensemble] members names {member!r}, which is "
+                                      f"{'this run itself' if path == here else f'the ensemble {path} it belongs to'}"
+                                      "; an ensemble's members are other run directories: remove it from the list")
+            members.append(load_model(path, dtype, chain)[1])
         return exp, SeedEnsemble(members)
     model = build_model(exp, dtype)
     if not exp.needs_training:

@@ -6,6 +6,7 @@ the temporary file.
 """
 from __future__ import annotations
 
+import errno
 import os
 import tempfile
 import threading
@@ -45,9 +46,24 @@ def atomic_path(path: str | os.PathLike, suffix: str = "") -> Iterator[Path]:
         yield Path(tmp)
         os.chmod(tmp, file_mode())  # mkstemp's 0600 is for the temporary file only
         os.replace(tmp, path)
+    except OSError as exc:
+        raise write_failure(exc, path) from None
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
+
+
+def write_failure(exc: OSError, path: str | os.PathLike) -> Exception:
+    """The error to raise when writing `path` failed with `exc`: for a full disk or quota an
+    `OutputError` naming the output (nothing of it was kept), else `exc` naming `path`."""
+    from sysid.errors import OutputError
+
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        return OutputError(f"{path}: {os.strerror(exc.errno).lower()} (writing it in {Path(path).parent}); nothing "
+                           "was written: free some space there, or choose an output path on another disk")
+    if getattr(exc, "filename", None):
+        return exc
+    return OSError(exc.errno, exc.strerror or str(exc), str(path))
 
 
 def write_csv(frame, path: str | os.PathLike, **kwargs) -> Path:

@@ -23,7 +23,10 @@ Refused (`OutputError`: exit 2, one line naming the output and the path at fault
 """
 from __future__ import annotations
 
+import errno
 import os
+import re
+import stat
 from contextlib import contextmanager
 from dataclasses import dataclass
 from enum import Enum
@@ -50,6 +53,7 @@ class OutputKind(str, Enum):
     REPRODUCTION = "reproduction"
     SWEEP = "sweep"
     MANEUVERS = "maneuvers"
+    COMPARISON = "comparison"
     REPORT = "report"
 
     @property
@@ -141,12 +145,7 @@ class OutputTarget:
     def check(self) -> None:
         """Refuse this target if it is an input, holds one, lies in one or in a sealed
         directory, is a link, or exists and may not be replaced; create its parent."""
-        for path in dict.fromkeys([self.path, *self.written()]):
-            self._check_link(path)
-        for path in self.written():
-            self._check_inputs(path, same=True)
-            self._check_sealed(path)
-            self._check_inputs(path, same=False)
+        self.check_place()
         if self.kind is OutputKind.SWEEP:
             self._check_sweep()
         elif self.kind.sealed:
@@ -164,6 +163,18 @@ class OutputTarget:
                 raise OutputError(f"{self.path}: already exists; it is written beside {self.companion}: pass "
                                   "--overwrite to replace it, or choose another output path")
             check_parent(self.path)
+
+    def check_place(self, sealed: bool = True) -> None:
+        """The rules for where any output may go, whatever is there: not a link, not one of
+        the inputs, holding none and inside none, and (with `sealed`) not inside a
+        directory sysid sealed."""
+        for path in dict.fromkeys([self.path, *self.written()]):
+            self._check_link(path)
+        for path in self.written():
+            self._check_inputs(path, same=True)
+            if sealed:
+                self._check_sealed(path)
+            self._check_inputs(path, same=False)
 
     def _check_link(self, path: Path) -> None:
         if path.is_symlink():
@@ -246,40 +257,91 @@ class OutputTarget:
             yield staging
 
 
+_PID_LINE = re.compile(rb"\d{0,10}\n?")  # what sysid writes into its lock files: its process id
+
+
+def _refuse_lock(target: Path, lock: Path, why: str) -> OutputError:
+    return OutputError(f"{target}: its lock file {lock} {why}; sysid creates that file itself and never writes "
+                       "through it: move it away, or choose another output path")
+
+
+def _open_lock(lock: Path, target: Path) -> tuple[int, bool]:
+    """The lock file's descriptor, and whether this process created it. A new lock file is
+    created exclusively (``O_EXCL``, never through a link); an existing one is opened only if
+    it is itself a plain file (``O_NOFOLLOW``, one link)."""
+    flags = os.O_RDWR | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+    try:
+        return os.open(lock, flags | os.O_CREAT | os.O_EXCL, 0o644), True
+    except FileExistsError:
+        pass
+    except OSError as exc:
+        raise OutputError(f"{target}: cannot create its lock file {lock} ({exc.strerror})") from None
+    if os.path.islink(lock):  # a symbolic link, dangling or not: never followed
+        raise _refuse_lock(target, lock, f"is a symbolic link to {os.readlink(lock)}")
+    try:
+        return os.open(lock, flags), False
+    except FileNotFoundError:
+        return -1, False  # its holder removed it meanwhile
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise _refuse_lock(target, lock, "is a symbolic link") from None
+        raise OutputError(f"{target}: cannot open its lock file {lock} ({exc.strerror})") from None
+
+
 @contextmanager
 def exclusive_lock(lock: Path, target: Path) -> Iterator[None]:
-    """An exclusive ``flock`` on the file `lock` (created, holding this process's id), or
-    `OutputError` naming `target` and `lock` if another process holds it. The file is
-    removed when the block ends; a holder that was killed leaves it unlocked (the kernel
-    releases the lock), so the next command takes it over."""
+    """An exclusive ``flock`` on the file `lock`, created by this process (``O_EXCL``, never
+    through a link) and holding its id, or `OutputError` naming `target` and `lock` if
+    another process holds it. The file is removed when the block ends.
+
+    A lock file found in place is one sysid left only if it is a plain file with one link,
+    owned by this user, holding nothing but a process id; anything else (a symbolic link,
+    dangling or not, a hard link to another file, a file of other content) is refused and
+    left untouched. A holder that was killed leaves its file unlocked (the kernel releases
+    the lock): the next command removes it and creates its own."""
     if fcntl is None:
         yield
         return
     while True:
+        fd, created = _open_lock(lock, target)
+        if fd < 0:
+            continue
         try:
-            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
-        except OSError as exc:
-            raise OutputError(f"{target}: cannot create its lock file {lock} ({exc.strerror})") from None
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.read(fd, 32).decode(errors="replace").strip() or "?"
+            found = os.fstat(fd)
+            if not stat.S_ISREG(found.st_mode):
+                raise _refuse_lock(target, lock, "is not a regular file")
+            if found.st_nlink != 1:
+                raise _refuse_lock(target, lock, f"is a hard link ({found.st_nlink} names for one file)")
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = os.read(fd, 32).decode(errors="replace").strip() or "?"
+                raise OutputError(f"{target}: another sysid process (pid {holder}) is writing it (lock {lock}); "
+                                  "wait for it to finish or choose another output path") from None
+            try:
+                still_there = os.lstat(lock).st_ino == found.st_ino
+            except FileNotFoundError:
+                still_there = False
+            if still_there and not created:  # a lock left by a killed sysid: checked, removed, made anew
+                if found.st_uid != os.geteuid():
+                    raise _refuse_lock(target, lock, f"belongs to another user (uid {found.st_uid})")
+                if not _PID_LINE.fullmatch(os.read(fd, 64)):
+                    raise _refuse_lock(target, lock, "holds something other than a sysid process id")
+                os.unlink(lock)
+                still_there = False
+        except BaseException:
             os.close(fd)
-            raise OutputError(f"{target}: another sysid process (pid {holder}) is writing it (lock {lock}); "
-                              "wait for it to finish or choose another output path") from None
-        try:
-            if os.fstat(fd).st_ino == os.stat(lock).st_ino:
-                break  # the file still at `lock`: ours
-        except FileNotFoundError:
-            pass
-        os.close(fd)  # its holder removed that file as we took it: take the new one
+            raise
+        if still_there:
+            break  # created here, locked, and still at `lock`: ours
+        os.close(fd)
     try:
-        os.ftruncate(fd, 0)
         os.write(fd, f"{os.getpid()}\n".encode())
         yield
     finally:
         try:
-            os.unlink(lock)
+            if os.lstat(lock).st_ino == os.fstat(fd).st_ino:
+                os.unlink(lock)
         except FileNotFoundError:
             pass
         os.close(fd)

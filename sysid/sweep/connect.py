@@ -15,15 +15,20 @@ from __future__ import annotations
 import logging
 import os
 import socket
+import sys
 import tempfile
+import threading
 from contextlib import contextmanager
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable, Iterator
 
 from sysid.errors import ConfigError
 
 INSTALL_HINT = "Ray is needed for sweeps and seed studies: pip install \"sysid[sweep]\" (ray[tune], optuna)"
 PROBE_TIMEOUT_S = 5.0    # TCP connect to the cluster's head before Ray is asked to join it
+WATCH_PERIOD_S = 2.0     # how often a running sweep checks that the cluster's head answers
+WATCH_MISSES = 3         # unanswered checks in a row: the cluster is gone
 JOIN_RETRIES = 10        # Ray's attempts (about 1 s each) to reach the head's GCS
 AUTH_HINT = ("the cluster uses token authentication: set RAY_AUTH_MODE=token and the cluster's token in "
              "RAY_AUTH_TOKEN (or RAY_AUTH_TOKEN_PATH naming a file holding it; default ~/.ray/auth_token)")
@@ -77,10 +82,25 @@ def _host_port(address: str) -> tuple[str, int] | None:
     return host.strip("[]"), int(port)
 
 
+def resolved(target: RayTarget) -> RayTarget:
+    """``auto`` as the address of the cluster ``ray start`` started on this machine (the one
+    Ray records in its temporary directory), never a Ray that a process started for itself
+    (another sweep's private local Ray): one line when there is none."""
+    if target.address != "auto":
+        return target
+    address = running_cluster()
+    if address is None:
+        raise ConfigError(f"{target.source} auto: no Ray cluster started with `ray start` runs on this machine "
+                          "(the private Ray of another sweep is never joined); start one with `ray start --head`, "
+                          "give its HOST:PORT, or leave --address out for a local Ray of this sweep's own")
+    return RayTarget(address, target.source)
+
+
 def check_reachable(target: RayTarget, timeout: float = PROBE_TIMEOUT_S) -> None:
     """Refuse (one line, within `timeout` s) a HOST:PORT whose host does not resolve or
     where nothing accepts a connection. ``auto`` and URIs (``ray://``) are left to Ray."""
-    if target.address is None or target.address == "auto" or "://" in target.address:
+    target = resolved(target)
+    if target.address is None or "://" in target.address:
         return
     host, port = _host_port(target.address)
     where = f"{target.source} {target.address}"
@@ -160,6 +180,120 @@ def join_error(target: RayTarget, exc: BaseException, log_text: str = "") -> Con
     return ConfigError(f"{where}: cannot join the Ray cluster ({last})")
 
 
+def package_dir() -> Path:
+    """The folder of the sysid package this process runs (this module's grandparent)."""
+    return Path(__file__).resolve().parents[1]
+
+
+def installed_package_dir() -> Path | None:
+    """Where ``import sysid`` leads without the working directory and the script's folder
+    on the path: the installed package (None: none is installed)."""
+    from importlib.machinery import PathFinder
+
+    script = Path(os.path.realpath(sys.argv[0])).parent if sys.argv and sys.argv[0] else None
+    local = {Path.cwd().resolve(), script}
+    path = [p for p in sys.path if p and Path(p).resolve() not in local]
+    spec = PathFinder.find_spec("sysid", path)
+    finders = [f for f in sys.meta_path if f is not PathFinder and hasattr(f, "find_spec")]
+    for finder in finders:
+        if spec is not None and spec.origin:
+            break
+        try:
+            spec = finder.find_spec("sysid", None)
+        except Exception:  # another package's finder: not ours to judge
+            spec = None
+    return Path(spec.origin).resolve().parent if spec is not None and spec.origin else None
+
+
+def shadowing_folder() -> Path | None:
+    """The folder whose ``sysid`` this process runs in place of the installed one (started
+    from a folder holding one, e.g. ``python -m sysid`` in a clone), else None."""
+    installed = installed_package_dir()
+    return package_dir().parent if installed is not None and installed != package_dir() else None
+
+
+def note_shadowing(log: Callable[[str], None]) -> None:
+    """One line when this process runs another sysid than the installed one (`shadowing_folder`)."""
+    folder = shadowing_folder()
+    if folder is not None:
+        log(f"note: {folder}: its folder sysid is running, not the installed sysid ({installed_package_dir()}); "
+            "a cluster's nodes run their installed sysid: start sysid from another folder to run that one")
+
+
+@contextmanager
+def _code_directory() -> Iterator[None]:
+    """This process's working directory set, while Ray starts, to the folder that holds the
+    sysid package it runs: Ray puts the driver's working directory first on every worker's
+    ``sys.path``, so a folder named ``sysid`` where the command was started (a clone, a
+    project folder) would otherwise be what the trials import."""
+    here = os.getcwd()
+    os.chdir(package_dir().parent)
+    try:
+        yield
+    finally:
+        os.chdir(here)
+
+
+def head_answers(address: str, timeout: float = PROBE_TIMEOUT_S) -> bool:
+    """Whether something accepts a TCP connection at a ``HOST:PORT`` address."""
+    host_port = _host_port(address)
+    if host_port is None:
+        return True   # a URI (ray://): Ray's own client reports its loss
+    try:
+        with socket.create_connection(host_port, timeout=timeout):
+            return True
+    except OSError:
+        return False
+
+
+_LOST_CLEANUPS: list[Callable[[], None]] = []
+
+
+def on_cluster_lost(cleanup: Callable[[], None]) -> None:
+    """Run `cleanup` (e.g. release the output's lock) if the cluster goes away mid-run and
+    the process must end at once (`watch_head`); later registrations run first."""
+    _LOST_CLEANUPS.append(cleanup)
+
+
+def lost_line(target: RayTarget, note: str) -> str:
+    return (f"{target.source} {target.address}: the Ray cluster went away while the sweep ran (its head no "
+            f"longer answers); {note}")
+
+
+@contextmanager
+def watch_head(target: RayTarget, note: Callable[[], str], cleanup: Callable[[], None] = lambda: None,
+               period: float = WATCH_PERIOD_S, misses: int = WATCH_MISSES) -> Iterator[None]:
+    """While the block runs, check every `period` s that the cluster's head answers; after
+    `misses` failures in a row, run `cleanup` and the `on_cluster_lost` cleanups, print one line (`note`:
+    what was kept) and end the process with exit code 2, before Ray's own loss of the
+    head ends it without a word. Nothing is watched for a local Ray."""
+    target = resolved(target)
+    if target.address is None or _host_port(target.address) is None:
+        yield
+        return
+    stop = threading.Event()
+
+    def watch() -> None:
+        failed = 0
+        while not stop.wait(period):
+            failed = 0 if head_answers(target.address, min(period, PROBE_TIMEOUT_S)) else failed + 1
+            if failed >= misses and not stop.is_set():
+                for step in [cleanup, *reversed(_LOST_CLEANUPS)]:
+                    try:
+                        step()
+                    except Exception:  # the line and the exit come first
+                        pass
+                os.write(2, f"error: {lost_line(target, note())}\n".encode())
+                os._exit(2)
+
+    thread = threading.Thread(target=watch, name="sysid-watch-head", daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+
+
 def running_cluster() -> str | None:
     """The address of a Ray cluster `ray start` left running on this machine, if any."""
     try:
@@ -175,6 +309,7 @@ def start_ray(workers: int, address: str | None, log: Callable[[str], None] = pr
     CPUs; True if this call started or joined (the caller shuts it down)."""
     ray, _ = import_ray()
     target = ray_target(address)
+    note_shadowing(log)
     # trial failures are reported by the progress lines and the results table, not tracebacks
     for name in ("ray", "ray.tune", "ray.air", "ray.train"):
         logging.getLogger(name).setLevel(logging.CRITICAL)
@@ -185,11 +320,13 @@ def start_ray(workers: int, address: str | None, log: Callable[[str], None] = pr
         if other:
             log(f"note: a Ray cluster runs on this machine ({other}); this run starts a local Ray of its own "
                 "(--address auto joins that cluster)")
-        ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False,
-                 logging_level=logging.ERROR, object_store_memory=200 * 1024**2, configure_logging=True)
+        with _code_directory():
+            ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False,
+                     logging_level=logging.ERROR, object_store_memory=200 * 1024**2, configure_logging=True)
         return True
+    target = resolved(target)
     check_reachable(target)
-    with _env(RAY_gcs_server_port_wait_time_s=str(JOIN_RETRIES)), _quiet_stderr() as captured:
+    with _env(RAY_gcs_server_port_wait_time_s=str(JOIN_RETRIES)), _quiet_stderr() as captured, _code_directory():
         try:
             ray.init(address=target.address, log_to_driver=False, logging_level=logging.ERROR)
         except Exception as exc:  # Ray's ConnectionError/RuntimeError/AuthenticationError

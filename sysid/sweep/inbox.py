@@ -217,5 +217,5 @@ def inbox_actor(out: str | os.PathLike):
     actor = ray.remote(RunInbox).options(
         name=name, num_cpus=0, max_restarts=0,
         scheduling_strategy=NodeAffinitySchedulingStrategy(node_id=here, soft=False)).remote(str(out))
-    ray.get(actor.ready.remote())
+    ray.get(actor.ready.remote())  # type: ignore[attr-defined]
     return actor, name

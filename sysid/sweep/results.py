@@ -111,7 +111,7 @@ def write_results(spec: SweepSpec, out: Path, results: SweepResults, seconds: fl
     write_csv(results.trials, out / "results.csv", float_format="%.6g")
     write_csv(results.points, out / "points.csv", float_format="%.6g")
     summary = SweepSummary(spec.name, str(spec.base_path), spec.search, tuple(spec.seeds), spec.objective,
-                           tuple(spec.keys), **results.counts, best=results.best, seconds=seconds,
+                           tuple(spec.keys), **results.counts, best=results.best, seconds=seconds,  # type: ignore[arg-type]
                            scheduler=str(spec.scheduler.kind), tune=tune, mlflow=mlflow)
     write_text(summary.to_text(), out / "summary.json")
     return summary

@@ -19,7 +19,7 @@ import threading
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Callable, Iterable, Iterator, Sequence
 
 from sysid.errors import ConfigError
 from sysid.sweep.connect import import_ray, start_ray
@@ -43,6 +43,39 @@ class TuneStorage:
         return f"{self.storage_path.rstrip('/')}/{self.name}"
 
 
+# URI schemes pyarrow's FileSystem.from_uri opens (Tune writes its experiment through it)
+STORAGE_SCHEMES = ("file", "s3", "gs", "gcs", "hdfs", "viewfs", "abfs", "abfss", "mock")
+
+
+def tune_storage(storage: str, name: str, out: Path, inputs: Iterable[str | os.PathLike] = ()) -> TuneStorage:
+    """``--storage`` checked as an output before Ray starts: a URI of a scheme pyarrow opens,
+    or a folder where Tune's experiment ``{storage}/{name}`` follows the rules of ``-o``
+    (`sysid.store.target.OutputTarget.check_place`): not a link, not one of the sweep's
+    `inputs` or the folder of one of its logs, holding none and inside none, not inside a
+    directory sysid sealed other than the sweep's own output `out`."""
+    from sysid.errors import OutputError
+    from sysid.store.target import OutputKind, OutputTarget
+
+    scheme, sep, rest = storage.partition("://")
+    if sep and scheme.lower() != "file":
+        if scheme.lower() not in STORAGE_SCHEMES or not rest:
+            raise ConfigError(f"--storage {storage!r}: not a folder or a storage URI Tune can write to (schemes: "
+                              f"{', '.join(STORAGE_SCHEMES[1:])}, or file://); give a folder or e.g. s3://bucket/dir")
+        return TuneStorage(storage, name)
+    folder = Path(rest if sep else storage).expanduser()
+    if not str(folder).strip():
+        raise OutputError("--storage: empty; give a folder or a storage URI")
+    experiment = folder / name
+    own = experiment.absolute().resolve().is_relative_to(out.absolute().resolve())
+    try:
+        OutputTarget(experiment, OutputKind.SWEEP, tuple(Path(p) for p in inputs)).check_place(sealed=not own)
+    except OutputError as exc:
+        raise OutputError(f"--storage {storage}: {exc}") from None
+    if folder.exists() and not folder.is_dir():
+        raise OutputError(f"--storage {storage}: exists and is not a folder; give a folder for Tune's experiment")
+    return TuneStorage(str(folder.absolute()), name)
+
+
 @dataclass
 class Outcomes:
     """What Tune says of the trials it ended without a complete run: errors, and trials a
@@ -60,7 +93,7 @@ def progress_callback(total: int, names: Callable[[dict], str], log: Callable[[s
     claims of every Tune trial that ends in the inbox named `inbox`."""
     _, tune = import_ray()
 
-    class SweepProgress(tune.Callback):
+    class SweepProgress(tune.Callback):  # type: ignore[name-defined]
         def __init__(self):
             self.running, self.done, self.failed, self.stopped, self.retried = set(), 0, 0, 0, 0
             self.best = (math.inf, "")
@@ -142,10 +175,15 @@ class Session:
 
 
 @contextmanager
-def ray_session(out: Path, workers: int | None, address: str | None, log: Callable[[str], None]) -> Iterator[Session]:
+def ray_session(out: Path, workers: int | None, address: str | None, log: Callable[[str], None],
+                lost_note: Callable[[], str] = lambda: "nothing was kept",
+                lost_cleanup: Callable[[], None] = lambda: None) -> Iterator[Session]:
     """Ray started or joined for the sweep, and the sweep's inbox on this node; Ray is shut
-    down afterwards if this session started it."""
-    from sysid.sweep.connect import ray_target
+    down afterwards if this session started it. A joined cluster whose head stops
+    answering ends the sweep with one line (`sysid.sweep.connect.watch_head`: `lost_cleanup`
+    first, `lost_note` says what was kept), or a `ClusterLostError` when Ray's calls fail first."""
+    from sysid.errors import ClusterLostError
+    from sysid.sweep.connect import head_answers, lost_line, ray_target, resolved, watch_head
 
     ray, _ = import_ray()
     local = ray_target(address).address is None
@@ -160,14 +198,21 @@ def ray_session(out: Path, workers: int | None, address: str | None, log: Callab
         if not local and not ray.cluster_resources().get("CPU"):
             log(f"note: {ray_target(address).describe()} has no CPU for trials yet; the trials wait for nodes "
                 "to join (Ctrl-C stops)")
-        yield Session(inbox, name, (workers or default_workers()) if local else workers)
+        target = resolved(ray_target(address))
+        try:
+            with watch_head(target, lost_note, lost_cleanup):
+                yield Session(inbox, name, (workers or default_workers()) if local else workers)
+        except Exception as exc:
+            if not local and target.address and not head_answers(target.address):
+                raise ClusterLostError(lost_line(target, lost_note())) from exc
+            raise
     finally:
         if started:
             ray.shutdown()
 
 
 def run_trials(trials: list[TrialSpec], out: Path, data: TrialData, session: Session, max_retries: int = 2,
-               storage: TuneStorage | None = None, scheduler=None, callbacks: list = (),
+               storage: TuneStorage | None = None, scheduler=None, callbacks: Sequence = (),
                log: Callable[[str], None] = print, prefix: str = "sweep") -> Outcomes:
     """Run `trials` (one Tune trial each, one CPU each) in a `ray_session`; trials already
     complete in `out` are reused. Returns what Tune ended without a complete run."""
@@ -204,7 +249,7 @@ def trial_space(tune, trials: list[TrialSpec]) -> dict:
 
 
 def run_optuna(spec, out: Path, data: TrialData, session: Session, storage: TuneStorage | None = None, scheduler=None,
-               callbacks: list = (), evaluated: list[tuple[dict, float]] = (), pending: list[dict] = (),
+               callbacks: Sequence = (), evaluated: Sequence[tuple[dict, float]] = (), pending: Sequence[dict] = (),
                log: Callable[[str], None] = print) -> Outcomes:
     """Optuna's search (through Ray Tune): ``samples`` configurations, each trial training
     every seed of the sweep and reporting their mean validation loss. A resumed search

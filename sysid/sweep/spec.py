@@ -38,7 +38,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import tomllib
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -50,12 +50,13 @@ from sysid.config.experiment import Experiment, load_experiment, parse_experimen
 
 SCHEDULERS = ("none", "asha", "median")
 # scheduler -> {setting: (default, smallest allowed, integer?)}; times in epochs
-SCHEDULER_SETTINGS = {
+SCHEDULER_SETTINGS: dict[str, dict[str, tuple[float, float, bool]]] = {
     "none": {},
     "asha": {"grace_period": (1, 1, True), "reduction_factor": (3.0, 1.0 + 1e-9, False), "brackets": (1, 1, True)},
     "median": {"grace_period": (1, 1, True), "min_samples_required": (3, 1, True)},
 }
 OBJECTIVES = ("val_loss_multistep",)
+SAFE_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,127}")   # one path component, never "." or ".."
 DISTRIBUTIONS = ("uniform", "loguniform", "randint", "choice")
 
 
@@ -130,9 +131,15 @@ class SweepSpec:
         return apply_values(self.base, values, seed, name, self.source, self.directory)
 
 
+def safe_name(text: str) -> str:
+    """`text` as one safe path component (`SAFE_NAME`): other characters become ``_``."""
+    name = re.sub(r"[^A-Za-z0-9_.-]", "_", text)[:128]
+    return name if SAFE_NAME.fullmatch(name) else f"_{name}"[:128]
+
+
 def base_document(exp: Experiment) -> dict:
     """An experiment as a TOML document (every option filled in)."""
-    return tomllib.loads(exp.to_toml())
+    return exp.to_table()
 
 
 def apply_values(base: Experiment, values: dict[str, Any], seed: int, name: str,
@@ -279,9 +286,14 @@ def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = Non
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
             raise ConfigError(f"{source}: [sweep] {key} must be an integer >= {low}, got {value!r}")
         ints[key] = value
-    name = table.get("name", Path(source).stem if source != "<sweep>" else "sweep")
-    if not isinstance(name, str) or not name:
-        raise ConfigError(f"{source}: [sweep] name must be a non-empty string")
+    if "name" in table:
+        name = table["name"]
+        if not isinstance(name, str) or not SAFE_NAME.fullmatch(name):
+            raise ConfigError(f"{source}: [sweep] name = {name!r}: a sweep name names a folder (Tune's experiment "
+                              "under --storage): ASCII letters, digits, '_', '-' and '.', not first, e.g. "
+                              "\"hybrid_D2_lr\"")
+    else:
+        name = safe_name(Path(source).stem if source != "<sweep>" else "sweep")
     vary = doc.get("vary", {})
     if not isinstance(vary, dict):
         raise ConfigError(f"{source}: [vary] must be a table of \"section.option\" = values")

@@ -38,6 +38,7 @@ from sysid.sweep.plan import make_trial, sweep_trials
 from sysid.sweep.results import SweepResults, collect_results, scanned_trials, write_results
 from sysid.sweep.summary import SweepSummary
 from sysid.sweep.runner import Outcomes, TuneStorage, make_scheduler, ray_session, run_optuna, run_trials
+from sysid.sweep.runner import tune_storage as tune_storage_of
 from sysid.sweep.spec import SweepSpec
 from sysid.sweep.trial import TrialSpec, read_trial_data
 
@@ -98,7 +99,7 @@ def optuna_history(spec: SweepSpec, out: Path) -> tuple[list[tuple[dict, float]]
     for trial in scanned_trials(spec, out):
         by_point.setdefault(trial.point, []).append(trial)
     evaluated, pending = [], []
-    for point, trials in by_point.items():
+    for trials in by_point.values():
         config = config_of(spec, trials[0].values)
         if config is None:
             continue
@@ -109,6 +110,26 @@ def optuna_history(spec: SweepSpec, out: Path) -> tuple[list[tuple[dict, float]]
         else:
             pending.append(config)
     return evaluated, pending
+
+
+def needs_paper_data(spec: SweepSpec, experiments) -> bool:
+    """Whether the sweep names the paper's data set D1/D2 (``[experiment] dataset`` in the
+    base, a planned trial, or an axis)."""
+    if any(a.key == "experiment.dataset" for a in spec.axes):
+        return True
+    return any(e.experiment.dataset for e in experiments)
+
+
+def sweep_inputs(spec: SweepSpec, experiments, root) -> list[Path]:
+    """What a sweep reads: its sweep file, base config, every log of its configurations and
+    the folders holding those logs (no output goes there)."""
+    from sysid.data.splits import data_split
+
+    paths = [Path(spec.source), spec.base_path]
+    for exp in experiments:
+        for files in data_split(exp, root).parts().values():
+            paths += [Path(f) for f in files] + [Path(f).parent for f in files]
+    return list(dict.fromkeys(paths))
 
 
 def _seed_dirs(spec: SweepSpec, values: dict) -> dict[str, str]:
@@ -133,15 +154,18 @@ def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = Non
 
     started = time.perf_counter()
     out = Path(out)
-    root = data_root(data)  # a clear error before Ray starts when the data are missing
     check_output(spec, out, resume, overwrite)
     planned = sweep_trials(spec) if spec.search is not Search.OPTUNA else []
-    trial_data = read_trial_data(_experiments(spec, planned), root)
+    experiments = _experiments(spec, planned)
+    # the paper's data set only when a configuration names one (a clear error before Ray starts)
+    root = data_root(data) if needs_paper_data(spec, experiments) else None
+    trial_data = read_trial_data(experiments, root)
     tracker = None
     if mlflow or spec.mlflow:
         from sysid.tracking import Tracker
         tracker = Tracker(mlflow or spec.mlflow, spec.name)
-    tune_storage = TuneStorage(storage, spec.name) if storage else TuneStorage(str(out.resolve()))
+    tune_storage = (tune_storage_of(storage, spec.name, out, sweep_inputs(spec, experiments, root)) if storage
+                    else TuneStorage(str(out.resolve())))
     scheduler = make_scheduler(spec.scheduler, spec.most_epochs * (len(spec.seeds) if spec.search is Search.OPTUNA else 1))
     existed = out.is_dir()
     where = f" on {address}" if address else (f" on {os.environ['RAY_ADDRESS']}" if os.environ.get("RAY_ADDRESS") else "")
@@ -150,11 +174,20 @@ def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = Non
         log(f"sweep {spec.name}: optuna resumes from {len(evaluated)} finished configurations "
             f"({len(pending)} with seeds left) in {out / 'trials'}; Tune's saved search state is not read")
     parent, outcomes = None, Outcomes()
+
+    def lost_note() -> str:
+        if (out / JOURNAL).exists():
+            return f"the trials finished so far are kept in {out / 'trials'}: rerun with --resume on a running cluster"
+        return "nothing was written"
+
+    def lost_cleanup() -> None:
+        if not resume:
+            _remove_unstarted(out, existed)
     try:
         if spec.search is Search.OPTUNA:
             log(f"sweep {spec.name}: optuna, {spec.samples} configurations x {len(spec.seeds)} seeds{where}")
             if len(evaluated) < spec.samples:
-                with ray_session(out, workers, address, log) as session:
+                with ray_session(out, workers, address, log, lost_note, lost_cleanup) as session:
                     write_output(spec, out, resume)
                     callbacks = []
                     if tracker is not None:
@@ -174,7 +207,7 @@ def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = Non
             log(f"sweep {spec.name}: {spec.search}, {len(trials) // len(spec.seeds)} configurations x "
                 f"{len(spec.seeds)} seeds = {len(trials)} trials{where}"
                 + (f", scheduler {spec.scheduler.kind}" if spec.scheduler.kind != "none" else ""))
-            with ray_session(out, workers, address, log) as session:
+            with ray_session(out, workers, address, log, lost_note, lost_cleanup) as session:
                 write_output(spec, out, resume)
                 callbacks = []
                 if tracker is not None:

@@ -18,7 +18,7 @@ def tracking_callback(tracker: Tracker, parent: str, out: Path, names: Callable[
     name, its parameters and its run directories ({key: path relative to `out`})."""
     _, tune = import_ray()
 
-    class TrackTrials(tune.Callback):
+    class TrackTrials(tune.Callback):  # type: ignore[name-defined]
         def __init__(self):
             self.runs: dict[str, str] = {}
             self.broken = False

@@ -25,12 +25,13 @@ from typing import Any, Callable, Iterable
 
 import torch
 
-from sysid.data.recordings import Run, read_run
+from sysid.config.choices import Solver
+from sysid.data.recordings import Run, read_runs
 from sysid.data.datasets import test_files
 from sysid.data.splits import file_sha256
 from sysid.errors import DataError
 from sysid.config.experiment import Experiment, parse_experiment
-from sysid.runs.lifecycle import checkpoint_path, run_experiment, training_runs
+from sysid.runs.lifecycle import checkpoint_path, run_experiment, training_runs, validation_runs
 from sysid.runs.summary import RunSummary
 from sysid.sweep.inbox import COMPLETE, WAIT, complete_summary, pack_run  # noqa: F401 (complete_summary: API)
 from sysid.identify.checkpoint import CheckpointState
@@ -59,15 +60,29 @@ def data_key(exp: Experiment) -> tuple:
     return (exp.experiment.dataset, tuple(exp.data.train), exp.data.columns, float(exp.data.rate))
 
 
+def validation_key(exp: Experiment) -> tuple:
+    """What decides an experiment's ``[data] validation`` logs: the files, their columns and rate."""
+    return (tuple(exp.data.validation), exp.data.columns, float(exp.data.rate))
+
+
 @dataclass(frozen=True)
 class TrialData:
     """The data every trial needs, read once on the driver: the test runs (none for a sweep),
-    and the training runs of each `data_key`. ``root`` is the driver's data root (a trial whose data were not
-    shipped reads them there, which works only where that path exists)."""
+    the training runs of each `data_key` and the ``[data] validation`` runs of each
+    `validation_key`. ``root`` is the driver's data root (a trial whose data were not
+    shipped reads them there, which works only where that path exists; None: no paper
+    data set is used)."""
 
     tests: tuple[Run, ...]
     training: dict = field(default_factory=dict)
     root: str | None = None
+    validation: dict = field(default_factory=dict)
+
+    def validation_runs(self, exp: Experiment) -> list[Run] | None:
+        """The shipped ``[data] validation`` runs of `exp` (None: it lists none, or they were
+        not shipped and are read where the trial runs)."""
+        runs = self.validation.get(validation_key(exp))
+        return list(runs) if runs is not None else None
 
     def training_runs(self, exp: Experiment) -> list[Run]:
         runs = self.training.get(data_key(exp))
@@ -82,18 +97,22 @@ class TrialData:
 
 def read_trial_data(experiments: Iterable[Experiment], root: str | os.PathLike | None,
                     tests: bool = False) -> TrialData:
-    """The training runs of every distinct `data_key` among `experiments` and, with `tests`
-    (``sysid reproduce --seeds``: evaluation), the paper's test runs. A sweep reads no test
-    file: its trials are trained, validated and ranked without one."""
+    """The training runs of every distinct `data_key` among `experiments`, their ``[data]
+    validation`` runs and, with `tests` (``sysid reproduce --seeds``: evaluation), the
+    paper's test runs. A sweep reads no test file: its trials are trained, validated and
+    ranked without one. `root` (the paper's data set) is needed only by an experiment that
+    names one."""
     def hashed(runs) -> tuple[Run, ...]:  # the files' SHA-256 travel with them (the run's provenance)
         return tuple(dataclasses.replace(r, sha256=r.sha256 or file_sha256(r.path)) for r in runs)
 
-    training = {}
+    training, validation = {}, {}
     for exp in experiments:
         if exp.needs_training and data_key(exp) not in training:
             training[data_key(exp)] = hashed(training_runs(exp, root))
-    test_runs = hashed(read_run(p) for p in test_files(root).values()) if tests else ()
-    return TrialData(test_runs, training, str(root) if root is not None else None)
+        if exp.needs_training and exp.data.validation and validation_key(exp) not in validation:
+            validation[validation_key(exp)] = hashed(validation_runs(exp))
+    test_runs = hashed(read_runs(test_files(root).values())) if tests else ()
+    return TrialData(test_runs, training, str(root) if root is not None else None, validation)
 
 
 def node_name() -> str:
@@ -152,7 +171,7 @@ def _history_metrics(rows: list[dict], summary: RunSummary | None = None) -> lis
     Levenberg-Marquardt's one row is not an epoch and is left out."""
     solver = summary.identification.solver if summary is not None and summary.identification is not None else None
     return [epoch_metrics(r["stage"], r["epoch"], r["train_loss"], r["early_stopping_loss"]) for r in rows
-            if not (r["stage"] == "identify" and solver == "levenberg_marquardt")]
+            if not (r["stage"] == "identify" and solver == Solver.LEVENBERG_MARQUARDT)]
 
 
 def _checkpoint_history(blob: bytes, source: str) -> list[dict]:
@@ -195,7 +214,7 @@ def run_trial(trial: TrialSpec, inbox, data: TrialData, holder: str = "local",
 
         runs = data.training_runs(exp) if exp.needs_training else None
         run_experiment(exp, run_dir, data.tests, runs, data.root, progress=False, log=log,
-                       resume=blob is not None, on_epoch=on_epoch)
+                       resume=blob is not None, validation=data.validation_runs(exp), on_epoch=on_epoch)
         summary = call(inbox, "deliver", trial.path, holder, pack_run(run_dir), trial.config, node)
     return result_row(trial, summary)
 

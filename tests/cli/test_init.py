@@ -41,6 +41,12 @@ def test_init_writes_a_project_that_loads_from_another_working_directory(tmp_pat
         assert present or commented, f"[{ref.section}] {ref.key} missing"
         assert ref.meaning and ref.meaning.split()[0] in text
 
+    # one definition of good: the horizons are written once, and the validation loss judges them
+    assert text.count("\nhorizons = ") == 1 and exp.evaluation.horizons == (30.0, 100.0)
+    assert exp.training.objective_s == 0
+    from sysid.identify.trainer import objective_horizons
+    assert objective_horizons(exp) == exp.evaluation.horizons
+
     ship = load_ship(project / "my_tanker.toml")  # the template validates as a ship file
     assert ship.name == "my_tanker" and dict(ship.models) == {"hull": "standard", "propeller": "standard",
                                                               "rudder": "standard"}

@@ -33,6 +33,8 @@ def test_choices_are_enums_written_as_the_files_words(path):
             assert resolved[section][key] == written[section][key] == value.value
         assert json.loads(json.dumps({"v": value}))["v"] == value.value  # summary.json form
     assert parse_experiment(resolved, str(path)) == exp  # the written config reads back the same
+    assert exp.to_table() == resolved  # the typed document is what a TOML reader makes of the text
+    assert all(type(v) in (str, int, float, bool, list, dict) for t in exp.to_table().values() for v in t.values())
 
 
 def test_python_callers_may_name_choices():

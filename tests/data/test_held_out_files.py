@@ -11,7 +11,9 @@ import pytest
 
 from sysid.data.datasets import training_files
 from sysid.data.recordings import Run, read_run
-from sysid.data.splits import PAPER_TEST_STEMS, hold_out_files, maneuver_group
+from sysid.data.splits import (PAPER_TEST_STEMS, SHARED_ROWS, TEST, TRAINING, VALIDATION, check_disjoint_runs,
+                              hold_out_files, maneuver_group, shared_rows)
+from sysid.errors import DataError
 
 
 def _log(folder: str, name: str, n: int = 50, seed: int = 0, of: Run | None = None) -> Run:
@@ -72,3 +74,40 @@ def test_small_groups_never_go_to_validation_whole():
         expected = min(9, max(1, int(np.floor(fraction * 10 + 0.5))))
         assert len([n for n in held["many"] if n != "m_cut"]) == expected
         assert ("m_cut" in held["many"]) == ("m4" in held["many"])
+
+
+def _piece(of: Run, name: str, rows: slice, scale: float = 1.0) -> Run:
+    """Rows `rows` of `of` as a log of its own (`scale`: its values in another unit and back)."""
+    return Run(name, Path("/logs/cut") / f"{name}.csv", of.t[rows], of.states[rows] * scale / scale,
+               of.inputs[rows] * scale / scale, of.relative_wind[rows], of.dt)
+
+
+@pytest.mark.parametrize("rows, at", [(slice(300, None), (0, 300, 200)), (slice(120, 180), (0, 120, 60)),
+                                      (slice(480, 495), (0, 480, 15))])
+def test_a_log_cut_from_another_shares_exactly_its_rows(rows, at):
+    whole = _log("many", "whole", n=500, seed=3)
+    cut = _piece(whole, "cut", rows, scale=0.514444)   # through knots and back: rounding at 1e-16
+    assert shared_rows(cut, whole) == at
+    assert shared_rows(whole, cut) == (at[1], at[0], at[2])
+    with pytest.raises(DataError, match=rf"cut\.csv \(test\) holds the samples of rows {at[1] + 1}-{at[1] + at[2]} "
+                                        r"of /logs/many/whole\.csv \(training\)"):
+        check_disjoint_runs({TRAINING: [_log("many", "other", n=400, seed=4), whole], TEST: [cut]})
+
+
+def test_logs_that_share_a_stretch_are_refused_and_recordings_that_do_not_pass():
+    a, b = _log("many", "a", n=400, seed=5), _log("many", "b", n=400, seed=6)
+    # b's rows 100-159 recorded again in the middle of another log: 60 samples in common
+    spliced = Run("spliced", Path("/logs/cut/spliced.csv"), np.arange(300.0),
+                  np.concatenate([a.states[:120], b.states[100:160], a.states[200:320]]),
+                  np.concatenate([a.inputs[:120], b.inputs[100:160], a.inputs[200:320]]), np.zeros((300, 2)), 1.0)
+    assert shared_rows(spliced, b) == (120, 100, 60)
+    with pytest.raises(DataError, match=r"spliced\.csv \(validation\) holds in its rows 121-180 the samples of rows "
+                                        r"101-160 of /logs/many/b\.csv \(training\)"):
+        check_disjoint_runs({TRAINING: [b], VALIDATION: [spliced]})
+    # fewer rows in common than SHARED_ROWS, neither log whole: two recordings, not one
+    short = Run("short", Path("/logs/cut/short.csv"), np.arange(200.0),
+                np.concatenate([a.states[:100], b.states[:SHARED_ROWS - 1], a.states[300:371]]),
+                np.concatenate([a.inputs[:100], b.inputs[:SHARED_ROWS - 1], a.inputs[300:371]]), np.zeros((200, 2)), 1.0)
+    assert shared_rows(short, b) is None
+    check_disjoint_runs({TRAINING: [a, b], TEST: [_log("many", "c", n=400, seed=7)]})
+    check_disjoint_runs({TRAINING: [a, a], TEST: [b]})  # one part may hold a log twice (its copies drop out later)

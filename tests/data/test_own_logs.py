@@ -73,7 +73,7 @@ def test_column_errors_name_the_file_the_column_and_the_fix(dataset_dir, tmp_pat
     own = write_own_log(dataset_dir / BERTHING, tmp_path / "own.csv")
     table = _table()
     with pytest.raises(DataError, match=r"own\.csv: no column 't \[s\]' for channel t, 'x_position_mid \[m\]' for "
-                                        r"channel x, .* and 7 more \(the file has .*'surge speed'.*\[data.columns\], "
+                                        r"channel x, .*for channel wind_dir_true \(the file has .*'surge speed'.*\[data.columns\], "
                                         r"e\.g\. t = \{ column"):
         read_run(own)   # no map: the processed schema's headers are missing
     wrong = {**table, "u": {"column": "surge spd", "unit": "knots"}}
@@ -87,6 +87,32 @@ def test_column_errors_name_the_file_the_column_and_the_fix(dataset_dir, tmp_pat
     with pytest.raises(DataError, match=r"own\.csv: column 'rudder' \[rad\] \(channel delta_rudder\) reaches .* "
                                         r"wrong units\? .*unit = \"deg\""):
         read_run(own, columns=parse_columns(as_radians, "exp.toml"))
+
+
+def test_every_bad_column_is_named_in_one_line(dataset_dir, tmp_path):
+    """Degrees read as radians in two columns (rudder, true wind direction), text in two columns: each
+    problem is one error naming every column it concerns."""
+    import pandas as pd
+
+    own = write_own_log(dataset_dir / BERTHING, tmp_path / "own.csv")
+    table = _table()
+    as_radians = {**table, "delta_rudder": {"column": "rudder", "unit": "rad"},
+                  "wind_dir_true": {"column": "true wind from", "unit": "rad"}}
+    with pytest.raises(DataError) as found:
+        read_run(own, columns=parse_columns(as_radians, "exp.toml"))
+    line = str(found.value)
+    assert "\n" not in line and line.count("reaches") == 2
+    assert "column 'true wind from' [rad] (channel wind_dir_true) reaches" in line
+    assert "column 'rudder' [rad] (channel delta_rudder) reaches" in line
+    assert 'wind_dir_true = { column = "...", unit = "deg" }' in line and 'delta_rudder = { column = "...", unit = "deg" }' in line
+    frame = pd.read_csv(own, dtype=str)
+    frame.loc[3, "shaft"], frame.loc[5, "heading"] = "12 rpm", "NNE"
+    texts = tmp_path / "texts.csv"
+    frame.to_csv(texts, index=False)
+    with pytest.raises(DataError, match=r"texts\.csv: not a number in 2 column\(s\): column 'heading' \(channel psi\) "
+                                        r"holds 'NNE' at data row 7; column 'shaft' \(channel n_prop\) holds '12 rpm' "
+                                        r"at data row 5; write numbers only"):
+        read_run(texts, columns=parse_columns(table, "exp.toml"))
 
 
 def test_relative_paths_resolve_against_the_config_from_another_directory(dataset_dir, tmp_path, monkeypatch):
@@ -152,3 +178,43 @@ def test_the_paper_test_set_only_for_a_paper_data_set(dataset_dir, tmp_path):
     both.write_text(paper.read_text() + f"[data]\ntrain = [{json.dumps(str(dataset_dir / BERTHING))}]\n")
     with pytest.raises(ConfigError, match=r"dataset = 'D1' and \[data\] train both name training data"):
         load_experiment(both)
+
+
+def test_a_log_at_another_rate_is_resampled_with_a_message_or_refused(dataset_dir, tmp_path):
+    """The dataset's 10 Hz processed logs read at 1 Hz: every 10th sample from the first, said
+    once (a stage line naming the file and both rates); a rate that is not a whole number of
+    the file's samples, or above its own, is refused in one line."""
+    import logging
+
+    import pandas as pd
+
+    from sysid.data import recordings
+
+    source = dataset_dir / BERTHING
+    raw = pd.read_csv(source)
+    heard: list[str] = []
+    handler = logging.Handler()
+    handler.emit = lambda record: heard.append(record.getMessage())
+    logger = logging.getLogger("sysid")
+    logger.addHandler(handler)
+    old_level = logger.level
+    logger.setLevel(logging.INFO)
+    recordings._NOTED.clear()
+    try:
+        run = read_run(source)
+        again = read_run(source)
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(old_level)
+    assert run.stride == 10 and run.dt == pytest.approx(1.0)
+    np.testing.assert_array_equal(run.t, raw["t [s]"].to_numpy()[:len(run.t) * 10:10])
+    np.testing.assert_array_equal(again.states, run.states)
+    said = [line for line in heard if "read at 1 Hz" in line]
+    assert len(said) == 1 and source.name in said[0] and "10 Hz" in said[0] and "every 10th sample" in said[0]
+    with pytest.raises(DataError, match=r"rate 3 Hz is not a whole number of this file's 0\.1-s samples"):
+        read_run(source, rate=3.0)
+    one_hz = tmp_path / "one_hz.csv"
+    raw.iloc[::10].to_csv(one_hz, index=False)
+    assert read_run(one_hz).stride == 1
+    with pytest.raises(DataError, match=r"one_hz\.csv: rate 10 Hz is not a whole number .*divides 1 Hz"):
+        read_run(one_hz, rate=10.0)

@@ -11,6 +11,7 @@ import pytest
 from pypdf import PdfReader
 
 from cli_harness import in_process
+from sysid.evaluation.judgement import Outcome
 from sysid.evaluation.verdict import SHIP_FILE_MMG, BaselineVerdict
 
 TRAIN = ("berthing/berthing_12-Nov-2020_13_37_05.csv", "berthing/berthing_12-Nov-2020_13_09_11.csv")
@@ -38,9 +39,17 @@ def test_a_bad_model_is_flagged_in_summary_on_stderr_and_on_page_one(dataset_dir
     verdict = BaselineVerdict.from_dict(summary["verdict"])
     assert summary["beats_baseline"] is False and summary["verdict"]["beats_baseline"] is False
     assert verdict.decided_on == "test" and verdict.baselines == (SHIP_FILE_MMG,) and verdict.worse
+    # one test log of 3 windows at 30 s: 54-116 % worse in every cell, but its windows scatter too
+    # much to say so at 95 % confidence; the validation windows (hundreds) say it: worse
+    judgement = verdict.judgements[SHIP_FILE_MMG]
+    assert judgement.outcome is Outcome.NOT_DISTINGUISHABLE and (judgement.n_logs, judgement.n_windows) == (1, 3)
+    assert all(c.change > 0.5 and c.n_windows == 3 for c in judgement.cells)
+    assert verdict.validation_judgements[SHIP_FILE_MMG].outcome is Outcome.WORSE
     warning = trained.err.strip().splitlines()[-1]   # the last line, on stderr
-    assert warning.startswith("WARNING: The hybrid is WORSE than its physics baseline, MMG (ship file), on the "
-                              "test logs"), trained.err
+    assert warning.startswith("WARNING: The hybrid cannot be told apart from its physics baseline MMG (ship file) "
+                              "on 3 windows: RMSE +"), trained.err
+    assert "Decided on the test logs at 30 s. On the validation windows the hybrid is worse than MMG (ship file)." \
+        in warning
     # the verdict's test cells: the run's own metrics, and the MMG evaluated independently
     metrics = pd.read_csv(run / "metrics.csv").iloc[0]
     mmg_csv = tmp_path / "mmg.csv"
@@ -53,18 +62,21 @@ def test_a_bad_model_is_flagged_in_summary_on_stderr_and_on_page_one(dataset_dir
         assert test[channel].baselines[SHIP_FILE_MMG] == pytest.approx(mmg[column], rel=1e-5)
     # measured: 54-116 % worse than the MMG in every channel; the flag needs one cell 10 % worse
     assert all(cell.model > 1.1 * cell.baselines[SHIP_FILE_MMG] for cell in test.values())
-    # one validation loss: the log line, summary.json and the verdict say the same number; the
-    # ship file's MMG on the same windows is the trainer's own MMG-only loss
+    # one validation loss: the log line, summary.json and the verdict say the same number; it would
+    # be at the verdict's horizon (30 s, [evaluation] horizons) but these two short logs' validation
+    # blocks (about 24 s) hold no 30-s window, so it falls back to the T = 5 training steps, and says so
     assert f"val_loss_multistep {summary['val_loss_multistep']:.5f}" in trained.out
+    assert "no validation window of 30 s" in trained.out and "on validation windows: " in trained.out
     assert verdict.val_loss_multistep["model"] == pytest.approx(summary["val_loss_multistep"], rel=1e-6)
-    assert verdict.val_loss_multistep[SHIP_FILE_MMG] == pytest.approx(summary["training"]["mmg_val_loss"], rel=1e-5)
+    assert {c.horizon_s for c in verdict.cells if c.split == "validation"} == {5.0}
     assert "early_stopping_loss" in pd.read_csv(run / "history.csv").columns
 
     reported = in_process(capsys, "report", run, "-o", tmp_path / "report")
     assert reported.code == 0, reported.err
     first = PdfReader(tmp_path / "report" / "report.pdf").pages[0].extract_text()
     lines = [line for line in first.splitlines() if line.strip()]
-    assert lines[1] == "Verdict" and lines[2].startswith("WARNING: The hybrid is WORSE than its physics baseline")
+    assert lines[1] == "Verdict" and lines[2].startswith("WARNING: The hybrid cannot be told apart from its physics "
+                                                          "baseline")
     assert any(line.startswith("val_loss_multistep") and f"{summary['val_loss_multistep']:.5f}" in line
                for line in lines)   # the same name and number as in the log and summary.json
     html = (tmp_path / "report" / "report.html").read_text()
@@ -85,5 +97,7 @@ def test_without_test_logs_the_verdict_is_on_validation_and_says_so(dataset_dir,
     assert summary["data"]["test_set"] == "none" and summary["data"]["test"] == []
     verdict = BaselineVerdict.from_dict(summary["verdict"])
     assert verdict.decided_on == "validation" and {c.split for c in verdict.cells} == {"validation"}
-    assert "on the validation windows (there is no test set)" in verdict.statement()
+    assert "Decided on the validation windows at 5 s: there are no test logs." in verdict.statement()
+    judgement = verdict.judgements[SHIP_FILE_MMG]
+    assert judgement.n_logs == 1 and judgement.n_windows == summary["n_val_windows"]
     assert pd.read_csv(tmp_path / "run" / "metrics.csv").empty

@@ -240,20 +240,31 @@ def test_force_correction_is_the_papers_network_and_members_average():
 
 @pytest.mark.slow
 def test_val_loss_multistep_is_the_final_models_validation_loss_at_the_objective_horizon(trained):
-    """summary.val_loss_multistep (the sweep objective): L_v of the final (gated) model on the
-    validation windows; with objective_s, on validation windows of that many seconds."""
+    """summary.val_loss_multistep (the sweep objective): L_v of the final (gated) model on
+    validation windows of each [evaluation] horizon the validation blocks hold (windows of
+    h / dt samples, as the test windows), averaged; with objective_s, on validation windows of
+    that many seconds."""
+    from sysid.errors import DataError
     from sysid.identify.trainer import multistep_loss, split_windows
     runs, trainer = trained
     exp = trainer.experiment
     t = exp.training
     model = trainer.model_
-    train, val, _, _ = split_windows(runs, t.steps, t.stride_s, t.val_fraction, False, torch.float32,
-                                     t.block_s, exp.experiment.seed)
+    train, _, _, _ = split_windows(runs, t.steps, t.stride_s, t.val_fraction, False, torch.float32,
+                                   t.block_s, exp.experiment.seed)
     from sysid.state import VELOCITY_INDEX
     w_v = 1.0 / train.states[:, :, list(VELOCITY_INDEX)].reshape(-1, 3).var(0)
-    with torch.no_grad():
-        expected = float(multistep_loss(model, val, w_v)[0])
-    assert trainer.summary_.val_loss_multistep == pytest.approx(expected, rel=1e-5)
+    losses = {}
+    for horizon in exp.evaluation.horizons:
+        try:
+            val = split_windows(runs, int(round(horizon / runs[0].dt)) - 1, t.stride_s, t.val_fraction, False,
+                                torch.float32, t.block_s, exp.experiment.seed)[1]
+        except DataError:
+            continue
+        with torch.no_grad():
+            losses[horizon] = float(multistep_loss(model, val, w_v)[0])
+    assert set(losses) == set(trainer.validation_sets_) and 30.0 in losses
+    assert trainer.summary_.val_loss_multistep == pytest.approx(np.mean(list(losses.values())), rel=1e-5)
 
     longer = Trainer(small_experiment(objective_s=20.0), progress=False, log=lambda m: None).fit(runs)
     _, val20, _, _ = split_windows(runs, 20, t.stride_s, t.val_fraction, False, torch.float32, t.block_s,
@@ -261,7 +272,7 @@ def test_val_loss_multistep_is_the_final_models_validation_loss_at_the_objective
     with torch.no_grad():
         expected20 = float(multistep_loss(longer.model_, val20, w_v)[0])
     assert longer.summary_.val_loss_multistep == pytest.approx(expected20, rel=1e-5)
-    assert longer.summary_.val_loss_multistep > trainer.summary_.val_loss_multistep  # errors grow over 20 s
+    assert longer.summary_.val_loss_multistep < losses[30.0]  # errors grow with the horizon
 
 
 def test_seed_ensemble_of_hybrids_is_their_mmg_plus_the_mean_gated_correction():

@@ -12,9 +12,9 @@ import pytest
 from synthetic_rundir import write_reproduction  # noqa: E402
 
 from sysid import MMG, load_ship  # noqa: E402
-from sysid.maneuvers.recorded import (RECORD_FILE, recorded_maneuver, record_comparison, recorded_test_runs,  # noqa: E402
-                                      write_record_comparison,
-                                      side_by_side)
+from sysid.maneuvers.recorded import (OPEN_LOOP_COLUMNS, RECORD_FILE, approach_conditions,  # noqa: E402
+                                      recorded_maneuver, record_comparison, recorded_test_runs,
+                                      write_record_comparison, side_by_side)
 from sysid.report import build_report  # noqa: E402
 from sysid.store.manifest import write_manifest  # noqa: E402
 
@@ -46,9 +46,15 @@ def test_recorded_runs_are_the_maneuvers_the_dataset_lists(runs):
         assert run.inputs[execute, 0] == pytest.approx(rps, abs=0.01)
 
 
-def test_record_and_predictions_side_by_side(runs):
+@pytest.fixture(scope="module")
+def lab_frame(runs):
+    """The record beside the lab MMG (esso_osaka) once and as two equal members."""
     lab = MMG(load_ship("esso_osaka"))
-    frame = record_comparison({"MMG lab": [lab], "two of it": [lab, lab]}, runs)
+    return record_comparison({"MMG lab": [lab], "two of it": [lab, lab]}, runs)
+
+
+def test_record_and_predictions_side_by_side(lab_frame):
+    frame = lab_frame
     assert list(frame.model[:3]) == ["recorded", "MMG lab", "two of it"]
     record = frame[frame.model == "recorded"].set_index("scenario")
     turn = record.loc["Turning 35"]
@@ -61,12 +67,46 @@ def test_record_and_predictions_side_by_side(runs):
     assert (double.tactical_diameter_m_std.dropna() == 0.0).all() and double.n_members.eq(2).all()
     wide = side_by_side(frame)
     assert {"recorded", "MMG lab"} <= set(wide.columns)
-    assert set(wide[wide.scenario == "Zigzag 30/30"]["index"]) == {"first_overshoot_deg", "second_overshoot_deg"}
+    assert set(wide[wide.scenario == "Zigzag 30/30"]["index"]) == {"first_overshoot_deg", "second_overshoot_deg",
+                                                                   *OPEN_LOOP_COLUMNS}
+
+
+def test_the_record_s_approach_is_read_from_the_record(runs, dataset_dir):
+    """u and n at the execute, the fastest rudder move and the mean wind, counted
+    independently from the 10-Hz file's 1-Hz samples (the dataset README: 16.67 rps)."""
+    run = runs["Zigzag 20/20"]
+    maneuver, execute = recorded_maneuver(run, "Zigzag 20/20")
+    c = approach_conditions(run, execute)
+    raw = pd.read_csv(dataset_dir / "zigzag" / f"{run.name}.csv").dropna().iloc[::10].reset_index(drop=True)
+    assert c.speed == pytest.approx(raw["u_velo [m/s]"][execute], rel=1e-12) and round(c.speed, 3) == 0.316
+    assert c.rps == pytest.approx(16.67, abs=0.01)
+    assert c.rudder_rate == pytest.approx(np.abs(np.diff(np.degrees(raw["delta_rudder [rad]"]))).max(), rel=1e-12)
+    assert c.wind_speed == pytest.approx(raw["wind_velo_true [m/s]"][execute:].mean(), rel=1e-12)
+    assert c.duration == pytest.approx(raw["t [s]"].iloc[-1] - raw["t [s]"][execute])
+    assert c.dt == 0.1 and c.method.value == "rk4"
+
+
+def test_zigzag_overshoots_are_like_for_like(lab_frame):
+    """The IMO overshoots of the record (heading-triggered reversals) and of the lab MMG run
+    closed loop from the record's approach: both positive, the model's within a few degrees
+    of the record's (issue 32: +4.2 / +6.1 against 5.75 / 9.47 on Zigzag 20/20); the
+    open-loop peaks keep the old numbers under their own name (-8.0 deg)."""
+    rows = lab_frame.set_index(["scenario", "model"])
+    record, lab = rows.loc[("Zigzag 20/20", "recorded")], rows.loc[("Zigzag 20/20", "MMG lab")]
+    assert (round(record.first_overshoot_deg, 2), round(record.second_overshoot_deg, 2)) == (5.75, 9.47)
+    assert record.open_loop_first_peak_deg == record.first_overshoot_deg  # its reversals are at the check angle
+    for scenario in ("Zigzag 20/20", "Zigzag 30/30"):
+        rec, model = rows.loc[(scenario, "recorded")], rows.loc[(scenario, "MMG lab")]
+        for index in ("first_overshoot_deg", "second_overshoot_deg"):
+            assert 0.0 < model[index] < 2.0 * rec[index] and abs(model[index] - rec[index]) < 3.0, (scenario, index)
+    assert lab.open_loop_first_peak_deg == pytest.approx(-8.0, abs=0.05)
+    twice = rows.loc[("Zigzag 20/20", "two of it")]
+    assert twice.first_overshoot_deg == lab.first_overshoot_deg and twice.first_overshoot_deg_std == 0.0
 
 
 def test_reproduction_report_shows_the_record_table(runs, tmp_path):
     repro = write_reproduction(tmp_path / "repro", scale=0.4, names=("mmg_paper", "mmg_lab"))
-    frame = record_comparison({"MMG": [MMG(load_ship("esso_osaka", {"Xvr": 0.4535}))]}, runs)
+    frame = record_comparison({"MMG": [MMG(load_ship("esso_osaka", {"Xvr": 0.4535}))]}, runs, closed_loop_dt=0.5)
     frame.to_csv(repro / RECORD_FILE, index=False)
     write_manifest(repro, "reproduction")
     paths = build_report(repro, tmp_path / "report")
@@ -80,8 +120,8 @@ def test_models_predicted_in_workers_write_the_same_file(dataset_dir, tmp_path):
     """Two worker processes write the bytes the driver alone writes, rows in the order of
     the labels (the bundled ship under two labels, one of them first)."""
     models = {"MMG": "esso_osaka", "MMG again": "esso_osaka"}
-    alone = write_record_comparison(tmp_path / "alone", models, dataset_dir.parent)
-    workers = write_record_comparison(tmp_path / "workers", models, dataset_dir.parent, workers=2)
+    alone = write_record_comparison(tmp_path / "alone", models, dataset_dir.parent, closed_loop_dt=0.5)
+    workers = write_record_comparison(tmp_path / "workers", models, dataset_dir.parent, workers=2, closed_loop_dt=0.5)
     assert workers.read_bytes() == alone.read_bytes()
     frame = pd.read_csv(alone)
     assert list(frame.model[:3]) == ["recorded", "MMG", "MMG again"]

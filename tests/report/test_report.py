@@ -237,3 +237,23 @@ def test_preprocessing_quality_report(tmp_path):
     assert "run_2" in html and "Preprocessing quality" in html
     pages, n = _pdf_text(paths.pdf)
     assert all(f"page {i} of {n}" in p for i, p in enumerate(pages, 1))
+
+
+def test_figures_cover_every_test_log_of_a_users_run(tmp_path, small_runs):
+    """A run on the user's own test logs (none of them a paper scenario): the per-log figures
+    (time series, trajectories, forces, kNN distance) are drawn for every test log, not only
+    the first."""
+    import copy
+
+    picked = list(small_runs.values())[:2]
+    runs = {}
+    for name, run in zip(("harbour_a", "harbour_b"), picked):
+        mine = copy.copy(run)
+        mine.name, mine.path = name, Path(f"{name}.csv")
+        runs[name] = mine
+    run_dir = write_run(tmp_path / "hybrid_D2", "hybrid_D2", runs)
+    paths = build_report(run_dir, tmp_path / "report")
+    captions = re.findall(r"<figcaption>(.*?)</figcaption>", paths.html.read_text(), flags=re.S)
+    for name in runs:
+        assert sum(name in c for c in captions) >= 2, (name, captions)
+    assert not [n for n in paths.notes if "failed" in n], paths.notes

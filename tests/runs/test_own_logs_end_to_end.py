@@ -78,8 +78,11 @@ def test_own_logs_train_evaluate_and_report_from_another_directory(dataset_dir, 
     verdict = summary["verdict"]
     assert verdict["decided_on"] == "test" and summary["beats_baseline"] == verdict["beats_baseline"]
     assert {c["split"] for c in verdict["cells"]} == {"validation", "test"}
+    said = {"beats": "The hybrid beats", "worse": "WARNING: The hybrid is WORSE",
+            "not_distinguishable": "WARNING: The hybrid cannot be told apart", "diverged": "WARNING: The hybrid DIVERGED"}
+    assert summary["beats_baseline"] == (verdict["outcome"] == "beats")
     if not summary["beats_baseline"]:
-        assert trained.err.strip().splitlines()[-1].startswith("WARNING: The hybrid is WORSE")
+        assert trained.err.strip().splitlines()[-1].startswith(said[verdict["outcome"]])
 
     # evaluate the run on the user's test log (read with the run's column map)
     out = work / "again.csv"
@@ -94,9 +97,7 @@ def test_own_logs_train_evaluate_and_report_from_another_directory(dataset_dir, 
     first = [line for line in PdfReader(work / "reports" / "own" / "report.pdf").pages[0].extract_text().splitlines()
              if line.strip()]
     assert first[1] == "Verdict"
-    said = "The hybrid beats its physics baseline" if summary["beats_baseline"] else \
-        "WARNING: The hybrid is WORSE than its physics baseline"
-    assert first[2].startswith(said), first[:4]
+    assert first[2].startswith(said[verdict["outcome"]]), first[:4]
     html = (work / "reports" / "own" / "report.html").read_text()
     for paper_words in ("D1", "D2", "better than the paper", "cf. Fig"):
         assert paper_words not in html, paper_words

@@ -64,8 +64,10 @@ def test_scratch_ship_trains_evaluates_and_reports(tmp_path):
     # the identified MMG (moved toward the truth) beats the ship file's on the held-out run
     verdict = summary["verdict"]
     assert summary["beats_baseline"] is True and verdict["baselines"] == ["MMG (ship file)"]
-    assert verdict["statement"].startswith("The identified MMG beats its physics baseline, MMG (ship file), "
-                                           "on the test logs")
+    assert verdict["outcome"] == "beats"
+    assert verdict["statement"].startswith("The identified MMG beats its physics baseline MMG (ship file) at 95 % "
+                                           "confidence: RMSE -")
+    assert verdict["statement"].endswith("Decided on the test logs at 30 s.")
     out = tmp_path / "metrics.csv"
     sysid(["evaluate", str(run_dir), "--data", str(files[2]), "--horizon", "30", "-o", str(out)])
     assert pd.read_csv(out).rmse_r.iloc[0] < 0.01

@@ -9,7 +9,9 @@ from pathlib import Path
 
 import pytest
 
+from sysid.config.choices import Solver
 from sysid.errors import CheckpointError
+from sysid.evaluation.verdict import BaselineVerdict
 from sysid.runs.directory import RunDir
 from sysid.runs.records import JsonRecord
 from sysid.runs.summary import RunSummary
@@ -69,11 +71,11 @@ def test_hybrid_summary_agrees_with_the_runs_other_files(hybrid_run):
     assert summary.n_val_windows == sum(f.val_windows for f in summary.training.split.files)
     history = run.read_history()
     assert summary.epochs == history.epoch.max() and set(summary.stopped) == {"identify", "train"}
-    assert summary.identification.solver == "gradient" and summary.identification.epochs == 2
+    assert summary.identification.solver is Solver.GRADIENT and summary.identification.epochs == 2
     assert summary.identified_uncertainty.names == ("N_r",)
     assert summary.identified_uncertainty.estimate[0] == pytest.approx(summary.identified["N_r"])
     assert summary.val_loss_multistep > 0 and summary.objective == summary.val_loss_multistep
-    verdict = summary.verdict.baseline_verdict()         # the typed block gives back the trainer's verdict
+    verdict = BaselineVerdict.from_dict(summary.verdict.to_json())  # the typed block gives back the trainer's verdict
     assert summary.beats_baseline == summary.verdict.beats_baseline == verdict.beats_baseline
     assert summary.verdict.statement == verdict.statement()
     assert summary.data.training == "files" and summary.data.test_set == "files"
@@ -119,6 +121,8 @@ def test_a_run_written_before_keys_existed_reads_with_their_defaults(tmp_path):
     (lambda d: d["training"]["split"]["files"][0].pop("val_windows"),
      r"key 'training\.split\.files\[0\]\.val_windows' is missing"),
     (lambda d: d.pop("name"), r"key 'name' is missing"),
+    (lambda d: d["identification"].update(solver="adam"),
+     r"identification\.solver: expected one of gradient, levenberg_marquardt, got a string 'adam'"),
 ])
 def test_a_malformed_summary_is_one_line_naming_the_file_and_key(hybrid_run, tmp_path, change, message):
     data = json.loads(RunDir(hybrid_run.path).summary.read_text())

@@ -20,7 +20,7 @@ from sysid.data.recordings import Run
 from sysid.evaluation.evaluate import predict_windows
 from sysid.store.manifest import write_manifest
 from sysid.mmg.wind import relative_wind
-from sysid.evaluation.evaluate import METRICS_COLUMNS, TRACE_COLUMNS, trace_name
+from sysid.evaluation.evaluate import REQUIRED_METRICS_COLUMNS, TRACE_COLUMNS, trace_name
 from sysid.protocol.paper import COMPARISON_COLUMNS
 
 DEG = math.pi / 180.0
@@ -143,7 +143,7 @@ def write_run(out: Path, name: str, runs: dict[str, Run], horizons=(30, 100), se
             err = trace[["pred_u", "pred_v", "pred_r"]].to_numpy() - trace[["obs_u", "obs_v", "obs_r"]].to_numpy()
             rmse = np.sqrt((err ** 2).mean(0))
             rows.append([scenario, run.name, horizon, int(trace["window"].nunique()), *rmse])
-    pd.DataFrame(rows, columns=METRICS_COLUMNS).to_csv(out / "metrics.csv", index=False)
+    pd.DataFrame(rows, columns=REQUIRED_METRICS_COLUMNS).to_csv(out / "metrics.csv", index=False)
     summary = {"name": name, "model": kind, "dataset": dataset if kind != "mmg" else None,
                "ship": "esso_osaka", "seed": seed, "created": "2026-11-22T05:00:00Z",
                "train_seconds": 0.0 if kind == "mmg" else 123.4,

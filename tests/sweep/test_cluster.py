@@ -19,6 +19,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from own_sweep import SYSID, no_paper_data, own_sweep_project, validation_files
 from ray_cluster import LocalCluster, namespaces_allowed
 from sysid.sweep.inbox import read_journal
 from tiny_experiment import tiny_experiment, tiny_test_file
@@ -85,6 +86,28 @@ def test_runs_trained_where_nothing_is_shared_arrive_complete(cluster, dataset_d
         ours = pd.read_csv(metrics)
         for c in ("rmse_u", "rmse_v", "rmse_r"):
             assert ours[c].iloc[0] == pytest.approx(recorded[c].iloc[0], rel=1e-5)
+
+
+def test_a_sweep_on_own_logs_known_only_to_the_driver(cluster, dataset_dir, tmp_path):
+    """Issue 33: a user's logs (knots, deg/s, renamed columns, validation logs) that only the
+    driver sees, no paper data set anywhere, started from a folder holding a ``sysid``
+    folder that is not sysid: both trials train on the worker node, validated on the
+    user's validation log shipped with the training logs."""
+    nodes, work = cluster
+    sweep = own_sweep_project(work / "own_project", dataset_dir)
+    project = sweep.parent
+    _, seen = nodes.worker_view([project / "my logs" / "harbour_check.csv", project / "sysid"])
+    assert seen == [False, False]
+    out = work / "own_out"
+    env = no_paper_data(nodes.env, tmp_path / "nowhere")
+    proc = subprocess.run([SYSID, "sweep", sweep.name, "-o", str(out), "--address", nodes.address], cwd=project,
+                          env=env, capture_output=True, text=True, timeout=1200)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    assert "2/2 trials complete" in proc.stdout
+    worker, _ = nodes.worker_view([])
+    assert {e["node"].rsplit(":", 1)[1] for e in read_journal(out)} == {worker[:8]}
+    for run in sorted((out / "trials").glob("*/seed0")):
+        assert validation_files(run) == ["harbour_check.csv"]
 
 
 def test_without_the_token_the_cluster_is_one_line_and_nothing_is_written(cluster, dataset_dir):

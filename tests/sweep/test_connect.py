@@ -63,3 +63,28 @@ def test_an_unreachable_address_is_one_line_within_30_s(tmp_path, dataset_dir, c
     assert len(lines) == 1 and f"--address {address}:" in lines[0], lines
     assert ("not found" if "invalid" in address else "Connection refused") in lines[0]
     assert not out.exists() and not list(tmp_path.glob(".out*"))
+
+
+def test_a_folders_sysid_running_in_place_of_the_installed_one_is_named(tmp_path):
+    """`python -m sysid` in a folder holding another sysid (a clone) runs that one: the
+    folder is named; from a folder with no sysid, or with the installed one, nothing."""
+    import shutil
+
+    import sysid
+    from sysid.sweep.connect import installed_package_dir, shadowing_folder
+
+    installed = installed_package_dir()
+    assert installed == Path(sysid.__file__).resolve().parent and shadowing_folder() is None
+    clone = tmp_path / "clone"
+    shutil.copytree(installed, clone / "sysid", ignore=shutil.ignore_patterns("__pycache__"))
+    probe = ("from sysid.sweep.connect import installed_package_dir, note_shadowing, shadowing_folder; "
+             "print(shadowing_folder()); print(installed_package_dir()); note_shadowing(print)")
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    out = subprocess.run([sys.executable, "-c", probe], cwd=clone, env=env, capture_output=True, text=True,
+                         timeout=120)
+    folder, found, note = out.stdout.strip().splitlines()
+    assert (folder, found) == (str(clone), str(installed)), out.stderr[-2000:]
+    assert note.startswith(f"note: {clone}: its folder sysid is running, not the installed sysid ({installed})")
+    elsewhere = subprocess.run([sys.executable, "-c", probe], cwd=tmp_path, env=env, capture_output=True, text=True,
+                               timeout=120)
+    assert elsewhere.stdout.strip().splitlines() == ["None", str(installed)]

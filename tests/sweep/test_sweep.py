@@ -202,7 +202,7 @@ def test_a_sweep_failing_before_its_first_trial_leaves_no_output(tmp_path, datas
     from sysid.sweep.runner import Session
 
     @contextmanager
-    def session(out, workers, address, log):  # Ray up, as far as the sweep can tell
+    def session(out, workers, address, log, *lost):  # Ray up, as far as the sweep can tell
         yield Session(None, "inbox", 1)
 
     def tune_fails(*args, **kwargs):

@@ -166,8 +166,9 @@ def test_a_trained_run_is_logged_to_mlflow(tmp_path, dataset_dir, monkeypatch):
     config = tiny_experiment(tmp_path / "t.toml", dataset_dir, seed=0, epochs=3, warm_start_epochs=1)
     run = tmp_path / "run"
     store = tmp_path / "store"
-    _sysid(["train", str(config), "-o", str(run), "--test", str(tiny_test_file(dataset_dir)), "--mlflow", str(store)],
-           dataset_dir, tmp_path)
+    zigzag = dataset_dir / "zigzag" / "zigzag_31-Jul-2020_13_57_45.csv"   # not a paper test file
+    _sysid(["train", str(config), "-o", str(run), "--test", str(tiny_test_file(dataset_dir)), "--test", str(zigzag),
+            "--mlflow", str(store)], dataset_dir, tmp_path)
     mlflow.set_tracking_uri(store.as_uri())
     runs = mlflow.search_runs(experiment_names=["tiny"])
     assert len(runs) == 1 and runs.status.iloc[0] == "FINISHED" and runs["tags.mlflow.runName"].iloc[0] == "run"
@@ -180,3 +181,10 @@ def test_a_trained_run_is_logged_to_mlflow(tmp_path, dataset_dir, monkeypatch):
     logged = sorted(client.get_metric_history(runs.run_id.iloc[0], "train_loss"), key=lambda m: m.step)
     assert [m.value for m in logged] == pytest.approx(list(pd.read_csv(run / "history.csv").train_loss), rel=CSV)
     assert {a.path for a in client.list_artifacts(runs.run_id.iloc[0], "run")} >= {"run/model.pt", "run/config.toml"}
+    # every test log its own key: scenario (the paper's name, or the maneuver recognised), log, horizon
+    metrics = pd.read_csv(run / "metrics.csv")
+    assert dict(zip(metrics.file, metrics.scenario)) == {"berthing_12-Nov-2020_11_49_21": "Berthing",
+                                                          "zigzag_31-Jul-2020_13_57_45": "Zigzag 20/20"}
+    for row in metrics.itertuples():
+        key = f"metrics.rmse_r/{row.scenario}/{row.file}/30s"
+        assert runs[key].iloc[0] == pytest.approx(row.rmse_r, rel=1e-12)

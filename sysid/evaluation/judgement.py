@@ -1,0 +1,462 @@
+"""How sysid judges a model: one stated statistical decision on per-log cells (docs: How sysid
+judges a model).
+
+A *cell* (`PairedCell`) is one log, one horizon and one channel (u, v_m [m/s], r [rad/s]),
+holding the per-window RMSE of the model and of its baseline on the *same* windows. The
+relative change of a cell is ``RMSE_model / RMSE_baseline - 1`` with each RMSE pooled over the
+cell's windows (and over the model's members). `judge` bootstraps it, paired, over windows
+within logs, over logs and over members, and decides at a stated confidence (`VerdictRule`):
+
+- DIVERGED: a model prediction went non-finite or far outside the training data's physical
+  range in some cell; such a model never beats its baseline;
+- WORSE: some cell is materially worse (its interval lies above ``+material``), or the model
+  is worse overall (the interval of the overall change lies above 0);
+- BEATS: better overall (interval below 0) and no cell more than ``material`` worse, neither
+  with confidence nor in its point estimate (a cell +12 % worse on too few windows to be sure
+  keeps the verdict open: more windows only sharpen a decision, never flip it);
+- NOT_DISTINGUISHABLE: otherwise, "on N windows".
+
+The overall change is the geometric mean of the cells' ratios minus 1, every log, horizon and
+channel alike, so a scenario with few windows weighs as much as one with many.
+`judge` is pure: no I/O, no torch; the same cells, rule and seed give the same judgement,
+whatever the order of the cells.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from enum import Enum
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+CHANNELS = ("u", "v_m", "r")
+UNITS = {"u": "m/s", "v_m": "m/s", "r": "rad/s"}
+
+
+class Outcome(str, Enum):
+    """The verdict, as the words a user reads after "The model ..."."""
+
+    BEATS = "beats its baseline"
+    WORSE = "is worse than its baseline"
+    NOT_DISTINGUISHABLE = "cannot be told apart from its baseline"
+    DIVERGED = "diverged"
+
+
+class CellDecision(str, Enum):
+    """One cell's decision at the rule's confidence."""
+
+    BETTER = "better"
+    WORSE = "worse, within the tolerance"
+    MATERIALLY_WORSE = "materially worse"
+    NOT_DISTINGUISHABLE = "not distinguishable"
+    TOO_FEW_WINDOWS = "too few windows"
+    DIVERGED = "diverged"
+    BASELINE_DIVERGED = "baseline diverged"
+
+
+@dataclass(frozen=True)
+class Divergence:
+    """Where a prediction left the physics: a non-finite state or one far outside the
+    training data's range. time_s : the log's time [s] of the first such sample;
+    channel : the state channel ("u", "v_m", "r", or "" when every one is non-finite);
+    reason : "non-finite" or "|u| 3.1 m/s beyond 3 x the training range 0.9 m/s"."""
+
+    log: str
+    horizon_s: float
+    time_s: float
+    channel: str = ""
+    reason: str = "non-finite"
+
+    def text(self) -> str:
+        """"zigzag_31-Jul at 30 s, t = 412 s: non-finite"."""
+        where = f", {self.channel}" if self.channel else ""
+        return f"{self.log} at {self.horizon_s:g} s, t = {self.time_s:g} s{where}: {self.reason}"
+
+    def to_dict(self) -> dict:
+        return {"log": self.log, "horizon_s": self.horizon_s, "time_s": self.time_s,
+                "channel": self.channel, "reason": self.reason}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "Divergence":
+        return cls(str(d["log"]), float(d["horizon_s"]), float(d["time_s"]), str(d.get("channel", "")),
+                   str(d.get("reason", "non-finite")))
+
+
+@dataclass(frozen=True, eq=False)
+class PairedCell:
+    """One log, horizon and channel: per-window RMSE of the model and of its baseline on the
+    same windows.
+
+    model : (M, W) per-window RMSE of each of M members (seeds or ensemble members; M = 1
+    for one model) [m/s or rad/s]; baseline : (B, W), B usually 1; window_start_s : (W,)
+    start time of each window [s]; divergence : where a model prediction diverged, or None.
+    """
+
+    log: str
+    scenario: str
+    horizon_s: float
+    channel: str
+    model: np.ndarray
+    baseline: np.ndarray
+    window_start_s: np.ndarray
+    divergence: Divergence | None = None
+
+    def __post_init__(self):
+        model = np.atleast_2d(np.asarray(self.model, dtype=float))
+        baseline = np.atleast_2d(np.asarray(self.baseline, dtype=float))
+        starts = np.asarray(self.window_start_s, dtype=float).reshape(-1)
+        if self.channel not in CHANNELS:
+            raise ValueError(f"cell {self.log}: channel {self.channel!r} is not one of {CHANNELS}")
+        if model.ndim != 2 or baseline.ndim != 2 or model.shape[1] != baseline.shape[1] \
+                or model.shape[1] != starts.size:
+            raise ValueError(f"cell {self.log} {self.channel} at {self.horizon_s:g} s: model {model.shape}, "
+                             f"baseline {baseline.shape} and {starts.size} window starts do not pair")
+        object.__setattr__(self, "model", model)
+        object.__setattr__(self, "baseline", baseline)
+        object.__setattr__(self, "window_start_s", starts)
+
+    @property
+    def n_windows(self) -> int:
+        return int(self.window_start_s.size)
+
+    @property
+    def model_diverged(self) -> bool:
+        return self.divergence is not None or not np.all(np.isfinite(self.model))
+
+    @property
+    def baseline_diverged(self) -> bool:
+        return not np.all(np.isfinite(self.baseline))
+
+    @property
+    def key(self) -> tuple:
+        return (self.log, self.scenario, float(self.horizon_s), CHANNELS.index(self.channel))
+
+
+@dataclass(frozen=True)
+class VerdictRule:
+    """The decision's settings. confidence : of every interval (two-sided); material : a cell
+    whose interval lies above this relative change is materially worse (0.10: 10 %);
+    min_windows : fewer windows than this and a cell is not decided alone; resamples : of the
+    bootstrap; seed : of its draws."""
+
+    confidence: float = 0.95
+    material: float = 0.10
+    min_windows: int = 3
+    resamples: int = 2000
+    seed: int = 0
+
+    def __post_init__(self):
+        if not 0.5 <= self.confidence < 1:
+            raise ValueError(f"confidence {self.confidence}: choose a value in [0.5, 1)")
+        if self.material < 0 or self.min_windows < 1 or self.resamples < 100:
+            raise ValueError("material >= 0, min_windows >= 1 and resamples >= 100, please")
+
+
+DEFAULT_RULE = VerdictRule()   # the stated rule: 95 % confidence, 10 % material
+
+
+@dataclass(frozen=True)
+class CellJudgement:
+    """One cell decided: RMSE of model and baseline pooled over its windows (and members)
+    [m/s or rad/s], the relative change (negative: the model is better) with its interval at
+    the rule's confidence, and the decision."""
+
+    log: str
+    scenario: str
+    horizon_s: float
+    channel: str
+    n_windows: int
+    n_members: int
+    model_rmse: float
+    baseline_rmse: float
+    change: float
+    change_low: float
+    change_high: float
+    decision: CellDecision
+    divergence: Divergence | None = None
+
+    @property
+    def where(self) -> str:
+        """"Zigzag 30/30 u at 100 s" (the log's name when it has no scenario)."""
+        return f"{self.scenario or self.log} {self.channel} at {self.horizon_s:g} s"
+
+    def text(self) -> str:
+        """"Zigzag 30/30 u at 100 s +141 % (+120 % to +160 %, 1 window)"."""
+        if self.decision is CellDecision.DIVERGED:
+            return f"{self.where} diverged" + (f" ({self.divergence.text()})" if self.divergence else "")
+        if self.decision is CellDecision.BASELINE_DIVERGED:
+            return f"{self.where}: the baseline diverged"
+        windows = f"{self.n_windows} window" + ("s" if self.n_windows != 1 else "")
+        if self.decision is CellDecision.TOO_FEW_WINDOWS:
+            return f"{self.where} {percent_text(self.change)} ({windows}, too few to decide)"
+        return f"{self.where} {percent_text(self.change)} ({interval_text(self.change_low, self.change_high)}, {windows})"
+
+    def to_dict(self) -> dict:
+        d = {k: getattr(self, k) for k in ("log", "scenario", "horizon_s", "channel", "n_windows", "n_members",
+                                           "model_rmse", "baseline_rmse", "change", "change_low", "change_high")}
+        d = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
+        d["decision"] = self.decision.name.lower()
+        d["divergence"] = self.divergence.to_dict() if self.divergence else None
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "CellJudgement":
+        num = {k: math.nan if d.get(k) is None else float(d[k])
+               for k in ("model_rmse", "baseline_rmse", "change", "change_low", "change_high")}
+        return cls(str(d["log"]), str(d.get("scenario", "")), float(d["horizon_s"]), str(d["channel"]),
+                   int(d["n_windows"]), int(d.get("n_members", 1)), decision=CellDecision[str(d["decision"]).upper()],
+                   divergence=Divergence.from_dict(d["divergence"]) if d.get("divergence") else None, **num)
+
+
+@dataclass(frozen=True)
+class Judgement:
+    """A model against its baseline on per-log cells (`judge`).
+
+    change, change_low, change_high : the overall relative change (geometric mean of the
+    cells' RMSE ratios minus 1) and its interval at `confidence`; member_changes : the
+    overall change of each member alone (the spread over seeds or members); worst : up to
+    three cells, diverged first, then the largest changes; sentence : what a user reads.
+    """
+
+    outcome: Outcome
+    confidence: float
+    material: float
+    cells: tuple[CellJudgement, ...]
+    change: float
+    change_low: float
+    change_high: float
+    member_changes: tuple[float, ...]
+    worst: tuple[CellJudgement, ...]
+    n_logs: int
+    n_windows: int
+    n_members: int
+    horizons_s: tuple[float, ...]
+    sentence: str
+    divergences: tuple[Divergence, ...] = ()
+
+    @property
+    def beats(self) -> bool:
+        return self.outcome is Outcome.BEATS
+
+    @property
+    def materially_worse(self) -> tuple[CellJudgement, ...]:
+        return tuple(c for c in self.cells if c.decision is CellDecision.MATERIALLY_WORSE)
+
+    def evidence(self) -> str:
+        """"6 logs, 78 windows, 1 member (no spread: one seed)" or "..., 5 members (each alone
+        -31 % to -36 %)"."""
+        logs = f"{self.n_logs} log" + ("s" if self.n_logs != 1 else "")
+        windows = f"{self.n_windows} window" + ("s" if self.n_windows != 1 else "")
+        finite = [c for c in self.member_changes if math.isfinite(c)]
+        if self.n_members == 1:
+            members = "1 seed (no spread: one model)"
+        elif finite:
+            members = f"{self.n_members} seeds or members (each alone {percent_text(min(finite))} to {percent_text(max(finite))})"
+        else:
+            members = f"{self.n_members} seeds or members"
+        return f"{logs}, {windows}, {members}"
+
+    def to_dict(self) -> dict:
+        def num(v):
+            return v if math.isfinite(v) else None
+        return {"outcome": self.outcome.name.lower(), "confidence": self.confidence, "material": self.material,
+                "change": num(self.change), "change_low": num(self.change_low), "change_high": num(self.change_high),
+                "member_changes": [num(v) for v in self.member_changes],
+                "n_logs": self.n_logs, "n_windows": self.n_windows, "n_members": self.n_members,
+                "horizons_s": list(self.horizons_s), "sentence": self.sentence,
+                "cells": [c.to_dict() for c in self.cells], "worst": [c.to_dict() for c in self.worst],
+                "divergences": [d.to_dict() for d in self.divergences]}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "Judgement":
+        def num(v):
+            return math.nan if v is None else float(v)
+        return cls(Outcome[str(d["outcome"]).upper()], float(d["confidence"]), float(d["material"]),
+                   tuple(CellJudgement.from_dict(c) for c in d.get("cells", ())),
+                   num(d.get("change")), num(d.get("change_low")), num(d.get("change_high")),
+                   tuple(num(v) for v in d.get("member_changes", ())),
+                   tuple(CellJudgement.from_dict(c) for c in d.get("worst", ())),
+                   int(d["n_logs"]), int(d["n_windows"]), int(d["n_members"]),
+                   tuple(float(h) for h in d.get("horizons_s", ())), str(d["sentence"]),
+                   tuple(Divergence.from_dict(v) for v in d.get("divergences", ())))
+
+
+def percent_text(change: float) -> str:
+    """A relative change as "+20 %", "-3.4 %" (one decimal below 10 %), "-" when undefined."""
+    if not math.isfinite(change):
+        return "-"
+    pct = 100 * change
+    return f"{pct:+.1f} %" if abs(pct) < 10 else f"{pct:+.0f} %"
+
+
+def interval_text(low: float, high: float) -> str:
+    """"-41 % to -24 %"."""
+    return f"{percent_text(low)} to {percent_text(high)}"
+
+
+def _counts(rng: np.random.Generator, n: int, resamples: int) -> np.ndarray:
+    """(resamples, n) how often each of n items is drawn in a resample of n with replacement."""
+    if n == 1:
+        return np.ones((resamples, 1))
+    return rng.multinomial(n, np.full(n, 1.0 / n), size=resamples).astype(float)
+
+
+def _pooled_mse(errors: np.ndarray, members: np.ndarray, windows: np.ndarray) -> np.ndarray:
+    """(R,) mean squared per-window RMSE over resampled members (R, M) and windows (R, W)."""
+    sq = errors**2
+    return ((members @ sq) * windows).sum(1) / (members.sum(1) * windows.sum(1))
+
+
+def _decided(cell: CellJudgement, low: float, high: float, rule: VerdictRule) -> CellJudgement:
+    """`cell` with its interval [low, high] of the relative change and the decision it gives."""
+    if cell.n_windows < rule.min_windows:
+        decision = CellDecision.TOO_FEW_WINDOWS
+    elif high < 0:
+        decision = CellDecision.BETTER
+    elif low > rule.material:
+        decision = CellDecision.MATERIALLY_WORSE
+    elif low > 0:
+        decision = CellDecision.WORSE
+    else:
+        decision = CellDecision.NOT_DISTINGUISHABLE
+    return replace(cell, change_low=float(low), change_high=float(high), decision=decision)
+
+
+def judge(cells: Sequence[PairedCell], rule: VerdictRule = VerdictRule(), model: str = "The model",
+          baseline: str = "its baseline") -> Judgement:
+    """The verdict on `cells` under `rule` (see the module docstring); `model` and
+    `baseline` name them in the sentence ("The hybrid", "MMG (ship file)")."""
+    if not cells:
+        raise ValueError("no cells to judge")
+    cells = sorted(cells, key=lambda c: c.key)
+    keys = [c.key for c in cells]
+    if len(set(keys)) != len(keys):
+        raise ValueError("two cells share a log, horizon and channel")
+    M, B = cells[0].model.shape[0], cells[0].baseline.shape[0]
+    if any(c.model.shape[0] != M or c.baseline.shape[0] != B for c in cells):
+        raise ValueError("every cell needs the same members of the model and of the baseline")
+    groups: dict[tuple[str, float], list[PairedCell]] = {}
+    for c in cells:
+        groups.setdefault((c.log, float(c.horizon_s)), []).append(c)
+    for (log, h), group in groups.items():
+        if any(not np.array_equal(g.window_start_s, group[0].window_start_s) for g in group):
+            raise ValueError(f"{log} at {h:g} s: the channels' cells are not on the same windows")
+
+    alpha = (1 - rule.confidence) / 2
+    R = rule.resamples
+    rng = np.random.default_rng(rule.seed)
+    members = _counts(rng, M, R)
+    baselines = _counts(rng, B, R)
+    judged: list[CellJudgement] = []
+    log_ratios: dict[str, list[np.ndarray]] = {}   # log -> resampled log-ratios of its judged cells
+    point_logs: list[float] = []
+    ratios: list[np.ndarray] = []                  # (R,) resampled RMSE ratio per compared cell
+    member_logs: list[np.ndarray] = []             # (M,) log-ratio of each member alone, per judged cell
+    for (log, _h), group in groups.items():
+        W = group[0].n_windows
+        windows = _counts(rng, W, R)
+        for c in group:
+            mse_m, mse_b = np.mean(c.model**2), np.mean(c.baseline**2)
+            model_rmse, baseline_rmse = math.sqrt(mse_m), math.sqrt(mse_b)
+            common = dict(log=c.log, scenario=c.scenario, horizon_s=float(c.horizon_s), channel=c.channel,
+                          n_windows=W, n_members=M, model_rmse=model_rmse, baseline_rmse=baseline_rmse)
+            if c.model_diverged:
+                judged.append(CellJudgement(**common, change=math.nan, change_low=math.nan, change_high=math.nan,
+                                            decision=CellDecision.DIVERGED, divergence=c.divergence))
+                continue
+            if c.baseline_diverged or not mse_b > 0 or W == 0:
+                judged.append(CellJudgement(**common, change=math.nan, change_low=math.nan, change_high=math.nan,
+                                            decision=CellDecision.BASELINE_DIVERGED))
+                continue
+            # rounded to 12 digits: a model equal to its baseline gives exactly 1 in every draw
+            ratio = np.round(np.sqrt(_pooled_mse(c.model, members, windows)
+                                     / _pooled_mse(c.baseline, baselines, windows)), 12)
+            change = round(model_rmse / baseline_rmse, 12) - 1
+            judged.append(CellJudgement(**common, change=change, change_low=math.nan, change_high=math.nan,
+                                        decision=CellDecision.NOT_DISTINGUISHABLE))
+            ratios.append(ratio)
+            with np.errstate(divide="ignore"):
+                log_ratios.setdefault(log, []).append(np.log(ratio))
+                point_logs.append(math.log(change + 1))
+                member_logs.append(0.5 * np.log(np.mean(c.model**2, axis=1) / mse_b))
+    if ratios:   # every compared cell's interval, in one call
+        bounds = iter(np.quantile(np.stack(ratios, 1), [alpha, 1 - alpha], axis=0).T - 1)   # (cells, 2)
+        decided: list[CellJudgement] = []
+        for cell in judged:
+            if math.isfinite(cell.change):
+                low, high = next(bounds)
+                cell = _decided(cell, float(low), float(high), rule)
+            decided.append(cell)
+        judged = decided
+
+    # overall: geometric mean of the judged cells' ratios, logs resampled with replacement
+    logs = sorted(log_ratios)
+    if logs:
+        sums = np.stack([np.sum(log_ratios[name], axis=0) for name in logs], 1)     # (R, L)
+        sizes = np.array([len(log_ratios[name]) for name in logs], dtype=float)      # (L,)
+        draws = _counts(rng, len(logs), R)
+        overall = np.exp((draws * sums).sum(1) / (draws @ sizes)) - 1
+        change = math.exp(float(np.mean(point_logs))) - 1
+        change_low, change_high = (float(q) for q in np.quantile(overall, [alpha, 1 - alpha]))
+        member_changes = tuple(float(v) for v in np.exp(np.mean(member_logs, axis=0)) - 1)
+    else:
+        change = change_low = change_high = math.nan
+        member_changes = tuple(math.nan for _ in range(M))
+
+    diverged = [c for c in judged if c.decision is CellDecision.DIVERGED]
+    material = [c for c in judged if c.decision is CellDecision.MATERIALLY_WORSE]
+    unjudged_material = [c for c in judged if c.decision is not CellDecision.MATERIALLY_WORSE
+                         and c.change > rule.material]
+    if diverged:
+        outcome = Outcome.DIVERGED
+    elif material or change_low > 0:
+        outcome = Outcome.WORSE
+    elif change_high < 0 and not unjudged_material:
+        outcome = Outcome.BEATS
+    else:
+        outcome = Outcome.NOT_DISTINGUISHABLE
+    ranked = sorted((c for c in judged if math.isfinite(c.change)), key=lambda c: -c.change)
+    worst = tuple(diverged[:3] + ranked[:max(0, 3 - len(diverged))])
+    n_windows = sum(group[0].n_windows for group in groups.values())
+    divergences = tuple(dict.fromkeys(c.divergence for c in diverged if c.divergence is not None))
+    result = Judgement(outcome, rule.confidence, rule.material, tuple(judged), change, change_low, change_high,
+                       member_changes, worst, len({c.log for c in cells}), n_windows, M,
+                       tuple(sorted({float(c.horizon_s) for c in cells})), "", divergences)
+    return _with_sentence(result, model, baseline, material, unjudged_material, diverged)
+
+
+def _listed(cells: Sequence[CellJudgement], limit: int = 3) -> str:
+    more = f"; and {len(cells) - limit} more" if len(cells) > limit else ""
+    return "; ".join(c.text() for c in cells[:limit]) + more
+
+
+def _with_sentence(j: Judgement, model: str, baseline: str, material: list[CellJudgement],
+                   unjudged_material: list[CellJudgement], diverged: list[CellJudgement]) -> Judgement:
+    conf = f"{100 * j.confidence:g} %"
+    tolerance = f"{100 * j.material:g} %"
+    overall = (f"RMSE {percent_text(j.change)} overall ({conf} interval {interval_text(j.change_low, j.change_high)})"
+               if math.isfinite(j.change) else "no cell to compare")
+    evidence = f"on {j.evidence()}"
+    if j.outcome is Outcome.DIVERGED:
+        places = list(dict.fromkeys(c.divergence.text() if c.divergence else c.where for c in diverged))
+        where = "; ".join(places[:3]) + (f"; and {len(places) - 3} more" if len(places) > 3 else "")
+        finite = f"{overall} in the cells that stayed finite" if math.isfinite(j.change) else "no cell stayed finite"
+        text = (f"{model} DIVERGED (non-finite or far outside the training data's range) in {where}, "
+                f"so it does not beat {baseline}; {finite}, {evidence}.")
+    elif j.outcome is Outcome.WORSE:
+        why = (f"more than {tolerance} worse at {conf} confidence in {_listed(material)}" if material
+               else f"worse overall at {conf} confidence")
+        text = f"{model} is WORSE than {baseline}: {why}; {overall}, {evidence}."
+    elif j.outcome is Outcome.BEATS:
+        text = (f"{model} beats {baseline} at {conf} confidence: {overall}, {evidence}; no cell more than "
+                f"{tolerance} worse at that confidence; worst cells: {_listed(j.worst)}.")
+    elif unjudged_material:
+        text = (f"{model} cannot be told apart from {baseline} on {j.n_windows} windows: {overall}, {evidence}; "
+                f"but {len(unjudged_material)} cell{'s are' if len(unjudged_material) > 1 else ' is'} more than "
+                f"{tolerance} worse without the evidence to decide at {conf} confidence: "
+                f"{_listed(sorted(unjudged_material, key=lambda c: -c.change))}.")
+    else:
+        text = (f"{model} cannot be told apart from {baseline} on {j.n_windows} windows: {overall} includes no change, "
+                f"{evidence}; worst cells: {_listed(j.worst)}.")
+    return replace(j, sentence=text)

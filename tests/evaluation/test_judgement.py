@@ -1,0 +1,272 @@
+"""The verdict's rule (`sysid.evaluation.judgement.judge`): its properties over generated cells,
+and the issue's cases with numbers, among them the paper's own Tables 7/8 (NN-only D1 is more
+than 10 % worse than the MMG in 8 scenario-channel cells and must not be called better)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+from sysid.evaluation.judgement import (CHANNELS, CellDecision, Divergence, Outcome, PairedCell, VerdictRule,
+                                        judge)
+from sysid.protocol.paper import SCENARIO_ORDER, paper_table
+
+RULE = VerdictRule(resamples=1000)
+PROPERTY = settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+
+
+def cells_of(ratios: dict[tuple[str, float, str], np.ndarray], baseline: dict | None = None, members: int = 1,
+             rng: np.random.Generator | None = None) -> list[PairedCell]:
+    """Cells whose model per-window RMSE is the baseline's times `ratios[(log, horizon, channel)]`
+    (one ratio per window); the baseline's per-window RMSE is drawn once per (log, horizon)."""
+    rng = rng or np.random.default_rng(1)
+    out = []
+    for (log, horizon, channel), ratio in sorted(ratios.items()):
+        ratio = np.atleast_1d(np.asarray(ratio, dtype=float))
+        base = (baseline or {}).get((log, horizon, channel))
+        if base is None:
+            base = 0.01 + 0.02 * rng.random(ratio.size)
+        model = np.tile(base * ratio, (members, 1))
+        out.append(PairedCell(log, log.title(), horizon, channel, model, base[None, :],
+                              horizon * np.arange(ratio.size)))
+    return out
+
+
+def uniform(logs: int, windows: int, ratio_of, horizons=(30.0, 100.0)) -> dict:
+    """(log, horizon, channel) -> per-window ratios ratio_of(log index, horizon, channel, windows)."""
+    return {(f"log{i}", h, c): ratio_of(i, h, c, windows) for i in range(logs) for h in horizons for c in CHANNELS}
+
+
+# -- properties -----------------------------------------------------------------------------
+
+ratio_sets = st.integers(2, 5).flatmap(lambda logs: st.tuples(
+    st.just(logs), st.integers(3, 12),
+    st.lists(st.floats(0.3, 1.5), min_size=logs * 6, max_size=logs * 6),
+    st.integers(0, 10_000)))
+
+
+def generated(logs: int, windows: int, means: list[float], seed: int, spread: float = 0.2) -> dict:
+    """Each cell's windows scattered by +-spread around its mean ratio."""
+    rng = np.random.default_rng(seed)
+    keys = sorted(uniform(logs, windows, lambda *a: None))
+    return {k: m * (1 + spread * (2 * rng.random(windows) - 1)) for k, m in zip(keys, means)}
+
+
+@PROPERTY
+@given(ratio_sets, st.integers(0, 10 ** 6))
+def test_a_non_finite_cell_is_never_better(data, pick):
+    logs, windows, means, seed = data
+    ratios = generated(logs, windows, means, seed)
+    cells = cells_of(ratios)
+    bad = cells[pick % len(cells)]
+    model = bad.model.copy()
+    model[0, pick % windows] = [math.nan, math.inf][pick % 2]
+    cells[pick % len(cells)] = PairedCell(bad.log, bad.scenario, bad.horizon_s, bad.channel, model, bad.baseline,
+                                          bad.window_start_s)
+    j = judge(cells, RULE)
+    assert j.outcome is Outcome.DIVERGED and not j.beats
+    assert [c.decision for c in j.cells].count(CellDecision.DIVERGED) == 1
+    assert "DIVERGED" in j.sentence and bad.scenario in j.sentence
+
+
+@PROPERTY
+@given(ratio_sets, st.randoms(use_true_random=False))
+def test_the_order_of_logs_changes_nothing(data, random):
+    logs, windows, means, seed = data
+    cells = cells_of(generated(logs, windows, means, seed))
+    shuffled = list(cells)
+    random.shuffle(shuffled)
+    assert judge(shuffled, RULE).to_dict() == judge(cells, RULE).to_dict()
+
+
+@PROPERTY
+@given(ratio_sets, st.integers(0, 10 ** 6), st.integers(1, 12), st.sampled_from([0.3, 0.5, 0.9]))
+def test_one_scenario_60_percent_worse_fails_whatever_the_average(data, pick, bad_windows, others):
+    """Every other cell 10-70 % better; one log's cells 60 % worse (+-20 % per window) on 1 to 12
+    windows: never "beats"; on 3 windows or more (`min_windows`) "worse", naming that log."""
+    logs, windows, _, seed = data
+    rng = np.random.default_rng(seed)
+    ratios = uniform(logs, windows, lambda i, h, c, w: others * (1 + 0.1 * (2 * rng.random(w) - 1)))
+    bad = f"log{pick % logs}"
+    for key in [k for k in ratios if k[0] == bad]:
+        n = bad_windows if key[1] == 30.0 else max(1, bad_windows // 3)
+        ratios[key] = 1.6 * (1 + 0.2 * (2 * rng.random(n) - 1))
+    j = judge(cells_of(ratios), RULE)
+    assert not j.beats
+    assert all(c.log == bad for c in j.worst)
+    if bad_windows >= RULE.min_windows:
+        assert j.outcome is Outcome.WORSE
+        assert {c.log for c in j.materially_worse} == {bad} and bad.title() in j.sentence
+    else:
+        assert j.outcome is Outcome.NOT_DISTINGUISHABLE
+
+
+@PROPERTY
+@given(ratio_sets, st.integers(1, 5))
+def test_a_model_equal_to_its_baseline_is_not_distinguishable(data, members):
+    logs, windows, means, seed = data
+    j = judge(cells_of(uniform(logs, windows, lambda *a: np.ones(a[3])), members=members), RULE)
+    assert j.outcome is Outcome.NOT_DISTINGUISHABLE
+    assert j.change == 0 and j.change_low == 0 and j.change_high == 0
+    assert {c.decision for c in j.cells} == {CellDecision.NOT_DISTINGUISHABLE}
+    assert f"on {logs * windows * 2} windows" in j.sentence
+
+
+@PROPERTY
+@given(ratio_sets, st.integers(2, 4))
+def test_more_windows_of_the_same_effect_only_sharpen_the_decision(data, k):
+    """Each window repeated k times: the same point changes; a decided cell or outcome stays
+    decided the same way, intervals only narrow."""
+    logs, windows, means, seed = data
+    ratios = generated(logs, windows, means, seed)
+    rng = np.random.default_rng(seed + 1)
+    baseline = {key: 0.01 + 0.02 * rng.random(windows) for key in ratios}
+    once = judge(cells_of(ratios, baseline), RULE)
+    more = judge(cells_of({key: np.tile(r, k) for key, r in ratios.items()},
+                          {key: np.tile(b, k) for key, b in baseline.items()}), RULE)
+    assert more.change == pytest.approx(once.change, abs=1e-12)
+    if once.outcome is not Outcome.NOT_DISTINGUISHABLE:
+        assert more.outcome is once.outcome
+    sharper = {CellDecision.WORSE: {CellDecision.WORSE, CellDecision.MATERIALLY_WORSE}}
+    for a, b in zip(once.cells, more.cells):
+        assert b.change == pytest.approx(a.change, abs=1e-12)
+        if a.decision not in (CellDecision.NOT_DISTINGUISHABLE, CellDecision.TOO_FEW_WINDOWS):
+            assert b.decision in sharper.get(a.decision, {a.decision}), (a, b)
+        if a.decision is not CellDecision.TOO_FEW_WINDOWS:
+            assert b.change_high - b.change_low <= a.change_high - a.change_low + 0.01
+
+
+def test_the_same_seed_gives_the_same_judgement_and_the_rule_is_stated():
+    cells = cells_of(generated(4, 6, list(np.linspace(0.5, 1.2, 24)), 3))
+    assert judge(cells, RULE).to_dict() == judge(cells, RULE).to_dict()
+    j = judge(cells, VerdictRule(confidence=0.9, resamples=500, seed=7))
+    assert j.confidence == 0.9 and "90 % interval" in j.sentence
+
+
+# -- the issue's cases, with numbers --------------------------------------------------------
+
+def paper_cells(model: str, dataset: str) -> list[PairedCell]:
+    """The paper's Tables 7/8 as cells: one scenario = one log, its RMSE = one window."""
+    table = paper_table()
+    mmg = table[(table.model == "MMG") & (table.dataset == dataset)].set_index(["scenario", "horizon_s"])
+    out = []
+    for row in table[(table.model == model) & (table.dataset == dataset)].itertuples():
+        for channel, column in zip(CHANNELS, ("rmse_u", "rmse_v", "rmse_r")):
+            out.append(PairedCell(row.scenario, row.scenario, row.horizon_s, channel, [[getattr(row, column)]],
+                                  [[mmg.loc[(row.scenario, row.horizon_s), column]]], [0.0]))
+    return out
+
+
+def test_the_papers_nn_only_d1_is_not_called_better_and_its_worst_scenarios_are_named():
+    j = judge(paper_cells("NN", "D1"), RULE, model="The NN-only model", baseline="the MMG")
+    assert j.outcome is Outcome.NOT_DISTINGUISHABLE
+    assert (j.n_logs, j.n_windows, j.n_members) == (6, 12, 1)
+    # geometric mean of the 36 ratios: 34 % lower, yet 8 cells more than 10 % worse
+    assert j.change == pytest.approx(-0.3368, abs=1e-4)
+    over = sorted((c for c in j.cells if c.change > 0.10), key=lambda c: -c.change)
+    assert len(over) == 8 and {c.scenario for c in over} == {"Random", "Zigzag 30/30"}
+    assert over[0].where == "Zigzag 30/30 u at 100 s" and over[0].change == pytest.approx(0.0659 / 0.0273 - 1)
+    assert [c.where for c in j.worst] == ["Zigzag 30/30 u at 100 s", "Random v_m at 100 s", "Random u at 30 s"]
+    assert j.worst[2].change == pytest.approx(0.034 / 0.021 - 1)          # +62 %
+    assert "8 cells are more than 10 % worse" in j.sentence and "Zigzag 30/30 u at 100 s +141 %" in j.sentence
+
+
+def test_the_papers_hybrid_d1_beats_the_mmg():
+    j = judge(paper_cells("Hybrid", "D1"), RULE)
+    assert j.outcome is Outcome.BEATS
+    assert j.change == pytest.approx(-0.4616, abs=1e-4) and j.change_high < 0
+    assert j.worst[0].where == "Zigzag 30/30 u at 100 s" and j.worst[0].change == pytest.approx(0.0283 / 0.0273 - 1)
+
+
+def test_a_model_diverging_on_one_log_and_a_little_better_elsewhere_does_not_pass():
+    ratios = uniform(3, 8, lambda i, h, c, w: np.full(w, 0.95))
+    cells = cells_of(ratios)
+    where = Divergence("log2", 30.0, 412.0, "r", "non-finite")
+    cells = [PairedCell(c.log, c.scenario, c.horizon_s, c.channel, np.full_like(c.model, np.nan), c.baseline,
+                        c.window_start_s, where) if (c.log, c.horizon_s) == ("log2", 30.0) else c for c in cells]
+    j = judge(cells, RULE)
+    assert j.outcome is Outcome.DIVERGED and j.divergences == (where,)       # named once, not per channel
+    assert "log2 at 30 s, t = 412 s, r: non-finite" in j.sentence
+    assert j.change == pytest.approx(-0.05)       # the cells that stayed finite, said beside it
+    # a divergence record with finite numbers (far outside the training range) counts the same
+    far = Divergence("log0", 100.0, 37.0, "u", "|u| 4.1 m/s beyond 3 x the training range 1.2 m/s")
+    cells = [PairedCell(c.log, c.scenario, c.horizon_s, c.channel, c.model, c.baseline, c.window_start_s, far)
+             if (c.log, c.horizon_s, c.channel) == ("log0", 100.0, "u") else c for c in cells_of(ratios)]
+    assert judge(cells, RULE).outcome is Outcome.DIVERGED
+
+
+def test_r_a_little_worse_everywhere_passes_within_the_tolerance_and_is_said():
+    """r 9.5 % worse in every log at both horizons (+-0.5 % per window), u and v_m 30 % better:
+    worse with confidence, within the 10 % tolerance; the model beats its baseline and the
+    sentence names r first among the worst cells."""
+    rng = np.random.default_rng(0)
+    ratios = uniform(4, 10, lambda i, h, c, w: (1.095 if c == "r" else 0.7) * (1 + 0.005 * (2 * rng.random(w) - 1)))
+    j = judge(cells_of(ratios), RULE)
+    r_cells = [c for c in j.cells if c.channel == "r"]
+    assert {c.decision for c in r_cells} == {CellDecision.WORSE}
+    assert all(0.09 < c.change_low and c.change_high < 0.10 for c in r_cells)
+    assert j.outcome is Outcome.BEATS and {c.channel for c in j.worst} == {"r"}
+    assert f"worst cells: {j.worst[0].where} +9." in j.sentence
+
+
+def test_one_cell_11_percent_worse_keeps_the_verdict_open_until_the_evidence_says_worse():
+    """Every cell 50 % better but one at +11 %: on 6 windows at +6 to +17 % the interval
+    reaches below +10 %, so the verdict stays open ("cannot be told apart", the cell named);
+    on 20 windows at +11 % +-0.5 % the cell is materially worse and so is the model."""
+    rng = np.random.default_rng(0)
+
+    def with_bad(spread, windows):
+        ratios = uniform(4, windows, lambda i, h, c, w: np.full(w, 0.5))
+        ratios[("log1", 30.0, "u")] = 1.11 * (1 + spread * (2 * rng.random(windows) - 1))
+        return judge(cells_of(ratios), RULE)
+
+    loose = with_bad(0.05, 6)
+    cell = next(c for c in loose.cells if (c.log, c.horizon_s, c.channel) == ("log1", 30.0, "u"))
+    assert cell.change_low < 0.10 < cell.change and cell.decision is CellDecision.WORSE
+    assert loose.outcome is Outcome.NOT_DISTINGUISHABLE and loose.change_high < -0.4
+    assert "1 cell is more than 10 % worse without the evidence to decide" in loose.sentence
+    assert "Log1 u at 30 s +11 %" in loose.sentence
+    tight = with_bad(0.005, 20)
+    cell = next(c for c in tight.cells if (c.log, c.horizon_s, c.channel) == ("log1", 30.0, "u"))
+    assert cell.change_low > 0.10 and cell.decision is CellDecision.MATERIALLY_WORSE
+    assert tight.outcome is Outcome.WORSE and "Log1 u at 30 s +11 %" in tight.sentence
+
+
+def test_several_members_are_resampled_and_their_spread_is_shown():
+    rng = np.random.default_rng(2)
+    cells = []
+    for log in ("a", "b", "c"):
+        base = 0.01 + 0.01 * rng.random(6)
+        for channel in CHANNELS:
+            model = base[None, :] * np.array([[0.6], [0.7], [0.8], [0.9], [1.3]])   # 5 seeds
+            cells.append(PairedCell(log, log, 30.0, channel, model, base[None, :], np.arange(6) * 30.0))
+    j = judge(cells, RULE)
+    assert j.n_members == 5 and len(j.member_changes) == 5
+    assert j.member_changes == pytest.approx([-0.4, -0.3, -0.2, -0.1, 0.3])
+    # pooled over seeds: sqrt(mean(ratio^2)) - 1, the seeds' draw makes the interval wide
+    assert j.change == pytest.approx(math.sqrt(np.mean(np.array([0.6, 0.7, 0.8, 0.9, 1.3]) ** 2)) - 1)
+    assert j.change_low < -0.2 and j.change_high > 0 and j.outcome is Outcome.NOT_DISTINGUISHABLE
+    assert "5 seeds or members (each alone -40 % to +30 %)" in j.sentence
+    one = judge([PairedCell(c.log, c.scenario, c.horizon_s, c.channel, c.model[:1], c.baseline, c.window_start_s)
+                 for c in cells], RULE)
+    assert "1 seed (no spread: one model)" in one.sentence and one.outcome is Outcome.BEATS
+
+
+def test_cells_that_do_not_pair_are_refused():
+    with pytest.raises(ValueError, match="do not pair"):
+        PairedCell("a", "", 30.0, "u", np.ones((1, 3)), np.ones((1, 2)), np.arange(3))
+    cells = cells_of(uniform(1, 3, lambda *a: np.ones(a[3])))
+    with pytest.raises(ValueError, match="share a log"):
+        judge(cells + cells[:1], RULE)
+
+
+def test_a_judgement_reads_back_from_its_dict():
+    from sysid.evaluation.judgement import Judgement
+    j = judge(paper_cells("NN", "D1"), RULE)
+    assert Judgement.from_dict(j.to_dict()) == j
+
+
+def test_every_scenario_of_the_paper_is_a_log():
+    assert {c.log for c in paper_cells("NN", "D1")} == set(SCENARIO_ORDER)

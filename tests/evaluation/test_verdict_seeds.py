@@ -1,0 +1,65 @@
+"""A run's verdict as summary.json keeps it, and the verdict of several seeds: every seed a
+member of the model, the ship file's MMG counted once, the spread on page 1; a verdict written
+before the rule reads back with its old decision."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sysid.evaluation.judgement import CHANNELS, Outcome, PairedCell, VerdictRule
+from sysid.evaluation.verdict import (SHIP_FILE_MMG, TEST, BaselineVerdict, ChannelCell, seed_mean_verdict,
+                                      verdict_of)
+from sysid.report.tables import verdict_table
+
+RULE = VerdictRule(resamples=500)
+
+
+def seed_verdict(factor: float) -> BaselineVerdict:
+    """One seed: the model's per-window RMSE `factor` x the MMG's on 3 logs of 8 windows."""
+    rng = np.random.default_rng(0)          # the same logs and MMG in every seed
+    cells = []
+    for log in ("a", "b", "c"):
+        base = 0.01 + 0.01 * rng.random(8)
+        for channel in CHANNELS:
+            cells.append(PairedCell(log, log.upper(), 30.0, channel, (factor * base)[None, :], base[None, :],
+                                    30.0 * np.arange(8)))
+    pooled = tuple(ChannelCell(TEST, 30.0, c, factor, {SHIP_FILE_MMG: 1.0}) for c in CHANNELS)
+    return verdict_of("hybrid", (SHIP_FILE_MMG,), pooled, {}, {TEST: {SHIP_FILE_MMG: tuple(cells)}}, RULE)
+
+
+def test_seeds_are_members_their_spread_is_shown_and_the_mmg_counts_once():
+    seeds = [seed_verdict(f) for f in (0.6, 0.8, 1.3)]
+    assert [s.beats_baseline for s in seeds] == [True, True, False]
+    both = seed_mean_verdict(seeds, RULE)
+    j = both.judgements[SHIP_FILE_MMG]
+    assert (j.n_members, j.n_logs, j.n_windows) == (3, 3, 24) and both.seeds == 3
+    assert all(c.n_members == 3 for c in j.cells)
+    assert j.member_changes == pytest.approx([-0.4, -0.2, 0.3])
+    assert j.change == pytest.approx(np.sqrt(np.mean(np.array([0.6, 0.8, 1.3]) ** 2)) - 1)
+    # one seed 30 % worse: the seeds' draw puts no change inside the interval
+    assert j.change_low < 0 < j.change_high and j.outcome is Outcome.NOT_DISTINGUISHABLE
+    assert both.statement().startswith("The hybrid (mean over 3 seeds) cannot be told apart from its physics "
+                                       "baseline MMG (ship file) on 24 windows")
+    assert "3 seeds or members (each alone -40 % to +30 %)" in both.statement()
+    table = verdict_table(both, "hybrid")
+    spread = np.std([0.6, 0.8, 1.3], ddof=1)
+    first = both.evidence[TEST][SHIP_FILE_MMG][0]
+    expected = spread * np.sqrt(np.mean(first.baseline ** 2))
+    assert table.rows[0][5].endswith(f" ± {expected:.5f}") and len(table.rows) == 9
+
+
+def test_a_verdict_reads_back_from_summary_json_and_an_old_one_keeps_its_decision():
+    verdict = seed_verdict(0.6)
+    again = BaselineVerdict.from_dict(verdict.to_dict())
+    assert again.judgements == verdict.judgements and again.beats_baseline and again.outcome is Outcome.BEATS
+    assert again.statement() == verdict.statement()
+    first, back = verdict.evidence[TEST][SHIP_FILE_MMG][0], again.evidence[TEST][SHIP_FILE_MMG][0]
+    assert np.array_equal(first.model, back.model) and np.array_equal(first.window_start_s, back.window_start_s)
+    old = {k: v for k, v in verdict.to_dict().items()
+           if k not in ("judgements", "validation_judgements", "evidence", "outcome")}
+    for beats in (True, False):
+        legacy = BaselineVerdict.from_dict({**old, "beats_baseline": beats})
+        assert legacy.beats_baseline is beats and legacy.outcome is None and not legacy.judgements
+        assert "the pooled rule of a run written before sysid judged per log" in legacy.statement()
+    table = verdict_table(BaselineVerdict.from_dict({**old, "beats_baseline": False}), "hybrid")
+    assert [r[1] for r in table.rows] == ["all (pooled)"] * 3
