@@ -142,15 +142,16 @@ def _converted(source, folder, column, factor):
 
 
 @pytest.mark.parametrize("column, channel, hint", [
-    ("psi_hat [rad]", "psi changes 57", "deg under a rad name?"),  # the track check: psi against r
-    ("r_angvelo [rad/s]", "r is 57", "deg/s under a rad/s name?"),  # r against the heading's rate
+    ("psi_hat [rad]", "psi", 'unit = "deg"'),      # beyond one turn either way
+    ("r_angvelo [rad/s]", "r", 'unit = "deg/s"'),  # beyond 172 deg/s
 ], ids=["heading in degrees", "yaw rate in deg/s"])
 def test_degrees_are_refused_alike_by_evaluate_and_train(sysid, files, zigzag, tmp_path, column, channel, hint):
     bad = _converted(zigzag, tmp_path, column, 180 / np.pi)
-    says = channel   # the log checked against its own track names the channel and the factor (57.3: degrees)
+    peak = np.abs(pd.read_csv(bad)[column]).max()  # the zigzag's largest heading / yaw rate, now in degrees
+    says = f"column '{column}' (channel {channel}) reaches {peak:.4g} "
     out, run = tmp_path / "m.csv", tmp_path / "run"
-    lines = [assert_refused(sysid("evaluate", "--data", bad, "--horizon", "30", "-o", out), 2, says,
-                            hint, "fix the unit or sign in [data.columns]", absent=(out,))]
+    lines = [assert_refused(sysid("evaluate", "--data", bad, "--horizon", "30", "-o", out), 2, says, "wrong units?",
+                                   hint, absent=(out,))]
     config = tmp_path / "deg.toml"
     config.write_text(tiny_config({"train": bad}))  # degrees in the training data
     lines.append(assert_refused(sysid("train", config, "-o", run, "--test", files["test"]), 2, says, absent=(run,)))
@@ -177,7 +178,7 @@ def test_an_unwrapped_heading_in_radians_is_no_unit_error(sysid, dataset_dir, tm
     pd.testing.assert_frame_equal(*tables, rtol=1e-9)
     degrees = _converted(unwrapped, tmp_path, "psi_hat [rad]", 180 / np.pi)  # the same turn in degrees
     assert_refused(sysid("evaluate", "--data", degrees, "--horizon", "30", "-o", tmp_path / "c.csv"), 2,
-                   "psi changes 5", "deg under a rad name?")   # the track check: 57.3 x the rate r says
+                   "(channel psi) reaches", 'wrong units? name its unit in [data.columns], e.g. psi = { column = "...", unit = "deg" }')
 
 
 def test_simulate_rate_that_is_no_whole_sample_or_leaves_one_row(sysid, files, tmp_path):
