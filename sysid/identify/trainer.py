@@ -607,6 +607,10 @@ class Trainer:
             # objective_s: that many seconds of steps; an evaluation horizon: windows of as many
             # samples as the test windows (H = h / dt points, first included)
             steps = max(1, int(round(horizon / val.dt)) - (0 if t.objective_s > 0 else 1))
+            if not self._validation_runs and int(round(t.block_s / val.dt)) < steps + 1:
+                self.log(f"val_loss_multistep: no validation window of {horizon:g} s fits a {t.block_s:g}-s "
+                         "validation block; that horizon is left out")
+                continue
             try:
                 windows = split_windows(runs, steps, t.stride_s, t.val_fraction, exp.data.exclude_suspect, dtype,
                                         t.block_s, exp.experiment.seed, device, self._validation_runs)[1]
