@@ -116,7 +116,8 @@ def compare(
     method = Method.parse(integrator, "--integrator", offered_only=True) if integrator else (
         exp.evaluation.integrator if exp is not None else Method.EULER)
     inputs = [Path(s) if Path(s).exists() else ship_file(s) for s in sources]
-    target = claim(output, OutputKind.COMPARISON, [config, *files, *inputs], overwrite)  # a bad -o fails now
+    target = claim(output, OutputKind.COMPARISON, [config, *(data or []), *files, *inputs],   # --data folders too
+                   overwrite)  # a bad -o fails now
 
     # the logs' columns: the config's, else the run directories' (which must agree)
     if exp is not None:

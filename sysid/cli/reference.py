@@ -52,19 +52,11 @@ PAGE = "docs/reference/cli.md"   # relative to the repository's root
 
 
 def main(argv=None) -> int:
-    """``python -m sysid.cli.reference``: print the reference; ``--write`` writes it into
-    ``docs/reference/cli.md`` below its marker; ``--check`` exits 1 when that page differs."""
-    import sys
-    from pathlib import Path
+    """``python -m sysid.cli.reference [--write | --check]``: print the reference, write it
+    into ``docs/reference/cli.md`` below its marker, or exit 1 when that page differs."""
+    from sysid.config.reference import page_command
 
-    from sysid.config.reference import regenerate
-
-    args = sys.argv[1:] if argv is None else list(argv)
-    if not {"--write", "--check"} & set(args):
-        print(markdown())
-        return 0
-    same = regenerate(Path(__file__).resolve().parents[2] / PAGE, MARKER, markdown(), "--write" in args)
-    return 0 if same or "--write" in args else 1
+    return page_command(argv, PAGE, MARKER, markdown)
 
 
 if __name__ == "__main__":

@@ -120,14 +120,14 @@ def train(
         detail = f" ({', '.join(steps)}; {stops})"
     typer.echo(f"train: wrote {output} in {time.perf_counter() - start:.0f} s{detail}")
     if result.verdict is not None:
-        if result.verdict.beats_baseline:
-            typer.echo("verdict: " + result.verdict.statement())
-        else:  # the last line, on stderr
-            typer.secho(result.verdict.warning(), fg=typer.colors.YELLOW, err=True)
         units = DisplayUnits.of(exp.data.columns)
         if not units.si and units.verdict_cells(result.verdict):  # the user's units ([data.columns])
             typer.echo(f"verdict in your units (vs {result.verdict.baselines[0]}): "
                        f"{units.verdict_cells(result.verdict)}", err=not result.verdict.beats_baseline)
+        if result.verdict.beats_baseline:
+            typer.echo("verdict: " + result.verdict.statement())
+        else:  # the last line, on stderr
+            typer.secho(result.verdict.warning(), fg=typer.colors.YELLOW, err=True)
 
 
 @app.command()

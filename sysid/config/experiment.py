@@ -406,7 +406,8 @@ def _validate(exp: Experiment, src: str) -> None:
         (0 <= t.split_seed < 2 ** 32, f"[training] split_seed = {t.split_seed}: must be >= 0 and < 2^32 (4294967296)"),
         (len(exp.evaluation.horizons) > 0, "[evaluation] horizons must list at least one horizon [s]"),
         (all(h > 0 for h in exp.evaluation.horizons), "[evaluation] horizons must be > 0"),
-        (exp.data.rate <= 0 or all(h * exp.data.rate >= 2 - 1e-9 for h in exp.evaluation.horizons),
+        (exp.data.rate <= 0 or all(h * exp.data.rate >= 2 - 1e-9 or abs(h * exp.data.rate - round(h * exp.data.rate)) > 1e-9
+                                   for h in exp.evaluation.horizons),   # a fractional one: its own error below
          f"[evaluation] horizons must be >= 2 samples at [data] rate ({2 / exp.data.rate if exp.data.rate > 0 else 2:g} "
          "s): a window of one sample is its start state alone, nothing is predicted and its RMSE is 0"),
         (all(w <= MAX_WIDTH for w in exp.network.hidden), f"[network] hidden widths must be <= {MAX_WIDTH}"),

@@ -292,18 +292,24 @@ def regenerate(path, marker: str, generated: str, write: bool) -> bool:
 PAGE = "docs/reference/config.md"   # relative to the repository's root
 
 
-def main(argv=None) -> int:
-    """``python -m sysid.config.reference``: print the reference; ``--write`` writes it into
-    ``docs/reference/config.md`` below its marker; ``--check`` exits 1 when that page differs."""
+def page_command(argv, page: str, marker: str, generate) -> int:
+    """A reference page's command line: print `generate()`; ``--write`` writes it into `page`
+    (relative to the repository's root) below its `marker`; ``--check`` exits 1 when the
+    page differs."""
     import sys
     from pathlib import Path
 
     args = sys.argv[1:] if argv is None else list(argv)
     if not {"--write", "--check"} & set(args):
-        print(markdown())
+        print(generate())
         return 0
-    same = regenerate(Path(__file__).resolve().parents[2] / PAGE, MARKER, markdown(), "--write" in args)
+    same = regenerate(Path(__file__).resolve().parents[2] / page, marker, generate(), "--write" in args)
     return 0 if same or "--write" in args else 1
+
+
+def main(argv=None) -> int:
+    """``python -m sysid.config.reference [--write | --check]`` (`page_command` of this page)."""
+    return page_command(argv, PAGE, MARKER, markdown)
 
 
 if __name__ == "__main__":

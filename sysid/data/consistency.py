@@ -43,6 +43,7 @@ CORRELATION_MARGINAL = 0.8
 # RMS of the track's rate below which a channel is too still to check
 MIN_MOTION = {"u": 0.03, "v": 0.01, "r": 0.003}  # m/s, m/s, rad/s
 SPAN_S = 1.0  # half-width of the central differences [s]
+MAX_PERIOD_S = 2.0  # sampled more coarsely, central differences of a turn's heading and track are biased
 CHECKED = ("u", "v", "r")
 _WHAT = {"u": "the track's speed", "v": "the track's sway velocity", "r": "the heading's rate dpsi/dt"}
 
@@ -169,6 +170,22 @@ def _grade(channel: str, factor: float, corr: float) -> Verdict:
 
 
 def check_track(path: str | Path, t: np.ndarray, x: np.ndarray, y: np.ndarray, psi: np.ndarray,
+                u: np.ndarray, v: np.ndarray, r: np.ndarray, columns: ColumnMap | None = None) -> TrackCheck:
+    """A log's u, v_m [m/s] and r [rad/s] against the rates of its own midship track x, y
+    [m] (earth frame, north and east) and heading psi [rad], all (N,) at times t (N,) [s]
+    as read (SI by `columns`, whose declared units name the likely cause). Cost O(N)."""
+    result = _check_track(path, t, x, y, psi, u, v, r, columns)
+    steps = np.diff(t)
+    period = float(np.median(steps)) if len(steps) else 0.0
+    if period > MAX_PERIOD_S and not any(c.channel == "t" for c in result.channels):
+        # a turn's heading and track sampled this coarsely bias central differences; only a
+        # time unit (every rate off by one factor) is still told apart
+        return TrackCheck(Path(path), reason=f"sampled every {period:g} s: too coarse to check u, v and r against "
+                                             f"the track's central differences (at most {MAX_PERIOD_S:g} s)")
+    return result
+
+
+def _check_track(path: str | Path, t: np.ndarray, x: np.ndarray, y: np.ndarray, psi: np.ndarray,
                 u: np.ndarray, v: np.ndarray, r: np.ndarray, columns: ColumnMap | None = None) -> TrackCheck:
     """A log's u, v_m [m/s] and r [rad/s] against the rates of its own midship track x, y
     [m] (earth frame, north and east) and heading psi [rad], all (N,) at times t (N,) [s]

@@ -99,9 +99,6 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
         row = int(np.argmax(steps <= 0)) + 1
         raise DataError(f"{path}: {columns.describe('t')} (channel t) is not strictly increasing at data row "
                         f"{row + 2} (t = {t[row]} s)")
-    c = {name: frame[name].to_numpy() for name in ("x", "y", "psi", "u", "v", "r")}
-    track = check_track(path, t, c["x"], c["y"], c["psi"], c["u"], c["v"], c["r"], columns)
-    report_checks([track], warn)
     beyond = []
     for name, limit in _LIMITS.items():
         peak = np.abs(frame[name].to_numpy()).max()
@@ -116,6 +113,11 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
                           for name, _, _ in beyond)
         raise DataError(f"{path}: {listed}: wrong units? name {'its unit' if len(beyond) == 1 else 'their units'} "
                         f"in [data.columns], e.g. {hints}")
+    # after the plausible ranges (every channel beyond its range named in one line): the track
+    # check finds the subtler faults (knots, a flipped sign, swapped channels)
+    c = {name: frame[name].to_numpy() for name in ("x", "y", "psi", "u", "v", "r")}
+    track = check_track(path, t, c["x"], c["y"], c["psi"], c["u"], c["v"], c["r"], columns)
+    report_checks([track], warn)
     period = float(np.median(steps))
     stride = int(round(1.0 / rate / period))
     if stride < 1 or abs(stride * period * rate - 1.0) > 1e-3:

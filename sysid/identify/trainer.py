@@ -410,15 +410,20 @@ class Trainer:
                 break
         if hasattr(bar, "close"):
             bar.close()
+        return self._end_stage(model, label, StageResult(history, best_epoch, best, stopped), best_state)
+
+    def _end_stage(self, model, label: str, stage: StageResult, best_state: dict | None) -> StageResult:
+        """A stage's end: its best state restored into `model`, a hit time limit recorded as
+        the run's failure, one log line; returns `stage`."""
         if best_state is not None:
             model.load_state_dict(best_state)
-        if stopped == "time limit":
+        if stage.stopped == "time limit":
             self._summary.failure = (f"wall-clock limit of {self.experiment.training.max_minutes:g} min "
-                                     f"([training] max_minutes) hit in stage {label} at epoch {len(history)}")
+                                     f"([training] max_minutes) hit in stage {label} at epoch {len(stage.history)}")
             self.log(f"FAILED: {self._summary.failure}")
-        self.log(f"{label}: {len(history)} epochs, best early-stopping loss {best:.5f} at epoch {best_epoch} "
-                 f"({stopped}; validation windows, before any kNN gate)")
-        return StageResult(history, best_epoch, best, stopped)
+        self.log(f"{label}: {len(stage.history)} epochs, best early-stopping loss {stage.best_loss:.5f} at epoch "
+                 f"{stage.best_epoch} ({stage.stopped}; validation windows, before any kNN gate)")
+        return stage
 
     def _bar(self, epochs, label: str, total: int, done: int):
         """tqdm on a terminal; elsewhere the epochs plain (progress then comes as log lines)."""
@@ -602,6 +607,10 @@ class Trainer:
             # objective_s: that many seconds of steps; an evaluation horizon: windows of as many
             # samples as the test windows (H = h / dt points, first included)
             steps = max(1, int(round(horizon / val.dt)) - (0 if t.objective_s > 0 else 1))
+            if not self._validation_runs and int(round(t.block_s / val.dt)) < steps + 1:
+                self.log(f"val_loss_multistep: no validation window of {horizon:g} s fits a {t.block_s:g}-s "
+                         "validation block; that horizon is left out")
+                continue
             try:
                 windows = split_windows(runs, steps, t.stride_s, t.val_fraction, exp.data.exclude_suspect, dtype,
                                         t.block_s, exp.experiment.seed, device, self._validation_runs)[1]
@@ -626,6 +635,17 @@ class Trainer:
         Sets ``model_``, ``history_``,
         ``summary_``, ``validation_windows_`` (the windows of ``val_loss_multistep``) and
         ``velocity_weights_`` (w_v (3,), 1 / variance of u, v_m, r in the training windows)."""
+        prepared = self.prepare(runs, validation)
+        stage = None
+        if prepared.trains:
+            stage = self.train(prepared.model, prepared.params, prepared.train, prepared.val, prepared.w_v,
+                               prepared.w_F)
+        return self.finish(prepared, stage)
+
+    def prepare(self, runs: Sequence[Run], validation: Sequence[Run] = ()) -> "Prepared":
+        """Stages 1-4 of `fit` (split, identification before training, standardisation, warm
+        start, or their results from a checkpoint of the training stage): what stage 5 and
+        `finish` need. `sysid.identify.side_by_side` trains several seeds' stage 5 at once."""
         exp = self.experiment
         if not validation and (held_out := held_out_validation(exp, runs)) is not None:
             runs, validation = held_out.train, held_out.validation
@@ -668,7 +688,7 @@ class Trainer:
             summary.identified_uncertainty, summary.identification = uncertainty, estimator
         if identify and not joint:
             mmg.requires_grad_(False)
-        model, stopping_best = mmg, None
+        prepared = Prepared(runs, dtype, device, started, train, val, samples, w_v, mmg)
         if kind is not ModelKind.MMG and summary.failure is None:
             net = ForceCorrection(exp.network.hidden, dtype, exp.network.members).to(device)
             model = CorrectedModel(mmg, net, None, physics=(kind is ModelKind.HYBRID), gate_space=exp.gate.space)
@@ -686,11 +706,23 @@ class Trainer:
                 with torch.no_grad():
                     summary.warm_val_loss = float(multistep_loss(PerMember(model), val, w_v)[0])
                 self.log(f"after warm start: validation loss {summary.warm_val_loss:.5f}")
-            params = list(net.parameters()) + (list(mmg.parameters()) if identify and joint else [])
+            prepared.params = list(net.parameters()) + (list(mmg.parameters()) if identify and joint else [])
             if resumed_in == "train":  # buffers (standardisation) first: w_F depends on them
                 PerMember(model).load_state_dict(self._resume.model)
-            w_F = 1.0 / net.output_std if kind is ModelKind.HYBRID else None
-            stage = self.train(model, params, train, val, w_v, w_F)
+            prepared.model = model
+            prepared.w_F = 1.0 / net.output_std if kind is ModelKind.HYBRID else None
+        return prepared
+
+    def finish(self, prepared: "Prepared", stage: StageResult | None) -> "Trainer":
+        """Stage 6 and the run's validation loss after the training stage `stage` (None: no
+        training stage, MMG-only or a failure before it); returns self, fitted."""
+        exp, t = self.experiment, self.experiment.training
+        model = prepared.model if prepared.model is not None else prepared.mmg
+        summary, val, w_v = self._summary, prepared.val, prepared.w_v
+        identify, joint = bool(exp.identify.parameters), exp.identify.stage is Stage.JOINT
+        stopping_best = None
+        if stage is not None and prepared.model is not None:
+            net = prepared.model.correction_net
             stopping_best = stage.best_loss if exp.gate.enabled else None
             self._history += stage.history
             summary.stopped["train"] = stage.stopped
@@ -700,16 +732,18 @@ class Trainer:
             if net.members > 1:
                 self.log(f"mean of {net.members} networks: validation loss {summary.ensemble_val_loss:.5f}")
             if identify and joint:
-                summary.identified = self._coefficients(mmg)
-                summary.identified_uncertainty = self.uncertainty(model, runs, dtype, device, w_v)
+                summary.identified = self._coefficients(prepared.mmg)
+                summary.identified_uncertainty = self.uncertainty(model, prepared.runs, prepared.dtype,
+                                                                  prepared.device, w_v)
                 summary.identification = self._gradient_estimator(stage, joint=True)
             if exp.gate.enabled:
-                summary.gate = self.fit_gate(model, samples, dtype)
+                summary.gate = self.fit_gate(model, prepared.samples, prepared.dtype)
         self.velocity_weights_ = w_v
         self.validation_windows_ = val
         self.validation_sets_ = {round(t.steps * val.dt, 6): val}
         if summary.failure is None:
-            summary.val_loss_multistep = self.objective(model, runs, val, w_v, dtype, device)
+            summary.val_loss_multistep = self.objective(model, prepared.runs, val, w_v, prepared.dtype,
+                                                        prepared.device)
             judged = " and ".join(f"{len(w)} of {h:g} s" for h, w in self.validation_sets_.items())
             self.log(f"val_loss_multistep {summary.val_loss_multistep:.5f}: the final model"
                      + (" (kNN gate on)" if summary.gate else "") + f" on validation windows: {judged}"
@@ -717,6 +751,32 @@ class Trainer:
                         "before the gate" if stopping_best is not None else ""))
         self.history_ = pd.DataFrame(self._history)
         summary.epochs = int(self.history_["epoch"].max()) if len(self._history) else 0
-        summary.train_seconds = time.perf_counter() - started
+        summary.train_seconds = time.perf_counter() - prepared.started
         self.model_, self.summary_ = model, summary
         return self
+
+
+@dataclass
+class Prepared:
+    """What `Trainer.prepare` leaves for the training stage and `Trainer.finish`: the training
+    logs `runs` (held-out validation logs removed), dtype, device, the start time
+    (``time.perf_counter``), the windows, the training samples, w_v (3,), the MMG, and for a
+    learned model still to train (``trains``): the model, the trained parameters and w_F (3,)
+    (None: NN-only)."""
+
+    runs: Sequence[Run]
+    dtype: torch.dtype
+    device: torch.device
+    started: float
+    train: WindowSet
+    val: WindowSet
+    samples: tuple[torch.Tensor, torch.Tensor]
+    w_v: torch.Tensor
+    mmg: torch.nn.Module
+    model: CorrectedModel | None = None
+    params: list = field(default_factory=list)
+    w_F: torch.Tensor | None = None
+
+    @property
+    def trains(self) -> bool:
+        return self.model is not None

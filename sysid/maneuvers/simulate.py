@@ -11,6 +11,8 @@ gate's share along the way, and the spread over an ensemble's members or seeds.
 from __future__ import annotations
 
 import math
+import os
+import statistics
 import time
 from dataclasses import dataclass
 from typing import Sequence
@@ -22,7 +24,7 @@ from torch import nn
 from sysid.dynamics.integrators import Method
 from sysid.maneuvers.any_model import ManeuverModel, ship_of
 from sysid.maneuvers.base import Conditions, Maneuver, ManeuverError, ManeuverResult, check_number
-from sysid.maneuvers.closed_loop import compiled_loop, loop_is_cached, run_compiled, run_eager
+from sysid.maneuvers.closed_loop import ClosedLoopStep, compiled_loop, loop_is_cached, run_compiled, run_eager
 from sysid.maneuvers.controllers import initial_orders, order_parameters
 from sysid.maneuvers.indices import Track, maneuver_indices
 from sysid.maneuvers.straight import straight_running_rps
@@ -31,8 +33,8 @@ from sysid.mmg.ship import Ship
 FULL_SCALE_RUDDER_RATE = 2.32  # deg/s: 65 deg in 28 s (SOLAS II-1/29), at full scale
 DURATION_L_OVER_U = 80.0       # default duration [s]: this many times L/U0
 GATE_CHUNK = 1024              # rows per call when the kNN gate is evaluated along a maneuver
-COMPILE_GUESS_S = 120.0        # [s] a cold start of a compiled loop where none is recorded (2 cores)
-PROBE_STEPS = 8                # eager steps timed to reckon a whole eager run
+COMPILE_GUESS_S = 120.0        # [s] a cold start of a compiled loop where none is recorded (2 quiet cores)
+PROBE_STEPS = 16               # eager steps timed to reckon a whole eager run
 
 
 def default_rudder_rate(ship: Ship) -> tuple[float, str]:
@@ -145,23 +147,36 @@ class LoopChoice:
 
 
 def _start_costs(label: str) -> tuple[float, str]:
-    """(cold start [s] to reckon with, what a cold and a warm start cost here, as words)."""
+    """(cold start [s] to reckon with, what a cold and a warm start cost, as words): the
+    cold start recorded on this machine, else `COMPILE_GUESS_S` times the machine's load
+    per core (a loaded machine compiles as much slower as it steps)."""
     from sysid.fast.compiled import recorded_seconds
     cold, warm = recorded_seconds(label, "compile"), recorded_seconds(label, "load")
-    words = (f"a cold start (compiling) {'took ' + format(cold, '.0f') if cold is not None else 'takes about ' + format(COMPILE_GUESS_S, '.0f')} s"
-             f"{' here' if cold is not None else ''}, a warm one (from the cache) "
-             f"{'about ' + format(warm, '.1f') + ' s' if warm is not None else 'seconds'}")
-    return (cold if cold is not None else COMPILE_GUESS_S), words
+    if cold is None:
+        busy = max(1.0, os.getloadavg()[0] / (os.cpu_count() or 1)) if hasattr(os, "getloadavg") else 1.0
+        reckoned = COMPILE_GUESS_S * busy
+        said = f"takes about {reckoned:.0f} s"
+    else:
+        reckoned, said = cold, f"took {cold:.0f} s here"
+    warm_said = f"about {warm:.1f} s" if warm is not None else "seconds"
+    return reckoned, f"a cold start (compiling) {said}, a warm one (from the cache) {warm_said}"
 
 
 def eager_seconds_per_step(model: nn.Module, maneuvers: Sequence[Maneuver], conditions: Conditions) -> float:
-    """Wall time [s] of one eager closed-loop step of all `maneuvers` side by side, timed
-    over `PROBE_STEPS` steps after one (which builds the gate's index)."""
-    x0, orders, parameters = _start(maneuvers, conditions)
-    run_eager(model, x0, orders, parameters, 1, conditions.dt, conditions.method)
-    start = time.perf_counter()
-    run_eager(model, x0, orders, parameters, PROBE_STEPS, conditions.dt, conditions.method)
-    return (time.perf_counter() - start) / PROBE_STEPS
+    """Wall time [s] of one eager closed-loop step of all `maneuvers` side by side: the
+    median over `PROBE_STEPS` steps from the execute, each timed alone (a burst of load or
+    a step the kNN gate needs its whole-bank scan for does not set it)."""
+    from sysid.fast.prepared import indexed  # the gate's leaf index, as run_eager uses it
+    x, o, parameters = _start(maneuvers, conditions)
+    step = ClosedLoopStep(indexed(model, x.shape[0]), conditions.method)
+    dt = torch.tensor(conditions.dt, dtype=x.dtype)
+    times = []
+    with torch.no_grad():
+        for k in range(PROBE_STEPS + 1):  # the first builds the gate's index
+            start = time.perf_counter()
+            x, o, _, _ = step(x, o, parameters, dt * k, dt)
+            times.append(time.perf_counter() - start)
+    return statistics.median(times[1:])
 
 
 def choose_loop(models: Sequence[nn.Module], maneuvers: Sequence[Maneuver], conditions: Conditions,

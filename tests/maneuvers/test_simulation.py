@@ -128,3 +128,57 @@ def test_compiled_loop_equals_the_eager_one(tmp_path, monkeypatch):
         np.testing.assert_allclose(b.inputs, a.inputs, rtol=0, atol=1e-12)
     other = simulate_maneuvers(MMG(ship), maneuvers[:1], Conditions(0.35, 8.85, 24.1, 0.25, 30.0), compiled=True)
     assert other[0].states.shape == (121, 6) and len(list(tmp_path.glob("*.pt2"))) == 1  # no second compile
+
+
+def test_the_loop_is_chosen_by_what_a_cold_start_costs(tmp_path, monkeypatch):
+    """`choose_loop`: as asked when asked; eager with compilation off; otherwise compiled
+    only where the eager steps would take longer than compiling (the cold start recorded
+    in the cache decides: an hour against a 3-s run, none against any run)."""
+    from sysid.fast.compiled import record_seconds
+    from sysid.maneuvers.simulate import choose_loop
+    monkeypatch.setenv("SYSID_CACHE", str(tmp_path))
+    model, maneuvers = MMG(load_ship("esso_osaka")), [TurningCircle(35.0), ZigZag(20.0, 20.0)]
+    conditions = Conditions(0.35, 8.85, 24.1, 0.1, 3.0)
+    assert choose_loop([model], maneuvers, conditions, True).compiled
+    assert not choose_loop([model], maneuvers, conditions, False).compiled
+    monkeypatch.setenv("SYSID_COMPILE", "0")
+    assert "compilation is off" in choose_loop([model], maneuvers, conditions).reason
+    monkeypatch.setenv("SYSID_COMPILE", "1")
+    record_seconds("maneuver-rk4", "compile", 3600.0)
+    choice = choose_loop([model], maneuvers, conditions)
+    assert not choice.compiled and "took 3600 s here" in choice.reason
+    for _ in range(5):  # the median of the last five decides
+        record_seconds("maneuver-rk4", "compile", 0.0)
+    assert choose_loop([model], maneuvers, conditions).compiled
+
+
+def test_the_eager_loop_gives_the_gate_decision_of_each_step_start():
+    """The gate's decision recorded at each step's start (from the rule's first stage)
+    equals the model's own `gate_decision` at the recorded states and held inputs."""
+    from sysid.maneuvers.closed_loop import run_eager
+    from sysid.maneuvers.controllers import initial_orders, order_parameters
+    ship = load_ship("esso_osaka")
+    torch.manual_seed(0)
+    net = ForceCorrection([16], torch.float64)
+    mmg = MMG(ship)
+    states = torch.zeros(400, 6, dtype=torch.float64)
+    states[:, 1] = 0.35 + 0.02 * torch.randn(400, dtype=torch.float64)
+    states[:, 3] = 0.01 * torch.randn(400, dtype=torch.float64)
+    states[:, 5] = 0.005 * torch.randn(400, dtype=torch.float64)
+    inputs = torch.zeros(400, 4, dtype=torch.float64)
+    inputs[:, 0] = 8.85
+    inputs[:, 1] = 0.1 * torch.randn(400, dtype=torch.float64)
+    wind = torch.stack(relative_wind(states[:, 1], states[:, 3], states[:, 4], inputs[:, 2], inputs[:, 3]), -1)
+    gate = KNNGate(k=5, features=9, dtype=torch.float64).fit(correction_inputs(states, inputs, wind))
+    hybrid = CorrectedModel(mmg, net, gate, gate_space="inputs")
+    maneuvers = [TurningCircle(35.0), ZigZag(10.0, 10.0, "port")]
+    conditions = Conditions(0.35, 8.85, 24.1, 0.5, 60.0)
+    x0 = torch.zeros(2, 6, dtype=torch.float64)
+    x0[:, 1] = 0.35
+    record = run_eager(hybrid, x0, initial_orders(maneuvers), order_parameters(maneuvers, conditions),
+                       conditions.steps, conditions.dt, conditions.method)
+    starts = torch.cat((x0[None], record[:-1, :, :6]))
+    with torch.no_grad():
+        expected = hybrid.gate_decision(starts, record[..., 8:12])
+    assert 0 < int(expected.sum()) < expected.numel()  # the run leaves the bank: both decisions occur
+    assert torch.equal(record[..., 12] > 0.5, expected)

@@ -1,0 +1,334 @@
+"""Seeds side by side: the training stage of N seeds of one configuration in one process,
+their networks stacked on the FNN's member axis.
+
+Each seed is an ordinary `Trainer`: `Trainer.prepare` (split, standardisation, warm start,
+or a checkpoint) and `Trainer.finish` (gate, validation loss) run per seed as when it trains
+alone. Only stage 5, the multi-step training, is shared: one Euler rollout per minibatch for
+the members of every seed still training, each seed on its own windows (its own batch
+order, drawn with its own generator), the loss summed over seeds so that each seed's slice
+of the gradient is its solo gradient, and Adam applied per member (Adam is elementwise, so
+the stacked update is each seed's own). A seed that stops early leaves the stack: its
+parameters and optimizer state no longer change. Each seed writes its own checkpoint in the
+solo layout, so it resumes side by side or alone. The trained model of each seed equals the
+one trained alone to round-off.
+
+The seeds must share everything but their seed: windows, MMG and standardisation.
+`refusal` says why a configuration's seeds cannot (validation blocks are drawn with the
+seed; identified MMG coefficients are one set per seed).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+import torch
+
+from sysid.config.choices import Method, ModelKind, Validation
+from sysid.config.experiment import Experiment
+from sysid.data.recordings import Run
+from sysid.dynamics.equations import integrate_with_forces
+from sysid.errors import ConfigError, TrainingError
+from sysid.hybrid.correction import ForceCorrection
+from sysid.hybrid.force_models import CorrectedModel, PerMember
+from sysid.identify.checkpoint import CheckpointState
+from sysid.identify.trainer import (VEL, EpochReport, Prepared, StageResult, Trainer, WindowSet, adam,
+                                    output_penalty)
+
+LABEL = "train"
+
+
+def refusal(exp: Experiment, validation_logs: bool = False) -> str | None:
+    """Why the seeds of `exp` cannot train side by side (None: they can); `validation_logs`:
+    validation logs are given (as ``Trainer.fit``'s `validation`)."""
+    if exp.experiment.model is ModelKind.MMG:
+        return "an MMG-only model has no network to stack"
+    if exp.identify.parameters:
+        return "[identify] parameters: the identified MMG coefficients are one set per seed"
+    if exp.training.validation is Validation.BLOCKS and not (exp.data.validation or validation_logs):
+        return ("[training] validation = \"blocks\": the validation blocks are drawn with the seed, so the "
+                "seeds train on different windows")
+    return None
+
+
+@dataclass(eq=False)
+class _Seed:
+    """One seed's training stage: its trainer, prepared stages 1-4, solo optimizer (the
+    checkpoint's layout; its learning rate and Adam state between epochs), schedule,
+    minibatch generator and early-stopping record."""
+
+    trainer: Trainer
+    prepared: Prepared
+    optimizer: torch.optim.Adam
+    scheduler: torch.optim.lr_scheduler.ReduceLROnPlateau | None
+    generator: torch.Generator
+    epoch: int = 0
+    best: float = math.inf
+    best_epoch: int = 0
+    best_state: dict | None = None
+    history: list = field(default_factory=list)
+    stopped: str | None = None
+
+    @property
+    def net(self) -> ForceCorrection:
+        model = self.prepared.model
+        assert model is not None
+        return model.correction_net
+
+    @property
+    def params(self) -> list[torch.nn.Parameter]:
+        return list(self.net.parameters())
+
+
+def _same(a: torch.Tensor, b: torch.Tensor) -> bool:
+    return a.shape == b.shape and bool(torch.equal(a, b))
+
+
+def _check_shared(seeds: Sequence[_Seed]) -> None:
+    """The seeds share windows, w_v, MMG and standardisation (else one `ConfigError` line)."""
+    first = seeds[0].prepared
+    ref_mmg = first.mmg.state_dict()
+    ref_buffers = dict(seeds[0].net.named_buffers())
+    for seed in seeds[1:]:
+        p = seed.prepared
+        same = (_same(p.train.states, first.train.states) and _same(p.val.states, first.val.states)
+                and _same(p.train.inputs, first.train.inputs) and _same(p.val.inputs, first.val.inputs)
+                and _same(p.w_v, first.w_v)
+                and all(_same(v, ref_mmg[k]) for k, v in p.mmg.state_dict().items())
+                and all(_same(v, ref_buffers[k]) for k, v in seed.net.named_buffers()))
+        if not same:
+            raise ConfigError(f"{seed.trainer.experiment.source or 'experiment'}: seed "
+                              f"{seed.trainer.experiment.experiment.seed} does not share the windows, MMG and "
+                              "standardisation of the first seed; train its seeds one by one")
+
+
+class _Stack:
+    """The active seeds' networks as one `ForceCorrection` (members seed by seed) with
+    their Adam moments, built from the seeds' own networks and optimizers, and written
+    back to them."""
+
+    def __init__(self, seeds: Sequence[_Seed], template: CorrectedModel):
+        self.seeds = list(seeds)
+        net0 = seeds[0].net
+        self.per_seed = net0.members
+        net = ForceCorrection([w.shape[2] for w in net0.weights][:-1], net0.input_mean.dtype,
+                              self.per_seed * len(seeds)).to(net0.input_mean.device)
+        with torch.no_grad():
+            for name, buffer in net0.named_buffers():
+                getattr(net, name).copy_(buffer)
+            for i, p in enumerate(net.parameters()):
+                p.copy_(torch.cat([list(s.net.parameters())[i] for s in seeds]))
+        self.net = net
+        self.model = PerMember(CorrectedModel(template.mmg, net, None, physics=template.physics,
+                                              gate_space=template.gate_space))
+        self.exp_avg = [torch.zeros_like(p) for p in net.parameters()]
+        self.exp_avg_sq = [torch.zeros_like(p) for p in net.parameters()]
+        for i in range(len(self.exp_avg)):
+            for k, s in enumerate(seeds):
+                state = s.optimizer.state.get(s.params[i])
+                if state:
+                    self._slice(self.exp_avg[i], k).copy_(state["exp_avg"])
+                    self._slice(self.exp_avg_sq[i], k).copy_(state["exp_avg_sq"])
+        self.steps = [float(s.optimizer.state[s.params[0]]["step"]) if s.optimizer.state.get(s.params[0]) else 0.0
+                      for s in seeds]
+
+    def _slice(self, tensor: torch.Tensor, k: int) -> torch.Tensor:
+        return tensor[k * self.per_seed:(k + 1) * self.per_seed]
+
+    def _per_member(self, values: Sequence[float], like: torch.Tensor) -> torch.Tensor:
+        """(K, 1, ...) of one number per seed, repeated over its members."""
+        column = torch.tensor(values, dtype=like.dtype, device=like.device).repeat_interleave(self.per_seed)
+        return column.reshape(-1, *([1] * (like.dim() - 1)))
+
+    @torch.no_grad()
+    def step(self) -> None:
+        """One Adam step of every member (torch's Adam: betas, eps and lr of each seed's
+        optimizer, no weight decay), each with its seed's step count."""
+        self.steps = [n + 1.0 for n in self.steps]
+        groups = [s.optimizer.param_groups[0] for s in self.seeds]
+        beta1, beta2 = groups[0]["betas"]
+        eps = groups[0]["eps"]
+        step_size = [-g["lr"] / (1 - beta1 ** n) for g, n in zip(groups, self.steps)]
+        bias2_sqrt = [(1 - beta2 ** n) ** 0.5 for n in self.steps]
+        for p, m, v in zip(self.net.parameters(), self.exp_avg, self.exp_avg_sq):
+            g = p.grad
+            m.lerp_(g, 1 - beta1)
+            v.mul_(beta2).addcmul_(g, g, value=1 - beta2)
+            denom = (v.sqrt() / self._per_member(bias2_sqrt, v)).add_(eps)
+            p.add_(self._per_member(step_size, p) * m / denom)
+
+    @torch.no_grad()
+    def write_back(self) -> None:
+        """Each seed's slice of parameters and Adam moments into its own network and
+        optimizer (the checkpoint's and the resumed run's layout)."""
+        stacked = list(self.net.parameters())
+        for k, s in enumerate(self.seeds):
+            for i, p in enumerate(s.params):
+                p.copy_(self._slice(stacked[i], k))
+                s.optimizer.state[p] = {"step": torch.tensor(self.steps[k]),
+                                        "exp_avg": self._slice(self.exp_avg[i], k).clone(),
+                                        "exp_avg_sq": self._slice(self.exp_avg_sq[i], k).clone()}
+
+
+def _losses(stack: _Stack, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor | None, band: float):
+    """Per seed (N,) L_v, L_F and |theta|^2 of its members on its own windows: `batch` holds
+    (T+1, N, B, ·), seed k's windows at [:, k]."""
+    k, m = len(stack.seeds), stack.per_seed
+    states, inputs = (x.unsqueeze(2).expand(x.shape[0], k, m, *x.shape[2:]).reshape(x.shape[0], k * m, *x.shape[2:])
+                      for x in (batch.states, batch.inputs))
+    trajectory = integrate_with_forces(stack.model, states[0], inputs, batch.dt, Method.EULER)
+    err = trajectory.states[1:, ..., VEL] - states[1:, ..., VEL]
+    loss_v = ((err * err) * w_v).sum(-1).mean((0, 2)).reshape(k, m).mean(1)
+    if w_F is None:
+        loss_F = torch.zeros_like(loss_v)
+    else:
+        forces = trajectory.forces
+        loss_F = output_penalty(forces.correction, forces.mmg, w_F, band).mean((0, 2)).reshape(k, m).mean(1)
+    l2 = sum((w * w).flatten(1).sum(1) for w in stack.net.weights).reshape(k, m).sum(1) / m
+    return loss_v, loss_F, l2
+
+
+def _val_losses(stack: _Stack, val: WindowSet, w_v: torch.Tensor) -> list[float]:
+    """Each seed's validation velocity loss L_v (its members' mean), as `multistep_loss`."""
+    k = len(stack.seeds)
+    index = torch.arange(len(val), device=val.states.device).expand(k, len(val))
+    with torch.no_grad():
+        batch = WindowSet(val.states[:, index], val.inputs[:, index], val.dt)
+        return _losses(stack, batch, w_v, None, 0.0)[0].tolist()
+
+
+def _start(trainer: Trainer, prepared: Prepared) -> _Seed:
+    """A seed's training stage as `Trainer._optimize` starts it (or resumes it)."""
+    t = trainer.experiment.training
+    opt = adam(prepared.params, t.learning_rate)
+    sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=t.lr_factor, patience=t.lr_patience) \
+        if t.lr_factor < 1.0 else None
+    gen = torch.Generator().manual_seed(trainer.experiment.experiment.seed + 1)
+    seed = _Seed(trainer, prepared, opt, sched, gen)
+    resume = trainer._resume if trainer._resume and trainer._resume.stage == LABEL else None
+    if resume:
+        opt.load_state_dict(resume.optimizer)
+        if sched is not None:
+            sched.load_state_dict(resume.scheduler)
+        gen.set_state(resume.generator)
+        seed.best, seed.best_epoch, seed.best_state = resume.best_loss, resume.best_epoch, resume.best_state
+        seed.history, seed.epoch = list(resume.stage_history), resume.epoch
+        trainer.log(f"{LABEL}: resumed after epoch {resume.epoch} from {trainer.checkpoint.path}"
+                    if trainer.checkpoint is not None else f"{LABEL}: resumed after epoch {resume.epoch}")
+        if seed.epoch - seed.best_epoch >= t.patience:
+            seed.stopped = "early stop"
+        elif seed.epoch >= t.epochs:
+            seed.stopped = "epoch limit"
+    return seed
+
+
+def _end_epoch(seed: _Seed, model: PerMember, train_sums: np.ndarray, val_v: float, seconds: float) -> None:
+    """`Trainer._optimize`'s bookkeeping after an epoch: history, best state, schedule,
+    progress, stopping, checkpoint, `EpochReport`."""
+    trainer, t = seed.trainer, seed.trainer.experiment.training
+    epoch = seed.epoch
+    row = {"stage": LABEL, "epoch": epoch, "train_loss": float(train_sums[0]),
+           "train_velocity": float(train_sums[1]), "train_penalty": float(train_sums[2]),
+           "early_stopping_loss": val_v, "seconds": seconds}
+    seed.history.append(row)
+    if val_v < seed.best:
+        seed.best, seed.best_epoch = val_v, epoch
+        seed.best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+    if seed.scheduler is not None:
+        seed.scheduler.step(val_v)
+    trainer._progress((), epoch, t.epochs, train_sums[1], val_v, seed.best_epoch)
+    if epoch - seed.best_epoch >= t.patience:
+        seed.stopped = "early stop"
+    elif time.perf_counter() > trainer._deadline:
+        seed.stopped = "time limit"
+    if trainer.checkpoint is not None:
+        trainer.checkpoint.save(CheckpointState(
+            stage=LABEL, epoch=epoch, model=model.state_dict(), optimizer=seed.optimizer.state_dict(),
+            scheduler=seed.scheduler.state_dict() if seed.scheduler is not None else {},
+            generator=seed.generator.get_state(), best_loss=seed.best, best_epoch=seed.best_epoch,
+            best_state=seed.best_state, stage_history=seed.history, history=trainer._history,
+            summary=trainer._summary.to_dict()))
+    if trainer.on_epoch is not None:
+        trainer.on_epoch(EpochReport(LABEL, epoch, t.epochs, float(train_sums[0]), val_v, seed.best,
+                                     seed.best_epoch, trainer.checkpoint.path if trainer.checkpoint is not None else None))
+    if seed.stopped is None and epoch >= t.epochs:
+        seed.stopped = "epoch limit"
+
+
+def _result(seed: _Seed) -> StageResult:
+    """`Trainer._optimize`'s end: the best state restored, a hit time limit, the log line."""
+    model = seed.prepared.model
+    assert model is not None
+    stage = StageResult(seed.history, seed.best_epoch, seed.best, seed.stopped or "epoch limit")
+    return seed.trainer._end_stage(PerMember(model), LABEL, stage, seed.best_state)
+
+
+def train_side_by_side(seeds: Sequence[_Seed]) -> list[StageResult]:
+    """Stage 5 of every seed at once (see the module); each seed's `StageResult`."""
+    first = seeds[0]
+    t = first.trainer.experiment.training
+    p = first.prepared
+    assert p.model is not None
+    train, val, w_v, w_F = p.train, p.val, p.w_v, p.w_F
+    stack = None
+    while active := [s for s in seeds if s.stopped is None]:
+        if stack is None or [id(s) for s in stack.seeds] != [id(s) for s in active]:
+            if stack is not None:
+                stack.write_back()
+            stack = _Stack(active, p.model)
+        started = time.perf_counter()
+        orders = torch.stack([torch.randperm(len(train), generator=s.generator) for s in active])
+        sums = np.zeros((len(active), 3))
+        for lo in range(0, len(train), t.batch_size):
+            batch = train.select(orders[:, lo:lo + t.batch_size])
+            loss_v, loss_F, l2 = _losses(stack, batch, w_v, w_F, t.force_band)
+            loss = t.lambda_v * loss_v + t.lambda_F * loss_F + t.lambda_L2 * l2
+            if not bool(torch.isfinite(loss).all()):
+                bad = active[int((~torch.isfinite(loss)).nonzero()[0])]
+                raise TrainingError(f"{bad.trainer.experiment.source}: [training] the {LABEL} loss of seed "
+                                    f"{bad.trainer.experiment.experiment.seed} became non-finite at epoch "
+                                    f"{bad.epoch + 1} (learning_rate = {t.learning_rate:g}?); no run written")
+            stack.net.zero_grad()
+            loss.sum().backward()
+            stack.step()
+            sums += batch.states.shape[2] * torch.stack((loss, loss_v, loss_F), 1).detach().cpu().numpy()
+        val_v = _val_losses(stack, val, w_v)
+        sums /= len(train)
+        stack.write_back()
+        seconds = time.perf_counter() - started
+        for k, s in enumerate(active):
+            s.epoch += 1
+            model = s.prepared.model
+            assert model is not None
+            _end_epoch(s, PerMember(model), sums[k], val_v[k], seconds)
+    return [_result(s) for s in seeds]
+
+
+def fit_side_by_side(trainers: Sequence[Trainer], runs: Sequence[Run],
+                     validation: Sequence[Run] = ()) -> list[Trainer]:
+    """`Trainer.fit` of each trainer (the seeds of one configuration: experiments equal but
+    for ``[experiment] seed``), their training stages side by side in this process. Each
+    trainer keeps its checkpoint, resume flag, log and ``on_epoch``; each comes back fitted
+    as if it had trained alone. One `ConfigError` line when they cannot share (`refusal`)."""
+    if not trainers:
+        return []
+    reference = trainers[0].experiment.replace(experiment={"seed": 0}).to_toml()
+    for trainer in trainers:
+        exp = trainer.experiment
+        if (why := refusal(exp, bool(validation))) is not None:
+            raise ConfigError(f"{exp.source or 'experiment'}: seeds cannot train side by side: {why}")
+        if exp.replace(experiment={"seed": 0}).to_toml() != reference:
+            raise ConfigError(f"{exp.source or 'experiment'}: seeds side by side need one configuration; "
+                              f"seed {exp.experiment.seed}'s differs in more than its seed")
+    seeds = []
+    for trainer in trainers:
+        prepared = trainer.prepare(runs, validation)
+        if not prepared.trains:  # failed before training (cannot happen without [identify])
+            raise TrainingError(f"{trainer.experiment.source}: seed {trainer.experiment.experiment.seed} "
+                                "has no training stage")
+        seeds.append(_start(trainer, prepared))
+    _check_shared(seeds)
+    stages = train_side_by_side(seeds)
+    return [s.trainer.finish(s.prepared, stage) for s, stage in zip(seeds, stages)]
