@@ -176,6 +176,11 @@ def maneuver(
     _print_results(output, results)
     if logged:
         _print_record(compared)
+    diverged = [own for r in results for own in (r, *r.members) if own.diverged]
+    if diverged:
+        typer.secho("WARNING: diverged (indices not valid): " + "; ".join(
+            f"{own.maneuver.name} ({own.model}) at t = {own.diverged_at_s:.1f} s, {own.divergence}" for own in diverged),
+            fg=typer.colors.YELLOW, err=True)
     for r in results:
         if r.gate_off_share is not None and r.gate_off_share > MOSTLY_OUTSIDE:
             typer.secho(f"  {r.maneuver.name}: kNN gate off on {100 * r.gate_off_share:.0f} % of the steps: the "

@@ -288,7 +288,18 @@ def evaluate(
     for run, h in short:
         typer.secho(f"warning: {run.path}: {len(run)} samples ({run.duration:.0f} s), fewer than one {h:g}-s "
                     "window: its metrics row is empty (n_windows 0)", fg=typer.colors.YELLOW, err=True)
-    table = evaluate_model(model, runs, horizons, chosen, traces=False).metrics
+    limits = None
+    if run_dir is not None:
+        from sysid.evaluation.divergence import PhysicalRange
+        from sysid.runs.directory import RunDir
+        limits = PhysicalRange.of_summary(RunDir(run_dir).read_summary())
+    typer.echo(f"divergence: a non-finite state, or speed or |r| beyond {limits.factor:g} x the run's training range "
+               f"({limits.speed:.3g} m/s, {limits.yaw_rate:.3g} rad/s, widened to each window's record)"
+               if limits is not None else "divergence: a non-finite state only (no training range recorded)")
+    evaluation = evaluate_model(model, runs, horizons, chosen, traces=False, limits=limits)
+    for divergence in evaluation.divergences:
+        typer.secho(f"WARNING: the prediction diverged on {divergence.text()}", fg=typer.colors.YELLOW, err=True)
+    table = evaluation.metrics
     write_csv(table, output, float_format="%.6g")
     with pd.option_context("display.width", 120, "display.float_format", "{:.5f}".format):
         typer.echo(table.to_string(index=False))

@@ -15,6 +15,7 @@ from typing import Sequence
 import numpy as np
 
 from sysid.evaluation.judgement import Divergence
+from sysid.records.summary import RunSummary
 from sysid.state import VELOCITY_INDEX
 
 DIVERGENCE_FACTOR = 3.0   # a prediction this many times faster or turning faster than any training sample diverged
@@ -47,6 +48,12 @@ class PhysicalRange:
 
     def to_dict(self) -> dict:
         return {"speed": self.speed, "yaw_rate": self.yaw_rate, "factor": self.factor}
+
+    @classmethod
+    def of_summary(cls, summary: RunSummary) -> "PhysicalRange | None":
+        """The training range a run recorded in summary.json (None: it recorded none)."""
+        kept = summary.training_range
+        return None if kept is None else cls(kept.speed, kept.yaw_rate, kept.factor)
 
 
 def diverged_windows(predicted: np.ndarray, t: np.ndarray, log: str, horizon_s: float,

@@ -11,9 +11,11 @@ from pathlib import Path
 from torch import nn
 
 from sysid.errors import CheckpointError
+from sysid.evaluation.divergence import PhysicalRange
 from sysid.hybrid.ensemble import SeedEnsemble
 from sysid.mmg.model import MMG
 from sysid.mmg.ship import Ship, load_ship
+from sysid.runs.directory import RunDir
 from sysid.runs.rundir import load_model
 from sysid.store.manifest import has_manifest
 
@@ -25,7 +27,9 @@ class ManeuverModel:
     label : its name (the ship's or the run directory's); model : the force model; ship :
     its ship (dimensions, [maneuvering] defaults); kind : "mmg", "nn" or "hybrid"; members :
     (label, model) of an ensemble's members or a folder's seeds, whose maneuvers give the
-    spread of the indices (empty for a single model); spread : what the members are.
+    spread of the indices (empty for a single model); spread : what the members are;
+    training_range : the training logs' range a run recorded (None: unknown), against
+    which a maneuver diverged.
     """
 
     label: str
@@ -34,6 +38,7 @@ class ManeuverModel:
     kind: str = "mmg"
     members: list[tuple[str, nn.Module]] = field(default_factory=list)
     spread: str = ""
+    training_range: PhysicalRange | None = None
 
 
 def ship_of(model: nn.Module) -> Ship:
@@ -59,13 +64,21 @@ def load_maneuver_model(path: str | os.PathLike) -> ManeuverModel:
             if isinstance(model, SeedEnsemble):
                 members = [(f"{path.name} member {i}", m) for i, m in enumerate(model.members)]
             return ManeuverModel(path.name, model, ship_of(model), getattr(model, "kind", "mmg"), members,
-                                 "ensemble members" if members else "")
+                                 "ensemble members" if members else "", _training_range([path]))
         seeds = sorted((p for p in path.glob("seed*") if has_manifest(p)), key=lambda p: (len(p.name), p.name))
         if not seeds:
             raise CheckpointError(f"{path}: neither a run directory (no manifest.json) nor a folder of seed run "
                                   "directories (seed0/, seed1/, ...)")
         members = [(f"{path.name} {p.name}", load_model(p)[1]) for p in seeds]
         model = SeedEnsemble([m for _, m in members])
-        return ManeuverModel(path.name, model, ship_of(model), model.kind, members, "seeds")
+        return ManeuverModel(path.name, model, ship_of(model), model.kind, members, "seeds", _training_range(seeds))
     ship = load_ship(path)
     return ManeuverModel(ship.name, MMG(ship), ship, "mmg")
+
+
+def _training_range(runs: list[Path]) -> PhysicalRange | None:
+    """The widest training range the run directories recorded (None: none recorded one)."""
+    kept = [r for r in (PhysicalRange.of_summary(RunDir(p).read_summary()) for p in runs) if r is not None]
+    if not kept:
+        return None
+    return PhysicalRange(max(r.speed for r in kept), max(r.yaw_rate for r in kept), kept[0].factor)

@@ -188,7 +188,9 @@ class ManeuverResult:
     from t (n_prop [rps], delta_rudder [rad] mean over the step, wind speed [m/s], wind
     direction [rad]; the last row repeats the one before); indices : `ManeuverIndices`;
     gate_off_share : share of steps with the kNN gate off at the step's start (None without
-    a gate); model : label of the model that ran it.
+    a gate); model : label of the model that ran it; diverged_at_s : time from the execute
+    [s] at which the simulation diverged (`sysid.maneuvers.simulate.first_divergence`; None:
+    it did not), divergence : why, in words.
     """
 
     maneuver: Maneuver
@@ -200,3 +202,9 @@ class ManeuverResult:
     gate_off_share: float | None = None
     model: str = ""
     members: list["ManeuverResult"] = field(default_factory=list)
+    diverged_at_s: float | None = None
+    divergence: str = ""
+
+    @property
+    def diverged(self) -> bool:
+        return self.diverged_at_s is not None

@@ -4,8 +4,11 @@
   ``zigzag_10_10_starboard``, ``crash_stop``): the indices (`INDEX_COLUMNS`: m, deg, ratio;
   empty where not applicable), with an ensemble or seeds ``n_members`` and the standard
   deviation over the members ``<index>_std``; ``gate_off_share`` (kNN gate off at this share
-  of the steps, empty without a gate) and ``mostly_outside`` (True when over half); each
-  IMO criterion that applies as ``imo_<index>`` = "met" / "not met" / "not assessed";
+  of the steps, empty without a gate) and ``mostly_outside`` (True when over half);
+  ``diverged`` and ``diverged_at_s`` (time from the execute [s] at which the simulation
+  diverged, `sysid.maneuvers.simulate.first_divergence`; empty otherwise: its indices are
+  not valid); each IMO criterion that applies as ``imo_<index>`` = "met" / "not met" /
+  "not assessed" (always for a diverged maneuver);
 - ``criteria.csv`` (`criteria_table`): every criterion with value, limit, the values as
   ratios to L (lengths) or in deg (angles), met, and the rule;
 - ``trajectories.csv`` (`trajectory_table`): every step of every maneuver (and of every
@@ -59,8 +62,10 @@ def indices_table(results: Sequence[ManeuverResult], L: float, U: float, scale: 
             row.update(spread(r))
         row["gate_off_share"] = r.gate_off_share
         row["mostly_outside"] = None if r.gate_off_share is None else bool(r.gate_off_share > MOSTLY_OUTSIDE)
+        row["diverged"] = r.diverged
+        row["diverged_at_s"] = r.diverged_at_s if r.diverged_at_s is not None else math.nan
         for c in criteria_for(r.maneuver, r.indices, L, U, scale):
-            row[f"imo_{c.index.rsplit('_', 1)[0]}"] = _verdict(c.met)
+            row[f"imo_{c.index.rsplit('_', 1)[0]}"] = _verdict(None if r.diverged else c.met)
         rows.append(row)
     frame = pd.DataFrame(rows)
     order = ["maneuver", "kind", "model", *INDEX_COLUMNS]
@@ -70,9 +75,11 @@ def indices_table(results: Sequence[ManeuverResult], L: float, U: float, scale: 
 def criteria_table(results: Sequence[ManeuverResult], L: float, U: float, scale: float | None) -> pd.DataFrame:
     """Every IMO criterion of every maneuver (`Criterion` fields; met as "met", "not met" or
     "not assessed")."""
-    rows: list[Criterion] = [c for r in results for c in criteria_for(r.maneuver, r.indices, L, U, scale)]
-    frame = pd.DataFrame([{k: getattr(c, k) for k in CRITERION_COLUMNS} for c in rows], columns=list(CRITERION_COLUMNS))
-    frame["met"] = [_verdict(c.met) for c in rows]
+    pairs: list[tuple[Criterion, bool]] = [(c, r.diverged) for r in results
+                                           for c in criteria_for(r.maneuver, r.indices, L, U, scale)]
+    frame = pd.DataFrame([{k: getattr(c, k) for k in CRITERION_COLUMNS} for c, _ in pairs],
+                         columns=list(CRITERION_COLUMNS))
+    frame["met"] = [_verdict(None if diverged else c.met) for c, diverged in pairs]
     return frame
 
 
@@ -113,6 +120,7 @@ def summary_document(subject_label: str, kind: str, ship, conditions, sources: d
         "spread": spread, "n_members": len(results[0].members) if results else 0,
         "maneuvers": [r.maneuver.name for r in results],
         "gate_off_share": {r.maneuver.name: r.gate_off_share for r in results},
+        "diverged_at_s": {r.maneuver.name: r.diverged_at_s for r in results if r.diverged},
     }
 
 

@@ -22,6 +22,7 @@ import torch
 from torch import nn
 
 from sysid.dynamics.integrators import Method
+from sysid.evaluation.divergence import PhysicalRange
 from sysid.maneuvers.any_model import ManeuverModel, ship_of
 from sysid.maneuvers.base import Conditions, Maneuver, ManeuverError, ManeuverResult, check_number
 from sysid.maneuvers.closed_loop import ClosedLoopStep, compiled_loop, loop_is_cached, run_compiled, run_eager
@@ -29,12 +30,43 @@ from sysid.maneuvers.controllers import initial_orders, order_parameters
 from sysid.maneuvers.indices import Track, maneuver_indices
 from sysid.maneuvers.straight import straight_running_rps
 from sysid.mmg.ship import Ship
+from sysid.state import VELOCITY_INDEX
 
 FULL_SCALE_RUDDER_RATE = 2.32  # deg/s: 65 deg in 28 s (SOLAS II-1/29), at full scale
 DURATION_L_OVER_U = 80.0       # default duration [s]: this many times L/U0
 GATE_CHUNK = 1024              # rows per call when the kNN gate is evaluated along a maneuver
 COMPILE_GUESS_S = 120.0        # [s] a cold start of a compiled loop where none is recorded (2 quiet cores)
 PROBE_STEPS = 16               # eager steps timed to reckon a whole eager run
+SPEED_OVER_U0 = 3.0            # without a training range: a maneuver faster than this many times U0 diverged
+
+
+def first_divergence(t: np.ndarray, states: np.ndarray, speed0: float,
+                     limits: PhysicalRange | None = None) -> tuple[float, str] | None:
+    """(time [s], why) at which a simulated maneuver diverged, or None: the first state
+    (t (T,), states (T, 6), `sysid.state`) that is not finite, or whose speed sqrt(u^2 +
+    v_m^2) exceeds `limits.factor` times the larger of the training logs' largest speed and
+    the approach speed `speed0` [m/s], or whose |r| exceeds that factor times their largest
+    |r|. Without a training range (`limits` None): non-finite, or speed beyond
+    `SPEED_OVER_U0` x `speed0`."""
+    states = np.asarray(states, dtype=float)
+    u, v, r = (states[:, i] for i in VELOCITY_INDEX)
+    factor = limits.factor if limits is not None else SPEED_OVER_U0
+    top_speed = factor * (max(limits.speed, speed0) if limits is not None else speed0)
+    top_r = factor * limits.yaw_rate if limits is not None else math.inf
+    finite = np.all(np.isfinite(states), axis=1)
+    with np.errstate(invalid="ignore"):
+        fast, turning = np.hypot(u, v) > top_speed, np.abs(r) > top_r
+    bad = ~finite | fast | turning
+    if not bad.any():
+        return None
+    k = int(np.argmax(bad))
+    if not finite[k]:
+        why = "a non-finite state"
+    elif fast[k]:
+        why = f"speed {float(np.hypot(u[k], v[k])):.3g} m/s, beyond {top_speed:.3g} m/s"
+    else:
+        why = f"|r| {abs(float(r[k])):.3g} rad/s, beyond {top_r:.3g} rad/s"
+    return float(t[k]), why
 
 
 def default_rudder_rate(ship: Ship) -> tuple[float, str]:
@@ -119,9 +151,10 @@ def gate_off_share(model: nn.Module, states: torch.Tensor, inputs: torch.Tensor)
 
 
 def _results(maneuvers: Sequence[Maneuver], conditions: Conditions, x0: torch.Tensor, record: torch.Tensor,
-             label: str) -> list[ManeuverResult]:
+             label: str, limits: PhysicalRange | None = None) -> list[ManeuverResult]:
     """`ManeuverResult`s from a record (steps, B, `RECORD`) of closed-loop steps from x0 (B, 6);
-    the kNN gate's off share is over the steps' start states."""
+    the kNN gate's off share is over the steps' start states; where each diverged
+    (`first_divergence` against `limits`)."""
     steps = record.shape[0]
     states = torch.cat((x0[None], record[..., :6]))
     rudder = torch.cat((torch.zeros_like(x0[None, :, 0]), record[..., 6]))
@@ -134,6 +167,8 @@ def _results(maneuvers: Sequence[Maneuver], conditions: Conditions, x0: torch.Te
         on = record[:, b, 12]
         share = None if torch.isnan(on).any() else float((on < 0.5).double().mean())
         out.append(ManeuverResult(maneuver, t, s, r, u, indices, share, label))
+        if (found := first_divergence(t, s, conditions.speed, limits)) is not None:
+            out[-1].diverged_at_s, out[-1].divergence = found
     return out
 
 
@@ -213,7 +248,8 @@ def _start(maneuvers: Sequence[Maneuver], conditions: Conditions):
 
 
 def simulate_maneuvers(model: nn.Module, maneuvers: Sequence[Maneuver], conditions: Conditions, *,
-                       compiled: bool | None = False, label: str = "model") -> list[ManeuverResult]:
+                       compiled: bool | None = False, label: str = "model",
+                       limits: PhysicalRange | None = None) -> list[ManeuverResult]:
     """Each maneuver from straight running at the approach speed (x = y = psi = 0, u = U0,
     v_m = r = 0, rudder amidships) for `conditions.duration`, closed loop, with its indices
     and the kNN gate's off share.
@@ -222,7 +258,9 @@ def simulate_maneuvers(model: nn.Module, maneuvers: Sequence[Maneuver], conditio
     `LOOP_ROWS` maneuvers side by side through the model's compiled loop
     (`sysid.maneuvers.closed_loop`; compiled once per model and rule, cached on disk, one
     notice line on stderr), or eager where compilation is off or unavailable; the numbers
-    agree to round-off. ``compiled=None``: as `choose_loop` decides.
+    agree to round-off. ``compiled=None``: as `choose_loop` decides. A maneuver that
+    diverged (`first_divergence` against the training range `limits`, None: unknown) says
+    when in its ``diverged_at_s``.
     """
     if not maneuvers:
         return []
@@ -238,7 +276,7 @@ def simulate_maneuvers(model: nn.Module, maneuvers: Sequence[Maneuver], conditio
         record = run_eager(model, x0, orders, parameters, conditions.steps, conditions.dt, conditions.method)
     else:
         record = run_compiled(loop, x0, orders, parameters, conditions.steps, conditions.dt)
-    return _results(maneuvers, conditions, x0, record, label)
+    return _results(maneuvers, conditions, x0, record, label, limits)
 
 
 def run_maneuvers(subject: ManeuverModel, maneuvers: Sequence[Maneuver], conditions: Conditions, *,
@@ -248,9 +286,10 @@ def run_maneuvers(subject: ManeuverModel, maneuvers: Sequence[Maneuver], conditi
     ``compiled=None``: one `choose_loop` for the model and its members."""
     if compiled is None:
         compiled = choose_loop([subject.model, *(m for _, m in subject.members)], maneuvers, conditions).compiled
-    results = simulate_maneuvers(subject.model, maneuvers, conditions, compiled=compiled, label=subject.label)
+    results = simulate_maneuvers(subject.model, maneuvers, conditions, compiled=compiled, label=subject.label,
+                                 limits=subject.training_range)
     for label, member in subject.members:
         for result, own in zip(results, simulate_maneuvers(member, maneuvers, conditions, compiled=compiled,
-                                                           label=label)):
+                                                           label=label, limits=subject.training_range)):
             result.members.append(own)
     return results

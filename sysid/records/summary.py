@@ -205,6 +205,18 @@ class VerdictSummary(JsonRecord):
 
 
 @dataclass(frozen=True)
+class RangeSummary(JsonRecord):
+    """"training_range": the training logs' largest speed sqrt(u^2 + v_m^2) [m/s] and |r|
+    [rad/s]; a prediction beyond `factor` times either diverged
+    (`sysid.evaluation.divergence.PhysicalRange.to_dict`)."""
+
+    speed: float
+    yaw_rate: float
+    factor: float
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
 class LogFile(JsonRecord):
     """A log a run used, as named in its config, with its SHA-256."""
 
@@ -271,6 +283,7 @@ class RunSummary(JsonRecord):
     verdict: VerdictSummary | None = None
     beats_baseline: bool | None = None
     data: DataSummary | None = None
+    training_range: RangeSummary | None = None   # None: no training logs (an MMG used as defined) or an older run
     stopped: dict[str, str] = field(default_factory=dict)
     n_train_windows: int | None = None
     n_val_windows: int | None = None

@@ -228,7 +228,7 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
                            held_out, exp.training.split_seed)
     seconds = time.perf_counter() - started
     path = write_run(out_dir, exp, model, evaluation, history, training, seconds, overwrite,
-                     verdict=verdict, data=data_used, baseline_metrics=baseline_metrics)
+                     verdict=verdict, data=data_used, baseline_metrics=baseline_metrics, limits=limits)
     if training is not None:
         TrainingCheckpoint(checkpoint_path(out_dir), exp.to_toml()).remove()
     return RunResult(path, exp, model, evaluation, history, training, seconds, verdict)

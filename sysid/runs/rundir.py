@@ -11,6 +11,8 @@ A **run directory** (``sysid train CONFIG -o runs/NAME``)::
                         model vs physics baselines per split, horizon and channel) and
                         "beats_baseline", "data" (the logs used: training source, every file
                         with its SHA-256, test set "files"|"paper"|"none"),
+                        "training_range" ({speed, yaw_rate, factor}: beyond factor times
+                        the training logs' largest speed or |r| a prediction diverged),
                         "stopped": {stage: "early stop"|"epoch limit"|...},
                         "n_train_windows", "n_val_windows", "versions": {...},
                         "mmg_overrides": {...}, "identified": {...}, "identified_initial": {...},
@@ -64,6 +66,7 @@ import torch
 from sysid.hybrid.correction import INPUT_NAMES, OUTPUT_NAMES
 from sysid.hybrid.ensemble import SeedEnsemble
 from sysid.errors import CheckpointError
+from sysid.evaluation.divergence import PhysicalRange
 from sysid.evaluation.evaluate import Evaluation
 from sysid.config.experiment import Experiment, ship_overrides
 from sysid.store.files import write_csv, write_text
@@ -71,8 +74,8 @@ from sysid.mmg.model import MMG
 from sysid.hybrid.force_models import CorrectedModel, build_model
 from sysid.runs.directory import BASELINE_METRICS_COLUMNS, RunDir
 from sysid.runs.knn_bank import KnnBank
-from sysid.records.summary import (VAL_LOSS_DEFINITION, DataSummary, GateSummary, IdentificationSummary, RunSummary,
-                                   TrainingDetails, UncertaintySummary, VerdictSummary)
+from sysid.records.summary import (VAL_LOSS_DEFINITION, DataSummary, GateSummary, IdentificationSummary, RangeSummary,
+                                   RunSummary, TrainingDetails, UncertaintySummary, VerdictSummary)
 from sysid.runs.tensor_files import save_tensors
 from sysid.store.staging import staged_directory
 from sysid.store.versions import software_versions
@@ -137,10 +140,10 @@ def _parsed(record, value: dict | None, at: str):
 
 
 def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds: float | None = None,
-                verdict=None, data: dict | None = None) -> RunSummary:
+                verdict=None, data: dict | None = None, limits: PhysicalRange | None = None) -> RunSummary:
     """summary.json of a run; `training` is the trainer's `TrainingSummary` (None if untrained),
     `verdict` its `sysid.evaluation.verdict.BaselineVerdict`, `data` the logs it used
-    (`sysid.data.splits.provenance`)."""
+    (`sysid.data.splits.provenance`), `limits` the training logs' `PhysicalRange` (None: none)."""
     info = training.to_dict() if training is not None else {}
     failure = info.pop("failure", None)
     return RunSummary(
@@ -157,6 +160,7 @@ def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds:
         verdict=_parsed(VerdictSummary, verdict.to_dict() if verdict is not None else None, "verdict"),
         beats_baseline=verdict.beats_baseline if verdict is not None else None,
         data=_parsed(DataSummary, data, "data"),
+        training_range=_parsed(RangeSummary, limits.to_dict() if limits is not None else None, "training_range"),
         stopped=info.pop("stopped", {}),
         n_train_windows=info.pop("n_train_windows", None),
         n_val_windows=info.pop("n_val_windows", None),
@@ -174,7 +178,7 @@ def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds:
 def write_run(run_dir: str | os.PathLike, exp: Experiment, model, evaluation: Evaluation,
               history: pd.DataFrame | None = None, training=None,
               seconds: float | None = None, overwrite: bool = False, verdict=None,
-              data: dict | None = None, baseline_metrics: pd.DataFrame | None = None) -> Path:
+              data: dict | None = None, baseline_metrics: pd.DataFrame | None = None, limits: PhysicalRange | None = None) -> Path:
     """Write a complete run directory (config, weights, kNN bank, history, metrics, traces).
 
     Staged (`sysid.store.staging`): the files go into a hidden directory beside `run_dir`, sealed
@@ -183,7 +187,7 @@ def write_run(run_dir: str | os.PathLike, exp: Experiment, model, evaluation: Ev
     """
     with staged_directory(run_dir, "run", overwrite) as staging:
         _write_run_files(RunDir(staging), exp, model, evaluation, history, training, seconds, verdict, data,
-                         baseline_metrics)
+                         baseline_metrics, limits)
     return Path(run_dir)
 
 
@@ -201,7 +205,7 @@ def _used_files(exp: Experiment, data: dict | None) -> Experiment:
 
 def _write_run_files(run: RunDir, exp: Experiment, model, evaluation: Evaluation,
                      history: pd.DataFrame | None, training, seconds: float | None, verdict=None,
-                     data: dict | None = None, baseline_metrics: pd.DataFrame | None = None) -> None:
+                     data: dict | None = None, baseline_metrics: pd.DataFrame | None = None, limits: PhysicalRange | None = None) -> None:
     write_text(_used_files(exp, data).to_toml(), run.config)
     save_model(model, run.path)
     if history is not None and len(history):
@@ -211,4 +215,4 @@ def _write_run_files(run: RunDir, exp: Experiment, model, evaluation: Evaluation
         write_csv(baseline_metrics[BASELINE_METRICS_COLUMNS], run.baseline_metrics, float_format="%.6g")
     for name, frame in evaluation.traces.items():
         write_csv(frame, run.traces / name, float_format="%.8g")
-    write_text(run_summary(exp, evaluation, training, seconds, verdict, data).to_text(), run.summary)
+    write_text(run_summary(exp, evaluation, training, seconds, verdict, data, limits).to_text(), run.summary)

@@ -75,3 +75,21 @@ def test_the_diverging_identified_mmg_is_named_and_kept(dataset_dir, tmp_path, c
         assert f"{d.log} at 30 s, t = {d.time_s:g} s" in warning
     assert "no test" not in warning and "Decided on the test logs at 30 s." in warning
     assert (trained.out + trained.err).count("WARNING: the prediction diverged on") == 2   # as it happens
+    # the run keeps its training range; sysid evaluate RUN judges divergence against it
+    from sysid.data.recordings import read_runs
+    from sysid.records.summary import RunSummary
+    kept = PhysicalRange.of_summary(RunSummary.from_json(summary, "summary.json"))
+    assert kept == PhysicalRange.of_runs(read_runs([dataset_dir / f for f in TRAIN], 1.0))
+    evaluated = in_process(capsys, "evaluate", run, "-o", tmp_path / "again.csv")
+    assert evaluated.code == 0, evaluated.err
+    assert (f"divergence: a non-finite state, or speed or |r| beyond 3 x the run's training range "
+            f"({kept.speed:.3g} m/s, {kept.yaw_rate:.3g} rad/s") in evaluated.out
+    assert evaluated.err.count("WARNING: the prediction diverged on") == 2
+    assert pd.read_csv(tmp_path / "again.csv")["diverged"].all()
+
+
+def test_a_summary_without_a_training_range_gives_none():
+    from sysid.records.summary import RunSummary
+    assert PhysicalRange.of_summary(RunSummary.from_json({"name": "old"}, "summary.json")) is None
+    kept = RunSummary.from_json({"name": "new", "training_range": PhysicalRange(1.5, 0.02).to_dict()}, "summary.json")
+    assert PhysicalRange.of_summary(kept) == PhysicalRange(1.5, 0.02)

@@ -85,3 +85,21 @@ def test_missing_approach_speed_names_the_ship_file_and_the_fix(tmp_path, capsys
     bad = tmp_path / "bad.toml"
     bad.write_text(text.replace("scale = 45.714", "scale = 0.5"))
     assert_refused(in_process(capsys, "maneuver", bad, "-o", tmp_path / "o2"), 2, "[maneuvering] scale")
+
+
+def test_a_maneuver_that_diverged_is_one_warning_line_and_marked_in_the_indices(tmp_path, capsys):
+    """The kvlcc2_l7 ship file with N_r = +0.3 (yaw unstable): the turn passes 3 U0 within
+    seconds; the line names the maneuver and the time, indices.csv marks it."""
+    source = (ships_dir() / "kvlcc2_l7.toml").read_text()
+    assert "N_r = -0.049" in source
+    ship = tmp_path / "unstable.toml"
+    ship.write_text(source.replace("N_r = -0.049", "N_r = 0.3"))
+    out = tmp_path / "out"
+    result = in_process(capsys, "maneuver", ship, "-o", out, "--turning", "35", "--side", "starboard", "--eager",
+                        "--no-report", "--duration", "60", "--dt", "0.2", "--rps", "11.8")
+    assert result.code == 0, result.err
+    table = pd.read_csv(out / "indices.csv")
+    assert table["diverged"].tolist() == [True] and 0 < table["diverged_at_s"][0] < 60
+    warnings = [line for line in result.err.splitlines() if line.startswith("WARNING: diverged")]
+    assert len(warnings) == 1
+    assert f"turning_35_starboard (kvlcc2_l7) at t = {table['diverged_at_s'][0]:.1f} s" in warnings[0]

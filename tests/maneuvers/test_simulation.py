@@ -182,3 +182,41 @@ def test_the_eager_loop_gives_the_gate_decision_of_each_step_start():
         expected = hybrid.gate_decision(starts, record[..., 8:12])
     assert 0 < int(expected.sum()) < expected.numel()  # the run leaves the bank: both decisions occur
     assert torch.equal(record[..., 12] > 0.5, expected)
+
+
+def test_a_maneuver_that_blows_up_is_named_with_its_time_and_a_normal_one_is_not():
+    """N_r > 0 destabilises yaw: the turn spins up until the speed passes 3 U0 and the state
+    goes non-finite. Without a training range the rule is non-finite or speed > 3 U0; the
+    time is the first step at which the simulated speed passes 3 U0 (read off the states)."""
+    conditions = Conditions(1.17248, 11.8, 15.7, 0.2, 100.0)
+    turn = [TurningCircle(35.0), ZigZag(10.0, 10.0)]
+    normal = simulate_maneuvers(MMG(load_ship("kvlcc2_l7")), turn, conditions)
+    unstable = simulate_maneuvers(MMG(load_ship("kvlcc2_l7", {"N_r": 0.3})), turn, conditions)
+    assert not any(r.diverged for r in normal)
+    for r in unstable:
+        speed = np.hypot(r.states[:, 1], r.states[:, 3])
+        first = int(np.argmax(~(speed <= 3 * 1.17248)))   # NaN counts as beyond
+        assert np.isfinite(r.states[:first]).all() and first > 0
+        assert r.diverged_at_s == pytest.approx(r.t[first], abs=1e-12) and r.diverged_at_s < 100.0
+        assert "speed" in r.divergence or "non-finite" in r.divergence
+    table = indices_table(normal + unstable, 7.0, 1.17248, None)
+    assert table["diverged"].tolist() == [False, False, True, True]
+    assert np.isnan(table["diverged_at_s"][:2]).all()
+    assert table["diverged_at_s"][2:].tolist() == [r.diverged_at_s for r in unstable]
+    imo = [c for c in table.columns if c.startswith("imo_")]
+    assert (table.loc[2:, imo].fillna("not assessed") == "not assessed").all().all()  # no verdict on a blown-up run
+
+
+def test_a_maneuver_beyond_the_training_range_of_r_diverged():
+    """With a training range, |r| beyond factor x the training logs' largest |r| diverged: a
+    normal 35-deg turn against a range of straight running (|r| <= 0.01 rad/s, 3 x: 0.03)."""
+    from sysid.evaluation.divergence import PhysicalRange
+    conditions = Conditions(1.17248, 11.8, 15.7, 0.2, 60.0)
+    limits = PhysicalRange(1.2, 0.01)
+    r = simulate_maneuvers(MMG(load_ship("kvlcc2_l7")), [TurningCircle(35.0)], conditions, limits=limits)[0]
+    first = int(np.argmax(np.abs(r.states[:, 5]) > 0.03))
+    assert first > 0 and r.diverged_at_s == pytest.approx(r.t[first], abs=1e-12)
+    assert r.divergence.startswith("|r|")
+    wide = simulate_maneuvers(MMG(load_ship("kvlcc2_l7")), [TurningCircle(35.0)], conditions,
+                              limits=PhysicalRange(1.2, 0.05))[0]
+    assert not wide.diverged   # its largest |r| is 0.077 rad/s < 3 x 0.05

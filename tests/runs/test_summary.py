@@ -30,7 +30,7 @@ def _extras(record: JsonRecord, at: str = "summary") -> dict:
 
 
 KEYS = ["name", "model", "status", "dataset", "ship", "seed", "created", "seconds", "train_seconds", "epochs",
-        "best_epoch", "val_loss_multistep", "val_loss_definition", "verdict", "beats_baseline", "data", "stopped", "n_train_windows", "n_val_windows", "versions", "mmg_overrides",
+        "best_epoch", "val_loss_multistep", "val_loss_definition", "verdict", "beats_baseline", "data", "training_range", "stopped", "n_train_windows", "n_val_windows", "versions", "mmg_overrides",
         "identified", "identified_initial", "identified_uncertainty", "identification", "gate", "training"]
 
 
