@@ -43,6 +43,7 @@ CORRELATION_MARGINAL = 0.8
 # RMS of the track's rate below which a channel is too still to check
 MIN_MOTION = {"u": 0.03, "v": 0.01, "r": 0.003}  # m/s, m/s, rad/s
 SPAN_S = 1.0  # half-width of the central differences [s]
+MIN_SAMPLES = 10    # samples a channel's factor needs before it is graded
 MAX_PERIOD_S = 2.0  # sampled more coarsely, central differences of a turn's heading and track are biased
 CHECKED = ("u", "v", "r")
 _WHAT = {"u": "the track's speed", "v": "the track's sway velocity", "r": "the heading's rate dpsi/dt"}
@@ -123,7 +124,8 @@ def central_rate(t: np.ndarray, q: np.ndarray, span: int) -> np.ndarray:
 
 def scale_factor(log: np.ndarray, track: np.ndarray) -> tuple[float, float, int]:
     """(k, correlation, samples kept): log = k x track, from the least-squares slope of the
-    track on the log refitted without residuals beyond 4 MADs. k = 0 for a log that is
+    track on the log refitted without residuals beyond 4 MADs (at least 0.1 % of the track's
+    RMS, so a noise-free log keeps its samples). k = 0 for a log that is
     zero where the track moves, inf for a log that moves where the track does not."""
     keep = np.isfinite(log) & np.isfinite(track)
     for _ in range(2):
@@ -134,7 +136,8 @@ def scale_factor(log: np.ndarray, track: np.ndarray) -> tuple[float, float, int]
         slope = float(a @ b) / power
         residual = track - slope * log
         mad = float(np.median(np.abs(residual[keep] - np.median(residual[keep]))))
-        keep = keep & (np.abs(residual) <= 4.0 * 1.4826 * mad + 1e-12)
+        floor = 1e-3 * float(np.sqrt(np.mean(b**2)))   # a noise-free log: MAD near 0
+        keep = keep & (np.abs(residual) <= max(4.0 * 1.4826 * mad, floor) + 1e-12)
     a, b = log[keep], track[keep]
     slope = float(a @ b) / float(a @ a) if float(a @ a) > 0 else 0.0
     corr = float(np.corrcoef(a, b)[0, 1]) if len(a) > 2 and a.std() > 0 and b.std() > 0 else 0.0
@@ -214,6 +217,9 @@ def _check_track(path: str | Path, t: np.ndarray, x: np.ndarray, y: np.ndarray, 
             found[name] = ChannelCheck(name, np.nan, np.nan, 0, Verdict.UNCHECKED, "too little motion")
             continue
         k, corr, kept = scale_factor(log[name], track[name])
+        if kept < MIN_SAMPLES:
+            found[name] = ChannelCheck(name, k, corr, kept, Verdict.UNCHECKED, f"{kept} samples kept: too few")
+            continue
         verdict = _grade(name, k, corr)
         hint = unit_hint(name, k, columns.spec(name).resolved_unit) if verdict is not Verdict.CONSISTENT else ""
         found[name] = ChannelCheck(name, k, corr, kept, verdict, hint)

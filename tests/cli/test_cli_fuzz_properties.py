@@ -49,7 +49,13 @@ def assert_clean(outcome, out) -> bool:
 
 
 def assert_finite_csv(path) -> None:
-    values = pd.read_csv(path).select_dtypes("number").to_numpy(dtype=float)
+    """Every number finite, and no row diverged (``diverged_at_s`` is empty, NaN, exactly
+    where a row did not diverge)."""
+    frame = pd.read_csv(path)
+    if "diverged" in frame:
+        assert not frame.diverged.any() and frame.diverged_at_s.isna().all(), path
+        frame = frame.drop(columns=["diverged", "diverged_at_s"])
+    values = frame.select_dtypes("number").to_numpy(dtype=float)
     assert values.size and np.isfinite(values).all(), path
 
 

@@ -135,8 +135,10 @@ def test_the_loop_is_chosen_by_what_a_cold_start_costs(tmp_path, monkeypatch):
     only where the eager steps would take longer than compiling (the cold start recorded
     in the cache decides: an hour against a 3-s run, none against any run)."""
     from sysid.fast.compiled import record_seconds
+    from sysid.maneuvers import closed_loop
     from sysid.maneuvers.simulate import choose_loop
     monkeypatch.setenv("SYSID_CACHE", str(tmp_path))
+    monkeypatch.setattr(closed_loop, "_compiled", {})  # loops compiled by earlier tests of this process
     model, maneuvers = MMG(load_ship("esso_osaka")), [TurningCircle(35.0), ZigZag(20.0, 20.0)]
     conditions = Conditions(0.35, 8.85, 24.1, 0.1, 3.0)
     assert choose_loop([model], maneuvers, conditions, True).compiled
