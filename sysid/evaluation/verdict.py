@@ -177,11 +177,14 @@ class BaselineVerdict:
             return f"No verdict: neither test logs nor validation windows gave the {self.model_name} a score."
         base = " and ".join(self.baselines)
         average = "; ".join(f"{percent_text(self.mean_change(b))} against {b}" for b in self.baselines)
+        why = (f"the pooled rule on the mean over {self.seeds} seeds, whose windows differ and cannot be paired "
+               f"per log" if self.seeds > 1 else "the pooled rule of a run written before sysid judged per log")
         if self.legacy_beats:
-            return (f"The {self.model_name} beats its physics baseline, {base}, on {where} (the pooled rule of "
-                    f"a run written before sysid judged per log): RMSE {average} on average.")
-        return (f"The {self.model_name} is WORSE than its physics baseline, {base}, on {where} (the pooled rule "
-                f"of a run written before sysid judged per log): RMSE {average} on average.")
+            every = "; every seed beats it" if self.seeds > 1 else ""
+            return (f"The {self.model_name} beats its physics baseline, {base}, on {where} ({why}{every}): "
+                    f"RMSE {average} on average.")
+        return (f"The {self.model_name} is WORSE than its physics baseline, {base}, on {where} ({why}): "
+                f"RMSE {average} on average.")
 
     def warning(self) -> str | None:
         """The WARNING line for stderr, or None when the model beats its baseline."""

@@ -126,7 +126,7 @@ def test_sweep_killed_part_way_resumes_without_training_a_trial_twice(tmp_path, 
     html = build_report(out, tmp_path / "report").html.read_text()
     assert "val_loss_multistep against the varied keys" in html and "Spread over 2 seeds" in html
     # page 1: the chosen configuration's verdict, the mean over its 2 seeds with their spread
-    assert html.index('id="verdict"') < html.index('id="summary"') and "2 seeds or members" in html
+    assert html.index('id="verdict"') < html.index('id="summary"') and "the mean over 2 seeds" in html
     verdict = html[html.index('id="verdict"'):html.index('id="summary"')]
     assert verdict.count(" ± ") >= 3   # the model's RMSE ± its std over the seeds, per channel
     assert "Chosen" in html and summary["best"]["point"] in html
