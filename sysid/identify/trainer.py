@@ -65,7 +65,7 @@ from sysid.config.experiment import PAPER_FORCE_BAND, Experiment
 from sysid.identify.levenberg_marquardt import fit_uncertainty, identify_levenberg_marquardt, start_state_check
 from sysid.hybrid.force_models import CorrectedModel, PerMember, build_mmg, correction_of
 from sysid.hybrid.knn_gate import KNNGate
-from sysid.state import VELOCITY_INDEX
+from sysid.channel_names import VELOCITY_INDEX
 from sysid.identify.uncertainty import coefficient_uncertainty
 from sysid.records.summary import VAL_LOSS_DEFINITION  # noqa: F401 (its home before: the run's validation loss)
 
