@@ -50,7 +50,6 @@ the config file that names it (`load_experiment`); a resolved config holds absol
 from __future__ import annotations
 
 import dataclasses
-import enum
 import math
 import os
 import re
@@ -59,7 +58,7 @@ from pathlib import Path
 from typing import Any
 
 from sysid.config.column_map import ColumnMap, parse_columns
-from sysid.config.choices import Choice, DType, GateSpace, Method, ModelKind, Solver, Stage, StartStates, Validation
+from sysid.config.choices import Choice, DType, GateSpace, Method, ModelKind, Solver, Stage, StartStates, Validation, plain_data
 from sysid.config.checks import path_component
 from sysid.errors import ConfigError
 from sysid.mmg.ship import parameter_name
@@ -252,15 +251,7 @@ class Experiment:
 def _plain(value: Any) -> Any:
     """An option's value as TOML data: a choice as its word, a tuple as a list, a column
     map as its ``[data.columns]`` table."""
-    if isinstance(value, ColumnMap):
-        return value.as_table()
-    if isinstance(value, enum.Enum):
-        return value.value
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
-    return value
+    return plain_data(value, ((ColumnMap, ColumnMap.as_table),))
 
 
 def _toml_value(value: Any) -> str:
