@@ -76,24 +76,14 @@ def compare(
     its number of windows, and each model's verdict (the project's one rule) against the first
     model or against its physics baseline. Nothing is trained."""
     from sysid.cli.outputs import claim, ship_file
-    from sysid.config import checks
     from sysid.config.choices import Method
     from sysid.config.experiment import load_experiment
     from sysid.device import compute_threads
-    from sysid.dynamics.integrators import Integrator
-    from sysid.evaluation.comparison import BASELINE, FIRST, compare as run_compare
-    from sysid.progress import progress
-    from sysid.report.comparison_report import write_comparison
+    from sysid.evaluation.comparison import FIRST
     from sysid.store.target import OutputKind
 
     started = time.perf_counter()
-    if against not in (FIRST, BASELINE):
-        raise DataError(f"--against {against!r}: choose {FIRST} (the first model) or {BASELINE} (each model's "
-                        "physics baseline)")
-    if threads is not None:
-        checks.threads("--threads", threads)
-    for h in horizon or ():
-        checks.DURATION.check("--horizon", h)
+    _check_options(against, threads, horizon)
     exp = load_experiment(config) if config is not None else None
     sources = list(models) + list(ship or [])
     if len(sources) < 2 and against == FIRST:
@@ -109,20 +99,48 @@ def compare(
     columns, rate = _log_columns(exp, data, sources)
     chosen = _contenders(sources)
     with compute_threads(1 if threads is None else threads):
-        runs = _read_logs(files, rate, columns, horizons)
-        logs.info(f"compare: {len(chosen)} models on {len(runs)} log(s) at {', '.join(f'{h:g}' for h in horizons)} s "
-                  f"({method.value}); verdicts against " + ("the first model, " + chosen[0].label if against == FIRST
-                                                             else "each model's physics baseline"))
-        on_interrupt(f"nothing written to {output} (it is moved into place only when complete)")
-        bar = progress(total=sum(len(c.members) for c in chosen) * len(horizons), desc="predicting",
-                       unit="model-horizons")
-        result = run_compare(chosen, runs, horizons, against, Integrator(method), on_done=bar.update)
-        bar.close()
-        with target.staged() as staging:
-            paths = write_comparison(staging, result, [str(s) for s in sources], [str(f) for f in files],
-                                     report=report)
+        result, paths = _compare_and_write(chosen, files, rate, columns, horizons, against, method, target,
+                                           sources, report, output)
     _print(result)
     typer.echo(f"compare: {output} ({len(paths)} files, {time.perf_counter() - started:.1f} s)")
+
+
+def _compare_and_write(chosen, files, rate: float, columns, horizons, against: str, method, target, sources,
+                       report: bool, output: Path):
+    """Read the logs, predict every model on them, judge, and write the comparison staged
+    into `target`; (the `Comparison`, the paths written)."""
+    from sysid.dynamics.integrators import Integrator
+    from sysid.evaluation.comparison import FIRST, compare as run_compare
+    from sysid.progress import progress
+    from sysid.report.comparison_report import write_comparison
+
+    runs = _read_logs(files, rate, columns, horizons)
+    logs.info(f"compare: {len(chosen)} models on {len(runs)} log(s) at {', '.join(f'{h:g}' for h in horizons)} s "
+              f"({method.value}); verdicts against " + ("the first model, " + chosen[0].label if against == FIRST
+                                                         else "each model's physics baseline"))
+    on_interrupt(f"nothing written to {output} (it is moved into place only when complete)")
+    bar = progress(total=sum(len(c.members) for c in chosen) * len(horizons), desc="predicting",
+                   unit="model-horizons")
+    result = run_compare(chosen, runs, horizons, against, Integrator(method), on_done=bar.update)
+    bar.close()
+    with target.staged() as staging:
+        paths = write_comparison(staging, result, [str(s) for s in sources], [str(f) for f in files],
+                                 report=report)
+    return result, paths
+
+
+def _check_options(against: str, threads, horizon) -> None:
+    """Exit 2 for an unknown ``--against``, a bad ``--threads`` or ``--horizon``."""
+    from sysid.config import checks
+    from sysid.evaluation.comparison import BASELINE, FIRST
+
+    if against not in (FIRST, BASELINE):
+        raise DataError(f"--against {against!r}: choose {FIRST} (the first model) or {BASELINE} (each model's "
+                        "physics baseline)")
+    if threads is not None:
+        checks.threads("--threads", threads)
+    for h in horizon or ():
+        checks.DURATION.check("--horizon", h)
 
 
 def _logs(data, exp) -> list[Path]:
