@@ -51,7 +51,7 @@ def compare(
                                                  "(MMG, identified MMG, NN-only, hybrid, ensemble), folders of seed "
                                                  "run directories, ship files or bundled ship names (their MMG)."),
     output: Path = typer.Option(..., "-o", "--output", help="Directory to write (comparison.csv, verdicts.csv, "
-                                                             "windows.csv, summary.json, report.html/.pdf)."),
+                                                             "windows.csv, comparison.json, report.html/.pdf)."),
     data: Optional[List[Path]] = typer.Option(None, "--data", help="Logs to compare on: files, folders or patterns "
                                                                     "(several may follow one --data; default: the "
                                                                     "config's [data] test)."),
