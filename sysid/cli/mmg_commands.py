@@ -12,6 +12,7 @@ from sysid.cli.app import app
 from sysid.cli.outputs import claim, ship_file
 from sysid.store.target import OutputKind
 from sysid.errors import DataError
+from sysid.fast.payoff import PREDICTION_REPAY_STEPS
 from sysid.state import FORCE, INPUTS, STATE, force_column
 
 FORCE_INPUTS = [*STATE, *INPUTS]
@@ -22,8 +23,31 @@ ShipOption = typer.Option("esso_osaka", "--ship", help="Ship name (configs/ships
 SetOption = typer.Option(None, "--set", help="Override a ship parameter, e.g. --set Xvr=0.4535 (repeatable).")
 QuadratureOption = typer.Option("exact", "--quadrature",
                                 help="Cross-flow integrals: exact (closed form) or simpson (the lab simulator's).")
-CompiledOption = typer.Option(False, "--compiled",
-                              help="Compiled step (native code, cached on disk; first use compiles, about a minute).")
+CompiledOption = typer.Option(None, "--compiled/--eager", show_default=False,
+                              help="Force the compiled step (native code, cached on disk; first use compiles, a minute "
+                                   "or more) or the eager one. Default: compiled when its package is in the cache, or "
+                                   f"when the eager steps reach {PREDICTION_REPAY_STEPS} per package not yet cached; "
+                                   "else eager (decided from the step count and the cache alone).")
+
+
+def _prediction_path(command: str, asked: Optional[bool], models, work, method, dt: float):
+    """The `sysid.fast.payoff.PathChoice` for predicting `work` ((ships, steps) of each
+    batched prediction) with each of `models` by rule `method` at step `dt` [s]; echoed in
+    one line."""
+    from sysid.fast.payoff import choose_path
+    from sysid.fast.compiled import enabled, prediction_package
+
+    packages, label = set(), None
+    if asked is None and enabled():
+        for model in models:
+            for ships, _ in work:
+                label, path = prediction_package(model, method, dt, ships)
+                packages.add(path)
+    steps = len(models) * sum(steps for _, steps in work)
+    cold = sum(not path.is_file() for path in packages)
+    choice = choose_path("prediction", steps, cold, len(packages), PREDICTION_REPAY_STEPS, asked, label)
+    typer.echo(f"{command}: {choice.reason}")
+    return choice
 
 
 def _integrator(name: str, compiled: bool):
@@ -161,7 +185,7 @@ def simulate(
     ship: str = ShipOption,
     set_: Optional[List[str]] = SetOption,
     quadrature: str = QuadratureOption,
-    compiled: bool = CompiledOption,
+    compiled: Optional[bool] = CompiledOption,
 ) -> None:
     """Predict from the recorded state at T with the recorded inputs (zero-order hold)."""
     import numpy as np
@@ -172,7 +196,7 @@ def simulate(
     from sysid.store.files import write_csv
     from sysid.config import checks
 
-    chosen = _integrator(integrator, compiled)
+    chosen = _integrator(integrator, False)
     checks.RATE.check("--rate", rate)
     checks.DURATION.check("--horizon", horizon)
     checks.TIME.check("--start", start)
@@ -196,6 +220,8 @@ def simulate(
                         "and --horizon inside an evenly sampled stretch, or resample the log")
     x0 = torch.as_tensor(run.states[i0], dtype=torch.float64)
     inputs = torch.as_tensor(run.inputs[sl], dtype=torch.float64)
+    path = _prediction_path("simulate", compiled, [model], [(1, steps)], chosen.method, run.dt)
+    chosen = _integrator(integrator, path.compiled)
     with torch.no_grad():
         pred = predict(model, x0, inputs, run.dt, chosen)
         forces = model(pred, inputs)
@@ -228,7 +254,7 @@ def evaluate(
     ship: Optional[str] = typer.Option(None, "--ship", help="Ship name (configs/ships/NAME.toml) or path to a ship TOML (default: the config's, else esso_osaka)."),
     set_: Optional[List[str]] = SetOption,
     quadrature: str = QuadratureOption,
-    compiled: bool = CompiledOption,
+    compiled: Optional[bool] = CompiledOption,
 ) -> None:
     """The protocol's windowed RMSE of u, v_m, r per file and horizon (MMG or a trained run).
 
@@ -273,7 +299,7 @@ def evaluate(
         raise DataError("evaluate: no logs: name them with --data, or give --config EXP (or a run) whose "
                         "[data] test lists them")
     horizons = list(horizon) if horizon else list(source.evaluation.horizons if source is not None else (30.0, 100.0))
-    chosen = _integrator(integrator or (str(source.evaluation.integrator) if source is not None else "euler"), compiled)
+    chosen = _integrator(integrator or (str(source.evaluation.integrator) if source is not None else "euler"), False)
     ship_input = None if run_dir is not None else ship_file(ship or (exp.experiment.ship if exp is not None
                                                                      else "esso_osaka"))
     claim(output, OutputKind.FILE, [run_dir, config, *(data or []), *files, ship_input])  # --data folders too
@@ -296,6 +322,10 @@ def evaluate(
     typer.echo(f"divergence: a non-finite state, or speed or |r| beyond {limits.factor:g} x the run's training range "
                f"({limits.speed:.3g} m/s, {limits.yaw_rate:.3g} rad/s, widened to each window's record)"
                if limits is not None else "divergence: a non-finite state only (no training range recorded)")
+    baselines = _baselines(run_exp, model)
+    path = _prediction_path("evaluate", compiled, [model, *baselines.values()], _window_work(runs, horizons),
+                            chosen.method, runs[0].dt)
+    chosen = _integrator(str(chosen.method), path.compiled)
     evaluation = evaluate_model(model, runs, horizons, chosen, traces=False, limits=limits)
     for divergence in evaluation.divergences:
         typer.secho(f"WARNING: the prediction diverged on {divergence.text()}", fg=typer.colors.YELLOW, err=True)
@@ -306,19 +336,39 @@ def evaluate(
     typer.echo(f"evaluate: {len(runs)} file(s), horizons {', '.join(f'{h:g}' for h in horizons)} s, "
                f"{label} -> {output} ({time.perf_counter() - start:.1f} s)")
     if run_exp is not None:
-        _beside_baselines(run_exp, model, runs, horizons, chosen)
+        _beside_baselines(run_exp, model, baselines, runs, horizons, chosen)
 
 
-def _beside_baselines(exp, model, runs, horizons, method) -> None:
+def _baselines(exp, model) -> dict:
+    """The run's physics baselines (`sysid.runs.lifecycle.physics_baselines`); {} for the MMG alone."""
+    if exp is None:
+        return {}
+    import torch
+    from sysid.runs.lifecycle import physics_baselines
+    return physics_baselines(exp, model, torch.float64)
+
+
+def _window_work(runs, horizons) -> list[tuple[int, int]]:
+    """(windows, steps) of each horizon's one batched prediction of every run's windows."""
+    from sysid.data.recordings import protocol_windows
+    from sysid.evaluation.evaluate import window_samples
+
+    work = []
+    for h in horizons:
+        samples = {window_samples("--horizon", h, run.dt) for run in runs}
+        windows = sum(len(protocol_windows(len(run), window_samples("--horizon", h, run.dt))) for run in runs)
+        if windows:
+            work.append((windows, max(samples) - 1))
+    return work
+
+
+def _beside_baselines(exp, model, baselines, runs, horizons, method) -> None:
     """The run's physics baselines on the same windows, their RMSE printed beside the
     model's, and the model's verdict against each (last line; stderr when not beaten)."""
     import pandas as pd
-    import torch
     from sysid.evaluation.comparison import Contender, judge_against_baselines, metrics_of
     from sysid.evaluation.verdict import MODEL_NAMES
-    from sysid.runs.lifecycle import physics_baselines
 
-    baselines = physics_baselines(exp, model, torch.float64)
     if not baselines:
         typer.echo("verdict: none: an MMG used as defined is itself the physics baseline")
         return

@@ -442,6 +442,20 @@ def compiled_rollout(model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, d
     return states.reshape(inputs.shape[0], *batch_shape, 6)
 
 
+def prediction_package(model: nn.Module, method: Method, dt: float, batch: int,
+                       dtype: torch.dtype = torch.float64, device: str | torch.device = "cpu") -> tuple[str, Path]:
+    """(cache label, path) of the package `compiled_rollout` runs for `batch` ships (a
+    `Rollout` up to `ROLLOUT_ROWS`, else a `Step` of up to `CHUNK_ROWS` rows): the file
+    exists when the prediction starts warm. Nothing is compiled."""
+    if batch <= ROLLOUT_ROWS:
+        roll, examples, label = _rollout(model, method, dt, batch, dtype, device)
+        return label, package_path(roll, examples, label, _options_for(batch))
+    rows = min(batch, CHUNK_ROWS)
+    step = Step(prepared(model, rows), method, dt, rows > 1)
+    label = step_label(method)
+    return label, package_path(step, _examples(rows, dtype, device), label, _options_for(rows))
+
+
 def predict(model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
             method: IntegratorLike = Method.EULER) -> torch.Tensor:
     """States (T, ..., 6) predicted from x0 (..., 6) with inputs (T, ..., 4), no gradient.
