@@ -38,7 +38,7 @@ from torch import nn
 from sysid.fast import codegen_fixes
 from sysid.config.choices import Method
 from sysid.dynamics.equations import check_shapes, eager_predict
-from sysid.dynamics.integrators import Integrator, IntegratorLike, run_steps
+from sysid.dynamics.integrators import Integrator, IntegratorLike, run_in_chunks, run_steps
 from sysid.fast.prepared import prepared
 from sysid.mmg.capture import capturing
 from sysid.store.files import atomic_path
@@ -400,22 +400,20 @@ def rollout_package(model: nn.Module, method: Method, dt: float, batch: int = 1,
 
 def _chunked_rollout(fn: Compiled, channels_first: bool) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
     """`fn`, a compiled `Rollout` of `ROLLOUT_STEPS` steps, as ``(x0 (B, 6), inputs (T, B, 4))
-    -> states (T, B, 6)``: calls of up to `ROLLOUT_STEPS` steps, each from the last state."""
+    -> states (T, B, 6)``: calls of up to `ROLLOUT_STEPS` steps, each from the last state
+    (`sysid.dynamics.integrators.run_in_chunks`)."""
 
     def run(x0: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
         x = x0.T.contiguous() if channels_first else x0
         u = inputs.transpose(1, 2) if channels_first else inputs
-        total = inputs.shape[0] - 1
-        out, done = [x[None]], 0
-        while done < total:
-            n = min(ROLLOUT_STEPS, total - done)
+
+        def call(x: torch.Tensor, done: int, n: int) -> tuple[torch.Tensor, torch.Tensor]:
             chunk = u[done:done + n]
             if n < ROLLOUT_STEPS:  # rows the loop does not reach: any numbers
                 chunk = torch.cat((chunk, chunk[-1:].expand(ROLLOUT_STEPS - n, *chunk.shape[1:])))
             states = fn(x, chunk, torch.tensor(n))[:n]
-            out.append(states)
-            x, done = states[-1], done + n
-        states = torch.cat(out)
+            return states, states[-1]
+        states = run_in_chunks(call, x, inputs.shape[0] - 1, ROLLOUT_STEPS, head=x[None])
         return states.transpose(1, 2) if channels_first else states
     return run
 
