@@ -241,9 +241,10 @@ class WindowScore:
     window_rmse: np.ndarray | None = None
 
 
-def window_score(model, windows: WindowSet, w_v: torch.Tensor) -> WindowScore:
-    """`WindowScore` of `model` on `windows` (Euler rollouts, as in training)."""
-    err = rollout_errors(model, windows)
+def window_score(model, windows: WindowSet, w_v: torch.Tensor, errors: torch.Tensor | None = None) -> WindowScore:
+    """`WindowScore` of `model` on `windows` (Euler rollouts, as in training); `errors`: the
+    velocity errors (T, W, 3) of those rollouts when already computed (`rollout_errors`)."""
+    err = rollout_errors(model, windows) if errors is None else errors
     rmse = torch.sqrt((err * err).reshape(-1, 3).mean(0))
     per_window = torch.sqrt((err * err).mean(0)).reshape(-1, 3)
     return WindowScore(float(velocity_loss(err, w_v)), tuple(float(v) for v in rmse),  # type: ignore[arg-type]

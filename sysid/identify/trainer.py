@@ -219,6 +219,7 @@ class Trainer:
         self.velocity_weights_ = w_v
         self.validation_windows_ = val
         self.validation_sets_ = {round(t.steps * val.dt, 6): val}
+        self.validation_errors_: dict[float, torch.Tensor] = {}
         if summary.failure is None:
             summary.val_loss_multistep = self.objective(model, prepared.runs, val, w_v, prepared.dtype,
                                                         prepared.device)
@@ -400,7 +401,8 @@ class Trainer:
         final model (gate included) on validation windows of each of its horizons
         (`objective_horizons`), averaged over the horizons the validation data hold a window
         of; T steps when they hold none. The windows are kept per horizon as
-        ``validation_sets_`` (the first as ``validation_windows_``)."""
+        ``validation_sets_`` (the first as ``validation_windows_``), the model's velocity errors
+        (T, W, 3) on them as ``validation_errors_``."""
         exp, t = self.experiment, self.experiment.training
         sets: dict[float, WindowSet] = {}
         for horizon in objective_horizons(exp):
@@ -423,4 +425,6 @@ class Trainer:
             sets[round(t.steps * val.dt, 6)] = val
         self.validation_sets_ = sets
         self.validation_windows_ = next(iter(sets.values()))
-        return float(np.mean([float(velocity_loss(rollout_errors(model, w), w_v)) for w in sets.values()]))
+        # the rollouts' errors, kept per horizon for the verdict's validation scores
+        self.validation_errors_ = {horizon: rollout_errors(model, w) for horizon, w in sets.items()}
+        return float(np.mean([float(velocity_loss(err, w_v)) for err in self.validation_errors_.values()]))

@@ -242,7 +242,9 @@ def _validation_scores(exp: Experiment, trainer: Trainer) -> dict:
     for horizon, windows in trainer.validation_sets_.items():
         scored = {"model": trainer.model_, **physics_baselines(exp, trainer.model_, windows.states.dtype,
                                                                 windows.states.device)}
-        validation_scores[horizon] = {k: window_score(m, windows, trainer.velocity_weights_)
+        # the model's rollouts are the ones of its val_loss_multistep (`Trainer.objective`)
+        errors = {"model": trainer.validation_errors_.get(horizon)}
+        validation_scores[horizon] = {k: window_score(m, windows, trainer.velocity_weights_, errors.get(k))
                                       for k, m in scored.items()}
     return validation_scores
 
