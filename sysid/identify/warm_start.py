@@ -60,10 +60,10 @@ def warm_start(net: ForceCorrection, s: torch.Tensor, residual: torch.Tensor, de
     journal.warm_start_begins(bar, t.warm_start_epochs, len(s))
     for epoch in bar:
         order = torch.randperm(len(s), generator=gen).to(device)
+        z_epoch, target_epoch = z[:, order], target[order]  # the epoch's order, gathered once
         for lo in range(0, len(s), 256):
-            idx = order[lo:lo + 256]
-            y = net.layers(z[:, idx])[0]
-            loss = ((y - target[idx]) ** 2).mean() + t.lambda_L2 * weight_norm(net)
+            y = net.layers(z_epoch[:, lo:lo + 256])[0]
+            loss = ((y - target_epoch[lo:lo + 256]) ** 2).mean() + t.lambda_L2 * weight_norm(net)
             opt.zero_grad()
             loss.backward()
             opt.step()
