@@ -57,7 +57,7 @@ from sysid.identify.checkpoint import CheckpointState, TrainingCheckpoint
 from sysid.data.recordings import Run, duplicate_runs, sliding_windows, stack_windows, window_touches
 from sysid.data.splits import HeldOutFiles, hold_out_files
 from sysid.device import resolve_device
-from sysid.dynamics.equations import integrate, integrate_with_forces, required_force
+from sysid.dynamics.equations import integrate, integrate_training, required_force
 from sysid.dynamics.rollouts import WindowSet, rollout_errors, velocity_loss  # noqa: F401 (the trainer's names too)
 from sysid.errors import ConfigError, DataError, TrainingError
 from sysid.config.choices import DType, Method, ModelKind, Solver, Stage, StartStates, Validation
@@ -296,12 +296,10 @@ def multistep_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor
     if w_F is None:
         pred = integrate(model, states[0], inputs, batch.dt, Method.EULER)
     else:
-        trajectory = integrate_with_forces(model, states[0], inputs, batch.dt, Method.EULER)
-        pred, forces = trajectory.states, trajectory.forces
+        pred, f_nn, f_mmg = integrate_training(model, states[0], inputs, batch.dt)
     loss_v = velocity_loss(pred[1:, ..., VEL] - states[1:, ..., VEL], w_v)
     if w_F is None:
         return loss_v, loss_v.new_zeros(())
-    f_nn, f_mmg = forces.correction, forces.mmg
     return loss_v, output_penalty(f_nn, f_mmg, w_F, band).mean()
 
 
