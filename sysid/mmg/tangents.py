@@ -16,7 +16,8 @@ exactly (the speed guard's inside) the drift angle's derivative is taken as 0; a
 NaN there (the derivative of hypot at 0).
 
 `supported(mmg)` is the boundary: other families (the standard ones), Simpson's quadrature
-or trainable coefficients are computed by `MMG` through autograd instead.
+or coefficients being identified (requiring a gradient) are computed by `MMG` through autograd
+instead.
 """
 from __future__ import annotations
 
@@ -38,13 +39,14 @@ FAMILIES = {"hull": "yoshimura_low_speed", "propeller": "four_quadrant", "rudder
 
 def supported(mmg) -> bool:
     """True where `forces_with_tangents` computes `mmg`'s F_MMG: the families of `FAMILIES`
-    (wind optional), exact cross-flow integrals, no trainable coefficient."""
+    (wind optional), exact cross-flow integrals, no coefficient that requires a gradient
+    (identified coefficients frozen for the hybrid's training are constants here)."""
     models = mmg.ship.models
     if any(models.get(k) != v for k, v in FAMILIES.items() if k != "wind"):
         return False
     if models.get("wind") not in (None, FAMILIES["wind"]):
         return False
-    return mmg.quadrature == "exact" and not mmg.coefficients.trainable_names
+    return mmg.quadrature == "exact" and not any(p.requires_grad for p in mmg.coefficients.parameters())
 
 
 class Tangents(NamedTuple):
