@@ -95,7 +95,7 @@ def vjp_comparison(exp, train, batch: int, repeats: int = 5, rounds: int = 5) ->
     medians of wall and process CPU time per step, the ratio, and the two losses."""
     old, old_loss = training_step(exp, train, batch, 1, fast=False)
     new, new_loss = training_step(exp, train, batch, 1, fast=True)
-    losses = float(old_loss()), float(new_loss())
+    losses = float(old_loss().detach()), float(new_loss().detach())
     wall: dict[str, list[float]] = {"old": [], "new": []}
     cpu: dict[str, list[float]] = {"old": [], "new": []}
     for _ in range(rounds):
@@ -270,14 +270,21 @@ def operation_counts(exp, train, batch: int) -> None:
         x.grad = None
         rhs.record.clear()
         rhs(torch.tensor(1.0), x).sum().backward()
-    times = {"whole": [], "autograd": [], "plain": []}
+    def vjp_pass():
+        x.grad = None
+        fast.f_nn.clear()
+        fast.f_mmg.clear()
+        fast(torch.tensor(1.0), x).sum().backward()
+    times: dict[str, list[float]] = {"whole": [], "autograd": [], "plain": [], "vjp": []}
     for _ in range(5):
-        for label, fn in (("whole", whole_pass), ("autograd", autograd_pass), ("plain", plain_pass)):
-            times[label] += cpu_ms(lambda: [fn() for _ in range(10)], 1)
-    w, a, b = (statistics.median(times[k]) / 10 for k in ("whole", "autograd", "plain"))
+        for label, fn in (("whole", whole_pass), ("autograd", autograd_pass), ("plain", plain_pass),
+                          ("vjp", vjp_pass)):
+            times[label] += cpu_ms(lambda fn=fn: [fn() for _ in range(10)], 1)
+    w, a, b, v = (statistics.median(times[k]) / 10 for k in ("whole", "autograd", "plain", "vjp"))
     print(f"CPU ms per call, batch {len(chunk)}: the right-hand side forward and backward {w:.2f}, of which the MMG's "
           f"{a:.2f} through autograd; the MMG's forward without autograd {b:.2f} ({plain_ops} operations, "
-          f"{a / b:.1f}x less than through autograd)")
+          f"{a / b:.1f}x less than through autograd); the right-hand side through the hand-derived VJP, forward "
+          f"and backward, {v:.2f} ({w / v:.2f}x less than through autograd)")
 
 
 def network_flops(widths: list[int], rows: int, steps: int) -> tuple[float, float]:

@@ -22,6 +22,7 @@ from sysid.dynamics.integrators import EULER, Integrator, IntegratorLike, Method
 from sysid.mmg.capture import captured
 from sysid.mmg.coefficient_lookup import Rows, coefficient_matrix, view_of
 from sysid.mmg.model import ForceBreakdown
+from sysid.mmg.vjp import RATE_ROWS
 
 _ODEINT_NAME = {Method.EULER: "euler", Method.RK4_38: "rk4"}  # torchdiffeq's public names
 
@@ -75,19 +76,7 @@ def derivative_channels(state: torch.Tensor, force, c) -> tuple[torch.Tensor, ..
 
 # dx/dt (..., 6) as features (..., 16) times a (16, 6) matrix of the mass terms: features
 # (X, Y, N, u r, v r, r r, u cos psi, u sin psi, v cos psi, v sin psi, x, u, y, v, psi, r)
-_NONE6 = (None,) * 6
-_RATE = ((None, "eom_X_u", None, None, None, None),        # X
-         (None, None, None, "eom_Y_v", None, "eom_N_v"),   # Y
-         (None, None, None, "eom_N_v", None, "eom_N_r"),   # N
-         (None, None, None, "eom_ur_v", None, "eom_ur_r"),  # u r
-         (None, "eom_vr_u", None, None, None, None),       # v r
-         (None, "eom_rr_u", None, None, None, None),       # r r
-         (1.0, None, None, None, None, None),              # u cos psi -> x_dot
-         (None, None, 1.0, None, None, None),              # u sin psi -> y_dot
-         (None, None, 1.0, None, None, None),              # v cos psi -> y_dot
-         (-1.0, None, None, None, None, None),             # v sin psi -> x_dot
-         _NONE6, _NONE6, _NONE6, _NONE6, _NONE6,           # x, u, y, v, psi
-         (None, None, None, None, 1.0, None))              # r -> psi_dot
+_RATE = RATE_ROWS
 
 
 def motion_rate(state: torch.Tensor, forces, motion, c) -> torch.Tensor:
@@ -288,8 +277,9 @@ def integrate_with_forces(force_model: nn.Module, x0: torch.Tensor, inputs: torc
                           method: Method = Method.EULER) -> Trajectory:
     """`integrate` (not compiled) that also returns every call's forces, stacked.
 
-    The training loss uses it with Euler: states from torchdiffeq's `odeint`, F_NN and
-    F_MMG of each step for the output penalty (paper Eq. 17).
+    With Euler it is the training loss's rollout through autograd (`integrate_training`
+    falls back to it): states from torchdiffeq's `odeint`, F_NN and F_MMG of each step for
+    the output penalty (paper Eq. 17).
     """
     record: list[ForceBreakdown] = []
     states = integrate(force_model, x0, inputs, dt, method, record=record)
