@@ -17,9 +17,12 @@ def nearest_distances(q: torch.Tensor, bank: torch.Tensor, bank_sq: torch.Tensor
     """The k smallest Euclidean distances (B, k), ascending, from q (B, F) to bank (N, F).
 
     |q - b|^2 = |q|^2 + |b|^2 - 2 q.b (bank_sq = |b|^2, (N,)): one matrix product, then
-    the k smallest.
+    the k smallest. Eager, the (B, N) difference is taken in place (the same numbers, one
+    (B, N) buffer fewer); compiled, as a plain difference.
     """
-    d2 = (q * q).sum(1, keepdim=True) + bank_sq - 2.0 * q @ bank.t()  # t(): a traceable op, not an attribute
+    d2 = (q * q).sum(1, keepdim=True) + bank_sq
+    product = 2.0 * q @ bank.t()  # t(): a traceable op, not an attribute
+    d2 = d2 - product if torch.compiler.is_compiling() else d2.sub_(product)
     return torch.topk(d2, k, dim=1, largest=False).values.clamp_min(0.0).sqrt()
 
 
