@@ -42,7 +42,7 @@ from sysid.dynamics.integrators import Integrator, IntegratorLike, run_in_chunks
 from sysid.fast.prepared import prepared
 from sysid.mmg.capture import capturing
 from sysid.store.files import atomic_path
-from sysid.state import INPUTS, STATE
+from sysid.channel_names import INPUTS, STATE
 from sysid.fast.stepper import Derivative, Rollout, Step
 
 Compiled = Callable[..., torch.Tensor]

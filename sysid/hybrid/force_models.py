@@ -66,7 +66,7 @@ class CorrectedModel(nn.Module):
         """F of the vectors the kNN gate compares: 9 standardised inputs, or the width of
         the FNN's last hidden layer (its features)."""
         net = self.correction_net
-        return net.input_mean.shape[0] if self.gate_space == "inputs" else net.weights[-1].shape[1]
+        return net.input_mean.shape[0] if self.gate_space is GateSpace.INPUTS else net.weights[-1].shape[1]
 
     @property
     def coefficients(self):
@@ -94,7 +94,7 @@ class CorrectedModel(nn.Module):
             return None
         wind = relative_wind(state[..., 1], state[..., 3], state[..., 4], inputs[..., 2], inputs[..., 3])
         s = correction_inputs(state, inputs, torch.stack(wind, -1))
-        z = None if self.gate_space == "inputs" else self.correction_net.features(s)
+        z = None if self.gate_space is GateSpace.INPUTS else self.correction_net.features(s)
         return self.gate(self.gate_coordinates(s, z))[1]
 
     def forward(self, state: torch.Tensor, inputs: torch.Tensor, per_member: bool = False) -> ForceBreakdown:

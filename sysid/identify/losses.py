@@ -10,7 +10,7 @@ from sysid.dynamics.equations import integrate, integrate_with_forces
 from sysid.dynamics.rollouts import WindowSet, velocity_loss
 from sysid.hybrid.correction import ForceCorrection
 from sysid.hybrid.force_models import PerMember, correction_of
-from sysid.state import VELOCITY_INDEX
+from sysid.channel_names import VELOCITY_INDEX
 
 VEL = list(VELOCITY_INDEX)
 

@@ -26,7 +26,7 @@ from sysid.maneuvers.controllers import initial_orders, order_parameters
 from sysid.maneuvers.indices import Track, maneuver_indices
 from sysid.maneuvers.straight import straight_running_rps
 from sysid.mmg.ship import Ship
-from sysid.state import VELOCITY_INDEX
+from sysid.channel_names import VELOCITY_INDEX
 
 if TYPE_CHECKING:
     from sysid.fast.payoff import PathChoice
@@ -40,7 +40,7 @@ SPEED_OVER_U0 = 3.0            # without a training range: a maneuver faster tha
 def first_divergence(t: np.ndarray, states: np.ndarray, speed0: float,
                      limits: PhysicalRange | None = None) -> tuple[float, str] | None:
     """(time [s], why) at which a simulated maneuver diverged, or None: the first state
-    (t (T,), states (T, 6), `sysid.state`) that is not finite, or whose speed sqrt(u^2 +
+    (t (T,), states (T, 6), `sysid.channel_names`) that is not finite, or whose speed sqrt(u^2 +
     v_m^2) exceeds `limits.factor` times the larger of the training logs' largest speed and
     the approach speed `speed0` [m/s], or whose |r| exceeds that factor times their largest
     |r|. Without a training range (`limits` None): non-finite, or speed beyond

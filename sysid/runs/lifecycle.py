@@ -185,44 +185,16 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
     held_out = None
     with compute_threads(exp.training.threads):
         if exp.needs_training:
-            runs = list(train_runs) if train_runs is not None else training_runs(exp, data)
-            if not validation and exp.data.validation:
-                validation = validation_runs(exp)
-            if not validation and (held_out := held_out_validation(exp, runs)) is not None:
-                runs, validation = list(held_out.train), list(held_out.validation)
-                log("validation: the held-out training logs " + "; ".join(
-                    f"{group}: {', '.join(names)}" for group, names in held_out.groups.items()))
-            check_disjoint_runs({TRAINING: runs, VALIDATION: validation, TEST: tests}, exp.source)
-            warn_outside_force_models(exp, runs)
-            try:
-                trainer = Trainer(exp, progress=progress, log=log, checkpoint=checkpoint_path(out_dir),
-                                  resume=resume, on_epoch=on_epoch).fit(runs, validation)
-            except TrainingError:  # a diverged training resumes to the same divergence: keep nothing
-                TrainingCheckpoint(checkpoint_path(out_dir), exp.to_toml()).remove()
-                raise
+            runs, validation, held_out = _training_logs(exp, train_runs, data, validation, tests, log)
+            trainer = _fitted(exp, runs, validation, out_dir, progress, log, resume, on_epoch)
             history, training = trainer.history_, trainer.summary_
             if training.failure is None:  # in the training dtype, as val_loss_multistep, at its horizons
-                validation_scores = {}
-                for horizon, windows in trainer.validation_sets_.items():
-                    scored = {"model": trainer.model_, **physics_baselines(exp, trainer.model_, windows.states.dtype,
-                                                                            windows.states.device)}
-                    validation_scores[horizon] = {k: window_score(m, windows, trainer.velocity_weights_)
-                                                  for k, m in scored.items()}
+                validation_scores = _validation_scores(exp, trainer)
             model = trainer.model_.cpu().double()
         else:
             model = build_model(exp)
         limits = PhysicalRange.of_runs(runs)   # the training logs' range: beyond it a prediction diverged
-        evaluation = evaluate_model(model, tests, exp.evaluation.horizons, Integrator(exp.evaluation.integrator),
-                                    limits=limits)
-        for divergence in evaluation.divergences:
-            log(f"WARNING: the prediction diverged on {divergence.text()}")
-        verdict, baseline_metrics = None, None
-        if validation_scores is not None:
-            scores = scores_on_tests(exp, model, evaluation, tests, limits)
-            verdict = baseline_verdict(str(exp.experiment.model), validation_scores, scores)
-            if scores:
-                baseline_metrics = pd.concat([e.metrics.assign(baseline=label) for label, e in scores.items()
-                                              if label != "model"], ignore_index=True)
+        evaluation, verdict, baseline_metrics = _evaluated(exp, model, tests, limits, validation_scores, log)
     source = "files" if exp.data.train else (exp.experiment.dataset if exp.needs_training else "-")
     data_used = provenance(source, runs, validation, tests, exp.training.val_fraction, exp.training.block_s,
                            held_out, exp.training.split_seed)
@@ -232,3 +204,62 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
     if training is not None:
         TrainingCheckpoint(checkpoint_path(out_dir), exp.to_toml()).remove()
     return RunResult(path, exp, model, evaluation, history, training, seconds, verdict)
+
+
+def _training_logs(exp: Experiment, train_runs: Sequence[Run] | None, data: str | os.PathLike | None,
+                   validation: list[Run], tests: Sequence[Run], log: Callable[[str], None]):
+    """(training logs, validation logs, the held-out draw or None): `train_runs` or the
+    config's, the validation logs given or ``[data] validation`` or held out of the training
+    logs; `DataError` for a log in two of them, a warning for states beyond the force models."""
+    runs = list(train_runs) if train_runs is not None else training_runs(exp, data)
+    held_out = None
+    if not validation and exp.data.validation:
+        validation = list(validation_runs(exp))
+    if not validation and (held_out := held_out_validation(exp, runs)) is not None:
+        runs, validation = list(held_out.train), list(held_out.validation)
+        log("validation: the held-out training logs " + "; ".join(
+            f"{group}: {', '.join(names)}" for group, names in held_out.groups.items()))
+    check_disjoint_runs({TRAINING: runs, VALIDATION: validation, TEST: tests}, exp.source)
+    warn_outside_force_models(exp, runs)
+    return runs, validation, held_out
+
+
+def _fitted(exp: Experiment, runs: Sequence[Run], validation: Sequence[Run], out_dir: str | os.PathLike, progress: bool,
+            log: Callable[[str], None], resume: bool, on_epoch: Callable[[EpochReport], None] | None) -> Trainer:
+    """The `Trainer` fitted on `runs`; a diverged training removes its checkpoint (it would
+    resume to the same divergence) and raises."""
+    try:
+        return Trainer(exp, progress=progress, log=log, checkpoint=checkpoint_path(out_dir),
+                       resume=resume, on_epoch=on_epoch).fit(runs, validation)
+    except TrainingError:
+        TrainingCheckpoint(checkpoint_path(out_dir), exp.to_toml()).remove()
+        raise
+
+
+def _validation_scores(exp: Experiment, trainer: Trainer) -> dict:
+    """horizon [s] -> "model" or baseline label -> `WindowScore` on the trainer's validation windows."""
+    validation_scores = {}
+    for horizon, windows in trainer.validation_sets_.items():
+        scored = {"model": trainer.model_, **physics_baselines(exp, trainer.model_, windows.states.dtype,
+                                                                windows.states.device)}
+        validation_scores[horizon] = {k: window_score(m, windows, trainer.velocity_weights_)
+                                      for k, m in scored.items()}
+    return validation_scores
+
+
+def _evaluated(exp: Experiment, model, tests: Sequence[Run], limits: PhysicalRange, validation_scores: dict | None,
+               log: Callable[[str], None]):
+    """(the model's `Evaluation` on the test logs, its verdict or None, the baselines'
+    metrics on the same logs or None); a WARNING line per diverged prediction."""
+    evaluation = evaluate_model(model, tests, exp.evaluation.horizons, Integrator(exp.evaluation.integrator),
+                                limits=limits)
+    for divergence in evaluation.divergences:
+        log(f"WARNING: the prediction diverged on {divergence.text()}")
+    verdict, baseline_metrics = None, None
+    if validation_scores is not None:
+        scores = scores_on_tests(exp, model, evaluation, tests, limits)
+        verdict = baseline_verdict(str(exp.experiment.model), validation_scores, scores)
+        if scores:
+            baseline_metrics = pd.concat([e.metrics.assign(baseline=label) for label, e in scores.items()
+                                          if label != "model"], ignore_index=True)
+    return evaluation, verdict, baseline_metrics

@@ -123,7 +123,8 @@ def test_simulate_and_evaluate_take_their_path_from_the_steps_and_the_cache(orac
     fewer eager steps than `PREDICTION_REPAY_STEPS`, eager; a prediction whose package is in
     the cache, or with enough steps, compiled; --eager and --compiled as asked. The windows
     `evaluate` counts are the protocol's floor(N / H) per log, H - 1 steps each."""
-    from sysid.cli.mmg_commands import _model, _prediction_path, _window_work
+    from sysid.cli.evaluate_commands import _window_work
+    from sysid.cli.mmg_options import mmg_of as _model, prediction_path as _prediction_path
     from sysid.config.choices import Method
     from sysid.fast.payoff import PREDICTION_REPAY_STEPS
     from sysid.fast.compiled import prediction_package
