@@ -265,6 +265,11 @@ def test_val_loss_multistep_is_the_final_models_validation_loss_at_the_objective
             losses[horizon] = float(multistep_loss(model, val, w_v)[0])
     assert set(losses) == set(trainer.validation_sets_) and 30.0 in losses
     assert trainer.summary_.val_loss_multistep == pytest.approx(np.mean(list(losses.values())), rel=1e-5)
+    # the rollouts' errors the verdict's validation scores reuse: those of a fresh rollout
+    from sysid.dynamics.rollouts import rollout_errors
+    assert list(trainer.validation_errors_) == list(trainer.validation_sets_)
+    for horizon, windows in trainer.validation_sets_.items():
+        assert torch.equal(trainer.validation_errors_[horizon], rollout_errors(model, windows))
 
     longer = Trainer(small_experiment(objective_s=20.0), progress=False, log=lambda m: None).fit(runs)
     _, val20, _, _ = split_windows(runs, 20, t.stride_s, t.val_fraction, False, torch.float32, t.block_s,
