@@ -204,7 +204,7 @@ def _warn_below_baseline(output: Path) -> None:
     """Every run's verdict: a WARNING on stderr for a run of a reproduction that does not beat
     its physics baseline (`RunSummary.beats_baseline` false), a "verdict:" line otherwise,
     each with its verdict's statement (evidence, interval and worst cells)."""
-    from sysid.runs.directory import RunDir
+    from sysid.runs.rundir import RunDir
 
     runs = output / "runs"
     for path in sorted(runs.glob("**/summary.json")):

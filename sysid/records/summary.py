@@ -1,7 +1,7 @@
 """summary.json of a run directory as a typed record (`RunSummary`), key for key, and the
 run's validation loss in words (`VAL_LOSS_DEFINITION`). Torch-free.
 
-Written by `sysid.runs.rundir.write_run`, read by `sysid.runs.directory.RunDir.read_summary`
+Written by `sysid.runs.layout.write_run`, read by `sysid.runs.rundir.RunDir.read_summary`
 (the report, sweeps, seed runs and the CLI read it there). Keys it does not know are kept
 (`extra`, see `sysid.records.base`): a run written by a newer sysid still opens. Runs written
 before a key existed read it as its default.

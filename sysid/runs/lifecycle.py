@@ -31,7 +31,7 @@ from sysid.evaluation.verdict import (IDENTIFIED_MMG, SHIP_FILE_MMG, BaselineVer
 from sysid.config.experiment import Experiment
 from sysid.hybrid.force_models import CorrectedModel, build_mmg, build_model
 from sysid.mmg.coverage import outside_force_models
-from sysid.runs.rundir import write_run
+from sysid.runs.layout import write_run
 from sysid.identify.trainer import EpochReport, Trainer, TrainingSummary, held_out_validation
 from sysid.config.checks import threads
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from sysid.runs.directory import RunDir
+from sysid.runs.rundir import RunDir
 from sysid.store.files import write_csv, write_text
 from sysid.sweep.inbox import complete_summary
 from sysid.sweep.plan import TRIALS_DIR

@@ -5,7 +5,7 @@ Output directory::
     manifest.json     written when the sweep starts: sweep.toml and base.toml (kind "sweep")
     sweep.toml        the sweep file as given (a resumed sweep must match it)
     base.toml         the base experiment, every option resolved
-    trials/{point}/seed{k}/   one ordinary run directory per trial (`sysid.runs.rundir`)
+    trials/{point}/seed{k}/   one ordinary run directory per trial (`sysid.runs.layout`)
     trials.log        journal: one JSON line per trial event (started, resumed, trained, reused)
     results.csv       one row per trial: varied values, seed, status, validation loss, epochs
     points.csv        one row per configuration: validation loss over its seeds

@@ -12,7 +12,7 @@ import pytest
 from sysid.config.choices import Solver
 from sysid.errors import CheckpointError, RecordError
 from sysid.evaluation.verdict import BaselineVerdict
-from sysid.runs.directory import RunDir
+from sysid.runs.rundir import RunDir
 from sysid.runs.records import JsonRecord
 from sysid.runs.summary import RunSummary
 from synthetic_rundir import measured_runs, write_run

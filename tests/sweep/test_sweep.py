@@ -118,7 +118,7 @@ def test_sweep_killed_part_way_resumes_without_training_a_trial_twice(tmp_path, 
     assert summary["best"]["val_loss_multistep_mean"] == pytest.approx(best, rel=1e-5)
 
     # every trial is an ordinary run directory
-    from sysid.runs.rundir import load_model
+    from sysid.runs.layout import load_model
     exp, model = load_model(out / table.run.iloc[0])
     assert exp.experiment.seed == table.seed.iloc[0] and exp.training.threads == 1
     # the sweep's report: objective against the keys, seed spread, the chosen configuration
