@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from sysid.config.choices import GateSpace, ModelKind, Solver, StartStates
+from sysid.config.choices import GateSpace, ModelKind, Solver, StartStates, TestLogs
 from sysid.records.base import JsonRecord
 
 LEGACY_VAL_LOSS = "val_loss"  # val_loss_multistep's key in runs written before it was renamed
@@ -238,7 +238,7 @@ class DataSummary(JsonRecord):
     training: str
     train: tuple[LogFile, ...] = ()
     validation: Any = "none"                  # tuple of `LogFile` as read: see `validation_logs`
-    test_set: str = "none"
+    test_set: TestLogs = TestLogs.NONE
     test: tuple[LogFile, ...] = ()
     held_out: dict[str, Any] | None = None
     extra: dict[str, Any] = field(default_factory=dict)

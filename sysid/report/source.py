@@ -15,7 +15,7 @@ import pandas as pd
 
 from preprocessing.quality import QualityReport
 from sysid.errors import CheckpointError
-from sysid.config.choices import ModelKind
+from sysid.config.choices import ModelKind, TestLogs
 from sysid.data.splits import PAPER_TEST_STEMS
 from sysid.evaluation.verdict import BaselineVerdict, seed_mean_verdict
 from sysid.store.manifest import has_manifest, verify_manifest
@@ -62,7 +62,7 @@ class RunRecord:
         """Trained on D1/D2 (or not trained) and tested on the paper's six test files."""
         data = self.summary.data
         if data is not None:
-            return data.test_set == "paper" and data.training in ("D1", "D2", "-")
+            return data.test_set is TestLogs.PAPER and data.training in ("D1", "D2", "-")
         stems = {Path(str(f)).stem for f in self.metrics["file"]}
         return self.dataset in ("D1", "D2") or (self.dataset == "-" and stems == set(PAPER_TEST_STEMS))
 

@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 import torch
 
+from sysid.config.choices import TestLogs
 from sysid.identify.checkpoint import TrainingCheckpoint
 from sysid.data.recordings import Run, read_runs
 from sysid.data.datasets import test_files
@@ -69,7 +70,7 @@ def evaluation_runs(exp: Experiment, data: str | os.PathLike | None = None) -> l
     """The experiment's test logs: ``[data] test``, else the paper's six when it names a
     paper data set, else none. Read only to evaluate."""
     split = data_split(exp, data)
-    columns = exp.data.columns if split.test_source == "files" else None
+    columns = exp.data.columns if split.test_source is TestLogs.FILES else None
     return read_runs(split.test, exp.data.rate, columns)
 
 
