@@ -167,3 +167,15 @@ class RunDir:
         """knn.pt, checked (`KnnBank`); `width`: F of the model's gate vectors, if known."""
         from sysid.runs.knn_bank import KnnBank  # torch: only when asked
         return KnnBank.load(self.knn, width)
+
+
+_WRITER_NAMES = ("load_model", "save_model", "model_state", "run_summary", "write_run")
+
+
+def __getattr__(name: str):
+    """The writer's names, which lived here before (`sysid.runs.layout`): loaded on first use,
+    so importing `RunDir` still loads no torch."""
+    if name in _WRITER_NAMES:
+        import importlib
+        return getattr(importlib.import_module("sysid.runs.layout"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
