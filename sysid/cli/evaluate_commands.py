@@ -9,7 +9,7 @@ from typing import List, Optional
 import typer
 
 from sysid.cli.app import app
-from sysid.cli.mmg_options import CompiledOption, QuadratureOption, SetOption, integrator_of, mmg_of
+from sysid.cli.mmg_options import CompiledOption, QuadratureOption, SetOption, integrator_of, mmg_of, prediction_path
 from sysid.cli.outputs import claim, ship_file
 from sysid.errors import DataError
 from sysid.store.target import OutputKind
@@ -27,7 +27,7 @@ def evaluate(
     ship: Optional[str] = typer.Option(None, "--ship", help="Ship name (configs/ships/NAME.toml) or path to a ship TOML (default: the config's, else esso_osaka)."),
     set_: Optional[List[str]] = SetOption,
     quadrature: str = QuadratureOption,
-    compiled: bool = CompiledOption,
+    compiled: Optional[bool] = CompiledOption,
 ) -> None:
     """The protocol's windowed RMSE of u, v_m, r per file and horizon (MMG or a trained run).
 
@@ -50,7 +50,7 @@ def evaluate(
     source = exp if exp is not None else run_exp   # where the logs, horizons and integrator come from
     files, columns = _logs(data, source)
     horizons = list(horizon) if horizon else list(source.evaluation.horizons if source is not None else (30.0, 100.0))
-    chosen = integrator_of(integrator or (str(source.evaluation.integrator) if source is not None else "euler"), compiled)
+    chosen = integrator_of(integrator or (str(source.evaluation.integrator) if source is not None else "euler"), False)
     ship_input = None if run_dir is not None else ship_file(ship or (exp.experiment.ship if exp is not None
                                                                      else "esso_osaka"))
     claim(output, OutputKind.FILE, [run_dir, config, *(data or []), *files, ship_input])  # --data folders too
@@ -58,6 +58,10 @@ def evaluate(
     runs = read_runs(progress(files, desc="reading", unit="files", quiet=len(files) < 4), rate, columns)
     _check_windows_fit(runs, horizons)
     limits = _training_range(run_dir)
+    baselines = _baselines(run_exp, model)
+    path = prediction_path("evaluate", compiled, [model, *baselines.values()], _window_work(runs, horizons),
+                           chosen.method, runs[0].dt)
+    chosen = integrator_of(str(chosen.method), path.compiled)
     evaluation = evaluate_model(model, runs, horizons, chosen, traces=False, limits=limits)
     for divergence in evaluation.divergences:
         typer.secho(f"WARNING: the prediction diverged on {divergence.text()}", fg=typer.colors.YELLOW, err=True)
@@ -68,7 +72,7 @@ def evaluate(
     typer.echo(f"evaluate: {len(runs)} file(s), horizons {', '.join(f'{h:g}' for h in horizons)} s, "
                f"{label} -> {output} ({time.perf_counter() - start:.1f} s)")
     if run_exp is not None:
-        _beside_baselines(run_exp, model, runs, horizons, chosen)
+        _beside_baselines(run_exp, model, baselines, runs, horizons, chosen)
 
 
 def _model_to_judge(run_dir, model_kind: str, exp, ship, set_, quadrature: str):
@@ -139,16 +143,36 @@ def _training_range(run_dir):
     return limits
 
 
-def _beside_baselines(exp, model, runs, horizons, method) -> None:
+def _baselines(exp, model) -> dict:
+    """The run's physics baselines (`sysid.runs.lifecycle.physics_baselines`); {} for the MMG alone."""
+    if exp is None:
+        return {}
+    import torch
+    from sysid.runs.lifecycle import physics_baselines
+    return physics_baselines(exp, model, torch.float64)
+
+
+def _window_work(runs, horizons) -> list[tuple[int, int]]:
+    """(windows, steps) of each horizon's one batched prediction of every run's windows."""
+    from sysid.data.recordings import protocol_windows
+    from sysid.evaluation.evaluate import window_samples
+
+    work = []
+    for h in horizons:
+        samples = {window_samples("--horizon", h, run.dt) for run in runs}
+        windows = sum(len(protocol_windows(len(run), window_samples("--horizon", h, run.dt))) for run in runs)
+        if windows:
+            work.append((windows, max(samples) - 1))
+    return work
+
+
+def _beside_baselines(exp, model, baselines, runs, horizons, method) -> None:
     """The run's physics baselines on the same windows, their RMSE printed beside the
     model's, and the model's verdict against each (last line; stderr when not beaten)."""
     import pandas as pd
-    import torch
     from sysid.evaluation.comparison import Contender, judge_against_baselines, metrics_of
     from sysid.evaluation.verdict import MODEL_NAMES
-    from sysid.runs.lifecycle import physics_baselines
 
-    baselines = physics_baselines(exp, model, torch.float64)
     if not baselines:
         typer.echo("verdict: none: an MMG used as defined is itself the physics baseline")
         return

@@ -7,6 +7,7 @@ from typing import List, Optional
 import typer
 
 from sysid.errors import DataError
+from sysid.fast.payoff import PREDICTION_REPAY_STEPS
 
 MMG_COMPONENTS = ("hull", "propeller", "rudder", "wind")
 
@@ -14,8 +15,31 @@ ShipOption = typer.Option("esso_osaka", "--ship", help="Ship name (configs/ships
 SetOption = typer.Option(None, "--set", help="Override a ship parameter, e.g. --set Xvr=0.4535 (repeatable).")
 QuadratureOption = typer.Option("exact", "--quadrature",
                                 help="Cross-flow integrals: exact (closed form) or simpson (the lab simulator's).")
-CompiledOption = typer.Option(False, "--compiled",
-                              help="Compiled step (native code, cached on disk; first use compiles, about a minute).")
+CompiledOption = typer.Option(None, "--compiled/--eager", show_default=False,
+                              help="Force the compiled step (native code, cached on disk; first use compiles, a minute "
+                                   "or more) or the eager one. Default: compiled when its package is in the cache, or "
+                                   f"when the eager steps reach {PREDICTION_REPAY_STEPS} per package not yet cached; "
+                                   "else eager (decided from the step count and the cache alone).")
+
+
+def prediction_path(command: str, asked: Optional[bool], models, work, method, dt: float):
+    """The `sysid.fast.payoff.PathChoice` for predicting `work` ((ships, steps) of each
+    batched prediction) with each of `models` by rule `method` at step `dt` [s]; echoed in
+    one line."""
+    from sysid.fast.payoff import choose_path
+    from sysid.fast.compiled import enabled, prediction_package
+
+    packages, label = set(), None
+    if asked is None and enabled():
+        for model in models:
+            for ships, _ in work:
+                label, path = prediction_package(model, method, dt, ships)
+                packages.add(path)
+    steps = len(models) * sum(steps for _, steps in work)
+    cold = sum(not path.is_file() for path in packages)
+    choice = choose_path("prediction", steps, cold, len(packages), PREDICTION_REPAY_STEPS, asked, label)
+    typer.echo(f"{command}: {choice.reason}")
+    return choice
 
 
 def integrator_of(name: str, compiled: bool):

@@ -9,7 +9,7 @@ import typer
 from sysid.channel_names import FORCE, INPUTS, STATE, force_column
 from sysid.cli.app import app
 from sysid.cli.mmg_options import (MMG_COMPONENTS, CompiledOption, QuadratureOption, SetOption, ShipOption,
-                                   integrator_of, mmg_of)
+                                   integrator_of, mmg_of, prediction_path)
 from sysid.cli.outputs import claim, ship_file
 from sysid.errors import DataError
 from sysid.store.target import OutputKind
@@ -26,7 +26,7 @@ def simulate(
     ship: str = ShipOption,
     set_: Optional[List[str]] = SetOption,
     quadrature: str = QuadratureOption,
-    compiled: bool = CompiledOption,
+    compiled: Optional[bool] = CompiledOption,
 ) -> None:
     """Predict from the recorded state at T with the recorded inputs (zero-order hold)."""
     import numpy as np
@@ -36,7 +36,7 @@ def simulate(
     from sysid.store.files import write_csv
     from sysid.config import checks
 
-    chosen = integrator_of(integrator, compiled)
+    chosen = integrator_of(integrator, False)
     checks.RATE.check("--rate", rate)
     checks.DURATION.check("--horizon", horizon)
     checks.TIME.check("--start", start)
@@ -47,6 +47,8 @@ def simulate(
     sl = slice(i0, i0 + steps + 1)
     x0 = torch.as_tensor(run.states[i0], dtype=torch.float64)
     inputs = torch.as_tensor(run.inputs[sl], dtype=torch.float64)
+    path = prediction_path("simulate", compiled, [model], [(1, steps)], chosen.method, run.dt)
+    chosen = integrator_of(str(chosen.method), path.compiled)
     with torch.no_grad():
         pred = predict(model, x0, inputs, run.dt, chosen)
         forces = model(pred, inputs)
