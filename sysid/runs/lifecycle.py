@@ -158,7 +158,7 @@ def check_experiment_fits(exp: Experiment, tests: Sequence[Run]) -> None:
 
 def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[Run],
                    train_runs: Sequence[Run] | None = None, data: str | os.PathLike | None = None,
-                   progress: bool = True, log: Callable[[str], None] = print,
+                   progress: bool = True, log: Callable[[str], None] | None = None,
                    resume: bool = False, overwrite: bool = False,
                    validation: Sequence[Run] | None = None,
                    on_epoch: Callable[[EpochReport], None] | None = None) -> RunResult:
@@ -176,8 +176,9 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
     Threads beyond this machine's cores, or horizons that are not whole samples or longer
     than a test file, are a `ConfigError` before any training.
     `on_epoch` receives every epoch's `EpochReport` (sweeps report it to Ray Tune,
-    tracking to MLflow).
+    tracking to MLflow). `log` takes the stage lines (default: this module's logger, INFO).
     """
+    log = log if log is not None else logging.getLogger(__name__).info
     check_experiment_fits(exp, tests)
     started = time.perf_counter()
     history, training, validation_scores = None, None, None
