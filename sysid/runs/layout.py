@@ -55,6 +55,7 @@ A **reproduction directory** (``sysid reproduce -o OUTDIR``)::
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import time
@@ -134,9 +135,24 @@ def load_model(run_dir: str | os.PathLike, dtype: torch.dtype = torch.float64, _
     return exp, model
 
 
-def _parsed(record, value: dict | None, at: str):
-    """A trainer's summary part as its record (None stays None)."""
-    return None if value is None else record.from_json(value, "summary.json (being written)", at)
+def _parsed(record, value, at: str):
+    """A part of the summary as its `record` type: a record as it is, a dict (what the
+    trainer gave before its parts were records) parsed; None stays None."""
+    if value is None or isinstance(value, record):
+        return value
+    return record.from_json(value, "summary.json (being written)", at)
+
+
+# the trainer's parts that are records of their own in summary.json (`TrainingSummary` attributes)
+_TRAINER_RECORDS = {"identified_uncertainty": UncertaintySummary, "identification": IdentificationSummary,
+                    "gate": GateSummary}
+
+
+def _trainer_records(training) -> dict:
+    """identified_uncertainty, identification (records or None) and gate (a `GateSummary`
+    without the off shares, or None) of the trainer's `TrainingSummary`, each taken as the
+    trainer holds it: a record, or a dict parsed into one."""
+    return {key: _parsed(record, getattr(training, key, None), key) for key, record in _TRAINER_RECORDS.items()}
 
 
 def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds: float | None = None,
@@ -145,7 +161,11 @@ def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds:
     `verdict` its `sysid.evaluation.verdict.BaselineVerdict`, `data` the logs it used
     (`sysid.data.splits.provenance`), `limits` the training logs' `PhysicalRange` (None: none)."""
     info = training.to_dict() if training is not None else {}
+    parts = _trainer_records(training) if training is not None else {}
+    for key in _TRAINER_RECORDS:
+        info.pop(key, None)
     failure = info.pop("failure", None)
+    gate = parts.get("gate") or GateSummary()
     return RunSummary(
         name=exp.experiment.name, model=exp.experiment.model,
         status=f"failed: {failure}" if failure else "complete",
@@ -167,10 +187,10 @@ def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds:
         versions=software_versions(), mmg_overrides=ship_overrides(exp),
         identified=info.pop("identified", {}) or {},
         identified_initial=info.pop("identified_initial", {}) or {},
-        identified_uncertainty=_parsed(UncertaintySummary, info.pop("identified_uncertainty", None),
-                                       "identified_uncertainty"),
-        identification=_parsed(IdentificationSummary, info.pop("identification", None), "identification"),
-        gate=_parsed(GateSummary, {**(info.pop("gate", None) or {}), "off_share": evaluation.gate_off_share}, "gate"),
+        identified_uncertainty=parts.get("identified_uncertainty"),
+        identification=parts.get("identification"),
+        gate=dataclasses.replace(gate, off_share=_parsed(GateSummary, {"off_share": evaluation.gate_off_share},
+                                                         "gate").off_share),
         training=_parsed(TrainingDetails, info, "training"),
     )
 
