@@ -47,7 +47,8 @@ A **reproduction directory** (``sysid reproduce -o OUTDIR``)::
                         ensemble (config ``[ensemble] members``)
     comparison.csv      `sysid.protocol.paper.COMPARISON_COLUMNS`: ours beside the paper's, every cell
     table7.md, table8.md  the paper's layout (30 s, 100 s), ours (paper)
-    summary.json        `sysid.runs.reproduction.Reproduction`: total time, gate shares,
+    reproduction.json   `sysid.runs.reproduction.Reproduction` (summary.json in reproductions
+                        written before): total time, gate shares,
                         scorecards against the paper; "runs" (the protocol
                         entries run) and "protocol" (all of them): fewer is a partial
                         reproduction, and its report says so on page 1

@@ -9,7 +9,7 @@ Output directory::
     trials.log        journal: one JSON line per trial event (started, resumed, trained, reused)
     results.csv       one row per trial: varied values, seed, status, validation loss, epochs
     points.csv        one row per configuration: validation loss over its seeds
-    summary.json      counts, the chosen configuration and its runs, where Tune's experiment is
+    sweep.json        counts, the chosen configuration and its runs, where Tune's experiment is
     tune/             Ray Tune's experiment (unless --storage puts it elsewhere):
                       tune.ExperimentAnalysis reads every trial's per-epoch validation loss
 
