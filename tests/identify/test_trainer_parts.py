@@ -4,8 +4,9 @@ on tiny real-data cases (hybrid D1, NN D1, the MMG identified by gradient and by
 Levenberg-Marquardt, a hybrid on identified and on jointly identified coefficients, two
 resumed runs) the same weights (`torch.equal`), the same history rows, summary, epoch
 reports and checkpoint, and the same ``val_loss_multistep``. Both versions run
-`tests/support/trainer_cases.py` in a subprocess with one torch thread; the earlier one is
-``git archive BEFORE sysid`` of this repository."""
+`tests/support/trainer_cases.py` in a subprocess with one torch thread on the experiment
+configs of `BEFORE`; the earlier one is ``git archive BEFORE sysid`` of this repository.
+A change meant to alter the trainer's numbers moves `BEFORE` to its own commit."""
 from __future__ import annotations
 
 import os
@@ -20,10 +21,10 @@ BEFORE = "d473cdc"  # the last commit of the one-piece trainer
 SCRIPT = ROOT / "tests" / "support" / "trainer_cases.py"
 
 
-def _results(package_root: Path, dataset_dir: Path, out: Path) -> dict:
+def _results(package_root: Path, configs_root: Path, dataset_dir: Path, out: Path) -> dict:
     out.parent.mkdir(parents=True, exist_ok=True)
     env = {**os.environ, "PYTHONPATH": str(package_root), "SYSID_DATA": str(dataset_dir)}
-    subprocess.run([sys.executable, str(SCRIPT), str(dataset_dir), str(ROOT), str(out)], check=True, env=env,
+    subprocess.run([sys.executable, str(SCRIPT), str(dataset_dir), str(configs_root), str(out)], check=True, env=env,
                    cwd=out.parent)
     results = torch.load(out, weights_only=True)
     assert Path(results.pop("package")).resolve() == (package_root / "sysid" / "__init__.py").resolve()
@@ -50,10 +51,12 @@ def _differences(a, b, where: str = "") -> list[str]:
 def test_trainer_in_parts_gives_the_one_piece_trainers_results(dataset_dir, tmp_path):
     before = tmp_path / "before"
     before.mkdir()
-    archive = subprocess.run(["git", "-C", str(ROOT), "archive", BEFORE, "sysid"], check=True, capture_output=True)
+    # the package and the experiment configs of BEFORE: both versions train the same configs
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", BEFORE, "sysid", "configs"], check=True,
+                             capture_output=True)
     subprocess.run(["tar", "-x", "-C", str(before)], input=archive.stdout, check=True)
-    old = _results(before, dataset_dir, tmp_path / "old" / "results.pt")
-    new = _results(ROOT, dataset_dir, tmp_path / "new" / "results.pt")
+    old = _results(before, before, dataset_dir, tmp_path / "old" / "results.pt")
+    new = _results(ROOT, before, dataset_dir, tmp_path / "new" / "results.pt")
     assert list(new) == list(old) and len(old) == 8
     for case in old:
         assert _differences(new[case], old[case], case) == []

@@ -1,6 +1,7 @@
 """The trainer's results on tiny real-data cases, through its public entry points only
 (`Trainer(...).fit`), saved to one file: run as ``python trainer_cases.py DATASET ROOT OUT``
-with whichever `sysid` is importable, so that two versions of the package can be compared
+with whichever `sysid` is importable and the experiment configs of ROOT/configs/experiments,
+so that two versions of the package can be compared
 (`tests/identify/test_trainer_parts.py`).
 
 Cases: hybrid D1 and NN D1 (2 epochs after a 2-epoch warm start, features gate, the output
