@@ -1,6 +1,6 @@
 """The house's figures (issue 35) for one checkout of sysid, read from its source.
 
-    python benchmarks/house_figures.py CHECKOUT [--list]
+    python benchmarks/house_figures.py CHECKOUT [--list] [--words OTHER_CHECKOUT]
 
 Prints:
   rooms               units of the layer table: subpackages of sysid, top-level modules of
@@ -12,10 +12,10 @@ Prints:
   functions > 60      how many functions or methods under sysid/ are longer than 60 lines
   integrator parses   calls that parse an integrator's name: ``Method.parse(...)``,
                       ``Integrator.of(...)``
-  choice comparisons  comparisons (==, !=, in, not in) of a value with a string literal
-                      (or a tuple/list/set of them) that is the word of a closed choice
-                      (a member of a `sysid.config.choices.Choice` subclass); words that
-                      name no choice are not counted
+  choice comparisons  comparisons of a value with a string literal that is the word of a
+                      closed choice (a member of a `sysid.config.choices.Choice` subclass):
+                      ``x == "w"``, ``x != "w"``, ``x in ("w", ...)``; words that name no
+                      choice, and ``"key" in mapping``, are not counted
   RunDir imports      what ``from sysid.runs import RunDir`` loads in a fresh process run in
                       the checkout: torch? sysid.identify?
 
@@ -64,7 +64,7 @@ def _strings(node: ast.AST) -> list[str]:
     return []
 
 
-def figures(root: Path) -> dict:
+def figures(root: Path, words_from: Path | None = None) -> dict:
     package = root / "sysid"
     files = sorted(package.rglob("*.py"))
     units = {"preprocessing"}
@@ -76,7 +76,7 @@ def figures(root: Path) -> dict:
             units.add(".".join(parts))
         else:
             units.add(".".join(parts[:2]))
-    words = choice_words(root)
+    words = choice_words(words_from or root)
     sizes, functions, parses, comparisons = {}, [], [], []
     for path in files:
         text = path.read_text()
@@ -89,9 +89,13 @@ def figures(root: Path) -> dict:
                 if (node.func.value.id, node.func.attr) in (("Method", "parse"), ("Integrator", "of")):
                     parses.append(f"{where}:{node.lineno} {node.func.value.id}.{node.func.attr}")
             elif isinstance(node, ast.Compare):
-                sides = [node.left, *node.comparators]
-                for op, right in zip(node.ops, node.comparators):
-                    if not isinstance(op, (ast.Eq, ast.NotEq, ast.In, ast.NotIn)):
+                lefts = [node.left, *node.comparators[:-1]]
+                for op, left, right in zip(node.ops, lefts, node.comparators):
+                    if isinstance(op, (ast.Eq, ast.NotEq)):
+                        sides = [left, right]
+                    elif isinstance(op, (ast.In, ast.NotIn)) and isinstance(right, (ast.Tuple, ast.List, ast.Set)):
+                        sides = [right]   # value in ("a", "b"); "key" in mapping is no comparison of a choice
+                    else:
                         continue
                     hit = [w for side in sides for w in _strings(side) if w in words]
                     if hit:
@@ -116,8 +120,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("checkout", type=Path)
     parser.add_argument("--list", action="store_true", help="list long functions, parse sites, comparisons")
+    parser.add_argument("--words", type=Path, default=None,
+                        help="take the choice words from this checkout (default: CHECKOUT's own), to count two "
+                             "checkouts with one vocabulary")
     args = parser.parse_args()
-    found = figures(args.checkout.resolve())
+    found = figures(args.checkout.resolve(), args.words.resolve() if args.words else None)
     for key, value in found.items():
         if not key.startswith("_"):
             print(f"{key:20s} {value}")

@@ -139,7 +139,7 @@ def models(bank: int, runs: list[str]):
     from sysid.hybrid.force_models import CorrectedModel
     from sysid.hybrid.knn_gate import KNNGate
     if runs:
-        from sysid.runs.rundir import load_model
+        from sysid.runs.layout import load_model
         return [(f"run {r}", load_model(r)[1]) for r in runs]
     out = [("MMG", MMG(load_ship("esso_osaka")))]
     states, inputs, source = training_samples(bank)

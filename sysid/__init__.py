@@ -31,7 +31,7 @@ _HOME = {
     "ShipDynamics": "sysid.dynamics.equations", "integrate": "sysid.dynamics.equations",
     "predict": "sysid.fast.compiled", "Integrator": "sysid.dynamics.integrators", "Method": "sysid.config.choices",
     "state_derivative": "sysid.dynamics.equations", "body_acceleration": "sysid.dynamics.equations",
-    "RunDir": "sysid.runs.directory", "RunSummary": "sysid.records.summary",
+    "RunDir": "sysid.runs.rundir", "RunSummary": "sysid.records.summary",
 }
 
 __all__ = ["Ship", "load_ship", "MMG", "ForceBreakdown", "ShipDynamics", "integrate", "predict", "Integrator", "Method",

@@ -62,7 +62,7 @@ def run_metrics(run_dir: Path) -> dict[str, float]:
     ``final_val_loss``, `RunSummary.objective`; ``val_loss`` is the per-epoch history) and the test RMSE of every
     test log and horizon, keyed by the log's scenario and name
     (``rmse_u/Berthing/berthing_12-Nov-2020_11_49_21/30s``: no two logs share a key)."""
-    from sysid.runs.directory import RunDir
+    from sysid.runs.rundir import RunDir
 
     run = RunDir(run_dir)
     summary = run.read_summary()

@@ -270,7 +270,7 @@ def test_training_evaluation_and_runs_do_not_load_the_compiled_path():
 
 
 def test_training_evaluation_and_runs_import_without_the_compiled_path():
-    modules = ["sysid.identify.trainer", "sysid.evaluation.evaluate", "sysid.runs.lifecycle", "sysid.runs.rundir"]
+    modules = ["sysid.identify.trainer", "sysid.evaluation.evaluate", "sysid.runs.lifecycle", "sysid.runs.layout"]
     code = (f"import sys; import {', '.join(modules)}; "
             "print(sorted(m for m in sys.modules if m.startswith('sysid.fast')))")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)

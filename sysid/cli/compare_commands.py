@@ -33,7 +33,7 @@ def _run_columns(path: Path):
     """The ``[data.columns]`` of a run directory (a seed folder: its first seed's), or None
     for a ship file."""
     from sysid.maneuvers.recorded import model_paths
-    from sysid.runs.directory import RunDir
+    from sysid.runs.rundir import RunDir
     from sysid.store.manifest import has_manifest
 
     first = model_paths(path)[0]

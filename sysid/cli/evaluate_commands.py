@@ -79,7 +79,7 @@ def _model_to_judge(run_dir, model_kind: str, exp, ship, set_, quadrature: str):
     """(the run's config or None, the model, its label): a trained run's, or the MMG of
     ``--ship`` (else the config's) with the config's [mmg] overrides and ``--set``."""
     if run_dir is not None:
-        from sysid.runs.rundir import load_model
+        from sysid.runs.layout import load_model
         run_exp, model = load_model(run_dir)
         label = f"{run_exp.experiment.model} run {run_dir}"
     else:
@@ -135,7 +135,7 @@ def _training_range(run_dir):
     limits = None
     if run_dir is not None:
         from sysid.evaluation.divergence import PhysicalRange
-        from sysid.runs.directory import RunDir
+        from sysid.runs.rundir import RunDir
         limits = PhysicalRange.of_summary(RunDir(run_dir).read_summary())
     typer.echo(f"divergence: a non-finite state, or speed or |r| beyond {limits.factor:g} x the run's training range "
                f"({limits.speed:.3g} m/s, {limits.yaw_rate:.3g} rad/s, widened to each window's record)"

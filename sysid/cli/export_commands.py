@@ -29,7 +29,7 @@ def export(
 
     from sysid.config.choices import Method
     from sysid.fast.export import export_model, load_step, step_latency
-    from sysid.runs.rundir import load_model
+    from sysid.runs.layout import load_model
     from sysid.config import checks
 
     try:

@@ -93,7 +93,7 @@ def maneuver(
     model: Path = typer.Argument(..., help="Ship file or bundled ship name (its MMG), run directory (MMG, identified, "
                                            "NN-only, hybrid, ensemble) or folder of seed run directories."),
     output: Path = typer.Option(..., "-o", "--output", help="Directory to write (indices.csv, criteria.csv, "
-                                                             "trajectories.csv, summary.json, report.html/.pdf)."),
+                                                             "trajectories.csv, maneuvers.json, report.html/.pdf)."),
     turning: Optional[List[str]] = typer.Option(None, "--turning", help="Turning circle, rudder [deg] (several)."),
     zigzag: Optional[List[str]] = typer.Option(None, "--zigzag", help="Zig-zag RUDDER/CHECK [deg], e.g. 10/10."),
     crash_stop: bool = typer.Option(False, "--crash-stop", help="Crash stop: minus the approach revolutions."),

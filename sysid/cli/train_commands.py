@@ -33,15 +33,34 @@ def train(
     The run directory is moved into place only when complete (with a manifest); an
     interrupted training leaves no run, only its checkpoint for --resume.
     """
-    from sysid.data.display_units import DisplayUnits
-    from sysid.data.recordings import expand_paths
-    from sysid.config import checks
-    from sysid.config.choices import Validation
-    from sysid.errors import ConfigError
-    from sysid.config.experiment import load_experiment
-    from sysid.runs.lifecycle import checkpoint_path, evaluation_runs, run_experiment, training_runs, validation_runs
+    from sysid.runs.lifecycle import checkpoint_path, evaluation_runs, training_runs, validation_runs
 
     start = time.perf_counter()
+    exp = _experiment(config, epochs, threads, test)
+    # a bad -o fails now, not after training
+    claim(output, OutputKind.RUN, [config, *experiment_inputs(exp, data)], overwrite)
+    checkpoint = checkpoint_path(output)
+    on_interrupt(lambda: f"nothing written to {output}" + (
+        f"; the training checkpoint {checkpoint} is kept: rerun with --resume to continue"
+        if checkpoint.is_file() else ""))
+    runs = training_runs(exp, data) if exp.needs_training else None
+    validation = validation_runs(exp) if exp.needs_training else []
+    # the logs the config (or --test) names are scored after training; the paper's six test
+    # files are never opened by training (sysid evaluate and sysid reproduce read them)
+    tests = evaluation_runs(exp, data) if exp.data.test else []
+    _say_logs(exp, runs, validation, tests)
+    result = _run_tracked(exp, output, tests, runs, data, resume, overwrite, validation, mlflow)
+    _say_result(result, exp, output, tests, start)
+
+
+def _experiment(config: Path, epochs: Optional[int], threads: Optional[int], test: Optional[List[Path]]):
+    """The experiment of `config` with ``--epochs``, ``--threads`` and ``--test``; exit 2 for
+    a bad option or a config of an ensemble."""
+    from sysid.config import checks
+    from sysid.config.experiment import load_experiment
+    from sysid.data.recordings import expand_paths
+    from sysid.errors import ConfigError
+
     if epochs is not None and epochs < 0:
         raise ConfigError(f"--epochs {epochs}: must be >= 0")
     if threads is not None:
@@ -57,17 +76,13 @@ def train(
         exp = exp.replace(training={"threads": threads})
     if test:
         exp = exp.replace(data={"test": tuple(os.path.abspath(p) for p in expand_paths(test))})
-    # a bad -o fails now, not after training
-    claim(output, OutputKind.RUN, [config, *experiment_inputs(exp, data)], overwrite)
-    checkpoint = checkpoint_path(output)
-    on_interrupt(lambda: f"nothing written to {output}" + (
-        f"; the training checkpoint {checkpoint} is kept: rerun with --resume to continue"
-        if checkpoint.is_file() else ""))
-    runs = training_runs(exp, data) if exp.needs_training else None
-    validation = validation_runs(exp) if exp.needs_training else []
-    # the logs the config (or --test) names are scored after training; the paper's six test
-    # files are never opened by training (sysid evaluate and sysid reproduce read them)
-    tests = evaluation_runs(exp, data) if exp.data.test else []
+    return exp
+
+
+def _say_logs(exp, runs, validation, tests) -> None:
+    """One line each: the training logs and how validation is drawn, the test logs (or why none)."""
+    from sysid.config.choices import Validation
+
     if runs is not None:
         source = f"data set {exp.experiment.dataset}" if exp.experiment.dataset and not exp.data.train else "your logs"
         logs.info(f"train: {exp.experiment.model} model on {len(runs)} training log(s) from {source} "
@@ -87,6 +102,12 @@ def train(
         logs.info("test: none (no [data] test in the config, no --test): " + (
             "scored on the validation windows only" if exp.needs_training else
             "nothing to evaluate this MMG on; name test logs in [data] test or with --test"))
+
+
+def _run_tracked(exp, output: Path, tests, runs, data, resume: bool, overwrite: bool, validation, mlflow):
+    """`run_experiment`, logged to MLflow at ``--mlflow`` (a failed run marked FAILED there)."""
+    from sysid.runs.lifecycle import run_experiment
+
     tracker = tracked = None
     if mlflow:
         from sysid.experiment_tracking import EpochLogger, Tracker, config_params
@@ -103,6 +124,14 @@ def train(
         raise
     if tracker is not None:
         tracker.finish(tracked, {"run": output}, "FAILED" if result.failure else "FINISHED")
+    return result
+
+
+def _say_result(result, exp, output: Path, tests, start: float) -> None:
+    """The test metrics, what training did and the verdict (its last line; on stderr, a
+    WARNING, when the model does not beat its baseline); exit 1 for a failed run."""
+    from sysid.data.display_units import DisplayUnits
+
     if tests:
         typer.echo(result.evaluation.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     if result.failure:
@@ -181,6 +210,18 @@ def reproduce(
                      f"(sysid report {output} -o {output} writes it)")
         paths = build_report(output, output)
         typer.echo(f"report: {paths.html} and {paths.pdf} ({paths.n_figures} figures, {paths.n_pages} pages)")
+    _say_scorecards(summary, seeds)
+    for name, why in (summary.failed or {}).items():
+        typer.secho(f"reproduce: run {name} FAILED: {why}", fg=typer.colors.RED, err=True)
+    typer.echo(f"reproduce: {output} in {summary.seconds / 60:.1f} min")
+    _warn_below_baseline(output)
+    if summary.failed:
+        raise SystemExit(1)
+
+
+def _say_scorecards(summary, seeds: int) -> None:
+    """Each scorecard per data set (the RMSE cut against MMG-only at 30 s, cells beating the
+    paper's hybrid, per scenario) and the kNN gate's off share on the Random test."""
     for card in summary.scorecards:
         model = f"Hybrid (mean over {seeds} seeds)" if seeds > 1 and card.model == "Hybrid" else card.model
         for ds, c in card.datasets.items():
@@ -192,19 +233,13 @@ def reproduce(
     if shares:
         typer.echo("kNN gate off on the Random test (30 s): " +
                    ", ".join(f"{k} {100 * v:.0f} %" for k, v in shares.items() if v is not None))
-    for name, why in (summary.failed or {}).items():
-        typer.secho(f"reproduce: run {name} FAILED: {why}", fg=typer.colors.RED, err=True)
-    typer.echo(f"reproduce: {output} in {summary.seconds / 60:.1f} min")
-    _warn_below_baseline(output)
-    if summary.failed:
-        raise SystemExit(1)
 
 
 def _warn_below_baseline(output: Path) -> None:
     """Every run's verdict: a WARNING on stderr for a run of a reproduction that does not beat
     its physics baseline (`RunSummary.beats_baseline` false), a "verdict:" line otherwise,
     each with its verdict's statement (evidence, interval and worst cells)."""
-    from sysid.runs.directory import RunDir
+    from sysid.runs.rundir import RunDir
 
     runs = output / "runs"
     for path in sorted(runs.glob("**/summary.json")):

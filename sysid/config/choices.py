@@ -147,6 +147,14 @@ class Validation(Choice):
         return "validation"
 
 
+
+class TestLogs(Choice):
+    """Where a run's test logs come from (summary.json ``data.test_set``)."""
+
+    FILES = "files"      # the logs ``[data] test`` lists
+    PAPER = "paper"      # the paper's six test logs (a config naming D1 or D2)
+    NONE = "none"        # no test logs
+
 def plain_data(value: typing.Any, leaves: tuple[tuple[type, typing.Callable[[typing.Any], typing.Any]], ...] = ()
                ) -> typing.Any:
     """`value` as plain data for a TOML or JSON writer: a choice (any enum) as its word, a

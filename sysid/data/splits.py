@@ -20,6 +20,7 @@ from typing import Sequence
 
 import numpy as np
 
+from sysid.config.choices import TestLogs
 from sysid.data.datasets import TEST_FILES, test_files, training_files
 from sysid.data.recordings import Run, duplicate_runs, expand_paths
 from sysid.errors import ConfigError, DataError
@@ -37,7 +38,7 @@ class DataSplit:
     train: tuple[Path, ...]
     validation: tuple[Path, ...]
     test: tuple[Path, ...]
-    test_source: str
+    test_source: TestLogs
 
     def parts(self) -> dict[str, tuple[Path, ...]]:
         return {TRAINING: self.train, VALIDATION: self.validation, TEST: self.test}
@@ -80,11 +81,11 @@ def data_split(exp, data: str | os.PathLike | None = None) -> DataSplit:
         source, train = ("-", ())
     validation = config_paths(d.validation, "validation", exp.source)
     if d.test:
-        test, test_source = config_paths(d.test, "test", exp.source), "files"
+        test, test_source = config_paths(d.test, "test", exp.source), TestLogs.FILES
     elif dataset:
-        test, test_source = tuple(test_files(data).values()), "paper"
+        test, test_source = tuple(test_files(data).values()), TestLogs.PAPER
     else:
-        test, test_source = (), "none"
+        test, test_source = (), TestLogs.NONE
     split = DataSplit(source, train, validation, test, test_source)
     check_disjoint_files(split, exp.source)
     return split
@@ -269,7 +270,7 @@ def provenance(source: str, train: Sequence[Run], validation: Sequence[Run], tes
         f"{val_fraction:g} of the {block_s:g}-s blocks of every training log, drawn with the seed"
         if train else "none")
     out = {"training": source, "train": files(train), "validation": validation_text,
-           "test_set": "none" if not test else ("paper" if stems == PAPER_TEST_STEMS else "files"),
+           "test_set": (TestLogs.NONE if not test else TestLogs.PAPER if stems == PAPER_TEST_STEMS else TestLogs.FILES).value,
            "test": files(test)}
     if held_out is not None:
         out["held_out"] = {"val_fraction": val_fraction, "split_seed": split_seed, "groups": held_out.groups}

@@ -15,8 +15,8 @@ from sysid.evaluation.divergence import PhysicalRange
 from sysid.hybrid.ensemble import SeedEnsemble
 from sysid.mmg.model import MMG
 from sysid.mmg.ship import Ship, load_ship
-from sysid.runs.directory import RunDir
-from sysid.runs.rundir import load_model
+from sysid.runs.rundir import RunDir
+from sysid.runs.layout import load_model
 from sysid.store.manifest import has_manifest
 
 

@@ -29,6 +29,7 @@ from sysid.maneuvers.criteria import Criterion, criteria_for
 from sysid.maneuvers.indices import INDEX_COLUMNS
 from sysid.channel_names import INPUTS, STATE
 from sysid.store.files import write_csv, write_text
+from sysid.store.target import RECORD_FILES, OutputKind
 
 MOSTLY_OUTSIDE = 0.5  # gate off on more than this share of the steps: "mostly outside the training data"
 CRITERION_COLUMNS = ("maneuver", "index", "value", "limit", "ratio", "limit_ratio", "met", "rule")
@@ -102,7 +103,7 @@ def trajectory_table(results: Sequence[ManeuverResult]) -> pd.DataFrame:
 
 def summary_document(subject_label: str, kind: str, ship, conditions, sources: dict[str, str],
                      results: Sequence[ManeuverResult], compiled: bool, seconds: float, spread: str = "") -> dict:
-    """summary.json of a maneuvers directory: the model, the ship's dimensions and scale,
+    """maneuvers.json of a maneuvers directory: the model, the ship's dimensions and scale,
     every condition with where it came from, per maneuver the kNN gate's off share."""
     L, B = float(ship["L_pp"]), float(ship["B"])
     scale = ship.maneuvering.get("scale")
@@ -125,11 +126,11 @@ def summary_document(subject_label: str, kind: str, ship, conditions, sources: d
 
 
 def write_maneuvers(directory, results: Sequence[ManeuverResult], ship, conditions, summary: dict) -> None:
-    """indices.csv, criteria.csv, trajectories.csv and summary.json into `directory` (a
+    """indices.csv, criteria.csv, trajectories.csv and maneuvers.json into `directory` (a
     staging directory: `sysid.store.staging.staged_directory`)."""
     directory = Path(directory)
     L, scale = float(ship["L_pp"]), ship.maneuvering.get("scale")
     write_csv(indices_table(results, L, conditions.speed, scale), directory / "indices.csv", float_format="%.8g")
     write_csv(criteria_table(results, L, conditions.speed, scale), directory / "criteria.csv", float_format="%.8g")
     write_csv(trajectory_table(results), directory / "trajectories.csv", float_format="%.10g")
-    write_text(json.dumps(summary, indent=2), directory / "summary.json")
+    write_text(json.dumps(summary, indent=2), directory / RECORD_FILES[OutputKind.MANEUVERS])

@@ -45,7 +45,18 @@ def derived_constants(c, names) -> dict:
     H_R, eta, kappa, f_alpha and the mass terms of the equations of motion. `c` holds the
     coefficients (`names`) as 0-d tensors; only the names the ship has are derived."""
     have = {name: None for name in names}
-    out = {}
+    out: dict = {}
+    _scale_constants(c, have, out)
+    _rudder_constants(c, have, out)
+    _interaction_constants(c, have, out)
+    if "m" in have:
+        _mass_constants(c, out)
+    return out
+
+
+def _scale_constants(c, have: dict, out: dict) -> None:
+    """Into `out`: the scales of the hull and the propeller (q, q L_pp, powers of L_pp, D, P)
+    and the hull's resistance terms."""
     if "rho" in have and "L_pp" in have and "d" in have:
         out["q"] = 0.5 * c.rho * c.L_pp * c.d
         out["qL"] = out["q"] * c.L_pp
@@ -62,6 +73,11 @@ def derived_constants(c, names) -> dict:
     if "C_D" in have:
         out["C_D_L"] = c.C_D / c.L_pp
         out["C_D_L2"] = c.C_D / (c.L_pp * c.L_pp)
+
+
+def _rudder_constants(c, have: dict, out: dict) -> None:
+    """Into `out`: the rudder's span, Fujii's gradient and the four-quadrant jet (when the
+    ship has lambda_R), and eta, kappa and the inflow terms of the rudder."""
     if "lambda_R" in have:  # four-quadrant rudder: span, Fujii's normal-force gradient
         out["H_R"] = torch.sqrt(c.A_R * c.lambda_R)
         out["kappa"] = c.k_x / c.epsilon
@@ -80,6 +96,11 @@ def derived_constants(c, names) -> dict:
         out["eps2_eta"] = c.epsilon * c.epsilon * out["eta"]
         out["eps2_one_minus_eta"] = c.epsilon * c.epsilon * out["one_minus_eta"]
         out["jet_D2"] = 8.0 * out["D2"] / math.pi
+
+
+def _interaction_constants(c, have: dict, out: dict) -> None:
+    """Into `out`: the hull-rudder and hull-propeller interaction terms (a_H, t_R, t_P, w_P0,
+    x_P, the four-quadrant wake) and the air's half density."""
     if "a_H" in have:
         out["one_plus_aH"] = 1.0 + c.a_H
         out["one_minus_tR"] = 1.0 - c.t_R
@@ -106,25 +127,27 @@ def derived_constants(c, names) -> dict:
         out["minus_C_1"] = -c.C_1
     if "rho_air" in have:
         out["half_rho_air"] = 0.5 * c.rho_air
-    if "m" in have:
-        m, xG = c.m, c.x_G
-        out["m_plus_mx"] = m + c.m_x
-        out["m_plus_my"] = m + c.m_y
-        out["mxG"] = m * xG
-        out["a22"] = c.I_zz_J_zz + xG * xG * m
-        out["det"] = out["m_plus_my"] * out["a22"] - out["mxG"] * out["mxG"]
-        # Eq. (4) solved: u_dot = X/(m+m_x) + (m+m_y)/(m+m_x) v r + m x_G/(m+m_x) r^2,
-        # (v_dot, r_dot) = [[a22, -mxG], [-mxG, m+m_y]] (Y - (m+m_x) u r, N - mxG u r) / det
-        det, mx, my, mxG = out["det"], out["m_plus_mx"], out["m_plus_my"], out["mxG"]
-        out["eom_X_u"] = 1.0 / mx
-        out["eom_vr_u"] = my / mx
-        out["eom_rr_u"] = mxG / mx
-        out["eom_Y_v"] = out["a22"] / det
-        out["eom_N_v"] = -mxG / det
-        out["eom_ur_v"] = (mxG * mxG - out["a22"] * mx) / det
-        out["eom_N_r"] = my / det
-        out["eom_ur_r"] = mxG * (mx - my) / det
-    return out
+
+
+def _mass_constants(c, out: dict) -> None:
+    """Into `out`: the mass terms of the equations of motion, Eq. (4) solved for the accelerations."""
+    m, xG = c.m, c.x_G
+    out["m_plus_mx"] = m + c.m_x
+    out["m_plus_my"] = m + c.m_y
+    out["mxG"] = m * xG
+    out["a22"] = c.I_zz_J_zz + xG * xG * m
+    out["det"] = out["m_plus_my"] * out["a22"] - out["mxG"] * out["mxG"]
+    # Eq. (4) solved: u_dot = X/(m+m_x) + (m+m_y)/(m+m_x) v r + m x_G/(m+m_x) r^2,
+    # (v_dot, r_dot) = [[a22, -mxG], [-mxG, m+m_y]] (Y - (m+m_x) u r, N - mxG u r) / det
+    det, mx, my, mxG = out["det"], out["m_plus_mx"], out["m_plus_my"], out["mxG"]
+    out["eom_X_u"] = 1.0 / mx
+    out["eom_vr_u"] = my / mx
+    out["eom_rr_u"] = mxG / mx
+    out["eom_Y_v"] = out["a22"] / det
+    out["eom_N_v"] = -mxG / det
+    out["eom_ur_v"] = (mxG * mxG - out["a22"] * mx) / det
+    out["eom_N_r"] = my / det
+    out["eom_ur_r"] = mxG * (mx - my) / det
 
 
 # every name `derived_constants` may give

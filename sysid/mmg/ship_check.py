@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Mapping
 
 from sysid.mmg.ship import Ship
 
@@ -43,8 +44,18 @@ def course_stability_verdict(index: float) -> str:
 
 def check_ship(ship: Ship) -> ShipCheck:
     """Derived quantities and warnings for `ship` (already validated by `load_ship`)."""
-    p = ship.parameters
     out = ShipCheck(ship)
+    _check_hull(ship.parameters, out)
+    _check_propeller(ship.parameters, out)
+    _check_rudder(ship.parameters, out)
+    if not ship.has_wind:
+        out.warnings.append("no [wind] section: wind forces are zero (fine for tank tests and calm water)")
+    return out
+
+
+def _check_hull(p: Mapping[str, float], out: ShipCheck) -> None:
+    """The hull's masses (non-dimensional by 1/2 rho L^2 d and 1/2 rho L^4 d), block
+    coefficient and course stability into `out`."""
     add, warn = out.quantities.append, out.warnings.append
     L, d, B, rho = p["L_pp"], p["d"], p["B"], p["rho"]
     q_mass, q_inertia = 0.5 * rho * L * L * d, 0.5 * rho * L ** 4 * d
@@ -73,7 +84,12 @@ def check_ship(ship: Ship) -> ShipCheck:
              "N_v, N_r and [mass] m, m_x, x_G")
     if Yv > 0 or Nr > 0:
         warn("Y'v > 0 or N'r > 0: sway and yaw damping of the hull should be negative")
-    # propeller
+
+
+def _check_propeller(p: Mapping[str, float], out: ShipCheck) -> None:
+    """The propeller's bollard thrust coefficient, zero-thrust advance ratio and diameter against the draft."""
+    add, warn = out.quantities.append, out.warnings.append
+    d = p["d"]
     D = p["D"]
     add(("propeller K_T at J = 0", p["k0"], ""))
     disc = p["k1"] ** 2 - 4 * p["k2"] * p["k0"]
@@ -87,7 +103,12 @@ def check_ship(ship: Ship) -> ShipCheck:
     add(("propeller diameter / draft", D / d, ""))
     if D > d:
         warn(f"propeller diameter {D} m exceeds the draft {d} m")
-    # rudder
+
+
+def _check_rudder(p: Mapping[str, float], out: ShipCheck) -> None:
+    """The rudder's height, area and position against the hull's (x_R in metres from midship)."""
+    add, warn = out.quantities.append, out.warnings.append
+    L, d, D = p["L_pp"], p["d"], p["D"]
     if "H_R" in p:
         H_R = p["H_R"]
         add(("eta = D / H_R", D / H_R, ""))
@@ -104,6 +125,3 @@ def check_ship(ship: Ship) -> ShipCheck:
              "x_R is in metres from midship, not a fraction of L_pp")
     if not 0.01 <= p["A_R"] / (L * d) <= 0.05:
         warn(f"rudder area ratio A_R/(L d) = {p['A_R'] / (L * d):.3g} is outside the usual 1/100 .. 1/20")
-    if not ship.has_wind:
-        warn("no [wind] section: wind forces are zero (fine for tank tests and calm water)")
-    return out

@@ -19,6 +19,7 @@ from sysid.errors import ConfigError
 from sysid.config.choices import ModelKind
 from sysid.config.experiment import Experiment, load_experiment
 from sysid.store.files import write_csv, write_text
+from sysid.store.target import RECORD_FILES, OutputKind
 from sysid.runs.lifecycle import cached_test_runs, cached_training_runs, run_experiment
 from sysid.runs.reproduction import DatasetScore, Reproduction, Scorecard
 from sysid.maneuvers.recorded import RECORD_FILE, write_record_comparison
@@ -212,7 +213,7 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
               overrides: dict | None = None, log: Callable[[str], None] = print,
               jobs: int = 1, seeds: int = 1, address: str | None = None, storage: str | None = None,
               mlflow: str | None = None) -> Reproduction:
-    """Run the protocol; write runs/, comparison.csv, table7.md, table8.md, summary.json.
+    """Run the protocol; write runs/, comparison.csv, table7.md, table8.md, reproduction.json.
 
     `jobs` > 1 trains that many runs side by side in worker processes (each with its
     config's ``[training] threads``, 1 by default): the results do not depend on it. Ctrl-C
@@ -288,7 +289,7 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
         seeds=seeds, scorecard=card, scorecard_ensemble=card_ensemble,
         identified_hybrid_D2_cells_beating_paper_hybrid=identified_cells,
         gate_off_share_random_30s={n: shares[n].get(f"{random_file}_h30.csv") for n in names if n.startswith("hybrid")})
-    write_text(summary.to_text(), out / "summary.json")
+    write_text(summary.to_text(), out / RECORD_FILES[OutputKind.REPRODUCTION])
     return summary
 
 

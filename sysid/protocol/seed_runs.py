@@ -19,8 +19,8 @@ from sysid.device import compute_threads
 from sysid.evaluation.evaluate import evaluate_model
 from sysid.config.experiment import Experiment
 from sysid.protocol.paper import run_variant
-from sysid.runs.directory import RunDir
-from sysid.runs.rundir import load_model, write_run
+from sysid.runs.rundir import RunDir
+from sysid.runs.layout import load_model, write_run
 from sysid.protocol.seeds import seed_metrics
 from sysid.hybrid.ensemble import SeedEnsemble
 from sysid.sweep.inbox import complete_summary

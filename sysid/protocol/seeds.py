@@ -7,7 +7,7 @@ from typing import Sequence
 import pandas as pd
 
 from sysid.evaluation.evaluate import METRICS_COLUMNS
-from sysid.runs.directory import with_divergence
+from sysid.runs.rundir import with_divergence
 
 RMSE = ["rmse_u", "rmse_v", "rmse_r"]
 SPREAD_COLUMNS = ["std_u", "std_v", "std_r", "n_seeds"]   # std over seeds (ddof 1), seeds counted

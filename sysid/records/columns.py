@@ -1,6 +1,6 @@
 """The column names of a run directory's tables (metrics.csv, baseline_metrics.csv,
 history.csv, traces/) and a trace's file name. Torch-free: written by
-`sysid.evaluation.evaluate` and `sysid.runs.rundir`, read by `sysid.runs.directory.RunDir`."""
+`sysid.evaluation.evaluate` and `sysid.runs.layout`, read by `sysid.runs.rundir.RunDir`."""
 from __future__ import annotations
 
 import re

@@ -1,7 +1,7 @@
 """summary.json of a run directory as a typed record (`RunSummary`), key for key, and the
 run's validation loss in words (`VAL_LOSS_DEFINITION`). Torch-free.
 
-Written by `sysid.runs.rundir.write_run`, read by `sysid.runs.directory.RunDir.read_summary`
+Written by `sysid.runs.layout.write_run`, read by `sysid.runs.rundir.RunDir.read_summary`
 (the report, sweeps, seed runs and the CLI read it there). Keys it does not know are kept
 (`extra`, see `sysid.records.base`): a run written by a newer sysid still opens. Runs written
 before a key existed read it as its default.
@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from sysid.config.choices import GateSpace, ModelKind, Solver, StartStates
+from sysid.config.choices import GateSpace, ModelKind, Solver, StartStates, TestLogs
 from sysid.records.base import JsonRecord
 
 LEGACY_VAL_LOSS = "val_loss"  # val_loss_multistep's key in runs written before it was renamed
@@ -238,7 +238,7 @@ class DataSummary(JsonRecord):
     training: str
     train: tuple[LogFile, ...] = ()
     validation: Any = "none"                  # tuple of `LogFile` as read: see `validation_logs`
-    test_set: str = "none"
+    test_set: TestLogs = TestLogs.NONE
     test: tuple[LogFile, ...] = ()
     held_out: dict[str, Any] | None = None
     extra: dict[str, Any] = field(default_factory=dict)

@@ -80,7 +80,7 @@ def _placeholder(message: str, into=None):
 def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
                  progress: Callable[[str], None] | None = None, sweeps=()) -> ReportPaths:
     """Write ``out_dir/report.html`` and ``out_dir/report.pdf`` for a run directory or a
-    reproduction directory (`sysid.runs.rundir`); `sweeps`: sweep directories whose validation
+    reproduction directory (`sysid.runs.layout`); `sweeps`: sweep directories whose validation
     landscape and chosen configuration the report shows beside. Raises `CheckpointError`
     naming the missing or corrupt file."""
     started = time.perf_counter()

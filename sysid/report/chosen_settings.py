@@ -10,7 +10,7 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-from sysid.config.choices import ModelKind
+from sysid.config.choices import ModelKind, Validation
 from sysid.package_data import bundled_dir
 from sysid.config.experiment import Experiment
 from sysid.protocol.paper import run_label
@@ -66,7 +66,7 @@ def validation_text(run: RunRecord) -> str:
         return f"{len(named)} named validation log{'s' if len(named) != 1 else ''} ([data] validation)"
     fraction = float(_setting(run, "training", "val_fraction") or 0.0)
     design = str(_setting(run, "training", "validation") or "blocks")
-    if design == "files":
+    if design == Validation.FILES:
         seed = _setting(run, "training", "split_seed")
         return (f"whole files: {100 * fraction:.0f} % of each maneuver group's training logs held out"
                 + (f" (split seed {seed})" if seed is not None else ""))

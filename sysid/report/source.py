@@ -1,6 +1,6 @@
-"""Reading a run directory or a reproduction directory (layout: `sysid.runs.rundir`).
+"""Reading a run directory or a reproduction directory (layout: `sysid.runs.layout`).
 
-Runs are read through `sysid.runs.directory.RunDir`: every file the report needs is checked
+Runs are read through `sysid.runs.rundir.RunDir`: every file the report needs is checked
 when it is read; a missing or corrupt file raises `CheckpointError` naming it, and a run or
 reproduction whose manifest is missing or disagrees with its files is refused
 (`IncompleteOutputError`). Traces are read lazily (a full reproduction holds ~70 of them).
@@ -15,12 +15,12 @@ import pandas as pd
 
 from preprocessing.quality import QualityReport
 from sysid.errors import CheckpointError
-from sysid.config.choices import ModelKind
+from sysid.config.choices import ModelKind, TestLogs
 from sysid.data.splits import PAPER_TEST_STEMS
 from sysid.evaluation.verdict import BaselineVerdict, seed_mean_verdict
 from sysid.store.manifest import has_manifest, verify_manifest
 from sysid.store.target import OutputKind, record_file
-from sysid.runs.directory import RunDir, read_table
+from sysid.runs.rundir import RunDir, read_table
 from sysid.records.base import read_json_object
 from sysid.runs.reproduction import Reproduction
 from sysid.records.summary import RunSummary
@@ -62,7 +62,7 @@ class RunRecord:
         """Trained on D1/D2 (or not trained) and tested on the paper's six test files."""
         data = self.summary.data
         if data is not None:
-            return data.test_set == "paper" and data.training in ("D1", "D2", "-")
+            return data.test_set is TestLogs.PAPER and data.training in ("D1", "D2", "-")
         stems = {Path(str(f)).stem for f in self.metrics["file"]}
         return self.dataset in ("D1", "D2") or (self.dataset == "-" and stems == set(PAPER_TEST_STEMS))
 
@@ -171,7 +171,7 @@ def _run_order(run: RunRecord) -> tuple:
 
 
 def read_run_dir(path: Path) -> RunRecord:
-    """A run directory (`sysid.runs.rundir`), checked."""
+    """A run directory (`sysid.runs.layout`), checked."""
     run = RunDir.open(path)
     summary = run.read_summary()
     config_text, config = run.read_config_text(), run.read_config()

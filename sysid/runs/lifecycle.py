@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 import torch
 
+from sysid.config.choices import TestLogs
 from sysid.identify.checkpoint import TrainingCheckpoint
 from sysid.data.recordings import Run, read_runs
 from sysid.data.datasets import test_files
@@ -31,7 +32,7 @@ from sysid.evaluation.verdict import (IDENTIFIED_MMG, SHIP_FILE_MMG, BaselineVer
 from sysid.config.experiment import Experiment
 from sysid.hybrid.force_models import CorrectedModel, build_mmg, build_model
 from sysid.mmg.coverage import outside_force_models
-from sysid.runs.rundir import write_run
+from sysid.runs.layout import write_run
 from sysid.identify.trainer import EpochReport, Trainer, TrainingSummary, held_out_validation
 from sysid.config.checks import threads
 
@@ -69,7 +70,7 @@ def evaluation_runs(exp: Experiment, data: str | os.PathLike | None = None) -> l
     """The experiment's test logs: ``[data] test``, else the paper's six when it names a
     paper data set, else none. Read only to evaluate."""
     split = data_split(exp, data)
-    columns = exp.data.columns if split.test_source == "files" else None
+    columns = exp.data.columns if split.test_source is TestLogs.FILES else None
     return read_runs(split.test, exp.data.rate, columns)
 
 
@@ -157,7 +158,7 @@ def check_experiment_fits(exp: Experiment, tests: Sequence[Run]) -> None:
 
 def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[Run],
                    train_runs: Sequence[Run] | None = None, data: str | os.PathLike | None = None,
-                   progress: bool = True, log: Callable[[str], None] = print,
+                   progress: bool = True, log: Callable[[str], None] | None = None,
                    resume: bool = False, overwrite: bool = False,
                    validation: Sequence[Run] | None = None,
                    on_epoch: Callable[[EpochReport], None] | None = None) -> RunResult:
@@ -175,8 +176,9 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
     Threads beyond this machine's cores, or horizons that are not whole samples or longer
     than a test file, are a `ConfigError` before any training.
     `on_epoch` receives every epoch's `EpochReport` (sweeps report it to Ray Tune,
-    tracking to MLflow).
+    tracking to MLflow). `log` takes the stage lines (default: this module's logger, INFO).
     """
+    log = log if log is not None else logging.getLogger(__name__).info
     check_experiment_fits(exp, tests)
     started = time.perf_counter()
     history, training, validation_scores = None, None, None

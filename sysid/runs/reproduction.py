@@ -1,4 +1,4 @@
-"""summary.json of a reproduction directory (``sysid reproduce``) as a typed record: what
+"""reproduction.json (summary.json before) of a reproduction directory (``sysid reproduce``) as a typed record: what
 `sysid.protocol.reproduce.reproduce` returns, writes, and the CLI and the report read."""
 from __future__ import annotations
 

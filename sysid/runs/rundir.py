@@ -1,218 +1,181 @@
-"""Run directories: their layout, and saving and loading them (the contract between
-`sysid.runs.lifecycle`, `sysid.evaluation.evaluate` and `sysid.report`).
+"""`RunDir`: the files of a run directory (layout: `sysid.runs.layout`) and the one reader
+of them. The report, sweeps, seed runs, model loading and the CLI open a run here.
 
-A **run directory** (``sysid train CONFIG -o runs/NAME``)::
-
-    config.toml        resolved experiment config (all defaults filled in)
-    summary.json       {"name", "model": "mmg"|"nn"|"hybrid", "status": "complete"|"failed: ...",
-                        "dataset": "D1"|"D2"|..., "ship", "seed", "created", "train_seconds",
-                        "epochs", "best_epoch", "val_loss_multistep" (the run's validation
-                        loss, "val_loss_definition"), "verdict" (`BaselineVerdict.to_dict`:
-                        model vs physics baselines per split, horizon and channel) and
-                        "beats_baseline", "data" (the logs used: training source, every file
-                        with its SHA-256, test set "files"|"paper"|"none"),
-                        "training_range" ({speed, yaw_rate, factor}: beyond factor times
-                        the training logs' largest speed or |r| a prediction diverged),
-                        "stopped": {stage: "early stop"|"epoch limit"|...},
-                        "n_train_windows", "n_val_windows", "versions": {...},
-                        "mmg_overrides": {...}, "identified": {...}, "identified_initial": {...},
-                        "identified_uncertainty": {names, estimate, std_error, correlation,
-                        undetermined, ...} | null, "identification": {"solver":
-                        "gradient"|"levenberg_marquardt", "start_states", "iterations"|"epochs",
-                        ...} | null (the estimator of both), "gate": {...},
-                        "training": {...}}
-    model.pt           state dict (torch.save of plain tensors; weights_only=True safe)
-    standardization.json  input/output mean and std of the FNN (Eqs. 8, 10)
-    knn.pt             {"bank": (N, F) gate vectors, "threshold": (), "train_distances": (N,),
-                        "k": (), "alpha": ()}
-    history.csv        stage, epoch, train_loss, train_velocity, train_penalty, early_stopping_loss
-                       (L_v on the validation windows during training, before the kNN gate), seconds
-    metrics.csv        `sysid.records.columns.METRICS_COLUMNS`
-    baseline_metrics.csv  the physics baselines on the same test logs: "baseline" (its label,
-                       `sysid.evaluation.verdict`) + METRICS_COLUMNS; with a verdict and test logs
-    traces/            one CSV per (file, horizon): ``{file_stem}_h{H}.csv``, `TRACE_COLUMNS`
-    manifest.json      written last: every other file with its SHA-256 (`sysid.store.manifest`)
-
-Untrained MMG-only runs have no model.pt, knn.pt or history.csv. A run is written into a
-staging directory and moved into place complete (`write_run`); it is read through
-`sysid.runs.directory.RunDir`, which refuses a run whose manifest is missing or disagrees
-with its files. summary.json is `sysid.records.summary.RunSummary`, knn.pt
-`sysid.runs.knn_bank.KnnBank`.
-
-A **reproduction directory** (``sysid reproduce -o OUTDIR``)::
-
-    runs/{name}/        run directories (`sysid.protocol.reproduce.PROTOCOL`); with ``--seeds N`` a
-                        learned run is a folder of N run directories ``seed{k}/``, and
-                        ``runs/{variant}_ensemble_{dataset}/`` is their mean-of-seeds
-                        ensemble (config ``[ensemble] members``)
-    comparison.csv      `sysid.protocol.paper.COMPARISON_COLUMNS`: ours beside the paper's, every cell
-    table7.md, table8.md  the paper's layout (30 s, 100 s), ours (paper)
-    summary.json        `sysid.runs.reproduction.Reproduction`: total time, gate shares,
-                        scorecards against the paper; "runs" (the protocol
-                        entries run) and "protocol" (all of them): fewer is a partial
-                        reproduction, and its report says so on page 1
-    manifest.json       written last, as in a run directory
+Every read is checked: a missing or corrupt file raises `CheckpointError` naming it, and a
+run whose manifest is missing or disagrees with its files is refused by `RunDir.open`
+(`IncompleteOutputError`). A pure reader: importing it loads neither torch nor training
+code (the weights and the kNN bank are read with torch only when asked for).
 """
 from __future__ import annotations
 
-import json
 import os
-import time
+import tomllib
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, ClassVar
 
 import pandas as pd
-import torch
 
-from sysid.hybrid.correction import INPUT_NAMES, OUTPUT_NAMES
-from sysid.hybrid.ensemble import SeedEnsemble
-from sysid.errors import CheckpointError
-from sysid.evaluation.divergence import PhysicalRange
-from sysid.evaluation.evaluate import Evaluation
-from sysid.config.experiment import Experiment, ship_overrides
-from sysid.store.files import write_csv, write_text
-from sysid.mmg.model import MMG
-from sysid.hybrid.force_models import CorrectedModel, build_model
-from sysid.runs.directory import BASELINE_METRICS_COLUMNS, RunDir
-from sysid.runs.knn_bank import KnnBank
-from sysid.records.summary import (VAL_LOSS_DEFINITION, DataSummary, GateSummary, IdentificationSummary, RangeSummary,
-                                   RunSummary, TrainingDetails, UncertaintySummary, VerdictSummary)
-from sysid.runs.tensor_files import save_tensors
-from sysid.store.staging import staged_directory
-from sysid.store.versions import software_versions
+from sysid.config.experiment import Experiment, load_experiment
+from sysid.errors import CheckpointError, ConfigError, IncompleteOutputError
+from sysid.records.columns import (BASELINE_METRICS_COLUMNS, HISTORY_COLUMNS, METRICS_COLUMNS,  # noqa: F401
+                                   REQUIRED_METRICS_COLUMNS, TRACE_COLUMNS, trace_name)
+from sysid.records.summary import RunSummary
+from sysid.store.manifest import MANIFEST, has_manifest, verify_manifest
+
+if TYPE_CHECKING:
+    from sysid.runs.knn_bank import KnnBank
 
 
-def model_state(model: torch.nn.Module) -> dict[str, torch.Tensor]:
-    """State dict without the kNN bank (stored on its own in knn.pt)."""
-    return {k: v.detach().cpu() for k, v in model.state_dict().items() if not k.startswith("gate.")}
-
-
-def save_model(model: torch.nn.Module, run_dir: Path) -> None:
-    """model.pt, standardization.json and knn.pt of a trained model."""
-    if isinstance(model, MMG) and not model.coefficients.trainable_names:
-        return
-    if isinstance(model, SeedEnsemble):  # the members' run directories hold the weights
-        return
-    run = RunDir(run_dir)
-    save_tensors(model_state(model), run.model)
-    if isinstance(model, CorrectedModel):
-        net = model.correction_net
-        stats = {"inputs": list(INPUT_NAMES), "outputs": list(OUTPUT_NAMES),
-                 "input_mean": net.input_mean.tolist(), "input_std": net.input_std.tolist(),
-                 "output_mean": net.output_mean.tolist(), "output_std": net.output_std.tolist(),
-                 "units": {"outputs": "N, N, N m"}}
-        write_text(json.dumps(stats, indent=2), run.standardization)
-        if model.gate is not None:
-            KnnBank.of(model.gate).save(run.knn)
-
-
-def load_model(run_dir: str | os.PathLike, dtype: torch.dtype = torch.float64, _within: tuple[Path, ...] = ()):
-    """(experiment, model) of a run directory; clear errors for a missing or corrupt one, and
-    for an ensemble whose members lead back to itself."""
-    run = RunDir.open(run_dir)
-    exp = run.read_experiment()
-    if exp.ensemble.members:
-        here = run.path.resolve()
-        chain = (*_within, here)
-        members = []
-        for member in exp.ensemble.members:
-            path = (run.path / member).resolve()
-            if path in chain:
-                raise CheckpointError(f"{run.config}: [ensemble] members names {member!r}, which is "
-                                      f"{'this run itself' if path == here else f'the ensemble {path} it belongs to'}"
-                                      "; an ensemble's members are other run directories: remove it from the list")
-            members.append(load_model(path, dtype, chain)[1])
-        return exp, SeedEnsemble(members)
-    model = build_model(exp, dtype)
-    if not exp.needs_training:
-        return exp, model
+def read_table(path: Path, columns: list[str], required: bool = True) -> pd.DataFrame | None:
+    """A CSV table with (at least) `columns`; None when absent and not `required`;
+    `CheckpointError` naming the file otherwise."""
+    if not path.is_file():
+        if required:
+            raise CheckpointError(f"{path}: file not found")
+        return None
     try:
-        model.load_state_dict(run.read_model_state())
-    except RuntimeError as exc:
-        raise CheckpointError(f"{run.model}: does not fit the config's model ({str(exc)[:300]})") from None
-    if isinstance(model, CorrectedModel) and exp.gate.enabled:
-        model.gate, model.gate_enabled = run.read_knn_bank(model.gate_width).gate(dtype), True
-    return exp, model
+        frame = pd.read_csv(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise CheckpointError(f"{path}: not a readable CSV ({exc})") from None
+    missing = [c for c in columns if c not in frame.columns]
+    if missing:
+        raise CheckpointError(f"{path}: missing column(s) {missing}")
+    return frame
 
 
-def _parsed(record, value: dict | None, at: str):
-    """A trainer's summary part as its record (None stays None)."""
-    return None if value is None else record.from_json(value, "summary.json (being written)", at)
+def with_divergence(frame: pd.DataFrame) -> pd.DataFrame:
+    """A metrics table with its ``diverged`` and ``diverged_at_s`` columns (False, NaN when
+    absent: a run written before divergence was marked)."""
+    if "diverged" not in frame.columns:
+        frame = frame.assign(diverged=False)
+    if "diverged_at_s" not in frame.columns:
+        frame = frame.assign(diverged_at_s=float("nan"))
+    return frame.assign(diverged=frame["diverged"].fillna(False).astype(bool))
 
 
-def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds: float | None = None,
-                verdict=None, data: dict | None = None, limits: PhysicalRange | None = None) -> RunSummary:
-    """summary.json of a run; `training` is the trainer's `TrainingSummary` (None if untrained),
-    `verdict` its `sysid.evaluation.verdict.BaselineVerdict`, `data` the logs it used
-    (`sysid.data.splits.provenance`), `limits` the training logs' `PhysicalRange` (None: none)."""
-    info = training.to_dict() if training is not None else {}
-    failure = info.pop("failure", None)
-    return RunSummary(
-        name=exp.experiment.name, model=exp.experiment.model,
-        status=f"failed: {failure}" if failure else "complete",
-        dataset="files" if exp.data.train else (exp.experiment.dataset if exp.needs_training else "-"),
-        ship=exp.experiment.ship, seed=exp.experiment.seed,
-        created=time.strftime("%Y-%m-%dT%H:%M:%S%z"), seconds=seconds,
-        train_seconds=info.pop("train_seconds", None),
-        epochs=info.pop("epochs", 0),
-        best_epoch=info.pop("best_epoch", None),
-        val_loss_multistep=info.pop("val_loss_multistep", None),
-        val_loss_definition=VAL_LOSS_DEFINITION,
-        verdict=_parsed(VerdictSummary, verdict.to_dict() if verdict is not None else None, "verdict"),
-        beats_baseline=verdict.beats_baseline if verdict is not None else None,
-        data=_parsed(DataSummary, data, "data"),
-        training_range=_parsed(RangeSummary, limits.to_dict() if limits is not None else None, "training_range"),
-        stopped=info.pop("stopped", {}),
-        n_train_windows=info.pop("n_train_windows", None),
-        n_val_windows=info.pop("n_val_windows", None),
-        versions=software_versions(), mmg_overrides=ship_overrides(exp),
-        identified=info.pop("identified", {}) or {},
-        identified_initial=info.pop("identified_initial", {}) or {},
-        identified_uncertainty=_parsed(UncertaintySummary, info.pop("identified_uncertainty", None),
-                                       "identified_uncertainty"),
-        identification=_parsed(IdentificationSummary, info.pop("identification", None), "identification"),
-        gate=_parsed(GateSummary, {**(info.pop("gate", None) or {}), "off_share": evaluation.gate_off_share}, "gate"),
-        training=_parsed(TrainingDetails, info, "training"),
-    )
+def _file(name: str, what: str) -> property:
+    """A property: the path of `name` in the run directory."""
+    return property(lambda self: self.path / name, doc=f"{name}: {what}.")
 
 
-def write_run(run_dir: str | os.PathLike, exp: Experiment, model, evaluation: Evaluation,
-              history: pd.DataFrame | None = None, training=None,
-              seconds: float | None = None, overwrite: bool = False, verdict=None,
-              data: dict | None = None, baseline_metrics: pd.DataFrame | None = None, limits: PhysicalRange | None = None) -> Path:
-    """Write a complete run directory (config, weights, kNN bank, history, metrics, traces).
+@dataclass(frozen=True)
+class RunDir:
+    """A run directory at `path`: its files' paths, and their checked readers."""
 
-    Staged (`sysid.store.staging`): the files go into a hidden directory beside `run_dir`, sealed
-    with a manifest and moved into place complete; an existing `run_dir` is refused unless
-    `overwrite`, which replaces all of it.
-    """
-    with staged_directory(run_dir, "run", overwrite) as staging:
-        _write_run_files(RunDir(staging), exp, model, evaluation, history, training, seconds, verdict, data,
-                         baseline_metrics, limits)
-    return Path(run_dir)
+    path: Path
+    REQUIRED: ClassVar[tuple[str, ...]] = ("config.toml", "summary.json", "metrics.csv")
+
+    def __post_init__(self):
+        object.__setattr__(self, "path", Path(self.path))  # a str given is a Path here
+
+    @classmethod
+    def open(cls, path: str | os.PathLike) -> "RunDir":
+        """The run directory at `path`, verified against its manifest (every listed file
+        present and unchanged, the `REQUIRED` ones listed)."""
+        path = Path(path)
+        if not path.is_dir():
+            raise CheckpointError(f"{path}: run directory not found")
+        verify_manifest(path, "run", cls.REQUIRED)
+        return cls(path)
+
+    @classmethod
+    def complete(cls, path: str | os.PathLike) -> "RunDir | None":
+        """The run directory at `path` when it is complete, else None (never written,
+        interrupted, changed afterwards)."""
+        if not has_manifest(path):
+            return None
+        try:
+            return cls.open(path)
+        except (IncompleteOutputError, CheckpointError, OSError):
+            return None
+
+    # -- the files -----------------------------------------------------------------
+    config = _file("config.toml", "the resolved experiment config")
+    summary = _file("summary.json", "`RunSummary`")
+    model = _file("model.pt", "the state dict without the kNN bank (trained runs only)")
+    knn = _file("knn.pt", "`KnnBank` (hybrid and NN runs with a gate)")
+    standardization = _file("standardization.json", "the FNN's input and output mean and std")
+    history = _file("history.csv", "losses per stage and epoch (trained runs only)")
+    metrics = _file("metrics.csv", "`sysid.records.columns.METRICS_COLUMNS`")
+    baseline_metrics = _file("baseline_metrics.csv", "the physics baselines on the same test logs "
+                             "(`BASELINE_METRICS_COLUMNS`; runs with a verdict and test logs)")
+    traces = _file("traces", "one CSV per (test file, horizon)")
+    manifest = _file(MANIFEST, "every other file with its SHA-256, written last")
+
+    def trace(self, file_stem: str, horizon_s: float) -> Path:
+        """The trace of a test file at a horizon [s]."""
+        return self.traces / trace_name(file_stem, horizon_s)
+
+    # -- reading them --------------------------------------------------------------
+    def read_summary(self) -> RunSummary:
+        return RunSummary.read(self.summary)
+
+    def read_config_text(self) -> str:
+        if not self.config.is_file():
+            raise CheckpointError(f"{self.config}: file not found")
+        return self.config.read_text()
+
+    def read_config(self) -> dict:
+        """config.toml as a TOML table (as written: every section, defaults filled in)."""
+        try:
+            return tomllib.loads(self.read_config_text())
+        except tomllib.TOMLDecodeError as exc:
+            raise CheckpointError(f"{self.config}: not valid TOML ({exc})") from None
+
+    def read_experiment(self) -> Experiment:
+        try:
+            return load_experiment(self.config)
+        except ConfigError as exc:
+            raise CheckpointError(f"{self.path}: bad run config ({exc})") from None
+
+    def read_metrics(self) -> pd.DataFrame:
+        """metrics.csv as written (RMSE of u, v_m [m/s] and r [rad/s]); a run written before
+        divergence was marked reads as not diverged."""
+        return with_divergence(read_table(self.metrics, REQUIRED_METRICS_COLUMNS))
+
+    def read_baseline_metrics(self) -> pd.DataFrame | None:
+        """baseline_metrics.csv (`BASELINE_METRICS_COLUMNS`), None for a run without one."""
+        frame = read_table(self.baseline_metrics, ["baseline"] + REQUIRED_METRICS_COLUMNS, required=False)
+        return with_divergence(frame) if frame is not None else None
+
+    def read_history(self) -> pd.DataFrame | None:
+        """history.csv, None for an untrained run. Runs written before ``val_loss_multistep``
+        named the per-epoch ``early_stopping_loss`` ``val_loss``: read under the new name."""
+        history = read_table(self.history, HISTORY_COLUMNS[:2], required=False)
+        if history is None:
+            return None
+        history = history.rename(columns={"val_loss": "early_stopping_loss"})
+        if "early_stopping_loss" not in history.columns:
+            raise CheckpointError(f"{self.history}: missing column(s) ['early_stopping_loss']")
+        return history
+
+    def read_trace(self, file_stem: str, horizon_s: float) -> pd.DataFrame | None:
+        """A trace (`TRACE_COLUMNS`), None when the run has none for that file and horizon."""
+        return read_table(self.trace(file_stem, horizon_s), TRACE_COLUMNS, required=False)
+
+    def read_model_state(self) -> dict:
+        """model.pt: the state dict (plain tensors, all finite)."""
+        from sysid.runs.tensor_files import check_finite, load_tensors  # torch: only when asked
+        state = load_tensors(self.model)
+        if not isinstance(state, dict):
+            raise CheckpointError(f"{self.model}: not a state dict")
+        check_finite(state, self.model)
+        return state
+
+    def read_knn_bank(self, width: int | None = None) -> KnnBank:
+        """knn.pt, checked (`KnnBank`); `width`: F of the model's gate vectors, if known."""
+        from sysid.runs.knn_bank import KnnBank  # torch: only when asked
+        return KnnBank.load(self.knn, width)
 
 
-def _used_files(exp: Experiment, data: dict | None) -> Experiment:
-    """`exp` with ``[data]`` train / validation / test as the files used (globs and
-    directories expanded), so the run's config.toml names what it was made from."""
-    if not data or not exp.data.train:
-        return exp
-    listed = {key: tuple(f["file"] for f in data[key]) for key in ("train", "validation", "test")
-              if isinstance(data.get(key), list)}
-    if data.get("held_out"):  # validation drawn from the training logs: all of them are [data] train
-        listed["train"] += listed.pop("validation", ())
-    return exp.replace(data=listed)
+_WRITER_NAMES = ("load_model", "save_model", "model_state", "run_summary", "write_run")
 
 
-def _write_run_files(run: RunDir, exp: Experiment, model, evaluation: Evaluation,
-                     history: pd.DataFrame | None, training, seconds: float | None, verdict=None,
-                     data: dict | None = None, baseline_metrics: pd.DataFrame | None = None, limits: PhysicalRange | None = None) -> None:
-    write_text(_used_files(exp, data).to_toml(), run.config)
-    save_model(model, run.path)
-    if history is not None and len(history):
-        write_csv(history, run.history, float_format="%.6g")
-    write_csv(evaluation.metrics, run.metrics, float_format="%.6g")
-    if baseline_metrics is not None and len(baseline_metrics):
-        write_csv(baseline_metrics[BASELINE_METRICS_COLUMNS], run.baseline_metrics, float_format="%.6g")
-    for name, frame in evaluation.traces.items():
-        write_csv(frame, run.traces / name, float_format="%.8g")
-    write_text(run_summary(exp, evaluation, training, seconds, verdict, data, limits).to_text(), run.summary)
+def __getattr__(name: str):
+    """The writer's names, which lived here before (`sysid.runs.layout`): loaded on first use,
+    so importing `RunDir` still loads no torch."""
+    if name in _WRITER_NAMES:
+        import importlib
+        return getattr(importlib.import_module("sysid.runs.layout"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -33,7 +33,7 @@ from pathlib import Path, PurePosixPath
 from sysid.errors import IncompleteOutputError
 from sysid.store.files import atomic_path, directory_mode
 from sysid.errors import CheckpointError
-from sysid.runs.directory import RunDir
+from sysid.runs.rundir import RunDir
 from sysid.runs.lifecycle import checkpoint_path
 from sysid.runs.summary import RunSummary
 

@@ -1,6 +1,6 @@
 """A sweep's results: one row per trial (``results.csv``), one per configuration over its
 seeds (``points.csv``: mean, std, min, max of the validation loss), the chosen
-configuration (lowest mean validation loss over all its seeds) in ``summary.json``.
+configuration (lowest mean validation loss over all its seeds) in ``sweep.json``.
 
 Only complete run directories count; a trial without one is "stopped early" (by the
 sweep's scheduler), "failed" (its error from Ray) or "missing" (never trained, interrupted).
@@ -13,8 +13,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from sysid.runs.directory import RunDir
+from sysid.runs.rundir import RunDir
 from sysid.store.files import write_csv, write_text
+from sysid.store.target import RECORD_FILES, OutputKind
 from sysid.sweep.inbox import complete_summary
 from sysid.sweep.plan import TRIALS_DIR
 from sysid.sweep.points import format_value
@@ -106,12 +107,12 @@ def _plain(value):
 
 def write_results(spec: SweepSpec, out: Path, results: SweepResults, seconds: float,
                   tune: str | None = None, mlflow: str | None = None) -> SweepSummary:
-    """results.csv, points.csv and summary.json (each written atomically), with where
+    """results.csv, points.csv and sweep.json (each written atomically), with where
     Tune's experiment (`tune`) and the MLflow store (`mlflow`) are."""
     write_csv(results.trials, out / "results.csv", float_format="%.6g")
     write_csv(results.points, out / "points.csv", float_format="%.6g")
     summary = SweepSummary(spec.name, str(spec.base_path), spec.search, tuple(spec.seeds), spec.objective,
                            tuple(spec.keys), **results.counts, best=results.best, seconds=seconds,  # type: ignore[arg-type]
                            scheduler=str(spec.scheduler.kind), tune=tune, mlflow=mlflow)
-    write_text(summary.to_text(), out / "summary.json")
+    write_text(summary.to_text(), out / RECORD_FILES[OutputKind.SWEEP])
     return summary

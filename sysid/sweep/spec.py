@@ -242,6 +242,30 @@ def _tracking(source: str, table) -> str:
 
 def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = None, text: str = "") -> SweepSpec:
     """A parsed sweep TOML document to a validated `SweepSpec`."""
+    table = _sweep_table(doc, source)
+    base, base_path = _base(doc, table, source, directory)
+    try:
+        search = Search.parse(table.get("search", "grid"), f"{source}: [sweep] search")
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+    objective = table.get("objective", "val_loss_multistep")
+    objective = "val_loss_multistep" if objective == "val_loss" else objective  # its older name
+    if objective not in OBJECTIVES:
+        raise ConfigError(f"{source}: [sweep] objective = {objective!r}: the objective is the validation "
+                          "loss (val_loss_multistep); test files are never used to choose")
+    seeds, ints = _seeds_and_counts(table, base, source)
+    name = _sweep_name(table, source)
+    axes = _axes(doc, source, base, search, directory)
+    scheduler = parse_scheduler(source, table.get("scheduler", "none"), doc.get("scheduler", {}))
+    mlflow = _tracking(source, doc.get("tracking", {}))
+    if mlflow and not Path(mlflow).is_absolute() and "://" not in mlflow and not mlflow.startswith("file:"):
+        mlflow = str((directory or Path.cwd()) / mlflow)   # a path relative to the sweep file
+    return SweepSpec(name, base, base_path, axes, tuple(seeds), search, ints["samples"], objective,
+                     ints["max_retries"], ints["search_seed"], source, text, scheduler, mlflow, directory)
+
+
+def _sweep_table(doc: dict, source: str) -> dict:
+    """The [sweep] table; `ConfigError` for an unknown section or key, or no [sweep]."""
     unknown = set(doc) - {"sweep", "set", "vary", "scheduler", "tracking"}
     if unknown:
         raise ConfigError(f"{source}: unknown section(s) {sorted(unknown)} "
@@ -253,6 +277,11 @@ def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = Non
     for key in table:
         if key not in known:
             raise ConfigError(f"{source}: [sweep] unknown key {key!r} (known: {', '.join(sorted(known))})")
+    return table
+
+
+def _base(doc: dict, table: dict, source: str, directory: Path | None):
+    """(the base experiment with [set] applied, the path of its config)."""
     if not isinstance(table.get("base"), str):
         raise ConfigError(f"{source}: [sweep] base must name the experiment config (a path)")
     base_path = Path(table["base"])
@@ -267,15 +296,11 @@ def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = Non
     if fixed:
         base = apply_values(base, {k: tuple(v) if isinstance(v, list) else v for k, v in fixed.items()},
                             base.experiment.seed, base.experiment.name, source, directory)
-    try:
-        search = Search.parse(table.get("search", "grid"), f"{source}: [sweep] search")
-    except ValueError as exc:
-        raise ConfigError(str(exc)) from None
-    objective = table.get("objective", "val_loss_multistep")
-    objective = "val_loss_multistep" if objective == "val_loss" else objective  # its older name
-    if objective not in OBJECTIVES:
-        raise ConfigError(f"{source}: [sweep] objective = {objective!r}: the objective is the validation "
-                          "loss (val_loss_multistep); test files are never used to choose")
+    return base, base_path
+
+
+def _seeds_and_counts(table: dict, base, source: str) -> tuple[list, dict]:
+    """(the seeds, {samples, max_retries, search_seed}) of [sweep], each checked."""
     seeds = table.get("seeds", [base.experiment.seed])
     if (not isinstance(seeds, list) or not seeds or any(isinstance(s, bool) or not isinstance(s, int) or s < 0
                                                        for s in seeds) or len(set(seeds)) != len(seeds)):
@@ -286,6 +311,11 @@ def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = Non
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
             raise ConfigError(f"{source}: [sweep] {key} must be an integer >= {low}, got {value!r}")
         ints[key] = value
+    return seeds, ints
+
+
+def _sweep_name(table: dict, source: str) -> str:
+    """[sweep] name (one safe path component), else the sweep file's stem."""
     if "name" in table:
         name = table["name"]
         if not isinstance(name, str) or not SAFE_NAME.fullmatch(name):
@@ -294,6 +324,11 @@ def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = Non
                               "\"hybrid_D2_lr\"")
     else:
         name = safe_name(Path(source).stem if source != "<sweep>" else "sweep")
+    return name
+
+
+def _axes(doc: dict, source: str, base, search: Search, directory: Path | None) -> tuple:
+    """The [vary] axes, each checked against the base experiment and the search."""
     vary = doc.get("vary", {})
     if not isinstance(vary, dict):
         raise ConfigError(f"{source}: [vary] must be a table of \"section.option\" = values")
@@ -303,12 +338,7 @@ def parse_sweep(doc: dict, source: str = "<sweep>", directory: Path | None = Non
             raise ConfigError(f"{source}: [vary] {axis.key!r}: a {axis.distribution} distribution needs "
                               "search = \"random\" or \"optuna\" (grid search takes a list of values)")
         _check_axis_values(source, axis, base, directory)
-    scheduler = parse_scheduler(source, table.get("scheduler", "none"), doc.get("scheduler", {}))
-    mlflow = _tracking(source, doc.get("tracking", {}))
-    if mlflow and not Path(mlflow).is_absolute() and "://" not in mlflow and not mlflow.startswith("file:"):
-        mlflow = str((directory or Path.cwd()) / mlflow)   # a path relative to the sweep file
-    return SweepSpec(name, base, base_path, axes, tuple(seeds), search, ints["samples"], objective,
-                     ints["max_retries"], ints["search_seed"], source, text, scheduler, mlflow, directory)
+    return axes
 
 
 def load_sweep(path: str | os.PathLike) -> SweepSpec:

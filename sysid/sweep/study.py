@@ -5,11 +5,11 @@ Output directory::
     manifest.json     written when the sweep starts: sweep.toml and base.toml (kind "sweep")
     sweep.toml        the sweep file as given (a resumed sweep must match it)
     base.toml         the base experiment, every option resolved
-    trials/{point}/seed{k}/   one ordinary run directory per trial (`sysid.runs.rundir`)
+    trials/{point}/seed{k}/   one ordinary run directory per trial (`sysid.runs.layout`)
     trials.log        journal: one JSON line per trial event (started, resumed, trained, reused)
     results.csv       one row per trial: varied values, seed, status, validation loss, epochs
     points.csv        one row per configuration: validation loss over its seeds
-    summary.json      counts, the chosen configuration and its runs, where Tune's experiment is
+    sweep.json        counts, the chosen configuration and its runs, where Tune's experiment is
     tune/             Ray Tune's experiment (unless --storage puts it elsewhere):
                       tune.ExperimentAnalysis reads every trial's per-epoch validation loss
 

@@ -1,4 +1,4 @@
-"""summary.json of a sweep directory as a typed record (`SweepSummary`): written by
+"""sweep.json (summary.json before) of a sweep directory as a typed record (`SweepSummary`): written by
 `sysid.sweep.results.write_results`, read by the CLI and the report."""
 from __future__ import annotations
 

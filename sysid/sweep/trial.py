@@ -1,5 +1,5 @@
 """One trial of a sweep: one configuration and seed trained into an ordinary run directory
-(`sysid.runs.rundir`; ``sysid evaluate`` and ``sysid report`` read it).
+(`sysid.runs.layout`; ``sysid evaluate`` and ``sysid report`` read it).
 
 A trial may run on any node: it needs nothing but the network. Its data come with it
 (`TrialData`, read once by the driver and shipped through Ray's object store); it trains in

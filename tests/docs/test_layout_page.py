@@ -48,8 +48,8 @@ def test_layout_names_only_modules_that_exist():
 
 
 def test_the_check_sees_a_module_left_out():
-    tree = [["sysid", "runs", "directory"], ["sysid", "report", "palette"], ["preprocessing", "gnss"]]
-    page = "| `sysid.runs.directory` | ... |\n| `sysid.report/` | `palette` |\n| `preprocessing/` | `gnss` |\n"
+    tree = [["sysid", "runs", "rundir"], ["sysid", "report", "palette"], ["preprocessing", "gnss"]]
+    page = "| `sysid.runs.rundir` | ... |\n| `sysid.report/` | `palette` |\n| `preprocessing/` | `gnss` |\n"
     assert unnamed(page, tree) == []
     assert unnamed(page.replace("`palette`", "palette"), tree) == ["sysid.report.palette"]
-    assert unnamed(page.replace("sysid.runs.directory", "sysid.runs.rundir"), tree) == ["sysid.runs.directory"]
+    assert unnamed(page.replace("sysid.runs.rundir", "sysid.runs.layout"), tree) == ["sysid.runs.rundir"]

@@ -58,7 +58,7 @@ def test_compare_hybrid_nn_and_ship_mmg_on_two_held_back_logs(project, dataset_d
     from sysid.evaluation.evaluate import evaluate_model
     from sysid.mmg import MMG
     from sysid.mmg.ship import load_ship
-    from sysid.runs.rundir import load_model
+    from sysid.runs.layout import load_model
 
     monkeypatch.chdir(project)
     done = in_process(capsys, "compare", "runs/hybrid", "runs/nn", "--ship", "esso_osaka",

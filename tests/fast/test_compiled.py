@@ -25,7 +25,7 @@ from sysid.dynamics.integrators import Integrator, Method
 from sysid.hybrid.knn_gate import KNNGate
 from sysid.hybrid.force_models import build_model
 from sysid.store.manifest import write_manifest
-from sysid.runs.rundir import load_model, save_model
+from sysid.runs.layout import load_model, save_model
 from sysid.dynamics.integrators import run_steps
 from sysid.fast.stepper import Step
 

@@ -14,7 +14,7 @@ from sysid.store.manifest import write_manifest
 from sysid.config.experiment import load_experiment, parse_experiment
 from sysid.hybrid.knn_gate import KNNGate
 from sysid.evaluation.evaluate import evaluate_model
-from sysid.runs.rundir import load_model, write_run
+from sysid.runs.layout import load_model, write_run
 from sysid.identify.trainer import Trainer, output_penalty
 
 ADDED_FORCE = torch.tensor([-1.5, 0.8, -0.6], dtype=torch.float64)  # X [N], Y [N], N [N m], body frame

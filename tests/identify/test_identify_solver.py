@@ -16,8 +16,8 @@ from sysid.cli import run as sysid
 from sysid.errors import ConfigError
 from sysid.config.experiment import load_experiment, parse_experiment
 from sysid.report.methods import estimator_text
-from sysid.runs.directory import RunDir
-from sysid.runs.rundir import load_model
+from sysid.runs.rundir import RunDir
+from sysid.runs.layout import load_model
 
 from processed_runs import write_processed_csv
 

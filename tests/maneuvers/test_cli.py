@@ -47,7 +47,7 @@ def test_directory_holds_indices_criteria_trajectories_and_report(written):
     assert len(one) == 301 and one.t.iloc[-1] == pytest.approx(60.0)
     assert one.u.iloc[0] == pytest.approx(1.17248) and one.psi.iloc[0] == 0.0
     assert np.degrees(one.rudder_angle.max()) == pytest.approx(35.0)
-    summary = json.loads((written / "summary.json").read_text())
+    summary = json.loads((written / "maneuvers.json").read_text())
     assert summary["sources"]["speed"].startswith("ship file") and summary["sources"]["rps"].startswith("straight")
     assert summary["conditions"]["rudder_rate_deg_s"] == pytest.approx(2.32 * math.sqrt(45.714))
     manifest = json.loads((written / "manifest.json").read_text())

@@ -30,7 +30,7 @@ def test_reproduce_with_two_seeds(tmp_path, dataset_dir):
     from sysid.store.manifest import write_manifest
     from sysid.report import build_report
     from sysid.protocol.reproduce import reproduce
-    from sysid.runs.rundir import load_model
+    from sysid.runs.layout import load_model
 
     out = tmp_path / "repro"
     tiny = {"training": {"epochs": 3, "warm_start_epochs": 3}, "evaluation": {"horizons": (30.0,)}}

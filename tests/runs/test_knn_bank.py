@@ -10,9 +10,9 @@ import torch
 
 from sysid.errors import CheckpointError
 from sysid.hybrid.knn_gate import KNNGate
-from sysid.runs.directory import RunDir
+from sysid.runs.rundir import RunDir
 from sysid.runs.knn_bank import KnnBank
-from sysid.runs.rundir import load_model
+from sysid.runs.layout import load_model
 from sysid.store.manifest import write_manifest
 
 

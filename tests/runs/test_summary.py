@@ -12,7 +12,9 @@ import pytest
 from sysid.config.choices import Solver
 from sysid.errors import CheckpointError, RecordError
 from sysid.evaluation.verdict import BaselineVerdict
-from sysid.runs.directory import RunDir
+from sysid.records.summary import GateSummary, IdentificationSummary, UncertaintySummary
+from sysid.runs.layout import run_summary
+from sysid.runs.rundir import RunDir
 from sysid.runs.records import JsonRecord
 from sysid.runs.summary import RunSummary
 from synthetic_rundir import measured_runs, write_run
@@ -58,6 +60,25 @@ def test_summary_keeps_the_trainers_blocks_key_for_key_in_their_order(which, req
     assert json.dumps(written["gate"]) == json.dumps(gate)
     rest = {k: v for k, v in made.items() if k not in KEYS and k != "failure"}
     assert json.dumps(written["training"]) == json.dumps(rest)
+
+
+@pytest.mark.parametrize("which", ["hybrid_run", "levenberg_marquardt_run"])
+def test_the_trainers_blocks_as_records_write_the_same_summary(which, request):
+    """`run_summary` takes the trainer's identification, sigma and gate as records as well as
+    the dicts the trainer gives today: the same blocks, byte for byte, as the run wrote."""
+    result = request.getfixturevalue(which)
+    written = json.loads(RunDir(result.path).summary.read_text())
+    made = result.training
+    typed = dataclasses.replace(
+        made,
+        identification=IdentificationSummary.from_json(made.identification) if made.identification else None,
+        identified_uncertainty=(UncertaintySummary.from_json(made.identified_uncertainty)
+                                if made.identified_uncertainty else None),
+        gate=GateSummary.from_json(made.gate) if made.gate else None)
+    assert isinstance(typed.identification, IdentificationSummary)
+    again = run_summary(result.experiment, result.evaluation, typed).to_json()
+    for key in ("identification", "identified_uncertainty", "gate", "training"):
+        assert json.dumps(again[key]) == json.dumps(written[key]), key
 
 
 def test_hybrid_summary_agrees_with_the_runs_other_files(hybrid_run):

@@ -1,4 +1,4 @@
-"""Synthetic run and reproduction directories following `sysid.runs.rundir`, for report tests.
+"""Synthetic run and reproduction directories following `sysid.runs.layout`, for report tests.
 
 "Measured" runs are simulated with a perturbed MMG (no real data needed); the MMG runs
 predict with the bundled ship, NN and hybrid runs are made-up blends of the measurement

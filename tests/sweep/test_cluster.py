@@ -62,8 +62,8 @@ def _sysid(args, env, dataset_dir, **kwargs):
 def test_runs_trained_where_nothing_is_shared_arrive_complete(cluster, dataset_dir):
     from sysid.data.recordings import read_run
     from sysid.evaluation.evaluate import evaluate_model
-    from sysid.runs.directory import RunDir
-    from sysid.runs.rundir import load_model
+    from sysid.runs.rundir import RunDir
+    from sysid.runs.layout import load_model
 
     nodes, work = cluster
     worker, seen = nodes.worker_view([work, dataset_dir / "berthing", tiny_test_file(dataset_dir)])

@@ -70,8 +70,8 @@ def _tamper(blob: bytes, name: str, data: bytes) -> bytes:
 
 
 def test_the_inbox_keeps_only_complete_unchanged_runs_of_their_trial(tmp_path, dataset_dir):
-    from sysid.runs.directory import RunDir
-    from sysid.runs.rundir import load_model
+    from sysid.runs.rundir import RunDir
+    from sysid.runs.layout import load_model
     from sysid.runs.summary import RunSummary
 
     run, config = _run_dir(tmp_path, dataset_dir)

@@ -110,7 +110,7 @@ def test_sweep_killed_part_way_resumes_without_training_a_trial_twice(tmp_path, 
     assert len(table) == 4 and set(table.status) == {"complete"}
     assert table.val_loss_multistep.map(math.isfinite).all()
     assert sorted(table.seed) == [0, 0, 1, 1]
-    summary = json.loads((out / "summary.json").read_text())
+    summary = json.loads((out / "sweep.json").read_text())
     points = pd.read_csv(out / "points.csv")
     assert summary["best"]["point"] == points.point.iloc[0]
     assert summary["best"]["val_loss_multistep_mean"] == pytest.approx(points.val_loss_multistep_mean.min(), rel=1e-5)
@@ -118,7 +118,7 @@ def test_sweep_killed_part_way_resumes_without_training_a_trial_twice(tmp_path, 
     assert summary["best"]["val_loss_multistep_mean"] == pytest.approx(best, rel=1e-5)
 
     # every trial is an ordinary run directory
-    from sysid.runs.rundir import load_model
+    from sysid.runs.layout import load_model
     exp, model = load_model(out / table.run.iloc[0])
     assert exp.experiment.seed == table.seed.iloc[0] and exp.training.threads == 1
     # the sweep's report: objective against the keys, seed spread, the chosen configuration
@@ -151,7 +151,7 @@ def test_ctrl_c_during_the_trials_ends_the_sweep_as_interrupted(tmp_path, datase
     log = sweep.communicate(timeout=300)[0]
     assert sweep.returncode == 130, log[-3000:]
     assert "interrupted" in log
-    assert not (out / "results.csv").exists() and not (out / "summary.json").exists()
+    assert not (out / "results.csv").exists() and not (out / "sweep.json").exists()
 
 
 def test_shipped_sweep_files_are_valid():

@@ -71,7 +71,7 @@ def test_every_epoch_is_in_tune_experiment_analysis(sweeps):
 
     tmp, _ = sweeps
     out = tmp / "plain"
-    summary = json.loads((out / "summary.json").read_text())
+    summary = json.loads((out / "sweep.json").read_text())
     assert summary["tune"] == str(out / "tune")
     analysis = tune.ExperimentAnalysis(str(out / "tune"))
     frames = analysis.trial_dataframes
@@ -104,7 +104,7 @@ def test_tuner_restore_gets_the_results(sweeps):
     finally:
         ray.shutdown()
     assert len(grid) == 2 and all(len(r.metrics_dataframe) == EPOCHS + 1 for r in grid)
-    summary = json.loads((out / "summary.json").read_text())
+    summary = json.loads((out / "sweep.json").read_text())
     assert best.config["training__learning_rate"] == summary["best"]["values"]["training.learning_rate"]
     assert best.metrics["val_loss_multistep"] == pytest.approx(summary["best"]["val_loss_multistep_mean"], rel=1e-12)
 
@@ -115,12 +115,12 @@ def test_asha_stops_the_poor_trial_early_with_the_same_best(sweeps):
 
     tmp, logs = sweeps
     epochs = {}
-    assert json.loads((tmp / "asha" / "summary.json").read_text())["tune"] == str(tmp / "store" / "asha")
+    assert json.loads((tmp / "asha" / "sweep.json").read_text())["tune"] == str(tmp / "store" / "asha")
     for name, where in (("plain", tmp / "plain" / "tune"), ("asha", tmp / "store" / "asha")):
         frames = tune.ExperimentAnalysis(str(where)).trial_dataframes.values()
         epochs[name] = sum(int(f.epoch.notna().sum()) for f in frames)
     assert epochs["plain"] == 2 * EPOCHS and epochs["asha"] < epochs["plain"]
-    plain, asha = (json.loads((tmp / n / "summary.json").read_text()) for n in ("plain", "asha"))
+    plain, asha = (json.loads((tmp / n / "sweep.json").read_text()) for n in ("plain", "asha"))
     assert asha["best"]["point"] == plain["best"]["point"] == f"learning_rate={GOOD!r}"
     assert asha["best"]["val_loss_multistep_mean"] == plain["best"]["val_loss_multistep_mean"]
     assert (asha["complete"], asha["stopped_early"]) == (1, 1) and (plain["complete"], plain["stopped_early"]) == (2, 0)
