@@ -142,8 +142,8 @@ def _say_result(result, exp, output: Path, tests, start: float) -> None:
     detail = ""
     if t is not None:
         steps = []
-        if (t.identification or {}).get("solver") == Solver.LEVENBERG_MARQUARDT:  # no epochs in that stage
-            steps.append(f"{t.identification['iterations']} Levenberg-Marquardt iterations")
+        if t.identification is not None and t.identification.solver is Solver.LEVENBERG_MARQUARDT:  # no epochs
+            steps.append(f"{t.identification.iterations} Levenberg-Marquardt iterations")
         if not steps or "train" in t.stopped:
             steps.append(f"{t.epochs} epochs, best {t.best_epoch}")
         detail = f" ({', '.join(steps)}; {stops})"

@@ -61,7 +61,7 @@ from torch import nn
 from torch.func import jacfwd
 
 from sysid.config.choices import Method, StartStates
-from sysid.records.summary import start_state_verdict
+from sysid.records.summary import StartStateCheckSummary, start_state_verdict
 from sysid.channel_names import VELOCITY_INDEX
 from sysid.identify.uncertainty import (CoefficientUncertainty, coefficient_uncertainty, multistep_residuals,
                                uncertainty_from_jacobian, velocity_weights)
@@ -301,6 +301,16 @@ class StartStateCheck:
         """The check in one clause (`start_state_verdict`)."""
         name, value = self.largest
         return start_state_verdict(self.start_states, name, value if math.isfinite(value) else None, self.agrees)
+
+    def summary(self, val_loss_multistep: float) -> StartStateCheckSummary:
+        """The run summary's ``identification.start_state_check`` record; `val_loss_multistep`:
+        the other fit's validation loss."""
+        name, value = self.largest
+        return StartStateCheckSummary(
+            start_states=self.start_states, coefficients=dict(self.coefficients),
+            difference_sigma={k: (v if math.isfinite(v) else None) for k, v in self.difference_sigma.items()},
+            largest=name, largest_sigma=value if math.isfinite(value) else None, limit_sigma=CHECK_LIMIT,
+            agrees=self.agrees, val_loss_multistep=val_loss_multistep)
 
     def as_dict(self) -> dict:
         name, value = self.largest

@@ -40,6 +40,7 @@ training, before the gate exists.
 """
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import os
@@ -71,7 +72,8 @@ from sysid.identify.solvers.gradient import GradientIdentification, gradient_est
 from sysid.identify.solvers.least_squares import LevenbergMarquardtIdentification
 from sysid.identify.warm_start import implied_residual, standardize, warm_start
 from sysid.identify.windowing import SplitReport, held_out_validation, objective_horizons, split_windows
-from sysid.records.summary import VAL_LOSS_DEFINITION
+from sysid.records.base import JsonRecord
+from sysid.records.summary import VAL_LOSS_DEFINITION, GateSummary, IdentificationSummary, UncertaintySummary
 
 # the trainer's names, where code and benchmarks import them from
 __all__ = ["Trainer", "TrainingSummary", "Prepared", "EpochReport", "StageResult", "SplitReport", "VEL",
@@ -100,18 +102,28 @@ class TrainingSummary:
     warm_val_loss: float | None = None
     ensemble_val_loss: float | None = None
     val_loss_multistep: float | None = None  # VAL_LOSS_DEFINITION: the run's validation loss (sweep objective)
-    identified_uncertainty: dict | None = None  # `CoefficientUncertainty.as_dict()`
-    identification: dict | None = None    # the estimator: solver, start_states, iterations, ...
-    gate: dict | None = None
+    identified_uncertainty: UncertaintySummary | None = None  # `CoefficientUncertainty.summary()`
+    identification: IdentificationSummary | None = None  # the estimator: solver, start_states, iterations, ...
+    gate: GateSummary | None = None       # without the off shares (evaluation's)
     train_seconds: float = 0.0
     failure: str | None = None            # why the run failed (a hit wall-clock limit)
 
     def to_dict(self) -> dict:
-        return {k: v for k, v in dataclasses.asdict(self).items() if v is not None}
+        """Plain data (the records as their summary.json objects), None fields left out."""
+        plain = dataclasses.asdict(dataclasses.replace(self, **dict.fromkeys(_RECORDS)))
+        return {f.name: (copy.deepcopy(value.to_json()) if f.name in _RECORDS else plain[f.name])
+                for f in dataclasses.fields(self) if (value := getattr(self, f.name)) is not None}
 
     @classmethod
     def from_dict(cls, d: dict) -> "TrainingSummary":
-        return cls(**{**d, "split": SplitReport(**d["split"])})
+        """The summary in `d` (`to_dict`'s, as a training checkpoint holds it)."""
+        records = {k: record.from_json(d[k], "training checkpoint", k) for k, record in _RECORDS.items() if k in d}
+        return cls(**{**d, "split": SplitReport(**d["split"]), **records})
+
+
+# `TrainingSummary` fields that are records of summary.json
+_RECORDS: dict[str, type[JsonRecord]] = {"identified_uncertainty": UncertaintySummary, "identification": IdentificationSummary,
+                                          "gate": GateSummary}
 
 
 def seed_everything(seed: int) -> None:
@@ -309,7 +321,7 @@ class Trainer:
             summary.stopped["identify"] = solver.stage_.stopped
             summary.best_epoch = solver.stage_.best_epoch  # the training stage's, if one follows
             summary.identified = coefficients(prepared.mmg, names)
-            summary.identified_uncertainty = solver.uncertainty_.as_dict()
+            summary.identified_uncertainty = solver.uncertainty_.summary()
             summary.identification = solver.estimator_
         if not joint:
             prepared.mmg.requires_grad_(False)
@@ -377,13 +389,13 @@ class Trainer:
             disjoint = self.disjoint_windows(prepared.runs, prepared.dtype, prepared.device)
             result = gradient_uncertainty(model, disjoint, exp.identify.parameters, w_v)
             self.journal.uncertainty(result)
-            summary.identified_uncertainty = result.as_dict()
+            summary.identified_uncertainty = result.summary()
             summary.identification = gradient_estimator(len(stage.history), joint=True)
         if exp.gate.enabled:
             summary.gate = self.fit_gate(model, prepared.samples, prepared.dtype)
         return stage.best_loss if exp.gate.enabled else None
 
-    def fit_gate(self, model: CorrectedModel, samples: tuple[torch.Tensor, torch.Tensor], dtype) -> dict:
+    def fit_gate(self, model: CorrectedModel, samples: tuple[torch.Tensor, torch.Tensor], dtype) -> GateSummary:
         """Stage 6: the kNN gate on the training samples' features (or standardised inputs)."""
         gate = self.experiment.gate
         with torch.no_grad():
@@ -393,8 +405,8 @@ class Trainer:
         model.gate = KNNGate(gate.k, gate.alpha, z.shape[-1], dtype).fit(z)
         model.gate_enabled = True
         self.journal.gate(z.shape[0], float(model.gate.threshold))
-        return {"k": gate.k, "alpha": gate.alpha, "space": gate.space, "bank": int(z.shape[0]),
-                "threshold": float(model.gate.threshold)}
+        return GateSummary(k=gate.k, alpha=gate.alpha, space=gate.space, bank=int(z.shape[0]),
+                           threshold=float(model.gate.threshold))
 
     def objective(self, model, runs: Sequence[Run], val: WindowSet, w_v, dtype, device) -> float:
         """The run's validation loss ``val_loss_multistep`` (`VAL_LOSS_DEFINITION`): L_v of the

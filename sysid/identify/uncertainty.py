@@ -35,6 +35,7 @@ from sysid.config.choices import Method
 from sysid.dynamics import integrators
 from sysid.dynamics.equations import derivative
 from sysid.mmg.coefficients import raw_value
+from sysid.records.summary import UncertaintySummary, WeakDirection
 from sysid.channel_names import VELOCITY_INDEX
 
 COVARIANCES = ("sandwich", "gauss_newton")
@@ -90,6 +91,18 @@ class CoefficientUncertainty:
             "n_windows": self.n_windows,
             "method": self.method,
         }
+
+    def summary(self) -> UncertaintySummary:
+        """The run summary's ``identified_uncertainty`` record (inf written as None)."""
+        def clean(a) -> tuple[float | None, ...]:
+            return tuple(None if not math.isfinite(x) else float(x) for x in np.ravel(a))
+        return UncertaintySummary(
+            names=tuple(self.names), estimate=clean(self.estimate), std_error=clean(self.std_error),
+            correlation=tuple(clean(self.correlation[i]) for i in range(len(self.names))),
+            undetermined=tuple(bool(x) for x in self.undetermined),
+            weak_directions=tuple(WeakDirection(d["relative_sigma"], d["combination"]) for d in self.weak_directions),
+            residual_rms=self.residual_rms, n_residuals=self.n_residuals, n_windows=self.n_windows,
+            method=self.method)
 
     def table(self, prior: dict[str, float] | None = None) -> str:
         """Markdown table: name, estimate +- 2 sigma, (prior), flag."""

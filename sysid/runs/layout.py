@@ -137,8 +137,8 @@ def load_model(run_dir: str | os.PathLike, dtype: torch.dtype = torch.float64, _
 
 
 def _parsed(record, value, at: str):
-    """A part of the summary as its `record` type: a record as it is, a dict (what the
-    trainer gave before its parts were records) parsed; None stays None."""
+    """A part of the summary as its `record` type: a record as it is, a dict parsed; None
+    stays None."""
     if value is None or isinstance(value, record):
         return value
     return record.from_json(value, "summary.json (being written)", at)
@@ -150,10 +150,9 @@ _TRAINER_RECORDS = {"identified_uncertainty": UncertaintySummary, "identificatio
 
 
 def _trainer_records(training) -> dict:
-    """identified_uncertainty, identification (records or None) and gate (a `GateSummary`
-    without the off shares, or None) of the trainer's `TrainingSummary`, each taken as the
-    trainer holds it: a record, or a dict parsed into one."""
-    return {key: _parsed(record, getattr(training, key, None), key) for key, record in _TRAINER_RECORDS.items()}
+    """identified_uncertainty, identification and gate (a `GateSummary` without the off
+    shares) of the trainer's `TrainingSummary`: records, or None."""
+    return {key: getattr(training, key, None) for key in _TRAINER_RECORDS}
 
 
 def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds: float | None = None,

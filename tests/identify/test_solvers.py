@@ -12,6 +12,7 @@ import torch
 
 from benchmark_scripts import load_benchmark
 from sysid import load_ship
+from sysid.config.choices import Solver
 from sysid.config.experiment import parse_experiment
 from sysid.device import compute_threads
 from sysid.dynamics.rollouts import WindowSet
@@ -68,7 +69,7 @@ def test_levenberg_marquardt_strategy_lands_on_the_truth(problem):
     assert isinstance(solver, Identification) and solver.fit(mmg, _data(windows)) is solver
     np.testing.assert_allclose(list(coefficients(mmg, NAMES).values()), truth, rtol=1e-6)
     assert solver.stage_.history[0]["epoch"] == solver.fit_.iterations and solver.val_loss_ < 1e-10
-    assert solver.estimator_["solver"] == "levenberg_marquardt" and list(solver.uncertainty_.names) == NAMES
+    assert solver.estimator_.solver is Solver.LEVENBERG_MARQUARDT and list(solver.uncertainty_.names) == NAMES
 
 
 def test_gradient_strategy_moves_towards_the_truth_through_the_loop(problem, tmp_path):
@@ -88,7 +89,7 @@ def test_gradient_strategy_moves_towards_the_truth_through_the_loop(problem, tmp
     after = np.array(list(coefficients(mmg, NAMES).values()))
     assert np.linalg.norm((after - truth) / truth) < 0.7 * np.linalg.norm((first - truth) / truth)
     assert solver.stage_.best_loss < 0.5 * first_loss and len(solver.stage_.history) == 15
-    assert solver.estimator_["solver"] == "gradient" and solver.estimator_["epochs"] == 15
+    assert solver.estimator_.solver is Solver.GRADIENT and solver.estimator_.epochs == 15
     # the loop's parts wrote and said it: one checkpoint, one report per epoch, the stage's line
     assert (tmp_path / "ckpt.pt").is_file() and [r.epoch for r in reports] == list(range(1, 16))
     assert said[-1].startswith("identify: 15 epochs, best early-stopping loss")

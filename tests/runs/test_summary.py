@@ -8,8 +8,10 @@ import json
 from pathlib import Path
 
 import pytest
+import torch
 
 from sysid.config.choices import Solver
+from sysid.identify.trainer import TrainingSummary
 from sysid.errors import CheckpointError, RecordError
 from sysid.evaluation.verdict import BaselineVerdict
 from sysid.records.summary import GateSummary, IdentificationSummary, UncertaintySummary
@@ -63,20 +65,28 @@ def test_summary_keeps_the_trainers_blocks_key_for_key_in_their_order(which, req
 
 
 @pytest.mark.parametrize("which", ["hybrid_run", "levenberg_marquardt_run"])
-def test_the_trainers_blocks_as_records_write_the_same_summary(which, request):
-    """`run_summary` takes the trainer's identification, sigma and gate as records as well as
-    the dicts the trainer gives today: the same blocks, byte for byte, as the run wrote."""
+def test_a_checkpoint_summary_of_the_dict_trainer_loads_as_records(which, request, tmp_path):
+    """A training checkpoint's summary as the trainer wrote it when its identification, sigma
+    and gate were dicts (the blocks of summary.json, the gate without its off shares) loads
+    with ``weights_only=True`` into the records the trainer gives now, and writes the same
+    summary.json blocks."""
     result = request.getfixturevalue(which)
     written = json.loads(RunDir(result.path).summary.read_text())
     made = result.training
-    typed = dataclasses.replace(
-        made,
-        identification=IdentificationSummary.from_json(made.identification) if made.identification else None,
-        identified_uncertainty=(UncertaintySummary.from_json(made.identified_uncertainty)
-                                if made.identified_uncertainty else None),
-        gate=GateSummary.from_json(made.gate) if made.gate else None)
-    assert isinstance(typed.identification, IdentificationSummary)
-    again = run_summary(result.experiment, result.evaluation, typed).to_json()
+    legacy = {**made.to_dict(), "identification": written["identification"],
+              "identified_uncertainty": written["identified_uncertainty"]}
+    legacy.pop("gate", None)
+    gate = {k: v for k, v in written["gate"].items() if k != "off_share"}
+    if gate:
+        legacy["gate"] = gate
+    torch.save({"summary": legacy}, tmp_path / "checkpoint.pt")
+    loaded = TrainingSummary.from_dict(torch.load(tmp_path / "checkpoint.pt", weights_only=True)["summary"])
+    assert isinstance(made.identification, IdentificationSummary)
+    assert isinstance(loaded.identification, IdentificationSummary)
+    assert isinstance(loaded.identified_uncertainty, UncertaintySummary)
+    assert (loaded.gate is None) == (made.gate is None) and (made.gate is None or isinstance(made.gate, GateSummary))
+    assert loaded.to_dict() == made.to_dict()
+    again = run_summary(result.experiment, result.evaluation, loaded).to_json()
     for key in ("identification", "identified_uncertainty", "gate", "training"):
         assert json.dumps(again[key]) == json.dumps(written[key]), key
 

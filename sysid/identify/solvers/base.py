@@ -22,6 +22,7 @@ from sysid.config.experiment import Experiment
 from sysid.dynamics.rollouts import WindowSet
 from sysid.identify.loop import StageResult
 from sysid.identify.uncertainty import CoefficientUncertainty
+from sysid.records.summary import IdentificationSummary
 
 
 @dataclass(frozen=True)
@@ -57,7 +58,7 @@ class Identification(ABC):
 
     stage_: StageResult
     uncertainty_: CoefficientUncertainty
-    estimator_: dict
+    estimator_: IdentificationSummary
 
 
 def coefficients(mmg: torch.nn.Module, names) -> dict[str, float]:

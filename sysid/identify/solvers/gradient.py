@@ -10,6 +10,7 @@ from sysid.config.choices import Method, Solver, Stage, StartStates
 from sysid.identify.loop import TrainingLoop
 from sysid.identify.solvers.base import Identification, IdentificationData
 from sysid.identify.uncertainty import CoefficientUncertainty, coefficient_uncertainty
+from sysid.records.summary import IdentificationSummary
 
 
 def gradient_uncertainty(model, disjoint, names, w_v) -> CoefficientUncertainty:
@@ -18,11 +19,11 @@ def gradient_uncertainty(model, disjoint, names, w_v) -> CoefficientUncertainty:
     return coefficient_uncertainty(model, disjoint, list(names), w_v)
 
 
-def gradient_estimator(epochs: int, joint: bool) -> dict:
+def gradient_estimator(epochs: int, joint: bool) -> IdentificationSummary:
     """What identified the coefficients with ``solver = "gradient"`` (for the summary)."""
-    return {"solver": Solver.GRADIENT.value, "start_states": StartStates.RECORDED.value, "epochs": epochs,
-            "stage": "joint with the FNN" if joint else Stage.BEFORE.value, "integrator": Method.EULER.value,
-            "covariance": "sandwich"}
+    return IdentificationSummary(solver=Solver.GRADIENT, start_states=StartStates.RECORDED, epochs=epochs,
+                                 stage="joint with the FNN" if joint else Stage.BEFORE.value,
+                                 integrator=Method.EULER.value, covariance="sandwich")
 
 
 class GradientIdentification(Identification):

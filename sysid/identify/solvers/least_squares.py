@@ -14,6 +14,7 @@ from sysid.identify.levenberg_marquardt import fit_uncertainty, identify_levenbe
 from sysid.identify.losses import multistep_loss
 from sysid.identify.loop import StageResult
 from sysid.identify.solvers.base import Identification, IdentificationData, coefficients
+from sysid.records.summary import IdentificationSummary
 
 
 class LevenbergMarquardtIdentification(Identification):
@@ -64,9 +65,8 @@ class LevenbergMarquardtIdentification(Identification):
                "train_velocity": self.train_loss_, "train_penalty": 0.0, "early_stopping_loss": self.val_loss_,
                "seconds": time.perf_counter() - started}
         self.stage_ = StageResult([row], fit.iterations, self.val_loss_, fit.stopped)
-        self.estimator_ = {"solver": Solver.LEVENBERG_MARQUARDT.value, "start_states": ident.start_states.value,
-                           "prior_weight": ident.prior_weight, "iterations": fit.iterations,
-                           "windows": self.windows_, "integrator": Method.EULER.value,
-                           "covariance": self.uncertainty_.method,
-                           "start_state_check": {**check.as_dict(), "val_loss_multistep": self.check_val_loss_}}
+        self.estimator_ = IdentificationSummary(
+            solver=Solver.LEVENBERG_MARQUARDT, start_states=ident.start_states, prior_weight=ident.prior_weight,
+            iterations=fit.iterations, windows=self.windows_, integrator=Method.EULER.value,
+            covariance=self.uncertainty_.method, start_state_check=check.summary(self.check_val_loss_))
         return self
