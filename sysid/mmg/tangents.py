@@ -119,6 +119,66 @@ def _row(x: torch.Tensor) -> torch.Tensor:
     return x.unsqueeze(-2)
 
 
+class _Factors(NamedTuple):
+    """The `_CONSTANTS` as (1,) vectors, in their order."""
+
+    lateral_P: torch.Tensor
+    lateral_R: torch.Tensor
+    two_C_P: torch.Tensor
+    two_k2: torch.Tensor
+    two_eps2_one_minus_eta: torch.Tensor
+    two_eps2_eta: torch.Tensor
+    two_C_PR: torch.Tensor
+    dX_0_pi: torch.Tensor
+    C7: torch.Tensor
+    jet_D2: torch.Tensor
+    kitagawa_jet_eps2: torch.Tensor
+    one_minus_tP_rho_D4: torch.Tensor
+    rho_D4: torch.Tensor
+    kappa: torch.Tensor
+
+
+class _Motion(NamedTuple):
+    """The state's velocities and what every family reads of them, with tangents (..., 6)."""
+
+    u: torch.Tensor           # (..., 1) [m/s]
+    v: torch.Tensor           # (..., 1) [m/s]
+    psi: torch.Tensor         # (..., 1) [rad]
+    r: torch.Tensor           # (..., 1) [rad/s]
+    slow: torch.Tensor        # (..., 1) bool: inside the speed guard
+    Ug: torch.Tensor          # (..., 1) guarded speed [m/s]
+    beta_hat: torch.Tensor    # (..., 1) atan2(v, u) [rad]
+    sign_u: torch.Tensor      # (..., 1)
+    d_Ug: torch.Tensor        # (..., 6)
+    d_beta: torch.Tensor      # (..., 6)
+
+
+class _Propeller(NamedTuple):
+    """The propeller's forces and what the rudder's inflow reads of it."""
+
+    force: torch.Tensor          # (..., 3)
+    d_force: torch.Tensor        # (..., 6, 3)
+    omw: torch.Tensor            # (..., 1) 1 - w_P
+    d_omw: torch.Tensor          # (..., 6)
+    K_T: torch.Tensor            # (..., 1)
+    d_KT: torch.Tensor           # (..., 6)
+    n: torch.Tensor              # (..., 1) [rps]
+    n2: torch.Tensor             # (..., 1) n^2 [1/s^2]
+    turning_ahead: torch.Tensor  # (..., 1) bool: n >= 0
+    moving_ahead: torch.Tensor   # (..., 1) bool: u >= 0
+
+
+class _Wind(NamedTuple):
+    """The relative wind: body-frame components, its speed and angle, with tangents."""
+
+    omega: torch.Tensor       # (..., 2) [m/s]
+    d_omega: torch.Tensor     # (..., 6, 2)
+    U_A: torch.Tensor         # (..., 1) [m/s]
+    d_UA: torch.Tensor        # (..., 6)
+    gamma_A: torch.Tensor     # (..., 1) [rad] in [0, 2 pi)
+    d_gamma: torch.Tensor     # (..., 6)
+
+
 def forces_with_tangents(state: torch.Tensor, inputs: torch.Tensor, c, wind: bool = True) -> Tangents:
     """F_MMG (..., 3) and the relative wind's body-frame components (..., 2), each with its
     Jacobian with respect to state (..., 6) = (x, u, y, v, psi, r); inputs (..., 4) = (n [rps],
@@ -127,15 +187,23 @@ def forces_with_tangents(state: torch.Tensor, inputs: torch.Tensor, c, wind: boo
     recorded (call it under ``torch.no_grad()`` or from an autograd Function's forward)."""
     k = constants(state)
     B = basis(state)
-    e_u, e_psi = B.e_u, B.e_psi
-    (lateral_P, lateral_R, two_C_P, two_k2, two_eps2_one_minus_eta, two_eps2_eta, two_C_PR, dX_0_pi, C7, jet_D2,
-     kitagawa_jet_eps2, one_minus_tP_rho_D4, rho_D4, kappa) = coefficient_vectors(c, _CONSTANTS, state)
-    _, u, _, v, psi, r = state.split_with_sizes(_SIX, -1)
+    f = _Factors(*coefficient_vectors(c, _CONSTANTS, state))
     n, delta, U_T, zeta = inputs.split_with_sizes(_FOUR, -1)
-    zero = torch.zeros_like(u)
-    one = torch.ones_like(u)
+    m = _motion(state, k, B)
+    hull, d_hull = _hull(m, c, k, B, f)
+    P = _propeller(m, n, c, k, B, f)
+    rudder, d_rudder = _rudder(m, delta, P, c, k, B, f)
+    W = _relative_wind(m, U_T, zeta, k, B)
+    total = hull + P.force + rudder
+    d_total = d_hull + P.d_force + d_rudder
+    if wind:
+        total, d_total = _wind_force(W, total, d_total, c)
+    return Tangents(total, d_total, W.omega, W.d_omega)
 
-    # speed, guarded speed and drift angle beta_hat = atan2(v, u) [rad]
+
+def _motion(state: torch.Tensor, k, B: Basis) -> _Motion:
+    """Speed, guarded speed and drift angle beta_hat = atan2(v, u) [rad], with tangents."""
+    _, u, _, v, psi, r = state.split_with_sizes(_SIX, -1)
     U = torch.hypot(u, v)
     slow = U < k.speed_guard
     Ug = torch.where(slow, k.low_speed, U)
@@ -143,11 +211,12 @@ def forces_with_tangents(state: torch.Tensor, inputs: torch.Tensor, c, wind: boo
     inv_U = 1.0 / torch.where(U > k.zero, U, k.one)
     d_Ug = state * (B.uv * torch.where(slow, k.zero, inv_U))          # (u, v) / U
     d_beta = state[..., B.swap_uv] * (B.vu * (inv_U * inv_U))         # (-v, u) / U^2
+    return _Motion(u, v, psi, r, slow, Ug, beta_hat, torch.sign(u), d_Ug, d_beta)
 
-    # hull: features (v u, v |u|, v r, r u, r |u|, X0 U u, I1, I2) times a (8, 3) matrix
-    beta_abs = beta_hat.abs()
-    X0 = torch.addcmul(c.X_0F, c.dX_0_pi, beta_abs)
-    d_X0 = (dX_0_pi * torch.sign(beta_hat)) * d_beta
+
+def _crossflow(m: _Motion, c, k, B: Basis) -> tuple[torch.Tensor, torch.Tensor]:
+    """The hull's cross-flow integrals I1, I2 (..., 2) and their tangents (..., 6, 2)."""
+    v, r = m.v, m.r
     Cr, same_v2, same_vb, same_b2, *horner = coefficient_vectors(c, _CROSSFLOW, v)
     b = r * Cr                                                         # (..., 2) [1/s]
     b_abs = b.abs()
@@ -165,30 +234,44 @@ def forces_with_tangents(state: torch.Tensor, inputs: torch.Tensor, c, wind: boo
     I_dv = torch.where(crossing, dP * b_abs, torch.addcmul(2.0 * same_v2 * v, same_vb, b) * sign_v)
     I_dr = torch.where(crossing, torch.addcmul(2.0 * P, dP, -t) * b_abs,
                        torch.addcmul(same_vb * v, 2.0 * same_b2, b) * sign_v) * Cr
-    d_integrals = torch.addcmul(B.v_col * _row(I_dv), B.r_col, _row(I_dr))   # (..., 6, 2)
+    return integrals, torch.addcmul(B.v_col * _row(I_dv), B.r_col, _row(I_dr))   # (..., 6, 2)
+
+
+def _hull(m: _Motion, c, k, B: Basis, f: _Factors) -> tuple[torch.Tensor, torch.Tensor]:
+    """Yoshimura's hull force (..., 3) and its tangents (..., 6, 3): features (v u, v |u|,
+    v r, r u, r |u|, X0 U u, I1, I2) times an (8, 3) matrix."""
+    u, v, r, Ug, beta_hat, sign_u = m.u, m.v, m.r, m.Ug, m.beta_hat, m.sign_u
+    zero = torch.zeros_like(u)
+    one = torch.ones_like(u)
+    beta_abs = beta_hat.abs()
+    X0 = torch.addcmul(c.X_0F, c.dX_0_pi, beta_abs)
+    d_X0 = (f.dX_0_pi * torch.sign(beta_hat)) * m.d_beta
+    integrals, d_integrals = _crossflow(m, c, k, B)
     u_abs = u.abs()
-    sign_u = torch.sign(u)
     X0U = X0 * Ug
     a = torch.cat([v, v, v, r, r, X0U], -1)
     bb = torch.cat([u, u_abs, r, u, u_abs, u], -1)
     hull_matrix = coefficient_matrix(c, _HULL, u)
     hull = torch.cat([a * bb, integrals], -1) @ hull_matrix
-    d_X0U = torch.addcmul(Ug * d_X0, X0, d_Ug)
+    d_X0U = torch.addcmul(Ug * d_X0, X0, m.d_Ug)
     batch = u.shape[:-1]
     d_a = torch.cat([B.hull_first.expand(*batch, 6, 5), _col(d_X0U)], -1)            # (..., 6, 6)
     d_b = torch.addcmul(B.hull_r, B.u_col, _row(torch.cat([one, sign_u, zero, one, sign_u, one], -1)))
     d_products = torch.addcmul(_row(a) * d_b, _row(bb), d_a)
-    d_hull = torch.cat([d_products, d_integrals], -1) @ hull_matrix                 # (..., 6, 3)
+    return hull, torch.cat([d_products, d_integrals], -1) @ hull_matrix            # (..., 6, 3)
 
-    # four-quadrant propeller: inflow (wake, advance ratios, K_T), then the forces
+
+def _propeller(m: _Motion, n: torch.Tensor, c, k, B: Basis, f: _Factors) -> _Propeller:
+    """The four-quadrant propeller: inflow (wake, advance ratios, K_T), then the forces."""
+    u, v, r, Ug, slow, sign_u, e_u = m.u, m.v, m.r, m.Ug, m.slow, m.sign_u, B.e_u
     s_raw = torch.addcmul(v, c.x_P_L, r) / Ug
     s = torch.where(slow, c.slow_lateral_inflow, s_raw)
-    d_s = torch.where(slow, k.zero, (lateral_P - s_raw * d_Ug) / Ug)
+    d_s = torch.where(slow, k.zero, (f.lateral_P - s_raw * m.d_Ug) / Ug)
     s_abs = s.abs()
     wake = torch.addcmul(c.one_minus_wP0, torch.addcmul(c.tau, c.C_P, s_abs), s_abs)
     forward_u = u > k.zero
     omw = torch.where(forward_u, wake.clamp(k.tiny, k.one), k.one)
-    wake_slope = torch.addcmul(c.tau, two_C_P, s_abs) * torch.sign(s)
+    wake_slope = torch.addcmul(c.tau, f.two_C_P, s_abs) * torch.sign(s)
     d_omw = torch.where(forward_u & (wake >= k.tiny) & (wake <= k.one), wake_slope, k.zero) * d_s
     n_stopped = n.abs() < k.tiny
     u_stopped = u.abs() < k.tiny
@@ -205,12 +288,21 @@ def forces_with_tangents(state: torch.Tensor, inputs: torch.Tensor, c, wind: boo
     K_T_reverse = torch.where(upper_line, torch.addcmul(c.C6, c.C7, J_s), c.C3)
     turning_ahead = n >= k.zero
     K_T = torch.where(n_stopped, k.zero, torch.where(turning_ahead, K_T_ahead, K_T_reverse))
-    d_KTa = torch.addcmul(c.k1, two_k2, J) * d_J
-    d_KTr = (torch.where(upper_line, C7, k.zero) * dJs_du) * e_u
+    d_KTa = torch.addcmul(c.k1, f.two_k2, J) * d_J
+    d_KTr = (torch.where(upper_line, f.C7, k.zero) * dJs_du) * e_u
     d_KT = torch.where(n_stopped, k.zero, torch.where(turning_ahead, d_KTa, d_KTr))
     n2 = n * n
     X_P = torch.where(turning_ahead, K_T_ahead * c.one_minus_tP_rho_D4, K_T * c.rho_D4)
-    d_XP = torch.where(turning_ahead, one_minus_tP_rho_D4 * n2 * d_KTa, rho_D4 * n2 * d_KT)
+    d_XP = torch.where(turning_ahead, f.one_minus_tP_rho_D4 * n2 * d_KTa, f.rho_D4 * n2 * d_KT)
+    lateral, d_lateral = _propeller_lateral(J_s, dJs_du, n2, turning_ahead, moving_ahead, c, k)
+    propeller = torch.cat([X_P, lateral], -1) * n2
+    d_propeller = torch.cat([_col(d_XP), B.u_col * _row(d_lateral)], -1)              # (..., 6, 3)
+    return _Propeller(propeller, d_propeller, omw, d_omw, K_T, d_KT, n, n2, turning_ahead, moving_ahead)
+
+
+def _propeller_lateral(J_s, dJs_du, n2, turning_ahead, moving_ahead, c, k) -> tuple[torch.Tensor, torch.Tensor]:
+    """The propeller's lateral force and yaw moment coefficients (..., 2) over n^2 and their
+    derivatives with respect to u (..., 2), times n^2."""
     A6, A7, A8, A1, A2, A3, A4, A5, low, high = coefficient_vectors(c, _LATERAL, J_s)
     second = torch.addcmul(A8, torch.addcmul(A7, A6, J_s), J_s)
     below, above = J_s < low, J_s > high
@@ -219,40 +311,15 @@ def forces_with_tangents(state: torch.Tensor, inputs: torch.Tensor, c, wind: boo
     d_second = torch.addcmul(A7, 2.0 * A6, J_s)
     d_reverse = torch.where(below, A4, torch.where(above, k.zero, A2))
     d_lateral = torch.where(turning_ahead, torch.where(moving_ahead, k.zero, d_second), d_reverse) * (dJs_du * n2)
-    propeller = torch.cat([X_P, lateral], -1) * n2
-    d_propeller = torch.cat([_col(d_XP), B.u_col * _row(d_lateral)], -1)              # (..., 6, 3)
+    return lateral, d_lateral
 
-    # four-quadrant rudder: inflow u_R (Yoshimura, Kitagawa or u), v_R, then F_N
-    u_p = u * omw
-    d_up = torch.addcmul(omw * e_u, u, d_omw)
-    u_p2 = u_p * u_p
-    jet = torch.addcmul(u_p2, K_T * n2, c.jet_D2)
-    jet_root = torch.sqrt(jet)  # >= 0 where this branch is taken
-    half_over_jet_root = torch.where(jet > k.zero, 0.5 / jet_root, k.zero)
-    d_jet_root = torch.addcmul(2.0 * u_p * d_up, n2 * jet_D2, d_KT) * half_over_jet_root
-    core = torch.addcmul(u_p, c.kappa, jet_root - u_p)
-    d_core = torch.addcmul(d_up, kappa, d_jet_root - d_up)
-    outer = u_p2 * c.eps2_one_minus_eta
-    d_outer = (two_eps2_one_minus_eta * u_p) * d_up
-    yoshimura_sq = torch.addcmul(outer, core * core, c.eps2_eta)
-    u_R_yoshimura = torch.sqrt(torch.clamp(yoshimura_sq, min=0.0))
-    d_yoshimura = torch.addcmul(d_outer, two_eps2_eta * core, d_core) * torch.where(
-        yoshimura_sq > k.zero, 0.5 / u_R_yoshimura, k.zero)
-    race = K_T.abs() * c.kitagawa_jet_eps2
-    race_root = torch.sqrt(race)
-    race_slope = torch.where(race > k.zero, (0.5 * kitagawa_jet_eps2) * torch.sign(K_T) / race_root, k.zero)
-    u1 = torch.addcmul(u_p, n, race_root)
-    d_u1 = torch.addcmul(d_up, n * race_slope, d_KT)
-    u1_abs = u1.abs()
-    s_k = torch.addcmul(torch.addcmul(outer, u1 * u1_abs, c.eps2_eta), c.C_PR, u * u)
-    d_sk = torch.addcmul(torch.addcmul(d_outer, two_eps2_eta * u1_abs, d_u1), two_C_PR * u, e_u)
-    s_k_abs = s_k.abs()
-    root_k = torch.sqrt(s_k_abs)
-    u_R_kitagawa = torch.copysign(root_k, s_k)
-    d_kitagawa = d_sk * torch.where(s_k_abs > k.zero, 0.5 / root_k, k.zero)
-    yoshimura_form = turning_ahead & (K_T > k.zero)
-    u_R = torch.where(yoshimura_form, u_R_yoshimura, torch.where(moving_ahead, u_R_kitagawa, u))
-    d_uR = torch.where(yoshimura_form, d_yoshimura, torch.where(moving_ahead, d_kitagawa, e_u))
+
+def _rudder(m: _Motion, delta: torch.Tensor, P: _Propeller, c, k, B: Basis,
+            f: _Factors) -> tuple[torch.Tensor, torch.Tensor]:
+    """The four-quadrant rudder: inflow u_R (Yoshimura, Kitagawa or u), v_R, then F_N; its
+    force (..., 3) and tangents (..., 6, 3)."""
+    v, r = m.v, m.r
+    u_R, d_uR = _rudder_inflow(m, P, c, k, B, f)
     straightening = torch.where(torch.addcmul(v, c.x_R, r) >= k.zero, c.minus_gamma_P, c.minus_gamma_N)
     v_R = straightening * torch.addcmul(v, c.l_R, r)
     alpha_R = delta - torch.atan2(v_R, u_R)
@@ -260,18 +327,58 @@ def forces_with_tangents(state: torch.Tensor, inputs: torch.Tensor, c, wind: boo
     F_N = torch.addcmul(u_R * u_R, v_R, v_R) * sin_a  # / (1/2 rho A_R f_alpha)
     # dF_N = (2 u_R sin a + v_R cos a) du_R + (2 v_R sin a - u_R cos a) dv_R, dv_R = gamma (e_v + l_R e_r)
     d_FN = torch.addcmul(torch.addcmul(2.0 * u_R * sin_a, v_R, cos_a) * d_uR,
-                         torch.addcmul(2.0 * v_R * sin_a, -u_R, cos_a) * straightening, lateral_R)
+                         torch.addcmul(2.0 * v_R * sin_a, -u_R, cos_a) * straightening, f.lateral_R)
     phases, scale = coefficient_vectors(c, _RUDDER, delta)
     rudder_factor = torch.sin(delta + phases) * scale                 # (..., 3)
-    rudder = rudder_factor * F_N
-    d_rudder = _col(d_FN) * _row(rudder_factor)                       # (..., 6, 3)
+    return rudder_factor * F_N, _col(d_FN) * _row(rudder_factor)     # (..., 3), (..., 6, 3)
 
-    # relative wind (the lab's guards) and Fujiwara's forces
+
+def _rudder_inflow(m: _Motion, P: _Propeller, c, k, B: Basis, f: _Factors) -> tuple[torch.Tensor, torch.Tensor]:
+    """The rudder's longitudinal inflow u_R (..., 1) [m/s]: Yoshimura's form (ahead
+    revolutions, K_T > 0), Kitagawa's (else moving ahead) or u, and its tangent (..., 6)."""
+    u, n, e_u, omw, d_omw, K_T, d_KT, n2 = m.u, P.n, B.e_u, P.omw, P.d_omw, P.K_T, P.d_KT, P.n2
+    u_p = u * omw
+    d_up = torch.addcmul(omw * e_u, u, d_omw)
+    u_p2 = u_p * u_p
+    jet = torch.addcmul(u_p2, K_T * n2, c.jet_D2)
+    jet_root = torch.sqrt(jet)  # >= 0 where this branch is taken
+    half_over_jet_root = torch.where(jet > k.zero, 0.5 / jet_root, k.zero)
+    d_jet_root = torch.addcmul(2.0 * u_p * d_up, n2 * f.jet_D2, d_KT) * half_over_jet_root
+    core = torch.addcmul(u_p, c.kappa, jet_root - u_p)
+    d_core = torch.addcmul(d_up, f.kappa, d_jet_root - d_up)
+    outer = u_p2 * c.eps2_one_minus_eta
+    d_outer = (f.two_eps2_one_minus_eta * u_p) * d_up
+    yoshimura_sq = torch.addcmul(outer, core * core, c.eps2_eta)
+    u_R_yoshimura = torch.sqrt(torch.clamp(yoshimura_sq, min=0.0))
+    d_yoshimura = torch.addcmul(d_outer, f.two_eps2_eta * core, d_core) * torch.where(
+        yoshimura_sq > k.zero, 0.5 / u_R_yoshimura, k.zero)
+    race = K_T.abs() * c.kitagawa_jet_eps2
+    race_root = torch.sqrt(race)
+    race_slope = torch.where(race > k.zero, (0.5 * f.kitagawa_jet_eps2) * torch.sign(K_T) / race_root, k.zero)
+    u1 = torch.addcmul(u_p, n, race_root)
+    d_u1 = torch.addcmul(d_up, n * race_slope, d_KT)
+    u1_abs = u1.abs()
+    s_k = torch.addcmul(torch.addcmul(outer, u1 * u1_abs, c.eps2_eta), c.C_PR, u * u)
+    d_sk = torch.addcmul(torch.addcmul(d_outer, f.two_eps2_eta * u1_abs, d_u1), f.two_C_PR * u, e_u)
+    s_k_abs = s_k.abs()
+    root_k = torch.sqrt(s_k_abs)
+    u_R_kitagawa = torch.copysign(root_k, s_k)
+    d_kitagawa = d_sk * torch.where(s_k_abs > k.zero, 0.5 / root_k, k.zero)
+    yoshimura_form = P.turning_ahead & (K_T > k.zero)
+    u_R = torch.where(yoshimura_form, u_R_yoshimura, torch.where(P.moving_ahead, u_R_kitagawa, u))
+    d_uR = torch.where(yoshimura_form, d_yoshimura, torch.where(P.moving_ahead, d_kitagawa, e_u))
+    return u_R, d_uR
+
+
+def _relative_wind(m: _Motion, U_T: torch.Tensor, zeta: torch.Tensor, k, B: Basis) -> _Wind:
+    """The relative wind (the lab's guards): speed U_A, angle gamma_A and the body-frame
+    components U_A (cos gamma_A, sin gamma_A), with tangents."""
+    psi, Ug, slow, beta_hat, d_Ug, d_beta = m.psi, m.Ug, m.slow, m.beta_hat, m.d_Ug, m.d_beta
     course = psi + beta_hat
     cos_c, sin_c = torch.cos(course), torch.sin(course)
     W_x = torch.addcmul(U_T * torch.cos(zeta), Ug, cos_c)
     W_y = torch.addcmul(U_T * torch.sin(zeta), Ug, sin_c)
-    d_course = d_beta + e_psi
+    d_course = d_beta + B.e_psi
     d_Wx = torch.addcmul(cos_c * d_Ug, -Ug * sin_c, d_course)
     d_Wy = torch.addcmul(sin_c * d_Ug, Ug * cos_c, d_course)
     U_A = torch.hypot(W_x, W_y)
@@ -283,20 +390,23 @@ def forces_with_tangents(state: torch.Tensor, inputs: torch.Tensor, c, wind: boo
     angle = torch.where(calm, beta_hat, angle)
     gamma_A = torch.remainder(angle, k.two_pi)
     d_direction = torch.addcmul(W_x * d_Wy, -W_y, d_Wx) * (inv_UA * inv_UA)
-    d_gamma = torch.where(calm, d_beta, torch.where(slow, k.zero, d_direction) - e_psi)
+    d_gamma = torch.where(calm, d_beta, torch.where(slow, k.zero, d_direction) - B.e_psi)
     cos_g, sin_g = torch.cos(gamma_A), torch.sin(gamma_A)
     omega = torch.cat([U_A * cos_g, U_A * sin_g], -1)
     # d(U_A cos g, U_A sin g) = (cos g, sin g) dU_A + U_A (-sin g, cos g) dg
     d_omega = torch.addcmul(_col(d_UA) * _row(torch.cat([cos_g, sin_g], -1)),
                             _col(d_gamma), _row(U_A * torch.cat([-sin_g, cos_g], -1)))  # (..., 6, 2)
-    total = hull + propeller + rudder
-    d_total = d_hull + d_propeller + d_rudder
-    if wind:
-        w_phases, harmonic, constant, matrix = coefficient_vectors(c, _WIND, U_A)
-        arguments = torch.addcmul(w_phases, gamma_A, harmonic)                # (..., 8)
-        C = torch.addmm(constant, torch.sin(arguments).reshape(-1, 8), matrix).view(U_A.shape[:-1] + (3,))
-        dC = (torch.cos(arguments) * harmonic).reshape(-1, 8).mm(matrix).view(U_A.shape[:-1] + (3,))
-        U_A2 = U_A * U_A
-        total = total + C * U_A2
-        d_total = d_total + torch.addcmul(_col(d_gamma) * _row(U_A2 * dC), _col(d_UA), _row(2.0 * U_A * C))
-    return Tangents(total, d_total, omega, d_omega)
+    return _Wind(omega, d_omega, U_A, d_UA, gamma_A, d_gamma)
+
+
+def _wind_force(W: _Wind, total: torch.Tensor, d_total: torch.Tensor, c) -> tuple[torch.Tensor, torch.Tensor]:
+    """`total` (..., 3) and `d_total` (..., 6, 3) with Fujiwara's wind force C(gamma_A) U_A^2 added."""
+    U_A, gamma_A = W.U_A, W.gamma_A
+    w_phases, harmonic, constant, matrix = coefficient_vectors(c, _WIND, U_A)
+    arguments = torch.addcmul(w_phases, gamma_A, harmonic)                # (..., 8)
+    C = torch.addmm(constant, torch.sin(arguments).reshape(-1, 8), matrix).view(U_A.shape[:-1] + (3,))
+    dC = (torch.cos(arguments) * harmonic).reshape(-1, 8).mm(matrix).view(U_A.shape[:-1] + (3,))
+    U_A2 = U_A * U_A
+    total = total + C * U_A2
+    d_total = d_total + torch.addcmul(_col(W.d_gamma) * _row(U_A2 * dC), _col(W.d_UA), _row(2.0 * U_A * C))
+    return total, d_total

@@ -5,6 +5,10 @@ branch, autograd's own choice at the branch switches, the same forward values in
 and float32 on real data, and the boundary where autograd is used instead."""
 from __future__ import annotations
 
+import subprocess
+import types
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -16,7 +20,7 @@ from sysid.mmg.model import MMG
 from sysid.mmg.propeller import propeller_inflow
 from sysid.mmg.rudder import rudder_inflow
 from sysid.mmg.ship import load_ship
-from sysid.mmg.tangents import supported
+from sysid.mmg.tangents import forces_with_tangents, supported
 from sysid.mmg.vjp import mmg_rate
 
 ESSO = MMG(load_ship("esso_osaka"))
@@ -222,3 +226,32 @@ def test_frozen_identified_coefficients_are_read_as_constants():
     (out * weights).sum().backward()
     (ref * weights).sum().backward()
     torch.testing.assert_close(x_new.grad, x_old.grad, rtol=1e-9, atol=1e-9)
+
+
+# the last commit of `forces_with_tangents` in one piece
+ONE_PIECE = "95543ca"
+
+
+def _one_piece_tangents():
+    """`sysid.mmg.tangents` as of `ONE_PIECE` (`git show`), as a module of its own."""
+    root = Path(__file__).resolve().parents[2]
+    source = subprocess.run(["git", "-C", str(root), "show", f"{ONE_PIECE}:sysid/mmg/tangents.py"], check=True,
+                            capture_output=True, text=True).stdout
+    module = types.ModuleType("one_piece_tangents")
+    exec(compile(source, "one_piece_tangents.py", "exec"), module.__dict__)
+    return module
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("wind", [True, False])
+def test_the_parts_give_the_one_piece_functions_numbers_bit_for_bit(dtype, wind):
+    """`forces_with_tangents` in named parts (hull, propeller, rudder, wind) gives the same
+    bits as the one function of `ONE_PIECE` on every branch and at the switches."""
+    old = _one_piece_tangents()
+    c = ESSO.coefficients.values_view(dtype)
+    for state, inputs in (_branch_rows(), _switch_rows()):
+        state, inputs = state.to(dtype), inputs.to(dtype)
+        with torch.no_grad():
+            new, before = forces_with_tangents(state, inputs, c, wind), old.forces_with_tangents(state, inputs, c, wind)
+        for a, b in zip(new, before):
+            assert a.dtype == b.dtype and a.shape == b.shape and torch.equal(a, b)
