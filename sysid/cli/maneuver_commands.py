@@ -122,14 +122,30 @@ def maneuver(
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output directory (all of it)."),
 ) -> None:
     """Turning circles, zig-zags and a crash stop of any model: IMO indices and criteria, trajectories, report."""
-    from sysid.config.choices import Method
-    from sysid.maneuvers import default_conditions, load_maneuver_model, run_maneuvers
-    from sysid.maneuvers.outputs import MOSTLY_OUTSIDE, summary_document, write_maneuvers
-    from sysid.maneuvers.simulate import ahead_only, choose_loop
     from sysid.cli.outputs import claim, ship_file
     from sysid.store.target import OutputKind
 
     start = time.perf_counter()
+    method, wind_from, maneuvers = _checked_options(speed, rps, rudder_rate, dt, duration, integrator, wind,
+                                                    turning or [], zigzag or [], crash_stop, side)
+    source = model if model.is_dir() else ship_file(model)  # what the command reads
+    target = claim(output, OutputKind.MANEUVERS, [source, *(recorded or []), config], overwrite)  # a bad -o fails now
+    subject, logged, maneuvers = _loaded(model, maneuvers, bool(turning or zigzag or crash_stop), recorded, config)
+    conditions, sources = _approach(subject, maneuvers, speed, rps, rudder_rate, dt, duration, wind_from, method)
+    on_interrupt(f"nothing written to {output} (it is moved into place only when complete)")
+    results, compiled, seconds = _simulated(subject, maneuvers, conditions, compiled)
+    compared = _written(target, subject, conditions, sources, results, compiled, seconds, logged, report)
+    _say_outcome(output, results, compared)
+    typer.echo(f"maneuver: {output} ({seconds:.1f} s simulating, {time.perf_counter() - start:.1f} s in all)")
+
+
+def _checked_options(speed, rps, rudder_rate, dt: float, duration, integrator: str, wind: str | None,
+                     turning: list[str], zigzag: list[str], crash_stop: bool, side: str):
+    """The options checked and parsed, each bad one a `ManeuverError` naming it: the
+    integrator (`Method`), the wind (speed [m/s], direction it comes from [rad]) and the
+    maneuvers asked for."""
+    from sysid.config.choices import Method
+
     for option, value in (("--speed", speed), ("--rps", rps), ("--rudder-rate", rudder_rate), ("--dt", dt),
                           ("--duration", duration)):
         _check(option, value)
@@ -139,16 +155,31 @@ def maneuver(
         raise _error(str(exc)) from None
     if duration is not None and duration / dt > MAX_STEPS:
         raise _error(f"--duration {duration:g} s at --dt {dt:g} s: {duration / dt:.0f} steps, more than {MAX_STEPS}")
-    wind_speed, wind_direction = parse_wind(wind)
-    maneuvers = parse_maneuvers(turning or [], zigzag or [], crash_stop, side)
-    source = model if model.is_dir() else ship_file(model)  # what the command reads
-    target = claim(output, OutputKind.MANEUVERS, [source, *(recorded or []), config], overwrite)  # a bad -o fails now
+    wind_from = parse_wind(wind)
+    return method, wind_from, parse_maneuvers(turning, zigzag, crash_stop, side)
+
+
+def _loaded(model: Path, maneuvers: list, asked: bool, recorded: Optional[List[Path]], config: Optional[Path]):
+    """The model to maneuver (`load_maneuver_model`), the --recorded logs' runs, and the
+    maneuvers it can run: IMO's without the crash stop (said) when the propeller model is
+    for ahead motion only and no maneuver was `asked` for."""
+    from sysid.maneuvers import load_maneuver_model
+    from sysid.maneuvers.simulate import ahead_only
+
     subject = load_maneuver_model(model)
     logged = _recorded_runs(recorded or [], config)
-    if not (turning or zigzag or crash_stop) and ahead_only(subject.model):
+    if not asked and ahead_only(subject.model):
         maneuvers = [m for m in maneuvers if m.kind != "crash_stop"]
         typer.echo(f"maneuver: no crash stop: the propeller model {subject.ship.models.get('propeller')!r} is for "
                    "ahead motion only")
+    return subject, logged, maneuvers
+
+
+def _approach(subject, maneuvers: list, speed, rps, rudder_rate, dt: float, duration, wind_from, method):
+    """The approach conditions (`default_conditions`) and where each came from, said in one line."""
+    from sysid.maneuvers import default_conditions
+
+    wind_speed, wind_direction = wind_from
     conditions, sources = default_conditions(subject.model, subject.ship, speed=speed, rps=rps,
                                              rudder_rate=rudder_rate, dt=dt, duration=duration,
                                              wind_speed=wind_speed, wind_direction=wind_direction,
@@ -161,15 +192,31 @@ def maneuver(
                f"U0 {conditions.speed:.4g} m/s ({sources['speed']}), n {conditions.rps:.4g} rps ({sources['rps']}), "
                f"rudder rate {conditions.rudder_rate:.3g} deg/s ({sources['rudder_rate']}), dt {conditions.dt:g} s, "
                f"{conditions.duration:g} s ({sources['duration']}), {conditions.method.value}")
-    on_interrupt(f"nothing written to {output} (it is moved into place only when complete)")
+    return conditions, sources
+
+
+def _simulated(subject, maneuvers: list, conditions, compiled: Optional[bool]):
+    """The maneuvers run on the chosen path (`choose_loop`, said): the results, whether the
+    compiled loop ran, and the seconds simulating."""
+    from sysid.maneuvers import run_maneuvers
+    from sysid.maneuvers.simulate import choose_loop
+
     simulated = time.perf_counter()
     choice = choose_loop([subject.model, *(m for _, m in subject.members)], maneuvers, conditions, compiled)
     typer.echo(f"maneuver: {choice.reason}")
-    compiled = choice.compiled
-    results = run_maneuvers(subject, maneuvers, conditions, compiled=compiled)
-    seconds = time.perf_counter() - simulated
+    results = run_maneuvers(subject, maneuvers, conditions, compiled=choice.compiled)
+    return results, choice.compiled, time.perf_counter() - simulated
+
+
+def _written(target, subject, conditions, sources, results, compiled: bool, seconds: float, logged: dict,
+             report: bool):
+    """The output directory written (staged, moved into place when complete): the maneuvers'
+    files, the comparison with the --recorded logs (returned; None without) and the report."""
+    from sysid.maneuvers.outputs import summary_document, write_maneuvers
+
     summary = summary_document(subject.label, subject.kind, subject.ship, conditions, sources, results, compiled,
                                seconds, subject.spread)
+    compared = None
     with target.staged() as staging:
         write_maneuvers(staging, results, subject.ship, conditions, summary)
         if logged:
@@ -177,8 +224,16 @@ def maneuver(
         if report:
             from sysid.report.maneuver_report import build_maneuver_report
             build_maneuver_report(staging)
+    return compared
+
+
+def _say_outcome(output: Path, results, compared) -> None:
+    """The indices, the comparison with the recorded maneuvers (if any), and warnings for
+    diverged maneuvers and for maneuvers mostly outside the kNN gate's training data."""
+    from sysid.maneuvers.outputs import MOSTLY_OUTSIDE
+
     _print_results(output, results)
-    if logged:
+    if compared is not None:
         _print_record(compared)
     diverged = [own for r in results for own in (r, *r.members) if own.diverged]
     if diverged:
@@ -190,7 +245,6 @@ def maneuver(
             typer.secho(f"  {r.maneuver.name}: kNN gate off on {100 * r.gate_off_share:.0f} % of the steps: the "
                         "maneuver runs mostly outside the training data (the FNN is switched off there)",
                         fg=typer.colors.YELLOW)
-    typer.echo(f"maneuver: {output} ({seconds:.1f} s simulating, {time.perf_counter() - start:.1f} s in all)")
 
 
 def _recorded_runs(paths: list[Path], config: Optional[Path]):
