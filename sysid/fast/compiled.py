@@ -23,6 +23,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
+import logging
 import os
 import statistics
 import sys
@@ -55,6 +56,7 @@ ROLLOUT_ROWS = 64  # up to this many ships a prediction is one compiled rollout,
 _SOURCE_PACKAGES = ("mmg", "dynamics", "hybrid", "fast")  # every module a compiled step can run
 _memo: "weakref.WeakKeyDictionary[nn.Module, dict]" = weakref.WeakKeyDictionary()
 _failed: set[str] = set()
+_log = logging.getLogger(__name__)  # "compiling ..." lines: stage lines of the `sysid` log (`sysid.logs`)
 
 
 def enabled() -> bool:
@@ -190,12 +192,12 @@ def cached_package(module: nn.Module, example_inputs: Sequence[torch.Tensor], la
     path = package_path(module, example_inputs, label, options)
     if not path.is_file():
         start = time.perf_counter()
-        (log or _stderr)(f"sysid: compiling {label} for {tuple(example_inputs[0].shape)} "
-                         f"{example_inputs[0].dtype} (once; cached in {path.parent}) ...")
+        (log or _log.info)(f"sysid: compiling {label} for {tuple(example_inputs[0].shape)} "
+                           f"{example_inputs[0].dtype} (once; cached in {path.parent}) ...")
         compile_package(export_program(module, example_inputs), path, metadata, options)
         seconds = time.perf_counter() - start
         record_seconds(label, "compile", seconds)
-        (log or _stderr)(f"sysid: compiled {label} in {seconds:.0f} s")
+        (log or _log.info)(f"sysid: compiled {label} in {seconds:.0f} s")
     return path
 
 
@@ -255,10 +257,6 @@ def compile_cached(module: nn.Module, example_inputs: Sequence[torch.Tensor], la
             _failed.add(message)
             warnings.warn(f"sysid: cannot compile {message}; using the eager step", RuntimeWarning, stacklevel=2)
         return None
-
-
-def _stderr(message: str) -> None:
-    print(message, file=sys.stderr, flush=True)
 
 
 def _state_key(model: nn.Module) -> tuple:

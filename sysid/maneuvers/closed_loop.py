@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import logging
 import math
-import sys
 from pathlib import Path
 from typing import Callable
 
@@ -30,6 +30,7 @@ CAPACITY = 512  # steps per call of the compiled loop
 LOOP_ROWS = 8  # maneuvers side by side in one compiled loop (IMO's five and a crash stop fit)
 RECORD = 6 + 2 + 4 + 1  # per step: state after it, controller state after it, inputs held over it, gate on
 _compiled: dict[str, Callable | None] = {}
+_log = logging.getLogger(__name__)
 
 
 class ClosedLoopStep(nn.Module):
@@ -112,9 +113,10 @@ def run_eager(model: nn.Module, x0: torch.Tensor, orders0: torch.Tensor, paramet
 
 
 def _notice(message: str) -> None:
-    """One line on stderr when a loop is compiled (not the line when it is done)."""
+    """One stage line of the `sysid` log (`sysid.logs`) when a loop is compiled (not the
+    line when it is done)."""
     if "compiling" in message:
-        print(message, file=sys.stderr, flush=True)
+        _log.info(message)
 
 
 def _loop_module(model: nn.Module, method: Method, dtype: torch.dtype):

@@ -338,3 +338,37 @@ def test_compiled_functions_are_rebuilt_when_the_model_changes(hybrid_run):
     finally:
         model.gate_enabled = True
     assert _memoized(model, ("test",), build) == 3  # back to the settings of build 3
+
+
+def test_the_compile_lines_are_stage_lines_of_the_commands_log(monkeypatch, tmp_path, capsys):
+    """"sysid: compiling ..." and "sysid: compiled ... in N s" (a compiled step) and the
+    closed loop's "compiling" line reach a command's stdout through the `sysid` log, with
+    their text unchanged (time-stamped when stdout is not a terminal), none on stderr; ``-q``
+    hides them like every stage line. The compiler itself is replaced: only the lines are checked."""
+    from sysid import logs
+    from sysid.fast import compiled
+    from sysid.maneuvers import closed_loop
+
+    path = tmp_path / "cache" / "step-0.pt2"
+    path.parent.mkdir()
+    monkeypatch.setattr(compiled, "package_path", lambda *args: path)
+    monkeypatch.setattr(compiled, "export_program", lambda module, inputs: None)
+    monkeypatch.setattr(compiled, "compile_package", lambda program, p, metadata, options: p.write_bytes(b"x"))
+    monkeypatch.setattr(compiled, "record_seconds", lambda *args: None)
+    logs.configure(0)                                                   # what a command sets up
+    assert compiled.cached_package(torch.nn.Identity(), (torch.zeros(3, 6),), "step") == path
+    closed_loop._notice("sysid: compiling closed loop ...")
+    closed_loop._notice("sysid: compiled closed loop in 1 s")           # not said: the compiling line was
+    out, err = capsys.readouterr()
+    stamp = re.compile(r"^\d{4}-\d{2}-\d{2} \d{2}:\d{2}:\d{2} ")
+    assert all(stamp.match(line) for line in out.splitlines()) and err == ""
+    said = [stamp.sub("", line) for line in out.splitlines()]
+    assert said[0] == f"sysid: compiling step for (3, 6) torch.float32 (once; cached in {path.parent}) ..."
+    assert re.fullmatch(r"sysid: compiled step in \d+ s", said[1])
+    assert said[2:] == ["sysid: compiling closed loop ..."]
+    logs.configure(-1)
+    path.unlink()
+    compiled.cached_package(torch.nn.Identity(), (torch.zeros(3, 6),), "step")
+    closed_loop._notice("sysid: compiling closed loop ...")
+    assert capsys.readouterr() == ("", "")
+    logs.configure(0)
