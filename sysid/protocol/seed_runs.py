@@ -1,4 +1,5 @@
-"""Protocol runs trained with N seeds on Ray (``sysid reproduce --seeds N``): each learned
+"""Protocol runs trained with N seeds on Ray (``sysid reproduce --seeds N``): the seeds of
+a learned run train side by side in one trial where they can (`seed_groups`); each learned
 run becomes ``runs/{name}/seed{k}/`` (ordinary run directories), its metrics the mean over
 the seeds with their spread (`sysid.protocol.seeds`), and the networks' mean-of-seeds ensemble a run
 of its own, ``runs/{variant}_ensemble_{dataset}/`` (`sysid.hybrid.ensemble`)."""
@@ -25,7 +26,7 @@ from sysid.protocol.seeds import seed_metrics
 from sysid.hybrid.ensemble import SeedEnsemble
 from sysid.sweep.inbox import complete_summary
 from sysid.sweep.runner import TuneStorage, ray_session, run_trials
-from sysid.sweep.trial import TrialSpec, read_trial_data
+from sysid.sweep.trial import TrialData, TrialSpec, group_name, read_trial_data, side_by_side_refusal
 from sysid.workers import in_workers
 
 
@@ -54,6 +55,25 @@ def seed_trials(experiments: dict[str, Experiment], seeds: int) -> list[TrialSpe
     return trials
 
 
+def seed_groups(trials: Sequence[TrialSpec], data: TrialData, log: Callable[[str], None] = print) -> list[list[int]]:
+    """The Tune trials of `seed_trials`: the seeds of each run side by side in one trial
+    (`sysid.sweep.trial.run_group`) where they can, else one trial per seed; one log line
+    per run saying which."""
+    groups: list[list[int]] = []
+    labels = list(dict.fromkeys(t.label for t in trials))
+    for label in labels:
+        members = [i for i, t in enumerate(trials) if t.label == label]
+        why = side_by_side_refusal([trials[i] for i in members], data)
+        if why is None:
+            groups.append(members)
+            log(f"{label}: {len(members)} seeds side by side in one trial")
+        else:
+            groups += [[i] for i in members]
+            if len(members) > 1:
+                log(f"{label}: {len(members)} seeds one trial each ({why})")
+    return groups
+
+
 def train_seeds(experiments: dict[str, Experiment], seeds: int, out: Path, data: str, workers: int | None,
                 address: str | None = None, log: Callable[[str], None] = print, storage: str | None = None,
                 mlflow: str | None = None) -> dict[str, SeedGroup]:
@@ -63,6 +83,7 @@ def train_seeds(experiments: dict[str, Experiment], seeds: int, out: Path, data:
     ``{out}/tune`` or `storage`; `mlflow` logs every seed run."""
     trials = seed_trials(experiments, seeds)
     trial_data = read_trial_data(experiments.values(), data, tests=True)  # the protocol evaluates
+    together = seed_groups(trials, trial_data, log)
     callbacks = []
     with ray_session(out, workers, address, log) as session:
         tracker = parent = None
@@ -72,13 +93,15 @@ def train_seeds(experiments: dict[str, Experiment], seeds: int, out: Path, data:
             tracker = Tracker(mlflow, "sysid-reproduce")
             parent = tracker.start("reproduce --seeds", {"seeds": seeds, "runs": ", ".join(experiments)},
                                    tags={"sysid.kind": "reproduce"})
-            callbacks = [tracking_callback(tracker, parent, out.resolve(), lambda c: trials[int(c["trial"])].path,
+            by_first = {g[0]: [trials[i] for i in g] for g in together}
+            callbacks = [tracking_callback(tracker, parent, out.resolve(), lambda c: group_name(by_first[int(c["trial"])]),
                                            lambda c: {"run": trials[int(c["trial"])].label,
-                                                      "seed": trials[int(c["trial"])].seed},
-                                           lambda c: {"run": trials[int(c["trial"])].path}, log)]
+                                                      "seed": ", ".join(str(t.seed) for t in by_first[int(c["trial"])])},
+                                           lambda c: {f"seed{t.seed}": t.path for t in by_first[int(c["trial"])]},
+                                           log)]
         outcomes = run_trials(trials, out, trial_data, session, max_retries=1,
                               storage=TuneStorage(storage, "reproduce") if storage else None,
-                              callbacks=callbacks, log=log, prefix="seeds")
+                              callbacks=callbacks, log=log, prefix="seeds", groups=together)
         if tracker is not None:
             tracker.finish(parent)
     errors = outcomes.errors
