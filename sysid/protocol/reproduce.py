@@ -181,7 +181,7 @@ def _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, d
         "they can), " + (f"{jobs} trials at a time" if jobs else "one trial per CPU of the cluster")
         + (f" on {address}" if address else ""))
     groups = train_seeds({n: experiments[n] for n in ordered}, seeds, out, str(data_root(data)), jobs, address, log,
-                         storage, mlflow)
+                         storage, mlflow, cost=lambda n: expected_cost(experiments[n]))
     learned = []
     for name in trained:
         exp, group = experiments[name], groups[name]

@@ -26,7 +26,7 @@ from sysid.protocol.seeds import seed_metrics
 from sysid.hybrid.ensemble import SeedEnsemble
 from sysid.sweep.inbox import complete_summary
 from sysid.sweep.runner import TuneStorage, ray_session, run_trials
-from sysid.sweep.trial import TrialData, TrialSpec, group_name, read_trial_data, side_by_side_refusal
+from sysid.sweep.trial import TrialSpec, group_name, read_trial_data, seed_groups
 from sysid.workers import in_workers
 
 
@@ -55,35 +55,22 @@ def seed_trials(experiments: dict[str, Experiment], seeds: int) -> list[TrialSpe
     return trials
 
 
-def seed_groups(trials: Sequence[TrialSpec], data: TrialData, log: Callable[[str], None] = print) -> list[list[int]]:
-    """The Tune trials of `seed_trials`: the seeds of each run side by side in one trial
-    (`sysid.sweep.trial.run_group`) where they can, else one trial per seed; one log line
-    per run saying which."""
-    groups: list[list[int]] = []
-    labels = list(dict.fromkeys(t.label for t in trials))
-    for label in labels:
-        members = [i for i, t in enumerate(trials) if t.label == label]
-        why = side_by_side_refusal([trials[i] for i in members], data)
-        if why is None:
-            groups.append(members)
-            log(f"{label}: {len(members)} seeds side by side in one trial")
-        else:
-            groups += [[i] for i in members]
-            if len(members) > 1:
-                log(f"{label}: {len(members)} seeds one trial each ({why})")
-    return groups
+SIDE_BY_SIDE_COST = 0.4   # a seed's share of its group's time (benchmarks/speed_results.md: 0.31-0.37x)
 
 
 def train_seeds(experiments: dict[str, Experiment], seeds: int, out: Path, data: str, workers: int | None,
                 address: str | None = None, log: Callable[[str], None] = print, storage: str | None = None,
-                mlflow: str | None = None) -> dict[str, SeedGroup]:
+                mlflow: str | None = None, cost: Callable[[str], float] | None = None) -> dict[str, SeedGroup]:
     """Train the learned runs with `seeds` seeds each on Ray (locally with `workers` side
     by side, or on the cluster at `address`; `sysid.sweep.runner`); their `SeedGroup`s.
     The data are read here once and shipped to the trials; Tune's experiment goes to
-    ``{out}/tune`` or `storage`; `mlflow` logs every seed run."""
+    ``{out}/tune`` or `storage`; `mlflow` logs every seed run; `cost` (run name -> relative
+    training cost of one seed) orders the trials longest first (None: as given)."""
     trials = seed_trials(experiments, seeds)
     trial_data = read_trial_data(experiments.values(), data, tests=True)  # the protocol evaluates
-    together = seed_groups(trials, trial_data, log)
+    together = seed_groups(trials, trial_data, log)   # a protocol run's seeds share its label
+    if cost is not None:  # the longest trials first; a group of seeds costs about SIDE_BY_SIDE_COST a seed
+        together.sort(key=lambda g: -cost(trials[g[0]].label) * (SIDE_BY_SIDE_COST * len(g) if len(g) > 1 else 1))
     callbacks = []
     with ray_session(out, workers, address, log) as session:
         tracker = parent = None

@@ -236,7 +236,15 @@ def run_trials(trials: list[TrialSpec], out: Path, data: TrialData, session: Ses
         run_config=_run_config(tune, storage, max_retries, [progress, *callbacks]))
     with _ctrl_c_ends_tune():
         grid = tuner.fit()
-    return _outcomes(grid, lambda c: trials[int(c["trial"])].path)
+    outcomes = _outcomes(grid, lambda c: trials[int(c["trial"])].path)
+    for group in groups:  # what Tune says of a group's trial holds for each of its seeds
+        first = trials[group[0]].path
+        for i in group[1:]:
+            if first in outcomes.errors:
+                outcomes.errors[trials[i].path] = outcomes.errors[first]
+            if first in outcomes.stopped:
+                outcomes.stopped[trials[i].path] = outcomes.stopped[first]
+    return outcomes
 
 
 def _plain(value):

@@ -230,6 +230,28 @@ def side_by_side_refusal(trials: Sequence[TrialSpec], data: TrialData | None = N
     return refusal(exp, bool(exp.data.validation) or shipped)
 
 
+def seed_groups(trials: Sequence[TrialSpec], data: TrialData | None = None,
+                log: Callable[[str], None] = print) -> list[list[int]]:
+    """The Tune trials of `trials` (indices into it): the seeds of each configuration (one
+    ``label`` in a reproduction, one ``point`` in a sweep) side by side in one trial
+    (`run_group`) where they can, else one trial per seed; one log line per configuration
+    with more than one seed saying which."""
+    groups: list[list[int]] = []
+    by_key: dict[str, list[int]] = {}
+    for i, t in enumerate(trials):
+        by_key.setdefault(t.label or t.point, []).append(i)
+    for key, members in by_key.items():
+        why = side_by_side_refusal([trials[i] for i in members], data)
+        if why is None:
+            groups.append(members)
+            log(f"{key}: {len(members)} seeds side by side in one trial")
+        else:
+            groups += [[i] for i in members]
+            if len(members) > 1:
+                log(f"{key}: {len(members)} seeds one trial each ({why})")
+    return groups
+
+
 def group_name(trials: Sequence[TrialSpec]) -> str:
     """A group's name in progress lines: the first seed's run directory and every seed."""
     if len(trials) == 1:

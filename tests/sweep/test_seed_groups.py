@@ -161,3 +161,24 @@ def test_which_seeds_can_share_a_trial(trials, data):
     assert "one set per seed" in side_by_side_refusal(identified, data)
     mmg = [varied(t, experiment={"model": "mmg"}) for t in trials]
     assert "no network" in side_by_side_refusal(mmg, data)
+
+
+def test_a_sweep_trains_each_configurations_seeds_side_by_side(tmp_path, dataset_dir, trials):
+    """`sysid sweep` (grid, no scheduler): one Tune trial per configuration, its two seeds
+    side by side, each delivered as its own run directory with the rows of results.csv."""
+    pytest.importorskip("ray.tune")
+    import pandas as pd
+    from sysid.cli import run
+
+    base = tmp_path / "base.toml"
+    base.write_text(parse_experiment(tomllib.loads(trials[0].config)).replace(data={"test": ()}).to_toml())
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text(f"[sweep]\nbase = '{base.name}'\nseeds = [3, 4]\n[vary]\n'training.learning_rate' = [1e-2]\n")
+    out = tmp_path / "sweep"
+    run(["sweep", str(sweep), "-o", str(out), "--workers", "1"])
+    table = pd.read_csv(out / "results.csv")
+    assert sorted(table.seed) == [3, 4] and set(table.status) == {"complete"}
+    started = [e for e in read_journal(out) if e["event"] == "started"]
+    assert len(started) == 2 and all(e["side_by_side"] == 2 for e in started)
+    for row in table.itertuples():
+        assert RunDir(out / row.run).read_summary().val_loss_multistep == pytest.approx(row.val_loss_multistep)
