@@ -85,6 +85,13 @@ def test_a_group_of_seeds_equals_each_seed_alone(tmp_path, trials, data, alone):
             p.name for p in (out_alone / trial.path).iterdir())
         run = RunDir(out / trial.path)
         assert run.read_summary().status == "complete" and len(run.read_metrics()) == 1
+    # sysid evaluate reads a seed's run directory and scores it as the run itself did
+    from sysid.cli import run as sysid
+    evaluated = tmp_path / "evaluated.csv"
+    sysid(["evaluate", str(out / trials[0].path), "-o", str(evaluated)])
+    import pandas as pd
+    mine, kept = pd.read_csv(evaluated), RunDir(out / trials[0].path).read_metrics()
+    assert mine.rmse_u.to_numpy() == pytest.approx(kept.rmse_u.to_numpy(), rel=1e-6)
     first, second = (_weights(out / t.path) for t in trials)
     nets = [k for k in first if "correction" in k and "weight" in k]
     assert nets and not torch.equal(first[nets[0]], second[nets[0]])  # two seeds, two networks
