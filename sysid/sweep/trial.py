@@ -180,6 +180,46 @@ def _checkpoint_history(blob: bytes, source: str) -> list[dict]:
     return list(state.history) + list(state.stage_history)
 
 
+def _claimed(trial: TrialSpec, inbox, holder: str, report: Callable[[dict], None], node: str) -> dict | None:
+    """Claim `trial` at the inbox (waiting while another Tune trial trains it): its
+    results-table row when its run is complete (its epochs reported, journaled "reused"),
+    else None (claimed: train it)."""
+    while (state := call(inbox, "claim", trial.path, holder)) == WAIT:
+        time.sleep(CLAIM_POLL_S)
+    if state != COMPLETE:
+        return None
+    summary = call(inbox, "summary", trial.path)
+    for metrics in _history_metrics(call(inbox, "history", trial.path), summary):
+        report(metrics)
+    call(inbox, "journal", "reused", trial.path, node=node)
+    return result_row(trial, summary)
+
+
+def _restored(trial: TrialSpec, inbox, run_dir: Path, report: Callable[[dict], None], node: str,
+              **journal) -> bool:
+    """The inbox's checkpoint of `trial` (if any) put beside `run_dir`, its epochs reported,
+    the start journaled ("resumed" or "started", with `journal`); whether it resumes."""
+    blob = call(inbox, "checkpoint", trial.path)
+    done: list[dict] = []
+    if blob is not None:
+        checkpoint_path(run_dir).write_bytes(blob)
+        done = _history_metrics(_checkpoint_history(blob, f"the checkpoint of trial {trial.path}"))
+        for metrics in done:
+            report(metrics)
+    call(inbox, "journal", "resumed" if blob is not None else "started", trial.path, node=node, **journal,
+         **({"after_epochs": len(done)} if blob is not None else {}))
+    return blob is not None
+
+
+def _epoch_sender(trial: TrialSpec, inbox, holder: str, report: Callable[[dict], None]) -> Callable[[EpochReport], None]:
+    """``on_epoch`` of `trial`'s training: its checkpoint to the inbox, the epoch to Tune."""
+    def on_epoch(epoch: EpochReport) -> None:
+        if epoch.checkpoint is not None:
+            call(inbox, "save_checkpoint", trial.path, holder, epoch.checkpoint.read_bytes())
+        report(epoch_metrics(epoch.stage, epoch.epoch, epoch.train_loss, epoch.val_loss))
+    return on_epoch
+
+
 def run_trial(trial: TrialSpec, inbox, data: TrialData, holder: str = "local",
               report: Callable[[dict], None] | None = None, log: Callable[[str], None] = lambda m: None) -> dict:
     """Train `trial` unless its run is complete; its results-table row. Every epoch is
@@ -187,35 +227,16 @@ def run_trial(trial: TrialSpec, inbox, data: TrialData, holder: str = "local",
     delivered to the inbox when complete. `holder` names the Tune trial doing it."""
     report = report or (lambda metrics: None)
     node = node_name()
-    while (state := call(inbox, "claim", trial.path, holder)) == WAIT:
-        time.sleep(CLAIM_POLL_S)
-    if state == COMPLETE:
-        summary = call(inbox, "summary", trial.path)
-        for metrics in _history_metrics(call(inbox, "history", trial.path), summary):
-            report(metrics)
-        call(inbox, "journal", "reused", trial.path, node=node)
-        return result_row(trial, summary)
+    if (row := _claimed(trial, inbox, holder, report, node)) is not None:
+        return row
     exp = parse_experiment(tomllib.loads(trial.config), f"sweep trial {trial.path}")
-    blob = call(inbox, "checkpoint", trial.path)
     with tempfile.TemporaryDirectory(prefix="sysid-trial-") as scratch:
         run_dir = Path(scratch) / PurePosixPath(trial.path).name
-        done: list[dict] = []
-        if blob is not None:
-            checkpoint_path(run_dir).write_bytes(blob)
-            done = _history_metrics(_checkpoint_history(blob, f"the checkpoint of trial {trial.path}"))
-            for metrics in done:
-                report(metrics)
-        call(inbox, "journal", "resumed" if blob is not None else "started", trial.path, node=node,
-             **({"after_epochs": len(done)} if blob is not None else {}))
-
-        def on_epoch(epoch: EpochReport) -> None:
-            if epoch.checkpoint is not None:
-                call(inbox, "save_checkpoint", trial.path, holder, epoch.checkpoint.read_bytes())
-            report(epoch_metrics(epoch.stage, epoch.epoch, epoch.train_loss, epoch.val_loss))
-
+        resume = _restored(trial, inbox, run_dir, report, node)
         runs = data.training_runs(exp) if exp.needs_training else None
         run_experiment(exp, run_dir, data.tests, runs, data.root, progress=False, log=log,
-                       resume=blob is not None, validation=data.validation_runs(exp), on_epoch=on_epoch)
+                       resume=resume, validation=data.validation_runs(exp),
+                       on_epoch=_epoch_sender(trial, inbox, holder, report))
         summary = call(inbox, "deliver", trial.path, holder, pack_run(run_dir), trial.config, node)
     return result_row(trial, summary)
 
@@ -272,18 +293,10 @@ def run_group(trials: Sequence[TrialSpec], inbox, data: TrialData, holder: str =
     report = report or (lambda metrics: None)
     node = node_name()
     rows: dict[str, dict] = {}
-    todo = []
     for trial in trials:
-        while (state := call(inbox, "claim", trial.path, holder)) == WAIT:
-            time.sleep(CLAIM_POLL_S)
-        if state == COMPLETE:
-            summary = call(inbox, "summary", trial.path)
-            for metrics in _history_metrics(call(inbox, "history", trial.path), summary):
-                report(metrics)
-            call(inbox, "journal", "reused", trial.path, node=node)
-            rows[trial.path] = result_row(trial, summary)
-        else:
-            todo.append(trial)
+        if (row := _claimed(trial, inbox, holder, report, node)) is not None:
+            rows[trial.path] = row
+    todo = [t for t in trials if t.path not in rows]
     if len(todo) == 1:
         rows[todo[0].path] = run_trial(todo[0], inbox, data, holder, report, log)
     elif todo:
@@ -292,31 +305,16 @@ def run_group(trials: Sequence[TrialSpec], inbox, data: TrialData, holder: str =
             run_dirs = [Path(scratch) / str(i) / PurePosixPath(t.path).name for i, t in enumerate(todo)]
             for trial, run_dir in zip(todo, run_dirs):
                 run_dir.parent.mkdir()
-                blob = call(inbox, "checkpoint", trial.path)
-                done: list[dict] = []
-                if blob is not None:
-                    checkpoint_path(run_dir).write_bytes(blob)
-                    done = _history_metrics(_checkpoint_history(blob, f"the checkpoint of trial {trial.path}"))
-                    for metrics in done:
-                        report(metrics)
-                call(inbox, "journal", "resumed" if blob is not None else "started", trial.path, node=node,
-                     side_by_side=len(todo), **({"after_epochs": len(done)} if blob is not None else {}))
+                _restored(trial, inbox, run_dir, report, node, side_by_side=len(todo))
 
-            def on_epoch_of(trial: TrialSpec) -> Callable[[EpochReport], None]:
-                def on_epoch(epoch: EpochReport) -> None:
-                    if epoch.checkpoint is not None:
-                        call(inbox, "save_checkpoint", trial.path, holder, epoch.checkpoint.read_bytes())
-                    report(epoch_metrics(epoch.stage, epoch.epoch, epoch.train_loss, epoch.val_loss))
-                return on_epoch
-
-            exp = experiments[0]
-            runs = data.training_runs(exp)
             def seed_log(seed: int) -> Callable[[str], None]:
                 return lambda m: log(f"seed {seed}: {m}")
 
-            run_seeds(experiments, run_dirs, data.tests, runs, data.root, progress=True,
+            exp = experiments[0]
+            run_seeds(experiments, run_dirs, data.tests, data.training_runs(exp), data.root, progress=True,
                       logs=[seed_log(t.seed) for t in todo], group_log=log, resume=True,
-                      validation=data.validation_runs(exp), on_epochs=[on_epoch_of(t) for t in todo])
+                      validation=data.validation_runs(exp),
+                      on_epochs=[_epoch_sender(t, inbox, holder, report) for t in todo])
             for trial, run_dir in zip(todo, run_dirs):
                 summary = call(inbox, "deliver", trial.path, holder, pack_run(run_dir), trial.config, node)
                 rows[trial.path] = result_row(trial, summary)
