@@ -27,7 +27,9 @@ import torch
 
 from sysid.device import compute_threads
 from sysid.hybrid.ensemble import SeedEnsemble
-from sysid.identify.trainer import VEL, Trainer, held_out_validation
+from sysid.identify.losses import VEL
+from sysid.identify.trainer import Trainer
+from sysid.identify.windowing import held_out_validation
 from sysid.protocol.reproduce import protocol_experiment
 from sysid.runs.directory import RunDir
 from sysid.runs.lifecycle import training_runs

@@ -116,3 +116,31 @@ class TrainingCheckpoint:
 
     def remove(self) -> None:
         self.path.unlink(missing_ok=True)
+
+
+class Checkpointing:
+    """The checkpointing part of training: the state a fit resumes from (read once by
+    `start`) and the `CheckpointState` written after every epoch; none of either without
+    a file."""
+
+    def __init__(self, path: str | os.PathLike | None, config: str, resume: bool = False):
+        self.file = TrainingCheckpoint(path, config) if path else None
+        self.resume = resume
+        self.resumed: CheckpointState | None = None
+
+    @property
+    def path(self) -> Path | None:
+        return self.file.path if self.file is not None else None
+
+    def start(self) -> CheckpointState | None:
+        """The saved state to resume from (None: none, or not resuming)."""
+        self.resumed = self.file.load() if self.file is not None and self.resume else None
+        return self.resumed
+
+    def stage(self, label: str) -> CheckpointState | None:
+        """The saved state of stage `label`, when the fit resumes inside it."""
+        return self.resumed if self.resumed is not None and self.resumed.stage == label else None
+
+    def save(self, state: CheckpointState) -> None:
+        if self.file is not None:
+            self.file.save(state)

@@ -19,9 +19,8 @@ seed; identified MMG coefficients are one set per seed).
 from __future__ import annotations
 
 import logging
-import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
@@ -31,12 +30,13 @@ from sysid.config.choices import Method, ModelKind, Validation
 from sysid.config.experiment import Experiment
 from sysid.data.recordings import Run
 from sysid.dynamics.equations import integrate_with_forces
+from sysid.dynamics.rollouts import WindowSet
 from sysid.errors import ConfigError, TrainingError
 from sysid.hybrid.correction import ForceCorrection
 from sysid.hybrid.force_models import CorrectedModel, PerMember
-from sysid.identify.checkpoint import CheckpointState
-from sysid.identify.trainer import (VEL, EpochReport, Prepared, StageResult, Trainer, WindowSet, adam,
-                                    output_penalty)
+from sysid.identify.losses import VEL, output_penalty
+from sysid.identify.loop import StageResult, StageState
+from sysid.identify.trainer import Prepared, Trainer
 
 LABEL = "train"
 _LOG = logging.getLogger(__name__)
@@ -57,21 +57,13 @@ def refusal(exp: Experiment, validation_logs: bool = False) -> str | None:
 
 @dataclass(eq=False)
 class _Seed:
-    """One seed's training stage: its trainer, prepared stages 1-4, solo optimizer (the
-    checkpoint's layout; its learning rate and Adam state between epochs), schedule,
-    minibatch generator and early-stopping record."""
+    """One seed's training stage: its trainer, prepared stages 1-4 and the loop's
+    `StageState` (its solo optimizer in the checkpoint's layout, with the learning rate and
+    Adam state between epochs; schedule, minibatch generator, early-stopping record)."""
 
     trainer: Trainer
     prepared: Prepared
-    optimizer: torch.optim.Adam
-    scheduler: torch.optim.lr_scheduler.ReduceLROnPlateau | None
-    generator: torch.Generator
-    epoch: int = 0
-    best: float = math.inf
-    best_epoch: int = 0
-    best_state: dict | None = None
-    history: list = field(default_factory=list)
-    stopped: str | None = None
+    state: StageState
 
     @property
     def net(self) -> ForceCorrection:
@@ -129,11 +121,11 @@ class _Stack:
         self.exp_avg_sq = [torch.zeros_like(p) for p in net.parameters()]
         for i in range(len(self.exp_avg)):
             for k, s in enumerate(seeds):
-                state = s.optimizer.state.get(s.params[i])
+                state = s.state.optimizer.state.get(s.params[i])
                 if state:
                     self._slice(self.exp_avg[i], k).copy_(state["exp_avg"])
                     self._slice(self.exp_avg_sq[i], k).copy_(state["exp_avg_sq"])
-        self.steps = [float(s.optimizer.state[s.params[0]]["step"]) if s.optimizer.state.get(s.params[0]) else 0.0
+        self.steps = [float(s.state.optimizer.state[s.params[0]]["step"]) if s.state.optimizer.state.get(s.params[0]) else 0.0
                       for s in seeds]
 
     def _slice(self, tensor: torch.Tensor, k: int) -> torch.Tensor:
@@ -149,7 +141,7 @@ class _Stack:
         """One Adam step of every member (torch's Adam: betas, eps and lr of each seed's
         optimizer, no weight decay), each with its seed's step count."""
         self.steps = [n + 1.0 for n in self.steps]
-        groups = [s.optimizer.param_groups[0] for s in self.seeds]
+        groups = [s.state.optimizer.param_groups[0] for s in self.seeds]
         beta1, beta2 = groups[0]["betas"]
         eps = groups[0]["eps"]
         step_size = [-g["lr"] / (1 - beta1 ** n) for g, n in zip(groups, self.steps)]
@@ -169,7 +161,7 @@ class _Stack:
         for k, s in enumerate(self.seeds):
             for i, p in enumerate(s.params):
                 p.copy_(self._slice(stacked[i], k))
-                s.optimizer.state[p] = {"step": torch.tensor(self.steps[k]),
+                s.state.optimizer.state[p] = {"step": torch.tensor(self.steps[k]),
                                         "exp_avg": self._slice(self.exp_avg[i], k).clone(),
                                         "exp_avg_sq": self._slice(self.exp_avg_sq[i], k).clone()}
 
@@ -202,70 +194,42 @@ def _val_losses(stack: _Stack, val: WindowSet, w_v: torch.Tensor) -> list[float]
 
 
 def _start(trainer: Trainer, prepared: Prepared) -> _Seed:
-    """A seed's training stage as `Trainer._optimize` starts it (or resumes it)."""
+    """A seed's training stage as the trainer's loop starts it (or resumes it); a resumed
+    stage that had stopped stays stopped."""
     t = trainer.experiment.training
-    opt = adam(prepared.params, t.learning_rate)
-    sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=t.lr_factor, patience=t.lr_patience) \
-        if t.lr_factor < 1.0 else None
-    gen = torch.Generator().manual_seed(trainer.experiment.experiment.seed + 1)
-    seed = _Seed(trainer, prepared, opt, sched, gen)
-    resume = trainer._resume if trainer._resume and trainer._resume.stage == LABEL else None
-    if resume:
-        opt.load_state_dict(resume.optimizer)
-        if sched is not None:
-            sched.load_state_dict(resume.scheduler)
-        gen.set_state(resume.generator)
-        seed.best, seed.best_epoch, seed.best_state = resume.best_loss, resume.best_epoch, resume.best_state
-        seed.history, seed.epoch = list(resume.stage_history), resume.epoch
-        trainer.log(f"{LABEL}: resumed after epoch {resume.epoch} from {trainer.checkpoint.path}"
-                    if trainer.checkpoint is not None else f"{LABEL}: resumed after epoch {resume.epoch}")
-        if seed.epoch - seed.best_epoch >= t.patience:
-            seed.stopped = "early stop"
-        elif seed.epoch >= t.epochs:
-            seed.stopped = "epoch limit"
-    return seed
+    model = prepared.model
+    assert model is not None
+    state = trainer.loop.start(PerMember(model), prepared.params, t.learning_rate, LABEL)
+    if trainer.checkpointing.stage(LABEL) is not None:
+        if state.epoch - state.best_epoch >= t.patience:
+            state.stopped = "early stop"
+        elif state.epoch >= t.epochs:
+            state.stopped = "epoch limit"
+    return _Seed(trainer, prepared, state)
+
+
+class _InGroupLine:
+    """A seed's epoch progress is shown in its group's line (`progress_line`), not on its
+    own: the loop's progress bar that shows nothing."""
+
+    def set_postfix(self, **losses) -> None:
+        return None
 
 
 def _end_epoch(seed: _Seed, model: PerMember, train_sums: np.ndarray, val_v: float, seconds: float) -> None:
-    """`Trainer._optimize`'s bookkeeping after an epoch: history, best state, schedule,
-    progress, stopping, checkpoint, `EpochReport`."""
-    trainer, t = seed.trainer, seed.trainer.experiment.training
-    epoch = seed.epoch
-    row = {"stage": LABEL, "epoch": epoch, "train_loss": float(train_sums[0]),
-           "train_velocity": float(train_sums[1]), "train_penalty": float(train_sums[2]),
-           "early_stopping_loss": val_v, "seconds": seconds}
-    seed.history.append(row)
-    if val_v < seed.best:
-        seed.best, seed.best_epoch = val_v, epoch
-        seed.best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
-    if seed.scheduler is not None:
-        seed.scheduler.step(val_v)
-    _LOG.debug(f"  seed {trainer.experiment.experiment.seed} epoch {epoch}/{t.epochs}: training "
-               f"{train_sums[1]:.5f}, early-stopping {val_v:.5f} (best at {seed.best_epoch})")
-    if epoch - seed.best_epoch >= t.patience:
-        seed.stopped = "early stop"
-    elif time.perf_counter() > trainer._deadline:
-        seed.stopped = "time limit"
-    if trainer.checkpoint is not None:
-        trainer.checkpoint.save(CheckpointState(
-            stage=LABEL, epoch=epoch, model=model.state_dict(), optimizer=seed.optimizer.state_dict(),
-            scheduler=seed.scheduler.state_dict() if seed.scheduler is not None else {},
-            generator=seed.generator.get_state(), best_loss=seed.best, best_epoch=seed.best_epoch,
-            best_state=seed.best_state, stage_history=seed.history, history=trainer._history,
-            summary=trainer._summary.to_dict()))
-    if trainer.on_epoch is not None:
-        trainer.on_epoch(EpochReport(LABEL, epoch, t.epochs, float(train_sums[0]), val_v, seed.best,
-                                     seed.best_epoch, trainer.checkpoint.path if trainer.checkpoint is not None else None))
-    if seed.stopped is None and epoch >= t.epochs:
-        seed.stopped = "epoch limit"
+    """The loop's bookkeeping after an epoch (history, best state, schedule, stopping,
+    checkpoint, `EpochReport`; progress in the group's line), and the epoch limit."""
+    t = seed.trainer.experiment.training
+    seed.trainer.loop.end_epoch(seed.state, model, LABEL, t.epochs, train_sums, val_v, seconds, _InGroupLine())
+    if seed.state.stopped is None and seed.state.epoch >= t.epochs:
+        seed.state.stopped = "epoch limit"
 
 
 def _result(seed: _Seed) -> StageResult:
-    """`Trainer._optimize`'s end: the best state restored, a hit time limit, the log line."""
+    """The loop's end of a stage: the best state restored, a hit time limit, the log line."""
     model = seed.prepared.model
     assert model is not None
-    stage = StageResult(seed.history, seed.best_epoch, seed.best, seed.stopped or "epoch limit")
-    return seed.trainer._end_stage(PerMember(model), LABEL, stage, seed.best_state)
+    return seed.trainer.loop.end_stage(PerMember(model), LABEL, seed.state)
 
 
 def progress_line(seeds: Sequence[_Seed]) -> str:
@@ -274,34 +238,34 @@ def progress_line(seeds: Sequence[_Seed]) -> str:
     total = seeds[0].trainer.experiment.training.epochs
     parts = []
     for s in seeds:
-        name = f"seed {s.trainer.experiment.experiment.seed}"
-        last = f" {s.history[-1]['early_stopping_loss']:.5f}" if s.history else ""
-        state = f"{s.stopped} at epoch {s.epoch}" if s.stopped else f"epoch {s.epoch}{last}"
-        parts.append(f"{name} {state} (best {s.best_epoch})")
-    active = sum(s.stopped is None for s in seeds)
+        st = s.state
+        last = f" {st.history[-1]['early_stopping_loss']:.5f}" if st.history else ""
+        state = f"{st.stopped} at epoch {st.epoch}" if st.stopped else f"epoch {st.epoch}{last}"
+        parts.append(f"seed {s.trainer.experiment.experiment.seed} {state} (best {st.best_epoch})")
+    active = sum(s.state.stopped is None for s in seeds)
     return f"{LABEL}: {active}/{len(seeds)} seeds training, of {total} epochs: " + "; ".join(parts)
 
 
 def train_side_by_side(seeds: Sequence[_Seed], log: Callable[[str], None] | None = None) -> list[StageResult]:
     """Stage 5 of every seed at once (see the module); each seed's `StageResult`. `log`
     receives one `progress_line` every 10th epoch and whenever a seed stops (None: the
-    first seed's log when it shows progress)."""
+    first seed's log when it shows progress; every epoch's line at DEBUG)."""
     first = seeds[0]
     t = first.trainer.experiment.training
     p = first.prepared
     assert p.model is not None
     train, val, w_v, w_F = p.train, p.val, p.w_v, p.w_F
     if log is None:
-        log = first.trainer.log if first.trainer.progress else _LOG.debug
+        log = first.trainer.journal.line if first.trainer.progress else _LOG.debug
     stack = None
     rounds = 0
-    while active := [s for s in seeds if s.stopped is None]:
+    while active := [s for s in seeds if s.state.stopped is None]:
         if stack is None or [id(s) for s in stack.seeds] != [id(s) for s in active]:
             if stack is not None:
                 stack.write_back()
             stack = _Stack(active, p.model)
         started = time.perf_counter()
-        orders = torch.stack([torch.randperm(len(train), generator=s.generator) for s in active])
+        orders = torch.stack([torch.randperm(len(train), generator=s.state.generator) for s in active])
         sums = np.zeros((len(active), 3))
         for lo in range(0, len(train), t.batch_size):
             batch = train.select(orders[:, lo:lo + t.batch_size])
@@ -311,7 +275,7 @@ def train_side_by_side(seeds: Sequence[_Seed], log: Callable[[str], None] | None
                 bad = active[int((~torch.isfinite(loss)).nonzero()[0])]
                 raise TrainingError(f"{bad.trainer.experiment.source}: [training] the {LABEL} loss of seed "
                                     f"{bad.trainer.experiment.experiment.seed} became non-finite at epoch "
-                                    f"{bad.epoch + 1} (learning_rate = {t.learning_rate:g}?); no run written")
+                                    f"{bad.state.epoch + 1} (learning_rate = {t.learning_rate:g}?); no run written")
             stack.net.zero_grad()
             loss.sum().backward()
             stack.step()
@@ -321,12 +285,12 @@ def train_side_by_side(seeds: Sequence[_Seed], log: Callable[[str], None] | None
         stack.write_back()
         seconds = time.perf_counter() - started
         for k, s in enumerate(active):
-            s.epoch += 1
+            s.state.epoch += 1
             model = s.prepared.model
             assert model is not None
             _end_epoch(s, PerMember(model), sums[k], val_v[k], seconds)
         rounds += 1
-        if rounds % 10 == 0 or any(s.stopped for s in active):
+        if rounds % 10 == 0 or any(s.state.stopped for s in active):
             log(progress_line(seeds))
         else:
             _LOG.debug(progress_line(seeds))
@@ -342,6 +306,7 @@ def fit_side_by_side(trainers: Sequence[Trainer], runs: Sequence[Run],
     One `ConfigError` line when they cannot share (`refusal`)."""
     if not trainers:
         return []
+
     def but_seed(exp: Experiment) -> str:  # the run's name (a sweep's names its seed) does not train
         return exp.replace(experiment={"seed": 0, "name": "seeds"}).to_toml()
 

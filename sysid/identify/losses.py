@@ -1,0 +1,68 @@
+"""The multi-step loss of training (Eqs. 13-17): L_v of Euler rollouts of T steps from each
+window's recorded start, the output constraint L_F, the weights' |theta|^2, and Adam."""
+from __future__ import annotations
+
+import torch
+
+from sysid.config.choices import Method
+from sysid.config.experiment import PAPER_FORCE_BAND
+from sysid.dynamics.equations import integrate, integrate_with_forces
+from sysid.dynamics.rollouts import WindowSet, velocity_loss
+from sysid.hybrid.correction import ForceCorrection
+from sysid.hybrid.force_models import PerMember, correction_of
+from sysid.state import VELOCITY_INDEX
+
+VEL = list(VELOCITY_INDEX)
+
+
+def output_penalty(f_nn: torch.Tensor, f_mmg: torch.Tensor, w_F: torch.Tensor,
+                   band: float = PAPER_FORCE_BAND) -> torch.Tensor:
+    """Eq. (17): w_F^T (|F_NN| - band |F_MMG|)^+ per sample, (..., 3) -> (...).
+
+    Zero while every component of F_NN stays within `band` (20 %) of the MMG force's
+    magnitude; grows linearly outside. w_F (3,) scales X [1/N], Y [1/N], N [1/(N m)].
+    """
+    return (torch.relu(f_nn.abs() - band * f_mmg.abs()) * w_F).sum(-1)
+
+
+def adam(params, lr: float) -> torch.optim.Adam:
+    """Adam (the paper's optimiser) updating all parameters in a few multi-tensor
+    operations (``foreach``): the same numbers as the per-parameter loop, fewer dispatches."""
+    return torch.optim.Adam(params, lr=lr, foreach=True)
+
+
+def weight_norm(net: ForceCorrection) -> torch.Tensor:
+    """||theta||^2 of the FNN weights (Eq. 13), per member (losses are means over members)."""
+    return sum((w * w).sum() for w in net.weights) / net.members
+
+
+def model_weight_norm(model) -> torch.Tensor:
+    """||theta||^2 of the FNN of a force model or `PerMember` (a zero without a network)."""
+    net = correction_of(model.model if isinstance(model, PerMember) else model)
+    return weight_norm(net) if net is not None else torch.zeros(())
+
+
+def multistep_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor | None = None,
+                   band: float = PAPER_FORCE_BAND):
+    """(L_v, L_F) of Eqs. (15)-(17) as means over windows and steps: Euler rollouts of T steps
+    from each window's first recorded state with its recorded inputs.
+
+    `model` is a force model, or `PerMember` of a hybrid (then every FNN member rolls out
+    the same windows and the losses are means over members too). L_F is 0 without `w_F`;
+    `band` is the output constraint's share of |F_MMG| (Eq. 17).
+    """
+    states, inputs = batch.states, batch.inputs
+    if isinstance(model, PerMember):
+        k = model.model.correction_net.members
+        states = states.unsqueeze(1).expand(states.shape[0], k, *states.shape[1:])
+        inputs = inputs.unsqueeze(1).expand(inputs.shape[0], k, *inputs.shape[1:])
+    if w_F is None:
+        pred = integrate(model, states[0], inputs, batch.dt, Method.EULER)
+    else:
+        trajectory = integrate_with_forces(model, states[0], inputs, batch.dt, Method.EULER)
+        pred, forces = trajectory.states, trajectory.forces
+    loss_v = velocity_loss(pred[1:, ..., VEL] - states[1:, ..., VEL], w_v)
+    if w_F is None:
+        return loss_v, loss_v.new_zeros(())
+    f_nn, f_mmg = forces.correction, forces.mmg
+    return loss_v, output_penalty(f_nn, f_mmg, w_F, band).mean()

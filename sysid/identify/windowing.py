@@ -1,0 +1,149 @@
+"""Stage 1 of training: windows of T+1 samples (T Euler steps) slid by ``stride_s`` within
+each file, cut into training and validation so that no validation window overlaps a
+training one, with the training samples and a `SplitReport`.
+
+Each file's time axis is cut into ``block_s`` blocks, a seeded ``val_fraction`` of them
+validation, and a window lies wholly in one part; or, given validation logs, every window of
+those is validation and every window of the training logs training. Exact copies of another
+file (``turn_cut_...``) and windows touching frozen-GNSS segments are left out and reported.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+import torch
+
+from sysid.config.choices import Validation
+from sysid.config.experiment import Experiment
+from sysid.data.recordings import Run, duplicate_runs, sliding_windows, stack_windows, window_touches
+from sysid.data.splits import HeldOutFiles, hold_out_files
+from sysid.dynamics.rollouts import WindowSet
+from sysid.errors import ConfigError, DataError
+
+
+@dataclass
+class SplitReport:
+    """How the files were cut: per file its training/validation window counts and quality
+    issues; files left out as copies of another; windows left out at frozen GNSS."""
+
+    files: list[dict] = field(default_factory=list)
+    dropped_copies: list[str] = field(default_factory=list)
+    suspect_windows: int = 0
+
+
+def _block_parts(n: int, block: int, val_fraction: float, rng: np.random.Generator) -> np.ndarray:
+    """(n,) True for samples in validation blocks: the run is cut into blocks of `block`
+    samples and a `val_fraction` share of them, drawn at random, is held out."""
+    n_blocks = max(2, math.ceil(n / max(block, 1)))
+    n_val = min(n_blocks - 1, max(1, int(round(val_fraction * n_blocks))))
+    val_blocks = np.zeros(n_blocks, dtype=bool)
+    val_blocks[rng.choice(n_blocks, n_val, replace=False)] = True
+    return np.repeat(val_blocks, math.ceil(n / n_blocks))[:n]
+
+
+def objective_horizons(exp: Experiment) -> tuple[float, ...]:
+    """The horizons [s] of ``val_loss_multistep``: ``[training] objective_s`` when set, else
+    ``[evaluation] horizons``, the horizons the verdict judges on the test logs (one
+    definition of good for validation, sweeps and the verdict)."""
+    t = exp.training
+    return (float(t.objective_s),) if t.objective_s > 0 else tuple(float(h) for h in exp.evaluation.horizons)
+
+
+def held_out_validation(exp: Experiment, runs: Sequence[Run]) -> HeldOutFiles | None:
+    """With ``[training] validation = "files"``: the training logs `runs` split into training
+    and held-out validation logs (`sysid.data.splits.hold_out_files`, ``val_fraction`` of each
+    folder's logs, drawn with ``split_seed``); else None."""
+    t = exp.training
+    return hold_out_files(runs, t.val_fraction, t.split_seed) if t.validation is Validation.FILES else None
+
+
+def _validation_samples(run: Run, length: int, val_fraction: float, block_s: float, rng: np.random.Generator,
+                        validation_runs: Sequence[Run]) -> np.ndarray:
+    """(n,) True for the samples of `run` that are validation: all or none of a validation
+    or training log, else the seeded validation blocks."""
+    if validation_runs:
+        return np.full(len(run), any(run is v for v in validation_runs))
+    block = int(round(block_s / run.dt))
+    if block < length:  # no window would lie wholly in one block: none in either part
+        raise ConfigError(f"[training] block_s = {block_s:g} s: a validation block holds {block} of the "
+                          f"data's {run.dt:g}-s samples, fewer than one {length}-sample training window; "
+                          f"set block_s >= {length * run.dt:g} s (default 30)")
+    return _block_parts(len(run), block, val_fraction, rng)
+
+
+def _cut_run(run: Run, part_of: np.ndarray, length: int, stride: int, exclude_suspect: bool,
+             report: SplitReport) -> dict[str, np.ndarray]:
+    """The first samples of the windows of `run` in each part ("train", "val"): a window
+    lies wholly in one part, so no validation window overlaps a training one."""
+    starts = sliding_windows(len(run), length, stride)
+    ends = starts + length - 1
+    cut = {}
+    for part, flag in (("train", False), ("val", True)):
+        inside = np.concatenate([[0], np.cumsum(part_of == flag)])
+        mine = starts[inside[ends + 1] - inside[starts] == length]
+        if exclude_suspect:
+            bad = window_touches(run, mine, length)
+            report.suspect_windows += int(bad.sum())
+            mine = mine[~bad]
+        cut[part] = mine
+    return cut
+
+
+def _training_samples(run: Run, part_of: np.ndarray, exclude_suspect: bool, dtype, device):
+    """The training part's samples of `run`, (n, 6) states and (n, 4) inputs, without those
+    within 1 s of a frozen-GNSS segment."""
+    keep = ~part_of
+    for a, b in run.suspect if exclude_suspect else []:
+        keep &= ~((run.t >= a - 1.0) & (run.t <= b + 1.0))
+    return (torch.as_tensor(run.states[keep], dtype=dtype, device=device),
+            torch.as_tensor(run.inputs[keep], dtype=dtype, device=device))
+
+
+def split_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction: float,
+                  exclude_suspect: bool = True, dtype=torch.float64, block_s: float = 30.0, seed: int = 0,
+                  device: str | torch.device = "cpu", validation_runs: Sequence[Run] = ()):
+    """Training and validation `WindowSet`s, the training samples (N, 6)/(N, 4), and a
+    `SplitReport`.
+
+    Each file is cut into blocks of `block_s`; a random `val_fraction` of the blocks (seeded)
+    is validation. Windows lie wholly inside one part, so none overlaps across the split.
+    Given `validation_runs`, those are validation whole and `runs` training whole.
+    """
+    rng = np.random.default_rng(seed)
+    report = SplitReport()
+    validation_runs = list(validation_runs)
+    copies = {copy for copy, _ in duplicate_runs(list(runs) + validation_runs)}
+    parts: dict[str, list] = {"train": [], "val": []}
+    samples: tuple[list, list] = ([], [])
+    dt = None
+    length = steps + 1
+    for run in list(runs) + validation_runs:
+        if run.name in copies:
+            report.dropped_copies.append(run.name)
+            continue
+        dt = run.dt if dt is None else dt
+        if abs(run.dt - dt) > 1e-9:
+            raise DataError(f"{run.path}: sample period {run.dt} s differs from {dt} s")
+        part_of = _validation_samples(run, length, val_fraction, block_s, rng, validation_runs)
+        cut = _cut_run(run, part_of, length, max(1, int(round(stride_s / run.dt))), exclude_suspect, report)
+        for part, mine in cut.items():
+            if len(mine):
+                parts[part].append(stack_windows(run, mine, length, dtype, device))
+        for kept, sample in zip(samples, _training_samples(run, part_of, exclude_suspect, dtype, device)):
+            kept.append(sample)
+        report.files.append({"file": run.name, "train_windows": len(cut["train"]),
+                             "val_windows": len(cut["val"]), "issues": run.issues})
+    if not parts["train"]:
+        raise DataError("no training windows: the files are shorter than one window")
+    if not parts["val"]:
+        raise DataError("no validation windows: the validation logs are shorter than one window"
+                        if validation_runs else "no validation windows: the files are too short for the 70/30 split")
+
+    def window_set(chunks) -> WindowSet:
+        return WindowSet(torch.cat([c[0] for c in chunks], 1), torch.cat([c[1] for c in chunks], 1), dt)
+
+    return window_set(parts["train"]), window_set(parts["val"]), \
+        (torch.cat(samples[0]), torch.cat(samples[1])), report

@@ -1,0 +1,107 @@
+"""The trainer's results on tiny real-data cases, through its public entry points only
+(`Trainer(...).fit`), saved to one file: run as ``python trainer_cases.py DATASET ROOT OUT``
+with whichever `sysid` is importable, so that two versions of the package can be compared
+(`tests/identify/test_trainer_parts.py`).
+
+Cases: hybrid D1 and NN D1 (2 epochs after a 2-epoch warm start, features gate, the output
+constraint), the identified MMG by gradient (2 epochs) and by Levenberg-Marquardt, a hybrid on
+coefficients identified before it and one identified jointly with the FNN. Each on two berthing
+logs with a third as validation, one torch thread, a checkpoint written every epoch.
+"""
+from __future__ import annotations
+
+import enum
+import math
+import sys
+from pathlib import Path
+
+TRAIN = ("berthing_12-Nov-2020_11_07_23.csv", "berthing_12-Nov-2020_11_14_47.csv")
+VALIDATION = ("berthing_12-Nov-2020_11_21_46.csv",)
+SHORT = {"epochs": 2, "warm_start_epochs": 2}
+CASES = {
+    "hybrid_D1": ("hybrid_D1.toml", {"training": SHORT}),
+    "nn_D1": ("nn_D1.toml", {"training": SHORT}),
+    "mmg_identified_D2": ("mmg_identified_D2.toml", {"identify": {"epochs": 2}}),
+    "mmg_identified_lm_D2": ("mmg_identified_lm_D2.toml", {"identify": {"iterations": 4}}),
+    "hybrid_identified_D2": ("hybrid_identified_D2.toml", {"training": SHORT, "identify": {"epochs": 2}}),
+    "hybrid_joint_D2": ("hybrid_identified_D2.toml", {"training": SHORT, "identify": {"stage": "joint"}}),
+}
+# cases interrupted after their first epoch report and resumed from the checkpoint
+RESUMED = {"hybrid_D1_resumed": "hybrid_D1", "hybrid_identified_D2_resumed": "hybrid_identified_D2"}
+
+
+class _Interrupted(Exception):
+    pass
+
+
+def _plain(value):
+    """`value` with floats that are NaN as the string "nan" (equal to themselves) and enum
+    members as their values (loadable with ``weights_only=True``)."""
+    if isinstance(value, enum.Enum):
+        return value.value
+    if isinstance(value, float) and math.isnan(value):
+        return "nan"
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
+def run_case(name: str, dataset: Path, root: Path, out: Path) -> dict:
+    """One case's results: weights, history (without seconds), summary (without seconds),
+    epoch reports, validation horizons, w_v and the last checkpoint's state."""
+    import torch
+    from sysid.config.experiment import load_experiment
+    from sysid.data.recordings import read_runs
+    from sysid.identify.trainer import Trainer
+
+    config, changes = CASES[RESUMED.get(name, name)]
+    exp = load_experiment(root / "configs" / "experiments" / config)
+    exp = exp.replace(**{section: {**values} for section, values in changes.items()})
+    if name == "hybrid_joint_D2":
+        from sysid.config.choices import Stage
+        exp = exp.replace(identify={"stage": Stage.JOINT})
+    berthing = dataset / "berthing"
+    runs, validation = read_runs([berthing / f for f in TRAIN]), read_runs([berthing / f for f in VALIDATION])
+    reports: list = []
+    checkpoint = out / f"{name}.ckpt.pt"
+
+    def report(r) -> None:
+        reports.append([r.stage, r.epoch, r.epochs, r.train_loss, r.val_loss, r.best_loss, r.best_epoch])
+        if name in RESUMED and len(reports) == 1:
+            raise _Interrupted
+
+    if name in RESUMED:
+        try:
+            Trainer(exp, progress=False, log=lambda _: None, checkpoint=checkpoint, on_epoch=report).fit(runs, validation)
+        except _Interrupted:
+            pass
+    trainer = Trainer(exp, progress=False, log=lambda _: None, checkpoint=checkpoint, on_epoch=report,
+                      resume=name in RESUMED)
+    trainer.fit(runs, validation)
+    summary = trainer.summary_.to_dict()
+    summary.pop("train_seconds")
+    history = trainer.history_.drop(columns="seconds").to_dict("list")
+    saved = torch.load(checkpoint, weights_only=True) if checkpoint.is_file() else {}
+    for row in saved.get("stage_history", []) + saved.get("history", []):
+        row.pop("seconds")
+    saved.get("summary", {}).pop("train_seconds", None)
+    return {"weights": trainer.model_.state_dict(), "history": _plain(history), "summary": _plain(summary),
+            "reports": _plain(reports), "horizons": list(trainer.validation_sets_),
+            "w_v": trainer.velocity_weights_, "checkpoint": saved}
+
+
+def main(dataset: str, root: str, out: str, *names: str) -> None:
+    import torch
+    from sysid.device import compute_threads
+    import sysid
+    results = {"package": sysid.__file__}
+    with compute_threads(1):
+        for name in names or [*CASES, *RESUMED]:
+            results[name] = run_case(name, Path(dataset), Path(root), Path(out).parent)
+    torch.save(results, out)
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:])
