@@ -125,7 +125,9 @@ def progress_callback(total: int, names: Callable[[dict], str], log: Callable[[s
             value = result.get(OBJECTIVE, math.inf)
             if value < self.best[0]:
                 self.best = (value, names(trial.config))
-            self._line(f"done {names(trial.config)} (val_loss_multistep {value:.5f})")
+            runs = int(result.get("runs", 1))
+            self._line(f"done {names(trial.config)} (val_loss_multistep {value:.5f}"
+                       + (f", the mean of its {runs} seeds)" if runs > 1 else ")"))
 
         def on_trial_recover(self, iteration, trials, trial, **info):
             self.retried += 1

@@ -323,11 +323,12 @@ def run_group(trials: Sequence[TrialSpec], inbox, data: TrialData, holder: str =
 
 def final_metrics(rows: list[dict]) -> dict:
     """A Tune trial's last report: the mean validation loss of its run(s) (inf if any
-    failed), the epochs, and ``final`` (a trial without it was stopped early)."""
+    failed), the epochs, how many ``runs`` (seeds), and ``final`` (a trial without it was
+    stopped early)."""
     values = [r[OBJECTIVE] for r in rows]
     ok = all(r["status"] == "complete" and math.isfinite(v) for r, v in zip(rows, values))
     return {OBJECTIVE: sum(values) / len(values) if ok else math.inf, "final": True, "failed": not ok,
-            "epochs": int(sum(int(r.get("epochs") or 0) for r in rows))}
+            "epochs": int(sum(int(r.get("epochs") or 0) for r in rows)), "runs": len(rows)}
 
 
 def tune_trainable(config: dict, trials: list[TrialSpec], inbox: Any, data: TrialData,
