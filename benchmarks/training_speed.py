@@ -12,14 +12,17 @@ torch.compile'd function (Inductor; its caches persist in TORCHINDUCTOR_CACHE_DI
 run of this script measures the warm start) beside today's eager step, interleaved, with the
 time of its first step (the compile, or the cache load) and the two losses;
 with --ops the aten operations dispatched by one right-hand-side call of the training loss
-(forward with the force record, its backward) and by the MMG's forward alone;
+(forward with the force record, its backward) and by the MMG's forward alone, and by one call
+of the training path with the MMG's hand-derived VJP (`sysid.mmg.vjp`) and its backward;
+with --vjp the step through the hand-derived VJP (the training default) beside the step
+through autograd (the path before it), interleaved, wall and CPU time, and both losses;
 with --converge also the wall time of a whole training to its early stop; with
 --parts the CPU time of the pieces of an epoch and of the seed ensembles' evaluation, each
 beside the way it was done before (interleaved repeats, medians of process CPU time, which a
 machine shared with other jobs disturbs less than wall time).
 
     python benchmarks/training_speed.py [--data DIR] [--threads 1] [--only D2] [--batches 256] [--members K]
-        [--limit] [--converge] [--parts]
+        [--limit] [--vjp] [--ops] [--converge] [--parts]
 """
 from __future__ import annotations
 
@@ -42,9 +45,13 @@ from sysid.identify.trainer import Trainer, multistep_loss, split_windows
 CONFIGS = {"D1": "configs/experiments/hybrid_D1.toml", "D2": "configs/experiments/hybrid_D2.toml"}
 
 
-def minibatch_seconds(exp, train, batch: int, repeats: int = 8, members: int | None = None) -> float:
-    """Mean wall time [s] of one training step on `batch` windows (`members` networks side
-    by side, each on the same windows; default: the config's)."""
+def training_step(exp, train, batch: int, members: int | None = None, fast: bool = True):
+    """One training step (forward, backward, Adam) on the first `batch` windows, as a
+    function, and its loss function: the multi-step loss L_v + 1e-3 L_F through the
+    hand-derived VJP of the MMG (`fast`, the training default) or through autograd."""
+    from sysid.dynamics.equations import integrate_training
+    from sysid.identify.trainer import VEL, output_penalty, velocity_loss
+    torch.manual_seed(0)
     mmg = build_mmg(exp, torch.float32).requires_grad_(False)
     net = ForceCorrection(exp.network.hidden, torch.float32, members or exp.network.members)
     model = PerMember(CorrectedModel(mmg, net, None, True, exp.gate.space))
@@ -52,20 +59,59 @@ def minibatch_seconds(exp, train, batch: int, repeats: int = 8, members: int | N
     w_F = torch.ones(3)
     opt = torch.optim.Adam(net.parameters(), 1e-3)
     chunk = train.select(torch.arange(min(batch, len(train))))
+    k = net.members
+    states = chunk.states.unsqueeze(1).expand(-1, k, -1, -1)
+    inputs = chunk.inputs.unsqueeze(1).expand(-1, k, -1, -1)
+
+    def loss():
+        pred, f_nn, f_mmg = integrate_training(model, states[0], inputs, chunk.dt, fast)
+        loss_v = velocity_loss(pred[1:, ..., VEL] - states[1:, ..., VEL], w_v)
+        return loss_v + 1e-3 * output_penalty(f_nn, f_mmg, w_F).mean()
 
     def step():
-        loss_v, loss_F = multistep_loss(model, chunk, w_v, w_F)
-        loss = loss_v + 1e-3 * loss_F
+        value = loss()
         opt.zero_grad()
-        loss.backward()
+        value.backward()
         opt.step()
+    return step, loss
 
+
+def minibatch_seconds(exp, train, batch: int, repeats: int = 8, members: int | None = None,
+                      fast: bool = True) -> float:
+    """Mean wall time [s] of one training step on `batch` windows (`members` networks side
+    by side, each on the same windows; default: the config's); `fast`: through the MMG's
+    hand-derived VJP (the training default), else through autograd."""
+    step = training_step(exp, train, batch, members, fast)[0]
     for _ in range(2):
         step()
     start = time.perf_counter()
     for _ in range(repeats):
         step()
     return (time.perf_counter() - start) / repeats
+
+
+def vjp_comparison(exp, train, batch: int, repeats: int = 5, rounds: int = 5) -> None:
+    """The step through the hand-derived VJP against the step through autograd, interleaved:
+    medians of wall and process CPU time per step, the ratio, and the two losses."""
+    old, old_loss = training_step(exp, train, batch, 1, fast=False)
+    new, new_loss = training_step(exp, train, batch, 1, fast=True)
+    losses = float(old_loss().detach()), float(new_loss().detach())
+    wall: dict[str, list[float]] = {"old": [], "new": []}
+    cpu: dict[str, list[float]] = {"old": [], "new": []}
+    for _ in range(rounds):
+        for label, step in (("old", old), ("new", new)):
+            step()
+            start, start_cpu = time.perf_counter(), time.process_time()
+            for _ in range(repeats):
+                step()
+            wall[label].append((time.perf_counter() - start) / repeats)
+            cpu[label].append((time.process_time() - start_cpu) / repeats)
+    w_old, w_new = statistics.median(wall["old"]), statistics.median(wall["new"])
+    c_old, c_new = statistics.median(cpu["old"]), statistics.median(cpu["new"])
+    print(f"hand-derived VJP against autograd, batch {min(batch, len(train))}, T = {exp.training.steps}, K = 1 "
+          f"({rounds} interleaved rounds of {repeats} steps, medians): wall {1e3 * w_new:.1f} against "
+          f"{1e3 * w_old:.1f} ms/step ({w_old / w_new:.2f}x), CPU {1e3 * c_new:.1f} against {1e3 * c_old:.1f} "
+          f"ms/step ({c_old / c_new:.2f}x); loss before the first step {losses[1]:.9g} against {losses[0]:.9g}")
 
 
 def compiled_comparison(exp, train, batch: int, repeats: int = 5) -> None:
@@ -167,7 +213,7 @@ def compiled_comparison(exp, train, batch: int, repeats: int = 5) -> None:
 def operation_counts(exp, train, batch: int) -> None:
     """Aten operations dispatched by one training right-hand-side call (K = 1, `batch` rows)."""
     from torch.utils._python_dispatch import TorchDispatchMode
-    from sysid.dynamics.equations import ShipDynamics
+    from sysid.dynamics.equations import ShipDynamics, TrainingDynamics
 
     class Count(TorchDispatchMode):
         def __init__(self):
@@ -194,8 +240,17 @@ def operation_counts(exp, train, batch: int) -> None:
     with Count() as c:
         out.sum().backward()
     counts["its backward"] = c.n
+    fast = TrainingDynamics(rhs.force_model.training_rate(), inputs, chunk.dt)
+    x.grad = None
+    fast(torch.tensor(0.0), x)  # the coefficient look-ups are cached on a first call
+    with Count() as c:
+        out = fast(torch.tensor(1.0), x)
+    counts["the same through the hand-derived VJP"] = c.n
+    with Count() as c:
+        out.sum().backward()
+    counts["its backward "] = c.n
     print(f"aten operations per right-hand-side call, batch {len(chunk)}: "
-          + ", ".join(f"{k} {v}" for k, v in counts.items()))
+          + ", ".join(f"{k.strip()} {v}" for k, v in counts.items()))
     # what a hand-derived backward of the MMG could save at most: its forward without autograd
     # (plain guard forms) against its forward and backward through autograd, interleaved
     with Count() as c:
@@ -215,14 +270,21 @@ def operation_counts(exp, train, batch: int) -> None:
         x.grad = None
         rhs.record.clear()
         rhs(torch.tensor(1.0), x).sum().backward()
-    times = {"whole": [], "autograd": [], "plain": []}
+    def vjp_pass():
+        x.grad = None
+        fast.f_nn.clear()
+        fast.f_mmg.clear()
+        fast(torch.tensor(1.0), x).sum().backward()
+    times: dict[str, list[float]] = {"whole": [], "autograd": [], "plain": [], "vjp": []}
     for _ in range(5):
-        for label, fn in (("whole", whole_pass), ("autograd", autograd_pass), ("plain", plain_pass)):
-            times[label] += cpu_ms(lambda: [fn() for _ in range(10)], 1)
-    w, a, b = (statistics.median(times[k]) / 10 for k in ("whole", "autograd", "plain"))
+        for label, fn in (("whole", whole_pass), ("autograd", autograd_pass), ("plain", plain_pass),
+                          ("vjp", vjp_pass)):
+            times[label] += cpu_ms(lambda fn=fn: [fn() for _ in range(10)], 1)
+    w, a, b, v = (statistics.median(times[k]) / 10 for k in ("whole", "autograd", "plain", "vjp"))
     print(f"CPU ms per call, batch {len(chunk)}: the right-hand side forward and backward {w:.2f}, of which the MMG's "
           f"{a:.2f} through autograd; the MMG's forward without autograd {b:.2f} ({plain_ops} operations, "
-          f"{a / b:.1f}x less than through autograd)")
+          f"{a / b:.1f}x less than through autograd); the right-hand side through the hand-derived VJP, forward "
+          f"and backward, {v:.2f} ({w / v:.2f}x less than through autograd)")
 
 
 def network_flops(widths: list[int], rows: int, steps: int) -> tuple[float, float]:
@@ -391,6 +453,8 @@ def main() -> None:
     parser.add_argument("--compiled", action="store_true",
                         help="also the step with a torch.compile'd right-hand side beside today's eager step")
     parser.add_argument("--ops", action="store_true", help="also count the operations of one right-hand-side call")
+    parser.add_argument("--vjp", action="store_true",
+                        help="also the step through the MMG's hand-derived VJP beside the step through autograd")
     parser.add_argument("--converge", action="store_true", help="also train each config to its early stop")
     parser.add_argument("--parts", action="store_true", help="CPU time of an epoch's pieces, before and after")
     args = parser.parse_args()
@@ -431,18 +495,21 @@ def main() -> None:
         if args.limit:
             widths = [9, *exp.network.hidden, 3]
             rows = min(t.batch_size, len(train))
-            step, floor = [], []
+            step, old, floor = [], [], []
             for _ in range(3):  # interleaved, medians
                 step.append(minibatch_seconds(exp, train, t.batch_size))
+                old.append(minibatch_seconds(exp, train, t.batch_size, fast=False))
                 floor.append(arithmetic_seconds(widths, rows, t.steps))
-            a, b = statistics.median(step), statistics.median(floor)
+            a, o, b = statistics.median(step), statistics.median(old), statistics.median(floor)
             forward, both = network_flops(widths, rows, t.steps)
             print(f"arithmetic limit, batch {rows}, T = {t.steps}, FNN {'-'.join(map(str, widths))}: "
                   f"{forward / 1e9:.3f} GFLOP forward, {both / 1e9:.3f} with the backward; that arithmetic alone "
                   f"{1e3 * b:.1f} ms ({both / b / 1e9:.1f} GFLOP/s) against the step's {1e3 * a:.1f} ms "
-                  f"({a / b:.1f}x the limit)")
+                  f"({a / b:.1f}x the limit; through autograd {1e3 * o:.1f} ms, {o / b:.1f}x)")
         if args.ops:
             operation_counts(exp, train, t.batch_size)
+        if args.vjp:
+            vjp_comparison(exp, train, t.batch_size)
         if args.compiled:
             compiled_comparison(exp, train, t.batch_size)
         if args.parts:

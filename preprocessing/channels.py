@@ -1,5 +1,5 @@
 """The processed log schema's columns (bare name -> unit, in the public files' column order)
-and the channel each one is in sysid (`sysid.state`). Plain dicts, no numpy or pandas: the
+and the channel each one is in sysid (`sysid.channel_names`). Plain dicts, no numpy or pandas: the
 config reads them (`sysid.config.column_map`) without loading either."""
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ PROCESSED = {
     "wind_velo_true": "m/s", "wind_dir_true": "rad",
 }
 
-# processed column -> the channel name of sysid's state and inputs (`sysid.state`)
+# processed column -> the channel name of sysid's state and inputs (`sysid.channel_names`)
 PROCESSED_CHANNEL = {
     "t": "t", "x_position_mid": "x", "u_velo": "u", "y_position_mid": "y", "vm_velo": "v",
     "psi_hat": "psi", "r_angvelo": "r", "n_prop": "n_prop", "delta_rudder": "delta_rudder",

@@ -8,12 +8,12 @@ train``), `sysid.protocol.reproduce.reproduce` the paper's protocol; `RunDir` op
 directory (``RunDir.open("runs/hybrid_D2").read_summary()``: its typed `RunSummary`).
 
 Subpackages in layers, each importing only those before it (`LAYERS` in
-tests/test_import_graph.py, docs/layout.md): `preprocessing`, `errors`, `state`, `logs`,
-`workers`, `bundled` → `progress`, `store` (files, manifests) → `mmg` (ship files, force
+tests/test_import_graph.py, docs/layout.md): `preprocessing`, `errors`, `channel_names`, `logs`,
+`workers`, `package_data` → `progress`, `store` (files, manifests) → `mmg` (ship files, force
 families, the force model) → `config` (the closed choices and experiment configs, no torch,
 no pandas) → `records` (what a run directory holds, no torch), `device` → `dynamics`,
 `hybrid`, `data` → `fast` (the compiled path and export; imported by the CLI, elsewhere only
-where compilation is chosen) → `identify`, `evaluation` → `runs` → `tracking` → `sweep` →
+where compilation is chosen) → `identify`, `evaluation` → `runs` → `experiment_tracking` → `sweep` →
 `maneuvers` → `protocol` → `report` → `cli`.
 
 The names are loaded on first use, so ``import sysid`` (and ``sysid --help``) does not pay

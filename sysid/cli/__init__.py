@@ -16,7 +16,9 @@ from sysid.cli.outputs import release
 from sysid.cli.app import app  # noqa: E402
 
 # subcommands (each module adds its commands to `app`)
-from sysid.cli import mmg_commands  # noqa: E402,F401
+from sysid.cli import forces_commands  # noqa: E402,F401
+from sysid.cli import simulate_commands  # noqa: E402,F401
+from sysid.cli import evaluate_commands  # noqa: E402,F401
 from sysid.cli import report_commands  # noqa: E402,F401
 from sysid.cli import preprocess_commands  # noqa: E402,F401
 from sysid.cli import train_commands  # noqa: E402,F401

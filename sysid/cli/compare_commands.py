@@ -51,7 +51,7 @@ def compare(
                                                  "(MMG, identified MMG, NN-only, hybrid, ensemble), folders of seed "
                                                  "run directories, ship files or bundled ship names (their MMG)."),
     output: Path = typer.Option(..., "-o", "--output", help="Directory to write (comparison.csv, verdicts.csv, "
-                                                             "windows.csv, summary.json, report.html/.pdf)."),
+                                                             "windows.csv, comparison.json, report.html/.pdf)."),
     data: Optional[List[Path]] = typer.Option(None, "--data", help="Logs to compare on: files, folders or patterns "
                                                                     "(several may follow one --data; default: the "
                                                                     "config's [data] test)."),
@@ -76,23 +76,64 @@ def compare(
     its number of windows, and each model's verdict (the project's one rule) against the first
     model or against its physics baseline. Nothing is trained."""
     from sysid.cli.outputs import claim, ship_file
-    from sysid.config import checks
     from sysid.config.choices import Method
     from sysid.config.experiment import load_experiment
-    from sysid.data.recordings import expand_paths, read_runs
-    from sysid.data.datasets import test_files
-    from sysid.data.splits import config_paths
     from sysid.device import compute_threads
-    from sysid.dynamics.integrators import Integrator
-    from sysid.evaluation.comparison import BASELINE, FIRST, Contender, compare as run_compare
-    from sysid.evaluation.evaluate import short_runs
-    from sysid.maneuvers.any_model import load_maneuver_model
-    from sysid.mmg.model import MMG
-    from sysid.progress import progress
-    from sysid.report.comparison_report import write_comparison
+    from sysid.evaluation.comparison import FIRST
     from sysid.store.target import OutputKind
 
     started = time.perf_counter()
+    _check_options(against, threads, horizon)
+    exp = load_experiment(config) if config is not None else None
+    sources = list(models) + list(ship or [])
+    if len(sources) < 2 and against == FIRST:
+        raise DataError("compare: give at least two models (the first is the reference), or --against baseline")
+    files = _logs(data, exp)
+    horizons = tuple(horizon) if horizon else (exp.evaluation.horizons if exp is not None else (30.0, 100.0))
+    method = Method.parse(integrator, "--integrator", offered_only=True) if integrator else (
+        exp.evaluation.integrator if exp is not None else Method.EULER)
+    inputs = [Path(s) if Path(s).exists() else ship_file(s) for s in sources]
+    target = claim(output, OutputKind.COMPARISON, [config, *(data or []), *files, *inputs],   # --data folders too
+                   overwrite)  # a bad -o fails now
+
+    columns, rate = _log_columns(exp, data, sources)
+    chosen = _contenders(sources)
+    with compute_threads(1 if threads is None else threads):
+        result, paths = _compare_and_write(chosen, files, rate, columns, horizons, against, method, target,
+                                           sources, report, output)
+    _print(result)
+    typer.echo(f"compare: {output} ({len(paths)} files, {time.perf_counter() - started:.1f} s)")
+
+
+def _compare_and_write(chosen, files, rate: float, columns, horizons, against: str, method, target, sources,
+                       report: bool, output: Path):
+    """Read the logs, predict every model on them, judge, and write the comparison staged
+    into `target`; (the `Comparison`, the paths written)."""
+    from sysid.dynamics.integrators import Integrator
+    from sysid.evaluation.comparison import FIRST, compare as run_compare
+    from sysid.progress import progress
+    from sysid.report.comparison_report import write_comparison
+
+    runs = _read_logs(files, rate, columns, horizons)
+    logs.info(f"compare: {len(chosen)} models on {len(runs)} log(s) at {', '.join(f'{h:g}' for h in horizons)} s "
+              f"({method.value}); verdicts against " + ("the first model, " + chosen[0].label if against == FIRST
+                                                         else "each model's physics baseline"))
+    on_interrupt(f"nothing written to {output} (it is moved into place only when complete)")
+    bar = progress(total=sum(len(c.members) for c in chosen) * len(horizons), desc="predicting",
+                   unit="model-horizons")
+    result = run_compare(chosen, runs, horizons, against, Integrator(method), on_done=bar.update)
+    bar.close()
+    with target.staged() as staging:
+        paths = write_comparison(staging, result, [str(s) for s in sources], [str(f) for f in files],
+                                 report=report)
+    return result, paths
+
+
+def _check_options(against: str, threads, horizon) -> None:
+    """Exit 2 for an unknown ``--against``, a bad ``--threads`` or ``--horizon``."""
+    from sysid.config import checks
+    from sysid.evaluation.comparison import BASELINE, FIRST
+
     if against not in (FIRST, BASELINE):
         raise DataError(f"--against {against!r}: choose {FIRST} (the first model) or {BASELINE} (each model's "
                         "physics baseline)")
@@ -100,10 +141,15 @@ def compare(
         checks.threads("--threads", threads)
     for h in horizon or ():
         checks.DURATION.check("--horizon", h)
-    exp = load_experiment(config) if config is not None else None
-    sources = list(models) + list(ship or [])
-    if len(sources) < 2 and against == FIRST:
-        raise DataError("compare: give at least two models (the first is the reference), or --against baseline")
+
+
+def _logs(data, exp) -> list[Path]:
+    """The logs to compare on: ``--data``, else the config's [data] test logs, else the
+    paper's six test logs; exit 2 without any."""
+    from sysid.data.datasets import test_files
+    from sysid.data.recordings import expand_paths
+    from sysid.data.splits import config_paths
+
     if data:
         files = expand_paths(data)
     elif exp is not None and exp.data.test:   # only the test logs need to exist here
@@ -112,14 +158,12 @@ def compare(
         files = list(test_files().values())   # the paper's six test files
     else:
         raise DataError("compare: no logs to compare on: name them with --data, or give --config with [data] test")
-    horizons = tuple(horizon) if horizon else (exp.evaluation.horizons if exp is not None else (30.0, 100.0))
-    method = Method.parse(integrator, "--integrator", offered_only=True) if integrator else (
-        exp.evaluation.integrator if exp is not None else Method.EULER)
-    inputs = [Path(s) if Path(s).exists() else ship_file(s) for s in sources]
-    target = claim(output, OutputKind.COMPARISON, [config, *(data or []), *files, *inputs],   # --data folders too
-                   overwrite)  # a bad -o fails now
+    return files
 
-    # the logs' columns: the config's, else the run directories' (which must agree)
+
+def _log_columns(exp, data, sources):
+    """([data.columns] the logs are read with or None, [data] rate [Hz]): the config's, else
+    the run directories' (which must agree)."""
     if exp is not None:
         columns, rate = exp.data.columns, exp.data.rate
         split_columns = exp.data.test or data
@@ -136,6 +180,17 @@ def compare(
             raise DataError(f"compare: the runs read their logs with different [data.columns] ({listed}); "
                             "give --config EXP whose [data.columns] fits the logs of --data")
         columns, rate = (next(iter(distinct)) if distinct else None), 1.0
+    return columns, rate
+
+
+def _contenders(sources):
+    """Every model of `sources` as a `Contender` (its label, members, kind and physics
+    baseline's label), followed by the ship file MMGs that are a learned model's physics
+    baseline and were not given."""
+    from sysid.evaluation.comparison import Contender
+    from sysid.maneuvers.any_model import load_maneuver_model
+    from sysid.mmg.model import MMG
+    from sysid.progress import progress
 
     contenders, taken, ships = [], set(), {}
     for s in progress(sources, desc="loading models", unit="models", quiet=len(sources) < 4):
@@ -155,29 +210,24 @@ def compare(
             baselines[key] = (name, (MMG(ship_),), "mmg", key, ship_)
     rows = contenders + list(baselines.values())
     chosen = [Contender(label, members, kind, ships[key]) for label, members, kind, key, _ in rows]
+    return chosen
 
-    with compute_threads(1 if threads is None else threads):
-        runs = read_runs(progress(files, desc="reading", unit="logs", quiet=len(files) < 4), rate, columns)
-        short = short_runs(runs, horizons)
-        for h in horizons:
-            if sum(s == h for _, s in short) == len(runs):
-                raise DataError(f"--horizon {h:g} s: no log is long enough for one window (the longest lasts "
-                                f"{max(r.duration for r in runs):.0f} s); nothing written")
-        for run, h in short:
-            logs.warning(f"{run.path}: {run.duration:.0f} s, shorter than one {h:g}-s window: no cell at {h:g} s")
-        logs.info(f"compare: {len(chosen)} models on {len(runs)} log(s) at {', '.join(f'{h:g}' for h in horizons)} s "
-                  f"({method.value}); verdicts against " + ("the first model, " + chosen[0].label if against == FIRST
-                                                             else "each model's physics baseline"))
-        on_interrupt(f"nothing written to {output} (it is moved into place only when complete)")
-        bar = progress(total=sum(len(c.members) for c in chosen) * len(horizons), desc="predicting",
-                       unit="model-horizons")
-        result = run_compare(chosen, runs, horizons, against, Integrator(method), on_done=bar.update)
-        bar.close()
-        with target.staged() as staging:
-            paths = write_comparison(staging, result, [str(s) for s in sources], [str(f) for f in files],
-                                     report=report)
-    _print(result)
-    typer.echo(f"compare: {output} ({len(paths)} files, {time.perf_counter() - started:.1f} s)")
+
+def _read_logs(files, rate: float, columns, horizons):
+    """The logs read; exit 2 when none holds a window of a horizon, a warning for each too short."""
+    from sysid.data.recordings import read_runs
+    from sysid.evaluation.evaluate import short_runs
+    from sysid.progress import progress
+
+    runs = read_runs(progress(files, desc="reading", unit="logs", quiet=len(files) < 4), rate, columns)
+    short = short_runs(runs, horizons)
+    for h in horizons:
+        if sum(s == h for _, s in short) == len(runs):
+            raise DataError(f"--horizon {h:g} s: no log is long enough for one window (the longest lasts "
+                            f"{max(r.duration for r in runs):.0f} s); nothing written")
+    for run, h in short:
+        logs.warning(f"{run.path}: {run.duration:.0f} s, shorter than one {h:g}-s window: no cell at {h:g} s")
+    return runs
 
 
 def _print(result) -> None:

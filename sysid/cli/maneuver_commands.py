@@ -10,6 +10,7 @@ import typer
 
 from sysid.cli.app import app
 from sysid.cli.interrupts import on_interrupt
+from sysid.fast.payoff import MANEUVER_REPAY_STEPS
 
 LIMITS = {  # option -> (low, high, unit): finite numbers inside, else one line naming the option
     "--speed": (1e-3, 50.0, "m/s"), "--rps": (-200.0, 200.0, "rps"), "--rudder-rate": (0.1, 100.0, "deg/s"),
@@ -107,8 +108,11 @@ def maneuver(
     integrator: str = typer.Option("rk4", "--integrator", help="rk4 (classical) or euler."),
     compiled: Optional[bool] = typer.Option(None, "--compiled/--eager", show_default=False,
                                             help="Force the compiled loop (compiled once per model, cached) or the "
-                                                 "eager step (default: the compiled loop only where it saves time: "
-                                                 "in the cache, or enough steps to repay compiling it)."),
+                                                 "eager step. Default: the compiled loop when every model's loop is "
+                                                 "in the cache, or when the eager steps (duration / dt per model) "
+                                                 f"reach {MANEUVER_REPAY_STEPS} per loop not yet cached; else eager "
+                                                 "(decided from the "
+                                                 "step count and the cache alone)."),
     recorded: Optional[List[Path]] = typer.Option(None, "--recorded", help="Logs or folders of logs: their turning "
                                                   "circles and zig-zags (recognised from rudder and heading) beside "
                                                   "the model's, like for like (recorded_indices.csv)."),

@@ -119,9 +119,7 @@ def preprocess(
     """
     from preprocessing import pipeline
     from sysid.config import checks
-    from sysid.progress import progress
     from sysid.mmg.ship import load_ship
-    from sysid.workers import in_workers
 
     checks.RATE.check("--rate", rate)
     checks.NON_NEGATIVE_SECONDS.check("--max-gap", max_gap)
@@ -132,6 +130,26 @@ def preprocess(
             swapped_antennas="repair" if swap_antennas else "error")
     except ValueError as exc:
         raise DataError(f"--rate {rate:g}: {exc}" if "output_rate" in str(exc) else str(exc)) from None
+    _check_inputs(raw, outdir)
+    target = claim(outdir, OutputKind.PREPROCESSING, [*raw, ship_file(ship)], overwrite)  # before any work
+    layout = load_ship(ship).sensors
+    paths = [str(p) for p in raw]
+    start = time.perf_counter()
+    on_interrupt(f"nothing written to {outdir} (it is moved into place only when every file is done)")
+    with target.staged() as staging:
+        results = _processed(paths, layout, settings, staging, jobs, outdir)
+        _check_tracks(results)  # a clear mismatch: nothing moved into place
+    order = {p: i for i, p in enumerate(paths)}
+    results.sort(key=lambda r: order[r["file"]])
+    _summary(results, outdir, time.perf_counter() - start)
+    failed = [r for r in results if not r["ok"]]
+    if failed:
+        raise SystemExit(1)  # (typer.Exit is swallowed by standalone_mode=False)
+
+
+def _check_inputs(raw: List[Path], outdir: Path) -> None:
+    """Exit 2 for two raw logs of one file name (their outputs would collide) or one that is
+    not a file."""
     stems: dict[str, Path] = {}
     for p in raw:
         if p.stem in stems:
@@ -141,37 +159,35 @@ def preprocess(
         if not p.is_file():
             from sysid.data.csvfiles import not_a_file
             raise DataError(f"{p}: {not_a_file(p)}")
-    target = claim(outdir, OutputKind.PREPROCESSING, [*raw, ship_file(ship)], overwrite)  # before any work
-    layout = load_ship(ship).sensors
-    paths = [str(p) for p in raw]
-    results = []
-    start = time.perf_counter()
-    on_interrupt(f"nothing written to {outdir} (it is moved into place only when every file is done)")
-    with target.staged() as staging:
-        bar = progress(total=len(paths), unit="files", desc="preprocess")
-        if jobs > 1 and len(paths) > 1:
-            work = functools.partial(pipeline.process_file, layout=layout, settings=settings, outdir=str(staging))
-            results = in_workers(work, paths, jobs, on_result=lambda r: bar.update())
-        else:
-            for p in paths:  # type: ignore[assignment]
-                results.append(pipeline.process_file(p, layout, settings, str(staging)))  # type: ignore[arg-type]
-                bar.update()
-        bar.close()
-        unwritten = next((r for r in results if r.get("write_error") is not None), None)
-        if unwritten is not None:  # the output cannot be written (a full disk): no file is kept
-            from sysid.store.files import write_failure
-            raise write_failure(OSError(unwritten["write_error"], unwritten["error"]), outdir)
-        if not any(r["ok"] for r in results):
-            for r in results:
-                typer.secho(f"error: {r['error']}", fg=typer.colors.RED, err=True)
-            raise SystemExit(1)  # nothing to move into place: no output directory at all
-        _check_tracks(results)  # a clear mismatch: nothing moved into place
-    order = {p: i for i, p in enumerate(paths)}
-    results.sort(key=lambda r: order[r["file"]])
-    _summary(results, outdir, time.perf_counter() - start)
-    failed = [r for r in results if not r["ok"]]
-    if failed:
-        raise SystemExit(1)  # (typer.Exit is swallowed by standalone_mode=False)
+
+
+def _processed(paths: list[str], layout, settings, staging: Path, jobs: int, outdir: Path) -> list[dict]:
+    """Every raw log preprocessed into `staging` (in `jobs` worker processes); each file's
+    result. A file that cannot be written (a full disk) keeps none; exit 1 when no file
+    could be processed."""
+    from preprocessing import pipeline
+    from sysid.progress import progress
+    from sysid.workers import in_workers
+
+    results: list[dict] = []
+    bar = progress(total=len(paths), unit="files", desc="preprocess")
+    if jobs > 1 and len(paths) > 1:
+        work = functools.partial(pipeline.process_file, layout=layout, settings=settings, outdir=str(staging))
+        results = in_workers(work, paths, jobs, on_result=lambda r: bar.update())
+    else:
+        for p in paths:
+            results.append(pipeline.process_file(p, layout, settings, str(staging)))
+            bar.update()
+    bar.close()
+    unwritten = next((r for r in results if r.get("write_error") is not None), None)
+    if unwritten is not None:  # the output cannot be written (a full disk): no file is kept
+        from sysid.store.files import write_failure
+        raise write_failure(OSError(unwritten["write_error"], unwritten["error"]), outdir)
+    if not any(r["ok"] for r in results):
+        for r in results:
+            typer.secho(f"error: {r['error']}", fg=typer.colors.RED, err=True)
+        raise SystemExit(1)  # nothing to move into place: no output directory at all
+    return results
 
 
 def _check_tracks(results: list[dict]) -> None:

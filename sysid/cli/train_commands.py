@@ -89,7 +89,7 @@ def train(
             "nothing to evaluate this MMG on; name test logs in [data] test or with --test"))
     tracker = tracked = None
     if mlflow:
-        from sysid.tracking import EpochLogger, Tracker, config_params
+        from sysid.experiment_tracking import EpochLogger, Tracker, config_params
         tracker = Tracker(mlflow, exp.experiment.name)
         tracked = tracker.start(output.name, config_params(exp),
                                 tags={"sysid.kind": "run", "sysid.output": str(output.resolve())})
@@ -164,7 +164,7 @@ def reproduce(
         import_ray()  # a clear error now if Ray is not installed
         cluster = ray_at.address is not None
     if mlflow:
-        from sysid.tracking import Tracker
+        from sysid.experiment_tracking import Tracker
         Tracker(mlflow, "sysid-reproduce")  # a store that cannot be used fails now
     target = claim(output, OutputKind.REPRODUCTION, [data_root(data)], overwrite)
     on_interrupt(f"nothing written to {output} (it is moved into place only when every run is done)")

@@ -145,3 +145,20 @@ class Validation(Choice):
     @classmethod
     def what(cls) -> str:
         return "validation"
+
+
+def plain_data(value: typing.Any, leaves: tuple[tuple[type, typing.Callable[[typing.Any], typing.Any]], ...] = ()
+               ) -> typing.Any:
+    """`value` as plain data for a TOML or JSON writer: a choice (any enum) as its word, a
+    tuple or list as a list, a dict key for key; an instance of a type in `leaves` (type,
+    to_data) through its `to_data` (a column map as its table, a record as its object)."""
+    for kind, to_data in leaves:
+        if isinstance(value, kind):
+            return to_data(value)
+    if isinstance(value, enum.Enum):
+        return value.value
+    if isinstance(value, (tuple, list)):
+        return [plain_data(v, leaves) for v in value]
+    if isinstance(value, dict):
+        return {k: plain_data(v, leaves) for k, v in value.items()}
+    return value

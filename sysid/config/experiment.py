@@ -50,7 +50,6 @@ the config file that names it (`load_experiment`); a resolved config holds absol
 from __future__ import annotations
 
 import dataclasses
-import enum
 import math
 import os
 import re
@@ -59,7 +58,7 @@ from pathlib import Path
 from typing import Any
 
 from sysid.config.column_map import ColumnMap, parse_columns
-from sysid.config.choices import Choice, DType, GateSpace, Method, ModelKind, Solver, Stage, StartStates, Validation
+from sysid.config.choices import Choice, DType, GateSpace, Method, ModelKind, Solver, Stage, StartStates, Validation, plain_data
 from sysid.config.checks import path_component
 from sysid.errors import ConfigError
 from sysid.mmg.ship import parameter_name
@@ -252,15 +251,7 @@ class Experiment:
 def _plain(value: Any) -> Any:
     """An option's value as TOML data: a choice as its word, a tuple as a list, a column
     map as its ``[data.columns]`` table."""
-    if isinstance(value, ColumnMap):
-        return value.as_table()
-    if isinstance(value, enum.Enum):
-        return value.value
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
-    return value
+    return plain_data(value, ((ColumnMap, ColumnMap.as_table),))
 
 
 def _toml_value(value: Any) -> str:
@@ -358,7 +349,20 @@ def _coerce(section: str, opt_cls, table: dict, src: str):
 
 
 def _validate(exp: Experiment, src: str) -> None:
-    e, t, g, i = exp.experiment, exp.training, exp.gate, exp.identify
+    """`ConfigError` naming the file `src` and the option for the first option of `exp`
+    that is out of range or contradicts another."""
+    _check_training_data(exp, src)
+    for ok, message in _range_checks(exp):
+        if not ok:
+            raise ConfigError(f"{src}: {message}")
+    _check_coefficient_names(exp, src)
+    if exp.experiment.model is ModelKind.NN and exp.identify.parameters:
+        raise ConfigError(f"{src}: [identify] parameters need an MMG part (model mmg or hybrid)")
+
+
+def _check_training_data(exp: Experiment, src: str) -> None:
+    """The training and validation data named once: the paper's data set or your logs."""
+    e, t = exp.experiment, exp.training
     if e.dataset not in ("", "D1", "D2"):
         raise ConfigError(f"{src}: [experiment] dataset = {e.dataset!r}: choose D1 or D2 (the paper's data), "
                           "or leave it out and list your logs in [data] train")
@@ -370,7 +374,12 @@ def _validate(exp: Experiment, src: str) -> None:
     if exp.data.validation and t.validation is Validation.FILES:
         raise ConfigError(f"{src}: [data] validation names the validation logs and [training] validation = "
                           "\"files\" draws them from the training logs: keep one")
-    checks = [
+
+
+def _range_checks(exp: Experiment) -> list[tuple[bool, str]]:
+    """(holds, what the option must be) for every range and pairing rule of the options."""
+    e, t, g, i = exp.experiment, exp.training, exp.gate, exp.identify
+    return [
         (t.steps >= 1, "[training] steps must be >= 1"),
         (t.stride_s > 0, "[training] stride_s must be > 0"),
         (0.0 < t.val_fraction < 1.0, "[training] val_fraction must be in (0, 1)"),
@@ -415,13 +424,16 @@ def _validate(exp: Experiment, src: str) -> None:
         (t.steps <= 10_000, "[training] steps must be <= 10000"),
         (exp.evaluation.integrator in Method.offered(),
          f"[evaluation] integrator must be one of {Method.listing()}"),
-        (all(w >= 1 for w in exp.network.hidden) and exp.network.hidden, "[network] hidden must list widths >= 1"),
+        (bool(exp.network.hidden) and all(w >= 1 for w in exp.network.hidden), "[network] hidden must list widths >= 1"),
         (exp.data.rate > 0, "[data] rate must be > 0"),
         (exp.network.members >= 1, "[network] members must be >= 1"),
     ]
-    for ok, message in checks:
-        if not ok:
-            raise ConfigError(f"{src}: {message}")
+
+
+def _check_coefficient_names(exp: Experiment, src: str) -> None:
+    """[mmg] overrides, [identify] parameters and bounds name coefficients of the ship file's
+    families; the overrides are finite numbers, the bounds (low, high) pairs."""
+    i = exp.identify
     try:
         for key in exp.mmg.overrides:
             parameter_name(key, f"{src}: [mmg] overrides")
@@ -437,8 +449,6 @@ def _validate(exp: Experiment, src: str) -> None:
         raise
     except Exception as exc:  # ShipDefinitionError on unknown names
         raise ConfigError(str(exc)) from None
-    if e.model is ModelKind.NN and i.parameters:
-        raise ConfigError(f"{src}: [identify] parameters need an MMG part (model mmg or hybrid)")
 
 
 # options that name files: a relative path resolves against the directory of the file that

@@ -176,30 +176,29 @@ def check_track(path: str | Path, t: np.ndarray, x: np.ndarray, y: np.ndarray, p
                 u: np.ndarray, v: np.ndarray, r: np.ndarray, columns: ColumnMap | None = None) -> TrackCheck:
     """A log's u, v_m [m/s] and r [rad/s] against the rates of its own midship track x, y
     [m] (earth frame, north and east) and heading psi [rad], all (N,) at times t (N,) [s]
-    as read (SI by `columns`, whose declared units name the likely cause). Cost O(N)."""
-    result = _check_track(path, t, x, y, psi, u, v, r, columns)
+    as read (SI by `columns`, whose declared units name the likely cause). Cost O(N).
+
+    A log sampled more coarsely than every `MAX_PERIOD_S` is left unchecked (a turn's heading
+    and track sampled this coarsely bias central differences), unless its time unit is off:
+    one factor in every rate is still told apart."""
+    path = Path(path)
+    columns = columns if columns is not None else ColumnMap()
     steps = np.diff(t)
     period = float(np.median(steps)) if len(steps) else 0.0
+    result = _against_track(path, t, x, y, psi, u, v, r, columns, period)
     if period > MAX_PERIOD_S and not any(c.channel == "t" for c in result.channels):
-        # a turn's heading and track sampled this coarsely bias central differences; only a
-        # time unit (every rate off by one factor) is still told apart
-        return TrackCheck(Path(path), reason=f"sampled every {period:g} s: too coarse to check u, v and r against "
-                                             f"the track's central differences (at most {MAX_PERIOD_S:g} s)")
+        return TrackCheck(path, reason=f"sampled every {period:g} s: too coarse to check u, v and r against "
+                                       f"the track's central differences (at most {MAX_PERIOD_S:g} s)")
     return result
 
 
-def _check_track(path: str | Path, t: np.ndarray, x: np.ndarray, y: np.ndarray, psi: np.ndarray,
-                u: np.ndarray, v: np.ndarray, r: np.ndarray, columns: ColumnMap | None = None) -> TrackCheck:
-    """A log's u, v_m [m/s] and r [rad/s] against the rates of its own midship track x, y
-    [m] (earth frame, north and east) and heading psi [rad], all (N,) at times t (N,) [s]
-    as read (SI by `columns`, whose declared units name the likely cause). Cost O(N)."""
-    path = Path(path)
-    columns = columns if columns is not None else ColumnMap()
+def _against_track(path: Path, t: np.ndarray, x: np.ndarray, y: np.ndarray, psi: np.ndarray, u: np.ndarray,
+                   v: np.ndarray, r: np.ndarray, columns: ColumnMap, period: float) -> TrackCheck:
+    """`check_track` at any sampling `period` [s]: each channel graded against the track's
+    central differences over `SPAN_S`, then the fault that explains them named."""
     if min(np.ptp(x), np.ptp(y)) == 0.0 or np.ptp(psi) == 0.0:
         missing = [name for name, q in (("x", x), ("y", y), ("psi", psi)) if np.ptp(q) == 0.0]
         return TrackCheck(path, reason=f"{', '.join(missing)} constant: no track to check u, v and r against")
-    steps = np.diff(t)
-    period = float(np.median(steps)) if len(steps) else 0.0
     span = max(1, int(round(SPAN_S / period))) if period > 0 else 1
     if len(t) < 2 * span + 5:
         return TrackCheck(path, reason=f"{len(t)} samples: too short to check against the track")
@@ -209,20 +208,29 @@ def _check_track(path: str | Path, t: np.ndarray, x: np.ndarray, y: np.ndarray, 
     c, s = np.cos(psi[mid]), np.sin(psi[mid])
     track = {"u": xdot * c + ydot * s, "v": -xdot * s + ydot * c, "r": central_rate(t, heading, span)}
     log = {"u": u[mid], "v": v[mid], "r": r[mid]}
-    found: dict[str, ChannelCheck] = {}
-    for name in CHECKED:
-        motion = float(np.sqrt(np.mean(track[name] ** 2)))
-        logged = float(np.sqrt(np.mean(log[name] ** 2)))
-        if max(motion, logged) < MIN_MOTION[name]:
-            found[name] = ChannelCheck(name, np.nan, np.nan, 0, Verdict.UNCHECKED, "too little motion")
-            continue
-        k, corr, kept = scale_factor(log[name], track[name])
-        if kept < MIN_SAMPLES:
-            found[name] = ChannelCheck(name, k, corr, kept, Verdict.UNCHECKED, f"{kept} samples kept: too few")
-            continue
-        verdict = _grade(name, k, corr)
-        hint = unit_hint(name, k, columns.spec(name).resolved_unit) if verdict is not Verdict.CONSISTENT else ""
-        found[name] = ChannelCheck(name, k, corr, kept, verdict, hint)
+    found = {name: _graded(name, log[name], track[name], columns) for name in CHECKED}
+    return _named_fault(path, found, log, track, columns) or TrackCheck(path, tuple(found[n] for n in CHECKED))
+
+
+def _graded(name: str, logged_rate: np.ndarray, track_rate: np.ndarray, columns: ColumnMap) -> ChannelCheck:
+    """One channel's logged values against the track's rate: its factor, correlation, the
+    samples kept and the verdict, with the likely unit named when it does not fit."""
+    motion = float(np.sqrt(np.mean(track_rate ** 2)))
+    logged = float(np.sqrt(np.mean(logged_rate ** 2)))
+    if max(motion, logged) < MIN_MOTION[name]:
+        return ChannelCheck(name, np.nan, np.nan, 0, Verdict.UNCHECKED, "too little motion")
+    k, corr, kept = scale_factor(logged_rate, track_rate)
+    if kept < MIN_SAMPLES:
+        return ChannelCheck(name, k, corr, kept, Verdict.UNCHECKED, f"{kept} samples kept: too few")
+    verdict = _grade(name, k, corr)
+    hint = unit_hint(name, k, columns.spec(name).resolved_unit) if verdict is not Verdict.CONSISTENT else ""
+    return ChannelCheck(name, k, corr, kept, verdict, hint)
+
+
+def _named_fault(path: Path, found: dict[str, ChannelCheck], log: dict[str, np.ndarray],
+                 track: dict[str, np.ndarray], columns: ColumnMap) -> TrackCheck | None:
+    """The one fault that explains the graded channels `found`: the heading in a smaller unit
+    or counted to port, the time's unit, u and v swapped; None when none does."""
     rate = found["r"]
     if rate.verdict is not Verdict.UNCHECKED and 0 < rate.factor < 1.0 and not rate.hint:  # psi in a smaller unit
         psi_hint = unit_hint("psi", 1.0 / rate.factor, columns.spec("psi").resolved_unit)
@@ -253,7 +261,7 @@ def _check_track(path: str | Path, t: np.ndarray, x: np.ndarray, y: np.ndarray, 
             swapped = ChannelCheck("uv", k_uv, min(corr_uv, corr_vu), kept_uv, Verdict.MISMATCH,
                                    "the u and v columns swapped?")
             return TrackCheck(path, (swapped, found["r"]))
-    return TrackCheck(path, tuple(found[n] for n in CHECKED))
+    return None
 
 
 def report_checks(checks: Sequence[TrackCheck], warn=None) -> None:

@@ -28,7 +28,7 @@ from sysid.data.consistency import TrackCheck, check_track, report_checks
 from sysid.data.csvfiles import LOG_SUFFIXES, not_a_file, read_table
 from sysid.errors import DataError
 from sysid.mmg.wind import relative_wind
-from sysid.state import INPUTS, STATE
+from sysid.channel_names import INPUTS, STATE
 
 # processed-schema header ("u_velo [m/s]") -> our channel name ("u"); one source: preprocessing.schema
 COLUMNS = {f"{name} [{unit}]": PROCESSED_CHANNEL[name] for name, unit in PROCESSED.items()}

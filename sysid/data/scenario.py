@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from sysid.data.recordings import Run
-from sysid.state import INPUTS, STATE
+from sysid.channel_names import INPUTS, STATE
 
 ASTERN_SHARE = 0.05               # share of samples with n < 0 that marks astern work
 BERTHING_REVERSALS_PER_MIN = 2.0  # propeller reversals (ahead <-> astern) per minute

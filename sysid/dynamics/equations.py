@@ -22,6 +22,7 @@ from sysid.dynamics.integrators import EULER, Integrator, IntegratorLike, Method
 from sysid.mmg.capture import captured
 from sysid.mmg.coefficient_lookup import Rows, coefficient_matrix, view_of
 from sysid.mmg.model import ForceBreakdown
+from sysid.mmg.vjp import RATE_ROWS
 
 _ODEINT_NAME = {Method.EULER: "euler", Method.RK4_38: "rk4"}  # torchdiffeq's public names
 
@@ -75,19 +76,7 @@ def derivative_channels(state: torch.Tensor, force, c) -> tuple[torch.Tensor, ..
 
 # dx/dt (..., 6) as features (..., 16) times a (16, 6) matrix of the mass terms: features
 # (X, Y, N, u r, v r, r r, u cos psi, u sin psi, v cos psi, v sin psi, x, u, y, v, psi, r)
-_NONE6 = (None,) * 6
-_RATE = ((None, "eom_X_u", None, None, None, None),        # X
-         (None, None, None, "eom_Y_v", None, "eom_N_v"),   # Y
-         (None, None, None, "eom_N_v", None, "eom_N_r"),   # N
-         (None, None, None, "eom_ur_v", None, "eom_ur_r"),  # u r
-         (None, "eom_vr_u", None, None, None, None),       # v r
-         (None, "eom_rr_u", None, None, None, None),       # r r
-         (1.0, None, None, None, None, None),              # u cos psi -> x_dot
-         (None, None, 1.0, None, None, None),              # u sin psi -> y_dot
-         (None, None, 1.0, None, None, None),              # v cos psi -> y_dot
-         (-1.0, None, None, None, None, None),             # v sin psi -> x_dot
-         _NONE6, _NONE6, _NONE6, _NONE6, _NONE6,           # x, u, y, v, psi
-         (None, None, None, None, 1.0, None))              # r -> psi_dot
+_RATE = RATE_ROWS
 
 
 def motion_rate(state: torch.Tensor, forces, motion, c) -> torch.Tensor:
@@ -238,12 +227,59 @@ def stack_forces(calls: list[ForceBreakdown]) -> ForceBreakdown:
     return ForceBreakdown(**stacked)
 
 
+class TrainingDynamics(nn.Module):
+    """Right-hand side f(tau, x) = dt `rate`(x, inputs[floor(tau)]) of a training rollout;
+    `rate` (a force model's ``training_rate``) gives (dx/dt, F_NN, F_MMG), and each call's
+    F_NN and F_MMG are kept in ``f_nn`` and ``f_mmg`` (the output penalty's)."""
+
+    def __init__(self, rate, inputs: torch.Tensor, dt: float):
+        super().__init__()
+        self.rate = rate
+        self.inputs = inputs
+        self.dt = float(dt)
+        self.f_nn: list[torch.Tensor] = []
+        self.f_mmg: list[torch.Tensor] = []
+
+    def forward(self, tau: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
+        k = min(max(int(tau), 0), self.inputs.shape[0] - 1)
+        rate, f_nn, f_mmg = self.rate(state, self.inputs[k])
+        self.f_nn.append(f_nn)
+        self.f_mmg.append(f_mmg)
+        return self.dt * rate
+
+
+def integrate_training(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
+                       fast: bool = True) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Euler rollouts of the training loss (torchdiffeq's `odeint`, plain backprop): states
+    (T, ..., 6) from x0 (..., 6) with inputs (T, ..., 4), and F_NN, F_MMG (T - 1, ..., 3) of
+    every step (zeros where a model has no such term).
+
+    Through the model's ``training_rate`` where it has one that applies (one autograd
+    Function with a hand-derived VJP for the MMG part: `sysid.mmg.vjp`); otherwise, or
+    with ``fast=False``, through `integrate_with_forces` (autograd over every operation).
+    The same numbers either way, to round-off.
+    """
+    training_rate = getattr(force_model, "training_rate", None) if fast else None
+    rate = training_rate() if training_rate is not None else None
+    if rate is None:
+        trajectory = integrate_with_forces(force_model, x0, inputs, dt, Method.EULER)
+        return trajectory.states, trajectory.forces.correction, trajectory.forces.mmg
+    check_shapes(x0, inputs)
+    if inputs.shape[0] < 2:
+        raise ValueError("no steps: inputs need at least two rows")
+    rhs = TrainingDynamics(rate, inputs, dt)
+    tau = torch.arange(inputs.shape[0], dtype=x0.dtype, device=x0.device)
+    states = odeint(rhs, x0, tau, method=_ODEINT_NAME[Method.EULER])
+    return states, torch.stack(rhs.f_nn), torch.stack(rhs.f_mmg)
+
+
 def integrate_with_forces(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
                           method: Method = Method.EULER) -> Trajectory:
     """`integrate` (not compiled) that also returns every call's forces, stacked.
 
-    The training loss uses it with Euler: states from torchdiffeq's `odeint`, F_NN and
-    F_MMG of each step for the output penalty (paper Eq. 17).
+    With Euler it is the training loss's rollout through autograd (`integrate_training`
+    falls back to it): states from torchdiffeq's `odeint`, F_NN and F_MMG of each step for
+    the output penalty (paper Eq. 17).
     """
     record: list[ForceBreakdown] = []
     states = integrate(force_model, x0, inputs, dt, method, record=record)

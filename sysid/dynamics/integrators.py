@@ -13,7 +13,7 @@ state x (..., 6) and of one right-hand side f(x) -> dx/dt (..., 6), step length 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Union
+from typing import Any, Callable, Union
 
 import torch
 
@@ -80,25 +80,70 @@ STEP_RULES: dict[Method, Callable[[RightHandSide, torch.Tensor, float], torch.Te
     Method.EULER: euler_step, Method.RK4: rk4_step, Method.RK4_38: rk4_38_step}
 
 
+Advance = Callable[[int, Any], tuple[torch.Tensor, Any]]  # (step k, carry) -> (record row k, carry after)
+
+
+def step_loop(advance: Advance, carry: Any, steps: int) -> list[torch.Tensor]:
+    """The rows of `steps` calls of ``advance(k, carry) -> (row, carry)``, k = 0 .. steps-1,
+    each from the carry the one before left: the one eager loop of every rollout (recorded
+    inputs, `rollout` and `run_steps`; closed loop, `sysid.maneuvers.closed_loop.run_eager`).
+    Its in-program twin, for compiled code, is `while_steps`."""
+    rows = []
+    for k in range(steps):
+        row, carry = advance(k, carry)
+        rows.append(row)
+    return rows
+
+
+def while_steps(advance: Callable[..., tuple], record: torch.Tensor, carry: tuple, steps: torch.Tensor) -> tuple:
+    """`step_loop` inside one program: ``advance(k, *carry) -> (row, *carry)`` for k = 0 ..
+    steps-1 (k and steps () int64 tensors) as one `torch.while_loop`, row k written into
+    `record[k]` in place (a record carried through the loop would be copied, and allocated
+    anew, on every step). Returns the loop's final (k, *carry); callers return a part of it
+    beside the record, which keeps the loop and its writes in the captured program."""
+    k0 = torch.zeros((), dtype=torch.int64, device=record.device)
+
+    def more(k, *state):
+        return k < steps
+
+    def body(k, *state):
+        row, *after = advance(k, *state)
+        record.index_copy_(0, k.reshape(1), row[None])
+        return (k + 1, *after)
+
+    return torch.while_loop(more, body, (k0, *carry))
+
+
+def run_in_chunks(call: Callable[[Any, int, int], tuple[torch.Tensor, Any]], carry: Any, steps: int,
+                  capacity: int, head: torch.Tensor | None = None) -> torch.Tensor:
+    """The one driver of compiled loops of `capacity` steps: ``call(carry, done, n) -> (rows
+    (n, ...), carry after them)`` for n = `capacity` steps at a time (fewer in the last
+    call) until `steps` are done, each call from the carry the one before left. Returns the
+    rows of every call concatenated, after `head` (e.g. the start state) where given."""
+    parts = [] if head is None else [head]
+    done = 0
+    while done < steps:
+        n = min(capacity, steps - done)
+        rows, carry = call(carry, done, n)
+        parts.append(rows)
+        done += n
+    return torch.cat(parts)
+
+
 def rollout(rhs: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], x0: torch.Tensor,
             inputs: torch.Tensor, dt: float, method: Method) -> torch.Tensor:
-    """States (T, ..., 6) from x0 (..., 6) and inputs (T, ..., 4) by a plain step loop.
-
-    `rhs(state, inputs) -> dx/dt`; step k holds inputs[k]; row 0 is x0.
-    """
+    """States (T, ..., 6) from x0 (..., 6) and inputs (T, ..., 4) by `method`'s step rule on
+    `rhs(state, inputs) -> dx/dt`; step k holds inputs[k]; row 0 is x0."""
     rule = STEP_RULES[method]
-    states = [x0]
-    for k in range(inputs.shape[0] - 1):
-        u = inputs[k]
-        states.append(rule(lambda x: rhs(x, u), states[-1], dt))  # noqa: B023 (called within this step)
-    return torch.stack(states)
+    return run_steps(lambda x, u: rule(lambda y: rhs(y, u), x, dt), x0, inputs)
 
 
 def run_steps(step: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], x0: torch.Tensor,
               inputs: torch.Tensor) -> torch.Tensor:
     """States (T, B, 6) from a whole-step function `step(x (B, 6), u (B, 4)) -> x_next`,
-    x0 (B, 6) and inputs (T, B, 4); row 0 is x0."""
-    states = [x0]
-    for k in range(inputs.shape[0] - 1):
-        states.append(step(states[-1], inputs[k]))
-    return torch.stack(states)
+    x0 (B, 6) and inputs (T, B, 4) (`step_loop`); row 0 is x0."""
+
+    def advance(k: int, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        following = step(x, inputs[k])
+        return following, following
+    return torch.stack([x0, *step_loop(advance, x0, inputs.shape[0] - 1)])

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import torch
 
 from sysid.dynamics.equations import integrate
-from sysid.state import VELOCITY_INDEX
+from sysid.channel_names import VELOCITY_INDEX
 
 VEL = list(VELOCITY_INDEX)
 

@@ -27,7 +27,7 @@ from sysid.dynamics.integrators import EULER, Integrator
 from sysid.evaluation.evaluate import predict_windows
 from sysid.evaluation.judgement import (CHANNELS, DEFAULT_RULE, UNITS, Divergence, Judgement, PairedCell, VerdictRule,
                                        judge)
-from sysid.state import VELOCITY_INDEX
+from sysid.channel_names import VELOCITY_INDEX
 
 FIRST, BASELINE = "first", "baseline"   # what every model is judged against (``--against``)
 # one row per log, horizon, channel and model (comparison.csv)

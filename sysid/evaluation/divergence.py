@@ -16,7 +16,7 @@ import numpy as np
 
 from sysid.evaluation.judgement import Divergence
 from sysid.records.summary import RunSummary
-from sysid.state import VELOCITY_INDEX
+from sysid.channel_names import VELOCITY_INDEX
 
 DIVERGENCE_FACTOR = 3.0   # a prediction this many times faster or turning faster than any training sample diverged
 
@@ -62,7 +62,7 @@ def diverged_windows(predicted: np.ndarray, t: np.ndarray, log: str, horizon_s: 
     """(W,) True for each window whose prediction diverged, and where it first did (the
     earliest time over the windows), or None.
 
-    predicted, observed : (H, W, 6) predicted and recorded states (`sysid.state.STATE`); t :
+    predicted, observed : (H, W, 6) predicted and recorded states (`sysid.channel_names.STATE`); t :
     (H, W) log time [s]. The range is the training logs' (`limits`), widened to the recorded
     states of these windows: a prediction as fast as the record never counts as diverged.
     """

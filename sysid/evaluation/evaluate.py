@@ -28,7 +28,7 @@ from sysid.evaluation.divergence import PhysicalRange, diverged_windows
 from sysid.evaluation.judgement import Divergence
 from sysid.records.columns import (METRICS_COLUMNS, REQUIRED_METRICS_COLUMNS, TRACE_COLUMNS,  # noqa: F401 (their home before)
                                    trace_name)
-from sysid.state import FORCE, FORCE_COMPONENTS, INPUTS, STATE, VELOCITY_INDEX
+from sysid.channel_names import FORCE, FORCE_COMPONENTS, INPUTS, STATE, VELOCITY_INDEX
 
 
 

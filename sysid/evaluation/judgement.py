@@ -24,7 +24,7 @@ whatever the order of the cells.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from enum import Enum
 from typing import Any, Mapping, Sequence
 
@@ -327,61 +327,16 @@ def judge(cells: Sequence[PairedCell], rule: VerdictRule = VerdictRule(), model:
           baseline: str = "its baseline") -> Judgement:
     """The verdict on `cells` under `rule` (see the module docstring); `model` and
     `baseline` name them in the sentence ("The hybrid", "MMG (ship file)")."""
-    if not cells:
-        raise ValueError("no cells to judge")
-    cells = sorted(cells, key=lambda c: c.key)
-    keys = [c.key for c in cells]
-    if len(set(keys)) != len(keys):
-        raise ValueError("two cells share a log, horizon and channel")
+    cells, groups = _checked(cells)
     M, B = cells[0].model.shape[0], cells[0].baseline.shape[0]
-    if any(c.model.shape[0] != M or c.baseline.shape[0] != B for c in cells):
-        raise ValueError("every cell needs the same members of the model and of the baseline")
-    groups: dict[tuple[str, float], list[PairedCell]] = {}
-    for c in cells:
-        groups.setdefault((c.log, float(c.horizon_s)), []).append(c)
-    for (log, h), group in groups.items():
-        if any(not np.array_equal(g.window_start_s, group[0].window_start_s) for g in group):
-            raise ValueError(f"{log} at {h:g} s: the channels' cells are not on the same windows")
-
     alpha = (1 - rule.confidence) / 2
     R = rule.resamples
-    rng = np.random.default_rng(rule.seed)
+    rng = np.random.default_rng(rule.seed)   # drawn in this order: members, baselines, each log's windows, logs
     members = _counts(rng, M, R)
     baselines = _counts(rng, B, R)
-    judged: list[CellJudgement] = []
-    log_ratios: dict[str, list[np.ndarray]] = {}   # log -> resampled log-ratios of its judged cells
-    point_logs: list[float] = []
-    ratios: list[np.ndarray] = []                  # (R,) resampled RMSE ratio per compared cell
-    member_logs: list[np.ndarray] = []             # (M,) log-ratio of each member alone, per judged cell
-    for (log, _h), group in groups.items():
-        W = group[0].n_windows
-        windows = _counts(rng, W, R)
-        for c in group:
-            mse_m, mse_b = np.mean(c.model**2), np.mean(c.baseline**2)
-            model_rmse, baseline_rmse = math.sqrt(mse_m), math.sqrt(mse_b)
-            common = dict(log=c.log, scenario=c.scenario, horizon_s=float(c.horizon_s), channel=c.channel,
-                          n_windows=W, n_members=M, model_rmse=model_rmse, baseline_rmse=baseline_rmse)
-            if c.model_diverged:
-                judged.append(CellJudgement(**common, change=math.nan, change_low=math.nan, change_high=math.nan,
-                                            decision=CellDecision.DIVERGED, divergence=c.divergence))
-                continue
-            if c.baseline_diverged or not mse_b > 0 or W == 0:
-                judged.append(CellJudgement(**common, change=math.nan, change_low=math.nan, change_high=math.nan,
-                                            decision=CellDecision.BASELINE_DIVERGED))
-                continue
-            # rounded to 12 digits: a model equal to its baseline gives exactly 1 in every draw
-            ratio = np.round(np.sqrt(_pooled_mse(c.model, members, windows)
-                                     / _pooled_mse(c.baseline, baselines, windows)), 12)
-            change = round(model_rmse / baseline_rmse, 12) - 1
-            judged.append(CellJudgement(**common, change=change, change_low=math.nan, change_high=math.nan,
-                                        decision=CellDecision.NOT_DISTINGUISHABLE))
-            ratios.append(ratio)
-            with np.errstate(divide="ignore"):
-                log_ratios.setdefault(log, []).append(np.log(ratio))
-                point_logs.append(math.log(change + 1))
-                member_logs.append(0.5 * np.log(np.mean(c.model**2, axis=1) / mse_b))
-    if ratios:   # every compared cell's interval, in one call
-        bounds = iter(np.quantile(np.stack(ratios, 1), [alpha, 1 - alpha], axis=0).T - 1)   # (cells, 2)
+    judged, compared = _cell_judgements(groups, rng, R, M, members, baselines)
+    if compared.ratios:   # every compared cell's interval, in one call
+        bounds = iter(np.quantile(np.stack(compared.ratios, 1), [alpha, 1 - alpha], axis=0).T - 1)   # (cells, 2)
         decided: list[CellJudgement] = []
         for cell in judged:
             if math.isfinite(cell.change):
@@ -389,20 +344,7 @@ def judge(cells: Sequence[PairedCell], rule: VerdictRule = VerdictRule(), model:
                 cell = _decided(cell, float(low), float(high), rule)
             decided.append(cell)
         judged = decided
-
-    # overall: geometric mean of the judged cells' ratios, logs resampled with replacement
-    logs = sorted(log_ratios)
-    if logs:
-        sums = np.stack([np.sum(log_ratios[name], axis=0) for name in logs], 1)     # (R, L)
-        sizes = np.array([len(log_ratios[name]) for name in logs], dtype=float)      # (L,)
-        draws = _counts(rng, len(logs), R)
-        overall = np.exp((draws * sums).sum(1) / (draws @ sizes)) - 1
-        change = math.exp(float(np.mean(point_logs))) - 1
-        change_low, change_high = (float(q) for q in np.quantile(overall, [alpha, 1 - alpha]))
-        member_changes = tuple(float(v) for v in np.exp(np.mean(member_logs, axis=0)) - 1)
-    else:
-        change = change_low = change_high = math.nan
-        member_changes = tuple(math.nan for _ in range(M))
+    change, change_low, change_high, member_changes = _overall_change(compared, rng, R, M, alpha)
 
     diverged = [c for c in judged if c.decision is CellDecision.DIVERGED]
     material = [c for c in judged if c.decision is CellDecision.MATERIALLY_WORSE]
@@ -424,6 +366,95 @@ def judge(cells: Sequence[PairedCell], rule: VerdictRule = VerdictRule(), model:
                        member_changes, worst, len({c.log for c in cells}), n_windows, M,
                        tuple(sorted({float(c.horizon_s) for c in cells})), "", divergences)
     return _with_sentence(result, model, baseline, material, unjudged_material, diverged)
+
+
+def _checked(cells: Sequence[PairedCell]) -> tuple[list[PairedCell], dict[tuple[str, float], list[PairedCell]]]:
+    """`cells` sorted by log, horizon and channel, and grouped by (log, horizon [s]);
+    `ValueError` for none, a repeated cell, members that differ or channels of one log and
+    horizon on different windows."""
+    if not cells:
+        raise ValueError("no cells to judge")
+    cells = sorted(cells, key=lambda c: c.key)
+    keys = [c.key for c in cells]
+    if len(set(keys)) != len(keys):
+        raise ValueError("two cells share a log, horizon and channel")
+    M, B = cells[0].model.shape[0], cells[0].baseline.shape[0]
+    if any(c.model.shape[0] != M or c.baseline.shape[0] != B for c in cells):
+        raise ValueError("every cell needs the same members of the model and of the baseline")
+    groups: dict[tuple[str, float], list[PairedCell]] = {}
+    for c in cells:
+        groups.setdefault((c.log, float(c.horizon_s)), []).append(c)
+    for (log, h), group in groups.items():
+        if any(not np.array_equal(g.window_start_s, group[0].window_start_s) for g in group):
+            raise ValueError(f"{log} at {h:g} s: the channels' cells are not on the same windows")
+    return cells, groups
+
+
+@dataclass
+class _Compared:
+    """The cells compared (model and baseline finite): per log the resampled log-ratios of
+    its cells, each cell's point log-ratio, its (R,) resampled RMSE ratio and the (M,)
+    log-ratio of each member alone."""
+
+    log_ratios: dict[str, list[np.ndarray]] = field(default_factory=dict)
+    point_logs: list[float] = field(default_factory=list)
+    ratios: list[np.ndarray] = field(default_factory=list)
+    member_logs: list[np.ndarray] = field(default_factory=list)
+
+
+def _cell_judgements(groups: dict[tuple[str, float], list[PairedCell]], rng: np.random.Generator, R: int, M: int,
+                     members: np.ndarray, baselines: np.ndarray) -> tuple[list[CellJudgement], _Compared]:
+    """Each cell's judgement before its interval (diverged, baseline diverged, or compared:
+    not distinguishable until `_decided`), and what the compared cells give the overall change.
+    One draw of windows per (log, horizon) from `rng`, in the groups' order."""
+    judged: list[CellJudgement] = []
+    compared = _Compared()
+    for (log, _h), group in groups.items():
+        W = group[0].n_windows
+        windows = _counts(rng, W, R)
+        for c in group:
+            mse_m, mse_b = np.mean(c.model**2), np.mean(c.baseline**2)
+            model_rmse, baseline_rmse = math.sqrt(mse_m), math.sqrt(mse_b)
+            common: dict[str, Any] = dict(log=c.log, scenario=c.scenario, horizon_s=float(c.horizon_s), channel=c.channel,
+                                          n_windows=W, n_members=M, model_rmse=model_rmse,
+                                          baseline_rmse=baseline_rmse)
+            if c.model_diverged:
+                judged.append(CellJudgement(**common, change=math.nan, change_low=math.nan, change_high=math.nan,
+                                            decision=CellDecision.DIVERGED, divergence=c.divergence))
+                continue
+            if c.baseline_diverged or not mse_b > 0 or W == 0:
+                judged.append(CellJudgement(**common, change=math.nan, change_low=math.nan, change_high=math.nan,
+                                            decision=CellDecision.BASELINE_DIVERGED))
+                continue
+            # rounded to 12 digits: a model equal to its baseline gives exactly 1 in every draw
+            ratio = np.round(np.sqrt(_pooled_mse(c.model, members, windows)
+                                     / _pooled_mse(c.baseline, baselines, windows)), 12)
+            change = round(model_rmse / baseline_rmse, 12) - 1
+            judged.append(CellJudgement(**common, change=change, change_low=math.nan, change_high=math.nan,
+                                        decision=CellDecision.NOT_DISTINGUISHABLE))
+            compared.ratios.append(ratio)
+            with np.errstate(divide="ignore"):
+                compared.log_ratios.setdefault(log, []).append(np.log(ratio))
+                compared.point_logs.append(math.log(change + 1))
+                compared.member_logs.append(0.5 * np.log(np.mean(c.model**2, axis=1) / mse_b))
+    return judged, compared
+
+
+def _overall_change(compared: _Compared, rng: np.random.Generator, R: int, M: int,
+                    alpha: float) -> tuple[float, float, float, tuple[float, ...]]:
+    """(change, its low and high bound, each member's change) overall: the geometric mean of
+    the compared cells' ratios minus 1, logs resampled with replacement; NaN without any."""
+    logs = sorted(compared.log_ratios)
+    if not logs:
+        return math.nan, math.nan, math.nan, tuple(math.nan for _ in range(M))
+    sums = np.stack([np.sum(compared.log_ratios[name], axis=0) for name in logs], 1)     # (R, L)
+    sizes = np.array([len(compared.log_ratios[name]) for name in logs], dtype=float)      # (L,)
+    draws = _counts(rng, len(logs), R)
+    overall = np.exp((draws * sums).sum(1) / (draws @ sizes)) - 1
+    change = math.exp(float(np.mean(compared.point_logs))) - 1
+    change_low, change_high = (float(q) for q in np.quantile(overall, [alpha, 1 - alpha]))
+    member_changes = tuple(float(v) for v in np.exp(np.mean(compared.member_logs, axis=0)) - 1)
+    return change, change_low, change_high, member_changes
 
 
 def _listed(cells: Sequence[CellJudgement], limit: int = 3) -> str:

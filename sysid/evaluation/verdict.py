@@ -6,7 +6,7 @@ the identified MMG. The evidence is paired per-window RMSE of u, v_m [m/s] and r
 
 - test: the benchmark protocol's windows of every test log at each evaluation horizon, one
   cell per (log, horizon, channel);
-- validation: the windows of ``val_loss_multistep`` (`sysid.identify.trainer.VAL_LOSS_DEFINITION`),
+- validation: the windows of ``val_loss_multistep`` (`sysid.records.summary.VAL_LOSS_DEFINITION`),
   one cell per channel, over their predicted steps.
 
 The test logs decide whenever there are any (a diverged prediction there is a DIVERGED

@@ -38,11 +38,11 @@ from torch import nn
 from sysid.fast import codegen_fixes
 from sysid.config.choices import Method
 from sysid.dynamics.equations import check_shapes, eager_predict
-from sysid.dynamics.integrators import Integrator, IntegratorLike, run_steps
+from sysid.dynamics.integrators import Integrator, IntegratorLike, run_in_chunks, run_steps
 from sysid.fast.prepared import prepared
 from sysid.mmg.capture import capturing
 from sysid.store.files import atomic_path
-from sysid.state import INPUTS, STATE
+from sysid.channel_names import INPUTS, STATE
 from sysid.fast.stepper import Derivative, Rollout, Step
 
 Compiled = Callable[..., torch.Tensor]
@@ -400,22 +400,20 @@ def rollout_package(model: nn.Module, method: Method, dt: float, batch: int = 1,
 
 def _chunked_rollout(fn: Compiled, channels_first: bool) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
     """`fn`, a compiled `Rollout` of `ROLLOUT_STEPS` steps, as ``(x0 (B, 6), inputs (T, B, 4))
-    -> states (T, B, 6)``: calls of up to `ROLLOUT_STEPS` steps, each from the last state."""
+    -> states (T, B, 6)``: calls of up to `ROLLOUT_STEPS` steps, each from the last state
+    (`sysid.dynamics.integrators.run_in_chunks`)."""
 
     def run(x0: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
         x = x0.T.contiguous() if channels_first else x0
         u = inputs.transpose(1, 2) if channels_first else inputs
-        total = inputs.shape[0] - 1
-        out, done = [x[None]], 0
-        while done < total:
-            n = min(ROLLOUT_STEPS, total - done)
+
+        def call(x: torch.Tensor, done: int, n: int) -> tuple[torch.Tensor, torch.Tensor]:
             chunk = u[done:done + n]
             if n < ROLLOUT_STEPS:  # rows the loop does not reach: any numbers
                 chunk = torch.cat((chunk, chunk[-1:].expand(ROLLOUT_STEPS - n, *chunk.shape[1:])))
             states = fn(x, chunk, torch.tensor(n))[:n]
-            out.append(states)
-            x, done = states[-1], done + n
-        states = torch.cat(out)
+            return states, states[-1]
+        states = run_in_chunks(call, x, inputs.shape[0] - 1, ROLLOUT_STEPS, head=x[None])
         return states.transpose(1, 2) if channels_first else states
     return run
 
@@ -440,6 +438,20 @@ def compiled_rollout(model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, d
             step = compiled_step(model, method, dt, x.shape[0], x.dtype, x.device)
             states = run_steps(step if step is not None else Step(model, method, dt), x, u)
     return states.reshape(inputs.shape[0], *batch_shape, 6)
+
+
+def prediction_package(model: nn.Module, method: Method, dt: float, batch: int,
+                       dtype: torch.dtype = torch.float64, device: str | torch.device = "cpu") -> tuple[str, Path]:
+    """(cache label, path) of the package `compiled_rollout` runs for `batch` ships (a
+    `Rollout` up to `ROLLOUT_ROWS`, else a `Step` of up to `CHUNK_ROWS` rows): the file
+    exists when the prediction starts warm. Nothing is compiled."""
+    if batch <= ROLLOUT_ROWS:
+        roll, examples, label = _rollout(model, method, dt, batch, dtype, device)
+        return label, package_path(roll, examples, label, _options_for(batch))
+    rows = min(batch, CHUNK_ROWS)
+    step = Step(prepared(model, rows), method, dt, rows > 1)
+    label = step_label(method)
+    return label, package_path(step, _examples(rows, dtype, device), label, _options_for(rows))
 
 
 def predict(model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,

@@ -4,7 +4,8 @@
 inputs held (Euler, classical RK4 or the 3/8 rule of `sysid.dynamics.integrators`): the unit that
 `sysid.fast.compiled` compiles and `sysid.fast.export` exports. `Derivative` is the bare right-hand
 side dx/dt (B, 6). `sysid.dynamics.integrators.run_steps` runs a step over recorded inputs;
-`Rollout` runs up to a fixed number of steps inside one module (a `while_loop`), so a
+`Rollout` runs up to a fixed number of steps inside one module (the same loop as
+`sysid.dynamics.integrators.while_steps`, a `while_loop`), so a
 compiled prediction is one native call instead of one per step.
 
 Both evaluate the right-hand side through `sysid.dynamics.equations.lean_derivative` (the model's
@@ -19,7 +20,7 @@ from torch import nn
 
 from sysid.config.choices import Method
 from sysid.dynamics.equations import derivative_channels, lean_derivative
-from sysid.dynamics.integrators import STEP_RULES
+from sysid.dynamics.integrators import STEP_RULES, while_steps
 
 
 class Derivative(nn.Module):
@@ -84,9 +85,8 @@ class Rollout(nn.Module):
     ``forward(x0, inputs, steps)``: x0 (B, 6) (or (6, B) for a channels-first step),
     inputs (capacity, B, 4) (or (capacity, 4, B)), steps () int64 <= capacity, the number
     of steps to take (step k holds inputs[k]). Returns the states after steps 1..steps,
-    (capacity, B, 6) (or (capacity, 6, B)), rows from `steps` on zero, and the last state.
-    The loop writes each state into the record in place (a record carried through the
-    loop would be copied, and allocated anew, on every step).
+    (capacity, B, 6) (or (capacity, 6, B)), rows from `steps` on zero, and the last state
+    (`sysid.dynamics.integrators.while_steps`: each state written into the record in place).
     """
 
     def __init__(self, step: Step, capacity: int):
@@ -96,16 +96,10 @@ class Rollout(nn.Module):
 
     def forward(self, x0: torch.Tensor, inputs: torch.Tensor, steps: torch.Tensor) -> torch.Tensor:
         states = torch.zeros((self.capacity, *x0.shape), dtype=x0.dtype, device=x0.device)
-        k0 = torch.zeros((), dtype=torch.int64, device=x0.device)
-
-        def more(k, x):
-            return k < steps
 
         def advance(k, x):
-            at = k.reshape(1)
-            x = self.step(x, inputs.index_select(0, at)[0])
-            states.index_copy_(0, at, x[None])  # in place: the record is not carried (no copy per step)
-            return k + 1, x
+            x = self.step(x, inputs.index_select(0, k.reshape(1))[0])
+            return x, x
 
-        last = torch.while_loop(more, advance, (k0, x0))[1]
+        last = while_steps(advance, states, (x0,), steps)[1]
         return states, last  # the last state keeps the loop (and its writes) in the program

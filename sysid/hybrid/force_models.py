@@ -17,6 +17,8 @@ from sysid.config.choices import GateSpace, ModelKind
 from sysid.config.experiment import Experiment, ship_overrides
 from sysid.mmg.coefficients import Coefficients
 from sysid.mmg.model import MMG, ForceBreakdown
+from sysid.mmg.tangents import supported
+from sysid.mmg.vjp import force_rate, mmg_rate
 from sysid.mmg.wind import relative_wind
 from sysid.hybrid.knn_gate import KNNGate
 from sysid.mmg.ship import load_ship
@@ -66,7 +68,7 @@ class CorrectedModel(nn.Module):
         """F of the vectors the kNN gate compares: 9 standardised inputs, or the width of
         the FNN's last hidden layer (its features)."""
         net = self.correction_net
-        return net.input_mean.shape[0] if self.gate_space == "inputs" else net.weights[-1].shape[1]
+        return net.input_mean.shape[0] if self.gate_space is GateSpace.INPUTS else net.weights[-1].shape[1]
 
     @property
     def coefficients(self):
@@ -94,7 +96,7 @@ class CorrectedModel(nn.Module):
             return None
         wind = relative_wind(state[..., 1], state[..., 3], state[..., 4], inputs[..., 2], inputs[..., 3])
         s = correction_inputs(state, inputs, torch.stack(wind, -1))
-        z = None if self.gate_space == "inputs" else self.correction_net.features(s)
+        z = None if self.gate_space is GateSpace.INPUTS else self.correction_net.features(s)
         return self.gate(self.gate_coordinates(s, z))[1]
 
     def forward(self, state: torch.Tensor, inputs: torch.Tensor, per_member: bool = False) -> ForceBreakdown:
@@ -133,6 +135,32 @@ class CorrectedModel(nn.Module):
         return tuple(t + f for t, f in zip(total, f_nn)), wind, on
 
 
+    def training_rate(self, per_member: bool = False):
+        """The right-hand side a training rollout differentiates, or None where it does not
+        apply (then `forward` is differentiated through autograd): a function of (state
+        (..., 6), inputs (..., 4)) giving (dx/dt (..., 6), F_NN (..., 3), F_MMG (..., 3)), the
+        MMG, the FNN's inputs and the equations of motion in one autograd Function with a
+        hand-derived VJP (`sysid.mmg.vjp`), the FNN through autograd. The same numbers as
+        `forward` and the equations of motion, to round-off.
+
+        It applies to a hybrid without an active gate, with gradients on, whose MMG
+        `sysid.mmg.tangents.supported` covers (the Esso Osaka's families, fixed
+        coefficients)."""
+        gated = self.gate is not None and self.gate_enabled and self.gate.bank.shape[0] > 0
+        if not (self.physics and torch.is_grad_enabled()) or gated or not supported(self.mmg):
+            return None
+        coefficients, net = self.mmg.coefficients, self.correction_net
+        wind = "wind" in self.mmg.families
+
+        def rate(state: torch.Tensor, inputs: torch.Tensor):
+            c = coefficients.values_view(state.dtype)
+            rate_mmg, f_mmg, s = mmg_rate(state, inputs, c, wind).split_with_sizes((6, 3, 9), -1)
+            f_nn = net.evaluate(s, per_member=per_member)[0].to(state.dtype)
+            return torch.addmm(rate_mmg.reshape(-1, 6), f_nn.reshape(-1, 3), force_rate(c, state)).view(
+                state.shape), f_nn, f_mmg
+        return rate
+
+
 class PerMember(nn.Module):
     """A `CorrectedModel` whose K FNN members each predict their own copy of the batch:
     inputs and states (K, ..., ·), forces (K, ..., 3). Used by training only."""
@@ -147,6 +175,10 @@ class PerMember(nn.Module):
 
     def forward(self, state: torch.Tensor, inputs: torch.Tensor) -> ForceBreakdown:
         return self.model(state, inputs, per_member=True)
+
+    def training_rate(self):
+        """`CorrectedModel.training_rate` of the members, each on its own copy of the batch."""
+        return self.model.training_rate(per_member=True)
 
 
 def build_mmg(exp: Experiment, dtype: torch.dtype = torch.float64) -> MMG:

@@ -62,7 +62,7 @@ from torch.func import jacfwd
 
 from sysid.config.choices import Method, StartStates
 from sysid.records.summary import start_state_verdict
-from sysid.state import VELOCITY_INDEX
+from sysid.channel_names import VELOCITY_INDEX
 from sysid.identify.uncertainty import (CoefficientUncertainty, coefficient_uncertainty, multistep_residuals,
                                uncertainty_from_jacobian, velocity_weights)
 

@@ -6,11 +6,11 @@ import torch
 
 from sysid.config.choices import Method
 from sysid.config.experiment import PAPER_FORCE_BAND
-from sysid.dynamics.equations import integrate, integrate_with_forces
+from sysid.dynamics.equations import integrate, integrate_training
 from sysid.dynamics.rollouts import WindowSet, velocity_loss
 from sysid.hybrid.correction import ForceCorrection
 from sysid.hybrid.force_models import PerMember, correction_of
-from sysid.state import VELOCITY_INDEX
+from sysid.channel_names import VELOCITY_INDEX
 
 VEL = list(VELOCITY_INDEX)
 
@@ -58,11 +58,9 @@ def multistep_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor
         inputs = inputs.unsqueeze(1).expand(inputs.shape[0], k, *inputs.shape[1:])
     if w_F is None:
         pred = integrate(model, states[0], inputs, batch.dt, Method.EULER)
-    else:
-        trajectory = integrate_with_forces(model, states[0], inputs, batch.dt, Method.EULER)
-        pred, forces = trajectory.states, trajectory.forces
+    else:  # the MMG's hand-derived VJP where it applies (`integrate_training`), else autograd
+        pred, f_nn, f_mmg = integrate_training(model, states[0], inputs, batch.dt)
     loss_v = velocity_loss(pred[1:, ..., VEL] - states[1:, ..., VEL], w_v)
     if w_F is None:
         return loss_v, loss_v.new_zeros(())
-    f_nn, f_mmg = forces.correction, forces.mmg
     return loss_v, output_penalty(f_nn, f_mmg, w_F, band).mean()

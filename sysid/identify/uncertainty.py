@@ -35,7 +35,7 @@ from sysid.config.choices import Method
 from sysid.dynamics import integrators
 from sysid.dynamics.equations import derivative
 from sysid.mmg.coefficients import raw_value
-from sysid.state import VELOCITY_INDEX
+from sysid.channel_names import VELOCITY_INDEX
 
 COVARIANCES = ("sandwich", "gauss_newton")
 

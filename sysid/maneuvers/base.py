@@ -1,7 +1,7 @@
 """Standard maneuvers (IMO Resolution MSC.137(76)) as typed specifications, the conditions
 they are run in, and what a simulation of one gives.
 
-Signs follow `sysid.state`: a positive rudder angle turns the ship to starboard, the heading
+Signs follow `sysid.channel_names`: a positive rudder angle turns the ship to starboard, the heading
 psi runs from x0 toward y0, and a starboard maneuver orders starboard (positive) rudder
 first. Time is counted from the execute (the first rudder or engine order), where the ship
 is at the origin, heading 0 (along x0), in straight running at the approach speed.
@@ -183,7 +183,7 @@ class Conditions:
 class ManeuverResult:
     """One simulated (or recorded) maneuver.
 
-    t : (T,) time from the execute [s]; states : (T, 6) x, u, y, v, psi, r (`sysid.state`);
+    t : (T,) time from the execute [s]; states : (T, 6) x, u, y, v, psi, r (`sysid.channel_names`);
     rudder : (T,) rudder angle at t [rad]; inputs : (T, 4) the inputs held over the step
     from t (n_prop [rps], delta_rudder [rad] mean over the step, wind speed [m/s], wind
     direction [rad]; the last row repeats the one before); indices : `ManeuverIndices`;

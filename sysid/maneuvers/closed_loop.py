@@ -22,7 +22,7 @@ from typing import Callable
 import torch
 from torch import nn
 
-from sysid.dynamics.integrators import STEP_RULES, Method
+from sysid.dynamics.integrators import STEP_RULES, Method, run_in_chunks, step_loop, while_steps
 from sysid.fast.stepper import Derivative
 from sysid.maneuvers.controllers import COLUMNS, ManeuverOrders
 
@@ -77,17 +77,12 @@ class ClosedLoopRollout(nn.Module):
 
     def forward(self, x0, orders0, parameters, t0, dt, steps):
         record = torch.zeros((self.capacity, x0.shape[0], RECORD), dtype=x0.dtype, device=x0.device)
-        k0 = torch.zeros((), dtype=torch.int64, device=x0.device)
-
-        def more(k, x, o):
-            return k < steps
 
         def advance(k, x, o):
             x, o, u, g = self.step(x, o, parameters, t0 + k.to(x.dtype) * dt, dt)
-            record.index_copy_(0, k.reshape(1), torch.cat((x, o, u, g), -1)[None])  # in place, as in Rollout
-            return k + 1, x, o
+            return torch.cat((x, o, u, g), -1), x, o
 
-        last = torch.while_loop(more, advance, (k0, x0, orders0))[1]
+        last = while_steps(advance, record, (x0, orders0), steps)[1]
         return record, last
 
 
@@ -103,17 +98,17 @@ def source_digest() -> str:
 
 def run_eager(model: nn.Module, x0: torch.Tensor, orders0: torch.Tensor, parameters: torch.Tensor,
               steps: int, dt: float, method: Method) -> torch.Tensor:
-    """Record (steps, B, `RECORD`) of `steps` closed-loop steps of all B maneuvers at once."""
+    """Record (steps, B, `RECORD`) of `steps` closed-loop steps of all B maneuvers at once
+    (`sysid.dynamics.integrators.step_loop`)."""
     from sysid.fast.prepared import indexed  # the gate's leaf index
     step = ClosedLoopStep(indexed(model, x0.shape[0]), method)
     dt_t = torch.tensor(dt, dtype=x0.dtype)
-    out = torch.empty((steps, x0.shape[0], RECORD), dtype=x0.dtype)
-    x, o = x0, orders0
+
+    def advance(k: int, carry: tuple[torch.Tensor, torch.Tensor]) -> tuple[torch.Tensor, tuple]:
+        x, o, u, g = step(carry[0], carry[1], parameters, dt_t * k, dt_t)
+        return torch.cat((x, o, u, g), -1), (x, o)
     with torch.no_grad():
-        for k in range(steps):
-            x, o, u, g = step(x, o, parameters, dt_t * k, dt_t)
-            out[k] = torch.cat((x, o, u, g), -1)
-    return out
+        return torch.stack(step_loop(advance, (x0, orders0), steps))
 
 
 def _notice(message: str) -> None:
@@ -171,11 +166,11 @@ def run_compiled(loop: Callable[..., torch.Tensor], x0: torch.Tensor, orders0: t
 
 
 def _run_group(loop, x0, orders0, parameters, steps: int, dt: float) -> torch.Tensor:
+    """Record (steps, LOOP_ROWS, `RECORD`) of one group through calls of `CAPACITY` steps
+    (`sysid.dynamics.integrators.run_in_chunks`)."""
     dt_t = torch.tensor(dt, dtype=x0.dtype)
-    x, o, parts, done = x0, orders0, [], 0
-    while done < steps:
-        n = min(CAPACITY, steps - done)
-        rec = loop(x, o, parameters, dt_t * done, dt_t, torch.tensor(n, dtype=torch.int64))[:n]
-        parts.append(rec)
-        x, o, done = rec[-1, :, :6], rec[-1, :, 6:8], done + n
-    return torch.cat(parts)
+
+    def call(carry, done: int, n: int):
+        rec = loop(carry[0], carry[1], parameters, dt_t * done, dt_t, torch.tensor(n, dtype=torch.int64))[:n]
+        return rec, (rec[-1, :, :6], rec[-1, :, 6:8])
+    return run_in_chunks(call, (x0, orders0), steps, CAPACITY)

@@ -52,7 +52,7 @@ class Track:
 
     @classmethod
     def of(cls, t: np.ndarray, states: np.ndarray) -> "Track":
-        """From times (T,) [s] and states (T, 6) = x, u, y, v, psi, r (`sysid.state`)."""
+        """From times (T,) [s] and states (T, 6) = x, u, y, v, psi, r (`sysid.channel_names`)."""
         s = np.asarray(states, dtype=float)
         return cls(np.asarray(t, dtype=float), s[:, 0], s[:, 2], s[:, 4], s[:, 1], s[:, 3])
 

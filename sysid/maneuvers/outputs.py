@@ -12,7 +12,7 @@
 - ``criteria.csv`` (`criteria_table`): every criterion with value, limit, the values as
   ratios to L (lengths) or in deg (angles), met, and the rule;
 - ``trajectories.csv`` (`trajectory_table`): every step of every maneuver (and of every
-  member), states and inputs in `sysid.state`'s units (m, m/s, rad, rad/s, rps).
+  member), states and inputs in `sysid.channel_names`'s units (m, m/s, rad, rad/s, rps).
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ import pandas as pd
 from sysid.maneuvers.base import ManeuverResult
 from sysid.maneuvers.criteria import Criterion, criteria_for
 from sysid.maneuvers.indices import INDEX_COLUMNS
-from sysid.state import INPUTS, STATE
+from sysid.channel_names import INPUTS, STATE
 from sysid.store.files import write_csv, write_text
 
 MOSTLY_OUTSIDE = 0.5  # gate off on more than this share of the steps: "mostly outside the training data"

@@ -11,11 +11,7 @@ gate's share along the way, and the spread over an ensemble's members or seeds.
 from __future__ import annotations
 
 import math
-import os
-import statistics
-import time
-from dataclasses import dataclass
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 import torch
@@ -25,25 +21,26 @@ from sysid.dynamics.integrators import Method
 from sysid.evaluation.divergence import PhysicalRange
 from sysid.maneuvers.any_model import ManeuverModel, ship_of
 from sysid.maneuvers.base import Conditions, Maneuver, ManeuverError, ManeuverResult, check_number
-from sysid.maneuvers.closed_loop import ClosedLoopStep, compiled_loop, loop_is_cached, run_compiled, run_eager
+from sysid.maneuvers.closed_loop import compiled_loop, loop_is_cached, run_compiled, run_eager
 from sysid.maneuvers.controllers import initial_orders, order_parameters
 from sysid.maneuvers.indices import Track, maneuver_indices
 from sysid.maneuvers.straight import straight_running_rps
 from sysid.mmg.ship import Ship
-from sysid.state import VELOCITY_INDEX
+from sysid.channel_names import VELOCITY_INDEX
+
+if TYPE_CHECKING:
+    from sysid.fast.payoff import PathChoice
 
 FULL_SCALE_RUDDER_RATE = 2.32  # deg/s: 65 deg in 28 s (SOLAS II-1/29), at full scale
 DURATION_L_OVER_U = 80.0       # default duration [s]: this many times L/U0
 GATE_CHUNK = 1024              # rows per call when the kNN gate is evaluated along a maneuver
-COMPILE_GUESS_S = 120.0        # [s] a cold start of a compiled loop where none is recorded (2 quiet cores)
-PROBE_STEPS = 16               # eager steps timed to reckon a whole eager run
 SPEED_OVER_U0 = 3.0            # without a training range: a maneuver faster than this many times U0 diverged
 
 
 def first_divergence(t: np.ndarray, states: np.ndarray, speed0: float,
                      limits: PhysicalRange | None = None) -> tuple[float, str] | None:
     """(time [s], why) at which a simulated maneuver diverged, or None: the first state
-    (t (T,), states (T, 6), `sysid.state`) that is not finite, or whose speed sqrt(u^2 +
+    (t (T,), states (T, 6), `sysid.channel_names`) that is not finite, or whose speed sqrt(u^2 +
     v_m^2) exceeds `limits.factor` times the larger of the training logs' largest speed and
     the approach speed `speed0` [m/s], or whose |r| exceeds that factor times their largest
     |r|. Without a training range (`limits` None): non-finite, or speed beyond
@@ -172,71 +169,21 @@ def _results(maneuvers: Sequence[Maneuver], conditions: Conditions, x0: torch.Te
     return out
 
 
-@dataclass(frozen=True)
-class LoopChoice:
-    """Which loop runs the maneuvers (compiled: True for the compiled loop) and why, in
-    one line (with what a cold and a warm start of the compiled loop cost where known)."""
-
-    compiled: bool
-    reason: str
-
-
-def _start_costs(label: str) -> tuple[float, str]:
-    """(cold start [s] to reckon with, what a cold and a warm start cost, as words): the
-    cold start recorded on this machine, else `COMPILE_GUESS_S` times the machine's load
-    per core (a loaded machine compiles as much slower as it steps)."""
-    from sysid.fast.compiled import recorded_seconds
-    cold, warm = recorded_seconds(label, "compile"), recorded_seconds(label, "load")
-    if cold is None:
-        busy = max(1.0, os.getloadavg()[0] / (os.cpu_count() or 1)) if hasattr(os, "getloadavg") else 1.0
-        reckoned = COMPILE_GUESS_S * busy
-        said = f"takes about {reckoned:.0f} s"
-    else:
-        reckoned, said = cold, f"took {cold:.0f} s here"
-    warm_said = f"about {warm:.1f} s" if warm is not None else "seconds"
-    return reckoned, f"a cold start (compiling) {said}, a warm one (from the cache) {warm_said}"
-
-
-def eager_seconds_per_step(model: nn.Module, maneuvers: Sequence[Maneuver], conditions: Conditions) -> float:
-    """Wall time [s] of one eager closed-loop step of all `maneuvers` side by side: the
-    median over `PROBE_STEPS` steps from the execute, each timed alone (a burst of load or
-    a step the kNN gate needs its whole-bank scan for does not set it)."""
-    from sysid.fast.prepared import indexed  # the gate's leaf index, as run_eager uses it
-    x, o, parameters = _start(maneuvers, conditions)
-    step = ClosedLoopStep(indexed(model, x.shape[0]), conditions.method)
-    dt = torch.tensor(conditions.dt, dtype=x.dtype)
-    times = []
-    with torch.no_grad():
-        for k in range(PROBE_STEPS + 1):  # the first builds the gate's index
-            start = time.perf_counter()
-            x, o, _, _ = step(x, o, parameters, dt * k, dt)
-            times.append(time.perf_counter() - start)
-    return statistics.median(times[1:])
-
-
 def choose_loop(models: Sequence[nn.Module], maneuvers: Sequence[Maneuver], conditions: Conditions,
-                compiled: bool | None = None) -> LoopChoice:
+                compiled: bool | None = None) -> PathChoice:
     """The loop for simulating `maneuvers` with each of `models`: as asked (`compiled`
-    True or False); otherwise (None) the compiled loop only where it saves time: every
-    model's loop is in the cache (a warm start), or the eager steps (timed over a few)
-    would take longer than compiling the loops that are not."""
-    if compiled is not None:
-        return LoopChoice(bool(compiled), f"{'compiled' if compiled else 'eager'} loop (as asked)")
+    True or False); otherwise (None) by `sysid.fast.payoff.choose_path` from the step count
+    and the cache alone (no clock): the compiled loop when every model's loop is in the
+    cache (a warm start), or when the eager steps (`conditions.steps` per model) reach
+    `MANEUVER_REPAY_STEPS` per loop still to compile; else the eager loop. Up to
+    `LOOP_ROWS` maneuvers share one loop and one eager step, so their number does not count."""
+    from sysid.fast.payoff import MANEUVER_REPAY_STEPS, choose_path
     from sysid.fast.compiled import enabled
-    if not enabled():
-        return LoopChoice(False, "eager loop (compilation is off: SYSID_COMPILE=0)")
     label = f"maneuver-{conditions.method.name.lower()}"
-    cold = [m for m in models if not loop_is_cached(m, conditions.method)]
-    reckoned, costs = _start_costs(label)
-    if not cold:
-        return LoopChoice(True, f"compiled loop: in the cache ({costs})")
-    eager = eager_seconds_per_step(models[0], maneuvers, conditions) * conditions.steps * len(models)
-    compiling = reckoned * len(cold)
-    if eager > compiling:
-        return LoopChoice(True, f"compiled loop: the eager one would take about {eager:.0f} s, compiling "
-                                f"{len(cold)} loop(s) about {compiling:.0f} s ({costs})")
-    return LoopChoice(False, f"eager loop: about {eager:.0f} s, less than compiling {len(cold)} loop(s) "
-                             f"({costs}; --compiled compiles them for later runs)")
+    asked = compiled is not None or not enabled()
+    cold = 0 if asked else sum(not loop_is_cached(m, conditions.method) for m in models)
+    return choose_path("loop", conditions.steps * len(models), cold, len(models), MANEUVER_REPAY_STEPS,
+                       compiled, label)
 
 
 def _start(maneuvers: Sequence[Maneuver], conditions: Conditions):

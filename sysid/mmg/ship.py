@@ -24,7 +24,7 @@ from types import MappingProxyType
 from typing import Mapping
 
 from preprocessing.sensors import SensorLayout
-from sysid.bundled import bundled_dir
+from sysid.package_data import bundled_dir
 from sysid.errors import ShipDefinitionError
 from sysid.store.toml_file import read_toml
 

@@ -12,7 +12,7 @@ from functools import lru_cache
 
 import pandas as pd
 
-from sysid.bundled import bundled_dir
+from sysid.package_data import bundled_dir
 from sysid.errors import ConfigError
 
 KIND_LABELS = {"mmg": "MMG", "nn": "NN", "hybrid": "Hybrid"}  # the paper's model names

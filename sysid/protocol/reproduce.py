@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from sysid.data.datasets import TEST_FILES, data_root
-from sysid.bundled import bundled_dir
+from sysid.package_data import bundled_dir
 from sysid.errors import ConfigError
 from sysid.config.choices import ModelKind
 from sysid.config.experiment import Experiment, load_experiment

@@ -76,7 +76,7 @@ def train_seeds(experiments: dict[str, Experiment], seeds: int, out: Path, data:
         tracker = parent = None
         if mlflow:
             from sysid.sweep.tracked import tracking_callback
-            from sysid.tracking import Tracker
+            from sysid.experiment_tracking import Tracker
             tracker = Tracker(mlflow, "sysid-reproduce")
             parent = tracker.start("reproduce --seeds", {"seeds": seeds, "runs": ", ".join(experiments)},
                                    tags={"sysid.kind": "reproduce"})

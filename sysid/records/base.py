@@ -23,6 +23,7 @@ import typing
 from pathlib import Path
 from typing import Any, ClassVar, Union
 
+from sysid.config.choices import plain_data
 from sysid.errors import RecordError
 
 FIX = "the file was changed or comes from another program; write it again with sysid"
@@ -157,13 +158,5 @@ def _parse(value: Any, hint: Any, source: str, at: str) -> Any:
 
 
 def _plain(value: Any) -> Any:
-    """A field value as JSON data (records to objects, tuples to arrays)."""
-    if isinstance(value, JsonRecord):
-        return value.to_json()
-    if isinstance(value, enum.Enum):
-        return value.value
-    if isinstance(value, (tuple, list)):
-        return [_plain(v) for v in value]
-    if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
-    return value
+    """A field value as JSON data (records to objects, choices to their words, tuples to arrays)."""
+    return plain_data(value, ((JsonRecord, JsonRecord.to_json),))

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import re
 
-from sysid.state import FORCE, FORCE_COMPONENTS, INPUTS, STATE
+from sysid.channel_names import FORCE, FORCE_COMPONENTS, INPUTS, STATE
 
 # metrics.csv: one row per file and horizon; RMSE of u, v_m [m/s] and r [rad/s]; diverged: a
 # window's prediction diverged, first at diverged_at_s [s] of the log (NaN otherwise)

@@ -26,7 +26,7 @@ from sysid.report.html import HtmlFigure, figure_svg, render_html  # noqa: E402
 from sysid.report.methods import changed_settings, methods_paragraphs, run_rows, summary_items  # noqa: E402
 from sysid.report.palette import model_colour  # noqa: E402
 from sysid.report.pdf import PdfReport, paginate, pdf_style, table_pages, text_blocks, text_lines  # noqa: E402
-from sysid.report.figure_plan import figure_plan  # noqa: E402
+from sysid.report.figure_plan import FigureSpec, figure_plan  # noqa: E402
 from sysid.report.chosen_settings import chosen_section  # noqa: E402
 from sysid.report.quality import quality_rows  # noqa: E402
 from sysid.report.source import ReportSource, read_source  # noqa: E402
@@ -111,33 +111,12 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
     split_tables = [(t, table_pages(t)) for t in tables]
     total = len(text_pages) + sum(len(p) for _, p in split_tables) + len(plain) + len(plan.figures)
 
-    html_figures: list[HtmlFigure] = []
     pdf_path = out_dir / "report.pdf"
     with rc_context(STYLE), pdf_style(), atomic_path(pdf_path, ".pdf") as tmp:  # type: ignore[arg-type]
         pdf = PdfReport(tmp, title, total)
-        for page in text_pages:
-            pdf.add_text(page)
-        for table, pages in split_tables:
-            for i, page_rows in enumerate(pages):
-                part = f" (part {i + 1} of {len(pages)})" if len(pages) > 1 else ""
-                pdf.add_table(table, page_rows, part)
-        for plain_table in plain:
-            pdf.add_figure(partial(table_figure, plain_table), tuple(table_figure(plain_table).get_size_inches()),  # type: ignore[attr-defined]
-                           plain_table.title)
+        _add_pages(pdf, text_pages, split_tables, plain)
         say(f"tables: {len(tables) + len(plain)}; drawing {len(plan.figures)} figures")
-        for number, spec in enumerate(plan.figures, 1):
-            try:
-                fig = spec.factory()
-                draw = spec.factory
-            except Exception as exc:  # noqa: BLE001 - one bad figure must not cost the report
-                message = f"{spec.title}: failed ({type(exc).__name__}: {exc})"
-                notes.append(message)
-                fig = _placeholder(message)
-                draw = lambda into=None, m=message: _placeholder(m, into)  # noqa: E731
-            html_figures.append(HtmlFigure(number, spec.key, spec.section, spec.title, spec.caption,
-                                           figure_svg(fig, f"f{number}")))  # type: ignore[arg-type]
-            pdf.add_figure(draw, tuple(fig.get_size_inches()), f"Figure {number}. {spec.title}. {spec.caption}")  # type: ignore[attr-defined]
-            say(f"figure {number}/{len(plan.figures)}: {spec.title}")
+        html_figures = _add_figures(pdf, plan.figures, notes, say)
         n_pages = pdf.page
         pdf.close()
         # the HTML is written before the PDF is moved into place: a failure (a full disk) keeps neither
@@ -155,3 +134,36 @@ def build_report(source_dir: str | os.PathLike, out_dir: str | os.PathLike,
     return ReportPaths(html_path, pdf_path, len(html_figures), n_pages, notes,
                        time.perf_counter() - started)
 
+
+def _add_pages(pdf: PdfReport, text_pages, split_tables, plain) -> None:
+    """The text pages, every table (split over pages as `table_pages` says) and the plain
+    tables into `pdf`."""
+    for page in text_pages:
+        pdf.add_text(page)
+    for table, pages in split_tables:
+        for i, page_rows in enumerate(pages):
+            part = f" (part {i + 1} of {len(pages)})" if len(pages) > 1 else ""
+            pdf.add_table(table, page_rows, part)
+    for plain_table in plain:
+        pdf.add_figure(partial(table_figure, plain_table), tuple(table_figure(plain_table).get_size_inches()),  # type: ignore[attr-defined]
+                       plain_table.title)
+
+
+def _add_figures(pdf: PdfReport, figures: list[FigureSpec], notes: list[str], say: Callable[[str], None]) -> list[HtmlFigure]:
+    """Draw every figure of the plan into `pdf`; the HTML's figures. A figure that fails is a
+    placeholder naming the failure, noted in `notes`: one bad figure must not cost the report."""
+    html_figures: list[HtmlFigure] = []
+    for number, spec in enumerate(figures, 1):
+        try:
+            fig = spec.factory()
+            draw = spec.factory
+        except Exception as exc:  # noqa: BLE001 - one bad figure must not cost the report
+            message = f"{spec.title}: failed ({type(exc).__name__}: {exc})"
+            notes.append(message)
+            fig = _placeholder(message)
+            draw = lambda into=None, m=message: _placeholder(m, into)  # noqa: E731
+        html_figures.append(HtmlFigure(number, spec.key, spec.section, spec.title, spec.caption,
+                                       figure_svg(fig, f"f{number}")))  # type: ignore[arg-type]
+        pdf.add_figure(draw, tuple(fig.get_size_inches()), f"Figure {number}. {spec.title}. {spec.caption}")  # type: ignore[attr-defined]
+        say(f"figure {number}/{len(figures)}: {spec.title}")
+    return html_figures

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from sysid.config.choices import ModelKind
-from sysid.bundled import bundled_dir
+from sysid.package_data import bundled_dir
 from sysid.config.experiment import Experiment
 from sysid.protocol.paper import run_label
 from sysid.report.source import ReportSource, RunRecord

@@ -5,7 +5,7 @@
                      the relative change with its interval and the cell's decision
     verdicts.csv     `VERDICT_COLUMNS`: each model's verdict against its reference
     windows.csv      every window's RMSE per model and member (the verdicts' evidence)
-    summary.json     the models given, the logs, horizons, what each model is judged against
+    comparison.json  the models given, the logs, horizons, what each model is judged against
                      and every verdict (`Judgement.to_dict`)
     report.html      self-contained page: the verdicts, then one table per log, horizon
     report.pdf       and channel (the same content on A4 pages)
@@ -29,6 +29,7 @@ from sysid.report.build import STYLE
 from sysid.report.pdf import PdfReport, paginate, pdf_style, text_lines
 from sysid.report.plain_tables import PlainTable, number, table_figure
 from sysid.store.files import atomic_path, write_csv, write_text
+from sysid.store.target import RECORD_FILES, OutputKind
 
 _ENV = jinja2.Environment(loader=jinja2.PackageLoader("sysid.report", "templates"),
                           autoescape=jinja2.select_autoescape(["html", "j2"]))
@@ -87,7 +88,7 @@ def write_comparison(out: str | Path, result: Comparison, models: Sequence[str],
                "against": result.against, "references": result.references,
                "verdicts": {label: j.to_dict() for label, j in result.verdicts.items()},
                "versions": {"sysid": sysid.__version__}}
-    paths.append(write_text(json.dumps(summary, indent=2, allow_nan=False, default=str), out / "summary.json"))
+    paths.append(write_text(json.dumps(summary, indent=2, allow_nan=False, default=str), out / RECORD_FILES[OutputKind.COMPARISON]))
     if report:
         paths += _write_report(out, result, models, logs)
     return paths

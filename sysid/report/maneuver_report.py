@@ -27,16 +27,18 @@ from sysid.report.maneuver_tables import criteria_plain_table, indices_plain_tab
 from sysid.report.plain_tables import table_figure
 from sysid.store.files import atomic_path, write_text
 from sysid.store.manifest import verify_manifest
+from sysid.store.target import OutputKind, record_file
 
 _ENV = jinja2.Environment(loader=jinja2.PackageLoader("sysid.report", "templates"),
                           autoescape=jinja2.select_autoescape(["html", "j2"]))
 
 
 def _read(directory: Path) -> tuple[dict, pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+    record = record_file(directory, OutputKind.MANEUVERS)
     if (directory / "manifest.json").is_file():  # a finished directory (inside its staging there is none yet)
-        verify_manifest(directory, "maneuvers", ("summary.json", "indices.csv", "criteria.csv", "trajectories.csv"))
+        verify_manifest(directory, "maneuvers", (record.name, "indices.csv", "criteria.csv", "trajectories.csv"))
     try:
-        summary = json.loads((directory / "summary.json").read_text())
+        summary = json.loads(record.read_text())
         frames = [pd.read_csv(directory / name) for name in ("indices.csv", "criteria.csv", "trajectories.csv")]
     except (OSError, ValueError) as exc:
         raise CheckpointError(f"{directory}: not a readable maneuvers directory ({exc})") from None

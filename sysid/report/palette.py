@@ -5,6 +5,8 @@ data set the paper's figures use). Force components have their own fixed colours
 """
 from __future__ import annotations
 
+from sysid.config.choices import ModelKind
+
 MEASURED = "#000000"
 
 MODEL_COLOURS = {
@@ -30,14 +32,14 @@ THRESHOLD = "#2ca02c"
 KNN_LINE = "#1f5fbf"
 
 
-def run_key(name: str, kind: str, dataset: str) -> str:
+def run_key(name: str, kind: ModelKind, dataset: str) -> str:
     """Canonical key of a run: the reproduction's directory name, else ``{kind}_{dataset}``."""
     if name in MODEL_COLOURS:
         return name
-    return f"{kind}_{dataset}" if kind != "mmg" else name
+    return f"{kind}_{dataset}" if kind is not ModelKind.MMG else name
 
 
-def model_colour(name: str, kind: str, dataset: str, index: int = 0) -> str:
+def model_colour(name: str, kind: ModelKind, dataset: str, index: int = 0) -> str:
     """Fixed colour of a run (see module docstring)."""
     key = run_key(name, kind, dataset)
     if key in MODEL_COLOURS:

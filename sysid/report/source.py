@@ -19,6 +19,7 @@ from sysid.config.choices import ModelKind
 from sysid.data.splits import PAPER_TEST_STEMS
 from sysid.evaluation.verdict import BaselineVerdict, seed_mean_verdict
 from sysid.store.manifest import has_manifest, verify_manifest
+from sysid.store.target import OutputKind, record_file
 from sysid.runs.directory import RunDir, read_table
 from sysid.records.base import read_json_object
 from sysid.runs.reproduction import Reproduction
@@ -243,7 +244,8 @@ def _read_source(path: Path) -> ReportSource:
         run_dirs = sorted(p for p in (path / "runs").iterdir() if p.is_dir())
         if not run_dirs:
             raise CheckpointError(f"{path / 'runs'}: holds no run directories")
-        reproduction = Reproduction.read(path / "summary.json") if (path / "summary.json").exists() else None
+        record = record_file(path, OutputKind.REPRODUCTION)
+        reproduction = Reproduction.read(record) if record.exists() else None
         runs = sorted((read_run_dir(p) if RunDir(p).manifest.is_file() or RunDir(p).summary.is_file()
                        else read_seed_group(p) for p in run_dirs), key=_run_order)
         indices = read_table(path / "maneuver_indices.csv", ["scenario", "maneuver", "model"], required=False)
@@ -262,7 +264,7 @@ def _read_source(path: Path) -> ReportSource:
 def read_sweep(path: Path, quality: list[QualityReport]) -> ReportSource:
     """A sweep directory: its tables, summary and the chosen configuration's seed runs (the
     report's run figures and table show the chosen configuration's first seed)."""
-    summary = SweepSummary.read(path / "summary.json")
+    summary = SweepSummary.read(record_file(path, OutputKind.SWEEP))
     trials = read_table(path / "results.csv", ["point", "seed", "run", "status", "val_loss_multistep"])
     points = read_table(path / "points.csv", ["point", "val_loss_multistep_mean"])
     keys = list(summary.keys)

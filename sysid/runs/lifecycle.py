@@ -20,8 +20,7 @@ import torch
 from sysid.identify.checkpoint import TrainingCheckpoint
 from sysid.data.recordings import Run, read_runs
 from sysid.data.datasets import test_files
-from sysid.data.splits import (TEST, TRAINING, VALIDATION, HeldOutFiles, check_disjoint_runs, data_split,
-                               provenance)
+from sysid.data.splits import TEST, TRAINING, VALIDATION, check_disjoint_runs, data_split, provenance
 from sysid.device import compute_threads
 from sysid.dynamics.integrators import Integrator
 from sysid.errors import ConfigError, TrainingError
@@ -180,18 +179,14 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
     """
     check_experiment_fits(exp, tests)
     started = time.perf_counter()
+    checked: list[Run] = list(validation) if validation is not None else []
     with compute_threads(exp.training.threads):
-        inputs = _RunInputs.of(exp, tests, train_runs, data, validation, log)
-        trainer = None
+        runs: list[Run] = []
+        held_out, trainer = None, None
         if exp.needs_training:
-            trainer = Trainer(exp, progress=progress, log=log, checkpoint=checkpoint_path(out_dir),
-                              resume=resume, on_epoch=on_epoch)
-            try:
-                trainer.fit(inputs.runs, inputs.validation)
-            except TrainingError:  # a diverged training resumes to the same divergence: keep nothing
-                TrainingCheckpoint(checkpoint_path(out_dir), exp.to_toml()).remove()
-                raise
-        return _finish_run(exp, out_dir, tests, inputs, trainer, started, overwrite, log)
+            runs, checked, held_out = _training_logs(exp, train_runs, data, checked, tests, log)
+            trainer = _fitted(exp, runs, checked, out_dir, progress, log, resume, on_epoch)
+        return _written(exp, out_dir, tests, runs, checked, held_out, trainer, started, overwrite, log)
 
 
 def run_seeds(experiments: Sequence[Experiment], out_dirs: Sequence[str | os.PathLike], tests: Sequence[Run],
@@ -201,8 +196,8 @@ def run_seeds(experiments: Sequence[Experiment], out_dirs: Sequence[str | os.Pat
               validation: Sequence[Run] | None = None,
               on_epochs: Sequence[Callable[[EpochReport], None] | None] | None = None) -> list[RunResult]:
     """`run_experiment` of the seeds of one configuration (`experiments`, equal but for
-    ``[experiment] seed``), each into its own run directory (`out_dirs`) with its own log,
-    checkpoint and ``on_epoch``, their training stages side by side in this process
+    ``[experiment] seed`` and name), each into its own run directory (`out_dirs`) with its
+    own log, checkpoint and ``on_epoch``, their training stages side by side in this process
     (`sysid.identify.side_by_side`; one progress line per epoch group through `group_log`).
     Each run directory holds what `run_experiment` writes for its seed alone, its model
     equal to round-off. `resume` continues every seed from its checkpoint (a seed without
@@ -216,74 +211,94 @@ def run_seeds(experiments: Sequence[Experiment], out_dirs: Sequence[str | os.Pat
     check_experiment_fits(exp0, tests)
     started = time.perf_counter()
     with compute_threads(exp0.training.threads):
-        inputs = _RunInputs.of(exp0, tests, train_runs, data, validation, logs[0])
+        runs, shared, held_out = _training_logs(exp0, train_runs, data, list(validation or []), tests, logs[0])
         trainers = [Trainer(exp, progress=progress, log=log, checkpoint=checkpoint_path(out), resume=resume,
                             on_epoch=on_epoch)
                     for exp, out, log, on_epoch in zip(experiments, out_dirs, logs, on_epochs)]
         try:
-            fit_side_by_side(trainers, inputs.runs, inputs.validation, log=group_log)
+            fit_side_by_side(trainers, runs, shared, log=group_log)
         except TrainingError:  # a diverged training resumes to the same divergence: keep nothing
             for exp, out in zip(experiments, out_dirs):
                 TrainingCheckpoint(checkpoint_path(out), exp.to_toml()).remove()
             raise
-        group_seconds = time.perf_counter() - started
-        results = []
-        for exp, out, trainer, log in zip(experiments, out_dirs, trainers, logs):
-            # each run's seconds: the group's shared training time split evenly, plus its own evaluation
-            results.append(_finish_run(exp, out, tests, inputs, trainer,
-                                       time.perf_counter() - group_seconds / len(trainers), overwrite, log))
-        return results
+        share = (time.perf_counter() - started) / len(trainers)   # each seed's share of the group's time
+        return [_written(exp, out, tests, runs, shared, held_out, trainer, time.perf_counter() - share, overwrite,
+                         log)
+                for exp, out, trainer, log in zip(experiments, out_dirs, trainers, logs)]
 
 
-@dataclass
-class _RunInputs:
-    """The logs a run trains and is validated on (held-out validation logs moved out of
-    the training logs), checked disjoint from the test logs."""
-
-    runs: list[Run]
-    validation: list[Run]
-    held_out: HeldOutFiles | None = None
-
-    @classmethod
-    def of(cls, exp: Experiment, tests: Sequence[Run], train_runs: Sequence[Run] | None,
-           data: str | os.PathLike | None, validation: Sequence[Run] | None,
-           log: Callable[[str], None]) -> "_RunInputs":
-        validation = list(validation) if validation is not None else []
-        if not exp.needs_training:
-            return cls([], validation)
-        runs = list(train_runs) if train_runs is not None else training_runs(exp, data)
-        if not validation and exp.data.validation:
-            validation = validation_runs(exp)
-        held_out = None
-        if not validation and (held_out := held_out_validation(exp, runs)) is not None:
-            runs, validation = list(held_out.train), list(held_out.validation)
-            log("validation: the held-out training logs " + "; ".join(
-                f"{group}: {', '.join(names)}" for group, names in held_out.groups.items()))
-        check_disjoint_runs({TRAINING: runs, VALIDATION: validation, TEST: tests}, exp.source)
-        warn_outside_force_models(exp, runs)
-        return cls(runs, validation, held_out)
-
-
-def _finish_run(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[Run], inputs: _RunInputs,
-                trainer: Trainer | None, started: float, overwrite: bool, log: Callable[[str], None]) -> RunResult:
-    """A run after its training (`trainer` fitted; None: an MMG used as defined): its
-    validation scores beside the physics baselines, evaluation on `tests`, the verdict,
-    the run directory written and the checkpoint removed."""
+def _written(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[Run], runs: list[Run],
+             validation: list[Run], held_out, trainer: Trainer | None, started: float, overwrite: bool,
+             log: Callable[[str], None]) -> RunResult:
+    """A run after its training (`trainer` fitted; None: an MMG used as defined): validation
+    scores beside the physics baselines, evaluation on `tests` with its verdict, the run
+    directory written (its seconds counted from `started`) and the checkpoint removed."""
     history, training, validation_scores = None, None, None
-    runs, validation = inputs.runs, inputs.validation
     if trainer is not None:
         history, training = trainer.history_, trainer.summary_
         if training.failure is None:  # in the training dtype, as val_loss_multistep, at its horizons
-            validation_scores = {}
-            for horizon, windows in trainer.validation_sets_.items():
-                scored = {"model": trainer.model_, **physics_baselines(exp, trainer.model_, windows.states.dtype,
-                                                                        windows.states.device)}
-                validation_scores[horizon] = {k: window_score(m, windows, trainer.velocity_weights_)
-                                              for k, m in scored.items()}
+            validation_scores = _validation_scores(exp, trainer)
         model = trainer.model_.cpu().double()
     else:
         model = build_model(exp)
     limits = PhysicalRange.of_runs(runs)   # the training logs' range: beyond it a prediction diverged
+    evaluation, verdict, baseline_metrics = _evaluated(exp, model, tests, limits, validation_scores, log)
+    source = "files" if exp.data.train else (exp.experiment.dataset if exp.needs_training else "-")
+    data_used = provenance(source, runs, validation, tests, exp.training.val_fraction, exp.training.block_s,
+                           held_out, exp.training.split_seed)
+    seconds = time.perf_counter() - started
+    path = write_run(out_dir, exp, model, evaluation, history, training, seconds, overwrite,
+                     verdict=verdict, data=data_used, baseline_metrics=baseline_metrics, limits=limits)
+    if training is not None:
+        TrainingCheckpoint(checkpoint_path(out_dir), exp.to_toml()).remove()
+    return RunResult(path, exp, model, evaluation, history, training, seconds, verdict)
+
+
+def _training_logs(exp: Experiment, train_runs: Sequence[Run] | None, data: str | os.PathLike | None,
+                   validation: list[Run], tests: Sequence[Run], log: Callable[[str], None]):
+    """(training logs, validation logs, the held-out draw or None): `train_runs` or the
+    config's, the validation logs given or ``[data] validation`` or held out of the training
+    logs; `DataError` for a log in two of them, a warning for states beyond the force models."""
+    runs = list(train_runs) if train_runs is not None else training_runs(exp, data)
+    held_out = None
+    if not validation and exp.data.validation:
+        validation = list(validation_runs(exp))
+    if not validation and (held_out := held_out_validation(exp, runs)) is not None:
+        runs, validation = list(held_out.train), list(held_out.validation)
+        log("validation: the held-out training logs " + "; ".join(
+            f"{group}: {', '.join(names)}" for group, names in held_out.groups.items()))
+    check_disjoint_runs({TRAINING: runs, VALIDATION: validation, TEST: tests}, exp.source)
+    warn_outside_force_models(exp, runs)
+    return runs, validation, held_out
+
+
+def _fitted(exp: Experiment, runs: Sequence[Run], validation: Sequence[Run], out_dir: str | os.PathLike, progress: bool,
+            log: Callable[[str], None], resume: bool, on_epoch: Callable[[EpochReport], None] | None) -> Trainer:
+    """The `Trainer` fitted on `runs`; a diverged training removes its checkpoint (it would
+    resume to the same divergence) and raises."""
+    try:
+        return Trainer(exp, progress=progress, log=log, checkpoint=checkpoint_path(out_dir),
+                       resume=resume, on_epoch=on_epoch).fit(runs, validation)
+    except TrainingError:
+        TrainingCheckpoint(checkpoint_path(out_dir), exp.to_toml()).remove()
+        raise
+
+
+def _validation_scores(exp: Experiment, trainer: Trainer) -> dict:
+    """horizon [s] -> "model" or baseline label -> `WindowScore` on the trainer's validation windows."""
+    validation_scores = {}
+    for horizon, windows in trainer.validation_sets_.items():
+        scored = {"model": trainer.model_, **physics_baselines(exp, trainer.model_, windows.states.dtype,
+                                                                windows.states.device)}
+        validation_scores[horizon] = {k: window_score(m, windows, trainer.velocity_weights_)
+                                      for k, m in scored.items()}
+    return validation_scores
+
+
+def _evaluated(exp: Experiment, model, tests: Sequence[Run], limits: PhysicalRange, validation_scores: dict | None,
+               log: Callable[[str], None]):
+    """(the model's `Evaluation` on the test logs, its verdict or None, the baselines'
+    metrics on the same logs or None); a WARNING line per diverged prediction."""
     evaluation = evaluate_model(model, tests, exp.evaluation.horizons, Integrator(exp.evaluation.integrator),
                                 limits=limits)
     for divergence in evaluation.divergences:
@@ -295,12 +310,4 @@ def _finish_run(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[Run
         if scores:
             baseline_metrics = pd.concat([e.metrics.assign(baseline=label) for label, e in scores.items()
                                           if label != "model"], ignore_index=True)
-    source = "files" if exp.data.train else (exp.experiment.dataset if exp.needs_training else "-")
-    data_used = provenance(source, runs, validation, tests, exp.training.val_fraction, exp.training.block_s,
-                           inputs.held_out, exp.training.split_seed)
-    seconds = time.perf_counter() - started
-    path = write_run(out_dir, exp, model, evaluation, history, training, seconds, overwrite,
-                     verdict=verdict, data=data_used, baseline_metrics=baseline_metrics, limits=limits)
-    if training is not None:
-        TrainingCheckpoint(checkpoint_path(out_dir), exp.to_toml()).remove()
-    return RunResult(path, exp, model, evaluation, history, training, seconds, verdict)
+    return evaluation, verdict, baseline_metrics

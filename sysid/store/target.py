@@ -64,6 +64,22 @@ class OutputKind(str, Enum):
 
 REPORT_FILES = ("report.html", "report.pdf")
 
+# the JSON record that says what a sealed directory of a kind holds: one name per kind (a
+# run's is its summary). Directories written before the kinds had their own names hold theirs
+# as LEGACY_RECORD; readers take it there (`record_file`).
+RECORD_FILES = {OutputKind.RUN: "summary.json", OutputKind.REPRODUCTION: "reproduction.json",
+                OutputKind.SWEEP: "sweep.json", OutputKind.MANEUVERS: "maneuvers.json",
+                OutputKind.COMPARISON: "comparison.json"}
+LEGACY_RECORD = "summary.json"
+
+
+def record_file(directory: str | os.PathLike, kind: OutputKind) -> Path:
+    """The record file of a `kind` directory: its own name (`RECORD_FILES`), or summary.json
+    in a directory written before that name (when only that one is there)."""
+    path = Path(directory) / RECORD_FILES[kind]
+    legacy = Path(directory) / LEGACY_RECORD
+    return legacy if not path.exists() and legacy.exists() else path
+
 
 def real_path(path: str | os.PathLike) -> Path:
     """Absolute `path` with every link resolved except its last component (the name that

@@ -162,7 +162,7 @@ def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = Non
     trial_data = read_trial_data(experiments, root)
     tracker = None
     if mlflow or spec.mlflow:
-        from sysid.tracking import Tracker
+        from sysid.experiment_tracking import Tracker
         tracker = Tracker(mlflow or spec.mlflow, spec.name)
     tune_storage = (tune_storage_of(storage, spec.name, out, sweep_inputs(spec, experiments, root)) if storage
                     else TuneStorage(str(out.resolve())))

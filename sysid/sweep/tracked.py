@@ -1,5 +1,5 @@
 """A sweep's trials in MLflow: a Tune callback on the driver logging each Tune trial as a
-child run of the sweep's run (`sysid.tracking`): its varied values, every epoch's losses,
+child run of the sweep's run (`sysid.experiment_tracking`): its varied values, every epoch's losses,
 its final metrics and run directories (once they are in the sweep's output)."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import Callable
 
 from sysid.sweep.connect import import_ray
 from sysid.sweep.inbox import complete_summary
-from sysid.tracking import Tracker
+from sysid.experiment_tracking import Tracker
 
 
 def tracking_callback(tracker: Tracker, parent: str, out: Path, names: Callable[[dict], str],
@@ -42,7 +42,7 @@ def tracking_callback(tracker: Tracker, parent: str, out: Path, names: Callable[
         def on_trial_result(self, iteration, trials, trial, result, **info):
             run = self.runs.get(trial.trial_id)
             if run is not None and not result.get("final"):
-                # MLflow's per-epoch names, as `sysid.tracking.EpochLogger` logs a training
+                # MLflow's per-epoch names, as `sysid.experiment_tracking.EpochLogger` logs a training
                 values = {name: result[k] for name, k in (("val_loss", "early_stopping_loss"), ("train_loss", "train_loss"))
                           if k in result}
                 self._safely("logging an epoch", lambda: tracker.metrics(run, values, int(result["training_iteration"])))

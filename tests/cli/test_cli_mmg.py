@@ -115,3 +115,42 @@ def test_dataset_checks_duplicates_and_frozen_gnss(dataset_dir):
     assert duplicate_runs([cut, full, other]) == [(cut.name, full.name)]
     frozen = read_run(dataset_dir / "turning" / "turn_14-Oct-2020_14_08_51.csv")
     assert any("GNSS frozen" in s and "t = 20" in s for s in frozen.issues), frozen.issues
+
+
+def test_simulate_and_evaluate_take_their_path_from_the_steps_and_the_cache(oracle_dir, dataset_dir, tmp_path,
+                                                                            monkeypatch, capsys):
+    """`simulate` and `evaluate` say which path they took: with nothing in the cache and
+    fewer eager steps than `PREDICTION_REPAY_STEPS`, eager; a prediction whose package is in
+    the cache, or with enough steps, compiled; --eager and --compiled as asked. The windows
+    `evaluate` counts are the protocol's floor(N / H) per log, H - 1 steps each."""
+    from sysid.cli.evaluate_commands import _window_work
+    from sysid.cli.mmg_options import mmg_of as _model, prediction_path as _prediction_path
+    from sysid.config.choices import Method
+    from sysid.fast.payoff import PREDICTION_REPAY_STEPS
+    from sysid.fast.compiled import prediction_package
+    monkeypatch.setenv("SYSID_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("SYSID_COMPILE", "1")
+    log = dataset_dir / pd.read_csv(oracle_dir / "traj_zigzag_dt1p0.csv").source[0]
+    args = ["simulate", "--ship", "esso_osaka", "--log", str(log), "--start", "15", "--horizon", "100",
+            "--integrator", "rk4", "-o", str(tmp_path / "sim.csv")]
+    main(args)
+    said = capsys.readouterr().out
+    assert (f"simulate: eager prediction: 100 steps, fewer than the {PREDICTION_REPAY_STEPS} per package that "
+            "repay compiling 1 package(s) not in the cache") in said
+    main([*args[:-1], str(tmp_path / "sim2.csv"), "--eager"])
+    assert "simulate: eager prediction (as asked)" in capsys.readouterr().out
+    assert pd.read_csv(tmp_path / "sim.csv").equals(pd.read_csv(tmp_path / "sim2.csv"))
+
+    model = _model("esso_osaka", None, "exact")
+    _, path = prediction_package(model, Method.RK4, 1.0, 1)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.touch()  # its package in the cache: a warm start
+    warm = _prediction_path("simulate", None, [model], [(1, 100)], Method.RK4, 1.0)
+    assert warm.compiled and "1 package(s) in the cache" in warm.reason
+    assert not _prediction_path("simulate", None, [model], [(1, 100)], Method.RK4, 0.5).compiled  # another dt: cold
+    assert _prediction_path("simulate", None, [model], [(1, PREDICTION_REPAY_STEPS)], Method.RK4, 0.5).compiled
+    assert not _prediction_path("simulate", False, [model], [(1, 100)], Method.RK4, 1.0).compiled
+    capsys.readouterr()
+
+    runs = [read_run(log, 1.0)]
+    assert _window_work(runs, [30.0, 100.0]) == [(len(runs[0]) // 30, 29), (len(runs[0]) // 100, 99)]

@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from cli_harness import in_process
-from sysid.bundled import bundled_dir
+from sysid.package_data import bundled_dir
 from sysid.data.datasets import TEST_FILES
 
 LOGS = {"logs/monday_turn.csv": "turning/turn_14-Oct-2020_14_17_39.csv",

@@ -30,7 +30,7 @@ def _project(tmp_path, dataset_dir):
 
 
 def _bundled_ship():
-    from sysid.bundled import bundled_dir
+    from sysid.package_data import bundled_dir
     return bundled_dir("ships") / "esso_osaka.toml"
 
 

@@ -99,7 +99,7 @@ def test_compare_hybrid_nn_and_ship_mmg_on_two_held_back_logs(project, dataset_d
         assert v.change_low <= v.change <= v.change_high
         assert v.outcome in ("beats", "worse", "not_distinguishable") and v.n_logs == 2
         assert v.model in v.sentence and "hybrid" in v.sentence
-    summary = json.loads((out / "summary.json").read_text())
+    summary = json.loads((out / "comparison.json").read_text())
     assert summary["against"] == "first" and summary["horizons_s"] == [30.0, 100.0]
     assert (out / "report.html").read_text().count("<table class=\"plain\">") == 13   # verdicts + 12 cells
     assert (out / "report.pdf").stat().st_size > 0 and (out / "manifest.json").is_file()

@@ -252,7 +252,7 @@ def test_val_loss_multistep_is_the_final_models_validation_loss_at_the_objective
     model = trainer.model_
     train, _, _, _ = split_windows(runs, t.steps, t.stride_s, t.val_fraction, False, torch.float32,
                                    t.block_s, exp.experiment.seed)
-    from sysid.state import VELOCITY_INDEX
+    from sysid.channel_names import VELOCITY_INDEX
     w_v = 1.0 / train.states[:, :, list(VELOCITY_INDEX)].reshape(-1, 3).var(0)
     losses = {}
     for horizon in exp.evaluation.horizons:

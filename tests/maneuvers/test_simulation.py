@@ -11,6 +11,7 @@ import pytest
 import torch
 
 from sysid import MMG, load_ship
+from sysid.config.choices import Method
 from sysid.hybrid.correction import ForceCorrection, correction_inputs
 from sysid.hybrid.ensemble import SeedEnsemble
 from sysid.hybrid.force_models import CorrectedModel
@@ -130,28 +131,58 @@ def test_compiled_loop_equals_the_eager_one(tmp_path, monkeypatch):
     assert other[0].states.shape == (121, 6) and len(list(tmp_path.glob("*.pt2"))) == 1  # no second compile
 
 
-def test_the_loop_is_chosen_by_what_a_cold_start_costs(tmp_path, monkeypatch):
-    """`choose_loop`: as asked when asked; eager with compilation off; otherwise compiled
-    only where the eager steps would take longer than compiling (the cold start recorded
-    in the cache decides: an hour against a 3-s run, none against any run)."""
-    from sysid.fast.compiled import record_seconds
+def test_the_loop_is_chosen_from_the_step_count_and_the_cache_alone(tmp_path, monkeypatch):
+    """`choose_loop` reads no clock and no load (both made to fail here): the same steps and
+    cache give the same loop, whatever the cache recorded a compile to cost. Cold cache:
+    eager below `MANEUVER_REPAY_STEPS` eager steps per loop to compile, compiled from it on;
+    a model whose loop is in the cache (its package on disk) counts warm: every model warm,
+    compiled at any step count. Forced by compiled=True/False; eager with compilation off."""
+    import os
+    import time
+    from sysid.fast.payoff import MANEUVER_REPAY_STEPS
+    from sysid.fast.compiled import package_path, record_seconds
     from sysid.maneuvers import closed_loop
     from sysid.maneuvers.simulate import choose_loop
     monkeypatch.setenv("SYSID_CACHE", str(tmp_path))
-    monkeypatch.setattr(closed_loop, "_compiled", {})  # loops compiled by earlier tests of this process
-    model, maneuvers = MMG(load_ship("esso_osaka")), [TurningCircle(35.0), ZigZag(20.0, 20.0)]
-    conditions = Conditions(0.35, 8.85, 24.1, 0.1, 3.0)
-    assert choose_loop([model], maneuvers, conditions, True).compiled
-    assert not choose_loop([model], maneuvers, conditions, False).compiled
-    monkeypatch.setenv("SYSID_COMPILE", "0")
-    assert "compilation is off" in choose_loop([model], maneuvers, conditions).reason
     monkeypatch.setenv("SYSID_COMPILE", "1")
-    record_seconds("maneuver-rk4", "compile", 3600.0)
-    choice = choose_loop([model], maneuvers, conditions)
-    assert not choice.compiled and "took 3600 s here" in choice.reason
-    for _ in range(5):  # the median of the last five decides
-        record_seconds("maneuver-rk4", "compile", 0.0)
-    assert choose_loop([model], maneuvers, conditions).compiled
+    monkeypatch.setattr(closed_loop, "_compiled", {})  # loops compiled by earlier tests of this process
+
+    def no_clock(*args):
+        raise AssertionError("the loop choice read a clock or the load")
+    monkeypatch.setattr(time, "perf_counter", no_clock)
+    monkeypatch.setattr(os, "getloadavg", no_clock)
+    esso, kvlcc2 = MMG(load_ship("esso_osaka")), MMG(load_ship("kvlcc2_l7"))
+    maneuvers = [TurningCircle(35.0), ZigZag(20.0, 20.0)]
+    dt = 0.1
+
+    def conditions(steps):
+        return Conditions(0.35, 8.85, 24.1, dt, steps * dt)
+
+    below, at = conditions(MANEUVER_REPAY_STEPS - 1), conditions(MANEUVER_REPAY_STEPS)
+    assert (below.steps, at.steps) == (MANEUVER_REPAY_STEPS - 1, MANEUVER_REPAY_STEPS)
+    for recorded in (3600.0, 0.0):  # what the cache says a compile cost does not decide
+        for _ in range(5):
+            record_seconds("maneuver-rk4", "compile", recorded)
+        first = choose_loop([esso], maneuvers, below)
+        assert not first.compiled and f"{MANEUVER_REPAY_STEPS - 1} steps" in first.reason
+        assert choose_loop([esso], maneuvers, below) == first  # same inputs, same path and words
+        assert choose_loop([esso], maneuvers, at).compiled
+    assert f"took {0:.0f} s here" in first.reason  # the recorded cost is quoted, not used
+    assert not choose_loop([esso, kvlcc2], maneuvers, conditions(MANEUVER_REPAY_STEPS - 1)).compiled
+    assert choose_loop([esso, kvlcc2], maneuvers, conditions(MANEUVER_REPAY_STEPS)).compiled  # 2 x steps, 2 loops
+    short = conditions(30)
+    assert not choose_loop([esso], maneuvers, short).compiled
+    package_path(*closed_loop._loop_module(esso, Method.RK4, torch.float64)).touch()  # esso's loop: warm
+    warm = choose_loop([esso], maneuvers, short)
+    assert warm.compiled and "in the cache" in warm.reason
+    assert not choose_loop([esso, kvlcc2], maneuvers, short).compiled  # kvlcc2's loop is still cold
+    half = conditions(MANEUVER_REPAY_STEPS // 2)  # 2 models x half = the steps that repay one cold loop
+    assert choose_loop([esso, kvlcc2], maneuvers, half).compiled
+    assert not choose_loop([esso], maneuvers, short, False).compiled
+    assert choose_loop([kvlcc2], maneuvers, short, True).compiled
+    monkeypatch.setenv("SYSID_COMPILE", "0")
+    off = choose_loop([esso], maneuvers, at)
+    assert not off.compiled and "compilation is off" in off.reason
 
 
 def test_the_eager_loop_gives_the_gate_decision_of_each_step_start():

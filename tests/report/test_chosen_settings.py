@@ -11,7 +11,7 @@ from types import SimpleNamespace
 import pandas as pd
 import pytest
 
-from sysid.bundled import bundled_dir
+from sysid.package_data import bundled_dir
 from sysid.config.experiment import load_experiment
 from sysid.errors import CheckpointError
 from sysid.report.chosen_settings import chosen_section, config_comments, run_reasons, settings_row

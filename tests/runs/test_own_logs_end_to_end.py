@@ -18,7 +18,7 @@ from pypdf import PdfReader
 
 from cli_harness import in_process
 from own_logs import columns_table, write_own_log
-from sysid.bundled import bundled_dir
+from sysid.package_data import bundled_dir
 from sysid.data.splits import PAPER_TEST_STEMS
 
 LOGS = {  # the user's name -> the dataset file it is made from; role

@@ -1,0 +1,102 @@
+"""``sysid simulate``: one prediction of the MMG from a recorded state with the recorded inputs."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from sysid.channel_names import FORCE, INPUTS, STATE, force_column
+from sysid.cli.app import app
+from sysid.cli.mmg_options import (MMG_COMPONENTS, CompiledOption, QuadratureOption, SetOption, ShipOption,
+                                   integrator_of, mmg_of, prediction_path)
+from sysid.cli.outputs import claim, ship_file
+from sysid.errors import DataError
+from sysid.store.target import OutputKind
+
+
+@app.command()
+def simulate(
+    log: Path = typer.Option(..., "--log", help="Processed run (public schema, 10 Hz or 1 Hz)."),
+    start: float = typer.Option(..., "--start", help="Start time T [s] (recorded state at T)."),
+    horizon: float = typer.Option(..., "--horizon", help="Prediction horizon H [s]."),
+    output: Path = typer.Option(..., "-o", "--output", help="Output CSV."),
+    integrator: str = typer.Option("euler", "--integrator", help="euler (the paper's) or rk4 (classical)."),
+    rate: float = typer.Option(1.0, "--rate", help="Step rate [Hz]: 1 = the protocol's 1 Hz grid."),
+    ship: str = ShipOption,
+    set_: Optional[List[str]] = SetOption,
+    quadrature: str = QuadratureOption,
+    compiled: Optional[bool] = CompiledOption,
+) -> None:
+    """Predict from the recorded state at T with the recorded inputs (zero-order hold)."""
+    import numpy as np
+    import torch
+    from sysid.fast.compiled import predict
+    from sysid.data.recordings import read_run
+    from sysid.store.files import write_csv
+    from sysid.config import checks
+
+    chosen = integrator_of(integrator, False)
+    checks.RATE.check("--rate", rate)
+    checks.DURATION.check("--horizon", horizon)
+    checks.TIME.check("--start", start)
+    model = mmg_of(ship, set_, quadrature)
+    claim(output, OutputKind.FILE, [log, ship_file(ship)])
+    run = read_run(log, rate)
+    i0, steps = _window(run, log, start, horizon, rate)
+    sl = slice(i0, i0 + steps + 1)
+    x0 = torch.as_tensor(run.states[i0], dtype=torch.float64)
+    inputs = torch.as_tensor(run.inputs[sl], dtype=torch.float64)
+    path = prediction_path("simulate", compiled, [model], [(1, steps)], chosen.method, run.dt)
+    chosen = integrator_of(str(chosen.method), path.compiled)
+    with torch.no_grad():
+        pred = predict(model, x0, inputs, run.dt, chosen)
+        forces = model(pred, inputs)
+    out = _prediction_frame(run, sl, i0, pred.numpy(), forces)
+    write_csv(out, output, float_format="%.17g")
+    err = np.sqrt(((out[["u", "v", "r"]].to_numpy() - out[["obs_u", "obs_v", "obs_r"]].to_numpy()) ** 2).mean(0))
+    typer.echo(f"simulate: {run.name} from t = {run.t[i0]:.1f} s, {steps} {chosen.method} steps of {run.dt:g} s -> {output}\n"
+               f"  RMSE vs record: u {err[0]:.4f} m/s, v_m {err[1]:.4f} m/s, r {err[2]:.4f} rad/s")
+
+
+def _window(run, log: Path, start: float, horizon: float, rate: float) -> tuple[int, int]:
+    """The sample index of ``--start`` in `run` and the steps of ``--horizon``; exit 2 for a
+    start outside the run, a horizon past its end or samples not ``1 / --rate`` apart."""
+    import numpy as np
+    from sysid.config import checks
+
+    i0 = int(np.argmin(np.abs(run.t - start)))
+    if abs(run.t[i0] - start) > 0.5 * run.dt:
+        raise DataError(f"{log}: --start {start} s is outside the run ({run.t[0]:.1f}..{run.t[-1]:.1f} s)")
+    steps = checks.whole_samples("--horizon", horizon, run.dt)
+    if i0 + steps >= len(run):
+        raise DataError(f"{log}: --horizon {horizon} s from {run.t[i0]:.1f} s runs past the end "
+                        f"({run.t[-1]:.1f} s)")
+    sl = slice(i0, i0 + steps + 1)
+    uneven = np.abs(np.diff(run.t[sl]) - run.dt) > 1e-3 * run.dt
+    if uneven.any():  # the model steps by dt on the recorded inputs: they must be dt apart
+        k = i0 + int(np.argmax(uneven))
+        raise DataError(f"{log}: samples at t = {run.t[k]:.6g} and {run.t[k + 1]:.6g} s are "
+                        f"{run.t[k + 1] - run.t[k]:.6g} s apart, not the {run.dt:g} s of --rate {rate:g} Hz "
+                        f"({int(uneven.sum())} uneven step(s) in the {horizon:g}-s horizon); choose a --start "
+                        "and --horizon inside an evenly sampled stretch, or resample the log")
+    return i0, steps
+
+
+def _prediction_frame(run, sl: slice, i0: int, pred, forces):
+    """The simulate CSV: time, the predicted state `pred` (K+1, 6), the recorded inputs, the
+    force components (N, N m) and the recorded state (``obs_``), one row per step of `sl`."""
+    import pandas as pd
+
+    out = pd.DataFrame({"t": run.t[sl], "t_rel": run.t[sl] - run.t[i0]})
+    for j, name in enumerate(STATE):
+        out[name] = pred[:, j]
+    for j, name in enumerate(INPUTS):
+        out[name] = run.inputs[sl, j]
+    for comp in MMG_COMPONENTS:
+        arr = getattr(forces, comp).numpy()
+        for j, axis in enumerate(FORCE):
+            out[force_column(comp, axis)] = arr[:, j]
+    for j, name in enumerate(STATE):
+        out[f"obs_{name}"] = run.states[sl, j]
+    return out

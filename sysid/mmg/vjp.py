@@ -1,0 +1,138 @@
+"""The MMG part of a hybrid right-hand side as one autograd Function with a hand-derived VJP.
+
+`mmg_rate` returns, for state (..., 6) and inputs (..., 4), one tensor (..., 18):
+
+* dx/dt (..., 6) of the equations of motion (paper Eqs. 1, 4) driven by F_MMG alone; the FNN's
+  force adds ``F_NN @ FORCE_RATE`` (the equations are linear in the force),
+* F_MMG (..., 3) = (X, Y, N) [N, N, N m],
+* the FNN's inputs s (..., 9) in `sysid.hybrid.correction.INPUT_NAMES` order (u, v_m, r,
+  delta, n_p, omega_u, omega_v, cos psi, sin psi),
+
+computed without autograd (`sysid.mmg.tangents`: the values and their Jacobian with respect to
+the state, the chain rule written out). Its backward is the vector-Jacobian product, one
+batched product: what a training step differentiates in place of autograd's record of every
+operation of the MMG, the FNN's inputs and the equations of motion. The inputs get no
+gradient (recorded, constant); the coefficients none either (`sysid.mmg.tangents.supported`
+says where this applies; elsewhere `MMG` runs through autograd).
+"""
+from __future__ import annotations
+
+import torch
+
+from sysid.mmg.coefficient_lookup import Rows, coefficient_matrix
+from sysid.mmg.tangents import basis, forces_with_tangents
+
+# dx/dt (..., 6) as features (..., 16) times a (16, 6) matrix of the mass terms: features
+# (X, Y, N, u r, v r, r r, u cos psi, u sin psi, v cos psi, v sin psi, x, u, y, v, psi, r)
+# (`sysid.mmg.coefficients.derived_constants`' ``eom_*``)
+_NONE6 = (None,) * 6
+RATE_ROWS = ((None, "eom_X_u", None, None, None, None),        # X
+             (None, None, None, "eom_Y_v", None, "eom_N_v"),   # Y
+             (None, None, None, "eom_N_v", None, "eom_N_r"),   # N
+             (None, None, None, "eom_ur_v", None, "eom_ur_r"),  # u r
+             (None, "eom_vr_u", None, None, None, None),       # v r
+             (None, "eom_rr_u", None, None, None, None),       # r r
+             (1.0, None, None, None, None, None),              # u cos psi -> x_dot
+             (None, None, 1.0, None, None, None),              # u sin psi -> y_dot
+             (None, None, 1.0, None, None, None),              # v cos psi -> y_dot
+             (-1.0, None, None, None, None, None),             # v sin psi -> x_dot
+             _NONE6, _NONE6, _NONE6, _NONE6, _NONE6,           # x, u, y, v, psi
+             (None, None, None, None, 1.0, None))              # r -> psi_dot
+_RATE = Rows(RATE_ROWS)
+FORCE_RATE = Rows(RATE_ROWS[:3])  # (3, 6): dx/dt of a force (X, Y, N)
+WIDTH = 18  # dx/dt (6), F_MMG (3), s (9)
+
+
+def force_rate(c, like: torch.Tensor) -> torch.Tensor:
+    """(3, 6): dx/dt = F @ this for a force F (..., 3) = (X, Y, N) [N, N, N m] (the mass
+    terms of Eq. 4), in `like`'s dtype."""
+    return coefficient_matrix(c, FORCE_RATE, like)
+
+
+def _rate_with_tangents(state, force, d_force, c):
+    """dx/dt (..., 6) of Eqs. (1), (4) driven by `force` and its Jacobian (..., 6, 6) laid out
+    [d state, d rate], from the force's (..., 6, 3); also (cos psi, sin psi) (..., 2)."""
+    B = basis(state)
+    _, u, _, v, psi, r = state.split_with_sizes([1] * 6, -1)
+    cos_psi, sin_psi = torch.cos(psi), torch.sin(psi)
+    # kinematic features a * b, a = (u, v, r, u, u, v, v), b = (r, r, r, cos, sin, cos, sin)
+    a = torch.cat([u, v, r, u, u, v, v], -1)
+    b = torch.cat([r, r, r, cos_psi, sin_psi, cos_psi, sin_psi], -1)
+    rates = coefficient_matrix(c, _RATE, state)
+    rate = torch.cat([force, a * b, state], -1) @ rates
+    first, r_in_b = _kinematic_tables(state)
+    zero = torch.zeros_like(u)
+    # d b = r's tangent (first three) + psi's times (0, 0, 0, -sin, cos, -sin, cos)
+    d_b = torch.addcmul(r_in_b, B.E[:, 4:5], torch.cat([zero, zero, zero, -sin_psi, cos_psi, -sin_psi, cos_psi],
+                                                      -1).unsqueeze(-2))
+    d_kinematic = torch.addcmul(a.unsqueeze(-2) * d_b, b.unsqueeze(-2), first)       # (..., 6, 7)
+    d_rate = (torch.cat([d_force, d_kinematic], -1).view(-1, 10) @ rates[:10]).view(*state.shape, 6) + rates[10:]
+    return rate, d_rate, torch.cat([cos_psi, sin_psi], -1)
+
+
+_KINEMATIC: dict[tuple, tuple[torch.Tensor, torch.Tensor]] = {}
+
+
+def _kinematic_tables(like: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(6, 7) tangents (columns) of a = (u, v, r, u, u, v, v) and of r in b = (r, r, r, ...)."""
+    key = (like.dtype, like.device)
+    found = _KINEMATIC.get(key)
+    if found is None:
+        with torch.inference_mode(False), torch.no_grad():
+            E = torch.eye(6, dtype=like.dtype, device=like.device)
+            r_in_b = torch.zeros(6, 7, dtype=like.dtype, device=like.device)
+            r_in_b[5, :3] = 1.0
+            found = _KINEMATIC[key] = (E[:, [1, 3, 5, 1, 1, 3, 3]].clone(), r_in_b)
+    return found
+
+
+def rate_with_jacobian(state: torch.Tensor, inputs: torch.Tensor, c, wind: bool = True):
+    """(out (..., 18) as `mmg_rate` returns it, its Jacobian (..., 6, 18): entry [i, j] is
+    d out_j / d state_i), without autograd."""
+    t = forces_with_tangents(state, inputs, c, wind)
+    rate, d_rate, cos_sin = _rate_with_tangents(state, t.force, t.d_force, c)
+    _, u, _, v, _, r = state.split_with_sizes([1] * 6, -1)
+    n, delta = inputs[..., :1], inputs[..., 1:2]
+    s = torch.cat([u, v, r, delta, n, t.omega, cos_sin], -1)
+    B = basis(state)
+    d_trig = B.E[:, 4:5] * torch.cat([-cos_sin[..., 1:], cos_sin[..., :1]], -1).unsqueeze(-2)   # (..., 6, 2)
+    batch = state.shape[:-1]
+    jacobian = torch.cat([d_rate, t.d_force, _first_inputs(state).expand(*batch, 6, 5), t.d_omega, d_trig], -1)
+    return torch.cat([rate, t.force, s], -1), jacobian
+
+
+_FIRST: dict[tuple, torch.Tensor] = {}
+
+
+def _first_inputs(like: torch.Tensor) -> torch.Tensor:
+    """(6, 5) tangents (columns) of the FNN inputs u, v_m, r, delta, n_p."""
+    key = (like.dtype, like.device)
+    found = _FIRST.get(key)
+    if found is None:
+        with torch.inference_mode(False), torch.no_grad():
+            E = torch.eye(6, dtype=like.dtype, device=like.device)
+            found = _FIRST[key] = torch.cat([E[:, [1, 3, 5]], torch.zeros(6, 2, dtype=like.dtype, device=like.device)], -1)
+    return found
+
+
+class _MMGRate(torch.autograd.Function):
+    """(state, inputs) -> (..., 18); backward: the output's gradient times the Jacobian."""
+
+    @staticmethod
+    def forward(ctx, state, inputs, c, wind):
+        out, jacobian = rate_with_jacobian(state, inputs, c, wind)
+        ctx.save_for_backward(jacobian)
+        return out
+
+    @staticmethod
+    def backward(ctx, grad):
+        (jacobian,) = ctx.saved_tensors
+        return torch.matmul(jacobian, grad.unsqueeze(-1)).squeeze(-1), None, None, None
+
+
+def mmg_rate(state: torch.Tensor, inputs: torch.Tensor, c, wind: bool = True) -> torch.Tensor:
+    """(..., 18) = (dx/dt of F_MMG (6), F_MMG (3), the FNN's inputs s (9)) at state (..., 6)
+    with inputs (..., 4) (see the module docstring); differentiable with respect to the
+    state by its hand-derived VJP. `c` is the coefficients' values view (constants), `wind`
+    adds Fujiwara's wind force."""
+    return _MMGRate.apply(state, inputs, c, wind)
