@@ -20,7 +20,8 @@ Side by side with an older checkout (``--against``): the whole command ``sysid m
 default duration 80 L/U0, indices, tables, report) of this code with its default settings
 and of the older code with ``--eager`` (its eager path), each in a fresh process with a
 fresh empty compile cache (``SYSID_CACHE``, ``TORCHINDUCTOR_CACHE_DIR``: cold caches), in
-turn, ``--repeats`` times; wall times and their ratio:
+turn, ``--repeats`` times; wall times (with the load average before and after each) and
+their ratio:
 
     python benchmarks/maneuver_speed.py --run runs/hybrid_D2 --against /path/to/old/checkout [--duration 690]
 """
@@ -28,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -95,9 +97,11 @@ def main() -> None:
               f"{per_step * conditions.steps / compiled:17.0f}x {gate:>9s}")
 
 
-def timed_command(root: Path, extra: list[str], model: str, duration: float | None, threads: int) -> tuple[float, str]:
-    """(wall time [s], the output's path line) of ``sysid maneuver`` from `root` in a fresh
-    process with empty caches; a turning circle and a zig-zag to starboard."""
+def timed_command(root: Path, extra: list[str], model: str, duration: float | None, threads: int
+                  ) -> tuple[float, float, str]:
+    """(wall time [s], the child's CPU time [s], the output's lines) of ``sysid maneuver``
+    from `root` in a fresh process with empty caches; a turning circle and a zig-zag to
+    starboard. On a loaded machine the CPU time compares two codes better than the wall."""
     with tempfile.TemporaryDirectory(prefix="maneuver-speed-") as tmp:
         env = dict(os.environ, PYTHONPATH=str(root), SYSID_CACHE=str(Path(tmp) / "sysid"),
                    TORCHINDUCTOR_CACHE_DIR=str(Path(tmp) / "inductor"), OMP_NUM_THREADS=str(threads))
@@ -105,13 +109,13 @@ def timed_command(root: Path, extra: list[str], model: str, duration: float | No
                    "--zigzag", "20/20", "--side", "starboard", *extra]
         if duration is not None:
             command += ["--duration", f"{duration:g}"]
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), resource.getrusage(resource.RUSAGE_CHILDREN)
         done = subprocess.run(command, env=env, capture_output=True, text=True, cwd=tmp)
-        took = time.perf_counter() - start
+        took, after = time.perf_counter() - start, resource.getrusage(resource.RUSAGE_CHILDREN)
         if done.returncode != 0:
             raise SystemExit(f"{root}: sysid maneuver failed:\n{done.stderr[-2000:]}")
         lines = [line for line in done.stdout.splitlines() if line.startswith("maneuver: ")]
-        return took, " | ".join(lines[1:])
+        return took, (after.ru_utime + after.ru_stime) - (cpu.ru_utime + cpu.ru_stime), " | ".join(lines[1:])
 
 
 def side_by_side(args) -> None:
@@ -121,15 +125,21 @@ def side_by_side(args) -> None:
     runs = {"today (--against, --eager)": (args.against.resolve(), ["--eager"]),
             "this code (default settings)": (ROOT, [])}
     times: dict[str, list[float]] = {name: [] for name in runs}
+    cpus: dict[str, list[float]] = {name: [] for name in runs}
     print(f"sysid maneuver {model} --turning 35 --zigzag 20/20 --side starboard"
           f"{'' if args.duration is None else f' --duration {args.duration:g}'}; cold caches, {args.threads} thread(s)")
     for repeat in range(args.repeats):
         for name, (root, extra) in (runs.items() if repeat % 2 == 0 else reversed(runs.items())):
-            took, said = timed_command(root, extra, model, args.duration, args.threads)
+            before = os.getloadavg()[0]
+            took, cpu, said = timed_command(root, extra, model, args.duration, args.threads)
             times[name].append(took)
-            print(f"  {name}: {took:.1f} s   {said}", flush=True)
+            cpus[name].append(cpu)
+            print(f"  {name}: {took:.1f} s wall, {cpu:.1f} s CPU (load {before:.1f} -> {os.getloadavg()[0]:.1f})"
+                  f"   {said}", flush=True)
     old, new = (statistics.median(v) for v in times.values())
-    print(f"median: today {old:.1f} s, this code {new:.1f} s: {old / new:.1f}x faster")
+    old_cpu, new_cpu = (statistics.median(v) for v in cpus.values())
+    print(f"median: today {old:.1f} s, this code {new:.1f} s: {old / new:.1f}x faster "
+          f"(CPU {old_cpu:.1f} s and {new_cpu:.1f} s: {old_cpu / new_cpu:.1f}x)")
 
 
 if __name__ == "__main__":

@@ -60,8 +60,10 @@ def available() -> bool:
 
 
 def cache_tag() -> str:
-    """What the compile cache key records of these fixes: their version, or "none"."""
-    return f"codegen-fixes-{VERSION}" if available() else "codegen-fixes-none"
+    """What the compile cache key records of these fixes: their version under `TORCH_VERSION`,
+    else "none". Read from the version alone (the key's torch version pins the rest), so
+    that checking the cache imports no compiler (`torch._inductor`: seconds)."""
+    return f"codegen-fixes-{VERSION}" if torch.__version__.split("+")[0] == TORCH_VERSION else "codegen-fixes-none"
 
 
 def _read_inputs(graph) -> set[str]:

@@ -253,3 +253,19 @@ def test_a_maneuver_beyond_the_training_range_of_r_diverged():
     wide = simulate_maneuvers(MMG(load_ship("kvlcc2_l7")), [TurningCircle(35.0)], conditions,
                               limits=PhysicalRange(1.2, 0.05))[0]
     assert not wide.diverged   # its largest |r| is 0.077 rad/s < 3 x 0.05
+
+
+def test_choosing_the_loop_loads_no_compiler(tmp_path):
+    """`choose_loop` with a cold cache reads the cache's fingerprint without importing
+    `torch._inductor` (seconds at start-up, which an eager run would pay for nothing)."""
+    import os
+    import subprocess
+    import sys
+    code = ("import sys; from sysid import MMG, load_ship; from sysid.maneuvers import Conditions, TurningCircle; "
+            "from sysid.maneuvers.simulate import choose_loop; "
+            "c = choose_loop([MMG(load_ship('esso_osaka'))], [TurningCircle(35.0)], Conditions(0.35, 8.85, 24.1)); "
+            "print(c.compiled, 'torch._inductor' in sys.modules)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env={**os.environ, "SYSID_CACHE": str(tmp_path), "SYSID_COMPILE": "1"})
+    assert done.returncode == 0, done.stderr[-1000:]
+    assert done.stdout.split() == ["False", "False"]  # 6000 steps, cold: eager; no compiler loaded
