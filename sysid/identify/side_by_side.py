@@ -18,9 +18,10 @@ seed; identified MMG coefficients are one set per seed).
 """
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 import torch
@@ -38,6 +39,7 @@ from sysid.identify.loop import StageResult, StageState
 from sysid.identify.trainer import Prepared, Trainer
 
 LABEL = "train"
+_LOG = logging.getLogger(__name__)
 
 
 def refusal(exp: Experiment, validation_logs: bool = False) -> str | None:
@@ -206,11 +208,19 @@ def _start(trainer: Trainer, prepared: Prepared) -> _Seed:
     return _Seed(trainer, prepared, state)
 
 
+class _InGroupLine:
+    """A seed's epoch progress is shown in its group's line (`progress_line`), not on its
+    own: the loop's progress bar that shows nothing."""
+
+    def set_postfix(self, **losses) -> None:
+        return None
+
+
 def _end_epoch(seed: _Seed, model: PerMember, train_sums: np.ndarray, val_v: float, seconds: float) -> None:
-    """The loop's bookkeeping after an epoch (history, best state, schedule, progress,
-    stopping, checkpoint, `EpochReport`), and the epoch limit."""
+    """The loop's bookkeeping after an epoch (history, best state, schedule, stopping,
+    checkpoint, `EpochReport`; progress in the group's line), and the epoch limit."""
     t = seed.trainer.experiment.training
-    seed.trainer.loop.end_epoch(seed.state, model, LABEL, t.epochs, train_sums, val_v, seconds)
+    seed.trainer.loop.end_epoch(seed.state, model, LABEL, t.epochs, train_sums, val_v, seconds, _InGroupLine())
     if seed.state.stopped is None and seed.state.epoch >= t.epochs:
         seed.state.stopped = "epoch limit"
 
@@ -222,14 +232,33 @@ def _result(seed: _Seed) -> StageResult:
     return seed.trainer.loop.end_stage(PerMember(model), LABEL, seed.state)
 
 
-def train_side_by_side(seeds: Sequence[_Seed]) -> list[StageResult]:
-    """Stage 5 of every seed at once (see the module); each seed's `StageResult`."""
+def progress_line(seeds: Sequence[_Seed]) -> str:
+    """One line for the group: each seed's epoch, early-stopping loss and best epoch, or
+    why it stopped."""
+    total = seeds[0].trainer.experiment.training.epochs
+    parts = []
+    for s in seeds:
+        st = s.state
+        last = f" {st.history[-1]['early_stopping_loss']:.5f}" if st.history else ""
+        state = f"{st.stopped} at epoch {st.epoch}" if st.stopped else f"epoch {st.epoch}{last}"
+        parts.append(f"seed {s.trainer.experiment.experiment.seed} {state} (best {st.best_epoch})")
+    active = sum(s.state.stopped is None for s in seeds)
+    return f"{LABEL}: {active}/{len(seeds)} seeds training, of {total} epochs: " + "; ".join(parts)
+
+
+def train_side_by_side(seeds: Sequence[_Seed], log: Callable[[str], None] | None = None) -> list[StageResult]:
+    """Stage 5 of every seed at once (see the module); each seed's `StageResult`. `log`
+    receives one `progress_line` every 10th epoch and whenever a seed stops (None: the
+    first seed's log when it shows progress; every epoch's line at DEBUG)."""
     first = seeds[0]
     t = first.trainer.experiment.training
     p = first.prepared
     assert p.model is not None
     train, val, w_v, w_F = p.train, p.val, p.w_v, p.w_F
+    if log is None:
+        log = first.trainer.journal.line if first.trainer.progress else _LOG.debug
     stack = None
+    rounds = 0
     while active := [s for s in seeds if s.state.stopped is None]:
         if stack is None or [id(s) for s in stack.seeds] != [id(s) for s in active]:
             if stack is not None:
@@ -260,25 +289,35 @@ def train_side_by_side(seeds: Sequence[_Seed]) -> list[StageResult]:
             model = s.prepared.model
             assert model is not None
             _end_epoch(s, PerMember(model), sums[k], val_v[k], seconds)
+        rounds += 1
+        if rounds % 10 == 0 or any(s.state.stopped for s in active):
+            log(progress_line(seeds))
+        else:
+            _LOG.debug(progress_line(seeds))
     return [_result(s) for s in seeds]
 
 
 def fit_side_by_side(trainers: Sequence[Trainer], runs: Sequence[Run],
-                     validation: Sequence[Run] = ()) -> list[Trainer]:
+                     validation: Sequence[Run] = (), log: Callable[[str], None] | None = None) -> list[Trainer]:
     """`Trainer.fit` of each trainer (the seeds of one configuration: experiments equal but
     for ``[experiment] seed``), their training stages side by side in this process. Each
     trainer keeps its checkpoint, resume flag, log and ``on_epoch``; each comes back fitted
-    as if it had trained alone. One `ConfigError` line when they cannot share (`refusal`)."""
+    as if it had trained alone; `log` takes the group's progress lines (`train_side_by_side`).
+    One `ConfigError` line when they cannot share (`refusal`)."""
     if not trainers:
         return []
-    reference = trainers[0].experiment.replace(experiment={"seed": 0}).to_toml()
+
+    def but_seed(exp: Experiment) -> str:  # the run's name (a sweep's names its seed) does not train
+        return exp.replace(experiment={"seed": 0, "name": "seeds"}).to_toml()
+
+    reference = but_seed(trainers[0].experiment)
     for trainer in trainers:
         exp = trainer.experiment
         if (why := refusal(exp, bool(validation))) is not None:
             raise ConfigError(f"{exp.source or 'experiment'}: seeds cannot train side by side: {why}")
-        if exp.replace(experiment={"seed": 0}).to_toml() != reference:
+        if but_seed(exp) != reference:
             raise ConfigError(f"{exp.source or 'experiment'}: seeds side by side need one configuration; "
-                              f"seed {exp.experiment.seed}'s differs in more than its seed")
+                              f"seed {exp.experiment.seed}'s differs in more than its seed and name")
     seeds = []
     for trainer in trainers:
         prepared = trainer.prepare(runs, validation)
@@ -287,5 +326,5 @@ def fit_side_by_side(trainers: Sequence[Trainer], runs: Sequence[Run],
                                 "has no training stage")
         seeds.append(_start(trainer, prepared))
     _check_shared(seeds)
-    stages = train_side_by_side(seeds)
+    stages = train_side_by_side(seeds, log)
     return [s.trainer.finish(s.prepared, stage) for s, stage in zip(seeds, stages)]

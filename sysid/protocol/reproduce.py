@@ -178,10 +178,11 @@ def _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, d
     from sysid.protocol.seed_runs import ensemble_name, train_seeds, write_ensembles
 
     ordered = sorted(trained, key=lambda n: -expected_cost(experiments[n]))  # longest first
-    log(f"training {len(trained)} runs x {seeds} seeds = {len(trained) * seeds} trials on Ray, "
-        + (f"{jobs} side by side" if jobs else "one per CPU of the cluster") + (f" on {address}" if address else ""))
+    log(f"training {len(trained)} runs x {seeds} seeds on Ray (a run's seeds side by side in one trial where "
+        "they can), " + (f"{jobs} trials at a time" if jobs else "one trial per CPU of the cluster")
+        + (f" on {address}" if address else ""))
     groups = train_seeds({n: experiments[n] for n in ordered}, seeds, out, str(data_root(data)), jobs, address, log,
-                         storage, mlflow)
+                         storage, mlflow, cost=lambda n: expected_cost(experiments[n]))
     learned = []
     for name in trained:
         exp, group = experiments[name], groups[name]
@@ -219,7 +220,8 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
     config's ``[training] threads``, 1 by default): the results do not depend on it. Ctrl-C
     (`KeyboardInterrupt`) ends every worker before it propagates (`sysid.workers`).
     `seeds` > 1 trains every learned run with that many seeds on Ray (`jobs` trials side by
-    side, or on the cluster at `address`): cells are seed means with their spread, and each
+    side, or on the cluster at `address`; the seeds of a run side by side in one trial where
+    they can, `sysid.protocol.seed_runs.seed_groups`): cells are seed means with their spread, and each
     network's mean-of-seeds ensemble is a model row of its own (`sysid.protocol.seed_runs`);
     `storage` (Tune's experiment) and `mlflow` (tracking) as for sweeps.
     """

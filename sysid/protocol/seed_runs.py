@@ -1,4 +1,5 @@
-"""Protocol runs trained with N seeds on Ray (``sysid reproduce --seeds N``): each learned
+"""Protocol runs trained with N seeds on Ray (``sysid reproduce --seeds N``): the seeds of
+a learned run train side by side in one trial where they can (`seed_groups`); each learned
 run becomes ``runs/{name}/seed{k}/`` (ordinary run directories), its metrics the mean over
 the seeds with their spread (`sysid.protocol.seeds`), and the networks' mean-of-seeds ensemble a run
 of its own, ``runs/{variant}_ensemble_{dataset}/`` (`sysid.hybrid.ensemble`)."""
@@ -25,7 +26,7 @@ from sysid.protocol.seeds import seed_metrics
 from sysid.hybrid.ensemble import SeedEnsemble
 from sysid.sweep.inbox import complete_summary
 from sysid.sweep.runner import TuneStorage, ray_session, run_trials
-from sysid.sweep.trial import TrialSpec, read_trial_data
+from sysid.sweep.trial import TrialSpec, group_name, read_trial_data, seed_groups
 from sysid.workers import in_workers
 
 
@@ -54,15 +55,22 @@ def seed_trials(experiments: dict[str, Experiment], seeds: int) -> list[TrialSpe
     return trials
 
 
+SIDE_BY_SIDE_COST = 0.4   # a seed's share of its group's time (benchmarks/speed_results.md: 0.31-0.37x)
+
+
 def train_seeds(experiments: dict[str, Experiment], seeds: int, out: Path, data: str, workers: int | None,
                 address: str | None = None, log: Callable[[str], None] = print, storage: str | None = None,
-                mlflow: str | None = None) -> dict[str, SeedGroup]:
+                mlflow: str | None = None, cost: Callable[[str], float] | None = None) -> dict[str, SeedGroup]:
     """Train the learned runs with `seeds` seeds each on Ray (locally with `workers` side
     by side, or on the cluster at `address`; `sysid.sweep.runner`); their `SeedGroup`s.
     The data are read here once and shipped to the trials; Tune's experiment goes to
-    ``{out}/tune`` or `storage`; `mlflow` logs every seed run."""
+    ``{out}/tune`` or `storage`; `mlflow` logs every seed run; `cost` (run name -> relative
+    training cost of one seed) orders the trials longest first (None: as given)."""
     trials = seed_trials(experiments, seeds)
     trial_data = read_trial_data(experiments.values(), data, tests=True)  # the protocol evaluates
+    together = seed_groups(trials, trial_data, log)   # a protocol run's seeds share its label
+    if cost is not None:  # the longest trials first; a group of seeds costs about SIDE_BY_SIDE_COST a seed
+        together.sort(key=lambda g: -cost(trials[g[0]].label) * (SIDE_BY_SIDE_COST * len(g) if len(g) > 1 else 1))
     callbacks = []
     with ray_session(out, workers, address, log) as session:
         tracker = parent = None
@@ -72,13 +80,15 @@ def train_seeds(experiments: dict[str, Experiment], seeds: int, out: Path, data:
             tracker = Tracker(mlflow, "sysid-reproduce")
             parent = tracker.start("reproduce --seeds", {"seeds": seeds, "runs": ", ".join(experiments)},
                                    tags={"sysid.kind": "reproduce"})
-            callbacks = [tracking_callback(tracker, parent, out.resolve(), lambda c: trials[int(c["trial"])].path,
+            by_first = {g[0]: [trials[i] for i in g] for g in together}
+            callbacks = [tracking_callback(tracker, parent, out.resolve(), lambda c: group_name(by_first[int(c["trial"])]),
                                            lambda c: {"run": trials[int(c["trial"])].label,
-                                                      "seed": trials[int(c["trial"])].seed},
-                                           lambda c: {"run": trials[int(c["trial"])].path}, log)]
+                                                      "seed": ", ".join(str(t.seed) for t in by_first[int(c["trial"])])},
+                                           lambda c: {f"seed{t.seed}": t.path for t in by_first[int(c["trial"])]},
+                                           log)]
         outcomes = run_trials(trials, out, trial_data, session, max_retries=1,
                               storage=TuneStorage(storage, "reproduce") if storage else None,
-                              callbacks=callbacks, log=log, prefix="seeds")
+                              callbacks=callbacks, log=log, prefix="seeds", groups=together)
         if tracker is not None:
             tracker.finish(parent)
     errors = outcomes.errors

@@ -181,22 +181,70 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
     log = log if log is not None else logging.getLogger(__name__).info
     check_experiment_fits(exp, tests)
     started = time.perf_counter()
-    history, training, validation_scores = None, None, None
-    runs: list[Run] = []
-    validation = list(validation) if validation is not None else []
-    held_out = None
+    checked: list[Run] = list(validation) if validation is not None else []
     with compute_threads(exp.training.threads):
+        runs: list[Run] = []
+        held_out, trainer = None, None
         if exp.needs_training:
-            runs, validation, held_out = _training_logs(exp, train_runs, data, validation, tests, log)
-            trainer = _fitted(exp, runs, validation, out_dir, progress, log, resume, on_epoch)
-            history, training = trainer.history_, trainer.summary_
-            if training.failure is None:  # in the training dtype, as val_loss_multistep, at its horizons
-                validation_scores = _validation_scores(exp, trainer)
-            model = trainer.model_.cpu().double()
-        else:
-            model = build_model(exp)
-        limits = PhysicalRange.of_runs(runs)   # the training logs' range: beyond it a prediction diverged
-        evaluation, verdict, baseline_metrics = _evaluated(exp, model, tests, limits, validation_scores, log)
+            runs, checked, held_out = _training_logs(exp, train_runs, data, checked, tests, log)
+            trainer = _fitted(exp, runs, checked, out_dir, progress, log, resume, on_epoch)
+        return _written(exp, out_dir, tests, runs, checked, held_out, trainer, started, overwrite, log)
+
+
+def run_seeds(experiments: Sequence[Experiment], out_dirs: Sequence[str | os.PathLike], tests: Sequence[Run],
+              train_runs: Sequence[Run] | None = None, data: str | os.PathLike | None = None,
+              progress: bool = True, logs: Sequence[Callable[[str], None]] | None = None,
+              group_log: Callable[[str], None] = print, resume: bool = False, overwrite: bool = False,
+              validation: Sequence[Run] | None = None,
+              on_epochs: Sequence[Callable[[EpochReport], None] | None] | None = None) -> list[RunResult]:
+    """`run_experiment` of the seeds of one configuration (`experiments`, equal but for
+    ``[experiment] seed`` and name), each into its own run directory (`out_dirs`) with its
+    own log, checkpoint and ``on_epoch``, their training stages side by side in this process
+    (`sysid.identify.side_by_side`; one progress line per epoch group through `group_log`).
+    Each run directory holds what `run_experiment` writes for its seed alone, its model
+    equal to round-off. `resume` continues every seed from its checkpoint (a seed without
+    one starts afresh), the unfinished ones side by side. Seeds that cannot share
+    (`side_by_side.refusal`) are a `ConfigError`: train them with `run_experiment`."""
+    from sysid.identify.side_by_side import fit_side_by_side
+
+    exp0 = experiments[0]
+    logs = list(logs) if logs is not None else [group_log] * len(experiments)
+    on_epochs = list(on_epochs) if on_epochs is not None else [None] * len(experiments)
+    check_experiment_fits(exp0, tests)
+    started = time.perf_counter()
+    with compute_threads(exp0.training.threads):
+        runs, shared, held_out = _training_logs(exp0, train_runs, data, list(validation or []), tests, logs[0])
+        trainers = [Trainer(exp, progress=progress, log=log, checkpoint=checkpoint_path(out), resume=resume,
+                            on_epoch=on_epoch)
+                    for exp, out, log, on_epoch in zip(experiments, out_dirs, logs, on_epochs)]
+        try:
+            fit_side_by_side(trainers, runs, shared, log=group_log)
+        except TrainingError:  # a diverged training resumes to the same divergence: keep nothing
+            for exp, out in zip(experiments, out_dirs):
+                TrainingCheckpoint(checkpoint_path(out), exp.to_toml()).remove()
+            raise
+        share = (time.perf_counter() - started) / len(trainers)   # each seed's share of the group's time
+        return [_written(exp, out, tests, runs, shared, held_out, trainer, time.perf_counter() - share, overwrite,
+                         log)
+                for exp, out, trainer, log in zip(experiments, out_dirs, trainers, logs)]
+
+
+def _written(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[Run], runs: list[Run],
+             validation: list[Run], held_out, trainer: Trainer | None, started: float, overwrite: bool,
+             log: Callable[[str], None]) -> RunResult:
+    """A run after its training (`trainer` fitted; None: an MMG used as defined): validation
+    scores beside the physics baselines, evaluation on `tests` with its verdict, the run
+    directory written (its seconds counted from `started`) and the checkpoint removed."""
+    history, training, validation_scores = None, None, None
+    if trainer is not None:
+        history, training = trainer.history_, trainer.summary_
+        if training.failure is None:  # in the training dtype, as val_loss_multistep, at its horizons
+            validation_scores = _validation_scores(exp, trainer)
+        model = trainer.model_.cpu().double()
+    else:
+        model = build_model(exp)
+    limits = PhysicalRange.of_runs(runs)   # the training logs' range: beyond it a prediction diverged
+    evaluation, verdict, baseline_metrics = _evaluated(exp, model, tests, limits, validation_scores, log)
     source = "files" if exp.data.train else (exp.experiment.dataset if exp.needs_training else "-")
     data_used = provenance(source, runs, validation, tests, exp.training.val_fraction, exp.training.block_s,
                            held_out, exp.training.split_seed)

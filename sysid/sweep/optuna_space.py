@@ -6,7 +6,7 @@ from typing import Any
 
 from sysid.sweep.points import point_name
 from sysid.sweep.spec import SweepSpec
-from sysid.sweep.trial import TrialData, final_metrics, run_trial
+from sysid.sweep.trial import TrialData, final_metrics, run_group, run_trial, side_by_side_refusal
 from sysid.sweep.plan import make_trial
 
 
@@ -66,11 +66,16 @@ def point_of(spec: SweepSpec, config: dict) -> str:
 
 
 def optuna_trainable(config: dict, spec: SweepSpec, inbox: Any, data: TrialData) -> None:
-    """Every seed of the proposed configuration, one after the other (each reporting its
+    """Every seed of the proposed configuration: side by side (`run_group`) when the sweep
+    has no scheduler and the seeds can share, else one after the other (each reporting its
     epochs); the last report is the mean validation loss over the seeds."""
     from ray import tune
 
     holder = tune.get_context().get_trial_id()
     values = values_of(spec, config)
-    rows = [run_trial(make_trial(spec, values, seed), inbox, data, holder, tune.report) for seed in spec.seeds]
+    trials = [make_trial(spec, values, seed) for seed in spec.seeds]
+    if spec.scheduler.kind == "none" and side_by_side_refusal(trials, data) is None:
+        rows = run_group(trials, inbox, data, holder, tune.report)
+    else:  # a scheduler compares the trial's reports epoch by epoch, seed after seed
+        rows = [run_trial(trial, inbox, data, holder, tune.report) for trial in trials]
     tune.report(final_metrics(rows))

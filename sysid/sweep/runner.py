@@ -25,7 +25,7 @@ from sysid.errors import ConfigError
 from sysid.sweep.connect import import_ray, start_ray
 from sysid.sweep.inbox import inbox_actor
 from sysid.sweep.spec import SchedulerSpec
-from sysid.sweep.trial import OBJECTIVE, TrialData, TrialSpec, tune_trainable
+from sysid.sweep.trial import OBJECTIVE, TrialData, TrialSpec, group_name, tune_trainable
 
 TUNE_DIR = "tune"   # Tune's experiment, inside the output directory unless --storage is given
 
@@ -125,7 +125,9 @@ def progress_callback(total: int, names: Callable[[dict], str], log: Callable[[s
             value = result.get(OBJECTIVE, math.inf)
             if value < self.best[0]:
                 self.best = (value, names(trial.config))
-            self._line(f"done {names(trial.config)} (val_loss_multistep {value:.5f})")
+            runs = int(result.get("runs", 1))
+            self._line(f"done {names(trial.config)} (val_loss_multistep {value:.5f}"
+                       + (f", the mean of its {runs} seeds)" if runs > 1 else ")"))
 
         def on_trial_recover(self, iteration, trials, trial, **info):
             self.retried += 1
@@ -213,33 +215,50 @@ def ray_session(out: Path, workers: int | None, address: str | None, log: Callab
 
 def run_trials(trials: list[TrialSpec], out: Path, data: TrialData, session: Session, max_retries: int = 2,
                storage: TuneStorage | None = None, scheduler=None, callbacks: Sequence = (),
-               log: Callable[[str], None] = print, prefix: str = "sweep") -> Outcomes:
+               log: Callable[[str], None] = print, prefix: str = "sweep",
+               groups: Sequence[Sequence[int]] | None = None) -> Outcomes:
     """Run `trials` (one Tune trial each, one CPU each) in a `ray_session`; trials already
-    complete in `out` are reused. Returns what Tune ended without a complete run."""
+    complete in `out` are reused. Returns what Tune ended without a complete run.
+
+    `groups` (indices into `trials`, each index in one group; None: each trial alone):
+    one Tune trial per group, its seeds side by side (`sysid.sweep.trial.run_group`);
+    ``config["trial"]`` is the group's first index."""
     _, tune = import_ray()
     storage = storage or TuneStorage(str(out.resolve()))
+    groups = [list(g) for g in groups] if groups is not None else [[i] for i in range(len(trials))]
+    by_first = {g[0]: g for g in groups}
     trainable = tune.with_resources(tune.with_parameters(tune_trainable, trials=trials, inbox=session.inbox_name,
-                                                         data=data), {"cpu": 1})
-    progress = progress_callback(len(trials), lambda c: trials[int(c["trial"])].path, log, session.inbox_name, prefix)
+                                                         data=data, groups=by_first), {"cpu": 1})
+    progress = progress_callback(len(groups), lambda c: group_name([trials[i] for i in by_first[int(c["trial"])]]),
+                                 log, session.inbox_name, prefix)
     tuner = tune.Tuner(
-        trainable, param_space=trial_space(tune, trials),
+        trainable, param_space=trial_space(tune, trials, [g[0] for g in groups]),
         tune_config=tune.TuneConfig(max_concurrent_trials=session.concurrency, reuse_actors=True,
                                     scheduler=scheduler),
         run_config=_run_config(tune, storage, max_retries, [progress, *callbacks]))
     with _ctrl_c_ends_tune():
         grid = tuner.fit()
-    return _outcomes(grid, lambda c: trials[int(c["trial"])].path)
+    outcomes = _outcomes(grid, lambda c: trials[int(c["trial"])].path)
+    for group in groups:  # what Tune says of a group's trial holds for each of its seeds
+        first = trials[group[0]].path
+        for i in group[1:]:
+            if first in outcomes.errors:
+                outcomes.errors[trials[i].path] = outcomes.errors[first]
+            if first in outcomes.stopped:
+                outcomes.stopped[trials[i].path] = outcomes.stopped[first]
+    return outcomes
 
 
 def _plain(value):
     return list(value) if isinstance(value, tuple) else value
 
 
-def trial_space(tune, trials: list[TrialSpec]) -> dict:
-    """Tune's parameter space of a trial list: the trial's index (a grid over all of them)
-    and, filled in from it, its seed, run name and varied values (``section__option``),
-    so that Tune's tables and ``get_best_config`` show what a trial is."""
-    space = {"trial": tune.grid_search(list(range(len(trials)))),
+def trial_space(tune, trials: list[TrialSpec], firsts: Sequence[int] | None = None) -> dict:
+    """Tune's parameter space of a trial list: the trial's index (a grid over all of them,
+    or over `firsts`, the first trial of each group) and, filled in from it, its seed, run
+    name and varied values (``section__option``), so that Tune's tables and
+    ``get_best_config`` show what a trial is."""
+    space = {"trial": tune.grid_search(list(firsts) if firsts is not None else list(range(len(trials)))),
              "seed": tune.sample_from(lambda s: trials[s.config["trial"]].seed)}
     if any(t.label for t in trials):
         space["run"] = tune.sample_from(lambda s: trials[s.config["trial"]].label)

@@ -40,7 +40,7 @@ from sysid.sweep.summary import SweepSummary
 from sysid.sweep.runner import Outcomes, TuneStorage, make_scheduler, ray_session, run_optuna, run_trials
 from sysid.sweep.runner import tune_storage as tune_storage_of
 from sysid.sweep.spec import SweepSpec
-from sysid.sweep.trial import TrialSpec, read_trial_data
+from sysid.sweep.trial import TrialSpec, group_name, read_trial_data, seed_groups
 
 MARKER = "sweep.toml"
 
@@ -207,16 +207,25 @@ def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = Non
             log(f"sweep {spec.name}: {spec.search}, {len(trials) // len(spec.seeds)} configurations x "
                 f"{len(spec.seeds)} seeds = {len(trials)} trials{where}"
                 + (f", scheduler {spec.scheduler.kind}" if spec.scheduler.kind != "none" else ""))
+            # a scheduler compares trials epoch by epoch: seeds stay one trial each under one
+            groups = seed_groups(trials, trial_data, log) if scheduler is None else None
+            if scheduler is not None and len(spec.seeds) > 1:
+                log(f"sweep {spec.name}: seeds one trial each (scheduler {spec.scheduler.kind} compares trials "
+                    "epoch by epoch)")
+            members = {g[0]: [trials[i] for i in g] for g in groups or [[i] for i in range(len(trials))]}
             with ray_session(out, workers, address, log, lost_note, lost_cleanup) as session:
                 write_output(spec, out, resume)
                 callbacks = []
                 if tracker is not None:
-                    callbacks, parent = _tracking(tracker, spec, out, lambda c: trials[int(c["trial"])].path,
+                    callbacks, parent = _tracking(tracker, spec, out, lambda c: group_name(members[int(c["trial"])]),
                                                   lambda c: {**trials[int(c["trial"])].values,
-                                                             "seed": trials[int(c["trial"])].seed},
-                                                  lambda c: {"run": trials[int(c["trial"])].path}, log)
+                                                             "seed": ", ".join(str(t.seed)
+                                                                               for t in members[int(c["trial"])])},
+                                                  lambda c: {("run" if len(members[int(c["trial"])]) == 1
+                                                              else f"seed{t.seed}"): t.path
+                                                             for t in members[int(c["trial"])]}, log)
                 outcomes = run_trials(trials, out, trial_data, session, spec.max_retries, tune_storage, scheduler,
-                                      callbacks, log)
+                                      callbacks, log, groups=groups)
     except BaseException:
         if not resume:
             _remove_unstarted(out, existed)

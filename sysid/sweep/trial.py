@@ -21,7 +21,7 @@ import time
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Sequence
 
 import torch
 
@@ -31,7 +31,8 @@ from sysid.data.datasets import test_files
 from sysid.data.splits import file_sha256
 from sysid.errors import DataError
 from sysid.config.experiment import Experiment, parse_experiment
-from sysid.runs.lifecycle import checkpoint_path, run_experiment, training_runs, validation_runs
+from sysid.identify.side_by_side import refusal
+from sysid.runs.lifecycle import checkpoint_path, run_experiment, run_seeds, training_runs, validation_runs
 from sysid.runs.summary import RunSummary
 from sysid.sweep.inbox import COMPLETE, WAIT, complete_summary, pack_run  # noqa: F401 (complete_summary: API)
 from sysid.identify.checkpoint import CheckpointState
@@ -179,6 +180,46 @@ def _checkpoint_history(blob: bytes, source: str) -> list[dict]:
     return list(state.history) + list(state.stage_history)
 
 
+def _claimed(trial: TrialSpec, inbox, holder: str, report: Callable[[dict], None], node: str) -> dict | None:
+    """Claim `trial` at the inbox (waiting while another Tune trial trains it): its
+    results-table row when its run is complete (its epochs reported, journaled "reused"),
+    else None (claimed: train it)."""
+    while (state := call(inbox, "claim", trial.path, holder)) == WAIT:
+        time.sleep(CLAIM_POLL_S)
+    if state != COMPLETE:
+        return None
+    summary = call(inbox, "summary", trial.path)
+    for metrics in _history_metrics(call(inbox, "history", trial.path), summary):
+        report(metrics)
+    call(inbox, "journal", "reused", trial.path, node=node)
+    return result_row(trial, summary)
+
+
+def _restored(trial: TrialSpec, inbox, run_dir: Path, report: Callable[[dict], None], node: str,
+              **journal) -> bool:
+    """The inbox's checkpoint of `trial` (if any) put beside `run_dir`, its epochs reported,
+    the start journaled ("resumed" or "started", with `journal`); whether it resumes."""
+    blob = call(inbox, "checkpoint", trial.path)
+    done: list[dict] = []
+    if blob is not None:
+        checkpoint_path(run_dir).write_bytes(blob)
+        done = _history_metrics(_checkpoint_history(blob, f"the checkpoint of trial {trial.path}"))
+        for metrics in done:
+            report(metrics)
+    call(inbox, "journal", "resumed" if blob is not None else "started", trial.path, node=node, **journal,
+         **({"after_epochs": len(done)} if blob is not None else {}))
+    return blob is not None
+
+
+def _epoch_sender(trial: TrialSpec, inbox, holder: str, report: Callable[[dict], None]) -> Callable[[EpochReport], None]:
+    """``on_epoch`` of `trial`'s training: its checkpoint to the inbox, the epoch to Tune."""
+    def on_epoch(epoch: EpochReport) -> None:
+        if epoch.checkpoint is not None:
+            call(inbox, "save_checkpoint", trial.path, holder, epoch.checkpoint.read_bytes())
+        report(epoch_metrics(epoch.stage, epoch.epoch, epoch.train_loss, epoch.val_loss))
+    return on_epoch
+
+
 def run_trial(trial: TrialSpec, inbox, data: TrialData, holder: str = "local",
               report: Callable[[dict], None] | None = None, log: Callable[[str], None] = lambda m: None) -> dict:
     """Train `trial` unless its run is complete; its results-table row. Every epoch is
@@ -186,52 +227,120 @@ def run_trial(trial: TrialSpec, inbox, data: TrialData, holder: str = "local",
     delivered to the inbox when complete. `holder` names the Tune trial doing it."""
     report = report or (lambda metrics: None)
     node = node_name()
-    while (state := call(inbox, "claim", trial.path, holder)) == WAIT:
-        time.sleep(CLAIM_POLL_S)
-    if state == COMPLETE:
-        summary = call(inbox, "summary", trial.path)
-        for metrics in _history_metrics(call(inbox, "history", trial.path), summary):
-            report(metrics)
-        call(inbox, "journal", "reused", trial.path, node=node)
-        return result_row(trial, summary)
+    if (row := _claimed(trial, inbox, holder, report, node)) is not None:
+        return row
     exp = parse_experiment(tomllib.loads(trial.config), f"sweep trial {trial.path}")
-    blob = call(inbox, "checkpoint", trial.path)
     with tempfile.TemporaryDirectory(prefix="sysid-trial-") as scratch:
         run_dir = Path(scratch) / PurePosixPath(trial.path).name
-        done: list[dict] = []
-        if blob is not None:
-            checkpoint_path(run_dir).write_bytes(blob)
-            done = _history_metrics(_checkpoint_history(blob, f"the checkpoint of trial {trial.path}"))
-            for metrics in done:
-                report(metrics)
-        call(inbox, "journal", "resumed" if blob is not None else "started", trial.path, node=node,
-             **({"after_epochs": len(done)} if blob is not None else {}))
-
-        def on_epoch(epoch: EpochReport) -> None:
-            if epoch.checkpoint is not None:
-                call(inbox, "save_checkpoint", trial.path, holder, epoch.checkpoint.read_bytes())
-            report(epoch_metrics(epoch.stage, epoch.epoch, epoch.train_loss, epoch.val_loss))
-
+        resume = _restored(trial, inbox, run_dir, report, node)
         runs = data.training_runs(exp) if exp.needs_training else None
         run_experiment(exp, run_dir, data.tests, runs, data.root, progress=False, log=log,
-                       resume=blob is not None, validation=data.validation_runs(exp), on_epoch=on_epoch)
+                       resume=resume, validation=data.validation_runs(exp),
+                       on_epoch=_epoch_sender(trial, inbox, holder, report))
         summary = call(inbox, "deliver", trial.path, holder, pack_run(run_dir), trial.config, node)
     return result_row(trial, summary)
 
 
+def side_by_side_refusal(trials: Sequence[TrialSpec], data: TrialData | None = None) -> str | None:
+    """Why the seeds `trials` (one configuration) cannot train side by side in one trial
+    (`sysid.identify.side_by_side.refusal`); None: they can."""
+    if len(trials) < 2:
+        return "a single seed"
+    exp = parse_experiment(tomllib.loads(trials[0].config), f"sweep trial {trials[0].path}")
+    shipped = data is not None and data.validation_runs(exp) is not None
+    return refusal(exp, bool(exp.data.validation) or shipped)
+
+
+def seed_groups(trials: Sequence[TrialSpec], data: TrialData | None = None,
+                log: Callable[[str], None] = print) -> list[list[int]]:
+    """The Tune trials of `trials` (indices into it): the seeds of each configuration (one
+    ``label`` in a reproduction, one ``point`` in a sweep) side by side in one trial
+    (`run_group`) where they can, else one trial per seed; one log line per configuration
+    with more than one seed saying which."""
+    groups: list[list[int]] = []
+    by_key: dict[str, list[int]] = {}
+    for i, t in enumerate(trials):
+        by_key.setdefault(t.label or t.point, []).append(i)
+    for key, members in by_key.items():
+        why = side_by_side_refusal([trials[i] for i in members], data)
+        if why is None:
+            groups.append(members)
+            log(f"{key}: {len(members)} seeds side by side in one trial")
+        else:
+            groups += [[i] for i in members]
+            if len(members) > 1:
+                log(f"{key}: {len(members)} seeds one trial each ({why})")
+    return groups
+
+
+def group_name(trials: Sequence[TrialSpec]) -> str:
+    """A group's name in progress lines: the first seed's run directory and every seed."""
+    if len(trials) == 1:
+        return trials[0].path
+    return f"{PurePosixPath(trials[0].path).parent}/seed{{{','.join(str(t.seed) for t in trials)}}}"
+
+
+def run_group(trials: Sequence[TrialSpec], inbox, data: TrialData, holder: str = "local",
+              report: Callable[[dict], None] | None = None, log: Callable[[str], None] = lambda m: None) -> list[dict]:
+    """The seeds `trials` of one configuration trained side by side in this process
+    (`sysid.runs.lifecycle.run_seeds`); their results-table rows in order. A seed whose run
+    is complete is reused; every other one is claimed, continues from the checkpoint the
+    inbox holds (a seed without one starts afresh: resuming a group resumes its unfinished
+    seeds side by side), sends its checkpoint after each of its epochs, and is delivered
+    as its own run directory, the layout of `run_trial`'s."""
+    if len(trials) == 1:
+        return [run_trial(trials[0], inbox, data, holder, report, log)]
+    report = report or (lambda metrics: None)
+    node = node_name()
+    rows: dict[str, dict] = {}
+    for trial in trials:
+        if (row := _claimed(trial, inbox, holder, report, node)) is not None:
+            rows[trial.path] = row
+    todo = [t for t in trials if t.path not in rows]
+    if len(todo) == 1:
+        rows[todo[0].path] = run_trial(todo[0], inbox, data, holder, report, log)
+    elif todo:
+        experiments = [parse_experiment(tomllib.loads(t.config), f"sweep trial {t.path}") for t in todo]
+        with tempfile.TemporaryDirectory(prefix="sysid-group-") as scratch:
+            run_dirs = [Path(scratch) / str(i) / PurePosixPath(t.path).name for i, t in enumerate(todo)]
+            for trial, run_dir in zip(todo, run_dirs):
+                run_dir.parent.mkdir()
+                _restored(trial, inbox, run_dir, report, node, side_by_side=len(todo))
+
+            def seed_log(seed: int) -> Callable[[str], None]:
+                return lambda m: log(f"seed {seed}: {m}")
+
+            exp = experiments[0]
+            run_seeds(experiments, run_dirs, data.tests, data.training_runs(exp), data.root, progress=True,
+                      logs=[seed_log(t.seed) for t in todo], group_log=log, resume=True,
+                      validation=data.validation_runs(exp),
+                      on_epochs=[_epoch_sender(t, inbox, holder, report) for t in todo])
+            for trial, run_dir in zip(todo, run_dirs):
+                summary = call(inbox, "deliver", trial.path, holder, pack_run(run_dir), trial.config, node)
+                rows[trial.path] = result_row(trial, summary)
+    return [rows[t.path] for t in trials]
+
+
 def final_metrics(rows: list[dict]) -> dict:
     """A Tune trial's last report: the mean validation loss of its run(s) (inf if any
-    failed), the epochs, and ``final`` (a trial without it was stopped early)."""
+    failed), the epochs, how many ``runs`` (seeds), and ``final`` (a trial without it was
+    stopped early)."""
     values = [r[OBJECTIVE] for r in rows]
     ok = all(r["status"] == "complete" and math.isfinite(v) for r, v in zip(rows, values))
     return {OBJECTIVE: sum(values) / len(values) if ok else math.inf, "final": True, "failed": not ok,
-            "epochs": int(sum(int(r.get("epochs") or 0) for r in rows))}
+            "epochs": int(sum(int(r.get("epochs") or 0) for r in rows)), "runs": len(rows)}
 
 
-def tune_trainable(config: dict, trials: list[TrialSpec], inbox: Any, data: TrialData) -> None:
-    """Ray Tune's function trainable: the trial at index ``config["trial"]``."""
+def tune_trainable(config: dict, trials: list[TrialSpec], inbox: Any, data: TrialData,
+                   groups: dict[int, list[int]] | None = None) -> None:
+    """Ray Tune's function trainable: the trial at index ``config["trial"]``, or with
+    `groups` (first index -> the indices of the seeds of one configuration) that trial's
+    group side by side (`run_group`)."""
     from ray import tune
 
     holder = tune.get_context().get_trial_id()
-    row = run_trial(trials[int(config["trial"])], inbox, data, holder, tune.report)
-    tune.report(final_metrics([row]))
+    first = int(config["trial"])
+    members = [trials[i] for i in (groups or {}).get(first, [first])]
+    rows = run_group(members, inbox, data, holder, tune.report, lambda m: print(f"[{group_name(members)}] {m}",
+                                                                                flush=True))
+    tune.report(final_metrics(rows))

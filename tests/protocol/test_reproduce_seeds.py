@@ -37,6 +37,11 @@ def test_reproduce_with_two_seeds(tmp_path, dataset_dir):
     summary = reproduce(out, dataset_dir.parent, only=["mmg_lab", "hybrid_D1"], overrides=tiny, jobs=2, seeds=2)
     assert summary.seeds == 2 and not summary.failed
     assert summary.runs == ("mmg_lab", "hybrid_D1", "hybrid_ensemble_D1")
+    # the two seeds trained side by side in one trial, each into its own run directory
+    from sysid.sweep.inbox import read_journal
+    started = [e for e in read_journal(out) if e["event"] == "started"]
+    assert sorted(e["trial"] for e in started) == ["runs/hybrid_D1/seed0", "runs/hybrid_D1/seed1"]
+    assert all(e["side_by_side"] == 2 for e in started)
     seeds = [pd.read_csv(out / "runs" / "hybrid_D1" / f"seed{k}" / "metrics.csv").set_index("scenario")
              for k in (0, 1)]
     assert not seeds[0][["rmse_u", "rmse_v", "rmse_r"]].equals(seeds[1][["rmse_u", "rmse_v", "rmse_r"]])
