@@ -269,7 +269,9 @@ def test_val_loss_multistep_is_the_final_models_validation_loss_at_the_objective
     from sysid.dynamics.rollouts import rollout_errors
     assert list(trainer.validation_errors_) == list(trainer.validation_sets_)
     for horizon, windows in trainer.validation_sets_.items():
-        assert torch.equal(trainer.validation_errors_[horizon], rollout_errors(model, windows))
+        # the same rollouts; a rerun here may split the products over other threads (float32 sums)
+        torch.testing.assert_close(trainer.validation_errors_[horizon], rollout_errors(model, windows),
+                                   rtol=1e-5, atol=1e-7)
 
     longer = Trainer(small_experiment(objective_s=20.0), progress=False, log=lambda m: None).fit(runs)
     _, val20, _, _ = split_windows(runs, 20, t.stride_s, t.val_fraction, False, torch.float32, t.block_s,

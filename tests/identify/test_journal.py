@@ -33,11 +33,15 @@ def test_identify_has_no_print_and_no_function_over_60_lines():
     assert any(path.name == "trainer.py" for path in PACKAGE.rglob("*.py"))  # the walk sees the package
 
 
-def test_trainer_logs_through_logging_only(dataset_dir, caplog, capsys):
+def test_trainer_logs_through_logging_only(dataset_dir, caplog, capsys, monkeypatch):
     exp = parse_experiment({"experiment": {"name": "logged", "model": "hybrid", "seed": 1},
                             "network": {"hidden": [8]},
                             "training": {"epochs": 2, "warm_start_epochs": 2, "batch_size": 64},
                             "gate": {"k": 3, "space": "inputs"}, "evaluation": {"horizons": [30.0]}})
+    # a CLI run earlier in this process leaves the "sysid" logger writing to stdout, not
+    # propagating (`sysid.logs.configure`): undone here, anything on stdout was printed
+    monkeypatch.setattr(logging.getLogger("sysid"), "handlers", [])
+    monkeypatch.setattr(logging.getLogger("sysid"), "propagate", True)
     runs = read_runs([dataset_dir / "berthing" / TRAIN_FILES[0]])
     with compute_threads(1), caplog.at_level(logging.INFO, logger="sysid.identify.journal"):
         trainer = Trainer(exp, progress=True).fit(runs)
