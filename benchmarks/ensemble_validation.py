@@ -31,7 +31,7 @@ from sysid.identify.losses import VEL
 from sysid.identify.trainer import Trainer
 from sysid.identify.windowing import held_out_validation
 from sysid.protocol.reproduce import protocol_experiment
-from sysid.runs.directory import RunDir
+from sysid.runs.rundir import RunDir
 from sysid.runs.lifecycle import training_runs
 from sysid.runs.rundir import load_model
 

@@ -14,7 +14,7 @@ import torch
 
 from sysid.config.experiment import parse_experiment
 from sysid.data.recordings import read_runs
-from sysid.runs.directory import RunDir
+from sysid.runs.rundir import RunDir
 from sysid.sweep.inbox import RunInbox, read_journal
 from sysid.sweep.trial import TrialData, TrialSpec, read_trial_data, run_group, run_trial, side_by_side_refusal
 from tiny_experiment import TEST_FILE, TRAIN_FILES
