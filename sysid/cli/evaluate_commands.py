@@ -2,6 +2,7 @@
 beside its physics baselines with its verdict."""
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 from typing import List, Optional
@@ -61,7 +62,7 @@ def evaluate(
     baselines = _baselines(run_exp, model)
     path = prediction_path("evaluate", compiled, [model, *baselines.values()], _window_work(runs, horizons),
                            chosen.method, runs[0].dt)
-    chosen = integrator_of(str(chosen.method), path.compiled)
+    chosen = dataclasses.replace(chosen, compiled=path.compiled)  # the method parsed once, above
     evaluation = evaluate_model(model, runs, horizons, chosen, traces=False, limits=limits)
     for divergence in evaluation.divergences:
         typer.secho(f"WARNING: the prediction diverged on {divergence.text()}", fg=typer.colors.YELLOW, err=True)

@@ -1,6 +1,7 @@
 """``sysid simulate``: one prediction of the MMG from a recorded state with the recorded inputs."""
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import List, Optional
 
@@ -48,7 +49,7 @@ def simulate(
     x0 = torch.as_tensor(run.states[i0], dtype=torch.float64)
     inputs = torch.as_tensor(run.inputs[sl], dtype=torch.float64)
     path = prediction_path("simulate", compiled, [model], [(1, steps)], chosen.method, run.dt)
-    chosen = integrator_of(str(chosen.method), path.compiled)
+    chosen = dataclasses.replace(chosen, compiled=path.compiled)  # the method parsed once, above
     with torch.no_grad():
         pred = predict(model, x0, inputs, run.dt, chosen)
         forces = model(pred, inputs)
