@@ -227,14 +227,12 @@ class IndexedGate(nn.Module):
         flat = z.detach().reshape(-1, z.shape[-1]).to(self.points_t.dtype)
         upper = self._upper(flat)
         threshold = self.gate.threshold
-        # |q|^2 + |b|^2 - 2 q.b, as KNNGate computes d^2, is off by at most about
-        # 2 (F + 4) eps (|q|^2 + |b|^2), so its distances by at most the root of that
-        err = (self.rounding * ((flat * flat).sum(1) + self.bank_sq_max)).sqrt()  # (B,)
-        tol = self.margin * threshold.abs() + err
+        tol = self.tolerance(flat)
         on = upper <= threshold - tol
         k = min(self.k, self.bank_sq.shape[0])
         if not torch.compiler.is_compiling():  # eager: the same tiers as plain branches
-            return self._eager_tiers(z, flat, upper, on, threshold, tol, k)
+            d, admitted = self._eager_tiers(flat, upper, on, threshold, tol, k)[:2]
+            return d.reshape(z.shape[:-1]), admitted.reshape(z.shape[:-1])
 
         def bounded(flat, upper, threshold, tol):  # tier 2, and tier 3 where it leaves rows open
             near, lower = self._box_bounds_tier(flat)
@@ -255,18 +253,88 @@ class IndexedGate(nn.Module):
         d, admitted = torch.cond((~on).any(), bounded, neighbourhood, (flat, upper, threshold, tol))
         return d.reshape(z.shape[:-1]), admitted.reshape(z.shape[:-1])
 
-    def _eager_tiers(self, z, flat, upper, on, threshold, tol, k):
+    def _eager_tiers(self, flat, upper, on, threshold, tol, k):
         """`forward`'s tiers 2 and 3 as Python branches (eager: `torch.cond` outside a
-        compiled program costs a trace per call); the same numbers and decisions."""
-        shape = z.shape[:-1]
+        compiled program costs a trace per call); the same numbers and decisions. Returns
+        (distance (B,), in_distribution (B,), upper (B,), lower (B,)): bounds of d_kNN at
+        flat (B, F) that `AnchoredGate` keeps: upper, the smallest of the tier bounds taken
+        (tier 1's, and tier 2's where it ran), each the mean distance to k distinct bank
+        points; lower, tier 2's lower bound (-inf where only tier 1 ran)."""
         if bool(on.all()):
-            return upper.reshape(shape), on.reshape(shape)
+            return upper, on, upper, torch.full_like(upper, -math.inf)
         near, lower = self._box_bounds_tier(flat)
+        bound = torch.minimum(upper, near)
         open_rows = (near > threshold - tol) & (lower <= threshold + tol)
         if bool(open_rows.any()):
             scan = nearest_distances(flat, self.scan_bank, self.bank_sq, k).mean(1)
-            return scan.reshape(shape), (scan <= threshold).reshape(shape)
-        return near.reshape(shape), (near <= threshold - tol).reshape(shape)
+            return scan, scan <= threshold, bound, lower
+        return near, near <= threshold - tol, bound, lower
+
+    def tolerance(self, flat: torch.Tensor) -> torch.Tensor:
+        """(B,) what a bound at features flat (B, F) must stay below the threshold by to
+        decide "on": the relative `margin` plus the round-off of `KNNGate`'s own distance."""
+        # |q|^2 + |b|^2 - 2 q.b, as KNNGate computes d^2, is off by at most about
+        # 2 (F + 4) eps (|q|^2 + |b|^2), so its distances by at most the root of that
+        err = (self.rounding * ((flat * flat).sum(1) + self.bank_sq_max)).sqrt()  # (B,)
+        return self.margin * self.gate.threshold.abs() + err
+
+
+class AnchoredGate(nn.Module):
+    """An `IndexedGate` for the eager steps of one rollout (a fresh one per rollout: it
+    keeps state between calls), deciding most calls from the call before: the same
+    decisions as `KNNGate`, with about a fifth of the operations where successive
+    features are close (the stages and steps of a maneuver).
+
+    Tier 0: for each row it keeps an anchor a (F,) where the index's tiers took bounds
+    L(a) <= d_kNN(a) <= U(a), U the mean distance from a to k distinct bank points
+    (`IndexedGate._eager_tiers`). The mean distance from z to the same k points is at most
+    U(a) + |z - a| (the triangle inequality), and d_kNN, a mean of order statistics of
+    distances, moves by at most |z - a|: L(a) - |z - a| <= d_kNN(z) <= U(a) + |z - a|. The
+    upper bound at or below the threshold by the tiers' tolerance (`IndexedGate.tolerance`)
+    decides "on", the lower bound above it by as much "off", as the tiers do. Where a row
+    stays open the call runs the index's tiers (whose own decision stands) and their
+    bounds at z become the anchors. Along a 690 s turning circle and 20/20 zig-zag of a
+    hybrid D2 (128 features, 27 600 stages) tier 0 decided 99.5 % of the calls.
+
+    ``forward(z (..., F))`` -> (distance (...,), in_distribution (...,)): the distance is
+    tier 0's bound that decided (upper where on, lower where off), else what
+    `IndexedGate.forward` returns.
+    """
+
+    def __init__(self, index: IndexedGate):
+        super().__init__()
+        self.index = index
+        self.anchor: torch.Tensor | None = None  # (B, F) features where the bounds were taken
+        self.upper: torch.Tensor | None = None  # (B,) bounds of d_kNN there
+        self.lower: torch.Tensor | None = None
+
+    @property
+    def threshold(self) -> torch.Tensor:
+        return self.index.threshold
+
+    @property
+    def bank(self) -> torch.Tensor:
+        return self.index.bank
+
+    def forward(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        index, shape = self.index, z.shape[:-1]
+        flat = z.detach().reshape(-1, z.shape[-1]).to(index.points_t.dtype)
+        threshold = index.gate.threshold
+        tol = index.tolerance(flat)
+        if self.anchor is not None and self.anchor.shape == flat.shape:
+            step = torch.linalg.vector_norm(flat - self.anchor, dim=1)
+            upper = self.upper + step
+            on = upper <= threshold - tol
+            if bool(on.all()):
+                return upper.reshape(shape), on.reshape(shape)
+            lower = self.lower - step
+            if bool((on | (lower > threshold + tol)).all()):
+                return torch.where(on, upper, lower).reshape(shape), on.reshape(shape)
+        upper = index._upper(flat)
+        d, on, self.upper, self.lower = index._eager_tiers(flat, upper, upper <= threshold - tol, threshold, tol,
+                                                           min(index.k, index.bank_sq.shape[0]))
+        self.anchor = flat.clone()
+        return d.reshape(shape), on.reshape(shape)
 
 
 def neighbourhood_groups(index: "IndexedGate", leaf: int) -> list[torch.Tensor]:
@@ -282,15 +350,17 @@ def neighbourhood_groups(index: "IndexedGate", leaf: int) -> list[torch.Tensor]:
 MAX_INDEXED_BATCH = 256  # beyond it the whole-bank scan (one matrix product) is as quick
 
 
-def with_indexed_gate(model: nn.Module, batch: int) -> nn.Module:
+def with_indexed_gate(model: nn.Module, batch: int, anchored: bool = False) -> nn.Module:
     """`model` with its fitted kNN gate replaced by an `IndexedGate` (a shallow copy; the
-    model itself is untouched), or `model` when it has no gate or the batch is large."""
+    model itself is untouched), or `model` when it has no gate or the batch is large.
+    `anchored`: by a fresh `AnchoredGate` around it (eager steps of one rollout)."""
     gate = getattr(model, "gate", None)
     if not isinstance(gate, KNNGate) or gate.bank.shape[0] <= gate.k or batch > MAX_INDEXED_BATCH:
         return model
     fast = copy.copy(model)
     fast._modules = dict(model._modules)
-    fast._modules["gate"] = indexed_gate(gate)
+    index = indexed_gate(gate)
+    fast._modules["gate"] = AnchoredGate(index) if anchored else index
     return fast
 
 

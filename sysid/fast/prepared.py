@@ -44,11 +44,12 @@ def prepared(model: nn.Module, batch: int) -> nn.Module:
     return packed(with_indexed_gate(model, batch))
 
 
-def indexed(model: nn.Module, batch: int) -> nn.Module:
+def indexed(model: nn.Module, batch: int, anchored: bool = False) -> nn.Module:
     """`model` with its fitted kNN gate (each member's, for an ensemble) replaced by an
     `IndexedGate` for `batch` rows, coefficients as they are: what eager steps run (the
-    same decisions; packed coefficients only pay inside compiled code)."""
+    same decisions; packed coefficients only pay inside compiled code). `anchored`: each
+    gate a fresh `sysid.fast.knn_index.AnchoredGate` (the eager steps of one rollout)."""
     members = getattr(model, "members", None)
     if isinstance(members, nn.ModuleList):
-        return _with_module(model, "members", nn.ModuleList([indexed(m, batch) for m in members]))
-    return with_indexed_gate(model, batch)
+        return _with_module(model, "members", nn.ModuleList([indexed(m, batch, anchored) for m in members]))
+    return with_indexed_gate(model, batch, anchored)

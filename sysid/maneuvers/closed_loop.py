@@ -100,9 +100,10 @@ def source_digest() -> str:
 def run_eager(model: nn.Module, x0: torch.Tensor, orders0: torch.Tensor, parameters: torch.Tensor,
               steps: int, dt: float, method: Method) -> torch.Tensor:
     """Record (steps, B, `RECORD`) of `steps` closed-loop steps of all B maneuvers at once
-    (`sysid.dynamics.integrators.step_loop`)."""
+    (`sysid.dynamics.integrators.step_loop`); the kNN gate decides through its leaf index,
+    each call first from a bound kept from the call before (`sysid.fast.knn_index.AnchoredGate`)."""
     from sysid.fast.prepared import indexed  # the gate's leaf index
-    step = ClosedLoopStep(indexed(model, x0.shape[0]), method)
+    step = ClosedLoopStep(indexed(model, x0.shape[0], anchored=True), method)
     dt_t = torch.tensor(dt, dtype=x0.dtype)
 
     def advance(k: int, carry: tuple[torch.Tensor, torch.Tensor]) -> tuple[torch.Tensor, tuple]:

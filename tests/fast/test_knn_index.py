@@ -4,7 +4,7 @@ import math
 import pytest
 import torch
 
-from sysid.fast.knn_index import IndexedGate, indexed_gate, k_smallest_means, leaf_partition, neighbourhood_groups
+from sysid.fast.knn_index import AnchoredGate, IndexedGate, indexed_gate, k_smallest_means, leaf_partition, neighbourhood_groups
 from sysid.hybrid.knn_gate import KNNGate
 
 
@@ -216,3 +216,29 @@ def test_the_index_is_built_once_per_bank(gate_and_queries):
     again = indexed_gate(gate)
     assert again is not first and again.scan_bank.shape[0] == 1500
     assert torch.equal(torch.cat([again(q[None])[1] for q in queries[:100]]), gate(queries[:100])[1])
+
+
+def test_anchored_decisions_along_a_path_equal_the_scan_and_mostly_skip_the_leaves(feature_gate_and_queries):
+    """Two rows moving along smooth paths across the 64-d feature manifold, in and out of
+    the bank (as a maneuver's stages): each call decides as the whole-bank scan, the
+    distance where "on" is a bound at or above the exact one, and most calls are decided
+    from the anchor kept from the call before (tier 0) without the index's tiers."""
+    gate, _ = feature_gate_and_queries
+    g = torch.Generator().manual_seed(11)
+    weights = torch.randn(3, 64, generator=torch.Generator().manual_seed(7), dtype=torch.float64)  # the fixture's map
+    t = torch.linspace(0, 1, 400, dtype=torch.float64)[:, None]
+    paths = [torch.cat([1.6 * t - 0.8, 0.3 * torch.sin(6 * t), 0.2 + 0 * t], 1),  # through the bank
+             torch.cat([2.4 * t - 0.6, 0.5 * torch.cos(4 * t), 1.2 * t], 1)]  # leaves it
+    queries = torch.stack([torch.tanh(p @ weights) for p in paths], 1)  # (400, 2, 64)
+    queries = queries + 0.002 * torch.randn(queries.shape, generator=g, dtype=torch.float64)
+    index = IndexedGate(gate)
+    anchored = AnchoredGate(index)
+    calls = []
+    index._upper = lambda flat, upper=index._upper: calls.append(1) or upper(flat)  # counts tier-1 runs
+    exact_d, exact_on = gate(queries)
+    d, on = zip(*(anchored(q) for q in queries))
+    d, on = torch.stack(d), torch.stack(on)
+    assert 0.1 < exact_on.double().mean() < 0.9  # both decisions occur
+    assert torch.equal(on, exact_on)
+    assert bool((d[on] >= exact_d[on] * (1 - 1e-12)).all())
+    assert len(calls) < 0.5 * len(queries)
