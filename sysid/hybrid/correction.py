@@ -7,7 +7,7 @@ a 9-64-64-3 tanh network (Table 6); output de-standardised to N, N, N m (Eq. 10)
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from typing import Callable, Sequence
 
 import torch
 from torch import nn
@@ -95,18 +95,31 @@ class ForceCorrection(nn.Module):
         return force.mean(0), z[0]
 
     def _single(self, s: torch.Tensor, standardized: bool) -> tuple[torch.Tensor, torch.Tensor]:
-        """`evaluate` of one member without gradient, as 2-d products without the member
-        axis: the same numbers (a product of batch 1 is the 2-d product), a third of the
-        operations (what a small eager batch, e.g. a maneuver's step, pays per call)."""
-        z = self.standardize_inputs(s)
-        flat = z.reshape(-1, z.shape[-1])
-        last = len(self.weights) - 1
-        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
-            y = torch.mm(flat, w[0]) + b[0]
-            if i < last:
-                flat = torch.tanh(y)
-        force = y if standardized else y * self.output_std + self.output_mean
-        return force.reshape(*z.shape[:-1], -1), flat.reshape(*z.shape[:-1], -1)
+        """`evaluate` of one member without gradient (`frozen`)."""
+        return self.frozen(standardized)(s)
+
+    def frozen(self, standardized: bool = False) -> Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]]:
+        """s (..., 9) -> `evaluate(s, standardized)` (F_NN or y (..., 3), features (..., 64))
+        with the parameters and statistics looked up once: for calls without gradient while
+        the parameters stay where they are (the steps of one rollout). One member runs as
+        2-d products without the member axis: the same numbers (a product of batch 1 is the
+        2-d product) in a third of the operations; several members as `evaluate` does."""
+        if self.members != 1:
+            return lambda s: self.evaluate(s, standardized)
+        layers = [(w[0], b[0]) for w, b in zip(self.weights, self.biases)]
+        hidden, (w_out, b_out) = layers[:-1], layers[-1]
+        mean, std, dtype = self.input_mean, self.input_std, self.input_mean.dtype
+        scale, shift = self.output_std, self.output_mean
+
+        def evaluate(s: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+            z = (s.to(dtype) - mean) / std
+            flat = z.reshape(-1, z.shape[-1])
+            for w, b in hidden:
+                flat = torch.tanh(torch.mm(flat, w) + b)
+            y = torch.mm(flat, w_out) + b_out
+            force = y if standardized else y * scale + shift
+            return force.reshape(*z.shape[:-1], -1), flat.reshape(*z.shape[:-1], -1)
+        return evaluate
 
     def standardize_inputs(self, s: torch.Tensor) -> torch.Tensor:
         """s-bar = (s - mu_s) / sigma_s (Eq. 8), (..., 9), in the parameters' dtype."""
