@@ -21,8 +21,9 @@ and ``wind`` True where the ship has Fujiwara's wind (``"wind" in mmg.families``
 * ``covers(mmg)``: the MMG's families are the ones the kernel computes (exact quadrature);
   ``applies(state, inputs, c)``: the library is loaded and these tensors can be passed to it
   (CPU, float32/float64, no autograd or torch.func transform through them, no capture for
-  compiled code, constant coefficients). Call `rate` or `rate_with_jacobian` only where
-  both hold; elsewhere compute through torch (`sysid.mmg.vjp`, `MMG`).
+  compiled code, constant coefficients; not inside ``torch_path()``). Call `rate` or
+  `rate_with_jacobian` only where both hold; elsewhere compute through torch
+  (`sysid.mmg.vjp`, `MMG`).
 
 The library is compiled on first use with the system's C++ compiler (``$CXX``, else ``c++``
 or ``g++``; flags `FLAGS`: no fast-math, no host-specific code, so every machine computes the
@@ -35,6 +36,7 @@ per process on the ``sysid.mmg.native`` logger.
 """
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import hashlib
 import itertools
@@ -47,6 +49,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
+from typing import Iterator
 
 import torch
 
@@ -217,7 +220,7 @@ def load(path: Path) -> ctypes.CDLL:
     return library
 
 
-_STATE: dict[str, object] = {}  # "library": the loaded CDLL, or None once it failed
+_STATE: dict[str, object] = {}  # "library": the loaded CDLL, or None once it failed; "off": torch_path
 
 
 def library() -> ctypes.CDLL | None:
@@ -238,6 +241,17 @@ def library() -> ctypes.CDLL | None:
             _log.warning("native MMG kernel unavailable, the MMG runs through torch: %s", error)
     _STATE["library"] = loaded
     return loaded
+
+
+@contextlib.contextmanager
+def torch_path() -> Iterator[None]:
+    """Inside, `applies` is False: every caller computes through torch (to compare the two)."""
+    before = _STATE.get("off", False)
+    _STATE["off"] = True
+    try:
+        yield
+    finally:
+        _STATE["off"] = before
 
 
 def available() -> bool:
@@ -262,6 +276,8 @@ def applies(state: torch.Tensor, inputs: torch.Tensor, c) -> bool:
     both are CPU tensors of one dtype (float32 or float64) with no gradient to record and
     no torch.func transform or compiled-code capture around them, and the coefficients in
     the values view `c` are constants."""
+    if _STATE.get("off"):
+        return False
     if state.device.type != "cpu" or state.dtype not in _DTYPES or inputs.dtype != state.dtype:
         return False
     if inputs.device.type != "cpu" or captured() or transformed(state) or transformed(inputs):

@@ -1,7 +1,7 @@
 // The MMG right-hand side of the Esso Osaka's families, row by row, in double.
 //
 // One template on the scalar type T: `double` gives the values, `Dual` (a value and its
-// tangents with respect to the state (x, u, y, v, psi, r)) gives them with their Jacobian,
+// tangents with respect to u, v, psi, r: nothing depends on x, y) gives them with their Jacobian,
 // by forward-mode differentiation of the same code (no derivative written by hand). The
 // formulas and every branch follow `sysid.mmg.tangents` (the derivative of the branch the
 // forward takes; clamp passes the derivative on its closed interval; |x| and sign give
@@ -18,7 +18,7 @@
 
 namespace {
 
-constexpr int NT = 6;  // tangents: d/d(x, u, y, v, psi, r)
+constexpr int NT = 4;  // tangents: d/d(u, v, psi, r) (nothing depends on x, y)
 
 struct Dual {
     double v;
@@ -152,12 +152,33 @@ inline Dual muladd(const Dual& a, const Dual& b, const Dual& c) {
     for (int i = 0; i < NT; ++i) o.d[i] = a.d[i] + b.d[i] * c.v + b.v * c.d[i];
     return o;
 }
-inline Dual muladd(double a, double b, const Dual& c) { return muladd(Dual(a), Dual(b), c); }
-inline Dual muladd(const Dual& a, double b, const Dual& c) { return muladd(a, Dual(b), c); }
-inline Dual muladd(double a, const Dual& b, const Dual& c) { return muladd(Dual(a), b, c); }
-inline Dual muladd(const Dual& a, const Dual& b, double c) { return muladd(a, b, Dual(c)); }
-inline Dual muladd(double a, const Dual& b, double c) { return muladd(Dual(a), b, Dual(c)); }
-inline Dual muladd(const Dual& a, double b, double c) { return muladd(a, Dual(b), Dual(c)); }
+// the same with constant operands (their zero tangents left out: the same numbers)
+inline Dual muladd(double a, double b, const Dual& c) {
+    Dual o(std::fma(b, c.v, a));
+    for (int i = 0; i < NT; ++i) o.d[i] = b * c.d[i];
+    return o;
+}
+inline Dual muladd(const Dual& a, double b, const Dual& c) {
+    Dual o(std::fma(b, c.v, a.v));
+    for (int i = 0; i < NT; ++i) o.d[i] = a.d[i] + b * c.d[i];
+    return o;
+}
+inline Dual muladd(double a, const Dual& b, const Dual& c) {
+    Dual o(std::fma(b.v, c.v, a));
+    for (int i = 0; i < NT; ++i) o.d[i] = b.d[i] * c.v + b.v * c.d[i];
+    return o;
+}
+inline Dual muladd(const Dual& a, const Dual& b, double c) {
+    Dual o(std::fma(b.v, c, a.v));
+    for (int i = 0; i < NT; ++i) o.d[i] = a.d[i] + b.d[i] * c;
+    return o;
+}
+inline Dual muladd(double a, const Dual& b, double c) {
+    Dual o(std::fma(b.v, c, a));
+    for (int i = 0; i < NT; ++i) o.d[i] = b.d[i] * c;
+    return o;
+}
+inline Dual muladd(const Dual& a, double b, double c) { Dual o = a; o.v = std::fma(b, c, a.v); return o; }
 
 template <class T> inline T choose(bool condition, const T& a, const T& b) { return condition ? a : b; }
 
@@ -294,8 +315,8 @@ Forces<T> forces(const T& u, const T& v, const T& psi, const T& r, double n, dou
 // one row: out (18) and, for T = Dual, jac (6, 18)
 template <class T>
 void row(const double* x, const double* in, const double* c, bool wind, T* out) {
-    const T u = component<T>(x[1], 1), v = component<T>(x[3], 3);
-    const T psi = component<T>(x[4], 4), r = component<T>(x[5], 5);
+    const T u = component<T>(x[1], 0), v = component<T>(x[3], 1);
+    const T psi = component<T>(x[4], 2), r = component<T>(x[5], 3);
     const double n = in[0], delta = in[1];
     const Forces<T> F = forces(u, v, psi, r, n, delta, in[2], in[3], c, wind);
     const T cos_psi = cosine(psi), sin_psi = sine(psi);
@@ -343,8 +364,12 @@ void values_and_jacobian(int64_t rows, const S* state, const S* inputs, const do
         row<Dual>(x, in, c, wind != 0, o);
         for (int j = 0; j < 18; ++j) out[18 * i + j] = static_cast<S>(o[j].v);
         S* J = jac + 108 * i;
-        for (int k = 0; k < NT; ++k) {
-            for (int j = 0; j < 18; ++j) J[18 * k + j] = static_cast<S>(o[j].d[k]);
+        for (int j = 0; j < 18; ++j) {  // rows x, u, y, v, psi, r: x and y enter nothing
+            J[j] = J[36 + j] = static_cast<S>(0.0);
+            J[18 + j] = static_cast<S>(o[j].d[0]);
+            J[54 + j] = static_cast<S>(o[j].d[1]);
+            J[72 + j] = static_cast<S>(o[j].d[2]);
+            J[90 + j] = static_cast<S>(o[j].d[3]);
         }
     }
 }

@@ -8,8 +8,10 @@
 * the FNN's inputs s (..., 9) in `sysid.hybrid.correction.INPUT_NAMES` order (u, v_m, r,
   delta, n_p, omega_u, omega_v, cos psi, sin psi),
 
-computed without autograd (`sysid.mmg.tangents`: the values and their Jacobian with respect to
-the state, the chain rule written out). Its backward is the vector-Jacobian product, one
+computed without autograd: by the native kernel (`sysid.mmg.native`: one call per batch,
+where it is built and the tensors are on the CPU) or by `sysid.mmg.tangents` (the values and
+their Jacobian with respect to the state, the chain rule written out in torch), the same
+numbers to round-off. Its backward is the vector-Jacobian product, one
 batched product: what a training step differentiates in place of autograd's record of every
 operation of the MMG, the FNN's inputs and the equations of motion. The inputs get no
 gradient (recorded, constant); the coefficients none either (`sysid.mmg.tangents.supported`
@@ -19,6 +21,7 @@ from __future__ import annotations
 
 import torch
 
+from sysid.mmg import native
 from sysid.mmg.coefficient_lookup import Rows, coefficient_matrix
 from sysid.mmg.tangents import basis, forces_with_tangents
 
@@ -88,7 +91,10 @@ def _kinematic_tables(like: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
 
 def rate_with_jacobian(state: torch.Tensor, inputs: torch.Tensor, c, wind: bool = True):
     """(out (..., 18) as `mmg_rate` returns it, its Jacobian (..., 6, 18): entry [i, j] is
-    d out_j / d state_i), without autograd."""
+    d out_j / d state_i), without autograd: through the native kernel where it applies
+    (`sysid.mmg.native.applies`), else through torch (`sysid.mmg.tangents`)."""
+    if native.applies(state, inputs, c):
+        return native.rate_with_jacobian(state, inputs, c, wind)
     t = forces_with_tangents(state, inputs, c, wind)
     rate, d_rate, cos_sin = _rate_with_tangents(state, t.force, t.d_force, c)
     _, u, _, v, _, r = state.split_with_sizes([1] * 6, -1)
