@@ -54,19 +54,23 @@ from sysid.identify.trainer import Trainer, multistep_loss, split_windows
 CONFIGS = {"D1": "configs/experiments/hybrid_D1.toml", "D2": "configs/experiments/hybrid_D2.toml"}
 
 
-def training_step(exp, train, batch: int, members: int | None = None, fast: bool = True):
+def training_step(exp, train, batch: int, members: int | None = None, fast: bool = True, trainer: bool = False):
     """One training step (forward, backward, Adam) on the first `batch` windows, as a
     function, and its loss function: the multi-step loss L_v + 1e-3 L_F through the
-    hand-derived VJP of the MMG (`fast`, the training default) or through autograd."""
+    hand-derived VJP of the MMG (`fast`, the training default) or through autograd; with
+    `trainer`, the step as `Trainer` takes it: lambda_v L_v + lambda_F L_F + lambda_L2
+    |theta|^2 of the config, Adam with ``foreach`` (`_WORKER`'s step)."""
     from sysid.dynamics.equations import integrate_training
-    from sysid.identify.trainer import VEL, output_penalty, velocity_loss
+    from sysid.identify.trainer import VEL, adam, output_penalty, velocity_loss, weight_norm
     torch.manual_seed(0)
     mmg = build_mmg(exp, torch.float32).requires_grad_(False)
     net = ForceCorrection(exp.network.hidden, torch.float32, members or exp.network.members)
     model = PerMember(CorrectedModel(mmg, net, None, True, exp.gate.space))
     w_v = 1.0 / train.states[:, :, [1, 3, 5]].reshape(-1, 3).var(0)
     w_F = torch.ones(3)
-    opt = torch.optim.Adam(net.parameters(), 1e-3)
+    t = exp.training
+    lambdas = (t.lambda_v, t.lambda_F, t.lambda_L2) if trainer else (1.0, 1e-3, 0.0)
+    opt = adam(net.parameters(), t.learning_rate) if trainer else torch.optim.Adam(net.parameters(), 1e-3)
     chunk = train.select(torch.arange(min(batch, len(train))))
     k = net.members
     states = chunk.states.unsqueeze(1).expand(-1, k, -1, -1)
@@ -75,7 +79,8 @@ def training_step(exp, train, batch: int, members: int | None = None, fast: bool
     def loss():
         pred, f_nn, f_mmg = integrate_training(model, states[0], inputs, chunk.dt, fast)
         loss_v = velocity_loss(pred[1:, ..., VEL] - states[1:, ..., VEL], w_v)
-        return loss_v + 1e-3 * output_penalty(f_nn, f_mmg, w_F).mean()
+        value = lambdas[0] * loss_v + lambdas[1] * output_penalty(f_nn, f_mmg, w_F).mean()
+        return value + lambdas[2] * weight_norm(net) if trainer else value
 
     def step():
         value = loss()
@@ -123,14 +128,14 @@ def vjp_comparison(exp, train, batch: int, repeats: int = 5, rounds: int = 5) ->
           f"ms/step ({c_old / c_new:.2f}x); loss before the first step {losses[1]:.9g} against {losses[0]:.9g}")
 
 
-# the step of another checkout (PYTHONPATH set to it): the trainer's multi-step loss, Adam; run
+# the step of another checkout (PYTHONPATH set to it) as its `Trainer` takes it; run
 # as a worker that reads a number of steps per line and answers "wall cpu" seconds per step
 _WORKER = r"""
 import sys, time, torch
 from sysid.config.experiment import load_experiment
 from sysid.hybrid.correction import ForceCorrection
 from sysid.hybrid.force_models import CorrectedModel, PerMember, build_mmg
-from sysid.identify.trainer import multistep_loss, split_windows
+from sysid.identify.trainer import adam, multistep_loss, split_windows, weight_norm
 from sysid.runs.lifecycle import training_runs
 config, data, batch, threads = sys.argv[1], sys.argv[2] or None, int(sys.argv[3]), int(sys.argv[4])
 torch.set_num_threads(threads)
@@ -142,11 +147,11 @@ torch.manual_seed(0)
 net = ForceCorrection(exp.network.hidden, torch.float32, 1)
 model = PerMember(CorrectedModel(build_mmg(exp, torch.float32).requires_grad_(False), net, None, True, exp.gate.space))
 w_v = 1.0 / train.states[:, :, [1, 3, 5]].reshape(-1, 3).var(0)
-opt = torch.optim.Adam(net.parameters(), 1e-3)
+opt = adam(net.parameters(), t.learning_rate)
 chunk = train.select(torch.arange(min(batch, len(train))))
 def loss():
     loss_v, loss_F = multistep_loss(model, chunk, w_v, torch.ones(3))
-    return loss_v + 1e-3 * loss_F
+    return t.lambda_v * loss_v + t.lambda_F * loss_F + t.lambda_L2 * weight_norm(net)
 def step():
     value = loss()
     opt.zero_grad()
@@ -192,8 +197,8 @@ class CheckoutStep:
 
 def native_comparison(exp, config: str, train, batch: int, data: str | None, against: str | None, threads: int,
                       repeats: int = 5, rounds: int = 5) -> None:
-    """The step through the native kernel, through the torch VJP (`sysid.mmg.native.torch_path`)
-    and through autograd, with `against`'s step (another checkout) when given, interleaved:
+    """The step as `Trainer` takes it through the native kernel, through the torch VJP
+    (`sysid.mmg.native.torch_path`) and through autograd, with `against`'s step (another checkout) when given, interleaved:
     medians of wall and CPU time per step, their ratios, the losses before the first step; and
     the kernel's build with a cold cache (a fresh directory) and a warm one."""
     from sysid.mmg import native
@@ -210,9 +215,9 @@ def native_comparison(exp, config: str, train, batch: int, data: str | None, aga
             with native.torch_path():
                 return fn()
         return run
-    new, new_loss = training_step(exp, train, batch, 1, fast=True)
-    vjp, vjp_loss = training_step(exp, train, batch, 1, fast=True)
-    old, old_loss = training_step(exp, train, batch, 1, fast=False)
+    new, new_loss = training_step(exp, train, batch, 1, fast=True, trainer=True)
+    vjp, vjp_loss = training_step(exp, train, batch, 1, fast=True, trainer=True)
+    old, old_loss = training_step(exp, train, batch, 1, fast=False, trainer=True)
     steps = {"native": new, "torch VJP": via_torch(vjp), "autograd": old}
     losses = {"native": new_loss(), "torch VJP": via_torch(vjp_loss)(), "autograd": old_loss()}
     losses = {k: float(v.detach()) for k, v in losses.items()}
@@ -251,7 +256,7 @@ def native_comparison(exp, config: str, train, batch: int, data: str | None, aga
 def profile_step(exp, train, batch: int, rows: int = 25) -> None:
     """The operators of the training step (native kernel) by self CPU time, torch.profiler."""
     from torch.profiler import ProfilerActivity, profile
-    step = training_step(exp, train, batch, 1, fast=True)[0]
+    step = training_step(exp, train, batch, 1, fast=True, trainer=True)[0]
     for _ in range(3):
         step()
     with profile(activities=[ProfilerActivity.CPU]) as prof:

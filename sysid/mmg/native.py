@@ -17,7 +17,9 @@ and ``wind`` True where the ship has Fujiwara's wind (``"wind" in mmg.families``
   right-hand side: maneuvers, predictions). dx/dt of the total force is ``out[..., :6] +
   F_NN @ sysid.mmg.vjp.force_rate(c, state)``.
 * ``rate_with_jacobian(state, inputs, c, wind) -> (out (..., 18), jacobian (..., 6, 18))``,
-  jacobian[..., i, j] = d out_j / d state_i (the training path, `sysid.mmg.vjp`).
+  jacobian[..., i, j] = d out_j / d state_i; ``training_rate`` the same with s standardised
+  for the FNN and the outputs apart, ``state_gradient`` its vector-Jacobian product (the
+  training path, `sysid.mmg.vjp.training_rate`).
 * ``covers(mmg)``: the MMG's families are the ones the kernel computes (exact quadrature);
   ``applies(state, inputs, c)``: the library is loaded and these tensors can be passed to it
   (CPU, float32/float64, no autograd or torch.func transform through them, no capture for
@@ -27,8 +29,8 @@ and ``wind`` True where the ship has Fujiwara's wind (``"wind" in mmg.families``
 
 The library is compiled on first use with the system's C++ compiler (``$CXX``, else ``c++``
 or ``g++``; flags `FLAGS`: no fast-math, no host-specific code, so every machine computes the
-same numbers) into a per-user cache (``$SYSID_CACHE_DIR``, else ``$XDG_CACHE_HOME/sysid``,
-else ``~/.cache/sysid``), named by a hash of the source, the compiler's version and the flags
+same numbers) into a per-user cache (``$SYSID_CACHE_DIR``, else ``$XDG_CACHE_HOME/sysid/native``,
+else ``~/.cache/sysid/native``), named by a hash of the source, the compiler's version and the flags
 and by the SHA-256 of its bytes (written to a temporary file, then renamed: concurrent
 processes and Ray workers never load a partial file; one whose bytes do not match its name is
 not loaded). ``SYSID_NATIVE=0``, no compiler or a failed compile: the torch path, said once
@@ -60,7 +62,7 @@ from sysid.mmg.hull import _CROSSFLOW, _HULL
 from sysid.mmg.motion import _VALUES, LOW_SPEED
 from sysid.mmg.propeller import _LATERAL
 from sysid.mmg.rudder import _RUDDER
-from sysid.mmg.wind import _WIND
+from sysid.mmg.wind import _HALF_PI, _WIND
 
 _log = logging.getLogger(__name__)
 
@@ -93,7 +95,8 @@ _WIND_START = len(SCALARS) + sum(len(entries) for _, entries in BLOCKS)
 N_COEFFICIENTS = _WIND_START + len(WIND_BLOCK[1])
 # the forward's constants (`sysid.mmg.motion.constants`)
 CONSTANTS = {"SPEED_GUARD": SPEED_GUARD, "LOW_SPEED": LOW_SPEED, "TINY": TINY,
-             "STOPPED_RATIO": _VALUES.stopped_ratio, "TWO_PI": _VALUES.two_pi}
+             "STOPPED_RATIO": _VALUES.stopped_ratio, "TWO_PI": _VALUES.two_pi,
+             "HALF_PI": _HALF_PI}
 
 
 def _header() -> str:
@@ -115,12 +118,13 @@ def library_source() -> str:
 
 
 def cache_dir() -> Path:
-    """Where compiled libraries are kept: ``$SYSID_CACHE_DIR``, else ``$XDG_CACHE_HOME/sysid``,
-    else ``~/.cache/sysid``."""
+    """Where compiled libraries are kept: ``$SYSID_CACHE_DIR``, else
+    ``$XDG_CACHE_HOME/sysid/native``, else ``~/.cache/sysid/native`` (beside the compiled
+    predictions' ``~/.cache/sysid/compiled``)."""
     if os.environ.get("SYSID_CACHE_DIR"):
         return Path(os.environ["SYSID_CACHE_DIR"])
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "sysid"
+    return Path(base) / "sysid" / "native"
 
 
 class NativeUnavailable(RuntimeError):
@@ -200,7 +204,9 @@ def build(directory: Path | None = None) -> Build:
 
 _P = ctypes.c_void_p
 _ENTRIES = {"rate": (ctypes.c_int64, _P, _P, _P, ctypes.c_int, _P),
-            "rate_jacobian": (ctypes.c_int64, _P, _P, _P, ctypes.c_int, _P, _P)}
+            "rate_jacobian": (ctypes.c_int64, _P, _P, _P, ctypes.c_int, _P, _P),
+            "training": (ctypes.c_int64, _P, _P, _P, ctypes.c_int, _P, _P, _P, _P, _P, _P),
+            "state_gradient": (ctypes.c_int64, _P, _P, _P, _P, _P)}
 
 
 def load(path: Path) -> ctypes.CDLL:
@@ -271,18 +277,19 @@ def covers(mmg) -> bool:
 _DTYPES = (torch.float32, torch.float64)
 
 
-def applies(state: torch.Tensor, inputs: torch.Tensor, c) -> bool:
+def applies(state: torch.Tensor, inputs: torch.Tensor, c, differentiated: bool = False) -> bool:
     """True where `rate`/`rate_with_jacobian` can take these tensors: the library is loaded,
-    both are CPU tensors of one dtype (float32 or float64) with no gradient to record and
-    no torch.func transform or compiled-code capture around them, and the coefficients in
-    the values view `c` are constants."""
+    both are CPU tensors of one dtype (float32 or float64) with no gradient to record (unless
+    `differentiated`: the caller's autograd Function records it) and no torch.func transform
+    or compiled-code capture around them, and the coefficients in the values view `c` are
+    constants."""
     if _STATE.get("off"):
         return False
     if state.device.type != "cpu" or state.dtype not in _DTYPES or inputs.dtype != state.dtype:
         return False
     if inputs.device.type != "cpu" or captured() or transformed(state) or transformed(inputs):
         return False
-    if torch.is_grad_enabled() and (state.requires_grad or inputs.requires_grad):
+    if not differentiated and torch.is_grad_enabled() and (state.requires_grad or inputs.requires_grad):
         return False
     if getattr(c, "requires_grad", False) or getattr(c, "wrapped", False):
         return False
@@ -306,7 +313,8 @@ def coefficient_values(c, wind: bool) -> torch.Tensor:
     return found
 
 
-def _call(entry: str, state: torch.Tensor, inputs: torch.Tensor, c, wind: bool, outputs: list[torch.Tensor]):
+def _call(entry: str, state: torch.Tensor, inputs: torch.Tensor, c, wind: bool, outputs: list,
+          extra: tuple = ()):
     lib = library()
     if lib is None:
         raise NativeUnavailable("the native MMG kernel is not loaded (see `applies`)")
@@ -318,7 +326,7 @@ def _call(entry: str, state: torch.Tensor, inputs: torch.Tensor, c, wind: bool, 
     coefficients = coefficient_values(c, wind)
     suffix = "f32" if state.dtype == torch.float32 else "f64"
     getattr(lib, f"sysid_mmg_{entry}_{suffix}")(rows, state.data_ptr(), inputs.data_ptr(), coefficients.data_ptr(),
-                                                int(bool(wind)), *[o.data_ptr() for o in outputs])
+                                                int(bool(wind)), *extra, *[o.data_ptr() for o in outputs])
 
 
 def rate(state: torch.Tensor, inputs: torch.Tensor, c, wind: bool = True) -> torch.Tensor:
@@ -336,3 +344,36 @@ def rate_with_jacobian(state: torch.Tensor, inputs: torch.Tensor, c,
     jacobian = torch.empty(state.shape[:-1] + (6, WIDTH), dtype=state.dtype)
     _call("rate_jacobian", state, inputs, c, wind, [out, jacobian])
     return out, jacobian
+
+
+def training_rate(state: torch.Tensor, inputs: torch.Tensor, c, wind: bool, mean: torch.Tensor,
+                  std: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """What a training step reads: dx/dt of F_MMG (..., 6), F_MMG (..., 3), the FNN's inputs
+    standardised, z = (s - mean) / std (..., 9) (`mean`, `std` (9,) in the state's dtype, Eq. 8),
+    and the Jacobian (..., 6, 18) of (dx/dt, F_MMG, z) with respect to the state; where
+    `applies` holds."""
+    if mean.dtype != state.dtype or std.dtype != state.dtype or mean.shape != (9,) or std.shape != (9,):
+        raise ValueError(f"mean and std (9,) in the state's dtype {state.dtype}, got {mean.dtype} "
+                         f"{tuple(mean.shape)}, {std.dtype} {tuple(std.shape)}")
+    batch, kw = state.shape[:-1], {"dtype": state.dtype}
+    rate_out, force, z = torch.empty(batch + (6,), **kw), torch.empty(batch + (3,), **kw), torch.empty(batch + (9,), **kw)
+    jacobian = torch.empty(batch + (6, WIDTH), **kw)
+    mean, std = mean.contiguous(), std.contiguous()  # constants: the FNN's buffers
+    _call("training", state, inputs, c, wind, [rate_out, force, z, jacobian], (mean.data_ptr(), std.data_ptr()))
+    return rate_out, force, z, jacobian
+
+
+def state_gradient(jacobian: torch.Tensor, grad_rate: torch.Tensor | None, grad_force: torch.Tensor | None,
+                   grad_z: torch.Tensor | None) -> torch.Tensor:
+    """(..., 6): the gradients of `training_rate`'s three outputs (None: zero) times its
+    Jacobian (..., 6, 18), the vector-Jacobian product, in one call."""
+    lib = library()
+    if lib is None:
+        raise NativeUnavailable("the native MMG kernel is not loaded (see `applies`)")
+    grads = [None if g is None else g.to(jacobian.dtype).contiguous() for g in (grad_rate, grad_force, grad_z)]
+    out = torch.empty(jacobian.shape[:-2] + (6,), dtype=jacobian.dtype)
+    suffix = "f32" if jacobian.dtype == torch.float32 else "f64"
+    getattr(lib, f"sysid_mmg_state_gradient_{suffix}")(out.shape.numel() // 6, jacobian.data_ptr(),
+                                                       *[None if g is None else g.data_ptr() for g in grads],
+                                                       out.data_ptr())
+    return out

@@ -88,8 +88,14 @@ inline Dual absolute(const Dual& x) { return chain(x, std::fabs(x.v), sgn(x.v));
 
 inline double sine(double x) { return std::sin(x); }
 inline Dual sine(const Dual& x) { return chain(x, std::sin(x.v), std::cos(x.v)); }
-inline double cosine(double x) { return std::cos(x); }
-inline Dual cosine(const Dual& x) { return chain(x, std::cos(x.v), -std::sin(x.v)); }
+
+// (sin x, cos x) of one argument
+inline void sin_cos(double x, double& s, double& c) { s = std::sin(x); c = std::cos(x); }
+inline void sin_cos(const Dual& x, Dual& s, Dual& c) {
+    const double sv = std::sin(x.v), cv = std::cos(x.v);
+    s = chain(x, sv, cv);
+    c = chain(x, cv, -sv);
+}
 
 // sqrt(x) where x > 0 (NaN below, as torch.sqrt), derivative 0 for x <= 0
 inline double root(double x) { return std::sqrt(x); }
@@ -289,19 +295,33 @@ Forces<T> forces(const T& u, const T& v, const T& psi, const T& r, double n, dou
 
     // the relative wind (the lab's guards) and Fujiwara's force
     const T course = psi + beta_hat;
-    const T W_x = muladd(U_T * std::cos(zeta), Ug, cosine(course));
-    const T W_y = muladd(U_T * std::sin(zeta), Ug, sine(course));
+    T sin_course, cos_course;
+    sin_cos(course, sin_course, cos_course);
+    const T W_x = muladd(U_T * std::cos(zeta), Ug, cos_course);
+    const T W_y = muladd(U_T * std::sin(zeta), Ug, sin_course);
     const T U_A = length(W_x, W_y);
     const T direction = choose(slow, T(zeta), angle(W_y, W_x)) - psi;
     const T gamma_A = wrapped(choose(U_T < SPEED_GUARD, beta_hat, direction), TWO_PI);
-    const T cos_g = cosine(gamma_A), sin_g = sine(gamma_A);
+    T sin_g, cos_g;
+    sin_cos(gamma_A, sin_g, cos_g);
     if (wind) {
-        const double* W = c + K::WIND;  // phases (8), harmonics (8), constant (3), matrix (8, 3)
+        // phases (8), harmonics (8), constant (3), matrix (8, 3): rows sin(phase + harmonic
+        // gamma_A); rows k and k + 4 of one harmonic with phases pi/2 and 0 are the cosine and
+        // the sine of one argument
+        const double* W = c + K::WIND;
         T C[3] = {T(W[16]), T(W[17]), T(W[18])};
+        T h[8];
+        for (int k = 0; k < 4; ++k) {
+            if (W[k] == HALF_PI && W[4 + k] == 0.0 && W[8 + k] == W[12 + k]) {
+                sin_cos(gamma_A * W[12 + k], h[4 + k], h[k]);
+            } else {
+                h[k] = sine(muladd(W[k], gamma_A, W[8 + k]));
+                h[4 + k] = sine(muladd(W[4 + k], gamma_A, W[12 + k]));
+            }
+        }
         for (int k = 0; k < 8; ++k) {
-            const T h = sine(muladd(W[k], gamma_A, W[8 + k]));
             for (int j = 0; j < 3; ++j) {
-                if (W[19 + 3 * k + j] != 0.0) C[j] = C[j] + h * W[19 + 3 * k + j];
+                if (W[19 + 3 * k + j] != 0.0) C[j] = C[j] + h[k] * W[19 + 3 * k + j];
             }
         }
         const T U_A2 = U_A * U_A;
@@ -319,7 +339,8 @@ void row(const double* x, const double* in, const double* c, bool wind, T* out) 
     const T psi = component<T>(x[4], 2), r = component<T>(x[5], 3);
     const double n = in[0], delta = in[1];
     const Forces<T> F = forces(u, v, psi, r, n, delta, in[2], in[3], c, wind);
-    const T cos_psi = cosine(psi), sin_psi = sine(psi);
+    T sin_psi, cos_psi;
+    sin_cos(psi, sin_psi, cos_psi);
     // the equations of motion, Eq. (4) solved for the accelerations (`derived_constants`' eom_*)
     const T ur = u * r, vr = v * r, rr = r * r;
     out[0] = u * cos_psi - v * sin_psi;
@@ -353,16 +374,38 @@ void values(int64_t rows, const S* state, const S* inputs, const double* c, int 
     }
 }
 
+// where a row's outputs go: dx/dt (6), F_MMG (3), s (9), each from a pointer with a row stride
 template <class S>
-void values_and_jacobian(int64_t rows, const S* state, const S* inputs, const double* c, int wind, S* out,
-                         S* jac) {
+struct Outputs {
+    S* rate;
+    S* force;
+    S* s;
+    int64_t stride_rate, stride_force, stride_s;
+};
+
+// rows with their Jacobian (jac (6, 18) per row); with `mean`, `std` (9 each, else null) the
+// FNN inputs are standardised, (s - mean) / std, and so are their columns of the Jacobian
+template <class S>
+void values_and_jacobian(int64_t rows, const S* state, const S* inputs, const double* c, int wind, const S* mean,
+                         const S* std, Outputs<S> out, S* jac) {
+    double shift[9] = {}, scale[9] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0};
+    if (mean != nullptr && std != nullptr) {
+        for (int j = 0; j < 9; ++j) shift[j] = static_cast<double>(mean[j]);
+        for (int j = 0; j < 9; ++j) scale[j] = static_cast<double>(std[j]);
+    }
     for (int64_t i = 0; i < rows; ++i) {
         double x[6], in[4];
         Dual o[18];
         for (int k = 0; k < 6; ++k) x[k] = static_cast<double>(state[6 * i + k]);
         for (int k = 0; k < 4; ++k) in[k] = static_cast<double>(inputs[4 * i + k]);
         row<Dual>(x, in, c, wind != 0, o);
-        for (int j = 0; j < 18; ++j) out[18 * i + j] = static_cast<S>(o[j].v);
+        for (int j = 0; j < 9; ++j) {
+            o[9 + j].v = (o[9 + j].v - shift[j]) / scale[j];
+            for (int k = 0; k < NT; ++k) o[9 + j].d[k] = o[9 + j].d[k] / scale[j];
+        }
+        for (int j = 0; j < 6; ++j) out.rate[out.stride_rate * i + j] = static_cast<S>(o[j].v);
+        for (int j = 0; j < 3; ++j) out.force[out.stride_force * i + j] = static_cast<S>(o[6 + j].v);
+        for (int j = 0; j < 9; ++j) out.s[out.stride_s * i + j] = static_cast<S>(o[9 + j].v);
         S* J = jac + 108 * i;
         for (int j = 0; j < 18; ++j) {  // rows x, u, y, v, psi, r: x and y enter nothing
             J[j] = J[36 + j] = static_cast<S>(0.0);
@@ -370,6 +413,24 @@ void values_and_jacobian(int64_t rows, const S* state, const S* inputs, const do
             J[54 + j] = static_cast<S>(o[j].d[1]);
             J[72 + j] = static_cast<S>(o[j].d[2]);
             J[90 + j] = static_cast<S>(o[j].d[3]);
+        }
+    }
+}
+
+// the vector-Jacobian product: grad_state (6) = jac (6, 18) times (g_rate (6), g_force (3),
+// g_s (9)) per row, in double; a null gradient is zero
+template <class S>
+void state_gradient(int64_t rows, const S* jac, const S* g_rate, const S* g_force, const S* g_s, S* out) {
+    for (int64_t i = 0; i < rows; ++i) {
+        double g[18] = {};
+        if (g_rate != nullptr) for (int j = 0; j < 6; ++j) g[j] = static_cast<double>(g_rate[6 * i + j]);
+        if (g_force != nullptr) for (int j = 0; j < 3; ++j) g[6 + j] = static_cast<double>(g_force[3 * i + j]);
+        if (g_s != nullptr) for (int j = 0; j < 9; ++j) g[9 + j] = static_cast<double>(g_s[9 * i + j]);
+        const S* J = jac + 108 * i;
+        for (int k = 0; k < 6; ++k) {
+            double sum = 0.0;
+            for (int j = 0; j < 18; ++j) sum += static_cast<double>(J[18 * k + j]) * g[j];
+            out[6 * i + k] = static_cast<S>(sum);
         }
     }
 }
@@ -392,12 +453,35 @@ void sysid_mmg_rate_f32(int64_t rows, const float* state, const float* inputs, c
 
 void sysid_mmg_rate_jacobian_f64(int64_t rows, const double* state, const double* inputs, const double* c,
                                  int wind, double* out, double* jac) {
-    values_and_jacobian(rows, state, inputs, c, wind, out, jac);
+    values_and_jacobian(rows, state, inputs, c, wind, static_cast<const double*>(nullptr),
+                        static_cast<const double*>(nullptr), Outputs<double>{out, out + 6, out + 9, 18, 18, 18}, jac);
 }
 
 void sysid_mmg_rate_jacobian_f32(int64_t rows, const float* state, const float* inputs, const double* c,
                                  int wind, float* out, float* jac) {
-    values_and_jacobian(rows, state, inputs, c, wind, out, jac);
+    values_and_jacobian(rows, state, inputs, c, wind, static_cast<const float*>(nullptr),
+                        static_cast<const float*>(nullptr), Outputs<float>{out, out + 6, out + 9, 18, 18, 18}, jac);
+}
+
+void sysid_mmg_training_f64(int64_t rows, const double* state, const double* inputs, const double* c, int wind,
+                            const double* mean, const double* std, double* rate, double* force, double* s,
+                            double* jac) {
+    values_and_jacobian(rows, state, inputs, c, wind, mean, std, Outputs<double>{rate, force, s, 6, 3, 9}, jac);
+}
+
+void sysid_mmg_training_f32(int64_t rows, const float* state, const float* inputs, const double* c, int wind,
+                            const float* mean, const float* std, float* rate, float* force, float* s, float* jac) {
+    values_and_jacobian(rows, state, inputs, c, wind, mean, std, Outputs<float>{rate, force, s, 6, 3, 9}, jac);
+}
+
+void sysid_mmg_state_gradient_f64(int64_t rows, const double* jac, const double* g_rate, const double* g_force,
+                                  const double* g_s, double* out) {
+    state_gradient(rows, jac, g_rate, g_force, g_s, out);
+}
+
+void sysid_mmg_state_gradient_f32(int64_t rows, const float* jac, const float* g_rate, const float* g_force,
+                                  const float* g_s, float* out) {
+    state_gradient(rows, jac, g_rate, g_force, g_s, out);
 }
 
 }  // extern "C"

@@ -142,3 +142,33 @@ def mmg_rate(state: torch.Tensor, inputs: torch.Tensor, c, wind: bool = True) ->
     state by its hand-derived VJP. `c` is the coefficients' values view (constants), `wind`
     adds Fujiwara's wind force."""
     return _MMGRate.apply(state, inputs, c, wind)
+
+
+class _NativeTrainingRate(torch.autograd.Function):
+    """(state, inputs) -> (dx/dt of F_MMG, F_MMG, z) by the native kernel; backward: the
+    outputs' gradients times the Jacobian, by the kernel too."""
+
+    @staticmethod
+    def forward(ctx, state, inputs, c, wind, mean, std):
+        ctx.set_materialize_grads(False)
+        rate, force, z, jacobian = native.training_rate(state, inputs, c, wind, mean, std)
+        ctx.save_for_backward(jacobian)
+        return rate, force, z
+
+    @staticmethod
+    def backward(ctx, grad_rate, grad_force, grad_z):
+        (jacobian,) = ctx.saved_tensors
+        return native.state_gradient(jacobian, grad_rate, grad_force, grad_z), None, None, None, None, None
+
+
+def training_rate(state: torch.Tensor, inputs: torch.Tensor, c, wind: bool, mean: torch.Tensor,
+                  std: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(dx/dt of F_MMG (..., 6), F_MMG (..., 3), the FNN's standardised inputs z = (s - mean)
+    / std (..., 9), Eq. 8) at state (..., 6) with inputs (..., 4), differentiable with respect
+    to the state by the hand-derived VJP: one call of the native kernel forward and one
+    backward where it applies (`sysid.mmg.native.applies`; `mean`, `std` (9,) in the state's
+    dtype), else `mmg_rate` and the standardisation in torch."""
+    if mean.dtype == state.dtype == std.dtype and native.applies(state, inputs, c, differentiated=True):
+        return _NativeTrainingRate.apply(state, inputs, c, wind, mean, std)
+    rate, force, s = mmg_rate(state, inputs, c, wind).split_with_sizes((6, 3, 9), -1)
+    return rate, force, (s.to(mean.dtype) - mean) / std

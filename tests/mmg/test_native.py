@@ -132,16 +132,16 @@ def test_a_float32_training_rollout_equals_the_torch_path(kernel, d2_rows):
                             torch.zeros(3), torch.tensor([2.0, 3.0, 1.5]))
     model = PerMember(CorrectedModel(MMG(load_ship("esso_osaka"), dtype=torch.float32), net))
     calls = []
-    original = native.rate_with_jacobian
+    original = native.training_rate
 
     def counted(*args):
         calls.append(args[0].dtype)
         return original(*args)
-    native.rate_with_jacobian = counted
+    native.training_rate = counted
     try:
         new = _rollout(model, states, u)
     finally:
-        native.rate_with_jacobian = original
+        native.training_rate = original
     with native.torch_path():
         old = _rollout(model, states, u)
     assert calls == [torch.float32] * 10  # the rollout went through the kernel
@@ -172,7 +172,7 @@ def test_a_second_build_reuses_the_library_and_a_corrupt_one_is_not_loaded(tmp_p
 def test_the_cache_directory_follows_the_environment(monkeypatch, tmp_path):
     monkeypatch.delenv("SYSID_CACHE_DIR", raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
-    assert native.cache_dir() == tmp_path / "xdg" / "sysid"
+    assert native.cache_dir() == tmp_path / "xdg" / "sysid" / "native"
     monkeypatch.setenv("SYSID_CACHE_DIR", str(tmp_path / "own"))
     assert native.cache_dir() == tmp_path / "own"
 
