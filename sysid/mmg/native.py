@@ -67,7 +67,10 @@ from sysid.mmg.wind import _HALF_PI, _WIND
 _log = logging.getLogger(__name__)
 
 SOURCE = Path(__file__).with_name("native_kernel.cpp")
-FLAGS = ("-O2", "-fPIC", "-shared", "-std=c++17", "-ffp-contract=off")
+# IEEE arithmetic as written: no fast-math, no contraction into FMA, no host-specific code (the
+# same numbers on every x86-64 machine); -O3's vectorised tangent loops give the same bits as
+# -O2's (checked on the D2 windows), 1.3x faster
+FLAGS = ("-O3", "-fPIC", "-shared", "-std=c++17", "-ffp-contract=off")
 WIDTH = 18  # dx/dt (6), F_MMG (3), s (9)
 # the families the kernel computes (wind: or none), as `sysid.mmg.tangents.FAMILIES`
 FAMILIES = {"hull": "yoshimura_low_speed", "propeller": "four_quadrant", "rudder": "four_quadrant",
