@@ -16,7 +16,6 @@ from dataclasses import dataclass, fields
 
 import torch
 from torch import nn
-from torchdiffeq import odeint
 
 from sysid.dynamics.integrators import EULER, Integrator, IntegratorLike, Method, rollout
 from sysid.mmg.capture import captured
@@ -112,8 +111,13 @@ def lean_derivative(force_model: nn.Module, state: torch.Tensor, inputs: torch.T
     """`derivative` through the model's ``force_channels`` (X, Y, N as separate tensors, no
     force breakdown) where it has one: the same numbers with fewer, larger operations
     (what compiled steps run). dx/dt is stacked along `dim` (0: channels first, (6, ...))."""
+    last = dim == -1 or dim == state.dim() - 1
+    eager_rate = getattr(force_model, "eager_rate", None) if last else None
+    found = eager_rate(state, inputs) if eager_rate is not None else None
+    if found is not None:  # no gradient, the native kernel's families: one native call for F_MMG
+        return found[0]
     rate_terms = getattr(force_model, "rate_terms", None)
-    if rate_terms is not None and (dim == -1 or dim == state.dim() - 1) and not captured():
+    if rate_terms is not None and last and not captured():
         return motion_rate(state, *rate_terms(state, inputs))  # one product for the equations of motion (eager)
     channels = getattr(force_model, "force_channels", None)
     force = channels(state, inputs)[0] if channels is not None else force_model(state, inputs).total.unbind(-1)
@@ -194,6 +198,8 @@ def integrate(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt
     rhs = ShipDynamics(force_model, inputs, dt, record)
     if integrator.method not in _ODEINT_NAME:  # classical RK4: a plain step loop
         return rollout(rhs.rate, x0, inputs, dt, integrator.method)
+    from torchdiffeq import odeint  # here: its import loads scipy.integrate (about 0.5 s), which eager
+    # maneuvers and predictions (step loops) never need
     tau = torch.arange(inputs.shape[0], dtype=x0.dtype, device=x0.device)
     options = {"perturb": True} if integrator.method is not Method.EULER else None
     return odeint(rhs, x0, tau, method=_ODEINT_NAME[integrator.method], options=options)
@@ -267,6 +273,7 @@ def integrate_training(force_model: nn.Module, x0: torch.Tensor, inputs: torch.T
     check_shapes(x0, inputs)
     if inputs.shape[0] < 2:
         raise ValueError("no steps: inputs need at least two rows")
+    from torchdiffeq import odeint  # here, as in `integrate`
     rhs = TrainingDynamics(rate, inputs.contiguous(), dt)  # each step's inputs one contiguous slice
     tau = torch.arange(inputs.shape[0], dtype=x0.dtype, device=x0.device)
     states = odeint(rhs, x0, tau, method=_ODEINT_NAME[Method.EULER])

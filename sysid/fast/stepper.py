@@ -45,6 +45,10 @@ class Derivative(nn.Module):
         without a gate) at states (B, 6) with inputs (B, 4): one evaluation of the FNN and
         the gate where the model gives both (``gated_force_channels``), else the model's
         ``gate_decision`` beside the derivative. dx/dt equals `forward`'s."""
+        eager_rate = getattr(self.force_model, "eager_rate", None) if not self.channels_first else None
+        found = eager_rate(state, inputs) if eager_rate is not None else None
+        if found is not None:  # one native call for F_MMG (`sysid.mmg.native`), no gradient
+            return found
         gated = getattr(self.force_model, "gated_force_channels", None)
         if gated is None:
             decide = getattr(self.force_model, "gate_decision", None)

@@ -134,6 +134,49 @@ class CorrectedModel(nn.Module):
             return f_nn, wind, on
         return tuple(t + f for t, f in zip(total, f_nn)), wind, on
 
+    def eager_rate(self, state: torch.Tensor, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None] | None:
+        """(dx/dt (..., 6), the kNN gate's decision (...,) or None without a fitted gate)
+        at state (..., 6) with inputs (..., 4) without gradient, where `no_grad_rate`
+        applies (a hybrid whose MMG the native kernel computes); else None (then
+        `gated_force_channels` and the equations of motion, which this equals to round-off)."""
+        if torch.is_grad_enabled():
+            return None
+        rate = self.no_grad_rate(state)
+        return rate(state, inputs) if rate is not None else None
+
+    def no_grad_rate(self, like: torch.Tensor):
+        """A function (state (..., 6), inputs (..., 4)) -> (dx/dt (..., 6), the kNN gate's
+        decision (...,) or None), to call without gradient on tensors of `like`'s dtype and
+        device while the model stays as it is (the steps of one rollout); None where it
+        does not apply: NN-only, an MMG the native kernel (`sysid.mmg.native`) does not
+        compute, tensors it does not take. dx/dt of F_MMG and the FNN's inputs s come from
+        one native call, the (gated) F_NN is added through the mass terms (dx/dt is linear
+        in the force: ``+ F_NN @ force_rate``); everything looked up once."""
+        if not self.physics:
+            return None
+        from sysid.mmg import native
+        with torch.no_grad():
+            c = self.mmg.coefficients.values_view(like.dtype)
+            if not native.covers(self.mmg) or not native.applies(like, like.new_empty(like.shape[:-1] + (4,)), c):
+                return None
+            mass = force_rate(c, like)  # (3, 6)
+        wind = "wind" in self.mmg.families
+        net = self.correction_net.frozen()
+        gated = self.gate is not None and self.gate_enabled and self.gate.bank.shape[0] > 0
+        gate, inputs_space = self.gate, self.gate_space is GateSpace.INPUTS
+        mean, std = self.correction_net.input_mean, self.correction_net.input_std
+
+        def rate(state: torch.Tensor, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+            out = native.rate(state, inputs, c, wind)
+            s = out[..., 9:]
+            f_nn, z = net(s)
+            f_nn = f_nn.to(state.dtype)
+            on = None
+            if gated:
+                on = gate((s.to(mean.dtype) - mean) / std if inputs_space else z)[1]
+                f_nn = torch.where(on[..., None], f_nn, torch.zeros_like(f_nn))
+            return torch.addmm(out[..., :6].reshape(-1, 6), f_nn.reshape(-1, 3), mass).view(state.shape), on
+        return rate
 
     def training_rate(self, per_member: bool = False):
         """The right-hand side a training rollout differentiates, or None where it does not

@@ -22,6 +22,7 @@ from typing import Callable
 import torch
 from torch import nn
 
+from sysid.device import compute_threads
 from sysid.dynamics.integrators import STEP_RULES, Method, run_in_chunks, step_loop, while_steps
 from sysid.fast.stepper import Derivative
 from sysid.maneuvers.controllers import COLUMNS, ManeuverOrders
@@ -38,21 +39,33 @@ class ClosedLoopStep(nn.Module):
     after the step (B, 6), orders after it (B, 2), inputs held over it (B, 4), the kNN
     gate's decision at the step's start (B, 1): 1 on, 0 off, NaN for a model without a gate)."""
 
-    def __init__(self, force_model: nn.Module, method: Method):
+    def __init__(self, force_model: nn.Module, method: Method, rate: Callable | None = None,
+                 held: Callable | None = None):
         super().__init__()
         self.derivative = Derivative(force_model)
         self.orders = ManeuverOrders()
         self.method = method
+        # eager only, looked up once: (state, inputs) -> (dx/dt, the gate's decision or None);
+        # (state, orders, t) -> `orders`' outputs for the loop's parameters and dt (`ManeuverOrders.held`)
+        self.rate = rate
+        self.held = held
 
     def forward(self, state, orders, parameters, t, dt):
-        inputs, after = self.orders(state, orders, parameters, t, dt)
+        if self.held is not None:
+            inputs, after = self.held(state, orders, t)
+        else:
+            inputs, after = self.orders(state, orders, parameters, t, dt)
         first: list = []  # the gate's decision at the step's start, from the rule's first stage
 
         def rate(x):
-            if first:
+            if self.rate is not None:
+                dx, on = self.rate(x, inputs)
+            elif first:
                 return self.derivative(x, inputs)
-            dx, on = self.derivative.with_gate(x, inputs)
-            first.append(on)
+            else:
+                dx, on = self.derivative.with_gate(x, inputs)
+            if not first:
+                first.append(on)
             return dx
 
         following = STEP_RULES[self.method](rate, state, dt)
@@ -101,15 +114,20 @@ def run_eager(model: nn.Module, x0: torch.Tensor, orders0: torch.Tensor, paramet
               steps: int, dt: float, method: Method) -> torch.Tensor:
     """Record (steps, B, `RECORD`) of `steps` closed-loop steps of all B maneuvers at once
     (`sysid.dynamics.integrators.step_loop`); the kNN gate decides through its leaf index,
-    each call first from a bound kept from the call before (`sysid.fast.knn_index.AnchoredGate`)."""
+    each call first from a bound kept from the call before (`sysid.fast.knn_index.AnchoredGate`);
+    the right-hand side is the model's ``no_grad_rate`` where it has one that applies (the
+    native kernel's MMG, `sysid.mmg.native`: the same numbers to round-off)."""
     from sysid.fast.prepared import indexed  # the gate's leaf index
-    step = ClosedLoopStep(indexed(model, x0.shape[0], anchored=True), method)
+    model = indexed(model, x0.shape[0], anchored=True)
+    no_grad_rate = getattr(model, "no_grad_rate", None)  # the native kernel's MMG, looked up once
     dt_t = torch.tensor(dt, dtype=x0.dtype)
+    step = ClosedLoopStep(model, method, no_grad_rate(x0) if no_grad_rate is not None else None,
+                          ManeuverOrders.held(parameters, dt_t))
 
     def advance(k: int, carry: tuple[torch.Tensor, torch.Tensor]) -> tuple[torch.Tensor, tuple]:
         x, o, u, g = step(carry[0], carry[1], parameters, dt_t * k, dt_t)
         return torch.cat((x, o, u, g), -1), (x, o)
-    with torch.no_grad():
+    with torch.no_grad(), compute_threads(1):  # a few rows a step: dispatch, which more threads only slow
         return torch.stack(step_loop(advance, (x0, orders0), steps))
 
 

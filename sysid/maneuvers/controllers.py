@@ -55,14 +55,17 @@ def initial_orders(maneuvers: Sequence[Maneuver], dtype: torch.dtype = torch.flo
     return torch.tensor([[0.0, m.side.sign if m.kind != "crash_stop" else 1.0] for m in maneuvers], dtype=dtype)  # type: ignore[union-attr]
 
 
-def rate_limited(angle: torch.Tensor, order: torch.Tensor, rate_dt: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+def rate_limited(angle: torch.Tensor, order: torch.Tensor, rate_dt: torch.Tensor,
+                 safe: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """(mean over the step, angle at its end) of a rudder at `angle` moving toward `order`
-    at most `rate_dt` [rad] per step (all (B,), rad)."""
+    at most `rate_dt` [rad] per step (all (B,), rad); `safe`: rate_dt where positive, else 1
+    (computed here when not given)."""
     gap = order - angle
     size = gap.abs()
     direction = torch.sign(gap)
     full = size >= rate_dt  # still moving at the end of the step
-    safe = torch.where(rate_dt > 0, rate_dt, torch.ones_like(rate_dt))
+    if safe is None:
+        safe = torch.where(rate_dt > 0, rate_dt, torch.ones_like(rate_dt))
     mean = torch.where(full, angle + 0.5 * direction * rate_dt, order - 0.5 * direction * size * size / safe)
     end = torch.where(full, angle + direction * rate_dt, order)
     return mean, end
@@ -91,3 +94,35 @@ class ManeuverOrders(nn.Module):
         rps = p[:, RPS_AHEAD] + ramp * (p[:, RPS_ORDER] - p[:, RPS_AHEAD])
         inputs = torch.stack((rps, mean, p[:, WIND_SPEED], p[:, WIND_DIRECTION]), -1)
         return inputs, torch.stack((end, side), -1)
+
+    @staticmethod
+    def held(parameters: torch.Tensor, dt: torch.Tensor):
+        """`forward` for fixed parameters (B, P) and step dt (), as a function (state (B, 6),
+        orders (B, 2), t ()) -> (inputs (B, 4), orders after the step (B, 2)) with what does
+        not change from step to step taken once (the eager loop's): the same operations
+        on the same numbers, so the same bits."""
+        p = parameters
+        psi0, check, rudder = p[:, PSI0], p[:, CHECK], p[:, RUDDER]
+        rate_dt = p[:, RATE] * dt
+        safe = torch.where(rate_dt > 0, rate_dt, torch.ones_like(rate_dt))
+        reversal = p[:, REVERSAL]
+        ramping = reversal > 0
+        ones = torch.ones_like(reversal)
+        divisor = torch.where(ramping, reversal, ones)
+        ahead = p[:, RPS_AHEAD]
+        span = p[:, RPS_ORDER] - ahead
+        wind = (p[:, WIND_SPEED], p[:, WIND_DIRECTION])
+        steady = None if bool(ramping.any()) else ahead + ones * span  # no ramp: the ramp is 1 throughout
+
+        def orders_over(state: torch.Tensor, orders: torch.Tensor, t: torch.Tensor):
+            angle, side = orders[:, 0], orders[:, 1]
+            deviation = state[:, 4] - psi0
+            side = torch.where(side * deviation >= check, -side, side)
+            mean, end = rate_limited(angle, side * rudder, rate_dt, safe)
+            if steady is None:
+                share = ((t + 0.5 * dt) / divisor).clamp(0.0, 1.0)
+                rps = ahead + torch.where(ramping, share, ones) * span
+            else:
+                rps = steady
+            return torch.stack((rps, mean, *wind), -1), torch.stack((end, side), -1)
+        return orders_over

@@ -118,6 +118,28 @@ class MMG(nn.Module):
         total, wind_rel, _ = self.total_force(state, inputs)
         return total.unbind(-1), as_channels(wind_rel)
 
+    def eager_rate(self, state: torch.Tensor, inputs: torch.Tensor) -> tuple[torch.Tensor, None] | None:
+        """(dx/dt (..., 6) of the equations of motion driven by F_MMG, None: no gate) without
+        gradient where `no_grad_rate` applies; else None (the torch path, `rate_terms`, which
+        this equals to round-off)."""
+        if torch.is_grad_enabled():
+            return None
+        rate = self.no_grad_rate(state)
+        return rate(state, inputs) if rate is not None else None
+
+    def no_grad_rate(self, like: torch.Tensor):
+        """A function (state (..., 6), inputs (..., 4)) -> (dx/dt (..., 6), None), one call of
+        the native kernel (`sysid.mmg.native.rate`), to call without gradient on tensors of
+        `like`'s dtype and device while the coefficients stay as they are; None where the
+        kernel does not compute this MMG's families or take such tensors."""
+        from sysid.mmg import native
+        with torch.no_grad():
+            c = self.coefficients.values_view(like.dtype)
+            if not native.covers(self) or not native.applies(like, like.new_empty(like.shape[:-1] + (4,)), c):
+                return None
+        wind = "wind" in self.families
+        return lambda state, inputs: (native.rate(state, inputs, c, wind)[..., :6], None)
+
     def rate_terms(self, state: torch.Tensor, inputs: torch.Tensor):
         """What the equations of motion need for dx/dt at state (..., 6) with inputs (..., 4),
         in one forward: the force components present, each (..., 3) = (X, Y, N) [N, N, N m],

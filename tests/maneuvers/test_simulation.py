@@ -269,3 +269,88 @@ def test_choosing_the_loop_loads_no_compiler(tmp_path):
                           env={**os.environ, "SYSID_CACHE": str(tmp_path), "SYSID_COMPILE": "1"})
     assert done.returncode == 0, done.stderr[-1000:]
     assert done.stdout.split() == ["False", "False"]  # 6000 steps, cold: eager; no compiler loaded
+
+
+def test_the_held_orders_are_the_controllers_own_to_the_bit():
+    """`ManeuverOrders.held` (what the eager loop takes once per run) gives the bits of
+    `ManeuverOrders.forward` step after step: a zig-zag that reverses, a turning circle and
+    a crash stop ramping its revolutions, along a swinging heading."""
+    from sysid.maneuvers.controllers import ManeuverOrders, initial_orders, order_parameters
+    maneuvers = [ZigZag(10.0, 10.0, "port"), TurningCircle(35.0), CrashStop(reversal_s=3.0)]
+    conditions = Conditions(0.35, 8.85, 24.1, 0.1, 10.0)
+    parameters, dt = order_parameters(maneuvers, conditions), torch.tensor(0.1, dtype=torch.float64)
+    controller, held = ManeuverOrders(), ManeuverOrders.held(parameters, dt)
+    ahead_only = ManeuverOrders.held(parameters[:2], dt)  # no ramp: the revolutions taken once
+    state = torch.zeros(3, 6, dtype=torch.float64)
+    orders = initial_orders(maneuvers)
+    reversed_once = False
+    for k in range(80):
+        state[:, 4] = 0.4 * math.sin(0.1 * k)  # [rad] heading swinging past the check angles
+        t = dt * k
+        expected = controller(state, orders, parameters, t, dt)
+        got = held(state, orders, t)
+        assert all(torch.equal(a, b) for a, b in zip(got, expected))
+        assert all(torch.equal(a, b[:2]) for a, b in zip(ahead_only(state[:2], orders[:2], t), expected))
+        reversed_once |= bool(expected[1][0, 1] != orders[0, 1])
+        orders = expected[1]
+    assert reversed_once and float(expected[0][2, 0]) == pytest.approx(-conditions.rps)  # reversed; astern reached
+
+
+def _features_hybrid() -> CorrectedModel:
+    """An Esso Osaka hybrid with a 9-32-32-3 FNN and its kNN gate in the 32 features (more
+    than `BOX_DIMENSIONS`: principal boxes), fitted on straight running and gentle turns."""
+    torch.manual_seed(2)
+    mmg = MMG(load_ship("esso_osaka"))
+    net = ForceCorrection((32, 32), torch.float64)
+    net.set_standardization(torch.tensor([0.3, 0.0, 0.0, 0.0, 8.8, 0.0, 0.0, 0.0, 0.0]),
+                            torch.tensor([0.1, 0.02, 0.01, 0.3, 1.0, 1.0, 1.0, 0.7, 0.7]),
+                            torch.zeros(3), torch.tensor([2.0, 2.0, 10.0]))
+    states = torch.zeros(2000, 6, dtype=torch.float64)
+    states[:, 1] = 0.35 + 0.03 * torch.randn(2000, dtype=torch.float64)
+    states[:, 3] = 0.01 * torch.randn(2000, dtype=torch.float64)
+    states[:, 4] = 2 * math.pi * torch.rand(2000, dtype=torch.float64)
+    states[:, 5] = 0.01 * torch.randn(2000, dtype=torch.float64)
+    inputs = torch.zeros(2000, 4, dtype=torch.float64)
+    inputs[:, 0] = 8.85
+    inputs[:, 1] = 0.3 * torch.randn(2000, dtype=torch.float64)
+    wind = torch.stack(relative_wind(states[:, 1], states[:, 3], states[:, 4], inputs[:, 2], inputs[:, 3]), -1)
+    with torch.no_grad():
+        features = net.features(correction_inputs(states, inputs, wind))
+    return CorrectedModel(mmg, net, KNNGate(k=5, alpha=0.99, features=32, dtype=torch.float64).fit(features))
+
+
+@pytest.mark.parametrize("kind", ["hybrid", "mmg"])
+def test_the_eager_loop_equals_the_torch_step_with_the_whole_bank_scan(kind):
+    """The eager loop (native MMG kernel, anchored kNN gate, FNN and orders looked up once)
+    against the step it replaced, run here: the model's own torch MMG, the gate's
+    whole-bank scan and `ManeuverOrders.forward` at every step. The same gate decision at
+    every step start and the same states to round-off (the native kernel and F_NN added
+    through the mass terms reorder the sums; the gate and the FNN give the same bits)."""
+    from sysid.device import compute_threads
+    from sysid.dynamics.integrators import step_loop
+    from sysid.maneuvers.closed_loop import ClosedLoopStep, run_eager
+    from sysid.maneuvers.controllers import initial_orders, order_parameters
+    from sysid.mmg import native
+    model = _features_hybrid() if kind == "hybrid" else MMG(load_ship("esso_osaka"))
+    maneuvers = [TurningCircle(35.0), ZigZag(20.0, 20.0, "port")]
+    conditions = Conditions(0.35, 8.85, 24.1, 0.2, 60.0)
+    x0 = torch.zeros(2, 6, dtype=torch.float64)
+    x0[:, 1] = 0.35
+    orders, parameters = initial_orders(maneuvers), order_parameters(maneuvers, conditions)
+    assert model.no_grad_rate(x0) is not None  # the native kernel computes this MMG
+    record = run_eager(model, x0, orders, parameters, conditions.steps, conditions.dt, conditions.method)
+    step, dt = ClosedLoopStep(model, conditions.method), torch.tensor(conditions.dt, dtype=torch.float64)
+
+    def advance(k, carry):
+        x, o, u, g = step(carry[0], carry[1], parameters, dt * k, dt)
+        return torch.cat((x, o, u, g), -1), (x, o)
+    with native.torch_path(), torch.no_grad(), compute_threads(1):
+        expected = torch.stack(step_loop(advance, (x0, orders), conditions.steps))
+    if kind == "hybrid":
+        on = expected[..., 12]
+        assert 0 < int(on.sum()) < on.numel()  # the turn leaves the bank: both decisions occur
+    else:
+        assert bool(torch.isnan(expected[..., 12]).all())
+    torch.testing.assert_close(record[..., 12], expected[..., 12], rtol=0, atol=0, equal_nan=True)
+    torch.testing.assert_close(record[..., 6:12], expected[..., 6:12], rtol=0, atol=1e-12)
+    torch.testing.assert_close(record[..., :6], expected[..., :6], rtol=1e-10, atol=1e-12)
