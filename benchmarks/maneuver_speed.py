@@ -19,7 +19,8 @@ Side by side with an older checkout (``--against``): the whole command ``sysid m
 --turning 35 --zigzag 20/20 --side starboard`` (one turning circle and one zig-zag, the
 default duration 80 L/U0, indices, tables, report) of this code with its default settings
 and of the older code with ``--eager`` (its eager path), each in a fresh process with a
-fresh empty compile cache (``SYSID_CACHE``, ``TORCHINDUCTOR_CACHE_DIR``: cold caches), in
+fresh empty compile cache (``SYSID_CACHE``, ``TORCHINDUCTOR_CACHE_DIR``, and ``SYSID_CACHE_DIR``: the native
+MMG kernel is built again, cold caches), in
 turn, ``--repeats`` times; wall times (with the load average before and after each) and
 their ratio:
 
@@ -104,7 +105,8 @@ def timed_command(root: Path, extra: list[str], model: str, duration: float | No
     starboard. On a loaded machine the CPU time compares two codes better than the wall."""
     with tempfile.TemporaryDirectory(prefix="maneuver-speed-") as tmp:
         env = dict(os.environ, PYTHONPATH=str(root), SYSID_CACHE=str(Path(tmp) / "sysid"),
-                   TORCHINDUCTOR_CACHE_DIR=str(Path(tmp) / "inductor"), OMP_NUM_THREADS=str(threads))
+                   SYSID_CACHE_DIR=str(Path(tmp) / "native"), TORCHINDUCTOR_CACHE_DIR=str(Path(tmp) / "inductor"),
+                   OMP_NUM_THREADS=str(threads))
         command = [sys.executable, "-m", "sysid", "maneuver", model, "-o", str(Path(tmp) / "out"), "--turning", "35",
                    "--zigzag", "20/20", "--side", "starboard", *extra]
         if duration is not None:

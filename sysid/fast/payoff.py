@@ -20,7 +20,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-MANEUVER_REPAY_STEPS = 20_000  # eager closed-loop RK4 steps that take as long as compiling a maneuver loop
+MANEUVER_REPAY_STEPS = 100_000  # eager closed-loop RK4 steps that take as long as compiling a maneuver loop
+# (a hybrid's turning circle and zig-zag side by side: about 0.8-1 ms a step through the native MMG kernel
+# and the anchored kNN gate, 2026-11-27; a cold compile of the loop 85-228 s)
 PREDICTION_REPAY_STEPS = 100_000  # eager open-loop steps that take as long as compiling a prediction
 
 
