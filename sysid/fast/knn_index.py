@@ -72,7 +72,8 @@ def leaf_partition(points: torch.Tensor, leaf: int) -> list[torch.Tensor]:
             out.append(idx)
             continue
         p = points[idx] - points[idx].mean(0)
-        direction = torch.linalg.svd(p[: 4096], full_matrices=False).Vh[0]  # (F,)
+        sample = p[: 4096]
+        direction = torch.linalg.eigh(sample.T @ sample).eigenvectors[:, -1]  # (F,): the leading right singular vector
         order = torch.argsort(p @ direction)
         half = idx.numel() // 2
         todo += [idx[order[:half]], idx[order[half:]]]
