@@ -230,6 +230,17 @@ def test_a_failed_compile_gives_the_torch_path_with_one_warning(monkeypatch, cap
     assert list(tmp_path.glob("*.so")) == []  # nothing half-written
 
 
+def test_a_cache_that_cannot_be_written_gives_the_torch_path(monkeypatch, caplog, tmp_path):
+    _fresh_process_state(monkeypatch)
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a directory")
+    monkeypatch.setenv("SYSID_CACHE_DIR", str(blocker / "cache"))
+    with caplog.at_level(logging.INFO, logger="sysid.mmg.native"):
+        assert native.library() is None
+    lines = [r for r in caplog.records if r.name == "sysid.mmg.native"]
+    assert len(lines) == 1 and "cannot build into the cache" in lines[0].getMessage()
+
+
 def test_where_the_kernel_does_not_apply(kernel):
     state, inputs = branch_rows()
     assert native.applies(state, inputs, C)
