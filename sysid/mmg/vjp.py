@@ -171,7 +171,7 @@ class _NativeTrainingRate(torch.autograd.Function):
         return native.state_gradient(jacobian, grad_rate, grad_force, grad_z), None, None, None, None, None
 
 
-def training_rate(state: torch.Tensor, inputs: torch.Tensor, c, wind: bool, mean: torch.Tensor,
+def training_rate(state: torch.Tensor, inputs: torch.Tensor, c, wind: int, mean: torch.Tensor,
                   std: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """(dx/dt of F_MMG (..., 6), F_MMG (..., 3), the FNN's standardised inputs z = (s - mean)
     / std (..., 9), Eq. 8) at state (..., 6) with inputs (..., 4), differentiable with respect
@@ -182,5 +182,8 @@ def training_rate(state: torch.Tensor, inputs: torch.Tensor, c, wind: bool, mean
     path computes the Esso Osaka's only."""
     if mean.dtype == state.dtype == std.dtype and native.applies(state, inputs, c, differentiated=True):
         return _NativeTrainingRate.apply(state, inputs, c, wind, mean, std)
-    rate, force, s = mmg_rate(state, inputs, c, wind).split_with_sizes((6, 3, 9), -1)
+    if int(wind) & ~int(native.Families.WIND):
+        raise ValueError(f"families {native.Families(int(wind))!r}: the torch path computes the Esso Osaka's "
+                         "only (call where `sysid.mmg.native.applies` holds)")
+    rate, force, s = mmg_rate(state, inputs, c, bool(wind)).split_with_sizes((6, 3, 9), -1)
     return rate, force, (s.to(mean.dtype) - mean) / std

@@ -386,3 +386,14 @@ def test_a_kvlcc2_training_rollout_through_the_kernel_equals_autograd(kernel):
         assert a.dtype == dtype
         torch.testing.assert_close(a, b, rtol=2e-5, atol=2e-5 * float(b.abs().max()))
         torch.testing.assert_close(f, b, rtol=2e-5, atol=2e-5 * float(b.abs().max()))
+
+
+def test_the_torch_vjp_computes_only_the_esso_osakas_families(kernel):
+    """Where the kernel does not apply, the hand-derived torch VJP refuses the standard
+    families in one line (it has the Esso Osaka's derivatives only)."""
+    from sysid.mmg.vjp import training_rate
+    state, inputs = standard_rows()
+    c = MMG(KVLCC2).coefficients.values_view(torch.float64)
+    mean, std = torch.zeros(9, dtype=torch.float64), torch.ones(9, dtype=torch.float64)
+    with native.torch_path(), pytest.raises(ValueError, match="computes the Esso Osaka's only"):
+        training_rate(state, inputs, c, Families.HULL_STANDARD | Families.PROPELLER_STANDARD, mean, std)
