@@ -23,7 +23,7 @@ from sysid.hybrid.force_models import CorrectedModel, PerMember
 from sysid.mmg import native
 from sysid.mmg.families import FAMILIES
 from sysid.mmg.model import MMG
-from sysid.mmg.ship import load_ship
+from sysid.mmg.ship import active_parameters, load_ship
 from sysid.mmg.vjp import rate_with_jacobian
 from mmg_rows import ESSO, branch_rows, reference, rows_of, switch_rows
 
@@ -41,6 +41,7 @@ def _with_families(ship, donor, components, models=None):
     parameters = dict(ship.parameters)
     for component in set(components) | set(models or {}):
         parameters.update({k: donor.parameters[k] for k in FAMILIES[component][chosen[component]].parameters})
+    parameters = {k: parameters[k] for k in active_parameters(chosen)}  # the mix's parameters only
     return dataclasses.replace(ship, name=f"{ship.name}+{donor.name}", models=MappingProxyType(chosen),
                                parameters=MappingProxyType(parameters))
 
