@@ -1,33 +1,38 @@
-"""The MMG right-hand side of the Esso Osaka's families as one native call per batch.
+"""The MMG right-hand side of the Esso Osaka's and the standard families as one native call per batch.
 
 `native_kernel.cpp` (shipped beside this module) computes, row by row in double, what
 `sysid.mmg.vjp.rate_with_jacobian` computes with some 400 torch operations: the MMG of
 Yoshimura's hull (exact cross-flow integrals), the four-quadrant propeller and rudder and
-Fujiwara's wind (or none), the equations-of-motion rate, the FNN's inputs s and, by
-forward-mode dual numbers over the same code, their Jacobian with respect to the state. The
-branches and their derivatives are `sysid.mmg.tangents`' (the branch the forward takes).
+Fujiwara's wind (or none), or the standard MMG families of Yasukawa & Yoshimura
+(`sysid.mmg.hull_standard`, `propeller_standard` with either wake, `rudder_standard`) in any mix
+`families_of` allows, the equations-of-motion rate, the FNN's inputs s and, by forward-mode
+dual numbers over the same code, their Jacobian with respect to the state. The branches and
+their derivatives are `sysid.mmg.tangents`' and the standard modules' (the branch the forward
+takes, as autograd).
 
 The public face, for states (..., 6) = (x, u, y, v, psi, r) and inputs (..., 4) = (n [rps],
 delta [rad], U_T [m/s], zeta [rad]) on the CPU, float32 or float64 (both the same dtype),
 ``c`` a values view of the coefficients (`sysid.mmg.coefficients.Coefficients.values_view`)
-and ``wind`` True where the ship has Fujiwara's wind (``"wind" in mmg.families``):
+and ``families`` the MMG's `Families` (`families_of`; ``True``/``False``: the Esso Osaka's
+with/without Fujiwara's wind), parsed once from the ship's families:
 
-* ``rate(state, inputs, c, wind) -> out (..., 18)``: dx/dt of F_MMG (6), F_MMG (3) [N, N,
+* ``rate(state, inputs, c, families) -> out (..., 18)``: dx/dt of F_MMG (6), F_MMG (3) [N, N,
   N m], s (9) in `sysid.hybrid.correction.INPUT_NAMES` order; no gradient (a no-grad
   right-hand side: maneuvers, predictions). dx/dt of the total force is ``out[..., :6] +
   F_NN @ sysid.mmg.vjp.force_rate(c, state)``.
-* ``rate_with_jacobian(state, inputs, c, wind) -> (out (..., 18), jacobian (..., 6, 18))``,
+* ``rate_with_jacobian(state, inputs, c, families) -> (out (..., 18), jacobian (..., 6, 18))``,
   jacobian[..., i, j] = d out_j / d state_i; ``training_rate`` the same with s standardised
   for the FNN and the outputs apart, ``state_gradient`` its vector-Jacobian product (the
   training path, `sysid.mmg.vjp.training_rate`).
-* ``covers(mmg)``: the MMG's families are the ones the kernel computes (exact quadrature);
+* ``covers(mmg)``: the MMG's families are ones the kernel computes (`families_of` is not
+  None; exact quadrature);
   ``applies(state, inputs, c)``: the library is loaded and these tensors can be passed to it
   (CPU, float32/float64, no autograd or torch.func transform through them, no capture for
   compiled code, constant coefficients; not inside ``torch_path()``). Call `rate` or
   `rate_with_jacobian` only where both hold; elsewhere compute through torch
   (`sysid.mmg.vjp`, `MMG`).
 * ``forward(mmg, state, inputs) -> out (..., 18) or None``: `rate` for an `MMG` where both
-  hold (its values view, its wind), None where the caller computes through torch.
+  hold (its values view, its families), None where the caller computes through torch.
 
 The library is compiled on first use with the system's C++ compiler (``$CXX``, else ``c++``
 or ``g++``; flags `FLAGS`: no fast-math, no host-specific code, so every machine computes the

@@ -1,9 +1,11 @@
-// The MMG right-hand side of the Esso Osaka's families, row by row, in double.
+// The MMG right-hand side of the Esso Osaka's families and the standard ones (Yasukawa &
+// Yoshimura 2015), chosen per call by the `Families` flags (`families`), row by row, in double.
 //
 // One template on the scalar type T: `double` gives the values, `Dual` (a value and its
 // tangents with respect to u, v, psi, r: nothing depends on x, y) gives them with their Jacobian,
 // by forward-mode differentiation of the same code (no derivative written by hand). The
-// formulas and every branch follow `sysid.mmg.tangents` (the derivative of the branch the
+// formulas and every branch follow `sysid.mmg.tangents` and `sysid.mmg.hull_standard`,
+// `propeller_standard`, `rudder_standard` (the derivative of the branch the
 // forward takes; clamp passes the derivative on its closed interval; |x| and sign give
 // sign(x) and 0 at 0; sqrt(max(x, 0)) gives 0 for x <= 0; atan2 and hypot give 0 at the
 // origin).
