@@ -148,13 +148,38 @@ def test_identified_coefficients_are_the_views_values(kernel):
     assert not torch.allclose(out, native.rate(state, inputs, C))
 
 
-def _rollout(model, states, inputs):
-    pred, f_nn, f_mmg = integrate_training(model, states[0], inputs, 0.1)
+def _rollout(model, states, inputs, fast=True):
+    pred, f_nn, f_mmg = integrate_training(model, states[0], inputs, 0.1, fast)
     loss = pred.square().mean() + f_nn.square().mean() + f_mmg.square().mean()
     net = model.model.correction_net
     net.zero_grad()
     loss.backward()
     return [loss.detach(), pred.detach()] + [p.grad.clone() for p in net.parameters()]
+
+
+def _hybrid(ship, states, dtype, force_scale):
+    """A two-member hybrid of `ship` whose FNN is standardised on `states` (seeded)."""
+    torch.manual_seed(0)
+    net = ForceCorrection((16, 16), dtype, members=2)
+    flat = states.reshape(-1, 6)
+    net.set_standardization(flat.mean(0).repeat(2)[:9], flat.std(0).repeat(2)[:9] + 0.1,
+                            torch.zeros(3), torch.tensor(force_scale))
+    return PerMember(CorrectedModel(MMG(ship, dtype=dtype), net))
+
+
+def _rollout_through_the_kernel(model, states, inputs):
+    """`_rollout` and the dtype of every `native.training_rate` call it made."""
+    calls = []
+    original = native.training_rate
+
+    def counted(*args):
+        calls.append(args[0].dtype)
+        return original(*args)
+    native.training_rate = counted
+    try:
+        return _rollout(model, states, inputs), calls
+    finally:
+        native.training_rate = original
 
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
@@ -164,23 +189,8 @@ def test_a_training_rollout_equals_the_torch_path(kernel, d2_rows, dtype):
     state, inputs = d2_rows
     states = state.reshape(11, -1, 6)[:, :256].to(dtype).unsqueeze(1).expand(-1, 2, -1, -1)
     u = inputs.reshape(11, -1, 4)[:, :256].to(dtype).unsqueeze(1).expand(-1, 2, -1, -1)
-    torch.manual_seed(0)
-    net = ForceCorrection((16, 16), dtype, members=2)
-    flat = states.reshape(-1, 6)
-    net.set_standardization(flat.mean(0).repeat(2)[:9], flat.std(0).repeat(2)[:9] + 0.1,
-                            torch.zeros(3), torch.tensor([2.0, 3.0, 1.5]))
-    model = PerMember(CorrectedModel(MMG(load_ship("esso_osaka"), dtype=dtype), net))
-    calls = []
-    original = native.training_rate
-
-    def counted(*args):
-        calls.append(args[0].dtype)
-        return original(*args)
-    native.training_rate = counted
-    try:
-        new = _rollout(model, states, u)
-    finally:
-        native.training_rate = original
+    model = _hybrid(load_ship("esso_osaka"), states, dtype, [2.0, 3.0, 1.5])
+    new, calls = _rollout_through_the_kernel(model, states, u)
     with native.torch_path():
         old = _rollout(model, states, u)
     assert calls == [dtype] * 10  # the rollout went through the kernel
@@ -355,32 +365,10 @@ def test_a_kvlcc2_training_rollout_through_the_kernel_equals_autograd(kernel):
     keep = state[:, 1] > 0.2  # ahead motion, as in training logs
     states = state[keep][:128].to(dtype).expand(11, 2, -1, -1)
     u = inputs[keep][:128].to(dtype).expand(11, 2, -1, -1)
-    torch.manual_seed(0)
-    net = ForceCorrection((16, 16), dtype, members=2)
-    flat = states.reshape(-1, 6)
-    net.set_standardization(flat.mean(0).repeat(2)[:9], flat.std(0).repeat(2)[:9] + 0.1,
-                            torch.zeros(3), torch.tensor([20.0, 30.0, 15.0]))
-    model = PerMember(CorrectedModel(MMG(KVLCC2, dtype=dtype), net))
-    calls = []
-    original = native.training_rate
-
-    def counted(*args):
-        calls.append(args[0].dtype)
-        return original(*args)
-    native.training_rate = counted
-    try:
-        new = _rollout(model, states, u)
-    finally:
-        native.training_rate = original
+    model = _hybrid(KVLCC2, states, dtype, [20.0, 30.0, 15.0])
+    new, calls = _rollout_through_the_kernel(model, states, u)
     assert calls == [dtype] * 10  # the rollout went through the kernel
-
-    def autograd_rollout(model, states, inputs):
-        pred, f_nn, f_mmg = integrate_training(model, states[0], inputs, 0.1, fast=False)
-        loss = pred.square().mean() + f_nn.square().mean() + f_mmg.square().mean()
-        model.model.correction_net.zero_grad()
-        loss.backward()
-        return [loss.detach(), pred.detach()] + [p.grad.clone() for p in model.model.correction_net.parameters()]
-    old = autograd_rollout(model, states, u)
+    old = _rollout(model, states, u, fast=False)  # autograd over every operation
     with native.torch_path():  # a step the kernel does not take: autograd over the forward
         fallback = _rollout(model, states, u)
     for a, b, f in zip(new, old, fallback):
