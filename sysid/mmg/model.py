@@ -133,12 +133,12 @@ class MMG(nn.Module):
         `like`'s dtype and device while the coefficients stay as they are; None where the
         kernel does not compute this MMG's families or take such tensors."""
         from sysid.mmg import native
+        families = native.families_of(self)
         with torch.no_grad():
             c = self.coefficients.values_view(like.dtype)
-            if not native.covers(self) or not native.applies(like, like.new_empty(like.shape[:-1] + (4,)), c):
+            if families is None or not native.applies(like, like.new_empty(like.shape[:-1] + (4,)), c):
                 return None
-        wind = "wind" in self.families
-        return lambda state, inputs: (native.rate(state, inputs, c, wind)[..., :6], None)
+        return lambda state, inputs: (native.rate(state, inputs, c, families)[..., :6], None)
 
     def rate_terms(self, state: torch.Tensor, inputs: torch.Tensor):
         """What the equations of motion need for dx/dt at state (..., 6) with inputs (..., 4),
