@@ -16,20 +16,29 @@ with --ops the aten operations dispatched by one right-hand-side call of the tra
 of the training path with the MMG's hand-derived VJP (`sysid.mmg.vjp`) and its backward;
 with --vjp the step through the hand-derived VJP (the training default) beside the step
 through autograd (the path before it), interleaved, wall and CPU time, and both losses;
-with --converge also the wall time of a whole training to its early stop; with
+with --native the step through the native MMG kernel (`sysid.mmg.native`, the training default
+where it is built) beside the step through the torch VJP and through autograd, interleaved, wall
+and CPU time, the losses, and the kernel's first-use build with a cold and a warm cache; with
+--against DIR also the step of the checkout at DIR (its own code, in a subprocess started once,
+alternating with this one's; e.g. /work/wt-trainspeed-base at 0928648); with --profile the
+operators of this step by CPU time (torch.profiler); with --converge also the wall time of a whole training to its early stop; with
 --parts the CPU time of the pieces of an epoch and of the seed ensembles' evaluation, each
 beside the way it was done before (interleaved repeats, medians of process CPU time, which a
 machine shared with other jobs disturbs less than wall time).
 
     python benchmarks/training_speed.py [--data DIR] [--threads 1] [--only D2] [--batches 256] [--members K]
-        [--limit] [--vjp] [--ops] [--converge] [--parts]
+        [--limit] [--vjp] [--native] [--against DIR] [--profile] [--ops] [--converge] [--parts]
 """
 from __future__ import annotations
 
 import argparse
 import os
 import statistics
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 import torch
 
@@ -45,19 +54,23 @@ from sysid.identify.trainer import Trainer, multistep_loss, split_windows
 CONFIGS = {"D1": "configs/experiments/hybrid_D1.toml", "D2": "configs/experiments/hybrid_D2.toml"}
 
 
-def training_step(exp, train, batch: int, members: int | None = None, fast: bool = True):
+def training_step(exp, train, batch: int, members: int | None = None, fast: bool = True, trainer: bool = False):
     """One training step (forward, backward, Adam) on the first `batch` windows, as a
     function, and its loss function: the multi-step loss L_v + 1e-3 L_F through the
-    hand-derived VJP of the MMG (`fast`, the training default) or through autograd."""
+    hand-derived VJP of the MMG (`fast`, the training default) or through autograd; with
+    `trainer`, the step as `Trainer` takes it: lambda_v L_v + lambda_F L_F + lambda_L2
+    |theta|^2 of the config, Adam with ``foreach`` (`_WORKER`'s step)."""
     from sysid.dynamics.equations import integrate_training
-    from sysid.identify.trainer import VEL, output_penalty, velocity_loss
+    from sysid.identify.trainer import VEL, adam, output_penalty, velocity_loss, weight_norm
     torch.manual_seed(0)
     mmg = build_mmg(exp, torch.float32).requires_grad_(False)
     net = ForceCorrection(exp.network.hidden, torch.float32, members or exp.network.members)
     model = PerMember(CorrectedModel(mmg, net, None, True, exp.gate.space))
     w_v = 1.0 / train.states[:, :, [1, 3, 5]].reshape(-1, 3).var(0)
     w_F = torch.ones(3)
-    opt = torch.optim.Adam(net.parameters(), 1e-3)
+    t = exp.training
+    lambdas = (t.lambda_v, t.lambda_F, t.lambda_L2) if trainer else (1.0, 1e-3, 0.0)
+    opt = adam(net.parameters(), t.learning_rate) if trainer else torch.optim.Adam(net.parameters(), 1e-3)
     chunk = train.select(torch.arange(min(batch, len(train))))
     k = net.members
     states = chunk.states.unsqueeze(1).expand(-1, k, -1, -1)
@@ -66,7 +79,8 @@ def training_step(exp, train, batch: int, members: int | None = None, fast: bool
     def loss():
         pred, f_nn, f_mmg = integrate_training(model, states[0], inputs, chunk.dt, fast)
         loss_v = velocity_loss(pred[1:, ..., VEL] - states[1:, ..., VEL], w_v)
-        return loss_v + 1e-3 * output_penalty(f_nn, f_mmg, w_F).mean()
+        value = lambdas[0] * loss_v + lambdas[1] * output_penalty(f_nn, f_mmg, w_F).mean()
+        return value + lambdas[2] * weight_norm(net) if trainer else value
 
     def step():
         value = loss()
@@ -112,6 +126,144 @@ def vjp_comparison(exp, train, batch: int, repeats: int = 5, rounds: int = 5) ->
           f"({rounds} interleaved rounds of {repeats} steps, medians): wall {1e3 * w_new:.1f} against "
           f"{1e3 * w_old:.1f} ms/step ({w_old / w_new:.2f}x), CPU {1e3 * c_new:.1f} against {1e3 * c_old:.1f} "
           f"ms/step ({c_old / c_new:.2f}x); loss before the first step {losses[1]:.9g} against {losses[0]:.9g}")
+
+
+# the step of another checkout (PYTHONPATH set to it) as its `Trainer` takes it; run
+# as a worker that reads a number of steps per line and answers "wall cpu" seconds per step
+_WORKER = r"""
+import sys, time, torch
+from sysid.config.experiment import load_experiment
+from sysid.hybrid.correction import ForceCorrection
+from sysid.hybrid.force_models import CorrectedModel, PerMember, build_mmg
+from sysid.identify.trainer import adam, multistep_loss, split_windows, weight_norm
+from sysid.runs.lifecycle import training_runs
+config, data, batch, threads = sys.argv[1], sys.argv[2] or None, int(sys.argv[3]), int(sys.argv[4])
+torch.set_num_threads(threads)
+exp = load_experiment(config)
+t = exp.training
+train = split_windows(training_runs(exp, data), t.steps, t.stride_s, t.val_fraction, True, torch.float32,
+                      t.block_s, exp.experiment.seed)[0]
+torch.manual_seed(0)
+net = ForceCorrection(exp.network.hidden, torch.float32, 1)
+model = PerMember(CorrectedModel(build_mmg(exp, torch.float32).requires_grad_(False), net, None, True, exp.gate.space))
+w_v = 1.0 / train.states[:, :, [1, 3, 5]].reshape(-1, 3).var(0)
+opt = adam(net.parameters(), t.learning_rate)
+chunk = train.select(torch.arange(min(batch, len(train))))
+def loss():
+    loss_v, loss_F = multistep_loss(model, chunk, w_v, torch.ones(3))
+    return t.lambda_v * loss_v + t.lambda_F * loss_F + t.lambda_L2 * weight_norm(net)
+def step():
+    value = loss()
+    opt.zero_grad()
+    value.backward()
+    opt.step()
+with torch.no_grad():
+    first = float(loss())
+step()
+print("ready", first, flush=True)
+for line in sys.stdin:
+    n = int(line)
+    wall, cpu = time.perf_counter(), time.process_time()
+    for _ in range(n):
+        step()
+    print((time.perf_counter() - wall) / n, (time.process_time() - cpu) / n, flush=True)
+"""
+
+
+class CheckoutStep:
+    """The training step of the checkout at `directory`, in a worker process (`_WORKER`)."""
+
+    def __init__(self, directory: str, config: str, data: str | None, batch: int, threads: int):
+        env = dict(os.environ, PYTHONPATH=str(Path(directory).resolve()))
+        self.process = subprocess.Popen([sys.executable, "-c", _WORKER, config, data or "", str(batch), str(threads)],
+                                        cwd=directory, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                        text=True)
+        ready = self.process.stdout.readline().split()
+        if not ready or ready[0] != "ready":
+            raise SystemExit(f"training_speed: the step of {directory} did not start")
+        self.first_loss = float(ready[1])
+
+    def times(self, steps: int) -> tuple[float, float]:
+        """(wall, CPU) seconds per step over `steps` steps."""
+        self.process.stdin.write(f"{steps}\n")
+        self.process.stdin.flush()
+        wall, cpu = self.process.stdout.readline().split()
+        return float(wall), float(cpu)
+
+    def close(self) -> None:
+        self.process.stdin.close()
+        self.process.wait()
+
+
+def native_comparison(exp, config: str, train, batch: int, data: str | None, against: str | None, threads: int,
+                      repeats: int = 5, rounds: int = 5) -> None:
+    """The step as `Trainer` takes it through the native kernel, through the torch VJP
+    (`sysid.mmg.native.torch_path`) and through autograd, with `against`'s step (another checkout) when given, interleaved:
+    medians of wall and CPU time per step, their ratios, the losses before the first step; and
+    the kernel's build with a cold cache (a fresh directory) and a warm one."""
+    from sysid.mmg import native
+    with tempfile.TemporaryDirectory() as scratch:
+        cold = native.build(Path(scratch))
+        warm = native.build(Path(scratch))
+    print(f"native kernel: first use with a cold cache {cold.seconds:.2f} s (compiled: {cold.compiled}), "
+          f"with a warm cache {1e3 * warm.seconds:.1f} ms (compiled: {warm.compiled})")
+    if not native.available():
+        raise SystemExit("training_speed: the native kernel is not available here (see the log line above)")
+
+    def via_torch(fn):
+        def run():
+            with native.torch_path():
+                return fn()
+        return run
+    new, new_loss = training_step(exp, train, batch, 1, fast=True, trainer=True)
+    vjp, vjp_loss = training_step(exp, train, batch, 1, fast=True, trainer=True)
+    old, old_loss = training_step(exp, train, batch, 1, fast=False, trainer=True)
+    steps = {"native": new, "torch VJP": via_torch(vjp), "autograd": old}
+    losses = {"native": new_loss(), "torch VJP": via_torch(vjp_loss)(), "autograd": old_loss()}
+    losses = {k: float(v.detach()) for k, v in losses.items()}
+    checkout = CheckoutStep(against, config, data, batch, threads) if against else None
+    wall: dict[str, list[float]] = {k: [] for k in [*steps, "against"]}
+    cpu: dict[str, list[float]] = {k: [] for k in [*steps, "against"]}
+    try:
+        for _ in range(rounds):
+            for label, step in steps.items():
+                step()
+                start, start_cpu = time.perf_counter(), time.process_time()
+                for _ in range(repeats):
+                    step()
+                wall[label].append((time.perf_counter() - start) / repeats)
+                cpu[label].append((time.process_time() - start_cpu) / repeats)
+            if checkout is not None:
+                w, c = checkout.times(repeats)
+                wall["against"].append(w)
+                cpu["against"].append(c)
+    finally:
+        if checkout is not None:
+            checkout.close()
+    med_w = {k: statistics.median(v) for k, v in wall.items() if v}
+    med_c = {k: statistics.median(v) for k, v in cpu.items() if v}
+    print(f"step, batch {min(batch, len(train))}, T = {exp.training.steps}, K = 1 ({rounds} interleaved rounds of "
+          f"{repeats} steps, medians; ratios: the other's time over the native step's)")
+    print(f"{'':12s} {'wall ms':>8} {'ratio':>7} {'CPU ms':>8} {'ratio':>7}  loss before the first step")
+    for label in med_w:
+        name = f"{against}" if label == "against" else label
+        loss = checkout.first_loss if label == "against" else losses[label]
+        print(f"{label:12s} {1e3 * med_w[label]:8.1f} {med_w[label] / med_w['native']:6.2f}x "
+              f"{1e3 * med_c[label]:8.1f} {med_c[label] / med_c['native']:6.2f}x  {loss:.9g}"
+              + (f" ({name}, its own code)" if label == "against" else ""))
+
+
+def profile_step(exp, train, batch: int, rows: int = 25) -> None:
+    """The operators of the training step (native kernel) by self CPU time, torch.profiler."""
+    from torch.profiler import ProfilerActivity, profile
+    step = training_step(exp, train, batch, 1, fast=True, trainer=True)[0]
+    for _ in range(3):
+        step()
+    with profile(activities=[ProfilerActivity.CPU]) as prof:
+        for _ in range(10):
+            step()
+    print(f"torch.profiler, 10 steps, batch {min(batch, len(train))}:")
+    print(prof.key_averages().table(sort_by="self_cpu_time_total", row_limit=rows))
 
 
 def compiled_comparison(exp, train, batch: int, repeats: int = 5) -> None:
@@ -455,6 +607,11 @@ def main() -> None:
     parser.add_argument("--ops", action="store_true", help="also count the operations of one right-hand-side call")
     parser.add_argument("--vjp", action="store_true",
                         help="also the step through the MMG's hand-derived VJP beside the step through autograd")
+    parser.add_argument("--native", action="store_true",
+                        help="also the step through the native MMG kernel beside the torch VJP and autograd")
+    parser.add_argument("--against", default=None, metavar="DIR",
+                        help="with --native: also the step of the checkout at DIR (its own code, a subprocess)")
+    parser.add_argument("--profile", action="store_true", help="also the step's operators by CPU time")
     parser.add_argument("--converge", action="store_true", help="also train each config to its early stop")
     parser.add_argument("--parts", action="store_true", help="CPU time of an epoch's pieces, before and after")
     args = parser.parse_args()
@@ -510,6 +667,10 @@ def main() -> None:
             operation_counts(exp, train, t.batch_size)
         if args.vjp:
             vjp_comparison(exp, train, t.batch_size)
+        if args.native:
+            native_comparison(exp, path, train, t.batch_size, args.data, args.against, args.threads)
+        if args.profile:
+            profile_step(exp, train, t.batch_size)
         if args.compiled:
             compiled_comparison(exp, train, t.batch_size)
         if args.parts:

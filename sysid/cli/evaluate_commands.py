@@ -160,8 +160,8 @@ def _window_work(runs, horizons) -> list[tuple[int, int]]:
 
     work = []
     for h in horizons:
-        samples = {window_samples("--horizon", h, run.dt) for run in runs}
-        windows = sum(len(protocol_windows(len(run), window_samples("--horizon", h, run.dt))) for run in runs)
+        samples = [window_samples("--horizon", h, run.dt) for run in runs]
+        windows = sum(len(protocol_windows(len(run), n)) for run, n in zip(runs, samples))
         if windows:
             work.append((windows, max(samples) - 1))
     return work

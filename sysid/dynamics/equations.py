@@ -267,7 +267,7 @@ def integrate_training(force_model: nn.Module, x0: torch.Tensor, inputs: torch.T
     check_shapes(x0, inputs)
     if inputs.shape[0] < 2:
         raise ValueError("no steps: inputs need at least two rows")
-    rhs = TrainingDynamics(rate, inputs, dt)
+    rhs = TrainingDynamics(rate, inputs.contiguous(), dt)  # each step's inputs one contiguous slice
     tau = torch.arange(inputs.shape[0], dtype=x0.dtype, device=x0.device)
     states = odeint(rhs, x0, tau, method=_ODEINT_NAME[Method.EULER])
     return states, torch.stack(rhs.f_nn), torch.stack(rhs.f_mmg)

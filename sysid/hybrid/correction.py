@@ -92,6 +92,25 @@ class ForceCorrection(nn.Module):
             return force, z
         return force.mean(0), z[0]
 
+    def evaluate_standardized(self, z: torch.Tensor, per_member: bool = False) -> torch.Tensor:
+        """F_NN [N, N, N m] for inputs already standardised, z = (s - mu_s) / sigma_s (Eq. 8):
+        `evaluate`'s force without its features (what a training step differentiates); with
+        `per_member`, z is (K, ..., 9) and each member's force (K, ..., 3) comes back, else the
+        members' mean. The layers run on (K, rows, width) with the bias added inside the
+        product (`torch.baddbmm`): fewer operations forward and backward than `layers`, the
+        same numbers to round-off."""
+        if not per_member:
+            z = z.expand(self.members, *z.shape)
+        shape = z.shape[:-1]
+        h = z.reshape(self.members, -1, z.shape[-1])
+        last = len(self.weights) - 1
+        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
+            h = torch.baddbmm(b.unsqueeze(1), h, w)
+            if i < last:
+                h = torch.tanh(h)
+        force = h.view(*shape, h.shape[-1]) * self.output_std + self.output_mean
+        return force if per_member else force.mean(0)
+
     def standardize_inputs(self, s: torch.Tensor) -> torch.Tensor:
         """s-bar = (s - mu_s) / sigma_s (Eq. 8), (..., 9), in the parameters' dtype."""
         return (s.to(self.input_mean.dtype) - self.input_mean) / self.input_std

@@ -18,7 +18,7 @@ from sysid.config.experiment import Experiment, ship_overrides
 from sysid.mmg.coefficients import Coefficients
 from sysid.mmg.model import MMG, ForceBreakdown
 from sysid.mmg.tangents import supported
-from sysid.mmg.vjp import force_rate, mmg_rate
+from sysid.mmg.vjp import force_rate, training_rate as mmg_training_rate
 from sysid.mmg.wind import relative_wind
 from sysid.hybrid.knn_gate import KNNGate
 from sysid.mmg.ship import load_ship
@@ -154,8 +154,8 @@ class CorrectedModel(nn.Module):
 
         def rate(state: torch.Tensor, inputs: torch.Tensor):
             c = coefficients.values_view(state.dtype)
-            rate_mmg, f_mmg, s = mmg_rate(state, inputs, c, wind).split_with_sizes((6, 3, 9), -1)
-            f_nn = net.evaluate(s, per_member=per_member)[0].to(state.dtype)
+            rate_mmg, f_mmg, z = mmg_training_rate(state, inputs, c, wind, net.input_mean, net.input_std)
+            f_nn = net.evaluate_standardized(z, per_member=per_member).to(state.dtype)
             return torch.addmm(rate_mmg.reshape(-1, 6), f_nn.reshape(-1, 3), force_rate(c, state)).view(
                 state.shape), f_nn, f_mmg
         return rate

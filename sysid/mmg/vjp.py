@@ -8,8 +8,10 @@
 * the FNN's inputs s (..., 9) in `sysid.hybrid.correction.INPUT_NAMES` order (u, v_m, r,
   delta, n_p, omega_u, omega_v, cos psi, sin psi),
 
-computed without autograd (`sysid.mmg.tangents`: the values and their Jacobian with respect to
-the state, the chain rule written out). Its backward is the vector-Jacobian product, one
+computed without autograd: by the native kernel (`sysid.mmg.native`: one call per batch,
+where it is built and the tensors are on the CPU) or by `sysid.mmg.tangents` (the values and
+their Jacobian with respect to the state, the chain rule written out in torch), the same
+numbers to round-off. Its backward is the vector-Jacobian product, one
 batched product: what a training step differentiates in place of autograd's record of every
 operation of the MMG, the FNN's inputs and the equations of motion. The inputs get no
 gradient (recorded, constant); the coefficients none either (`sysid.mmg.tangents.supported`
@@ -19,6 +21,7 @@ from __future__ import annotations
 
 import torch
 
+from sysid.mmg import native
 from sysid.mmg.coefficient_lookup import Rows, coefficient_matrix
 from sysid.mmg.tangents import basis, forces_with_tangents
 
@@ -88,7 +91,10 @@ def _kinematic_tables(like: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
 
 def rate_with_jacobian(state: torch.Tensor, inputs: torch.Tensor, c, wind: bool = True):
     """(out (..., 18) as `mmg_rate` returns it, its Jacobian (..., 6, 18): entry [i, j] is
-    d out_j / d state_i), without autograd."""
+    d out_j / d state_i), without autograd: through the native kernel where it applies
+    (`sysid.mmg.native.applies`), else through torch (`sysid.mmg.tangents`)."""
+    if native.applies(state, inputs, c):
+        return native.rate_with_jacobian(state, inputs, c, wind)
     t = forces_with_tangents(state, inputs, c, wind)
     rate, d_rate, cos_sin = _rate_with_tangents(state, t.force, t.d_force, c)
     _, u, _, v, _, r = state.split_with_sizes([1] * 6, -1)
@@ -136,3 +142,33 @@ def mmg_rate(state: torch.Tensor, inputs: torch.Tensor, c, wind: bool = True) ->
     state by its hand-derived VJP. `c` is the coefficients' values view (constants), `wind`
     adds Fujiwara's wind force."""
     return _MMGRate.apply(state, inputs, c, wind)
+
+
+class _NativeTrainingRate(torch.autograd.Function):
+    """(state, inputs) -> (dx/dt of F_MMG, F_MMG, z) by the native kernel; backward: the
+    outputs' gradients times the Jacobian, by the kernel too."""
+
+    @staticmethod
+    def forward(ctx, state, inputs, c, wind, mean, std):
+        ctx.set_materialize_grads(False)
+        rate, force, z, jacobian = native.training_rate(state, inputs, c, wind, mean, std)
+        ctx.save_for_backward(jacobian)
+        return rate, force, z
+
+    @staticmethod
+    def backward(ctx, grad_rate, grad_force, grad_z):
+        (jacobian,) = ctx.saved_tensors
+        return native.state_gradient(jacobian, grad_rate, grad_force, grad_z), None, None, None, None, None
+
+
+def training_rate(state: torch.Tensor, inputs: torch.Tensor, c, wind: bool, mean: torch.Tensor,
+                  std: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(dx/dt of F_MMG (..., 6), F_MMG (..., 3), the FNN's standardised inputs z = (s - mean)
+    / std (..., 9), Eq. 8) at state (..., 6) with inputs (..., 4), differentiable with respect
+    to the state by the hand-derived VJP: one call of the native kernel forward and one
+    backward where it applies (`sysid.mmg.native.applies`; `mean`, `std` (9,) in the state's
+    dtype), else `mmg_rate` and the standardisation in torch."""
+    if mean.dtype == state.dtype == std.dtype and native.applies(state, inputs, c, differentiated=True):
+        return _NativeTrainingRate.apply(state, inputs, c, wind, mean, std)
+    rate, force, s = mmg_rate(state, inputs, c, wind).split_with_sizes((6, 3, 9), -1)
+    return rate, force, (s.to(mean.dtype) - mean) / std

@@ -93,6 +93,24 @@ def run_case(name: str, dataset: Path, root: Path, out: Path) -> dict:
             "w_v": trainer.velocity_weights_, "checkpoint": saved}
 
 
+def _autograd_gradient(self, z, target_T, loss: bool = False):
+    """`OneStepRegression.gradient` through autograd on the network's own layers: the one-piece
+    trainer's forward pass and backward, its gradients copied into the flat ``grad``."""
+    import torch
+    from sysid.identify.losses import weight_norm
+    net = self.net
+    with torch.no_grad():
+        for q, v in zip(self.parameters, self.views):
+            q.copy_(v)
+    net.zero_grad()
+    with torch.enable_grad():
+        value = ((net.layers(z)[0] - target_T.T) ** 2).mean() + self.lambda_L2 * weight_norm(net)
+        value.backward()
+    for d, q in zip(self.grads, self.parameters):
+        d.copy_(q.grad)
+    return value.detach() if loss else None
+
+
 def main(dataset: str, root: str, out: str, *names: str) -> None:
     import torch
     from sysid.device import compute_threads
@@ -103,6 +121,14 @@ def main(dataset: str, root: str, out: str, *names: str) -> None:
         # trainer's parts; the MMG's hand-derived VJP (the training default, equal to round-off,
         # not bit for bit) is compared with autograd in tests/mmg/test_vjp.py
         force_models.CorrectedModel.training_rate = lambda self, per_member=False: None
+    import importlib.util
+    if importlib.util.find_spec("sysid.identify.warm_start") is not None:  # not in the one-piece trainer
+        from sysid.identify import warm_start
+        if hasattr(warm_start, "OneStepRegression"):
+            # the warm start's gradient through autograd, as the one-piece trainer computed it; the
+            # closed-form gradient (equal to round-off) is compared with autograd in
+            # tests/identify/test_warm_start.py, and its flat Adam is torch's to the bit
+            warm_start.OneStepRegression.gradient = _autograd_gradient
     results = {"package": sysid.__file__}
     with compute_threads(1):
         for name in names or [*CASES, *RESUMED]:
