@@ -73,8 +73,8 @@ def _tree_cpu(root: int, seen: dict[int, float], kinds: dict[int, str] | None = 
         pid = todo.pop()
         if pid in stats:
             seen[pid] = max(seen.get(pid, 0.0), stats[pid][1])
-            if kinds is not None and pid not in kinds:
-                kinds[pid] = _kind(pid, root)
+            if kinds is not None and not kinds.get(pid, "").startswith("ray workers"):
+                kinds[pid] = _kind(pid, root)  # a Ray worker names itself ray::... once it started
         todo += children.get(pid, [])
 
 
