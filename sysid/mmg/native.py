@@ -182,13 +182,19 @@ def build(directory: Path | None = None) -> Build:
     directory = cache_dir() if directory is None else Path(directory)
     cxx = compiler()
     key = build_key(cxx)
-    found = _intact(directory, key) if directory.is_dir() else None
-    if found is not None:
-        return Build(found, False, time.perf_counter() - start)
     try:
-        directory.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise NativeUnavailable(f"cannot create the cache {directory}: {error}") from error
+        found = _intact(directory, key) if directory.is_dir() else None
+        if found is not None:
+            return Build(found, False, time.perf_counter() - start)
+        return _compile(directory, cxx, key, start)
+    except OSError as error:  # the cache cannot be read or written (not a directory, full, read-only)
+        raise NativeUnavailable(f"cannot build into the cache {directory}: {error}") from error
+
+
+def _compile(directory: Path, cxx: str, key: str, start: float) -> Build:
+    """Compile the library of `key` in a scratch directory inside `directory` and rename it
+    into place."""
+    directory.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=directory, prefix=".mmg-build-") as scratch:
         # a fixed source name (it is recorded in the library): the same bytes from every build
         source = Path(scratch) / f"mmg-{key}.cpp"

@@ -138,18 +138,19 @@ def _rollout(model, states, inputs):
     return [loss.detach(), pred.detach()] + [p.grad.clone() for p in net.parameters()]
 
 
-def test_a_float32_training_rollout_equals_the_torch_path(kernel, d2_rows):
-    """Loss, states and every network gradient of a T = 10 Euler rollout (two FNN members) in
-    float32, through the kernel and through the torch VJP: equal to float32 round-off."""
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_a_training_rollout_equals_the_torch_path(kernel, d2_rows, dtype):
+    """Loss, states and every network gradient of a T = 10 Euler rollout (two FNN members),
+    through the kernel and through the torch VJP: equal to round-off."""
     state, inputs = d2_rows
-    states = state.reshape(11, -1, 6)[:, :256].float().unsqueeze(1).expand(-1, 2, -1, -1)
-    u = inputs.reshape(11, -1, 4)[:, :256].float().unsqueeze(1).expand(-1, 2, -1, -1)
+    states = state.reshape(11, -1, 6)[:, :256].to(dtype).unsqueeze(1).expand(-1, 2, -1, -1)
+    u = inputs.reshape(11, -1, 4)[:, :256].to(dtype).unsqueeze(1).expand(-1, 2, -1, -1)
     torch.manual_seed(0)
-    net = ForceCorrection((16, 16), torch.float32, members=2)
+    net = ForceCorrection((16, 16), dtype, members=2)
     flat = states.reshape(-1, 6)
     net.set_standardization(flat.mean(0).repeat(2)[:9], flat.std(0).repeat(2)[:9] + 0.1,
                             torch.zeros(3), torch.tensor([2.0, 3.0, 1.5]))
-    model = PerMember(CorrectedModel(MMG(load_ship("esso_osaka"), dtype=torch.float32), net))
+    model = PerMember(CorrectedModel(MMG(load_ship("esso_osaka"), dtype=dtype), net))
     calls = []
     original = native.training_rate
 
@@ -163,10 +164,11 @@ def test_a_float32_training_rollout_equals_the_torch_path(kernel, d2_rows):
         native.training_rate = original
     with native.torch_path():
         old = _rollout(model, states, u)
-    assert calls == [torch.float32] * 10  # the rollout went through the kernel
+    assert calls == [dtype] * 10  # the rollout went through the kernel
+    rtol = 2e-5 if dtype == torch.float32 else 1e-11
     for a, b in zip(new, old):
-        assert a.dtype == torch.float32
-        torch.testing.assert_close(a, b, rtol=2e-5, atol=2e-5 * float(b.abs().max()))
+        assert a.dtype == dtype
+        torch.testing.assert_close(a, b, rtol=rtol, atol=rtol * float(b.abs().max()))
 
 
 def test_a_second_build_reuses_the_library_and_a_corrupt_one_is_not_loaded(tmp_path):
@@ -226,6 +228,17 @@ def test_a_failed_compile_gives_the_torch_path_with_one_warning(monkeypatch, cap
     lines = [r for r in caplog.records if r.name == "sysid.mmg.native"]
     assert len(lines) == 1 and lines[0].levelno == logging.WARNING and "failed" in lines[0].getMessage()
     assert list(tmp_path.glob("*.so")) == []  # nothing half-written
+
+
+def test_a_cache_that_cannot_be_written_gives_the_torch_path(monkeypatch, caplog, tmp_path):
+    _fresh_process_state(monkeypatch)
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a directory")
+    monkeypatch.setenv("SYSID_CACHE_DIR", str(blocker / "cache"))
+    with caplog.at_level(logging.INFO, logger="sysid.mmg.native"):
+        assert native.library() is None
+    lines = [r for r in caplog.records if r.name == "sysid.mmg.native"]
+    assert len(lines) == 1 and "cannot build into the cache" in lines[0].getMessage()
 
 
 def test_where_the_kernel_does_not_apply(kernel):
