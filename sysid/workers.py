@@ -125,8 +125,8 @@ class Overlap:
 
     def poll(self) -> None:
         """Collect finished work (an error in it propagates) and start queued work."""
-        for future in [f for f in self.running if f.done()]:
-            key = self.running.pop(future)
+        finished = [(f, self.running.pop(f)) for f in list(self.running) if f.done()]
+        for future, key in finished:  # taken out first: `on_result` may `add`, which polls again
             self.results[key] = future.result()
             if self.on_result is not None:
                 self.on_result(key, self.results[key])

@@ -87,6 +87,10 @@ def test_overlap_starts_work_only_on_allowed_slots_and_takes_follow_ups(tmp_path
         assert not list(tmp_path.iterdir()) and not pool.running  # no slot allowed: nothing started
         pool.allow(1)
         assert len(pool.running) == 1 and pool.queued == [("b", "b")]
+        pool.allow(2)
+        while not all(f.done() for f in pool.running):
+            time.sleep(0.05)
+        pool.poll()  # a and b collected in one poll, a's result adding a2 on the way
         results = pool.finish()
     assert results == {"a": "A", "b": "B", "a2": "A2"}  # a2 added when a's result came
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a", "a2", "b"]
