@@ -59,16 +59,18 @@ def test_reproduce_with_two_seeds(tmp_path, dataset_dir):
     assert "± " in (out / "table7.md").read_text()
 
     # after training, overlapped with the last trial (sysid.protocol.overlap): NN-only's ensemble
-    # and the recorded maneuvers of its seeds and of the MMG took the slot its trial left; all
-    # of it equals the same work done after training (ensemble metrics, maneuver_indices.csv)
+    # and the recorded maneuvers of its seeds and of the MMG may take the slot its trial left;
+    # all of it equals the same work done after training (ensemble metrics, maneuver_indices.csv)
     import shutil
     from sysid.maneuvers.recorded import RECORD_FILE, RECORDED, write_record_comparison
     from sysid.protocol.paper import run_label
     from sysid.protocol.seed_runs import SeedGroup, write_ensemble
     from sysid.runs.lifecycle import cached_test_runs
 
+    # every piece went through the overlap (how many while a trial still ran depends on timing):
+    # 2 ensembles, the predictions of mmg_lab, 4 seeds and 2 ensembles
     overlapped = next(line for line in lines if line.startswith("after training:"))
-    assert int(overlapped.split()[2]) >= 3, overlapped  # an ensemble and 3 models while hybrid_D1 trained
+    assert overlapped.split()[4] == "9", overlapped
     again = tmp_path / "again"
     labels = {run_label(n, k, d): out / "runs" / n for n, k, d in
               (("mmg_lab", "mmg", "-"), ("nn_D1", "nn", "D1"), ("nn_ensemble_D1", "nn", "D1"))}
