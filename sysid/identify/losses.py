@@ -12,7 +12,10 @@ from sysid.hybrid.correction import ForceCorrection
 from sysid.hybrid.force_models import PerMember, correction_of
 from sysid.channel_names import VELOCITY_INDEX
 
-VEL = list(VELOCITY_INDEX)
+# the velocities (u, v_m, r) of a state (..., 6) as a strided slice: a view, not a gathered copy
+VEL = slice(VELOCITY_INDEX[0], VELOCITY_INDEX[-1] + 1, VELOCITY_INDEX[1] - VELOCITY_INDEX[0])
+if tuple(range(6))[VEL] != tuple(VELOCITY_INDEX):
+    raise ImportError(f"the velocity channels {VELOCITY_INDEX} are not evenly spaced")
 
 
 def output_penalty(f_nn: torch.Tensor, f_mmg: torch.Tensor, w_F: torch.Tensor,

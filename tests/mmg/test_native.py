@@ -97,6 +97,24 @@ def test_the_jacobian_equals_autograds_of_the_mmg_away_from_switches(kernel):
     assert _relative(jacobian, truth, (0, 1)) < 1e-10
 
 
+def test_the_no_grad_forward_of_an_mmg_equals_its_own_forces_and_rate(kernel):
+    """`forward(mmg, ...)`: F_MMG as the MMG computes it, dx/dt as the equations of motion
+    do, the FNN inputs as `correction_inputs` (autograd's reference path); None where it does
+    not apply."""
+    for mmg in (ESSO, MMG(load_ship("esso_osaka"), dtype=torch.float32)):
+        dtype = mmg.coefficients.X_vr.dtype
+        for rows in (branch_rows, switch_rows):
+            state, inputs = (t.to(dtype) for t in rows())
+            with torch.no_grad():
+                out, ref = native.forward(mmg, state, inputs), reference(state, inputs, mmg)
+            assert out.dtype == dtype
+            assert _relative(out, ref, 0) < (1e-12 if dtype == torch.float64 else 2e-6)
+    state, inputs = branch_rows()
+    assert native.forward(MMG(load_ship("kvlcc2_l7")), state, inputs) is None
+    with native.torch_path():
+        assert native.forward(ESSO, state, inputs) is None
+
+
 def test_identified_coefficients_are_the_views_values(kernel):
     """A frozen identified MMG's values reach the kernel (its coefficient vector is made per
     values view), not the ship file's."""

@@ -21,10 +21,19 @@ from sysid.mmg.propeller import propeller_inflow
 from sysid.mmg.rudder import rudder_inflow
 from sysid.mmg.ship import load_ship
 from sysid.mmg.tangents import forces_with_tangents, supported
+from sysid.mmg import native
 from sysid.mmg.vjp import mmg_rate
 from mmg_rows import ESSO, branch_rows as _branch_rows, reference as _reference, switch_rows as _switch_rows
 
 C = ESSO.coefficients.values_view(torch.float64)
+
+
+@pytest.fixture(autouse=True)
+def _torch_path():
+    """These are tests of the VJP written out in torch, the native kernel's fallback (the
+    kernel itself: tests/mmg/test_native.py)."""
+    with native.torch_path():
+        yield
 
 
 def test_the_rows_take_every_branch():
