@@ -104,6 +104,15 @@ def minibatch_seconds(exp, train, batch: int, repeats: int = 8, members: int | N
     return (time.perf_counter() - start) / repeats
 
 
+def per_step_seconds(step, repeats: int) -> tuple[float, float]:
+    """(wall, process CPU) seconds per call of `step` over `repeats` calls, after one warm-up."""
+    step()
+    start, start_cpu = time.perf_counter(), time.process_time()
+    for _ in range(repeats):
+        step()
+    return (time.perf_counter() - start) / repeats, (time.process_time() - start_cpu) / repeats
+
+
 def vjp_comparison(exp, train, batch: int, repeats: int = 5, rounds: int = 5) -> None:
     """The step through the hand-derived VJP against the step through autograd, interleaved:
     medians of wall and process CPU time per step, the ratio, and the two losses."""
@@ -114,12 +123,9 @@ def vjp_comparison(exp, train, batch: int, repeats: int = 5, rounds: int = 5) ->
     cpu: dict[str, list[float]] = {"old": [], "new": []}
     for _ in range(rounds):
         for label, step in (("old", old), ("new", new)):
-            step()
-            start, start_cpu = time.perf_counter(), time.process_time()
-            for _ in range(repeats):
-                step()
-            wall[label].append((time.perf_counter() - start) / repeats)
-            cpu[label].append((time.process_time() - start_cpu) / repeats)
+            w, c = per_step_seconds(step, repeats)
+            wall[label].append(w)
+            cpu[label].append(c)
     w_old, w_new = statistics.median(wall["old"]), statistics.median(wall["new"])
     c_old, c_new = statistics.median(cpu["old"]), statistics.median(cpu["new"])
     print(f"hand-derived VJP against autograd, batch {min(batch, len(train))}, T = {exp.training.steps}, K = 1 "
@@ -227,12 +233,9 @@ def native_comparison(exp, config: str, train, batch: int, data: str | None, aga
     try:
         for _ in range(rounds):
             for label, step in steps.items():
-                step()
-                start, start_cpu = time.perf_counter(), time.process_time()
-                for _ in range(repeats):
-                    step()
-                wall[label].append((time.perf_counter() - start) / repeats)
-                cpu[label].append((time.process_time() - start_cpu) / repeats)
+                w, c = per_step_seconds(step, repeats)
+                wall[label].append(w)
+                cpu[label].append(c)
             if checkout is not None:
                 w, c = checkout.times(repeats)
                 wall["against"].append(w)

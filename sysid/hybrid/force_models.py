@@ -18,7 +18,8 @@ from sysid.config.experiment import Experiment, ship_overrides
 from sysid.mmg.coefficients import Coefficients
 from sysid.mmg.model import MMG, ForceBreakdown
 from sysid.mmg.tangents import supported
-from sysid.mmg.vjp import force_rate, training_rate as mmg_training_rate
+from sysid.mmg import native
+from sysid.mmg.vjp import force_rate, rate_of_force, training_rate as mmg_training_rate
 from sysid.mmg.wind import relative_wind
 from sysid.hybrid.knn_gate import KNNGate
 from sysid.mmg.ship import load_ship
@@ -134,7 +135,6 @@ class CorrectedModel(nn.Module):
             return f_nn, wind, on
         return tuple(t + f for t, f in zip(total, f_nn)), wind, on
 
-
     def training_rate(self, per_member: bool = False):
         """The right-hand side a training rollout differentiates, or None where it does not
         apply (then `forward` is differentiated through autograd): a function of (state
@@ -145,19 +145,44 @@ class CorrectedModel(nn.Module):
 
         It applies to a hybrid without an active gate, with gradients on, whose MMG
         `sysid.mmg.tangents.supported` covers (the Esso Osaka's families, fixed
-        coefficients)."""
+        coefficients) or the native kernel computes (`sysid.mmg.native.families_of`: the
+        standard families too, fixed coefficients; a step the kernel does not apply to goes
+        through autograd over `forward`)."""
         gated = self.gate is not None and self.gate_enabled and self.gate.bank.shape[0] > 0
-        if not (self.physics and torch.is_grad_enabled()) or gated or not supported(self.mmg):
+        if not (self.physics and torch.is_grad_enabled()) or gated:
             return None
         coefficients, net = self.mmg.coefficients, self.correction_net
-        wind = "wind" in self.mmg.families
+        if supported(self.mmg):
+            return self._training_rate(coefficients, net, "wind" in self.mmg.families, per_member)
+        families = native.families_of(self.mmg)
+        if families is None or any(p.requires_grad for p in coefficients.parameters()):
+            return None
+        return self._native_training_rate(coefficients, net, families, per_member)
 
+    @staticmethod
+    def _training_rate(coefficients, net, wind: bool, per_member: bool):
+        """The Esso Osaka's `training_rate`: the native kernel, else the torch VJP."""
         def rate(state: torch.Tensor, inputs: torch.Tensor):
             c = coefficients.values_view(state.dtype)
             rate_mmg, f_mmg, z = mmg_training_rate(state, inputs, c, wind, net.input_mean, net.input_std)
             f_nn = net.evaluate_standardized(z, per_member=per_member).to(state.dtype)
             return torch.addmm(rate_mmg.reshape(-1, 6), f_nn.reshape(-1, 3), force_rate(c, state)).view(
                 state.shape), f_nn, f_mmg
+        return rate
+
+    def _native_training_rate(self, coefficients, net, families: int, per_member: bool):
+        """`training_rate` of the other families the native kernel covers (`native.families_of`):
+        the kernel where it applies to a step's tensors, else autograd through `forward`."""
+        def rate(state: torch.Tensor, inputs: torch.Tensor):
+            c = coefficients.values_view(state.dtype)
+            mean, std = net.input_mean, net.input_std
+            if mean.dtype == state.dtype == std.dtype and native.applies(state, inputs, c, differentiated=True):
+                rate_mmg, f_mmg, z = mmg_training_rate(state, inputs, c, families, mean, std)
+                f_nn = net.evaluate_standardized(z, per_member=per_member).to(state.dtype)
+                return torch.addmm(rate_mmg.reshape(-1, 6), f_nn.reshape(-1, 3), force_rate(c, state)).view(
+                    state.shape), f_nn, f_mmg
+            forces = self(state, inputs, per_member=per_member)
+            return rate_of_force(state, forces.total, c), forces.correction, forces.mmg
         return rate
 
 

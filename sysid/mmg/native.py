@@ -1,33 +1,38 @@
-"""The MMG right-hand side of the Esso Osaka's families as one native call per batch.
+"""The MMG right-hand side of the Esso Osaka's and the standard families as one native call per batch.
 
 `native_kernel.cpp` (shipped beside this module) computes, row by row in double, what
 `sysid.mmg.vjp.rate_with_jacobian` computes with some 400 torch operations: the MMG of
 Yoshimura's hull (exact cross-flow integrals), the four-quadrant propeller and rudder and
-Fujiwara's wind (or none), the equations-of-motion rate, the FNN's inputs s and, by
-forward-mode dual numbers over the same code, their Jacobian with respect to the state. The
-branches and their derivatives are `sysid.mmg.tangents`' (the branch the forward takes).
+Fujiwara's wind (or none), or the standard MMG families of Yasukawa & Yoshimura
+(`sysid.mmg.hull_standard`, `propeller_standard` with either wake, `rudder_standard`) in any mix
+`families_of` allows, the equations-of-motion rate, the FNN's inputs s and, by forward-mode
+dual numbers over the same code, their Jacobian with respect to the state. The branches and
+their derivatives are `sysid.mmg.tangents`' and the standard modules' (the branch the forward
+takes, as autograd).
 
 The public face, for states (..., 6) = (x, u, y, v, psi, r) and inputs (..., 4) = (n [rps],
 delta [rad], U_T [m/s], zeta [rad]) on the CPU, float32 or float64 (both the same dtype),
 ``c`` a values view of the coefficients (`sysid.mmg.coefficients.Coefficients.values_view`)
-and ``wind`` True where the ship has Fujiwara's wind (``"wind" in mmg.families``):
+and ``families`` the MMG's `Families` (`families_of`; ``True``/``False``: the Esso Osaka's
+with/without Fujiwara's wind), parsed once from the ship's families:
 
-* ``rate(state, inputs, c, wind) -> out (..., 18)``: dx/dt of F_MMG (6), F_MMG (3) [N, N,
+* ``rate(state, inputs, c, families) -> out (..., 18)``: dx/dt of F_MMG (6), F_MMG (3) [N, N,
   N m], s (9) in `sysid.hybrid.correction.INPUT_NAMES` order; no gradient (a no-grad
   right-hand side: maneuvers, predictions). dx/dt of the total force is ``out[..., :6] +
   F_NN @ sysid.mmg.vjp.force_rate(c, state)``.
-* ``rate_with_jacobian(state, inputs, c, wind) -> (out (..., 18), jacobian (..., 6, 18))``,
+* ``rate_with_jacobian(state, inputs, c, families) -> (out (..., 18), jacobian (..., 6, 18))``,
   jacobian[..., i, j] = d out_j / d state_i; ``training_rate`` the same with s standardised
   for the FNN and the outputs apart, ``state_gradient`` its vector-Jacobian product (the
   training path, `sysid.mmg.vjp.training_rate`).
-* ``covers(mmg)``: the MMG's families are the ones the kernel computes (exact quadrature);
+* ``covers(mmg)``: the MMG's families are ones the kernel computes (`families_of` is not
+  None; exact quadrature);
   ``applies(state, inputs, c)``: the library is loaded and these tensors can be passed to it
   (CPU, float32/float64, no autograd or torch.func transform through them, no capture for
   compiled code, constant coefficients; not inside ``torch_path()``). Call `rate` or
   `rate_with_jacobian` only where both hold; elsewhere compute through torch
   (`sysid.mmg.vjp`, `MMG`).
 * ``forward(mmg, state, inputs) -> out (..., 18) or None``: `rate` for an `MMG` where both
-  hold (its values view, its wind), None where the caller computes through torch.
+  hold (its values view, its families), None where the caller computes through torch.
 
 The library is compiled on first use with the system's C++ compiler (``$CXX``, else ``c++``
 or ``g++``; flags `FLAGS`: no fast-math, no host-specific code, so every machine computes the
@@ -41,6 +46,7 @@ per process on the ``sysid.mmg.native`` logger.
 from __future__ import annotations
 
 import contextlib
+import enum
 import ctypes
 import hashlib
 import itertools
@@ -61,6 +67,7 @@ from sysid.mmg.capture import captured, transformed
 from sysid.mmg.coefficient_lookup import Rows, coefficient_vector
 from sysid.mmg.guards import SPEED_GUARD, TINY
 from sysid.mmg.hull import _CROSSFLOW, _HULL
+from sysid.mmg.hull_standard import _ROWS as _STANDARD_HULL
 from sysid.mmg.motion import _VALUES, LOW_SPEED
 from sysid.mmg.propeller import _LATERAL
 from sysid.mmg.rudder import _RUDDER
@@ -74,17 +81,28 @@ SOURCE = Path(__file__).with_name("native_kernel.cpp")
 # -O2's (checked on the D2 windows), 1.3x faster
 FLAGS = ("-O3", "-fPIC", "-shared", "-std=c++17", "-ffp-contract=off")
 WIDTH = 18  # dx/dt (6), F_MMG (3), s (9)
-# the families the kernel computes (wind: or none), as `sysid.mmg.tangents.FAMILIES`
+
+
+class Families(enum.IntFlag):
+    """The force families of one call, as the kernel reads them (its ``families`` argument):
+    no flag is the Esso Osaka's (Yoshimura hull, four-quadrant propeller and rudder) without
+    wind; ``True``/``False`` passed for it mean that with/without Fujiwara's wind."""
+
+    WIND = 1                 # Fujiwara's wind
+    HULL_STANDARD = 2        # `sysid.mmg.hull_standard`
+    PROPELLER_STANDARD = 4   # `sysid.mmg.propeller_standard` with `sysid.mmg.rudder_standard`
+    WAKE_GAUSSIAN = 8        # with PROPELLER_STANDARD: shipmmg's wake (else Yasukawa's C_1, C_2)
+
+
+# the ship-file families the kernel computes, by component: name -> its flags (wind: or none);
+# the standard propellers only with the standard rudder, the four-quadrant ones together
+HULLS = {"yoshimura_low_speed": Families(0), "standard": Families.HULL_STANDARD}
+PROPELLERS = {"four_quadrant": Families(0), "standard": Families.PROPELLER_STANDARD,
+              "standard_gaussian_wake": Families.PROPELLER_STANDARD | Families.WAKE_GAUSSIAN}
+RUDDER_OF = {"four_quadrant": "four_quadrant", "standard": "standard", "standard_gaussian_wake": "standard"}
+# the Esso Osaka's families, as `sysid.mmg.tangents.FAMILIES`
 FAMILIES = {"hull": "yoshimura_low_speed", "propeller": "four_quadrant", "rudder": "four_quadrant",
             "wind": "fujiwara"}
-
-# The coefficients the kernel reads, in this order: one flat double vector. Scalars by name,
-# then blocks (the force families' own look-up tables, flattened row by row), each entry as
-# `sysid.mmg.coefficient_lookup.coefficient_vector` reads it (a tuple: a product, None: 0).
-SCALARS = ("X_0F", "dX_0_pi", "half_L", "x_P_L", "slow_lateral_inflow", "one_minus_wP0", "tau", "C_P", "D",
-           "k0", "k1", "k2", "C10", "C6", "C7", "C3", "one_minus_tP_rho_D4", "rho_D4", "eps2_one_minus_eta",
-           "jet_D2", "kappa", "eps2_eta", "kitagawa_jet_eps2", "C_PR", "x_R", "minus_gamma_P", "minus_gamma_N",
-           "l_R", "eom_X_u", "eom_vr_u", "eom_rr_u", "eom_Y_v", "eom_N_v", "eom_ur_v", "eom_N_r", "eom_ur_r")
 
 
 def _flat(block: tuple) -> tuple:
@@ -93,11 +111,49 @@ def _flat(block: tuple) -> tuple:
         itertools.chain.from_iterable(g) if isinstance(g, Rows) else g for g in block))
 
 
-BLOCKS = (("CROSSFLOW", _flat(_CROSSFLOW)), ("HULL", _flat(_HULL)), ("LATERAL", _flat(_LATERAL)),
-          ("RUDDER", _flat(_RUDDER)))
-WIND_BLOCK = ("WIND", _flat(_WIND))  # zeros for a ship without wind
-_WIND_START = len(SCALARS) + sum(len(entries) for _, entries in BLOCKS)
-N_COEFFICIENTS = _WIND_START + len(WIND_BLOCK[1])
+@dataclass(frozen=True)
+class Segment:
+    """Coefficients the kernel reads for some families: scalars (kernel name, entry), then
+    blocks (kernel name, entries), each entry as `coefficient_vector` reads it (a tuple: a
+    product, None: 0). Read where ``families & mask == value``, zeros elsewhere."""
+
+    mask: Families
+    value: Families
+    scalars: tuple = ()
+    blocks: tuple = ()
+
+    def used(self, families: int) -> bool:
+        return (families & self.mask) == self.value
+
+    def entries(self) -> tuple:
+        return tuple(e for _, e in self.scalars) + tuple(itertools.chain.from_iterable(e for _, e in self.blocks))
+
+
+def _same(*names: str) -> tuple:
+    return tuple((name, name) for name in names)
+
+
+def _standard(*names: str) -> tuple:
+    return tuple((f"S_{name}", name) for name in names)
+
+
+_NONE, _HS, _PS, _WG = Families(0), Families.HULL_STANDARD, Families.PROPELLER_STANDARD, Families.WAKE_GAUSSIAN
+SEGMENTS = (
+    Segment(_NONE, _NONE, _same("eom_X_u", "eom_vr_u", "eom_rr_u", "eom_Y_v", "eom_N_v", "eom_ur_v", "eom_N_r",
+                                "eom_ur_r") + _standard("L_pp"), (("RUDDER", _flat(_RUDDER)),)),
+    Segment(_HS, _NONE, _same("X_0F", "dX_0_pi", "half_L"), (("CROSSFLOW", _flat(_CROSSFLOW)), ("HULL", _flat(_HULL)))),
+    Segment(_HS, _HS, (), (("S_HULL", tuple(itertools.chain.from_iterable(_STANDARD_HULL))),)),
+    Segment(_PS, _NONE, _same("x_P_L", "slow_lateral_inflow", "one_minus_wP0", "tau", "C_P", "D", "k0", "k1", "k2",
+                              "C10", "C6", "C7", "C3", "one_minus_tP_rho_D4", "rho_D4", "eps2_one_minus_eta",
+                              "jet_D2", "kappa", "eps2_eta", "kitagawa_jet_eps2", "C_PR", "x_R", "minus_gamma_P",
+                              "minus_gamma_N", "l_R"), (("LATERAL", _flat(_LATERAL)),)),
+    Segment(_PS, _PS, _standard("minus_x_P", "D", "k0", "k1", "k2", "one_minus_tP_rho_D4", "jet_D2", "kappa",
+                                "eps2_eta", "eps2_one_minus_eta", "minus_l_R_nd", "gamma_R_minus", "gamma_R_plus")),
+    Segment(_PS | _WG, _PS, _standard("one_minus_wP0", "minus_C_1", "wake_plus", "wake_minus")),
+    Segment(_PS | _WG, _PS | _WG, _standard("minus_w_P0")),
+    Segment(Families.WIND, Families.WIND, (), (("WIND", _flat(_WIND)),)),
+)
+N_COEFFICIENTS = sum(len(segment.entries()) for segment in SEGMENTS)
 # the forward's constants (`sysid.mmg.motion.constants`)
 CONSTANTS = {"SPEED_GUARD": SPEED_GUARD, "LOW_SPEED": LOW_SPEED, "TINY": TINY,
              "STOPPED_RATIO": _VALUES.stopped_ratio, "TWO_PI": _VALUES.two_pi,
@@ -105,14 +161,19 @@ CONSTANTS = {"SPEED_GUARD": SPEED_GUARD, "LOW_SPEED": LOW_SPEED, "TINY": TINY,
 
 
 def _header() -> str:
-    """The `constexpr` lines the kernel reads: constants, then the offsets into the vector."""
+    """The `constexpr` lines the kernel reads: constants, the family flags, then the offsets
+    into the coefficient vector."""
     lines = [f"constexpr double {name} = {float(value)!r};" for name, value in CONSTANTS.items()]
+    lines += [f"constexpr int {flag.name} = {int(flag)};" for flag in Families]
     lines.append("namespace K {")
-    lines += [f"constexpr int {name} = {i};" for i, name in enumerate(SCALARS)]
-    offset = len(SCALARS)
-    for name, entries in BLOCKS + (WIND_BLOCK,):
-        lines.append(f"constexpr int {name} = {offset};")
-        offset += len(entries)
+    offset = 0
+    for segment in SEGMENTS:
+        for name, _ in segment.scalars:
+            lines.append(f"constexpr int {name} = {offset};")
+            offset += 1
+        for name, entries in segment.blocks:
+            lines.append(f"constexpr int {name} = {offset};")
+            offset += len(entries)
     lines += [f"constexpr int N_COEFFICIENTS = {offset};", "}  // namespace K", ""]
     return "\n".join(lines)
 
@@ -182,13 +243,19 @@ def build(directory: Path | None = None) -> Build:
     directory = cache_dir() if directory is None else Path(directory)
     cxx = compiler()
     key = build_key(cxx)
-    found = _intact(directory, key) if directory.is_dir() else None
-    if found is not None:
-        return Build(found, False, time.perf_counter() - start)
     try:
-        directory.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise NativeUnavailable(f"cannot create the cache {directory}: {error}") from error
+        found = _intact(directory, key) if directory.is_dir() else None
+        if found is not None:
+            return Build(found, False, time.perf_counter() - start)
+        return _compile(directory, cxx, key, start)
+    except OSError as error:  # the cache cannot be read or written (not a directory, full, read-only)
+        raise NativeUnavailable(f"cannot build into the cache {directory}: {error}") from error
+
+
+def _compile(directory: Path, cxx: str, key: str, start: float) -> Build:
+    """Compile the library of `key` in a scratch directory inside `directory` and rename it
+    into place."""
+    directory.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=directory, prefix=".mmg-build-") as scratch:
         # a fixed source name (it is recorded in the library): the same bytes from every build
         source = Path(scratch) / f"mmg-{key}.cpp"
@@ -270,13 +337,22 @@ def available() -> bool:
     return library() is not None
 
 
-def covers(mmg) -> bool:
-    """True where the kernel computes `mmg`'s F_MMG: the families of `FAMILIES` (wind
-    optional) and exact cross-flow integrals."""
+def families_of(mmg) -> Families | None:
+    """The kernel's `Families` for `mmg`, or None where it does not compute its F_MMG: a hull
+    of `HULLS`, a propeller of `PROPELLERS` with its rudder (`RUDDER_OF`), Fujiwara's wind
+    or none, exact cross-flow integrals."""
     models = mmg.ship.models
-    if any(models.get(k) != v for k, v in FAMILIES.items() if k != "wind"):
-        return False
-    return models.get("wind") in (None, FAMILIES["wind"]) and mmg.quadrature == "exact"
+    hull, propeller, wind = models.get("hull"), models.get("propeller"), models.get("wind")
+    if hull not in HULLS or propeller not in PROPELLERS or models.get("rudder") != RUDDER_OF[propeller]:
+        return None
+    if wind not in (None, FAMILIES["wind"]) or mmg.quadrature != "exact":
+        return None
+    return HULLS[hull] | PROPELLERS[propeller] | (Families.WIND if wind is not None else Families(0))
+
+
+def covers(mmg) -> bool:
+    """True where the kernel computes `mmg`'s F_MMG (`families_of`)."""
+    return families_of(mmg) is not None
 
 
 _DTYPES = (torch.float32, torch.float64)
@@ -301,24 +377,27 @@ def applies(state: torch.Tensor, inputs: torch.Tensor, c, differentiated: bool =
     return available()
 
 
-def coefficient_values(c, wind: bool) -> torch.Tensor:
+def coefficient_values(c, families: int) -> torch.Tensor:
     """(N_COEFFICIENTS,) float64: the kernel's coefficient vector from the values view `c`
-    (kept in the view: once per coefficient state)."""
+    for `families` (`Families`; the segments of other families are zeros), kept in the view:
+    once per coefficient state."""
+    families = int(families)
     cache = c.__dict__.setdefault("_native", {}) if type(c) is SimpleNamespace else {}
-    found = cache.get(wind)
+    found = cache.get(families)
     if found is not None:
         return found
     like = torch.empty((), dtype=torch.float64)
-    entries = SCALARS + tuple(itertools.chain.from_iterable(e for _, e in BLOCKS))
+    parts = []
     with torch.no_grad():
-        values = coefficient_vector(c, entries, like).detach().to("cpu", torch.float64)
-        tail = (coefficient_vector(c, WIND_BLOCK[1], like).detach().to("cpu", torch.float64) if wind
-                else torch.zeros(len(WIND_BLOCK[1]), dtype=torch.float64))
-    found = cache[wind] = torch.cat([values, tail]).contiguous()
+        for segment in SEGMENTS:
+            entries = segment.entries()
+            parts.append(coefficient_vector(c, entries, like).detach().to("cpu", torch.float64)
+                         if segment.used(families) else torch.zeros(len(entries), dtype=torch.float64))
+    found = cache[families] = torch.cat(parts).contiguous()
     return found
 
 
-def _call(entry: str, state: torch.Tensor, inputs: torch.Tensor, c, wind: bool, outputs: list,
+def _call(entry: str, state: torch.Tensor, inputs: torch.Tensor, c, families: int, outputs: list,
           extra: tuple = ()):
     lib = library()
     if lib is None:
@@ -328,26 +407,27 @@ def _call(entry: str, state: torch.Tensor, inputs: torch.Tensor, c, wind: bool, 
                          f"{tuple(inputs.shape)}")
     state, inputs = state.contiguous(), inputs.contiguous()
     rows = state.numel() // 6
-    coefficients = coefficient_values(c, wind)
+    families = int(families)
+    coefficients = coefficient_values(c, families)
     suffix = "f32" if state.dtype == torch.float32 else "f64"
     getattr(lib, f"sysid_mmg_{entry}_{suffix}")(rows, state.data_ptr(), inputs.data_ptr(), coefficients.data_ptr(),
-                                                int(bool(wind)), *extra, *[o.data_ptr() for o in outputs])
+                                                families, *extra, *[o.data_ptr() for o in outputs])
 
 
-def rate(state: torch.Tensor, inputs: torch.Tensor, c, wind: bool = True) -> torch.Tensor:
+def rate(state: torch.Tensor, inputs: torch.Tensor, c, families: int = Families.WIND) -> torch.Tensor:
     """out (..., 18) (see the module docstring), no gradient; where `applies` holds."""
     out = torch.empty(state.shape[:-1] + (WIDTH,), dtype=state.dtype)
-    _call("rate", state, inputs, c, wind, [out])
+    _call("rate", state, inputs, c, families, [out])
     return out
 
 
 def rate_with_jacobian(state: torch.Tensor, inputs: torch.Tensor, c,
-                       wind: bool = True) -> tuple[torch.Tensor, torch.Tensor]:
+                       families: int = Families.WIND) -> tuple[torch.Tensor, torch.Tensor]:
     """(out (..., 18), its Jacobian (..., 6, 18), [i, j] = d out_j / d state_i); where
     `applies` holds."""
     out = torch.empty(state.shape[:-1] + (WIDTH,), dtype=state.dtype)
     jacobian = torch.empty(state.shape[:-1] + (6, WIDTH), dtype=state.dtype)
-    _call("rate_jacobian", state, inputs, c, wind, [out, jacobian])
+    _call("rate_jacobian", state, inputs, c, families, [out, jacobian])
     return out, jacobian
 
 
@@ -355,15 +435,16 @@ def forward(mmg, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor | No
     """`rate` (..., 18) of the `MMG` `mmg` at state (..., 6) with inputs (..., 4) where the
     kernel covers its families and applies to these tensors (`covers`, `applies`), else None
     (compute through torch then)."""
-    if not covers(mmg):
+    families = families_of(mmg)
+    if families is None:
         return None
     c = mmg.coefficients.values_view(state.dtype)
     if not applies(state, inputs, c):
         return None
-    return rate(state, inputs, c, "wind" in mmg.families)
+    return rate(state, inputs, c, families)
 
 
-def training_rate(state: torch.Tensor, inputs: torch.Tensor, c, wind: bool, mean: torch.Tensor,
+def training_rate(state: torch.Tensor, inputs: torch.Tensor, c, families: int, mean: torch.Tensor,
                   std: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """What a training step reads: dx/dt of F_MMG (..., 6), F_MMG (..., 3), the FNN's inputs
     standardised, z = (s - mean) / std (..., 9) (`mean`, `std` (9,) in the state's dtype, Eq. 8),
@@ -376,7 +457,7 @@ def training_rate(state: torch.Tensor, inputs: torch.Tensor, c, wind: bool, mean
     rate_out, force, z = torch.empty(batch + (6,), **kw), torch.empty(batch + (3,), **kw), torch.empty(batch + (9,), **kw)
     jacobian = torch.empty(batch + (6, WIDTH), **kw)
     mean, std = mean.contiguous(), std.contiguous()  # constants: the FNN's buffers
-    _call("training", state, inputs, c, wind, [rate_out, force, z, jacobian], (mean.data_ptr(), std.data_ptr()))
+    _call("training", state, inputs, c, families, [rate_out, force, z, jacobian], (mean.data_ptr(), std.data_ptr()))
     return rate_out, force, z, jacobian
 
 

@@ -1,9 +1,11 @@
-// The MMG right-hand side of the Esso Osaka's families, row by row, in double.
+// The MMG right-hand side of the Esso Osaka's families and the standard ones (Yasukawa &
+// Yoshimura 2015), chosen per call by the `Families` flags (`families`), row by row, in double.
 //
 // One template on the scalar type T: `double` gives the values, `Dual` (a value and its
 // tangents with respect to u, v, psi, r: nothing depends on x, y) gives them with their Jacobian,
 // by forward-mode differentiation of the same code (no derivative written by hand). The
-// formulas and every branch follow `sysid.mmg.tangents` (the derivative of the branch the
+// formulas and every branch follow `sysid.mmg.tangents` and `sysid.mmg.hull_standard`,
+// `propeller_standard`, `rudder_standard` (the derivative of the branch the
 // forward takes; clamp passes the derivative on its closed interval; |x| and sign give
 // sign(x) and 0 at 0; sqrt(max(x, 0)) gives 0 for x <= 0; atan2 and hypot give 0 at the
 // origin).
@@ -86,6 +88,12 @@ inline double sgn(const Dual& x) { return sgn(x.v); }
 inline double absolute(double x) { return std::fabs(x); }
 inline Dual absolute(const Dual& x) { return chain(x, std::fabs(x.v), sgn(x.v)); }
 
+inline double exponential(double x) { return std::exp(x); }
+inline Dual exponential(const Dual& x) {
+    const double e = std::exp(x.v);
+    return chain(x, e, e);
+}
+
 inline double sine(double x) { return std::sin(x); }
 inline Dual sine(const Dual& x) { return chain(x, std::sin(x.v), std::cos(x.v)); }
 
@@ -141,6 +149,14 @@ inline Dual angle(const Dual& y, const Dual& x) {
     Dual o(std::atan2(y.v, x.v));
     for (int i = 0; i < NT; ++i) o.d[i] = (x.v * y.d[i] - y.v * x.d[i]) * (inv * inv);
     return o;
+}
+
+// atan2(y, x) with atan2(0, 0) = 0 as atan2(y, 1) there (`sysid.mmg.guards.safe_atan2`:
+// derivative dy at the origin)
+inline double angle_guarded(double y, double x) { return std::atan2(y, x == 0.0 && y == 0.0 ? 1.0 : x); }
+inline Dual angle_guarded(const Dual& y, const Dual& x) {
+    if (x.v == 0.0 && y.v == 0.0) return y;
+    return angle(y, x);
 }
 
 // torch.remainder(x, m) for m > 0: in [0, m), derivative 1
@@ -217,7 +233,8 @@ inline T crossflow(const T& v, const T& r, const double* c, int lane) {
 
 template <class T>
 Forces<T> forces(const T& u, const T& v, const T& psi, const T& r, double n, double delta, double U_T,
-                 double zeta, const double* c, bool wind) {
+                 double zeta, const double* c, int families) {
+    const bool wind = (families & WIND) != 0;
     // motion: speed with the simulator's guard, drift angle beta_hat = atan2(v, u)
     const T U = length(u, v);
     const bool slow = val(U) < SPEED_GUARD;
@@ -225,73 +242,132 @@ Forces<T> forces(const T& u, const T& v, const T& psi, const T& r, double n, dou
     const T beta_hat = angle(v, u);
     const double sign_u = sgn(u);
 
-    // hull: Yoshimura, exact cross-flow integrals
-    const T X0 = muladd(c[K::X_0F], c[K::dX_0_pi], absolute(beta_hat));
-    const T u_abs = absolute(u);
-    const T I1 = crossflow(v, r, c, 0), I2 = crossflow(v, r, c, 1);
-    const T vu = v * u, vua = v * u_abs, vr = v * r, ru = r * u, rua = r * u_abs, X0Uu = (X0 * Ug) * u;
-    const double* H = c + K::HULL;  // (8, 3)
-    T X = vu * H[0] + vua * H[3] + vr * H[6] + ru * H[9] + rua * H[12] + X0Uu * H[15] + I1 * H[18] + I2 * H[21];
-    T Y = vu * H[1] + vua * H[4] + vr * H[7] + ru * H[10] + rua * H[13] + X0Uu * H[16] + I1 * H[19] + I2 * H[22];
-    T N = vu * H[2] + vua * H[5] + vr * H[8] + ru * H[11] + rua * H[14] + X0Uu * H[17] + I1 * H[20] + I2 * H[23];
-
-    // propeller: four quadrants
-    const T s_raw = muladd(v, c[K::x_P_L], r) / Ug;
-    const T s = choose(slow, T(c[K::slow_lateral_inflow]), s_raw);
-    const T s_abs = absolute(s);
-    const T wake = muladd(c[K::one_minus_wP0], muladd(c[K::tau], c[K::C_P], s_abs), s_abs);
-    const T omw = choose(val(u) > 0.0, clamped(wake, TINY, 1.0), T(1.0));
-    const bool n_stopped = std::fabs(n) < TINY;
-    const bool u_stopped = std::fabs(val(u)) < TINY;
-    const double nD = n * c[K::D];
-    const T J_s = n_stopped ? T(sign_u * STOPPED_RATIO) : (u_stopped ? T(TINY) : u / nD);
-    const bool moving_ahead = val(u) >= 0.0;
-    const bool turning_ahead = n >= 0.0;
-    const T J = choose(moving_ahead, J_s * omw, J_s);
-    const T K_T_ahead = muladd(c[K::k0], muladd(c[K::k1], c[K::k2], J), J);
-    const T K_T_reverse = choose(val(J_s) >= c[K::C10], muladd(c[K::C6], c[K::C7], J_s), T(c[K::C3]));
-    const T K_T = n_stopped ? T(0.0) : choose(turning_ahead, K_T_ahead, K_T_reverse);
-    const double n2 = n * n;
-    const T X_P = choose(turning_ahead, K_T_ahead * c[K::one_minus_tP_rho_D4], K_T * c[K::rho_D4]);
-    const double* A = c + K::LATERAL;  // (A6, A7, A8, A1, ..., A5) x (Y, N) lanes, then the J_s bounds
-    T lateral[2];
-    for (int lane = 0; lane < 2; ++lane) {
-        if (turning_ahead) {
-            lateral[lane] = moving_ahead ? T(0.0) : muladd(A[4 + lane], muladd(A[2 + lane], A[lane], J_s), J_s);
-        } else if (val(J_s) < A[16]) {
-            lateral[lane] = muladd(A[10 + lane], A[12 + lane], J_s);
-        } else if (val(J_s) > A[17]) {
-            lateral[lane] = T(A[14 + lane]);
-        } else {
-            lateral[lane] = muladd(A[6 + lane], A[8 + lane], J_s);
+    T X, Y, N;
+    if (families & HULL_STANDARD) {
+        // hull: the standard polynomials (`sysid.mmg.hull_standard`), features times (16, 3)
+        const T inverse_U = choose(slow, T(0.0), T(1.0) / Ug);
+        const T w[2] = {v, r * c[K::S_L_pp]};
+        T f[16];
+        f[0] = u * u + v * v;
+        for (int a = 0; a < 2; ++a)
+            for (int b = 0; b < 2; ++b) f[1 + 2 * a + b] = w[a] * w[b];
+        for (int a = 0; a < 2; ++a) f[5 + a] = w[a] * U;
+        for (int ab = 0; ab < 4; ++ab)
+            for (int k = 0; k < 2; ++k) f[7 + 2 * ab + k] = (f[1 + ab] * w[k]) * inverse_U;
+        f[15] = f[1] * f[1] * (inverse_U * inverse_U);
+        const double* H = c + K::S_HULL;  // (16, 3)
+        X = f[0] * H[0];
+        Y = f[0] * H[1];
+        N = f[0] * H[2];
+        for (int i = 1; i < 16; ++i) {
+            X = X + f[i] * H[3 * i];
+            Y = Y + f[i] * H[3 * i + 1];
+            N = N + f[i] * H[3 * i + 2];
         }
-    }
-    X = X + X_P * n2;
-    Y = Y + lateral[0] * n2;
-    N = N + lateral[1] * n2;
-
-    // rudder: inflow (Yoshimura, Kitagawa or u), then the normal force
-    const T u_p = u * omw;
-    const T u_p2 = u_p * u_p;
-    const T outer = u_p2 * c[K::eps2_one_minus_eta];
-    T u_R;
-    if (turning_ahead && val(K_T) > 0.0) {
-        const T jet = muladd(u_p2, K_T * n2, c[K::jet_D2]);
-        const T core = muladd(u_p, c[K::kappa], root(jet) - u_p);
-        u_R = root_positive(muladd(outer, core * core, c[K::eps2_eta]));
-    } else if (moving_ahead) {
-        const T u1 = muladd(u_p, n, root(absolute(K_T) * c[K::kitagawa_jet_eps2]));
-        u_R = signed_root(muladd(muladd(outer, u1 * absolute(u1), c[K::eps2_eta]), c[K::C_PR], u * u));
     } else {
-        u_R = u;
+        // hull: Yoshimura, exact cross-flow integrals
+        const T X0 = muladd(c[K::X_0F], c[K::dX_0_pi], absolute(beta_hat));
+        const T u_abs = absolute(u);
+        const T I1 = crossflow(v, r, c, 0), I2 = crossflow(v, r, c, 1);
+        const T vu = v * u, vua = v * u_abs, vr = v * r, ru = r * u, rua = r * u_abs, X0Uu = (X0 * Ug) * u;
+        const double* H = c + K::HULL;  // (8, 3)
+        X = vu * H[0] + vua * H[3] + vr * H[6] + ru * H[9] + rua * H[12] + X0Uu * H[15] + I1 * H[18] + I2 * H[21];
+        Y = vu * H[1] + vua * H[4] + vr * H[7] + ru * H[10] + rua * H[13] + X0Uu * H[16] + I1 * H[19] + I2 * H[22];
+        N = vu * H[2] + vua * H[5] + vr * H[8] + ru * H[11] + rua * H[14] + X0Uu * H[17] + I1 * H[20] + I2 * H[23];
     }
-    const double straightening = val(muladd(v, c[K::x_R], r)) >= 0.0 ? c[K::minus_gamma_P] : c[K::minus_gamma_N];
-    const T v_R = straightening * muladd(v, c[K::l_R], r);
-    const T alpha_R = delta - angle(v_R, u_R);
-    const T F_N = muladd(u_R * u_R, v_R, v_R) * sine(alpha_R);
-    X = X + (std::sin(delta + c[K::RUDDER]) * c[K::RUDDER + 3]) * F_N;
-    Y = Y + (std::sin(delta + c[K::RUDDER + 1]) * c[K::RUDDER + 4]) * F_N;
-    N = N + (std::sin(delta + c[K::RUDDER + 2]) * c[K::RUDDER + 5]) * F_N;
+
+    if (families & PROPELLER_STANDARD) {
+        // propeller: the standard thrust (`sysid.mmg.propeller_standard`), wake by beta_P
+        const T beta = choose(slow, T(0.0), -beta_hat);
+        const T r_nd = choose(slow, T(0.0), (r * c[K::S_L_pp]) / Ug);
+        const T beta_P = muladd(beta, c[K::S_minus_x_P], r_nd);
+        T omw;
+        if (families & WAKE_GAUSSIAN) {
+            omw = muladd(1.0, c[K::S_minus_w_P0], exponential((beta_P * beta_P) * -4.0));
+        } else {
+            const T rise = 1.0 - exponential(absolute(beta_P) * c[K::S_minus_C_1]);
+            omw = muladd(c[K::S_one_minus_wP0], rise, val(beta_P) > 0.0 ? c[K::S_wake_plus] : c[K::S_wake_minus]);
+        }
+        const bool turning = std::fabs(n) >= TINY;
+        const T J_s = turning ? u / (n * c[K::S_D]) : T(0.0);
+        const T J = J_s * omw;
+        const T K_T = muladd(c[K::S_k0], muladd(c[K::S_k1], c[K::S_k2], J), J);
+        const double n2 = n * n;
+        X = X + (K_T * n2) * c[K::S_one_minus_tP_rho_D4];
+
+        // rudder: the standard inflow (`sysid.mmg.rudder_standard`)
+        const T u_P = u * omw;
+        const T u_P2 = u_P * u_P;
+        const T jet = root_positive(muladd(u_P2, K_T * n2, c[K::S_jet_D2]));
+        const T core = muladd(u_P, c[K::S_kappa], jet - u_P);
+        const T u_R = root_positive(muladd(core * core * c[K::S_eps2_eta], c[K::S_eps2_one_minus_eta], u_P2));
+        const T beta_R = muladd(beta, c[K::S_minus_l_R_nd], r_nd);
+        const double gamma_R = val(beta_R) < 0.0 ? c[K::S_gamma_R_minus] : c[K::S_gamma_R_plus];
+        const T v_R = (U * gamma_R) * beta_R;
+        const T alpha_R = delta - angle_guarded(v_R, u_R);
+        const T F_N = muladd(u_R * u_R, v_R, v_R) * sine(alpha_R);
+        X = X + (std::sin(delta + c[K::RUDDER]) * c[K::RUDDER + 3]) * F_N;
+        Y = Y + (std::sin(delta + c[K::RUDDER + 1]) * c[K::RUDDER + 4]) * F_N;
+        N = N + (std::sin(delta + c[K::RUDDER + 2]) * c[K::RUDDER + 5]) * F_N;
+    } else {
+        // propeller: four quadrants
+        const T s_raw = muladd(v, c[K::x_P_L], r) / Ug;
+        const T s = choose(slow, T(c[K::slow_lateral_inflow]), s_raw);
+        const T s_abs = absolute(s);
+        const T wake = muladd(c[K::one_minus_wP0], muladd(c[K::tau], c[K::C_P], s_abs), s_abs);
+        const T omw = choose(val(u) > 0.0, clamped(wake, TINY, 1.0), T(1.0));
+        const bool n_stopped = std::fabs(n) < TINY;
+        const bool u_stopped = std::fabs(val(u)) < TINY;
+        const double nD = n * c[K::D];
+        const T J_s = n_stopped ? T(sign_u * STOPPED_RATIO) : (u_stopped ? T(TINY) : u / nD);
+        const bool moving_ahead = val(u) >= 0.0;
+        const bool turning_ahead = n >= 0.0;
+        const T J = choose(moving_ahead, J_s * omw, J_s);
+        const T K_T_ahead = muladd(c[K::k0], muladd(c[K::k1], c[K::k2], J), J);
+        const T K_T_reverse = choose(val(J_s) >= c[K::C10], muladd(c[K::C6], c[K::C7], J_s), T(c[K::C3]));
+        const T K_T = n_stopped ? T(0.0) : choose(turning_ahead, K_T_ahead, K_T_reverse);
+        const double n2 = n * n;
+        const T X_P = choose(turning_ahead, K_T_ahead * c[K::one_minus_tP_rho_D4], K_T * c[K::rho_D4]);
+        const double* A = c + K::LATERAL;  // (A6, A7, A8, A1, ..., A5) x (Y, N) lanes, then the J_s bounds
+        T lateral[2];
+        for (int lane = 0; lane < 2; ++lane) {
+            if (turning_ahead) {
+                lateral[lane] = moving_ahead ? T(0.0) : muladd(A[4 + lane], muladd(A[2 + lane], A[lane], J_s), J_s);
+            } else if (val(J_s) < A[16]) {
+                lateral[lane] = muladd(A[10 + lane], A[12 + lane], J_s);
+            } else if (val(J_s) > A[17]) {
+                lateral[lane] = T(A[14 + lane]);
+            } else {
+                lateral[lane] = muladd(A[6 + lane], A[8 + lane], J_s);
+            }
+        }
+        X = X + X_P * n2;
+        Y = Y + lateral[0] * n2;
+        N = N + lateral[1] * n2;
+
+        // rudder: inflow (Yoshimura, Kitagawa or u), then the normal force
+        const T u_p = u * omw;
+        const T u_p2 = u_p * u_p;
+        const T outer = u_p2 * c[K::eps2_one_minus_eta];
+        T u_R;
+        if (turning_ahead && val(K_T) > 0.0) {
+            const T jet = muladd(u_p2, K_T * n2, c[K::jet_D2]);
+            const T core = muladd(u_p, c[K::kappa], root(jet) - u_p);
+            u_R = root_positive(muladd(outer, core * core, c[K::eps2_eta]));
+        } else if (moving_ahead) {
+            const T u1 = muladd(u_p, n, root(absolute(K_T) * c[K::kitagawa_jet_eps2]));
+            u_R = signed_root(muladd(muladd(outer, u1 * absolute(u1), c[K::eps2_eta]), c[K::C_PR], u * u));
+        } else {
+            u_R = u;
+        }
+        const double straightening = val(muladd(v, c[K::x_R], r)) >= 0.0 ? c[K::minus_gamma_P] : c[K::minus_gamma_N];
+        const T v_R = straightening * muladd(v, c[K::l_R], r);
+        const T alpha_R = delta - angle(v_R, u_R);
+        const T F_N = muladd(u_R * u_R, v_R, v_R) * sine(alpha_R);
+        X = X + (std::sin(delta + c[K::RUDDER]) * c[K::RUDDER + 3]) * F_N;
+        Y = Y + (std::sin(delta + c[K::RUDDER + 1]) * c[K::RUDDER + 4]) * F_N;
+        N = N + (std::sin(delta + c[K::RUDDER + 2]) * c[K::RUDDER + 5]) * F_N;
+    }
 
     // the relative wind (the lab's guards) and Fujiwara's force
     const T course = psi + beta_hat;
@@ -334,11 +410,11 @@ Forces<T> forces(const T& u, const T& v, const T& psi, const T& r, double n, dou
 
 // one row: out (18) and, for T = Dual, jac (6, 18)
 template <class T>
-void row(const double* x, const double* in, const double* c, bool wind, T* out) {
+void row(const double* x, const double* in, const double* c, int families, T* out) {
     const T u = component<T>(x[1], 0), v = component<T>(x[3], 1);
     const T psi = component<T>(x[4], 2), r = component<T>(x[5], 3);
     const double n = in[0], delta = in[1];
-    const Forces<T> F = forces(u, v, psi, r, n, delta, in[2], in[3], c, wind);
+    const Forces<T> F = forces(u, v, psi, r, n, delta, in[2], in[3], c, families);
     T sin_psi, cos_psi;
     sin_cos(psi, sin_psi, cos_psi);
     // the equations of motion, Eq. (4) solved for the accelerations (`derived_constants`' eom_*)
@@ -364,12 +440,12 @@ void row(const double* x, const double* in, const double* c, bool wind, T* out) 
 }
 
 template <class S>
-void values(int64_t rows, const S* state, const S* inputs, const double* c, int wind, S* out) {
+void values(int64_t rows, const S* state, const S* inputs, const double* c, int families, S* out) {
     for (int64_t i = 0; i < rows; ++i) {
         double x[6], in[4], o[18];
         for (int k = 0; k < 6; ++k) x[k] = static_cast<double>(state[6 * i + k]);
         for (int k = 0; k < 4; ++k) in[k] = static_cast<double>(inputs[4 * i + k]);
-        row<double>(x, in, c, wind != 0, o);
+        row<double>(x, in, c, families, o);
         for (int j = 0; j < 18; ++j) out[18 * i + j] = static_cast<S>(o[j]);
     }
 }
@@ -386,7 +462,7 @@ struct Outputs {
 // rows with their Jacobian (jac (6, 18) per row); with `mean`, `std` (9 each, else null) the
 // FNN inputs are standardised, (s - mean) / std, and so are their columns of the Jacobian
 template <class S>
-void values_and_jacobian(int64_t rows, const S* state, const S* inputs, const double* c, int wind, const S* mean,
+void values_and_jacobian(int64_t rows, const S* state, const S* inputs, const double* c, int families, const S* mean,
                          const S* std, Outputs<S> out, S* jac) {
     double shift[9] = {}, scale[9] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0};
     if (mean != nullptr && std != nullptr) {
@@ -398,7 +474,7 @@ void values_and_jacobian(int64_t rows, const S* state, const S* inputs, const do
         Dual o[18];
         for (int k = 0; k < 6; ++k) x[k] = static_cast<double>(state[6 * i + k]);
         for (int k = 0; k < 4; ++k) in[k] = static_cast<double>(inputs[4 * i + k]);
-        row<Dual>(x, in, c, wind != 0, o);
+        row<Dual>(x, in, c, families, o);
         for (int j = 0; j < 9; ++j) {
             o[9 + j].v = (o[9 + j].v - shift[j]) / scale[j];
             for (int k = 0; k < NT; ++k) o[9 + j].d[k] = o[9 + j].d[k] / scale[j];
@@ -441,37 +517,37 @@ extern "C" {
 
 int sysid_mmg_width() { return K::N_COEFFICIENTS; }
 
-void sysid_mmg_rate_f64(int64_t rows, const double* state, const double* inputs, const double* c, int wind,
+void sysid_mmg_rate_f64(int64_t rows, const double* state, const double* inputs, const double* c, int families,
                         double* out) {
-    values(rows, state, inputs, c, wind, out);
+    values(rows, state, inputs, c, families, out);
 }
 
-void sysid_mmg_rate_f32(int64_t rows, const float* state, const float* inputs, const double* c, int wind,
+void sysid_mmg_rate_f32(int64_t rows, const float* state, const float* inputs, const double* c, int families,
                         float* out) {
-    values(rows, state, inputs, c, wind, out);
+    values(rows, state, inputs, c, families, out);
 }
 
 void sysid_mmg_rate_jacobian_f64(int64_t rows, const double* state, const double* inputs, const double* c,
-                                 int wind, double* out, double* jac) {
-    values_and_jacobian(rows, state, inputs, c, wind, static_cast<const double*>(nullptr),
+                                 int families, double* out, double* jac) {
+    values_and_jacobian(rows, state, inputs, c, families, static_cast<const double*>(nullptr),
                         static_cast<const double*>(nullptr), Outputs<double>{out, out + 6, out + 9, 18, 18, 18}, jac);
 }
 
 void sysid_mmg_rate_jacobian_f32(int64_t rows, const float* state, const float* inputs, const double* c,
-                                 int wind, float* out, float* jac) {
-    values_and_jacobian(rows, state, inputs, c, wind, static_cast<const float*>(nullptr),
+                                 int families, float* out, float* jac) {
+    values_and_jacobian(rows, state, inputs, c, families, static_cast<const float*>(nullptr),
                         static_cast<const float*>(nullptr), Outputs<float>{out, out + 6, out + 9, 18, 18, 18}, jac);
 }
 
-void sysid_mmg_training_f64(int64_t rows, const double* state, const double* inputs, const double* c, int wind,
+void sysid_mmg_training_f64(int64_t rows, const double* state, const double* inputs, const double* c, int families,
                             const double* mean, const double* std, double* rate, double* force, double* s,
                             double* jac) {
-    values_and_jacobian(rows, state, inputs, c, wind, mean, std, Outputs<double>{rate, force, s, 6, 3, 9}, jac);
+    values_and_jacobian(rows, state, inputs, c, families, mean, std, Outputs<double>{rate, force, s, 6, 3, 9}, jac);
 }
 
-void sysid_mmg_training_f32(int64_t rows, const float* state, const float* inputs, const double* c, int wind,
+void sysid_mmg_training_f32(int64_t rows, const float* state, const float* inputs, const double* c, int families,
                             const float* mean, const float* std, float* rate, float* force, float* s, float* jac) {
-    values_and_jacobian(rows, state, inputs, c, wind, mean, std, Outputs<float>{rate, force, s, 6, 3, 9}, jac);
+    values_and_jacobian(rows, state, inputs, c, families, mean, std, Outputs<float>{rate, force, s, 6, 3, 9}, jac);
 }
 
 void sysid_mmg_state_gradient_f64(int64_t rows, const double* jac, const double* g_rate, const double* g_force,

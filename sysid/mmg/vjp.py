@@ -52,6 +52,16 @@ def force_rate(c, like: torch.Tensor) -> torch.Tensor:
     return coefficient_matrix(c, FORCE_RATE, like)
 
 
+def rate_of_force(state: torch.Tensor, force: torch.Tensor, c) -> torch.Tensor:
+    """dx/dt (..., 6) of Eqs. (1), (4) at state (..., 6) driven by `force` (..., 3) = (X, Y,
+    N) [N, N, N m], through torch (autograd records it)."""
+    _, u, _, v, psi, r = state.split_with_sizes([1] * 6, -1)
+    cos_psi, sin_psi = torch.cos(psi), torch.sin(psi)
+    a = torch.cat([u, v, r, u, u, v, v], -1)
+    b = torch.cat([r, r, r, cos_psi, sin_psi, cos_psi, sin_psi], -1)
+    return torch.cat([force, a * b, state], -1) @ coefficient_matrix(c, _RATE, state)
+
+
 def _rate_with_tangents(state, force, d_force, c):
     """dx/dt (..., 6) of Eqs. (1), (4) driven by `force` and its Jacobian (..., 6, 6) laid out
     [d state, d rate], from the force's (..., 6, 3); also (cos psi, sin psi) (..., 2)."""
@@ -161,14 +171,19 @@ class _NativeTrainingRate(torch.autograd.Function):
         return native.state_gradient(jacobian, grad_rate, grad_force, grad_z), None, None, None, None, None
 
 
-def training_rate(state: torch.Tensor, inputs: torch.Tensor, c, wind: bool, mean: torch.Tensor,
+def training_rate(state: torch.Tensor, inputs: torch.Tensor, c, wind: int, mean: torch.Tensor,
                   std: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """(dx/dt of F_MMG (..., 6), F_MMG (..., 3), the FNN's standardised inputs z = (s - mean)
     / std (..., 9), Eq. 8) at state (..., 6) with inputs (..., 4), differentiable with respect
     to the state by the hand-derived VJP: one call of the native kernel forward and one
     backward where it applies (`sysid.mmg.native.applies`; `mean`, `std` (9,) in the state's
-    dtype), else `mmg_rate` and the standardisation in torch."""
+    dtype), else `mmg_rate` and the standardisation in torch. `wind`: the kernel's
+    `sysid.mmg.native.Families` (a bool: the Esso Osaka's, with or without wind); the torch
+    path computes the Esso Osaka's only."""
     if mean.dtype == state.dtype == std.dtype and native.applies(state, inputs, c, differentiated=True):
         return _NativeTrainingRate.apply(state, inputs, c, wind, mean, std)
-    rate, force, s = mmg_rate(state, inputs, c, wind).split_with_sizes((6, 3, 9), -1)
+    if int(wind) & ~int(native.Families.WIND):
+        raise ValueError(f"families {native.Families(int(wind))!r}: the torch path computes the Esso Osaka's "
+                         "only (call where `sysid.mmg.native.applies` holds)")
+    rate, force, s = mmg_rate(state, inputs, c, bool(wind)).split_with_sizes((6, 3, 9), -1)
     return rate, force, (s.to(mean.dtype) - mean) / std

@@ -5,26 +5,45 @@ with and without wind; a float32 training rollout's loss and gradients; the comp
 library's cache (reused, never a corrupt file) and the fallbacks to torch."""
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import subprocess
 import sys
 from pathlib import Path
+from types import MappingProxyType
 
 import pytest
 import torch
 
 from sysid.dynamics.equations import integrate_training
+from sysid.mmg.native import Families
 from sysid.hybrid.correction import ForceCorrection
 from sysid.hybrid.force_models import CorrectedModel, PerMember
 from sysid.mmg import native
+from sysid.mmg.families import FAMILIES
 from sysid.mmg.model import MMG
-from sysid.mmg.ship import load_ship
+from sysid.mmg.ship import active_parameters, load_ship
 from sysid.mmg.vjp import rate_with_jacobian
-from mmg_rows import ESSO, branch_rows, reference, switch_rows
+from mmg_rows import ESSO, branch_rows, reference, rows_of, switch_rows
 
 ROOT = Path(__file__).resolve().parents[2]
 C = ESSO.coefficients.values_view(torch.float64)
+KVLCC2 = load_ship("kvlcc2_l7")
+
+
+def _with_families(ship, donor, components, models=None):
+    """`ship` with `donor`'s families of `components` (and their parameters from `donor`),
+    then the families in `models` ({component: name}, parameters from `donor`)."""
+    chosen = dict(ship.models)
+    chosen.update({k: donor.models[k] for k in components})
+    chosen.update(models or {})
+    parameters = dict(ship.parameters)
+    for component in set(components) | set(models or {}):
+        parameters.update({k: donor.parameters[k] for k in FAMILIES[component][chosen[component]].parameters})
+    parameters = {k: parameters[k] for k in active_parameters(chosen)}  # the mix's parameters only
+    return dataclasses.replace(ship, name=f"{ship.name}+{donor.name}", models=MappingProxyType(chosen),
+                               parameters=MappingProxyType(parameters))
 
 
 @pytest.fixture(scope="module")
@@ -110,7 +129,7 @@ def test_the_no_grad_forward_of_an_mmg_equals_its_own_forces_and_rate(kernel):
             assert out.dtype == dtype
             assert _relative(out, ref, 0) < (1e-12 if dtype == torch.float64 else 2e-6)
     state, inputs = branch_rows()
-    assert native.forward(MMG(load_ship("kvlcc2_l7")), state, inputs) is None
+    assert native.forward(MMG(load_ship("esso_osaka"), quadrature="simpson"), state, inputs) is None
     with native.torch_path():
         assert native.forward(ESSO, state, inputs) is None
 
@@ -129,8 +148,8 @@ def test_identified_coefficients_are_the_views_values(kernel):
     assert not torch.allclose(out, native.rate(state, inputs, C))
 
 
-def _rollout(model, states, inputs):
-    pred, f_nn, f_mmg = integrate_training(model, states[0], inputs, 0.1)
+def _rollout(model, states, inputs, fast=True):
+    pred, f_nn, f_mmg = integrate_training(model, states[0], inputs, 0.1, fast)
     loss = pred.square().mean() + f_nn.square().mean() + f_mmg.square().mean()
     net = model.model.correction_net
     net.zero_grad()
@@ -138,18 +157,18 @@ def _rollout(model, states, inputs):
     return [loss.detach(), pred.detach()] + [p.grad.clone() for p in net.parameters()]
 
 
-def test_a_float32_training_rollout_equals_the_torch_path(kernel, d2_rows):
-    """Loss, states and every network gradient of a T = 10 Euler rollout (two FNN members) in
-    float32, through the kernel and through the torch VJP: equal to float32 round-off."""
-    state, inputs = d2_rows
-    states = state.reshape(11, -1, 6)[:, :256].float().unsqueeze(1).expand(-1, 2, -1, -1)
-    u = inputs.reshape(11, -1, 4)[:, :256].float().unsqueeze(1).expand(-1, 2, -1, -1)
+def _hybrid(ship, states, dtype, force_scale):
+    """A two-member hybrid of `ship` whose FNN is standardised on `states` (seeded)."""
     torch.manual_seed(0)
-    net = ForceCorrection((16, 16), torch.float32, members=2)
+    net = ForceCorrection((16, 16), dtype, members=2)
     flat = states.reshape(-1, 6)
     net.set_standardization(flat.mean(0).repeat(2)[:9], flat.std(0).repeat(2)[:9] + 0.1,
-                            torch.zeros(3), torch.tensor([2.0, 3.0, 1.5]))
-    model = PerMember(CorrectedModel(MMG(load_ship("esso_osaka"), dtype=torch.float32), net))
+                            torch.zeros(3), torch.tensor(force_scale))
+    return PerMember(CorrectedModel(MMG(ship, dtype=dtype), net))
+
+
+def _rollout_through_the_kernel(model, states, inputs):
+    """`_rollout` and the dtype of every `native.training_rate` call it made."""
     calls = []
     original = native.training_rate
 
@@ -158,15 +177,27 @@ def test_a_float32_training_rollout_equals_the_torch_path(kernel, d2_rows):
         return original(*args)
     native.training_rate = counted
     try:
-        new = _rollout(model, states, u)
+        return _rollout(model, states, inputs), calls
     finally:
         native.training_rate = original
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_a_training_rollout_equals_the_torch_path(kernel, d2_rows, dtype):
+    """Loss, states and every network gradient of a T = 10 Euler rollout (two FNN members),
+    through the kernel and through the torch VJP: equal to round-off."""
+    state, inputs = d2_rows
+    states = state.reshape(11, -1, 6)[:, :256].to(dtype).unsqueeze(1).expand(-1, 2, -1, -1)
+    u = inputs.reshape(11, -1, 4)[:, :256].to(dtype).unsqueeze(1).expand(-1, 2, -1, -1)
+    model = _hybrid(load_ship("esso_osaka"), states, dtype, [2.0, 3.0, 1.5])
+    new, calls = _rollout_through_the_kernel(model, states, u)
     with native.torch_path():
         old = _rollout(model, states, u)
-    assert calls == [torch.float32] * 10  # the rollout went through the kernel
+    assert calls == [dtype] * 10  # the rollout went through the kernel
+    rtol = 2e-5 if dtype == torch.float32 else 1e-11
     for a, b in zip(new, old):
-        assert a.dtype == torch.float32
-        torch.testing.assert_close(a, b, rtol=2e-5, atol=2e-5 * float(b.abs().max()))
+        assert a.dtype == dtype
+        torch.testing.assert_close(a, b, rtol=rtol, atol=rtol * float(b.abs().max()))
 
 
 def test_a_second_build_reuses_the_library_and_a_corrupt_one_is_not_loaded(tmp_path):
@@ -228,6 +259,17 @@ def test_a_failed_compile_gives_the_torch_path_with_one_warning(monkeypatch, cap
     assert list(tmp_path.glob("*.so")) == []  # nothing half-written
 
 
+def test_a_cache_that_cannot_be_written_gives_the_torch_path(monkeypatch, caplog, tmp_path):
+    _fresh_process_state(monkeypatch)
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a directory")
+    monkeypatch.setenv("SYSID_CACHE_DIR", str(blocker / "cache"))
+    with caplog.at_level(logging.INFO, logger="sysid.mmg.native"):
+        assert native.library() is None
+    lines = [r for r in caplog.records if r.name == "sysid.mmg.native"]
+    assert len(lines) == 1 and "cannot build into the cache" in lines[0].getMessage()
+
+
 def test_where_the_kernel_does_not_apply(kernel):
     state, inputs = branch_rows()
     assert native.applies(state, inputs, C)
@@ -238,7 +280,9 @@ def test_where_the_kernel_does_not_apply(kernel):
         assert native.applies(state, inputs, C)
     identified = MMG(load_ship("esso_osaka"), trainable=["X_vr"])
     assert not native.applies(state.detach(), inputs, identified.coefficients.values_view(torch.float64))
-    assert native.covers(ESSO) and not native.covers(MMG(load_ship("kvlcc2_l7")))
+    assert native.covers(ESSO) and native.covers(MMG(load_ship("kvlcc2_l7")))
+    # a standard propeller drives only the standard rudder in the kernel
+    assert not native.covers(MMG(_with_families(KVLCC2, ESSO.ship, ("rudder",))))
     assert not native.covers(MMG(load_ship("esso_osaka"), quadrature="simpson"))
 
 
@@ -256,3 +300,89 @@ def test_a_new_process_loads_the_cached_library_without_compiling(kernel, tmp_pa
     after = built.path.stat()
     assert (after.st_ino, after.st_mtime_ns) == (before.st_ino, before.st_mtime_ns)
     assert len(list(tmp_path.glob("mmg-*.so"))) == 1
+
+
+# the standard families (Yasukawa & Yoshimura 2015) and mixes with the Esso Osaka's
+STANDARD_SHIPS = {
+    "kvlcc2": (KVLCC2, Families.HULL_STANDARD | Families.PROPELLER_STANDARD),
+    "kvlcc2 gaussian wake": (_with_families(KVLCC2, KVLCC2, (), {"propeller": "standard_gaussian_wake"}),
+                             Families.HULL_STANDARD | Families.PROPELLER_STANDARD | Families.WAKE_GAUSSIAN),
+    "esso hull and wind, standard propeller and rudder": (
+        _with_families(ESSO.ship, KVLCC2, ("propeller", "rudder")), Families.PROPELLER_STANDARD | Families.WIND),
+    "standard hull, esso propeller, rudder and wind": (
+        _with_families(ESSO.ship, KVLCC2, ("hull",)), Families.HULL_STANDARD | Families.WIND),
+}
+
+
+def standard_rows() -> tuple[torch.Tensor, torch.Tensor]:
+    """Random rows (seeded) over the operating range, ahead and astern, ahead and reverse
+    revolutions, then rows on switches: beta_P = beta_R = 0 (v = r = 0), n = 0, u = 0, inside
+    the speed guard, calm."""
+    g = torch.Generator().manual_seed(7)
+
+    def uniform(low, high, size=300):
+        return low + (high - low) * torch.rand(size, generator=g, dtype=torch.float64)
+    random = torch.stack([uniform(-0.8, 2.0), uniform(-0.5, 0.5), uniform(-3.0, 3.0), uniform(-0.3, 0.3),
+                          uniform(-10.0, 25.0), uniform(-0.6, 0.6), uniform(0.0, 5.0), uniform(0.0, 6.2)], -1)
+    state, inputs = rows_of(random.tolist())
+    switch_state, switch_inputs = rows_of([
+        (1.0, 0.0, 0.3, 0.0, 15.0, 0.2, 3.0, 1.0),
+        (-0.5, 0.0, 0.3, 0.0, -8.0, -0.2, 3.0, 1.0),
+        (0.8, 0.05, 0.2, 0.01, 0.0, 0.2, 4.0, 0.5),
+        (0.0, 0.3, 0.2, 0.01, 5.0, 0.1, 3.0, 1.0),
+        (4e-6, 3e-6, 0.4, 0.01, 3.0, 0.2, 3.0, 2.0),
+        (0.6, 0.02, 0.4, 0.01, 12.0, 0.2, 0.0, 2.0),
+    ])
+    return torch.cat([state, switch_state]), torch.cat([inputs, switch_inputs])
+
+
+@pytest.mark.parametrize("name", list(STANDARD_SHIPS))
+def test_standard_families_equal_the_mmgs_torch_forward_and_autograds_jacobian(kernel, name):
+    """The standard hull, both standard propellers (wake by Yasukawa's C_1, C_2 and shipmmg's
+    Gaussian) with the standard rudder, alone and mixed with the Esso Osaka's families: out as
+    the MMG's own forward (no grad) to 1e-12, the Jacobian as autograd's through it to 1e-10."""
+    ship, families = STANDARD_SHIPS[name]
+    mmg = MMG(ship)
+    assert native.families_of(mmg) == families
+    state, inputs = standard_rows()
+    u, n = state[:, 1], inputs[:, 0]
+    assert ((u < 0) & (n < 0)).any() and ((u < 0) & (n > 0)).any() and ((u > 0) & (n < 0)).any()
+    with torch.no_grad():
+        out, ref = native.forward(mmg, state, inputs), reference(state, inputs, mmg)
+    assert _relative(out, ref, 0) < 1e-12
+    c = mmg.coefficients.values_view(torch.float64)
+    values, jacobian = native.rate_with_jacobian(state, inputs, c, families)
+    assert torch.equal(values, out)
+    truth = torch.autograd.functional.jacobian(lambda x: reference(x, inputs, mmg).sum(0), state).permute(1, 2, 0)
+    assert _relative(jacobian, truth, (0, 1)) < 1e-10
+
+
+def test_a_kvlcc2_training_rollout_through_the_kernel_equals_autograd(kernel):
+    """Loss, states and every network gradient of a T = 10 float32 Euler rollout of a KVLCC2
+    hybrid (two FNN members) through the kernel and through autograd over the forward."""
+    dtype = torch.float32
+    state, inputs = standard_rows()
+    keep = state[:, 1] > 0.2  # ahead motion, as in training logs
+    states = state[keep][:128].to(dtype).expand(11, 2, -1, -1)
+    u = inputs[keep][:128].to(dtype).expand(11, 2, -1, -1)
+    model = _hybrid(KVLCC2, states, dtype, [20.0, 30.0, 15.0])
+    new, calls = _rollout_through_the_kernel(model, states, u)
+    assert calls == [dtype] * 10  # the rollout went through the kernel
+    old = _rollout(model, states, u, fast=False)  # autograd over every operation
+    with native.torch_path():  # a step the kernel does not take: autograd over the forward
+        fallback = _rollout(model, states, u)
+    for a, b, f in zip(new, old, fallback):
+        assert a.dtype == dtype
+        torch.testing.assert_close(a, b, rtol=2e-5, atol=2e-5 * float(b.abs().max()))
+        torch.testing.assert_close(f, b, rtol=2e-5, atol=2e-5 * float(b.abs().max()))
+
+
+def test_the_torch_vjp_computes_only_the_esso_osakas_families(kernel):
+    """Where the kernel does not apply, the hand-derived torch VJP refuses the standard
+    families in one line (it has the Esso Osaka's derivatives only)."""
+    from sysid.mmg.vjp import training_rate
+    state, inputs = standard_rows()
+    c = MMG(KVLCC2).coefficients.values_view(torch.float64)
+    mean, std = torch.zeros(9, dtype=torch.float64), torch.ones(9, dtype=torch.float64)
+    with native.torch_path(), pytest.raises(ValueError, match="computes the Esso Osaka's only"):
+        training_rate(state, inputs, c, Families.HULL_STANDARD | Families.PROPELLER_STANDARD, mean, std)

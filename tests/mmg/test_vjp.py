@@ -141,25 +141,32 @@ def test_the_boundary_standard_families_trainable_coefficients_and_simpson_use_a
     assert supported(identified.requires_grad_(False))    # frozen for the hybrid: constants
     assert not supported(MMG(load_ship("esso_osaka"), quadrature="simpson"))
     net = ForceCorrection((8,), torch.float64)
-    assert CorrectedModel(MMG(load_ship("kvlcc2_l7")), net).training_rate() is None
+    # standard families: the native kernel's training rate (`sysid.mmg.native.families_of`)
+    assert CorrectedModel(MMG(load_ship("kvlcc2_l7")), net).training_rate() is not None
+    assert CorrectedModel(MMG(load_ship("esso_osaka"), quadrature="simpson"), net).training_rate() is None
     assert CorrectedModel(ESSO, net, physics=False).training_rate() is None
     assert CorrectedModel(ESSO, net).training_rate() is not None
     with torch.no_grad():
         assert CorrectedModel(ESSO, net).training_rate() is None
 
 
-def test_a_standard_ship_trains_through_autograd_with_the_same_rollout():
-    """kvlcc2 (standard families) falls back: integrate_training gives integrate_with_forces'
-    numbers."""
+def test_a_standard_ship_trains_with_the_same_rollout():
+    """kvlcc2 (standard families): integrate_training gives integrate_with_forces' numbers,
+    through the native kernel to round-off and, where the kernel does not apply, through
+    autograd over the forward."""
     from sysid.dynamics.equations import integrate_with_forces
     mmg = MMG(load_ship("kvlcc2_l7"))
     model = CorrectedModel(mmg, ForceCorrection((8,), torch.float64))
     state, inputs = _branch_rows()
     u = inputs.expand(4, -1, -1)
-    pred, f_nn, f_mmg = integrate_training(model, state, u, 0.5)
     reference = integrate_with_forces(model, state, u, 0.5)
-    torch.testing.assert_close(pred, reference.states, rtol=0, atol=0)
-    torch.testing.assert_close(f_mmg, reference.forces.mmg, rtol=0, atol=0)
+    with native.torch_path():
+        pred, f_nn, f_mmg = integrate_training(model, state, u, 0.5)
+    torch.testing.assert_close(pred, reference.states, rtol=1e-13, atol=0)
+    torch.testing.assert_close(f_mmg, reference.forces.mmg, rtol=1e-13, atol=1e-9)
+    pred, f_nn, f_mmg = integrate_training(model, state, u, 0.5)
+    torch.testing.assert_close(pred, reference.states, rtol=1e-11, atol=0)
+    torch.testing.assert_close(f_mmg, reference.forces.mmg, rtol=1e-11, atol=1e-9)
 
 
 def test_frozen_identified_coefficients_are_read_as_constants():
