@@ -38,8 +38,29 @@ def _stat(pid: int) -> tuple[int, float] | None:
     return ppid, (utime + stime) / TICKS
 
 
-def _tree_cpu(root: int, seen: dict[int, float]) -> None:
-    """Update `seen` (pid -> latest CPU seconds) with every living descendant of `root`."""
+def _kind(pid: int, root: int) -> str:
+    """What a process of the tree is: the command itself (the driver), a Ray worker
+    (trials, the inbox actor), Ray's own services, or a worker process of the driver's
+    (multiprocessing: ensembles, recorded maneuvers)."""
+    if pid == root:
+        return "driver (the command's process)"
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as f:
+            args = f.read().replace(b"\0", b" ").decode(errors="replace")
+    except OSError:
+        return "other"
+    if args.startswith("ray::"):
+        return "ray workers (" + args.split()[0] + ")"
+    if "multiprocessing" in args:
+        return "driver's worker processes"
+    if "/ray/" in args:
+        return "ray services"
+    return "other"
+
+
+def _tree_cpu(root: int, seen: dict[int, float], kinds: dict[int, str] | None = None) -> None:
+    """Update `seen` (pid -> latest CPU seconds) with every living descendant of `root`
+    (and `kinds`, pid -> `_kind`, when given)."""
     stats = {}
     for name in os.listdir("/proc"):
         if name.isdigit() and (s := _stat(int(name))) is not None:
@@ -52,6 +73,8 @@ def _tree_cpu(root: int, seen: dict[int, float]) -> None:
         pid = todo.pop()
         if pid in stats:
             seen[pid] = max(seen.get(pid, 0.0), stats[pid][1])
+            if kinds is not None and not kinds.get(pid, "").startswith("ray workers"):
+                kinds[pid] = _kind(pid, root)  # a Ray worker names itself ray::... once it started
         todo += children.get(pid, [])
 
 
@@ -64,11 +87,12 @@ def main() -> None:
     if not command:
         parser.error("give the command to time after --")
     seen: dict[int, float] = {}
+    kinds: dict[int, str] = {}
     loads = []
     started = time.perf_counter()
     proc = subprocess.Popen(command)
     while proc.poll() is None:
-        _tree_cpu(proc.pid, seen)
+        _tree_cpu(proc.pid, seen, kinds)
         with open("/proc/loadavg") as f:
             loads.append(float(f.read().split()[0]))
         time.sleep(args.every)
@@ -79,6 +103,11 @@ def main() -> None:
           f"CPU of the process tree {cpu / 60:.1f} min ({cpu:.0f} s, {cpu / wall:.2f} cores on average); "
           f"load (1-min) min {min(loads, default=0):.1f}, mean {sum(loads) / max(len(loads), 1):.1f}, "
           f"max {max(loads, default=0):.1f} on {os.cpu_count()} cores", flush=True)
+    by_kind: dict[str, float] = {}
+    for pid, seconds in seen.items():
+        by_kind[kinds.get(pid, "other")] = by_kind.get(kinds.get(pid, "other"), 0.0) + seconds
+    for kind, seconds in sorted(by_kind.items(), key=lambda kv: -kv[1]):
+        print(f"  CPU {seconds:7.0f} s  {kind}")
     sys.exit(proc.returncode)
 
 

@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import signal
 import threading
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from typing import Callable, Sequence, TypeVar
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from typing import Callable, Hashable, Sequence, TypeVar
 
 Item = TypeVar("Item")
 Result = TypeVar("Result")
@@ -80,3 +80,78 @@ def in_workers(work: Callable[[Item], Result], items: Sequence[Item], workers: i
         pool.shutdown(wait=True, cancel_futures=True)
         if in_main:
             signal.signal(signal.SIGINT, previous)
+
+
+class Overlap:
+    """Work handed to up to `workers` processes while something else (Ray's trials) keeps
+    the cores busy: items queue with `add` and start only as `allow` frees slots for them
+    (a count that only grows), so the work fills cores the other job leaves idle instead
+    of competing with it. Results are kept by key (`results`); `on_result(key, result)`
+    may `add` follow-up items. Everything runs in the caller's thread: `poll` collects
+    finished work and starts queued work, `finish` lets every slot work and waits for all.
+
+    Used as a context manager: leaving it by an error or Ctrl-C stops every worker and
+    waits until they have exited (as `in_workers`); work queued and not started never starts.
+    """
+
+    def __init__(self, work: Callable, workers: int, context=None,
+                 on_result: Callable[[Hashable, object], None] | None = None):
+        self.work, self.workers, self.context, self.on_result = work, max(1, workers), context, on_result
+        self.allowed = 0
+        self.queued: list[tuple[Hashable, object]] = []
+        self.running: dict[Future, Hashable] = {}
+        self.results: dict[Hashable, object] = {}
+        self._pool: ProcessPoolExecutor | None = None
+
+    def __enter__(self) -> "Overlap":
+        return self
+
+    def __exit__(self, kind, value, traceback) -> None:
+        if self._pool is not None:
+            if kind is not None:
+                _stop(self._pool)
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+
+    def add(self, key: Hashable, item) -> None:
+        """Queue `work(item)`, its result kept under `key` (it starts when a slot is allowed and free)."""
+        self.queued.append((key, item))
+        self.poll()
+
+    def allow(self, slots: int) -> None:
+        """Let up to `slots` items work at once from now on (never fewer than before)."""
+        self.allowed = max(self.allowed, min(slots, self.workers))
+        self.poll()
+
+    def poll(self) -> None:
+        """Collect finished work (an error in it propagates) and start queued work."""
+        finished = [(f, self.running.pop(f)) for f in list(self.running) if f.done()]
+        for future, key in finished:  # taken out first: `on_result` may `add`, which polls again
+            self.results[key] = future.result()
+            if self.on_result is not None:
+                self.on_result(key, self.results[key])
+        while self.queued and len(self.running) < self.allowed:
+            key, item = self.queued.pop(0)
+            self.running[self._submit(item)] = key
+
+    def _submit(self, item) -> Future:
+        in_main = threading.current_thread() is threading.main_thread()
+        blocking = in_main and hasattr(signal, "pthread_sigmask") and self._pool is None
+        if blocking:  # the workers start with SIGINT blocked, then ignore it (as `in_workers`)
+            signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            if self._pool is None:
+                self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=self.context,
+                                                 initializer=_ignore_interrupts)
+            return self._pool.submit(self.work, item)
+        finally:
+            if blocking:
+                signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+    def finish(self) -> dict:
+        """Every slot allowed; wait for all work, queued and added on the way: `results`."""
+        self.allow(self.workers)
+        while self.running or self.queued:
+            wait(list(self.running), timeout=0.2, return_when=FIRST_COMPLETED)
+            self.poll()
+        return self.results

@@ -67,3 +67,45 @@ def test_results_arrive_each_once(tmp_path):
     seen = []
     assert sorted(in_workers(abs, [-3, 1, -2], 2, on_result=seen.append)) == [1, 2, 3]
     assert sorted(seen) == [1, 2, 3]
+
+
+def _after(folder: Path, item: str) -> str:
+    """Work that leaves a file named by its item, then returns it in capitals."""
+    (folder / item).touch()
+    return item.upper()
+
+
+def test_overlap_starts_work_only_on_allowed_slots_and_takes_follow_ups(tmp_path):
+    from sysid.workers import Overlap
+
+    work = functools.partial(_after, tmp_path)
+    with Overlap(work, 2, on_result=lambda key, result: key == "a" and pool.add("a2", "a2")) as pool:
+        pool.add("a", "a")
+        pool.add("b", "b")
+        time.sleep(0.5)
+        pool.poll()
+        assert not list(tmp_path.iterdir()) and not pool.running  # no slot allowed: nothing started
+        pool.allow(1)
+        assert len(pool.running) == 1 and pool.queued == [("b", "b")]
+        pool.allow(2)
+        while not all(f.done() for f in pool.running):
+            time.sleep(0.05)
+        pool.poll()  # a and b collected in one poll, a's result adding a2 on the way
+        results = pool.finish()
+    assert results == {"a": "A", "b": "B", "a2": "A2"}  # a2 added when a's result came
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a", "a2", "b"]
+
+
+def test_overlap_error_ends_every_worker(tmp_path):
+    from sysid.workers import Overlap
+
+    work = functools.partial(_started, tmp_path)
+    with pytest.raises(ValueError, match="bad item"):
+        with Overlap(work, 2) as pool:
+            pool.add("sleeps", "sleeps")
+            pool.add("fails", "fails")
+            pool.add("never", "never")
+            pool.finish()
+    started = sorted(p.name.split(".")[0] for p in tmp_path.iterdir())
+    assert started == ["fails", "sleeps"]  # the third was queued behind them: it never ran
+    assert all(_ended(int(p.suffix[1:])) for p in tmp_path.iterdir())

@@ -29,7 +29,7 @@ import multiprocessing
 import os
 import re
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -313,23 +313,34 @@ def _predicted_run(path: Path, runs: Sequence[Run], starts: Sequence[int], metho
         return path, _predictions(load_maneuver_model(path).model, runs, starts, method, maneuvers, dt)
 
 
+def record_predictor(runs: Mapping[str, Run], method: Method = Method.EULER, threads: int = 1,
+                     closed_loop_dt: float = CLOSED_LOOP_DT) -> Callable[[Path], tuple[Path, Predictions]]:
+    """The work of one worker item of `write_record_comparison` for the recorded runs
+    `runs` (`recorded_test_runs`): a model's path (`model_paths`) -> (path, its predictions),
+    with `threads` torch threads; picklable, for worker processes."""
+    return functools.partial(_predicted_run, runs=list(runs.values()), starts=_execute_starts(runs), method=method,
+                             threads=threads, maneuvers=_maneuvers(runs), dt=closed_loop_dt)
+
+
 def write_record_comparison(out_dir: str | os.PathLike, run_dirs: Mapping[str, str | os.PathLike],
                             data: str | os.PathLike | None = None, method: Method = Method.EULER,
-                            workers: int = 1, threads: int = 1, closed_loop_dt: float = CLOSED_LOOP_DT) -> Path:
+                            workers: int = 1, threads: int = 1, closed_loop_dt: float = CLOSED_LOOP_DT,
+                            predicted: Mapping[Path, Predictions] | None = None) -> Path:
     """``out_dir/maneuver_indices.csv``: `record_comparison` of the protocol's turning and
     zig-zag test runs (1 Hz) and the models of `run_dirs` (label -> run directory or folder
     of seed run directories). `workers` > 1 predicts the models side by side in that many
-    worker processes (`sysid.workers`, `threads` torch threads each); the numbers do not
-    depend on it."""
+    worker processes (`sysid.workers`, `threads` torch threads each); `predicted` (a model's
+    path -> its predictions by `record_predictor` with the same settings, made earlier)
+    are not predicted again. The numbers depend on neither."""
     runs = recorded_test_runs(data)
-    if workers <= 1:
+    if workers <= 1 and not predicted:
         frame = record_comparison(run_models(run_dirs), runs, method, closed_loop_dt)
         return write_csv(frame, Path(out_dir) / RECORD_FILE, float_format="%.6g")
-    starts = _execute_starts(runs)
+    done = dict(predicted or {})
     paths = {label: model_paths(path) for label, path in run_dirs.items()}
-    items = [p for found in paths.values() for p in found]
-    work = functools.partial(_predicted_run, runs=list(runs.values()), starts=starts, method=method,
-                             threads=threads, maneuvers=_maneuvers(runs), dt=closed_loop_dt)
-    done = dict(in_workers(work, items, workers, multiprocessing.get_context("spawn")))
+    items = [p for found in paths.values() for p in found if p not in done]
+    if items:
+        work = record_predictor(runs, method, threads, closed_loop_dt)
+        done.update(in_workers(work, items, workers, multiprocessing.get_context("spawn")))
     frame = compared({label: [done[p] for p in found] for label, found in paths.items()}, runs)
     return write_csv(frame, Path(out_dir) / RECORD_FILE, float_format="%.6g")

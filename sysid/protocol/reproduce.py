@@ -2,6 +2,7 @@
 hybrid on D1 and D2, evaluated on the six test files, tables beside the paper's 7 and 8."""
 from __future__ import annotations
 
+import contextlib
 import functools
 import multiprocessing
 import os
@@ -172,34 +173,49 @@ def _worker(name: str, experiments: dict[str, Experiment], out: Path, data) -> P
 
 
 def _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, done, storage=None,
-            mlflow=None) -> list[str]:
-    """Learned runs with `seeds` seeds on Ray into `done`; their ensembles' names."""
+            mlflow=None) -> tuple[list[str], dict]:
+    """Learned runs with `seeds` seeds on Ray into `done`; their ensembles' names and the
+    recorded maneuvers' predictions made while the last trials ran (`sysid.protocol.overlap`;
+    the runs already in `done` are queued for it first)."""
     from sysid.data.datasets import data_root
+    from sysid.protocol.overlap import AfterTraining
     from sysid.protocol.seed_runs import ensemble_name, train_seeds, write_ensembles
 
     ordered = sorted(trained, key=lambda n: -expected_cost(experiments[n]))  # longest first
     log(f"training {len(trained)} runs x {seeds} seeds on Ray (a run's seeds side by side in one trial where "
         "they can), " + (f"{jobs} trials at a time" if jobs else "one trial per CPU of the cluster")
         + (f" on {address}" if address else ""))
-    groups = train_seeds({n: experiments[n] for n in ordered}, seeds, out, str(data_root(data)), jobs, address, log,
-                         storage, mlflow, cost=lambda n: expected_cost(experiments[n]))
-    learned = []
-    for name in trained:
-        exp, group = experiments[name], groups[name]
-        done[name] = ProtocolRun(name, exp.experiment.model, exp.experiment.dataset, group.metrics,
-                                 group.gate_off_share, group.failure, group.seconds)
-        if exp.experiment.model is not ModelKind.MMG and group.seeds:
-            learned.append((name, exp, group))
+    workers = _driver_workers(jobs)
+    after = AfterTraining(experiments, out, cached_test_runs(data), data, workers, log) \
+        if workers > 1 and address is None else None
+    with after.pool if after is not None else contextlib.nullcontext():
+        for name in (n for n in names if n in done and after is not None):
+            after.ready(name)
+        groups = train_seeds({n: experiments[n] for n in ordered}, seeds, out, str(data_root(data)), jobs, address,
+                             log, storage, mlflow, cost=lambda n: expected_cost(experiments[n]), watch=after)
+        learned = []
+        for name in trained:
+            exp, group = experiments[name], groups[name]
+            done[name] = ProtocolRun(name, exp.experiment.model, exp.experiment.dataset, group.metrics,
+                                     group.gate_off_share, group.failure, group.seconds)
+            if exp.experiment.model is not ModelKind.MMG and group.seeds:
+                learned.append((name, exp, group))
+        written, predicted = {}, {}
+        if after is not None:
+            after.finish()
+            # an ensemble of the seeds the final groups hold (a seed is never complete, then not)
+            written = {n: r for n, (g, r) in after.ensembles.items() if g.seeds == groups[n].seeds}
+            predicted = after.predicted
     sizes = {ensemble_name(n, e.experiment.dataset): len(g.seeds) for n, e, g in learned}
-    written = write_ensembles(learned, out, cached_test_runs(data), _driver_workers(jobs),
-                              on_result=lambda r: log(f"[{r[0]}] mean of {sizes[r[0]]} seeds' networks evaluated"))
+    written.update(write_ensembles([x for x in learned if x[0] not in written], out, cached_test_runs(data), workers,
+                                   on_result=lambda r: log(f"[{r[0]}] mean of {sizes[r[0]]} seeds' networks evaluated")))
     ensembles = []
     for name, exp, _ in learned:  # in the protocol's order, whichever was written first
         target, evaluation, _ = written[name]
         done[target] = ProtocolRun(target, exp.experiment.model, exp.experiment.dataset, evaluation.metrics,
                                    evaluation.gate_off_share, None, 0.0)
         ensembles.append(target)
-    return ensembles
+    return ensembles, predicted
 
 
 def _driver_workers(jobs: int | None) -> int:
@@ -236,9 +252,23 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
     done: dict[str, ProtocolRun] = {}
     trained = [n for n in names if experiments[n].needs_training]
     ensembles: list[str] = []
+    predicted: dict = {}
+
+    def run_here(i: int, name: str) -> None:
+        exp = experiments[name]
+        dataset = exp.experiment.dataset if exp.needs_training else "D1+D2"
+        log(f"[{i}/{len(names)}] {name}: {model_label(name, exp.experiment.model, dataset)} on {dataset}")
+        run = done[name] = _run_one(name, exp, out, data, progress, lambda m: log("    " + m))
+        if run.failure:
+            log(f"    FAILED: {run.failure}")
+        log(f"    done in {run.seconds:.0f} s")
+
     if seeds > 1 and trained:
-        ensembles = _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, done, storage,
-                            mlflow)
+        for i, name in enumerate(names, 1):  # the MMGs as defined first: their maneuvers overlap the training
+            if name not in trained:
+                run_here(i, name)
+        ensembles, predicted = _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, done,
+                                       storage, mlflow)
     elif jobs > 1 and len(trained) > 1:
         log(f"training {len(trained)} runs in {min(jobs, len(trained))} worker processes")
 
@@ -250,15 +280,8 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
         work = functools.partial(_worker, experiments=experiments, out=out, data=data)
         in_workers(work, longest_first, jobs, multiprocessing.get_context("spawn"), finished)
     for i, name in enumerate(names, 1):
-        if name in done:
-            continue
-        exp = experiments[name]
-        dataset = exp.experiment.dataset if exp.needs_training else "D1+D2"
-        log(f"[{i}/{len(names)}] {name}: {model_label(name, exp.experiment.model, dataset)} on {dataset}")
-        run = done[name] = _run_one(name, exp, out, data, progress, lambda m: log("    " + m))
-        if run.failure:
-            log(f"    FAILED: {run.failure}")
-        log(f"    done in {run.seconds:.0f} s")
+        if name not in done:
+            run_here(i, name)
     names = names + ensembles
     runs = [done[n] for n in names]
     results = [(r.name, r.kind, r.dataset, r.metrics) for r in runs]
@@ -285,7 +308,7 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
         paper = ref.loc[ours.index, ["paper_u", "paper_v", "paper_r"]].to_numpy()
         identified_cells = (int((ours.to_numpy() < paper).sum()), int(paper.size))
     random_file = Path(TEST_FILES["Random"]).stem
-    _recorded_maneuvers(out, runs, data, log, _driver_workers(jobs))
+    _recorded_maneuvers(out, runs, data, log, _driver_workers(jobs), predicted)
     summary = Reproduction(
         seconds=time.perf_counter() - started, runs=tuple(names), failed=failed, protocol=tuple(PROTOCOL),
         seeds=seeds, scorecard=card, scorecard_ensemble=card_ensemble,
@@ -296,12 +319,12 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
 
 
 def _recorded_maneuvers(out: Path, runs: list[ProtocolRun], data, log: Callable[[str], None],
-                        workers: int = 1) -> None:
+                        workers: int = 1, predicted: dict | None = None) -> None:
     """maneuver_indices.csv: the recorded turning and zig-zag test runs' IMO indices beside
     every finished model's prediction of them (`sysid.maneuvers.recorded`; the models in
-    `workers` processes, one torch thread each)."""
+    `workers` processes, one torch thread each; `predicted`: those predicted already)."""
     started = time.perf_counter()
     done = {run_label(r.name, r.kind, r.dataset): out / "runs" / r.name for r in runs if not r.failure}
-    write_record_comparison(out, done, data, workers=workers)
+    write_record_comparison(out, done, data, workers=workers, predicted=predicted)
     log(f"{RECORD_FILE}: indices of the recorded turning and zig-zag runs beside {len(done)} models' predictions "
         f"({time.perf_counter() - started:.0f} s)")

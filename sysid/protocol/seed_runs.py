@@ -10,7 +10,7 @@ import multiprocessing
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable, Protocol, Sequence
 
 import pandas as pd
 
@@ -25,6 +25,7 @@ from sysid.runs.layout import load_model, write_run
 from sysid.protocol.seeds import seed_metrics
 from sysid.hybrid.ensemble import SeedEnsemble
 from sysid.sweep.inbox import complete_summary
+from sysid.sweep.connect import import_ray
 from sysid.sweep.runner import TuneStorage, ray_session, run_trials
 from sysid.sweep.trial import TrialSpec, group_name, read_trial_data, seed_groups
 from sysid.workers import in_workers
@@ -60,12 +61,14 @@ SIDE_BY_SIDE_COST = 0.4   # a seed's share of its group's time (benchmarks/speed
 
 def train_seeds(experiments: dict[str, Experiment], seeds: int, out: Path, data: str, workers: int | None,
                 address: str | None = None, log: Callable[[str], None] = print, storage: str | None = None,
-                mlflow: str | None = None, cost: Callable[[str], float] | None = None) -> dict[str, SeedGroup]:
+                mlflow: str | None = None, cost: Callable[[str], float] | None = None,
+                watch: TrainingWatch | None = None) -> dict[str, SeedGroup]:
     """Train the learned runs with `seeds` seeds each on Ray (locally with `workers` side
     by side, or on the cluster at `address`; `sysid.sweep.runner`); their `SeedGroup`s.
     The data are read here once and shipped to the trials; Tune's experiment goes to
     ``{out}/tune`` or `storage`; `mlflow` logs every seed run; `cost` (run name -> relative
-    training cost of one seed) orders the trials longest first (None: as given)."""
+    training cost of one seed) orders the trials longest first (None: as given); `watch`
+    hears of the trials as they end (on a local Ray only)."""
     trials = seed_trials(experiments, seeds)
     trial_data = read_trial_data(experiments.values(), data, tests=True)  # the protocol evaluates
     together = seed_groups(trials, trial_data, log)   # a protocol run's seeds share its label
@@ -86,30 +89,81 @@ def train_seeds(experiments: dict[str, Experiment], seeds: int, out: Path, data:
                                                       "seed": ", ".join(str(t.seed) for t in by_first[int(c["trial"])])},
                                            lambda c: {f"seed{t.seed}": t.path for t in by_first[int(c["trial"])]},
                                            log)]
+        if watch is not None and address is None and session.concurrency:
+            callbacks.append(_watch_callback(watch, trials, together, out, session.concurrency))
         outcomes = run_trials(trials, out, trial_data, session, max_retries=1,
                               storage=TuneStorage(storage, "reproduce") if storage else None,
                               callbacks=callbacks, log=log, prefix="seeds", groups=together)
         if tracker is not None:
             tracker.finish(parent)
-    errors = outcomes.errors
-    groups = {}
-    for name in experiments:
-        frames, shares, failures, used, seconds = [], [], [], [], 0.0
-        for trial in (t for t in trials if t.label == name):
-            summary = complete_summary(out / trial.path)
-            if summary is None:
-                failures.append(f"seed {trial.seed}: {errors.get(trial.path, 'no complete run')}")
-                continue
-            if summary.status != "complete":
-                failures.append(f"seed {trial.seed}: {summary.status}")
-            frames.append(RunDir(out / trial.path).read_metrics())
-            shares.append(summary.gate.off_share or {})
-            used.append(trial.seed)
-            seconds += float(summary.seconds or 0.0)
-        metrics = seed_metrics(frames) if frames else pd.DataFrame()
-        mean_share = {k: sum(s.get(k, 0.0) for s in shares) / len(shares) for k in (shares[0] if shares else {})}
-        groups[name] = SeedGroup(name, used, metrics, mean_share, "; ".join(failures) or None, seconds)
-    return groups
+    return {name: seed_group(name, trials, out, outcomes.errors) for name in experiments}
+
+
+def seed_group(name: str, trials: Sequence[TrialSpec], out: Path, errors: dict[str, str]) -> SeedGroup:
+    """The `SeedGroup` of the protocol run `name` from its seeds' run directories in `out`
+    (`errors`: trial path -> what Tune said of a trial without a complete run)."""
+    frames, shares, failures, used, seconds = [], [], [], [], 0.0
+    for trial in (t for t in trials if t.label == name):
+        summary = complete_summary(out / trial.path)
+        if summary is None:
+            failures.append(f"seed {trial.seed}: {errors.get(trial.path, 'no complete run')}")
+            continue
+        if summary.status != "complete":
+            failures.append(f"seed {trial.seed}: {summary.status}")
+        frames.append(RunDir(out / trial.path).read_metrics())
+        shares.append(summary.gate.off_share or {})
+        used.append(trial.seed)
+        seconds += float(summary.seconds or 0.0)
+    metrics = seed_metrics(frames) if frames else pd.DataFrame()
+    mean_share = {k: sum(s.get(k, 0.0) for s in shares) / len(shares) for k in (shares[0] if shares else {})}
+    return SeedGroup(name, used, metrics, mean_share, "; ".join(failures) or None, seconds)
+
+
+class TrainingWatch(Protocol):
+    """What `train_seeds` tells while its trials run (in the driver's thread): `free`
+    trial slots no trial will take again (the queue is empty), a protocol run `ready` (all
+    its seeds complete), and `poll` on every step of Tune's loop."""
+
+    def free(self, slots: int) -> None: ...
+
+    def ready(self, name: str, group: SeedGroup) -> None: ...
+
+    def poll(self) -> None: ...
+
+
+def _watch_callback(watch: TrainingWatch, specs: Sequence[TrialSpec], groups: Sequence[Sequence[int]], out: Path,
+                    slots: int):
+    """A Tune callback feeding `watch`: `specs` trained in Tune trials of `groups` (indices
+    into `specs`, ``config["trial"]`` the first), `slots` of them at once."""
+    _, tune = import_ray()
+    seeds_of: dict[str, int] = {}
+    for t in specs:
+        seeds_of[t.label] = seeds_of.get(t.label, 0) + 1
+
+    class Watch(tune.Callback):  # type: ignore[name-defined]
+        def __init__(self):
+            self.ended, self.announced = 0, set()
+
+        def on_step_end(self, iteration, trials, **info):
+            watch.poll()
+
+        def _ended(self, trial) -> None:
+            self.ended += 1
+            watch.free(slots - (len(groups) - self.ended))
+            name = specs[int(trial.config["trial"])].label
+            if name not in self.announced:
+                group = seed_group(name, specs, out, {})
+                if group.failure is None and len(group.seeds) == seeds_of[name]:
+                    self.announced.add(name)
+                    watch.ready(name, group)
+
+        def on_trial_complete(self, iteration, trials, trial, **info):
+            self._ended(trial)
+
+        def on_trial_error(self, iteration, trials, trial, **info):
+            self._ended(trial)
+
+    return Watch()
 
 
 def ensemble_name(name: str, dataset: str) -> str:

@@ -34,13 +34,16 @@ def test_reproduce_with_two_seeds(tmp_path, dataset_dir):
 
     out = tmp_path / "repro"
     tiny = {"training": {"epochs": 3, "warm_start_epochs": 3}, "evaluation": {"horizons": (30.0,)}}
-    summary = reproduce(out, dataset_dir.parent, only=["mmg_lab", "hybrid_D1"], overrides=tiny, jobs=2, seeds=2)
+    lines: list[str] = []
+    summary = reproduce(out, dataset_dir.parent, only=["mmg_lab", "nn_D1", "hybrid_D1"], overrides=tiny, jobs=2,
+                        seeds=2, log=lines.append)
     assert summary.seeds == 2 and not summary.failed
-    assert summary.runs == ("mmg_lab", "hybrid_D1", "hybrid_ensemble_D1")
+    assert summary.runs == ("mmg_lab", "nn_D1", "hybrid_D1", "nn_ensemble_D1", "hybrid_ensemble_D1")
     # the two seeds trained side by side in one trial, each into its own run directory
     from sysid.sweep.inbox import read_journal
     started = [e for e in read_journal(out) if e["event"] == "started"]
-    assert sorted(e["trial"] for e in started) == ["runs/hybrid_D1/seed0", "runs/hybrid_D1/seed1"]
+    assert sorted(e["trial"] for e in started) == ["runs/hybrid_D1/seed0", "runs/hybrid_D1/seed1",
+                                                   "runs/nn_D1/seed0", "runs/nn_D1/seed1"]
     assert all(e["side_by_side"] == 2 for e in started)
     seeds = [pd.read_csv(out / "runs" / "hybrid_D1" / f"seed{k}" / "metrics.csv").set_index("scenario")
              for k in (0, 1)]
@@ -54,6 +57,33 @@ def test_reproduce_with_two_seeds(tmp_path, dataset_dir):
     assert set(hybrid.n_seeds) == {2}
     assert "Hybrid (ensemble)" in set(table.model)
     assert "± " in (out / "table7.md").read_text()
+
+    # after training, overlapped with the last trial (sysid.protocol.overlap): NN-only's ensemble
+    # and the recorded maneuvers of its seeds and of the MMG may take the slot its trial left;
+    # all of it equals the same work done after training (ensemble metrics, maneuver_indices.csv)
+    import shutil
+    from sysid.maneuvers.recorded import RECORD_FILE, RECORDED, write_record_comparison
+    from sysid.protocol.paper import run_label
+    from sysid.protocol.seed_runs import SeedGroup, write_ensemble
+    from sysid.runs.lifecycle import cached_test_runs
+
+    # every piece went through the overlap (how many while a trial still ran depends on timing):
+    # 2 ensembles, the predictions of mmg_lab, 4 seeds and 2 ensembles
+    overlapped = next(line for line in lines if line.startswith("after training:"))
+    assert overlapped.split()[4] == "9", overlapped
+    again = tmp_path / "again"
+    labels = {run_label(n, k, d): out / "runs" / n for n, k, d in
+              (("mmg_lab", "mmg", "-"), ("nn_D1", "nn", "D1"), ("nn_ensemble_D1", "nn", "D1"))}
+    write_record_comparison(again, labels, dataset_dir.parent, workers=2)
+    ours = pd.read_csv(out / RECORD_FILE)
+    pd.testing.assert_frame_equal(pd.read_csv(again / RECORD_FILE),
+                                  ours[ours.model.isin([RECORDED, *labels])].reset_index(drop=True))
+    shutil.copytree(out / "runs" / "nn_D1", again / "runs" / "nn_D1")
+    exp, _ = load_model(out / "runs" / "nn_D1" / "seed0")
+    write_ensemble("nn_D1", exp, SeedGroup("nn_D1", [0, 1], pd.DataFrame(), {}, None, 0.0), again,
+                   cached_test_runs(dataset_dir.parent), threads=1)
+    assert ((again / "runs" / "nn_ensemble_D1" / "metrics.csv").read_bytes()
+            == (out / "runs" / "nn_ensemble_D1" / "metrics.csv").read_bytes())
 
     # the ensemble run loads from its members and averages their forces
     exp, ensemble = load_model(out / "runs" / "hybrid_ensemble_D1")
