@@ -129,8 +129,16 @@ def main(dataset: str, root: str, out: str, *names: str) -> None:
             # closed-form gradient (equal to round-off) is compared with autograd in
             # tests/identify/test_warm_start.py, and its flat Adam is torch's to the bit
             warm_start.OneStepRegression.gradient = _autograd_gradient
+    import contextlib
+    native_off = contextlib.nullcontext()
+    if importlib.util.find_spec("sysid.mmg.native") is not None:  # not in the one-piece trainer
+        from sysid.mmg import native
+        # the MMG's no-grad forwards (losses, evaluation) through torch, as the one-piece trainer
+        # computed them; the native kernel (equal to round-off) is compared with the torch path
+        # in tests/mmg/test_native.py and tests/maneuvers/test_simulation.py
+        native_off = native.torch_path()
     results = {"package": sysid.__file__}
-    with compute_threads(1):
+    with compute_threads(1), native_off:
         for name in names or [*CASES, *RESUMED]:
             results[name] = run_case(name, Path(dataset), Path(root), Path(out).parent)
     torch.save(results, out)
