@@ -25,7 +25,7 @@ from sysid.errors import TrainingError
 from sysid.identify.adam import Adam
 from sysid.identify.checkpoint import CheckpointState, Checkpointing
 from sysid.identify.journal import TrainingJournal
-from sysid.identify.losses import adam, model_weight_norm, multistep_loss
+from sysid.identify.losses import adam, model_weight_norm, multistep_loss, validation_loss
 from sysid.identify.plateau import Plateau
 
 
@@ -157,8 +157,7 @@ class TrainingLoop:
                 batch = train.select(order[lo:lo + t.batch_size])
                 losses = self.step(model, batch, w_v, w_F, state.optimizer, label, epoch, lr)
                 sums += len(batch) * np.array([loss.item() for loss in losses])
-            with torch.no_grad():
-                val_v, _ = multistep_loss(model, val, w_v)
+            val_v = validation_loss(model, val, w_v)
             state.epoch = epoch
             self.end_epoch(state, model, label, epochs, sums / len(train), float(val_v),
                            time.perf_counter() - started, bar)

@@ -68,3 +68,14 @@ def multistep_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor
     if w_F is None:
         return loss_v, loss_v.new_zeros(())
     return loss_v, output_penalty(f_nn, f_mmg, w_F, band).mean()
+
+
+def validation_loss(model, batch: WindowSet, w_v: torch.Tensor) -> torch.Tensor:
+    """L_v of `multistep_loss` without gradient (the early-stopping loss). A `PerMember` of a
+    network of one member rolls out as its model: the same rollouts (one member's own force
+    is the members' mean), through the model's no-grad path (the native MMG kernel where it
+    applies, `CorrectedModel.eager_rate`), which equals the per-member path to round-off."""
+    if isinstance(model, PerMember) and model.model.correction_net.members == 1:
+        model = model.model
+    with torch.no_grad():
+        return multistep_loss(model, batch, w_v)[0]
