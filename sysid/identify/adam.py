@@ -11,7 +11,7 @@ the other.
 """
 from __future__ import annotations
 
-from typing import Iterable
+from typing import Any, Iterable
 
 import torch
 
@@ -31,7 +31,7 @@ class Adam:
         self.params = list(params)
         if not self.params:
             raise ValueError("Adam: no parameters to optimize")
-        self.param_groups = [{"params": self.params, "lr": float(lr), "betas": self.betas, "eps": self.eps,
+        self.param_groups: list[dict[str, Any]] = [{"params": self.params, "lr": float(lr), "betas": self.betas, "eps": self.eps,
                               "weight_decay": 0, "amsgrad": False, "maximize": False, "foreach": True,
                               "capturable": False, "differentiable": False, "fused": None,
                               "decoupled_weight_decay": False}]

@@ -27,8 +27,8 @@ def test_rollout_gate_decides_as_the_scan_at_every_step_scanning_few_rows():
     for dtype in (torch.float32, torch.float64):
         gate, paths = _bank_and_paths(dtype)
         rollout = RolloutGate(gate)
-        scanned = []
-        rollout._scan = lambda flat, scan=rollout._scan: scanned.append(flat.shape[0]) or scan(flat)
+        scanned: list[int] = []
+        rollout._scan = lambda flat, scan=rollout._scan, scanned=scanned: scanned.append(flat.shape[0]) or scan(flat)
         decisions = []
         for z in paths:
             d, on = rollout(z)
