@@ -28,7 +28,7 @@ def test_rollout_gate_decides_as_the_scan_at_every_step_scanning_few_rows():
         gate, paths = _bank_and_paths(dtype)
         rollout = RolloutGate(gate)
         scanned: list[int] = []
-        rollout._scan = lambda flat, scan=rollout._scan, scanned=scanned: scanned.append(flat.shape[0]) or scan(flat)
+        rollout._scan = lambda flat, scan=rollout._scan, scanned=scanned: scanned.append(flat.shape[0]) or scan(flat)  # type: ignore[method-assign]
         decisions = []
         for z in paths:
             d, on = rollout(z)
