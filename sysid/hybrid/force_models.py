@@ -13,6 +13,7 @@ import torch
 from torch import nn
 
 from sysid.hybrid.correction import ForceCorrection, correction_inputs
+from sysid.hybrid.fused_rate import Plan, hybrid_rate
 from sysid.config.choices import GateSpace, ModelKind
 from sysid.config.experiment import Experiment, ship_overrides
 from sysid.mmg.coefficients import Coefficients
@@ -196,11 +197,39 @@ class CorrectedModel(nn.Module):
             return None
         coefficients, net = self.mmg.coefficients, self.correction_net
         if supported(self.mmg):
-            return self._training_rate(coefficients, net, "wind" in self.mmg.families, per_member)
+            rate = self._training_rate(coefficients, net, "wind" in self.mmg.families, per_member)
+        else:
+            families = native.families_of(self.mmg)
+            if families is None or any(p.requires_grad for p in coefficients.parameters()):
+                return None
+            rate = self._native_training_rate(coefficients, net, families, per_member)
         families = native.families_of(self.mmg)
-        if families is None or any(p.requires_grad for p in coefficients.parameters()):
-            return None
-        return self._native_training_rate(coefficients, net, families, per_member)
+        if net.members != 1 or families is None:
+            return rate
+        return self._fused_training_rate(coefficients, net, families, rate)
+
+    @staticmethod
+    def _fused_training_rate(coefficients, net, families: int, otherwise):
+        """`training_rate` of one network (K = 1) as one autograd Function
+        (`sysid.hybrid.fused_rate`) where the native kernel applies to a step's tensors (and
+        the FNN's are of the state's dtype), else `otherwise`."""
+        parameters = [p for pair in zip(net.weights, net.biases) for p in pair]
+        plans: dict[torch.dtype, Plan] = {}
+
+        def rate(state: torch.Tensor, inputs: torch.Tensor):
+            c = coefficients.values_view(state.dtype)
+            plan = plans.get(state.dtype)
+            if plan is None:
+                if not (native.applies(state, inputs, c, differentiated=True)
+                        and all(t.dtype == state.dtype for t in (*parameters, net.input_mean, net.output_std))):
+                    return otherwise(state, inputs)
+                plan = plans[state.dtype] = Plan(native.TrainingKernel(c, families, net.input_mean, net.input_std,
+                                                                       state.dtype), force_rate(c, state),
+                                                 net.output_std, net.output_mean)
+            elif not native.applies(state, inputs, c, differentiated=True):
+                return otherwise(state, inputs)
+            return hybrid_rate(state, inputs, plan, parameters)
+        return rate
 
     @staticmethod
     def _training_rate(coefficients, net, wind: bool, per_member: bool):

@@ -459,8 +459,9 @@ struct Outputs {
     int64_t stride_rate, stride_force, stride_s;
 };
 
-// rows with their Jacobian (jac (6, 18) per row); with `mean`, `std` (9 each, else null) the
-// FNN inputs are standardised, (s - mean) / std, and so are their columns of the Jacobian
+// rows with their Jacobian (jac (6, 18) per row; null: the values alone, the same numbers); with
+// `mean`, `std` (9 each, else null) the FNN inputs are standardised, (s - mean) / std, and so are
+// their columns of the Jacobian
 template <class S>
 void values_and_jacobian(int64_t rows, const S* state, const S* inputs, const double* c, int families, const S* mean,
                          const S* std, Outputs<S> out, S* jac) {
@@ -468,6 +469,19 @@ void values_and_jacobian(int64_t rows, const S* state, const S* inputs, const do
     if (mean != nullptr && std != nullptr) {
         for (int j = 0; j < 9; ++j) shift[j] = static_cast<double>(mean[j]);
         for (int j = 0; j < 9; ++j) scale[j] = static_cast<double>(std[j]);
+    }
+    if (jac == nullptr) {  // the values alone (a state without gradient: the rollout's first)
+        for (int64_t i = 0; i < rows; ++i) {
+            double x[6], in[4], o[18];
+            for (int k = 0; k < 6; ++k) x[k] = static_cast<double>(state[6 * i + k]);
+            for (int k = 0; k < 4; ++k) in[k] = static_cast<double>(inputs[4 * i + k]);
+            row<double>(x, in, c, families, o);
+            for (int j = 0; j < 9; ++j) o[9 + j] = (o[9 + j] - shift[j]) / scale[j];
+            for (int j = 0; j < 6; ++j) out.rate[out.stride_rate * i + j] = static_cast<S>(o[j]);
+            for (int j = 0; j < 3; ++j) out.force[out.stride_force * i + j] = static_cast<S>(o[6 + j]);
+            for (int j = 0; j < 9; ++j) out.s[out.stride_s * i + j] = static_cast<S>(o[9 + j]);
+        }
+        return;
     }
     for (int64_t i = 0; i < rows; ++i) {
         double x[6], in[4];

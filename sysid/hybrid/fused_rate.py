@@ -1,0 +1,88 @@
+"""The hybrid's training right-hand side of one network (K = 1) as one autograd Function.
+
+At state x (..., 6) with inputs (..., 4), one call gives what a training rollout reads:
+
+    dx/dt = r_MMG(x) + F_NN(z(x)) M,   F_NN (..., 3),   F_MMG (..., 3),
+
+with r_MMG (dx/dt of F_MMG), F_MMG and the FNN's standardised inputs z from one call of the
+native kernel (`sysid.mmg.native.TrainingKernel`, with their Jacobian J with respect to the
+state), F_NN from the FNN's layers (`sysid.hybrid.layers`), and M (3, 6) the mass terms of the
+equations of motion (`sysid.mmg.vjp.force_rate`). Its backward is the chain rule written out:
+
+    g_F = g_{F_NN} + g_{dx/dt} M^T,   (g_z, dW, db) = the layers' backward of g_F,
+    g_x = J (g_{dx/dt}, g_{F_MMG}, g_z)   (the kernel's vector-Jacobian product),
+
+in place of three autograd Functions (kernel, layers, the force's rate) and the views and
+casts between them: the same numbers (`sysid.hybrid.force_models.CorrectedModel.training_rate`
+without it, `tests/hybrid/test_fused_rate.py`). A state without gradient (a rollout's first)
+skips the Jacobian. Several networks side by side (K > 1) go through the separate Functions.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from sysid.hybrid import layers
+from sysid.mmg.native import TrainingKernel
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What each call reads, looked up once per rollout: the kernel, the mass terms M (3, 6),
+    sigma_F and mu_F (3,) (the FNN's output statistics)."""
+
+    kernel: TrainingKernel
+    mass: torch.Tensor
+    scale: torch.Tensor
+    shift: torch.Tensor
+
+
+class _HybridRate(torch.autograd.Function):
+    """(state, inputs, plan, W_1, b_1, ..., W_L, b_L) -> (dx/dt, F_NN, F_MMG); W_i (1, n_{i-1},
+    n_i), b_i (1, n_i) as `sysid.hybrid.correction.ForceCorrection` holds them."""
+
+    @staticmethod
+    def forward(ctx, state, inputs, plan, *parameters):
+        ctx.set_materialize_grads(False)
+        state_gradient = ctx.needs_input_grad[0]
+        rate_mmg, f_mmg, z, jacobian = plan.kernel(state, inputs, state_gradient)
+        weights = [w[0] for w in parameters[0::2]]
+        f_nn = state.new_empty(f_mmg.shape)
+        h = layers.forward_single(z.view(-1, z.shape[-1]), weights, [b[0] for b in parameters[1::2]], plan.scale,
+                                  plan.shift, f_nn.view(-1, f_nn.shape[-1]))
+        rate = state.new_empty(state.shape)
+        torch.addmm(rate_mmg.view(-1, 6), f_nn.view(-1, 3), plan.mass, out=rate.view(-1, 6))
+        ctx.save_for_backward(jacobian, *h, *weights)
+        ctx.plan = plan
+        return rate, f_nn, f_mmg
+
+    @staticmethod
+    def backward(ctx, grad_rate, grad_nn, grad_mmg):
+        saved = ctx.saved_tensors
+        n = (len(saved) - 1) // 2
+        jacobian, h, weights = saved[0], saved[1:1 + n], saved[1 + n:]
+        plan = ctx.plan
+        rows = h[0].shape[0]
+        g_rate = None if grad_rate is None else grad_rate.reshape(rows, 6)
+        if grad_nn is None:
+            g_force = None if g_rate is None else torch.mm(g_rate, plan.mass.mT)
+        else:
+            g_force = grad_nn.reshape(rows, 3)
+            if g_rate is not None:
+                g_force = torch.addmm(g_force, g_rate, plan.mass.mT)
+        state_gradient = ctx.needs_input_grad[0]
+        g_z, grads = None, [None] * (2 * n)
+        if g_force is not None:
+            g_z, grads = layers.backward(g_force, h, weights, plan.scale, True, state_gradient)
+        g_state = None
+        if state_gradient:
+            # (..., 6): the Jacobian's batch shape, the state's
+            g_state = plan.kernel.state_gradient(jacobian, g_rate, grad_mmg, g_z)
+        return g_state, None, None, *grads
+
+
+def hybrid_rate(state: torch.Tensor, inputs: torch.Tensor, plan: Plan, parameters) -> tuple:
+    """(dx/dt (..., 6), F_NN (..., 3), F_MMG (..., 3)) at state (..., 6) with inputs (..., 4)
+    (see the module docstring); `parameters` (W_1, b_1, ..., W_L, b_L) of one network."""
+    return _HybridRate.apply(state, inputs, plan, *parameters)
