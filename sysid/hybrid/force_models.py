@@ -223,12 +223,12 @@ class CorrectedModel(nn.Module):
                 if not (native.applies(state, inputs, c, differentiated=True)
                         and all(t.dtype == state.dtype for t in (*parameters, net.input_mean, net.output_std))):
                     return otherwise(state, inputs)
-                plan = plans[state.dtype] = Plan(native.TrainingKernel(c, families, net.input_mean, net.input_std,
-                                                                       state.dtype), force_rate(c, state),
-                                                 net.output_std, net.output_mean)
+                kernel = native.TrainingKernel(c, families, net.input_mean, net.input_std, state.dtype)
+                plan = plans[state.dtype] = Plan(kernel, force_rate(c, state), net.output_std, net.output_mean,
+                                                 parameters)
             elif not native.applies(state, inputs, c, differentiated=True):
                 return otherwise(state, inputs)
-            return hybrid_rate(state, inputs, plan, parameters)
+            return hybrid_rate(state, inputs, plan)
         return rate
 
     @staticmethod

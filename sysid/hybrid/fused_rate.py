@@ -19,70 +19,69 @@ skips the Jacobian. Several networks side by side (K > 1) go through the separat
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import torch
 
 from sysid.hybrid import layers
 from sysid.mmg.native import TrainingKernel
 
 
-@dataclass(frozen=True)
 class Plan:
-    """What each call reads, looked up once per rollout: the kernel, the mass terms M (3, 6),
-    sigma_F and mu_F (3,) (the FNN's output statistics)."""
+    """What each call of one rollout reads, looked up once (the parameters stay where they are
+    during a rollout: an optimizer steps between rollouts): the kernel, the mass terms M (3, 6)
+    and M^T, sigma_F and mu_F (3,), the network's parameters as the Function's inputs and their
+    2-d views (W_L^T as a contiguous copy, b_L as a column: `sysid.hybrid.layers.forward_single`)."""
 
-    kernel: TrainingKernel
-    mass: torch.Tensor
-    scale: torch.Tensor
-    shift: torch.Tensor
+    def __init__(self, kernel: TrainingKernel, mass: torch.Tensor, scale: torch.Tensor, shift: torch.Tensor,
+                 parameters):
+        self.kernel, self.mass, self.mass_T = kernel, mass, mass.mT.contiguous()
+        self.scale, self.shift = scale, shift
+        self.parameters = tuple(parameters)
+        with torch.no_grad():
+            self.weights = [w[0] for w in self.parameters[0::2]]
+            self.biases = [b[0] for b in self.parameters[1::2]]
+            self.last_T = self.weights[-1].mT.contiguous()
+            self.last_bias = self.biases[-1].unsqueeze(-1)
 
 
 class _HybridRate(torch.autograd.Function):
     """(state, inputs, plan, W_1, b_1, ..., W_L, b_L) -> (dx/dt, F_NN, F_MMG); W_i (1, n_{i-1},
-    n_i), b_i (1, n_i) as `sysid.hybrid.correction.ForceCorrection` holds them."""
+    n_i), b_i (1, n_i) as `sysid.hybrid.correction.ForceCorrection` holds them (the plan's)."""
 
     @staticmethod
     def forward(ctx, state, inputs, plan, *parameters):
         ctx.set_materialize_grads(False)
         state_gradient = ctx.needs_input_grad[0]
         rate_mmg, f_mmg, z, jacobian = plan.kernel(state, inputs, state_gradient)
-        weights = [w[0] for w in parameters[0::2]]
-        f_nn = state.new_empty(f_mmg.shape)
-        h = layers.forward_single(z.view(-1, z.shape[-1]), weights, [b[0] for b in parameters[1::2]], plan.scale,
-                                  plan.shift, f_nn.view(-1, f_nn.shape[-1]))
-        rate = state.new_empty(state.shape)
+        f_nn = torch.empty_like(f_mmg)
+        h = layers.forward_single(z.view(-1, 9), plan.weights, plan.biases, plan.scale, plan.shift,
+                                  f_nn.view(-1, 3), (plan.last_T, plan.last_bias))
+        rate = torch.empty_like(rate_mmg)
         torch.addmm(rate_mmg.view(-1, 6), f_nn.view(-1, 3), plan.mass, out=rate.view(-1, 6))
-        ctx.save_for_backward(jacobian, *h, *weights)
+        ctx.save_for_backward(jacobian, *h)
         ctx.plan = plan
         return rate, f_nn, f_mmg
 
     @staticmethod
     def backward(ctx, grad_rate, grad_nn, grad_mmg):
-        saved = ctx.saved_tensors
-        n = (len(saved) - 1) // 2
-        jacobian, h, weights = saved[0], saved[1:1 + n], saved[1 + n:]
+        jacobian, *h = ctx.saved_tensors
         plan = ctx.plan
         rows = h[0].shape[0]
-        g_rate = None if grad_rate is None else grad_rate.reshape(rows, 6)
+        g_rate = None if grad_rate is None else grad_rate.view(rows, 6)
         if grad_nn is None:
-            g_force = None if g_rate is None else torch.mm(g_rate, plan.mass.mT)
+            g_force = None if g_rate is None else torch.mm(g_rate, plan.mass_T)
         else:
-            g_force = grad_nn.reshape(rows, 3)
-            if g_rate is not None:
-                g_force = torch.addmm(g_force, g_rate, plan.mass.mT)
+            g_force = grad_nn.view(rows, 3) if g_rate is None else torch.addmm(grad_nn.view(rows, 3), g_rate,
+                                                                                 plan.mass_T)
         state_gradient = ctx.needs_input_grad[0]
-        g_z, grads = None, [None] * (2 * n)
+        g_z, grads = None, [None] * len(plan.parameters)
         if g_force is not None:
-            g_z, grads = layers.backward(g_force, h, weights, plan.scale, True, state_gradient)
-        g_state = None
-        if state_gradient:
-            # (..., 6): the Jacobian's batch shape, the state's
-            g_state = plan.kernel.state_gradient(jacobian, g_rate, grad_mmg, g_z)
+            g_z, grads = layers.backward(g_force, h, plan.weights, plan.scale, True, state_gradient)
+        # (..., 6): the Jacobian's batch shape, the state's
+        g_state = plan.kernel.state_gradient(jacobian, g_rate, grad_mmg, g_z) if state_gradient else None
         return g_state, None, None, *grads
 
 
-def hybrid_rate(state: torch.Tensor, inputs: torch.Tensor, plan: Plan, parameters) -> tuple:
+def hybrid_rate(state: torch.Tensor, inputs: torch.Tensor, plan: Plan) -> tuple:
     """(dx/dt (..., 6), F_NN (..., 3), F_MMG (..., 3)) at state (..., 6) with inputs (..., 4)
-    (see the module docstring); `parameters` (W_1, b_1, ..., W_L, b_L) of one network."""
-    return _HybridRate.apply(state, inputs, plan, *parameters)
+    (see the module docstring), rows contiguous; `plan` of this rollout."""
+    return _HybridRate.apply(state, inputs, plan, *plan.parameters)
