@@ -211,23 +211,23 @@ class CorrectedModel(nn.Module):
     @staticmethod
     def _fused_training_rate(coefficients, net, families: int, otherwise):
         """`training_rate` of one network (K = 1) as one autograd Function
-        (`sysid.hybrid.fused_rate`) where the native kernel applies to a step's tensors (and
-        the FNN's are of the state's dtype), else `otherwise`."""
+        (`sysid.hybrid.fused_rate`) where the native kernel applies to the rollout's tensors
+        (checked at its first call of each dtype; the FNN's tensors of the state's dtype), else
+        `otherwise`. One rollout: the parameters, the coefficients and the way tensors reach
+        the kernel stay as they are between its calls (a training rollout's)."""
         parameters = [p for pair in zip(net.weights, net.biases) for p in pair]
         plans: dict[torch.dtype, Plan] = {}
 
         def rate(state: torch.Tensor, inputs: torch.Tensor):
-            c = coefficients.values_view(state.dtype)
             plan = plans.get(state.dtype)
-            if plan is None:
+            if plan is None:  # the rollout's first call: the checks, then the lookups, once
+                c = coefficients.values_view(state.dtype)
                 if not (native.applies(state, inputs, c, differentiated=True)
                         and all(t.dtype == state.dtype for t in (*parameters, net.input_mean, net.output_std))):
                     return otherwise(state, inputs)
                 kernel = native.TrainingKernel(c, families, net.input_mean, net.input_std, state.dtype)
                 plan = plans[state.dtype] = Plan(kernel, force_rate(c, state), net.output_std, net.output_mean,
                                                  parameters)
-            elif not native.applies(state, inputs, c, differentiated=True):
-                return otherwise(state, inputs)
             return hybrid_rate(state, inputs, plan)
         return rate
 
