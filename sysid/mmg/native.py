@@ -71,6 +71,7 @@ from sysid.mmg.hull_standard import _ROWS as _STANDARD_HULL
 from sysid.mmg.motion import _VALUES, LOW_SPEED
 from sysid.mmg.propeller import _LATERAL
 from sysid.mmg.rudder import _RUDDER
+from sysid.mmg.tangents import FAMILIES  # the Esso Osaka's families (its wind is the one here)
 from sysid.mmg.wind import _HALF_PI, _WIND
 
 _log = logging.getLogger(__name__)
@@ -100,9 +101,6 @@ HULLS = {"yoshimura_low_speed": Families(0), "standard": Families.HULL_STANDARD}
 PROPELLERS = {"four_quadrant": Families(0), "standard": Families.PROPELLER_STANDARD,
               "standard_gaussian_wake": Families.PROPELLER_STANDARD | Families.WAKE_GAUSSIAN}
 RUDDER_OF = {"four_quadrant": "four_quadrant", "standard": "standard", "standard_gaussian_wake": "standard"}
-# the Esso Osaka's families, as `sysid.mmg.tangents.FAMILIES`
-FAMILIES = {"hull": "yoshimura_low_speed", "propeller": "four_quadrant", "rudder": "four_quadrant",
-            "wind": "fujiwara"}
 
 
 def _flat(block: tuple) -> tuple:
@@ -453,7 +451,9 @@ def training_rate(state: torch.Tensor, inputs: torch.Tensor, c, families: int, m
     if state.shape[:-1] != inputs.shape[:-1] or state.shape[-1] != 6 or inputs.shape[-1] != 4:
         raise ValueError(f"state (..., 6) and inputs (..., 4) of one batch, got {tuple(state.shape)}, "
                          f"{tuple(inputs.shape)}")
-    return TrainingKernel(c, families, mean, std, state.dtype)(state, inputs, True)  # type: ignore[return-value]
+    rate_out, force, z, jacobian = TrainingKernel(c, families, mean, std, state.dtype)(state, inputs, True)
+    assert jacobian is not None
+    return rate_out, force, z, jacobian
 
 
 class TrainingKernel:
@@ -481,7 +481,8 @@ class TrainingKernel:
         self._keep = (coefficient_values(c, self.families), mean.contiguous(), std.contiguous())
         self._pointers = tuple(t.data_ptr() for t in self._keep)
 
-    def __call__(self, state: torch.Tensor, inputs: torch.Tensor, jacobian: bool = True):
+    def __call__(self, state: torch.Tensor, inputs: torch.Tensor,
+                 jacobian: bool = True) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None]:
         state, inputs = state.contiguous(), inputs.contiguous()
         batch = state.shape[:-1]
         rate_out, force = state.new_empty(batch + (6,)), state.new_empty(batch + (3,))
