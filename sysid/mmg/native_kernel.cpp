@@ -141,13 +141,13 @@ inline Dual length(const Dual& x, const Dual& y) {
     return o;
 }
 
-// atan2(y, x) with derivative (x dy - y dx) / hypot^2, 0 at the origin
+// atan2(y, x) with derivative (x dy - y dx) / (x^2 + y^2), 0 at the origin
 inline double angle(double y, double x) { return std::atan2(y, x); }
 inline Dual angle(const Dual& y, const Dual& x) {
-    const double h = std::hypot(x.v, y.v);
-    const double inv = 1.0 / (h > 0.0 ? h : 1.0);
+    const double r2 = x.v * x.v + y.v * y.v;
+    const double inv2 = 1.0 / (r2 > 0.0 ? r2 : 1.0);
     Dual o(std::atan2(y.v, x.v));
-    for (int i = 0; i < NT; ++i) o.d[i] = (x.v * y.d[i] - y.v * x.d[i]) * (inv * inv);
+    for (int i = 0; i < NT; ++i) o.d[i] = (x.v * y.d[i] - y.v * x.d[i]) * inv2;
     return o;
 }
 
@@ -231,6 +231,15 @@ inline T crossflow(const T& v, const T& r, const double* c, int lane) {
     return P * (b * b_abs);
 }
 
+// sin(delta + phase) of the rudder's three lanes (X, Y, N); a phase equal to an earlier one
+// reuses its sine (the same number)
+inline void rudder_sines(double delta, const double* c, double* sines) {
+    const double* phase = c + K::RUDDER;
+    sines[0] = std::sin(delta + phase[0]);
+    sines[1] = phase[1] == phase[0] ? sines[0] : std::sin(delta + phase[1]);
+    sines[2] = phase[2] == phase[1] ? sines[1] : (phase[2] == phase[0] ? sines[0] : std::sin(delta + phase[2]));
+}
+
 template <class T>
 Forces<T> forces(const T& u, const T& v, const T& psi, const T& r, double n, double delta, double U_T,
                  double zeta, const double* c, int families) {
@@ -306,9 +315,11 @@ Forces<T> forces(const T& u, const T& v, const T& psi, const T& r, double n, dou
         const T v_R = (U * gamma_R) * beta_R;
         const T alpha_R = delta - angle_guarded(v_R, u_R);
         const T F_N = muladd(u_R * u_R, v_R, v_R) * sine(alpha_R);
-        X = X + (std::sin(delta + c[K::RUDDER]) * c[K::RUDDER + 3]) * F_N;
-        Y = Y + (std::sin(delta + c[K::RUDDER + 1]) * c[K::RUDDER + 4]) * F_N;
-        N = N + (std::sin(delta + c[K::RUDDER + 2]) * c[K::RUDDER + 5]) * F_N;
+        double sines[3];
+        rudder_sines(delta, c, sines);
+        X = X + (sines[0] * c[K::RUDDER + 3]) * F_N;
+        Y = Y + (sines[1] * c[K::RUDDER + 4]) * F_N;
+        N = N + (sines[2] * c[K::RUDDER + 5]) * F_N;
     } else {
         // propeller: four quadrants
         const T s_raw = muladd(v, c[K::x_P_L], r) / Ug;
@@ -364,9 +375,11 @@ Forces<T> forces(const T& u, const T& v, const T& psi, const T& r, double n, dou
         const T v_R = straightening * muladd(v, c[K::l_R], r);
         const T alpha_R = delta - angle(v_R, u_R);
         const T F_N = muladd(u_R * u_R, v_R, v_R) * sine(alpha_R);
-        X = X + (std::sin(delta + c[K::RUDDER]) * c[K::RUDDER + 3]) * F_N;
-        Y = Y + (std::sin(delta + c[K::RUDDER + 1]) * c[K::RUDDER + 4]) * F_N;
-        N = N + (std::sin(delta + c[K::RUDDER + 2]) * c[K::RUDDER + 5]) * F_N;
+        double sines[3];
+        rudder_sines(delta, c, sines);
+        X = X + (sines[0] * c[K::RUDDER + 3]) * F_N;
+        Y = Y + (sines[1] * c[K::RUDDER + 4]) * F_N;
+        N = N + (sines[2] * c[K::RUDDER + 5]) * F_N;
     }
 
     // the relative wind (the lab's guards) and Fujiwara's force
