@@ -184,8 +184,10 @@ class CorrectedModel(nn.Module):
         apply (then `forward` is differentiated through autograd): a function of (state
         (..., 6), inputs (..., 4)) giving (dx/dt (..., 6), F_NN (..., 3), F_MMG (..., 3)), the
         MMG, the FNN's inputs and the equations of motion in one autograd Function with a
-        hand-derived VJP (`sysid.mmg.vjp`), the FNN through autograd. The same numbers as
-        `forward` and the equations of motion, to round-off.
+        hand-derived VJP (`sysid.mmg.vjp`), the FNN's layers in another
+        (`sysid.hybrid.layers`); for one network (K = 1) where the native kernel applies, all
+        of it in one (`sysid.hybrid.fused_rate`). The same numbers as `forward` and the
+        equations of motion, to round-off.
 
         It applies to a hybrid without an active gate, with gradients on, whose MMG
         `sysid.mmg.tangents.supported` covers (the Esso Osaka's families, fixed

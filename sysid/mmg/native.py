@@ -23,7 +23,9 @@ with/without Fujiwara's wind), parsed once from the ship's families:
 * ``rate_with_jacobian(state, inputs, c, families) -> (out (..., 18), jacobian (..., 6, 18))``,
   jacobian[..., i, j] = d out_j / d state_i; ``training_rate`` the same with s standardised
   for the FNN and the outputs apart, ``state_gradient`` its vector-Jacobian product (the
-  training path, `sysid.mmg.vjp.training_rate`).
+  training path, `sysid.mmg.vjp.training_rate`); `TrainingKernel` both with their lookups
+  done once per rollout, and the values without the Jacobian for a state without gradient
+  (`sysid.hybrid.fused_rate`).
 * ``covers(mmg)``: the MMG's families are ones the kernel computes (`families_of` is not
   None; exact quadrature);
   ``applies(state, inputs, c)``: the library is loaded and these tensors can be passed to it
