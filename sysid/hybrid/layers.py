@@ -66,10 +66,8 @@ def backward(grad: torch.Tensor, h, weights, scale: torch.Tensor, single: bool,
         h_in = h[i]
         # narrow products transposed (dW_L = (g^T h)^T, g_z = (W_1 g^T)^T), as in `forward_single`
         d_w = mm(g.mT, h_in).mT if single and i == n - 1 else mm(h_in.mT, g)
-        d_b = g.sum(-2)
-        if single:
-            d_w, d_b = d_w.unsqueeze(0), d_b.unsqueeze(0)
-        grads[2 * i], grads[2 * i + 1] = d_w, d_b
+        grads[2 * i] = d_w.unsqueeze(0) if single else d_w
+        grads[2 * i + 1] = g.sum(-2, keepdim=single)  # (1, n_i) or (K, n_i)
         if i > 0:
             g = torch.ops.aten.tanh_backward(mm(g, weights[i].mT), h_in)
         elif input_gradient:
