@@ -6,7 +6,8 @@ second; with --members K the time of a step that trains K networks side by side 
 FNN's member axis; what K seeds trained in one process would cost) beside one network;
 with --limit the step at the config's batch beside its arithmetic limit (the FLOP count of the
 FNN's products and the measured time of that arithmetic alone: the products and tanh of T
-forward steps and their backward, without the MMG, the integrator or autograd's bookkeeping);
+forward steps and their backward, without the MMG, the integrator or autograd's bookkeeping)
+and beside the step's own arithmetic (its layers' and native kernel's calls alone);
 with --compiled the step whose hybrid right-hand side (MMG, FNN, equations of motion) is one
 torch.compile'd function (Inductor; its caches persist in TORCHINDUCTOR_CACHE_DIR, so a second
 run of this script measures the warm start) beside today's eager step, interleaved, with the
@@ -450,6 +451,51 @@ def network_flops(widths: list[int], rows: int, steps: int) -> tuple[float, floa
     return forward, 3.0 * forward
 
 
+def own_arithmetic_seconds(exp, train, rows: int, repeats: int = 8) -> tuple[float, float]:
+    """(the FNN's, the native kernel's) mean wall time [s] of one training step's arithmetic as
+    the step computes it, without autograd, the integrator or Adam: per Euler step the layers
+    forward (`sysid.hybrid.layers.forward_single`) and the kernel's values (with their Jacobian
+    but at the first step), then per step the layers' backward (`sysid.hybrid.layers.backward`)
+    and the kernel's vector-Jacobian product, on the first `rows` windows' recorded states."""
+    from sysid.hybrid import layers
+    from sysid.mmg import native
+    torch.manual_seed(0)
+    mmg = build_mmg(exp, torch.float32).requires_grad_(False)
+    net = ForceCorrection(exp.network.hidden, torch.float32, 1)
+    c = mmg.coefficients.values_view(torch.float32)
+    kernel = native.TrainingKernel(c, native.families_of(mmg), net.input_mean, net.input_std, torch.float32)
+    chunk = train.select(torch.arange(min(rows, len(train))))
+    steps = chunk.states.shape[0] - 1
+    states = [chunk.states[k].contiguous() for k in range(steps)]
+    inputs = [chunk.inputs[k].contiguous() for k in range(steps)]
+    weights = [w[0].detach() for w in net.weights]
+    biases = [b[0].detach() for b in net.biases]
+    z = [kernel(states[k], inputs[k], False)[2] for k in range(steps)]
+    g_force, g_rate = torch.ones(len(chunk), 3), torch.ones(len(chunk), 6)
+
+    def fnn():
+        saved = []
+        for k in range(steps):
+            out = torch.empty(len(chunk), 3)
+            saved.append(layers.forward_single(z[k], weights, biases, net.output_std, net.output_mean, out))
+        for k in range(steps - 1, -1, -1):
+            layers.backward(g_force, saved[k], weights, net.output_std, True, k > 0)
+
+    def mmg_part():
+        jacobians = [kernel(states[k], inputs[k], k > 0)[3] for k in range(steps)]
+        for k in range(steps - 1, 0, -1):
+            kernel.state_gradient(jacobians[k], g_rate, g_force, z[k])
+
+    times = []
+    for part in (fnn, mmg_part):
+        part()
+        start = time.perf_counter()
+        for _ in range(repeats):
+            part()
+        times.append((time.perf_counter() - start) / repeats)
+    return times[0], times[1]
+
+
 def arithmetic_seconds(widths: list[int], rows: int, steps: int, repeats: int = 8) -> float:
     """Mean wall time [s] of the arithmetic of one training step alone: per Euler step the
     FNN's products and tanh forward, then per step and layer the two backward products and the
@@ -655,17 +701,24 @@ def main() -> None:
         if args.limit:
             widths = [9, *exp.network.hidden, 3]
             rows = min(t.batch_size, len(train))
-            step, old, floor = [], [], []
+            step, old, floor, own_fnn, own_mmg = [], [], [], [], []
             for _ in range(3):  # interleaved, medians
                 step.append(minibatch_seconds(exp, train, t.batch_size))
                 old.append(minibatch_seconds(exp, train, t.batch_size, fast=False))
                 floor.append(arithmetic_seconds(widths, rows, t.steps))
+                f, m = own_arithmetic_seconds(exp, train, rows)
+                own_fnn.append(f)
+                own_mmg.append(m)
             a, o, b = statistics.median(step), statistics.median(old), statistics.median(floor)
+            f, m = statistics.median(own_fnn), statistics.median(own_mmg)
             forward, both = network_flops(widths, rows, t.steps)
             print(f"arithmetic limit, batch {rows}, T = {t.steps}, FNN {'-'.join(map(str, widths))}: "
                   f"{forward / 1e9:.3f} GFLOP forward, {both / 1e9:.3f} with the backward; that arithmetic alone "
                   f"{1e3 * b:.1f} ms ({both / b / 1e9:.1f} GFLOP/s) against the step's {1e3 * a:.1f} ms "
                   f"({a / b:.1f}x the limit; through autograd {1e3 * o:.1f} ms, {o / b:.1f}x)")
+            print(f"the step's own arithmetic, without autograd, the integrator or Adam: the FNN's layers as "
+                  f"it computes them (sysid.hybrid.layers) {1e3 * f:.1f} ms, the native kernel's calls "
+                  f"{1e3 * m:.1f} ms, together {1e3 * (f + m):.1f} ms ({a / (f + m):.2f}x of it is the step)")
         if args.ops:
             operation_counts(exp, train, t.batch_size)
         if args.vjp:
