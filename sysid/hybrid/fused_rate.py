@@ -29,7 +29,8 @@ class Plan:
     """What each call of one rollout reads, looked up once (the parameters stay where they are
     during a rollout: an optimizer steps between rollouts): the kernel, the mass terms M (3, 6)
     and M^T, sigma_F and mu_F (3,), the network's parameters as the Function's inputs and their
-    2-d views (W_L^T as a contiguous copy, b_L as a column: `sysid.hybrid.layers.forward_single`)."""
+    2-d views (W_L^T as a contiguous copy, b_L as a column, the hidden layers' doubled:
+    `sysid.hybrid.layers.forward_single`)."""
 
     def __init__(self, kernel: TrainingKernel, mass: torch.Tensor, scale: torch.Tensor, shift: torch.Tensor,
                  parameters):
@@ -41,6 +42,7 @@ class Plan:
             self.biases = [b[0] for b in self.parameters[1::2]]
             self.last_T = self.weights[-1].mT.contiguous()
             self.last_bias = self.biases[-1].unsqueeze(-1)
+            self.doubled = [(2.0 * w, 2.0 * b) for w, b in zip(self.weights[:-1], self.biases[:-1])]
 
 
 class _HybridRate(torch.autograd.Function):
@@ -54,7 +56,7 @@ class _HybridRate(torch.autograd.Function):
         rate_mmg, f_mmg, z, jacobian = plan.kernel(state, inputs, state_gradient)
         f_nn = torch.empty_like(f_mmg)
         h = layers.forward_single(z.view(-1, 9), plan.weights, plan.biases, plan.scale, plan.shift,
-                                  f_nn.view(-1, 3), (plan.last_T, plan.last_bias))
+                                  f_nn.view(-1, 3), (plan.last_T, plan.last_bias), plan.doubled)
         rate = torch.empty_like(rate_mmg)
         torch.addmm(rate_mmg.view(-1, 6), f_nn.view(-1, 3), plan.mass, out=rate.view(-1, 6))
         ctx.save_for_backward(jacobian, *h)

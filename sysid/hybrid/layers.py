@@ -36,16 +36,22 @@ def _hidden_(a2: torch.Tensor) -> torch.Tensor:
 
 
 def forward_single(z: torch.Tensor, weights, biases, scale: torch.Tensor, shift: torch.Tensor,
-                   out: torch.Tensor, last: tuple | None = None) -> list[torch.Tensor]:
+                   out: torch.Tensor, last: tuple | None = None, doubled: list | None = None) -> list[torch.Tensor]:
     """One network's F (rows, n_L) into `out` from z (rows, n_0), without autograd; W_i
     (n_{i-1}, n_i), b_i (n_i,). Returns the activations [z, h_1, ..., h_{L-1}] (`backward`'s).
 
     The narrow output layer runs transposed, with its n_L = 3 outputs as the product's rows
     (y^T = W_L^T h^T + b_L): several times quicker on this CPU's BLAS than h W_L; `last` is
-    (W_L^T contiguous, b_L (n_L, 1)) where the caller keeps them, else they are made here."""
+    (W_L^T contiguous, b_L (n_L, 1)) where the caller keeps them, else they are made here.
+    `doubled`: (2 W_i, 2 b_i) of the hidden layers where the caller keeps them (2 a = h 2W + 2b
+    in one product without scaling: the same numbers, doubling is exact)."""
     h = [z]
-    for w, b in zip(weights[:-1], biases[:-1]):
-        h.append(_hidden_(torch.addmm(b, h[-1], w, beta=2.0, alpha=2.0)))
+    if doubled is None:
+        for w, b in zip(weights[:-1], biases[:-1]):
+            h.append(_hidden_(torch.addmm(b, h[-1], w, beta=2.0, alpha=2.0)))
+    else:
+        for w2, b2 in doubled:
+            h.append(_hidden_(torch.addmm(b2, h[-1], w2)))
     w_T, b_col = (weights[-1].mT.contiguous(), biases[-1].unsqueeze(-1)) if last is None else last
     y = torch.addmm(b_col, w_T, h[-1].mT).mT
     torch.addcmul(shift, y, scale, out=out)
