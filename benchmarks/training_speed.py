@@ -21,18 +21,21 @@ with --native the step through the native MMG kernel (`sysid.mmg.native`, the tr
 where it is built) beside the step through the torch VJP and through autograd, interleaved, wall
 and CPU time, the losses, and the kernel's first-use build with a cold and a warm cache; with
 --against DIR also the step of the checkout at DIR (its own code, in a subprocess started once,
-alternating with this one's; e.g. /work/wt-trainspeed-base at 0928648); with --profile the
+alternating with this one's; e.g. /work/wt-trainspeed-base at 0928648); with --ship NAME the
+hybrid's MMG is that ship file's (e.g. kvlcc2_l7, the standard families) on the config's windows;
+with --profile the
 operators of this step by CPU time (torch.profiler); with --converge also the wall time of a whole training to its early stop; with
 --parts the CPU time of the pieces of an epoch and of the seed ensembles' evaluation, each
 beside the way it was done before (interleaved repeats, medians of process CPU time, which a
 machine shared with other jobs disturbs less than wall time).
 
     python benchmarks/training_speed.py [--data DIR] [--threads 1] [--only D2] [--batches 256] [--members K]
-        [--limit] [--vjp] [--native] [--against DIR] [--profile] [--ops] [--converge] [--parts]
+        [--limit] [--vjp] [--native] [--against DIR] [--ship NAME] [--profile] [--ops] [--converge] [--parts]
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import statistics
 import subprocess
@@ -204,8 +207,9 @@ class CheckoutStep:
 
 def native_comparison(exp, config: str, train, batch: int, data: str | None, against: str | None, threads: int,
                       repeats: int = 5, rounds: int = 5) -> None:
-    """The step as `Trainer` takes it through the native kernel, through the torch VJP
-    (`sysid.mmg.native.torch_path`) and through autograd, with `against`'s step (another checkout) when given, interleaved:
+    """The step as `Trainer` takes it through the native kernel, through the torch path
+    (`sysid.mmg.native.torch_path`: the torch VJP of the Esso Osaka's MMG, autograd over the
+    forward for other families) and through autograd, with `against`'s step (another checkout) when given, interleaved:
     medians of wall and CPU time per step, their ratios, the losses before the first step; and
     the kernel's build with a cold cache (a fresh directory) and a warm one."""
     from sysid.mmg import native
@@ -225,8 +229,8 @@ def native_comparison(exp, config: str, train, batch: int, data: str | None, aga
     new, new_loss = training_step(exp, train, batch, 1, fast=True, trainer=True)
     vjp, vjp_loss = training_step(exp, train, batch, 1, fast=True, trainer=True)
     old, old_loss = training_step(exp, train, batch, 1, fast=False, trainer=True)
-    steps = {"native": new, "torch VJP": via_torch(vjp), "autograd": old}
-    losses = {"native": new_loss(), "torch VJP": via_torch(vjp_loss)(), "autograd": old_loss()}
+    steps = {"native": new, "torch path": via_torch(vjp), "autograd": old}
+    losses = {"native": new_loss(), "torch path": via_torch(vjp_loss)(), "autograd": old_loss()}
     losses = {k: float(v.detach()) for k, v in losses.items()}
     checkout = CheckoutStep(against, config, data, batch, threads) if against else None
     wall: dict[str, list[float]] = {k: [] for k in [*steps, "against"]}
@@ -663,6 +667,9 @@ def main() -> None:
                         help="also the step through the native MMG kernel beside the torch VJP and autograd")
     parser.add_argument("--against", default=None, metavar="DIR",
                         help="with --native: also the step of the checkout at DIR (its own code, a subprocess)")
+    parser.add_argument("--ship", default=None, metavar="NAME",
+                        help="the hybrid's MMG from this ship file instead of the config's (e.g. kvlcc2_l7: the "
+                             "standard families through the native kernel), on the same windows; not with --against")
     parser.add_argument("--profile", action="store_true", help="also the step's operators by CPU time")
     parser.add_argument("--converge", action="store_true", help="also train each config to its early stop")
     parser.add_argument("--parts", action="store_true", help="CPU time of an epoch's pieces, before and after")
@@ -671,13 +678,19 @@ def main() -> None:
         data_root(args.data)
     except DataError as exc:
         raise SystemExit(f"training_speed: {exc}")
+    if args.ship and args.against:
+        raise SystemExit("training_speed: --ship with --against: the other checkout's step is the config's ship's; "
+                         "drop one of them")
     torch.set_num_threads(args.threads)
-    print(f"torch {torch.__version__}, {args.threads} thread(s)")
+    print(f"torch {torch.__version__}, {args.threads} thread(s)" + (f", ship {args.ship}" if args.ship else ""))
     for name, path in CONFIGS.items():
         if args.only and name not in args.only:
             continue
         exp = load_experiment(path)
         runs = training_runs(exp, args.data)
+        if args.ship:  # the windows stay the config's: only the MMG of the step changes
+            exp = dataclasses.replace(exp, experiment=dataclasses.replace(exp.experiment, ship=args.ship),
+                                      mmg=dataclasses.replace(exp.mmg, overrides={}))
         t = exp.training
         train, val, _, _ = split_windows(runs, t.steps, t.stride_s, t.val_fraction, True, torch.float32,
                                          t.block_s, exp.experiment.seed)
