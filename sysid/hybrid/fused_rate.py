@@ -13,8 +13,8 @@ equations of motion (`sysid.mmg.vjp.force_rate`). Its backward is the chain rule
     g_x = J (g_{dx/dt}, g_{F_MMG}, g_z)   (the kernel's vector-Jacobian product),
 
 in place of three autograd Functions (kernel, layers, the force's rate) and the views and
-casts between them: the same numbers (`sysid.hybrid.force_models.CorrectedModel.training_rate`
-without it, `tests/hybrid/test_fused_rate.py`). A state without gradient (a rollout's first)
+casts between them: the same numbers as those (`sysid.hybrid.force_models.CorrectedModel.training_rate`
+without it) to round-off, `tests/hybrid/test_fused_rate.py`. A state without gradient (a rollout's first)
 skips the Jacobian. Several networks side by side (K > 1) go through the separate Functions.
 """
 from __future__ import annotations
