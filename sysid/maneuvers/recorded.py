@@ -142,7 +142,7 @@ def closed_loop_indices(model: nn.Module, runs: Sequence[Run], maneuvers: Sequen
     (`simulate_rows`: each as if run alone, to round-off); None for another maneuver (its
     prediction is the recorded run's) or a run without one."""
     rows = [i for i, m in enumerate(maneuvers) if m is not None and m.kind == "zigzag"]
-    results = simulate_rows(model, [maneuvers[i] for i in rows],  # type: ignore[misc]
+    results = simulate_rows(model, [maneuvers[i] for i in rows],
                             [approach_conditions(runs[i], executes[i], dt) for i in rows])
     found: list[dict[str, float] | None] = [None] * len(maneuvers)
     for i, result in zip(rows, results):

@@ -20,7 +20,7 @@ from sysid.maneuvers import (Conditions, CrashStop, ManeuverError, ManeuverModel
                              default_conditions, run_maneuvers, simulate_maneuvers, straight_running_rps)
 from sysid.maneuvers.controllers import rate_limited
 from sysid.maneuvers.outputs import indices_table
-from sysid.maneuvers.simulate import gate_off_share
+from sysid.maneuvers.simulate import gate_off_share, simulate_rows
 from sysid.maneuvers.straight import surge_acceleration
 from sysid.mmg.wind import relative_wind
 
@@ -104,6 +104,33 @@ def test_ensemble_indices_carry_the_members_spread():
     assert row["n_members"] == 2
     assert row["tactical_diameter_m_std"] == pytest.approx(abs(alone[0] - alone[1]) / math.sqrt(2), rel=1e-12)
     assert min(alone) < result.indices.tactical_diameter_m < max(alone)  # the mean-force model lies between
+
+
+@pytest.mark.parametrize("gated", [False, True])
+def test_rows_under_their_own_conditions_equal_each_maneuver_run_alone(gated):
+    """`simulate_rows`: zig-zags and a turn of different approach speed, revolutions,
+    rudder rate, wind and duration as rows of one rollout, each as `simulate_maneuvers`
+    runs it alone (the kNN gate deciding row by row when `gated`)."""
+    ship = load_ship("kvlcc2_l7")
+    bank = torch.zeros(400, 6, dtype=torch.float64)
+    bank[:, 1] = torch.linspace(1.0, 1.3, 400)
+    model = _hybrid_without_correction(ship, bank) if gated else MMG(ship)
+    maneuvers = [ZigZag(20.0, 20.0, "starboard"), ZigZag(10.0, 10.0, "port"), TurningCircle(35.0, "port")]
+    conditions = [Conditions(1.17, 11.8, 15.7, 0.2, 50.0, 0.0, 0.0),
+                  Conditions(1.05, 10.9, 9.0, 0.2, 34.0, 0.8, 2.0),
+                  Conditions(1.25, 12.5, 20.0, 0.2, 20.0, 0.3, 5.5)]
+    rows = simulate_rows(model, maneuvers, conditions)
+    for maneuver, condition, row in zip(maneuvers, conditions, rows):
+        alone = simulate_maneuvers(model, [maneuver], condition)[0]
+        assert row.states.shape == alone.states.shape == (condition.steps + 1, 6)
+        np.testing.assert_allclose(row.states, alone.states, rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(row.inputs, alone.inputs, rtol=1e-13, atol=1e-13)
+        assert row.gate_off_share == alone.gate_off_share and (row.gate_off_share is not None) == gated
+        for k, v in alone.indices.as_dict().items():
+            assert row.indices.as_dict()[k] == pytest.approx(v, rel=1e-12, nan_ok=True), k
+    assert rows[1].indices.first_overshoot_deg > 0  # the port zig-zag reversed within its 34 s
+    with pytest.raises(ManeuverError, match="one time step"):
+        simulate_rows(model, maneuvers[:2], [conditions[0], Conditions(1.05, 10.9, 9.0, 0.1, 34.0)])
 
 
 def test_crash_stop_needs_astern_thrust():
