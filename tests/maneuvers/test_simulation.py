@@ -323,10 +323,11 @@ def test_the_held_orders_are_the_controllers_own_to_the_bit():
     assert reversed_once and float(expected[0][2, 0]) == pytest.approx(-conditions.rps)  # reversed; astern reached
 
 
-def _features_hybrid() -> CorrectedModel:
-    """An Esso Osaka hybrid with a 9-32-32-3 FNN and its kNN gate in the 32 features (more
-    than `BOX_DIMENSIONS`: principal boxes), fitted on straight running and gentle turns."""
-    torch.manual_seed(2)
+def _features_hybrid(seed: int = 2) -> CorrectedModel:
+    """An Esso Osaka hybrid with a 9-32-32-3 FNN (initialised from `seed`) and its kNN gate
+    in the 32 features (more than `BOX_DIMENSIONS`: principal boxes), fitted on straight
+    running and gentle turns."""
+    torch.manual_seed(seed)
     mmg = MMG(load_ship("esso_osaka"))
     net = ForceCorrection((32, 32), torch.float64)
     net.set_standardization(torch.tensor([0.3, 0.0, 0.0, 0.0, 8.8, 0.0, 0.0, 0.0, 0.0]),
@@ -346,19 +347,22 @@ def _features_hybrid() -> CorrectedModel:
     return CorrectedModel(mmg, net, KNNGate(k=5, alpha=0.99, features=32, dtype=torch.float64).fit(features))
 
 
-@pytest.mark.parametrize("kind", ["hybrid", "mmg"])
+@pytest.mark.parametrize("kind", ["hybrid", "mmg", "ensemble"])
 def test_the_eager_loop_equals_the_torch_step_with_the_whole_bank_scan(kind):
     """The eager loop (native MMG kernel, anchored kNN gate, FNN and orders looked up once)
     against the step it replaced, run here: the model's own torch MMG, the gate's
     whole-bank scan and `ManeuverOrders.forward` at every step. The same gate decision at
     every step start and the same states to round-off (the native kernel and F_NN added
-    through the mass terms reorder the sums; the gate and the FNN give the same bits)."""
+    through the mass terms reorder the sums; the gate and the FNN give the same bits). An
+    ensemble of hybrids of one MMG: the mean of its members' native rates against its
+    `forward` (F_MMG once, the members' gated F_NN averaged, the majority's gate)."""
     from sysid.device import compute_threads
     from sysid.dynamics.integrators import step_loop
     from sysid.maneuvers.closed_loop import ClosedLoopStep, run_eager
     from sysid.maneuvers.controllers import initial_orders, order_parameters
     from sysid.mmg import native
-    model = _features_hybrid() if kind == "hybrid" else MMG(load_ship("esso_osaka"))
+    model = {"hybrid": _features_hybrid, "mmg": lambda: MMG(load_ship("esso_osaka")),
+             "ensemble": lambda: SeedEnsemble([_features_hybrid(seed) for seed in (2, 3, 4)])}[kind]()
     maneuvers = [TurningCircle(35.0), ZigZag(20.0, 20.0, "port")]
     conditions = Conditions(0.35, 8.85, 24.1, 0.2, 60.0)
     x0 = torch.zeros(2, 6, dtype=torch.float64)
@@ -373,7 +377,7 @@ def test_the_eager_loop_equals_the_torch_step_with_the_whole_bank_scan(kind):
         return torch.cat((x, o, u, g), -1), (x, o)
     with native.torch_path(), torch.no_grad(), compute_threads(1):
         expected = torch.stack(step_loop(advance, (x0, orders), conditions.steps))
-    if kind == "hybrid":
+    if kind != "mmg":
         on = expected[..., 12]
         assert 0 < int(on.sum()) < on.numel()  # the turn leaves the bank: both decisions occur
     else:
