@@ -6,7 +6,8 @@ second; with --members K the time of a step that trains K networks side by side 
 FNN's member axis; what K seeds trained in one process would cost) beside one network;
 with --limit the step at the config's batch beside its arithmetic limit (the FLOP count of the
 FNN's products and the measured time of that arithmetic alone: the products and tanh of T
-forward steps and their backward, without the MMG, the integrator or autograd's bookkeeping);
+forward steps and their backward, without the MMG, the integrator or autograd's bookkeeping)
+and beside the step's own arithmetic (its layers' and native kernel's calls alone);
 with --compiled the step whose hybrid right-hand side (MMG, FNN, equations of motion) is one
 torch.compile'd function (Inductor; its caches persist in TORCHINDUCTOR_CACHE_DIR, so a second
 run of this script measures the warm start) beside today's eager step, interleaved, with the
@@ -20,18 +21,21 @@ with --native the step through the native MMG kernel (`sysid.mmg.native`, the tr
 where it is built) beside the step through the torch VJP and through autograd, interleaved, wall
 and CPU time, the losses, and the kernel's first-use build with a cold and a warm cache; with
 --against DIR also the step of the checkout at DIR (its own code, in a subprocess started once,
-alternating with this one's; e.g. /work/wt-trainspeed-base at 0928648); with --profile the
+alternating with this one's; e.g. /work/wt-trainspeed-base at 0928648); with --ship NAME the
+hybrid's MMG is that ship file's (e.g. kvlcc2_l7, the standard families) on the config's windows;
+with --profile the
 operators of this step by CPU time (torch.profiler); with --converge also the wall time of a whole training to its early stop; with
 --parts the CPU time of the pieces of an epoch and of the seed ensembles' evaluation, each
 beside the way it was done before (interleaved repeats, medians of process CPU time, which a
 machine shared with other jobs disturbs less than wall time).
 
     python benchmarks/training_speed.py [--data DIR] [--threads 1] [--only D2] [--batches 256] [--members K]
-        [--limit] [--vjp] [--native] [--against DIR] [--profile] [--ops] [--converge] [--parts]
+        [--limit] [--vjp] [--native] [--against DIR] [--ship NAME] [--profile] [--ops] [--converge] [--parts]
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import statistics
 import subprocess
@@ -203,8 +207,9 @@ class CheckoutStep:
 
 def native_comparison(exp, config: str, train, batch: int, data: str | None, against: str | None, threads: int,
                       repeats: int = 5, rounds: int = 5) -> None:
-    """The step as `Trainer` takes it through the native kernel, through the torch VJP
-    (`sysid.mmg.native.torch_path`) and through autograd, with `against`'s step (another checkout) when given, interleaved:
+    """The step as `Trainer` takes it through the native kernel, through the torch path
+    (`sysid.mmg.native.torch_path`: the torch VJP of the Esso Osaka's MMG, autograd over the
+    forward for other families) and through autograd, with `against`'s step (another checkout) when given, interleaved:
     medians of wall and CPU time per step, their ratios, the losses before the first step; and
     the kernel's build with a cold cache (a fresh directory) and a warm one."""
     from sysid.mmg import native
@@ -224,8 +229,8 @@ def native_comparison(exp, config: str, train, batch: int, data: str | None, aga
     new, new_loss = training_step(exp, train, batch, 1, fast=True, trainer=True)
     vjp, vjp_loss = training_step(exp, train, batch, 1, fast=True, trainer=True)
     old, old_loss = training_step(exp, train, batch, 1, fast=False, trainer=True)
-    steps = {"native": new, "torch VJP": via_torch(vjp), "autograd": old}
-    losses = {"native": new_loss(), "torch VJP": via_torch(vjp_loss)(), "autograd": old_loss()}
+    steps = {"native": new, "torch path": via_torch(vjp), "autograd": old}
+    losses = {"native": new_loss(), "torch path": via_torch(vjp_loss)(), "autograd": old_loss()}
     losses = {k: float(v.detach()) for k, v in losses.items()}
     checkout = CheckoutStep(against, config, data, batch, threads) if against else None
     wall: dict[str, list[float]] = {k: [] for k in [*steps, "against"]}
@@ -450,6 +455,54 @@ def network_flops(widths: list[int], rows: int, steps: int) -> tuple[float, floa
     return forward, 3.0 * forward
 
 
+def own_arithmetic_seconds(exp, train, rows: int, repeats: int = 8) -> tuple[float, float]:
+    """(the FNN's, the native kernel's) mean wall time [s] of one training step's arithmetic as
+    the step computes it, without autograd, the integrator or Adam: per Euler step the layers
+    forward (`sysid.hybrid.layers.forward_single`) and the kernel's values (with their Jacobian
+    but at the first step), then per step the layers' backward (`sysid.hybrid.layers.backward`)
+    and the kernel's vector-Jacobian product, on the first `rows` windows' recorded states."""
+    from sysid.hybrid import layers
+    from sysid.mmg import native
+    torch.manual_seed(0)
+    mmg = build_mmg(exp, torch.float32).requires_grad_(False)
+    net = ForceCorrection(exp.network.hidden, torch.float32, 1)
+    c = mmg.coefficients.values_view(torch.float32)
+    kernel = native.TrainingKernel(c, native.families_of(mmg), net.input_mean, net.input_std, torch.float32)
+    chunk = train.select(torch.arange(min(rows, len(train))))
+    steps = chunk.states.shape[0] - 1
+    states = [chunk.states[k].contiguous() for k in range(steps)]
+    inputs = [chunk.inputs[k].contiguous() for k in range(steps)]
+    weights = [w[0].detach() for w in net.weights]
+    biases = [b[0].detach() for b in net.biases]
+    last = (weights[-1].mT.contiguous(), biases[-1].unsqueeze(-1))
+    doubled = [(2.0 * w, 2.0 * b) for w, b in zip(weights[:-1], biases[:-1])]
+    z = [kernel(states[k], inputs[k], False)[2] for k in range(steps)]
+    g_force, g_rate = torch.ones(len(chunk), 3), torch.ones(len(chunk), 6)
+
+    def fnn():
+        saved = []
+        for k in range(steps):
+            out = torch.empty(len(chunk), 3)
+            saved.append(layers.forward_single(z[k], weights, biases, net.output_std, net.output_mean, out, last,
+                                               doubled))
+        for k in range(steps - 1, -1, -1):
+            layers.backward(g_force, saved[k], weights, net.output_std, True, k > 0)
+
+    def mmg_part():
+        jacobians = [kernel(states[k], inputs[k], k > 0)[3] for k in range(steps)]
+        for k in range(steps - 1, 0, -1):
+            kernel.state_gradient(jacobians[k], g_rate, g_force, z[k])
+
+    times = []
+    for part in (fnn, mmg_part):
+        part()
+        start = time.perf_counter()
+        for _ in range(repeats):
+            part()
+        times.append((time.perf_counter() - start) / repeats)
+    return times[0], times[1]
+
+
 def arithmetic_seconds(widths: list[int], rows: int, steps: int, repeats: int = 8) -> float:
     """Mean wall time [s] of the arithmetic of one training step alone: per Euler step the
     FNN's products and tanh forward, then per step and layer the two backward products and the
@@ -614,6 +667,9 @@ def main() -> None:
                         help="also the step through the native MMG kernel beside the torch VJP and autograd")
     parser.add_argument("--against", default=None, metavar="DIR",
                         help="with --native: also the step of the checkout at DIR (its own code, a subprocess)")
+    parser.add_argument("--ship", default=None, metavar="NAME",
+                        help="the hybrid's MMG from this ship file instead of the config's (e.g. kvlcc2_l7: the "
+                             "standard families through the native kernel), on the same windows; not with --against")
     parser.add_argument("--profile", action="store_true", help="also the step's operators by CPU time")
     parser.add_argument("--converge", action="store_true", help="also train each config to its early stop")
     parser.add_argument("--parts", action="store_true", help="CPU time of an epoch's pieces, before and after")
@@ -622,13 +678,19 @@ def main() -> None:
         data_root(args.data)
     except DataError as exc:
         raise SystemExit(f"training_speed: {exc}")
+    if args.ship and args.against:
+        raise SystemExit("training_speed: --ship with --against: the other checkout's step is the config's ship's; "
+                         "drop one of them")
     torch.set_num_threads(args.threads)
-    print(f"torch {torch.__version__}, {args.threads} thread(s)")
+    print(f"torch {torch.__version__}, {args.threads} thread(s)" + (f", ship {args.ship}" if args.ship else ""))
     for name, path in CONFIGS.items():
         if args.only and name not in args.only:
             continue
         exp = load_experiment(path)
         runs = training_runs(exp, args.data)
+        if args.ship:  # the windows stay the config's: only the MMG of the step changes
+            exp = dataclasses.replace(exp, experiment=dataclasses.replace(exp.experiment, ship=args.ship),
+                                      mmg=dataclasses.replace(exp.mmg, overrides={}))
         t = exp.training
         train, val, _, _ = split_windows(runs, t.steps, t.stride_s, t.val_fraction, True, torch.float32,
                                          t.block_s, exp.experiment.seed)
@@ -655,17 +717,24 @@ def main() -> None:
         if args.limit:
             widths = [9, *exp.network.hidden, 3]
             rows = min(t.batch_size, len(train))
-            step, old, floor = [], [], []
+            step, old, floor, own_fnn, own_mmg = [], [], [], [], []
             for _ in range(3):  # interleaved, medians
                 step.append(minibatch_seconds(exp, train, t.batch_size))
                 old.append(minibatch_seconds(exp, train, t.batch_size, fast=False))
                 floor.append(arithmetic_seconds(widths, rows, t.steps))
+                f, m = own_arithmetic_seconds(exp, train, rows)
+                own_fnn.append(f)
+                own_mmg.append(m)
             a, o, b = statistics.median(step), statistics.median(old), statistics.median(floor)
+            f, m = statistics.median(own_fnn), statistics.median(own_mmg)
             forward, both = network_flops(widths, rows, t.steps)
             print(f"arithmetic limit, batch {rows}, T = {t.steps}, FNN {'-'.join(map(str, widths))}: "
                   f"{forward / 1e9:.3f} GFLOP forward, {both / 1e9:.3f} with the backward; that arithmetic alone "
                   f"{1e3 * b:.1f} ms ({both / b / 1e9:.1f} GFLOP/s) against the step's {1e3 * a:.1f} ms "
                   f"({a / b:.1f}x the limit; through autograd {1e3 * o:.1f} ms, {o / b:.1f}x)")
+            print(f"the step's own arithmetic, without autograd, the integrator or Adam: the FNN's layers as "
+                  f"it computes them (sysid.hybrid.layers) {1e3 * f:.1f} ms, the native kernel's calls "
+                  f"{1e3 * m:.1f} ms, together {1e3 * (f + m):.1f} ms ({a / (f + m):.2f}x of it is the step)")
         if args.ops:
             operation_counts(exp, train, t.batch_size)
         if args.vjp:

@@ -21,6 +21,7 @@ from torch import nn
 from sysid.data.recordings import Run, protocol_windows, stack_windows
 from sysid.data.scenario import scenario_of
 from sysid.dynamics.equations import eager_predict
+from sysid.hybrid.rollout_gate import with_rollout_gate
 from sysid.dynamics.integrators import EULER, Integrator
 from sysid.config.checks import whole_samples
 from sysid.errors import DataError
@@ -118,7 +119,9 @@ def predict_windows(model: nn.Module, runs: Sequence[Run], horizon_s: float,
     if chunks:
         observed = torch.cat([c[0] for c in chunks], 1)
         inputs = torch.cat([c[1] for c in chunks], 1)
-        predicted = predict(model, observed[0], inputs, dt, integrator)
+        # eager: the kNN gate's decisions along the rollout from earlier steps' scans (`RolloutGate`)
+        predicted = predict(model if integrator.compiled else with_rollout_gate(model), observed[0], inputs, dt,
+                            integrator)
     out, col = [], 0
     for run, H, starts in meta:
         W = len(starts)

@@ -12,6 +12,8 @@ from typing import Callable, Sequence
 import torch
 from torch import nn
 
+from sysid.hybrid.layers import forces as network_forces
+
 INPUT_NAMES = ("u", "v_m", "r", "delta", "n_p", "omega_u", "omega_v", "cos_psi", "sin_psi")
 OUTPUT_NAMES = ("X_NN", "Y_NN", "N_NN")
 
@@ -125,19 +127,19 @@ class ForceCorrection(nn.Module):
         """F_NN [N, N, N m] for inputs already standardised, z = (s - mu_s) / sigma_s (Eq. 8):
         `evaluate`'s force without its features (what a training step differentiates); with
         `per_member`, z is (K, ..., 9) and each member's force (K, ..., 3) comes back, else the
-        members' mean. The layers run on (K, rows, width) with the bias added inside the
-        product (`torch.baddbmm`): fewer operations forward and backward than `layers`, the
-        same numbers to round-off."""
+        members' mean. The layers run as one autograd Function with a hand-written backward
+        (`sysid.hybrid.layers`: 2-d products for one member, batched ones on (K, rows, width)
+        for several; tanh as 2 sigmoid(2 a) - 1), the same numbers as `layers` to round-off."""
+        k, width = self.members, z.shape[-1]
+        weights, biases = list(self.weights), list(self.biases)
+        if k == 1:  # (..., 9) or, per member, (1, ..., 9): rows without the member axis
+            force = network_forces(z.reshape(-1, width), weights, biases, self.output_std, self.output_mean)
+            return force.view(*z.shape[:-1], force.shape[-1])
         if not per_member:
-            z = z.expand(self.members, *z.shape)
+            z = z.expand(k, *z.shape)
         shape = z.shape[:-1]
-        h = z.reshape(self.members, -1, z.shape[-1])
-        last = len(self.weights) - 1
-        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
-            h = torch.baddbmm(b.unsqueeze(1), h, w)
-            if i < last:
-                h = torch.tanh(h)
-        force = h.view(*shape, h.shape[-1]) * self.output_std + self.output_mean
+        force = network_forces(z.reshape(k, -1, width), weights, biases, self.output_std, self.output_mean)
+        force = force.view(*shape, force.shape[-1])
         return force if per_member else force.mean(0)
 
     def standardize_inputs(self, s: torch.Tensor) -> torch.Tensor:

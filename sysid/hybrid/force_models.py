@@ -13,6 +13,7 @@ import torch
 from torch import nn
 
 from sysid.hybrid.correction import ForceCorrection, correction_inputs
+from sysid.hybrid.fused_rate import Plan, hybrid_rate
 from sysid.config.choices import GateSpace, ModelKind
 from sysid.config.experiment import Experiment, ship_overrides
 from sysid.mmg.coefficients import Coefficients
@@ -183,8 +184,10 @@ class CorrectedModel(nn.Module):
         apply (then `forward` is differentiated through autograd): a function of (state
         (..., 6), inputs (..., 4)) giving (dx/dt (..., 6), F_NN (..., 3), F_MMG (..., 3)), the
         MMG, the FNN's inputs and the equations of motion in one autograd Function with a
-        hand-derived VJP (`sysid.mmg.vjp`), the FNN through autograd. The same numbers as
-        `forward` and the equations of motion, to round-off.
+        hand-derived VJP (`sysid.mmg.vjp`), the FNN's layers in another
+        (`sysid.hybrid.layers`); for one network (K = 1) where the native kernel applies, all
+        of it in one (`sysid.hybrid.fused_rate`). The same numbers as `forward` and the
+        equations of motion, to round-off.
 
         It applies to a hybrid without an active gate, with gradients on, whose MMG
         `sysid.mmg.tangents.supported` covers (the Esso Osaka's families, fixed
@@ -196,11 +199,39 @@ class CorrectedModel(nn.Module):
             return None
         coefficients, net = self.mmg.coefficients, self.correction_net
         if supported(self.mmg):
-            return self._training_rate(coefficients, net, "wind" in self.mmg.families, per_member)
+            rate = self._training_rate(coefficients, net, "wind" in self.mmg.families, per_member)
+        else:
+            families = native.families_of(self.mmg)
+            if families is None or any(p.requires_grad for p in coefficients.parameters()):
+                return None
+            rate = self._native_training_rate(coefficients, net, families, per_member)
         families = native.families_of(self.mmg)
-        if families is None or any(p.requires_grad for p in coefficients.parameters()):
-            return None
-        return self._native_training_rate(coefficients, net, families, per_member)
+        if net.members != 1 or families is None:
+            return rate
+        return self._fused_training_rate(coefficients, net, families, rate)
+
+    @staticmethod
+    def _fused_training_rate(coefficients, net, families: int, otherwise):
+        """`training_rate` of one network (K = 1) as one autograd Function
+        (`sysid.hybrid.fused_rate`) where the native kernel applies to the rollout's tensors
+        (checked at its first call of each dtype; the FNN's tensors of the state's dtype), else
+        `otherwise`. One rollout: the parameters, the coefficients and the way tensors reach
+        the kernel stay as they are between its calls (a training rollout's)."""
+        parameters = [p for pair in zip(net.weights, net.biases) for p in pair]
+        plans: dict[torch.dtype, Plan] = {}
+
+        def rate(state: torch.Tensor, inputs: torch.Tensor):
+            plan = plans.get(state.dtype)
+            if plan is None:  # the rollout's first call: the checks, then the lookups, once
+                c = coefficients.values_view(state.dtype)
+                if not (native.applies(state, inputs, c, differentiated=True)
+                        and all(t.dtype == state.dtype for t in (*parameters, net.input_mean, net.output_std))):
+                    return otherwise(state, inputs)
+                kernel = native.TrainingKernel(c, families, net.input_mean, net.input_std, state.dtype)
+                plan = plans[state.dtype] = Plan(kernel, force_rate(c, state), net.output_std, net.output_mean,
+                                                 parameters)
+            return hybrid_rate(state, inputs, plan)
+        return rate
 
     @staticmethod
     def _training_rate(coefficients, net, wind: bool, per_member: bool):

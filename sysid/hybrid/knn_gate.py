@@ -13,8 +13,9 @@ import torch
 from torch import nn
 
 
-def nearest_distances(q: torch.Tensor, bank: torch.Tensor, bank_sq: torch.Tensor, k: int) -> torch.Tensor:
-    """The k smallest Euclidean distances (B, k), ascending, from q (B, F) to bank (N, F).
+def nearest(q: torch.Tensor, bank: torch.Tensor, bank_sq: torch.Tensor, k: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The k smallest Euclidean distances (B, k), ascending, from q (B, F) to bank (N, F),
+    and the bank rows they are to (B, k).
 
     |q - b|^2 = |q|^2 + |b|^2 - 2 q.b (bank_sq = |b|^2, (N,)): one matrix product, then
     the k smallest. Eager, the product accumulates into the (B, N) sum in place (one
@@ -25,7 +26,13 @@ def nearest_distances(q: torch.Tensor, bank: torch.Tensor, bank_sq: torch.Tensor
         d2 = d2 - 2.0 * q @ bank.t()  # t(): a traceable op, not an attribute
     else:
         d2.addmm_(q, bank.t(), alpha=-2.0)
-    return torch.topk(d2, k, dim=1, largest=False).values.clamp_min(0.0).sqrt()
+    found = torch.topk(d2, k, dim=1, largest=False)
+    return found.values.clamp_min(0.0).sqrt(), found.indices
+
+
+def nearest_distances(q: torch.Tensor, bank: torch.Tensor, bank_sq: torch.Tensor, k: int) -> torch.Tensor:
+    """The k smallest Euclidean distances (B, k), ascending, from q (B, F) to bank (N, F) (`nearest`'s)."""
+    return nearest(q, bank, bank_sq, k)[0]
 
 
 class KNNGate(nn.Module):

@@ -22,9 +22,11 @@ import torch
 from sysid.config.experiment import Experiment
 from sysid.dynamics.rollouts import WindowSet
 from sysid.errors import TrainingError
+from sysid.identify.adam import Adam
 from sysid.identify.checkpoint import CheckpointState, Checkpointing
 from sysid.identify.journal import TrainingJournal
-from sysid.identify.losses import adam, model_weight_norm, multistep_loss
+from sysid.identify.losses import adam, model_weight_norm, multistep_loss, validation_loss
+from sysid.identify.plateau import Plateau
 
 
 @dataclass
@@ -67,8 +69,8 @@ class StageState:
     last finished epoch, early-stopping record, history rows and why it stopped (None: it
     goes on)."""
 
-    optimizer: torch.optim.Adam
-    scheduler: torch.optim.lr_scheduler.ReduceLROnPlateau | None
+    optimizer: Adam
+    scheduler: Plateau | None
     generator: torch.Generator
     epoch: int = 0
     best: float = math.inf
@@ -126,8 +128,7 @@ class TrainingLoop:
         opt = adam(params, lr)
         # the learning rate falls by lr_factor after lr_patience epochs without a better
         # validation loss (lr_factor = 1: constant, the paper's Adam)
-        sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=t.lr_factor, patience=t.lr_patience) \
-            if t.lr_factor < 1.0 else None
+        sched = Plateau(opt, t.lr_factor, t.lr_patience) if t.lr_factor < 1.0 else None
         state = StageState(opt, sched, torch.Generator().manual_seed(self.experiment.experiment.seed + 1))
         resume = self.checkpointing.stage(label)
         if resume:
@@ -156,8 +157,7 @@ class TrainingLoop:
                 batch = train.select(order[lo:lo + t.batch_size])
                 losses = self.step(model, batch, w_v, w_F, state.optimizer, label, epoch, lr)
                 sums += len(batch) * np.array([loss.item() for loss in losses])
-            with torch.no_grad():
-                val_v, _ = multistep_loss(model, val, w_v)
+            val_v = validation_loss(model, val, w_v)
             state.epoch = epoch
             self.end_epoch(state, model, label, epochs, sums / len(train), float(val_v),
                            time.perf_counter() - started, bar)

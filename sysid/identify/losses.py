@@ -9,6 +9,7 @@ from sysid.config.experiment import PAPER_FORCE_BAND
 from sysid.dynamics.equations import integrate, integrate_training
 from sysid.dynamics.rollouts import WindowSet, velocity_loss
 from sysid.hybrid.correction import ForceCorrection
+from sysid.identify.adam import Adam
 from sysid.hybrid.force_models import PerMember, correction_of
 from sysid.channel_names import VELOCITY_INDEX
 
@@ -28,10 +29,10 @@ def output_penalty(f_nn: torch.Tensor, f_mmg: torch.Tensor, w_F: torch.Tensor,
     return (torch.relu(f_nn.abs() - band * f_mmg.abs()) * w_F).sum(-1)
 
 
-def adam(params, lr: float) -> torch.optim.Adam:
+def adam(params, lr: float) -> Adam:
     """Adam (the paper's optimiser) updating all parameters in a few multi-tensor
-    operations (``foreach``): the same numbers as the per-parameter loop, fewer dispatches."""
-    return torch.optim.Adam(params, lr=lr, foreach=True)
+    operations: torch.optim.Adam(foreach=True)'s numbers (`sysid.identify.adam.Adam`)."""
+    return Adam(params, lr)
 
 
 def weight_norm(net: ForceCorrection) -> torch.Tensor:
@@ -67,3 +68,14 @@ def multistep_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor
     if w_F is None:
         return loss_v, loss_v.new_zeros(())
     return loss_v, output_penalty(f_nn, f_mmg, w_F, band).mean()
+
+
+def validation_loss(model, batch: WindowSet, w_v: torch.Tensor) -> torch.Tensor:
+    """L_v of `multistep_loss` without gradient (the early-stopping loss). A `PerMember` of a
+    network of one member rolls out as its model: the same rollouts (one member's own force
+    is the members' mean), through the model's no-grad path (the native MMG kernel where it
+    applies, `CorrectedModel.eager_rate`), which equals the per-member path to round-off."""
+    if isinstance(model, PerMember) and model.model.correction_net.members == 1:
+        model = model.model
+    with torch.no_grad():
+        return multistep_loss(model, batch, w_v)[0]

@@ -63,6 +63,7 @@ from sysid.errors import ConfigError, DataError
 from sysid.hybrid.correction import ForceCorrection, correction_inputs
 from sysid.hybrid.force_models import CorrectedModel, PerMember, build_mmg
 from sysid.hybrid.knn_gate import KNNGate
+from sysid.hybrid.rollout_gate import with_rollout_gate
 from sysid.identify.checkpoint import Checkpointing
 from sysid.identify.journal import TrainingJournal
 from sysid.identify.loop import EpochReport, RunProgress, StageResult, TrainingLoop
@@ -437,6 +438,7 @@ class Trainer:
             sets[round(t.steps * val.dt, 6)] = val
         self.validation_sets_ = sets
         self.validation_windows_ = next(iter(sets.values()))
-        # the rollouts' errors, kept per horizon for the verdict's validation scores
-        self.validation_errors_ = {horizon: rollout_errors(model, w) for horizon, w in sets.items()}
+        # the rollouts' errors, kept per horizon for the verdict's validation scores; the gate's
+        # decisions along each rollout from its earlier steps' scans (`RolloutGate`: the same decisions)
+        self.validation_errors_ = {horizon: rollout_errors(with_rollout_gate(model), w) for horizon, w in sets.items()}
         return float(np.mean([float(velocity_loss(err, w_v)) for err in self.validation_errors_.values()]))

@@ -23,7 +23,9 @@ with/without Fujiwara's wind), parsed once from the ship's families:
 * ``rate_with_jacobian(state, inputs, c, families) -> (out (..., 18), jacobian (..., 6, 18))``,
   jacobian[..., i, j] = d out_j / d state_i; ``training_rate`` the same with s standardised
   for the FNN and the outputs apart, ``state_gradient`` its vector-Jacobian product (the
-  training path, `sysid.mmg.vjp.training_rate`).
+  training path, `sysid.mmg.vjp.training_rate`); `TrainingKernel` both with their lookups
+  done once per rollout, and the values without the Jacobian for a state without gradient
+  (`sysid.hybrid.fused_rate`).
 * ``covers(mmg)``: the MMG's families are ones the kernel computes (`families_of` is not
   None; exact quadrature);
   ``applies(state, inputs, c)``: the library is loaded and these tensors can be passed to it
@@ -71,6 +73,7 @@ from sysid.mmg.hull_standard import _ROWS as _STANDARD_HULL
 from sysid.mmg.motion import _VALUES, LOW_SPEED
 from sysid.mmg.propeller import _LATERAL
 from sysid.mmg.rudder import _RUDDER
+from sysid.mmg.tangents import FAMILIES  # the Esso Osaka's families (its wind is the one here)
 from sysid.mmg.wind import _HALF_PI, _WIND
 
 _log = logging.getLogger(__name__)
@@ -100,9 +103,6 @@ HULLS = {"yoshimura_low_speed": Families(0), "standard": Families.HULL_STANDARD}
 PROPELLERS = {"four_quadrant": Families(0), "standard": Families.PROPELLER_STANDARD,
               "standard_gaussian_wake": Families.PROPELLER_STANDARD | Families.WAKE_GAUSSIAN}
 RUDDER_OF = {"four_quadrant": "four_quadrant", "standard": "standard", "standard_gaussian_wake": "standard"}
-# the Esso Osaka's families, as `sysid.mmg.tangents.FAMILIES`
-FAMILIES = {"hull": "yoshimura_low_speed", "propeller": "four_quadrant", "rudder": "four_quadrant",
-            "wind": "fujiwara"}
 
 
 def _flat(block: tuple) -> tuple:
@@ -450,15 +450,60 @@ def training_rate(state: torch.Tensor, inputs: torch.Tensor, c, families: int, m
     standardised, z = (s - mean) / std (..., 9) (`mean`, `std` (9,) in the state's dtype, Eq. 8),
     and the Jacobian (..., 6, 18) of (dx/dt, F_MMG, z) with respect to the state; where
     `applies` holds."""
-    if mean.dtype != state.dtype or std.dtype != state.dtype or mean.shape != (9,) or std.shape != (9,):
-        raise ValueError(f"mean and std (9,) in the state's dtype {state.dtype}, got {mean.dtype} "
-                         f"{tuple(mean.shape)}, {std.dtype} {tuple(std.shape)}")
-    batch, kw = state.shape[:-1], {"dtype": state.dtype}
-    rate_out, force, z = torch.empty(batch + (6,), **kw), torch.empty(batch + (3,), **kw), torch.empty(batch + (9,), **kw)
-    jacobian = torch.empty(batch + (6, WIDTH), **kw)
-    mean, std = mean.contiguous(), std.contiguous()  # constants: the FNN's buffers
-    _call("training", state, inputs, c, families, [rate_out, force, z, jacobian], (mean.data_ptr(), std.data_ptr()))
+    if state.shape[:-1] != inputs.shape[:-1] or state.shape[-1] != 6 or inputs.shape[-1] != 4:
+        raise ValueError(f"state (..., 6) and inputs (..., 4) of one batch, got {tuple(state.shape)}, "
+                         f"{tuple(inputs.shape)}")
+    rate_out, force, z, jacobian = TrainingKernel(c, families, mean, std, state.dtype)(state, inputs, True)
+    assert jacobian is not None
     return rate_out, force, z, jacobian
+
+
+class TrainingKernel:
+    """`training_rate` with its lookups done once (the library's entries, the coefficient
+    vector, the standardisation), for the calls of one rollout: ``kernel(state (..., 6), inputs
+    (..., 4), jacobian)`` gives (dx/dt of F_MMG (..., 6), F_MMG (..., 3), z (..., 9), the
+    Jacobian (..., 6, 18) or, without `jacobian`, None: the values alone, the same numbers);
+    ``kernel.state_gradient(jacobian, g_rate, g_force, g_z)`` is `state_gradient`. Tensors of
+    `dtype` on the CPU, where `applies` holds; `mean`, `std` (9,) of that dtype (constants
+    while the kernel is used)."""
+
+    def __init__(self, c, families: int, mean: torch.Tensor, std: torch.Tensor, dtype: torch.dtype):
+        lib = library()
+        if lib is None:
+            raise NativeUnavailable("the native MMG kernel is not loaded (see `applies`)")
+        if dtype not in _DTYPES or mean.dtype != dtype or std.dtype != dtype or mean.shape != (9,) \
+                or std.shape != (9,):
+            raise ValueError(f"mean and std (9,) in the state's dtype {dtype}, got {mean.dtype} "
+                             f"{tuple(mean.shape)}, {std.dtype} {tuple(std.shape)}")
+        suffix = "f32" if dtype == torch.float32 else "f64"
+        self._training = getattr(lib, f"sysid_mmg_training_{suffix}")
+        self._gradient = getattr(lib, f"sysid_mmg_state_gradient_{suffix}")
+        self.families = int(families)
+        self.dtype = dtype
+        self._keep = (coefficient_values(c, self.families), mean.contiguous(), std.contiguous())
+        self._pointers = tuple(t.data_ptr() for t in self._keep)
+
+    def __call__(self, state: torch.Tensor, inputs: torch.Tensor,
+                 jacobian: bool = True) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        state, inputs = state.contiguous(), inputs.contiguous()
+        batch = state.shape[:-1]
+        rate_out, force = state.new_empty(batch + (6,)), state.new_empty(batch + (3,))
+        z = state.new_empty(batch + (9,))
+        jac = state.new_empty(batch + (6, WIDTH)) if jacobian else None
+        coefficients, mean, std = self._pointers
+        self._training(state.numel() // 6, state.data_ptr(), inputs.data_ptr(), coefficients, self.families, mean,
+                       std, rate_out.data_ptr(), force.data_ptr(), z.data_ptr(),
+                       None if jac is None else jac.data_ptr())
+        return rate_out, force, z, jac
+
+    def state_gradient(self, jacobian: torch.Tensor, grad_rate: torch.Tensor | None,
+                       grad_force: torch.Tensor | None, grad_z: torch.Tensor | None) -> torch.Tensor:
+        """`state_gradient` of this kernel's dtype."""
+        grads = [None if g is None else g.to(self.dtype).contiguous() for g in (grad_rate, grad_force, grad_z)]
+        out = jacobian.new_empty(jacobian.shape[:-2] + (6,))
+        self._gradient(out.shape.numel() // 6, jacobian.data_ptr(),
+                       *[None if g is None else g.data_ptr() for g in grads], out.data_ptr())
+        return out
 
 
 def state_gradient(jacobian: torch.Tensor, grad_rate: torch.Tensor | None, grad_force: torch.Tensor | None,

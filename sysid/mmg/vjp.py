@@ -159,9 +159,9 @@ class _NativeTrainingRate(torch.autograd.Function):
     outputs' gradients times the Jacobian, by the kernel too."""
 
     @staticmethod
-    def forward(ctx, state, inputs, c, wind, mean, std):
+    def forward(ctx, state, inputs, c, families, mean, std):
         ctx.set_materialize_grads(False)
-        rate, force, z, jacobian = native.training_rate(state, inputs, c, wind, mean, std)
+        rate, force, z, jacobian = native.training_rate(state, inputs, c, families, mean, std)
         ctx.save_for_backward(jacobian)
         return rate, force, z
 
@@ -171,19 +171,19 @@ class _NativeTrainingRate(torch.autograd.Function):
         return native.state_gradient(jacobian, grad_rate, grad_force, grad_z), None, None, None, None, None
 
 
-def training_rate(state: torch.Tensor, inputs: torch.Tensor, c, wind: int, mean: torch.Tensor,
+def training_rate(state: torch.Tensor, inputs: torch.Tensor, c, families: int, mean: torch.Tensor,
                   std: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """(dx/dt of F_MMG (..., 6), F_MMG (..., 3), the FNN's standardised inputs z = (s - mean)
     / std (..., 9), Eq. 8) at state (..., 6) with inputs (..., 4), differentiable with respect
     to the state by the hand-derived VJP: one call of the native kernel forward and one
     backward where it applies (`sysid.mmg.native.applies`; `mean`, `std` (9,) in the state's
-    dtype), else `mmg_rate` and the standardisation in torch. `wind`: the kernel's
+    dtype), else `mmg_rate` and the standardisation in torch. `families`: the kernel's
     `sysid.mmg.native.Families` (a bool: the Esso Osaka's, with or without wind); the torch
     path computes the Esso Osaka's only."""
     if mean.dtype == state.dtype == std.dtype and native.applies(state, inputs, c, differentiated=True):
-        return _NativeTrainingRate.apply(state, inputs, c, wind, mean, std)
-    if int(wind) & ~int(native.Families.WIND):
-        raise ValueError(f"families {native.Families(int(wind))!r}: the torch path computes the Esso Osaka's "
+        return _NativeTrainingRate.apply(state, inputs, c, families, mean, std)
+    if int(families) & ~int(native.Families.WIND):
+        raise ValueError(f"families {native.Families(int(families))!r}: the torch path computes the Esso Osaka's "
                          "only (call where `sysid.mmg.native.applies` holds)")
-    rate, force, s = mmg_rate(state, inputs, c, bool(wind)).split_with_sizes((6, 3, 9), -1)
+    rate, force, s = mmg_rate(state, inputs, c, bool(families)).split_with_sizes((6, 3, 9), -1)
     return rate, force, (s.to(mean.dtype) - mean) / std

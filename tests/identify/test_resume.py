@@ -56,3 +56,34 @@ def test_resume_refuses_another_configs_checkpoint(dataset_dir, tmp_path, monkey
     TrainingCheckpoint(checkpoint_path(out), "[experiment]\nname = 'other'\n").save(state)
     with pytest.raises(CheckpointError, match="made with another config"):
         sysid(["train", str(config), "-o", str(out), "--test", str(test_file), "--resume"])
+
+
+def test_a_checkpoint_of_torch_adam_resumes_to_the_same_metrics(dataset_dir, tmp_path, monkeypatch, capsys):
+    """A checkpoint whose optimizer state is torch.optim.Adam's (what sysid wrote before its
+    own `Adam`) resumes to the metrics of an uninterrupted run."""
+    from sysid.identify import loop
+
+    config, test_file = _config(tmp_path, dataset_dir)
+    sysid(["train", str(config), "-o", str(tmp_path / "whole"), "--test", str(test_file)])
+    whole = (tmp_path / "whole" / "metrics.csv").read_text()
+
+    original = TrainingCheckpoint.save
+    saves, made = [], []
+
+    def save_then_interrupt(self, state):
+        original(self, state)
+        saves.append(state.epoch)
+        if len(saves) == 2:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(TrainingCheckpoint, "save", save_then_interrupt)
+    monkeypatch.setattr(loop, "adam", lambda params, lr: made.append(lr) or torch.optim.Adam(params, lr=lr, foreach=True))
+    out = tmp_path / "parted"
+    with pytest.raises(SystemExit):
+        main(["train", str(config), "-o", str(out), "--test", str(test_file)])
+    monkeypatch.undo()
+    assert made and saves == [1, 2]
+    assert torch.load(checkpoint_path(out), weights_only=True)["optimizer"]["state"][0]["step"] > 0
+    sysid(["train", str(config), "-o", str(out), "--test", str(test_file), "--resume"])
+    assert "resumed after epoch 2" in capsys.readouterr().out
+    assert (out / "metrics.csv").read_text() == whole
