@@ -1,7 +1,6 @@
 """Typed integrator, the fused step loop, the compiled prediction and the export.
 
-Truth: torchdiffeq's Euler (`integrate`'s `euler_grid`, equal to its `odeint` to the bit:
-tests/dynamics/test_euler_grid.py) and the eager model (the compiled code must give the
+Truth: torchdiffeq's Euler `odeint` and the eager model (the compiled code must give the
 same states), the lab's RK4 trajectories (test_mmg_oracle.py), and a fresh Python
 process that has only torch (the exported file must predict the same without sysid).
 """
@@ -101,7 +100,7 @@ def test_step_loop_is_torchdiffeq_euler_bit_for_bit(hybrid_run, zigzag):
     states, inputs = zigzag
     model = hybrid_run[1]
     with torch.no_grad():
-        reference = integrate(model, states[0], inputs, 1.0, "euler")  # torchdiffeq's Euler
+        reference = integrate(model, states[0], inputs, 1.0, "euler")  # torchdiffeq odeint
         ours = run_steps(Step(model, Method.EULER, 1.0), states[:1], inputs[:, None])[:, 0]
         on = model(reference, inputs).gate_on
     assert on.any() and not on.all()  # both branches of the gate are exercised
