@@ -198,28 +198,11 @@ def integrate(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt
     rhs = ShipDynamics(force_model, inputs, dt, record)
     if integrator.method not in _ODEINT_NAME:  # classical RK4: a plain step loop
         return rollout(rhs.rate, x0, inputs, dt, integrator.method)
+    from torchdiffeq import odeint  # here: its import loads scipy.integrate (about 0.5 s), which eager
+    # maneuvers and predictions (step loops) never need
     tau = torch.arange(inputs.shape[0], dtype=x0.dtype, device=x0.device)
-    if integrator.method is Method.EULER:
-        return euler_grid(rhs, x0, tau)
-    from torchdiffeq import odeint  # here: its import loads scipy.integrate (about 0.5 s), which only
-    # torchdiffeq's rk4 needs
-    return odeint(rhs, x0, tau, method=_ODEINT_NAME[integrator.method], options={"perturb": True})
-
-
-def euler_grid(rhs: nn.Module, x0: torch.Tensor, tau: torch.Tensor) -> torch.Tensor:
-    """Euler's method for d state / d tau = rhs(tau, state) on the grid tau (T,): states
-    (T, ..., 6), row 0 x0, row k+1 = row k + (tau[k+1] - tau[k]) rhs(tau[k], row k), written
-    into one (T, ..., 6) tensor. The operations, in their order, of torchdiffeq's fixed-grid
-    "euler" on the same grid (its `odeint(rhs, x0, tau, method="euler")`, the same numbers
-    and gradients) without importing torchdiffeq, whose import loads scipy.integrate."""
-    states = torch.empty(len(tau), *x0.shape, dtype=x0.dtype, device=x0.device)
-    states[0] = x0
-    state = x0
-    for k in range(len(tau) - 1):
-        step = tau[k + 1] - tau[k]
-        state = state + step * rhs(tau[k], state)
-        states[k + 1] = state
-    return states
+    options = {"perturb": True} if integrator.method is not Method.EULER else None
+    return odeint(rhs, x0, tau, method=_ODEINT_NAME[integrator.method], options=options)
 
 
 def eager_predict(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
@@ -273,8 +256,7 @@ class TrainingDynamics(nn.Module):
 
 def integrate_training(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
                        fast: bool = True) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Euler rollouts of the training loss (`euler_grid`: torchdiffeq's "euler", plain
-    backprop): states
+    """Euler rollouts of the training loss (torchdiffeq's `odeint`, plain backprop): states
     (T, ..., 6) from x0 (..., 6) with inputs (T, ..., 4), and F_NN, F_MMG (T - 1, ..., 3) of
     every step (zeros where a model has no such term).
 
@@ -291,9 +273,10 @@ def integrate_training(force_model: nn.Module, x0: torch.Tensor, inputs: torch.T
     check_shapes(x0, inputs)
     if inputs.shape[0] < 2:
         raise ValueError("no steps: inputs need at least two rows")
+    from torchdiffeq import odeint  # here, as in `integrate`
     rhs = TrainingDynamics(rate, inputs.contiguous(), dt)  # each step's inputs one contiguous slice
     tau = torch.arange(inputs.shape[0], dtype=x0.dtype, device=x0.device)
-    states = euler_grid(rhs, x0, tau)
+    states = odeint(rhs, x0, tau, method=_ODEINT_NAME[Method.EULER])
     return states, torch.stack(rhs.f_nn), torch.stack(rhs.f_mmg)
 
 

@@ -2,8 +2,7 @@
 
 `Method` (`sysid.config.choices`) names the rule: explicit Euler (the paper's), classical RK4 (1/6, 1/3, 1/3, 1/6,
 the lab simulator's) or torchdiffeq's own "rk4" (the 3/8 rule). `Integrator` adds how the
-steps are run: differentiable (training; Euler by `sysid.dynamics.equations.euler_grid`, the 3/8
-rule through torchdiffeq's public `odeint`), or the
+steps are run: through torchdiffeq's public `odeint` (differentiable; training), or the
 same rule as one compiled function per step (`compiled=True`; inference, see
 `sysid.fast.compiled.predict`). Classical RK4 has no public name in torchdiffeq, so it is written
 here (`rk4_step`) instead of being registered in torchdiffeq's solver table.

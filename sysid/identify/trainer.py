@@ -25,7 +25,7 @@ identification strategies (`sysid.identify.solvers`). Stages, in order, one meth
    for LM, the fit with the other start-state treatment beside it (`start_state_check`).
 4. Warm start: the FNN regresses that residual force (one-step fit). With ``[network]
    members`` K > 1, K networks are trained side by side (each on its own loss) and averaged.
-5. Multi-step training: differentiable Euler rollouts of T steps, loss
+5. Multi-step training: Euler rollouts of T steps through torchdiffeq, loss
    lambda_v * L_v + lambda_F * L_F + lambda_L2 * |theta|^2, Adam, early stopping on the
    validation velocity loss L_v of the network being trained (the *early-stopping loss*;
    the kNN gate does not exist yet), best weights restored.

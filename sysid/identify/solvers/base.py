@@ -6,7 +6,7 @@ model's coefficients and returns the strategy with what it learned in attributes
 ``_``; it writes nothing and logs nothing. The training loop's checkpointing and logging
 parts, when a strategy runs the loop (gradient), are the caller's
 (`sysid.identify.loop.TrainingLoop`). Strategies: `gradient.GradientIdentification` (Adam on
-the multi-step loss, differentiable Euler rollouts) and
+the multi-step loss, Euler rollouts through torchdiffeq's ``odeint``) and
 `least_squares.LevenbergMarquardtIdentification`; a fused or compiled gradient step is a
 `sysid.identify.loop.GradientStep` given to the loop the gradient strategy runs.
 """

@@ -1,6 +1,6 @@
-"""Identification by gradient: Adam on the multi-step loss (differentiable Euler rollouts of
-T steps, `sysid.dynamics.equations.euler_grid`, from each window's recorded start), early
-stopping on the validation loss, run by the training loop; the sigma from the multi-step residuals on
+"""Identification by gradient: Adam on the multi-step loss (Euler rollouts of T steps
+through torchdiffeq's ``odeint`` from each window's recorded start), early stopping on the
+validation loss, run by the training loop; the sigma from the multi-step residuals on
 disjoint windows (`sysid.identify.uncertainty`, the sandwich)."""
 from __future__ import annotations
 
