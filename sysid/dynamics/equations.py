@@ -236,22 +236,19 @@ def stack_forces(calls: list[ForceBreakdown]) -> ForceBreakdown:
 class TrainingDynamics(nn.Module):
     """Right-hand side f(tau, x) = dt `rate`(x, inputs[floor(tau)]) of a training rollout;
     `rate` (a force model's ``training_rate``) gives (dx/dt, F_NN, F_MMG), and each call's
-    state, F_NN and F_MMG are kept in ``states``, ``f_nn`` and ``f_mmg`` (an Euler rollout's
-    states are those its right-hand side is called at; F_NN and F_MMG the output penalty's)."""
+    F_NN and F_MMG are kept in ``f_nn`` and ``f_mmg`` (the output penalty's)."""
 
     def __init__(self, rate, inputs: torch.Tensor, dt: float):
         super().__init__()
         self.rate = rate
         self.inputs = inputs
         self.dt = float(dt)
-        self.states: list[torch.Tensor] = []
         self.f_nn: list[torch.Tensor] = []
         self.f_mmg: list[torch.Tensor] = []
 
     def forward(self, tau: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
         k = min(max(int(tau), 0), self.inputs.shape[0] - 1)
         rate, f_nn, f_mmg = self.rate(state, self.inputs[k])
-        self.states.append(state)
         self.f_nn.append(f_nn)
         self.f_mmg.append(f_mmg)
         return self.dt * rate
@@ -278,14 +275,9 @@ def integrate_training(force_model: nn.Module, x0: torch.Tensor, inputs: torch.T
         raise ValueError("no steps: inputs need at least two rows")
     from torchdiffeq import odeint  # here, as in `integrate`
     rhs = TrainingDynamics(rate, inputs.contiguous(), dt)  # each step's inputs one contiguous slice
-    # steps of 1 in tau on [0, T - 1] (tau = t / dt: the grid 0, 1, ..., T - 1), the ends asked for:
-    # the states between are the right-hand side's arguments, stacked once (not written into
-    # odeint's solution step by step); the same numbers as asking for every tau
-    ends = torch.tensor([0.0, inputs.shape[0] - 1], dtype=x0.dtype, device=x0.device)
-    last = odeint(rhs, x0, ends, method=_ODEINT_NAME[Method.EULER], options={"step_size": 1.0})[-1]
-    if len(rhs.states) != inputs.shape[0] - 1:
-        raise RuntimeError(f"odeint took {len(rhs.states)} Euler steps for {inputs.shape[0] - 1}")
-    return torch.stack([*rhs.states, last]), torch.stack(rhs.f_nn), torch.stack(rhs.f_mmg)
+    tau = torch.arange(inputs.shape[0], dtype=x0.dtype, device=x0.device)
+    states = odeint(rhs, x0, tau, method=_ODEINT_NAME[Method.EULER])
+    return states, torch.stack(rhs.f_nn), torch.stack(rhs.f_mmg)
 
 
 def integrate_with_forces(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
