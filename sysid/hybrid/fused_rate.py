@@ -29,14 +29,20 @@ class Plan:
     """What each call of one rollout reads, looked up once (the parameters stay where they are
     during a rollout: an optimizer steps between rollouts): the kernel, the mass terms M (3, 6)
     and M^T, sigma_F and mu_F (3,), the network's parameters as the Function's inputs and their
-    form for the layers (`sysid.hybrid.layers.SigmoidForm`)."""
+    2-d views (W_L^T as a contiguous copy, b_L as a column, the hidden layers' doubled:
+    `sysid.hybrid.layers.forward_single`)."""
 
     def __init__(self, kernel: TrainingKernel, mass: torch.Tensor, scale: torch.Tensor, shift: torch.Tensor,
                  parameters):
         self.kernel, self.mass, self.mass_T = kernel, mass, mass.mT.contiguous()
         self.scale, self.shift = scale, shift
         self.parameters = tuple(parameters)
-        self.form = layers.SigmoidForm([w[0] for w in self.parameters[0::2]], [b[0] for b in self.parameters[1::2]])
+        with torch.no_grad():
+            self.weights = [w[0] for w in self.parameters[0::2]]
+            self.biases = [b[0] for b in self.parameters[1::2]]
+            self.last_T = self.weights[-1].mT.contiguous()
+            self.last_bias = self.biases[-1].unsqueeze(-1)
+            self.doubled = [(2.0 * w, 2.0 * b) for w, b in zip(self.weights[:-1], self.biases[:-1])]
 
 
 class _HybridRate(torch.autograd.Function):
@@ -49,7 +55,8 @@ class _HybridRate(torch.autograd.Function):
         state_gradient = ctx.needs_input_grad[0]
         rate_mmg, f_mmg, z, jacobian = plan.kernel(state, inputs, state_gradient)
         f_nn = torch.empty_like(f_mmg)
-        h = layers.forward_sigmoid(z.view(-1, 9), plan.form, plan.scale, plan.shift, f_nn.view(-1, 3))
+        h = layers.forward_single(z.view(-1, 9), plan.weights, plan.biases, plan.scale, plan.shift,
+                                  f_nn.view(-1, 3), (plan.last_T, plan.last_bias), plan.doubled)
         rate = torch.empty_like(rate_mmg)
         torch.addmm(rate_mmg.view(-1, 6), f_nn.view(-1, 3), plan.mass, out=rate.view(-1, 6))
         ctx.save_for_backward(jacobian, *h)
@@ -70,7 +77,7 @@ class _HybridRate(torch.autograd.Function):
         state_gradient = ctx.needs_input_grad[0]
         g_z, grads = None, [None] * len(plan.parameters)
         if g_force is not None:
-            g_z, grads = layers.backward_sigmoid(g_force, h, plan.form, plan.scale, state_gradient)
+            g_z, grads = layers.backward(g_force, h, plan.weights, plan.scale, True, state_gradient)
         # (..., 6): the Jacobian's batch shape, the state's
         g_state = plan.kernel.state_gradient(jacobian, g_rate, grad_mmg, g_z) if state_gradient else None
         return g_state, None, None, *grads

@@ -18,10 +18,7 @@ CPU's float32, the same function: its absolute error against the exact tanh is b
 float32 (1.8e-7 measured, 1.5 ulp of 1; `torch.tanh`'s own is 3e-8) and below 4e-16 in
 float64, on a dense grid of a in [-20, 20] (`tests/hybrid/test_layers.py`); it is exactly 0 at
 0 and saturates to exactly +-1. The no-gradient forwards (`ForceCorrection.frozen`, `layers`)
-keep `torch.tanh`: the two differ at float32 round-off. The training right-hand side
-(`sysid.hybrid.fused_rate`) keeps sigmoid(2 a) itself, with the affine 2 s - 1 folded into
-the next layer's parameters (`SigmoidForm`): one elementwise pass per hidden layer forward
-and one backward.
+keep `torch.tanh`: the two differ at float32 round-off.
 """
 from __future__ import annotations
 
@@ -81,71 +78,6 @@ def backward(grad: torch.Tensor, h, weights, scale: torch.Tensor, single: bool,
             g = torch.ops.aten.tanh_backward(mm(g, weights[i].mT), h_in)
         elif input_gradient:
             g_in = torch.mm(weights[0], g.mT).mT.contiguous() if single else torch.bmm(g, weights[0].mT)
-    return g_in, grads
-
-
-class SigmoidForm:
-    """One network's parameters (W_i (n_{i-1}, n_i), b_i (n_i,)) rearranged for `forward_sigmoid`
-    and `backward_sigmoid`, which keep s_i = sigmoid(2 a_i) of each hidden layer in place of
-    h_i = tanh(a_i) = 2 s_i - 1, one elementwise pass where tanh takes three:
-
-        2 a_1 = z (2 W_1) + 2 b_1,   2 a_i = s_{i-1} (4 W_i) + 2 (b_i - 1^T W_i)   (i > 1),
-        y = s_{L-1} (2 W_L) + (b_L - 1^T W_L),
-
-    (1^T W the column sums) and backward g_{a_{i-1}} = (g_{a_i} (4 W_i)^T) s (1 - s), since
-    tanh' = 1 - h^2 = 4 s (1 - s); dW_i = h^T g = 2 s^T g - 1 (1^T g). The same function as the
-    tanh form to round-off. Doubling and quadrupling are exact; the column sums are made once
-    (the parameters stay put while a form is used: one rollout)."""
-
-    def __init__(self, weights, biases):
-        self.first_weight = weights[0]
-        hidden = len(weights) - 1
-        with torch.no_grad():
-            self.layers = []  # (input weight, bias) of each hidden layer's doubled pre-activation
-            for i, (w, b) in enumerate(zip(weights[:-1], biases[:-1])):
-                self.layers.append((2.0 * w, 2.0 * b) if i == 0 else (4.0 * w, 2.0 * (b - w.sum(0))))
-            w, b = weights[-1], biases[-1]
-            # the narrow output layer transposed, its n_L outputs as rows (`forward_single`)
-            self.last_T = (w.mT if hidden == 0 else 2.0 * w.mT).contiguous()
-            self.last_bias = (b if hidden == 0 else b - w.sum(0)).unsqueeze(-1)
-            self.last_T4 = (4.0 * w.mT).contiguous() if hidden else None
-
-
-def forward_sigmoid(z: torch.Tensor, form: SigmoidForm, scale: torch.Tensor, shift: torch.Tensor,
-                    out: torch.Tensor) -> list[torch.Tensor]:
-    """One network's F (rows, n_L) into `out` from z (rows, n_0), without autograd, through
-    `form` (`SigmoidForm`). Returns [z, s_1, ..., s_{L-1}] (`backward_sigmoid`'s)."""
-    s = [z]
-    for w, b in form.layers:
-        s.append(torch.addmm(b, s[-1], w).sigmoid_())
-    y = torch.addmm(form.last_bias, form.last_T, s[-1].mT).mT
-    torch.addcmul(shift, y, scale, out=out)
-    return s
-
-
-def backward_sigmoid(grad: torch.Tensor, s, form: SigmoidForm, scale: torch.Tensor,
-                     input_gradient: bool) -> tuple[torch.Tensor | None, list[torch.Tensor]]:
-    """(g_z or None, [dW_1, db_1, ..., dW_L, db_L], each (1, ...) as the module holds them) for
-    the gradient `grad` of F (rows, n_L) of `forward_sigmoid` (its `s`)."""
-    g = grad * scale
-    n = len(s)
-    grads: list[torch.Tensor] = [grad] * (2 * n)
-    g_in: torch.Tensor | None = None
-    for i in range(n - 1, -1, -1):
-        s_in = s[i]
-        d_b = g.sum(0, keepdim=True)  # (1, n_i)
-        if i == 0:
-            d_w = torch.mm(g.mT, s_in).mT if n == 1 else torch.mm(s_in.mT, g)
-        elif i == n - 1:  # transposed, as in the forward: (2 g^T s - (1^T g)^T 1^T)^T
-            d_w = torch.addmm(d_b.mT.expand(g.shape[1], s_in.shape[1]), g.mT, s_in, beta=-1.0, alpha=2.0).mT
-        else:
-            d_w = torch.addmm(d_b.expand(s_in.shape[1], g.shape[1]), s_in.mT, g, beta=-1.0, alpha=2.0)
-        grads[2 * i], grads[2 * i + 1] = d_w.unsqueeze(0), d_b
-        if i > 0:
-            g_s = torch.mm(g, form.last_T4) if i == n - 1 else torch.mm(g, form.layers[i][0].mT)
-            g = torch.ops.aten.sigmoid_backward(g_s, s_in)
-        elif input_gradient:
-            g_in = torch.mm(form.first_weight, g.mT).mT.contiguous()
     return g_in, grads
 
 

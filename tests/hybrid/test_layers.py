@@ -87,31 +87,3 @@ def test_one_networks_inputs_are_rows():
     weights, biases = list(net.weights), list(net.biases)
     with pytest.raises(ValueError, match="rows, n"):
         layers.forces(torch.zeros(1, 4, 9, dtype=torch.float64), weights, biases, net.output_std, net.output_mean)
-
-
-@pytest.mark.parametrize("hidden", [(), (16,), (16, 12), (16, 12, 10)])
-def test_the_sigmoid_form_equals_autograd_through_torch_tanh(hidden):
-    """`forward_sigmoid` and `backward_sigmoid` (s = sigmoid(2 a) kept, the parameters folded:
-    `SigmoidForm`) against autograd through `ForceCorrection.layers` (torch.tanh), float64:
-    forces, the input's gradient and every parameter's, to round-off; with 0 to 3 hidden
-    layers (no fold, the output layer's fold alone, hidden-to-hidden folds)."""
-    net = _network(1, hidden=hidden)
-    z = torch.randn(7, 9, dtype=torch.float64, requires_grad=True)
-    weight = torch.randn(7, 3, dtype=torch.float64)
-    force = _autograd_forces(net, z.unsqueeze(0))[0]
-    (force * weight).sum().backward()
-    old = [force.detach(), z.grad] + [p.grad for p in (*net.weights, *net.biases)]
-    form = layers.SigmoidForm([w[0] for w in net.weights], [b[0] for b in net.biases])
-    new_force = torch.empty(7, 3, dtype=torch.float64)
-    with torch.no_grad():
-        s = layers.forward_sigmoid(z.detach(), form, net.output_std, net.output_mean, new_force)
-        g_z, grads = layers.backward_sigmoid(weight, s, form, net.output_std, True)
-    assert len(s) == len(hidden) + 1
-    new = [new_force, g_z] + grads[0::2] + grads[1::2]
-    for a, b in zip(new, old):
-        assert a.shape == b.shape
-        torch.testing.assert_close(a, b, rtol=1e-12, atol=1e-12 * float(b.abs().max()))
-    # the kept activations are sigmoid(2 a): h = 2 s - 1 is the network's tanh layer
-    if hidden:
-        h_1 = torch.tanh(z.detach() @ net.weights[0][0] + net.biases[0][0])
-        torch.testing.assert_close(2.0 * s[1] - 1.0, h_1, rtol=0, atol=1e-14)
