@@ -98,7 +98,7 @@ class Overlap:
                  on_result: Callable[[Hashable, object], None] | None = None):
         self.work, self.workers, self.context, self.on_result = work, max(1, workers), context, on_result
         self.allowed = 0
-        self.queued: list[tuple[Hashable, object]] = []
+        self.queued: list[tuple[Hashable, object, bool]] = []  # (key, item, queued first)
         self.running: dict[Future, Hashable] = {}
         self.results: dict[Hashable, object] = {}
         self._pool: ProcessPoolExecutor | None = None
@@ -113,9 +113,15 @@ class Overlap:
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
 
-    def add(self, key: Hashable, item) -> None:
-        """Queue `work(item)`, its result kept under `key` (it starts when a slot is allowed and free)."""
-        self.queued.append((key, item))
+    def add(self, key: Hashable, item, first: bool = False) -> None:
+        """Queue `work(item)`, its result kept under `key` (it starts when a slot is allowed and
+        free); `first`: ahead of the items queued without it (long work first, so the last
+        items to run are short ones)."""
+        if first:
+            ahead = sum(1 for _, _, f in self.queued if f)
+            self.queued.insert(ahead, (key, item, True))
+        else:
+            self.queued.append((key, item, False))
         self.poll()
 
     def allow(self, slots: int) -> None:
@@ -131,7 +137,7 @@ class Overlap:
             if self.on_result is not None:
                 self.on_result(key, self.results[key])
         while self.queued and len(self.running) < self.allowed:
-            key, item = self.queued.pop(0)
+            key, item, _ = self.queued.pop(0)
             self.running[self._submit(item)] = key
 
     def _submit(self, item) -> Future:

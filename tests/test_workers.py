@@ -86,7 +86,7 @@ def test_overlap_starts_work_only_on_allowed_slots_and_takes_follow_ups(tmp_path
         pool.poll()
         assert not list(tmp_path.iterdir()) and not pool.running  # no slot allowed: nothing started
         pool.allow(1)
-        assert len(pool.running) == 1 and pool.queued == [("b", "b")]
+        assert len(pool.running) == 1 and pool.queued == [("b", "b", False)]
         pool.allow(2)
         while not all(f.done() for f in pool.running):
             time.sleep(0.05)
@@ -94,6 +94,18 @@ def test_overlap_starts_work_only_on_allowed_slots_and_takes_follow_ups(tmp_path
         results = pool.finish()
     assert results == {"a": "A", "b": "B", "a2": "A2"}  # a2 added when a's result came
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a", "a2", "b"]
+
+
+def test_overlap_items_queued_first_start_first_in_their_order(tmp_path):
+    from sysid.workers import Overlap
+
+    with Overlap(functools.partial(_after, tmp_path), 1) as pool:
+        for key, first in (("a", False), ("b", False), ("c", True), ("d", True), ("e", False)):
+            pool.add(key, key, first=first)
+        assert [q[0] for q in pool.queued] == ["c", "d", "a", "b", "e"]
+        pool.allow(1)
+        assert list(pool.running.values()) == ["c"] and not (tmp_path / "a").exists()
+        assert pool.finish() == {k: k.upper() for k in "abcde"}
 
 
 def test_overlap_error_ends_every_worker(tmp_path):

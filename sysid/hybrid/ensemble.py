@@ -62,6 +62,29 @@ class SeedEnsemble(nn.Module):
             forces.gate_on = torch.stack([p.gate_on for p in parts]).to(state.dtype).mean(0) >= 0.5
         return forces
 
+    def no_grad_rate(self, like: torch.Tensor):
+        """A function (state (..., 6), inputs (..., 4)) -> (dx/dt (..., 6), the kNN gate's
+        decision (...,) or None) without gradient (the closed-loop maneuvers' eager steps,
+        `sysid.maneuvers.closed_loop.run_eager`): the mean of the members' own
+        `no_grad_rate`s. dx/dt is affine in the force, with the mass terms of the one MMG
+        the members share, so the mean of their rates is the rate of `forward`'s mean force,
+        to round-off; the gate on where at least half of the members apply their correction,
+        as `forward`. None unless the members are hybrids of one MMG whose every
+        `no_grad_rate` applies (then the equations of motion over `forward`)."""
+        if not self._shared_mmg:
+            return None
+        rates = [m.no_grad_rate(like) for m in self.members]
+        if any(r is None for r in rates):
+            return None
+
+        def rate(state: torch.Tensor, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+            parts = [r(state, inputs) for r in rates]
+            dx = torch.stack([p[0] for p in parts]).mean(0)
+            if any(p[1] is None for p in parts):
+                return dx, None
+            return dx, torch.stack([p[1] for p in parts]).to(state.dtype).mean(0) >= 0.5
+        return rate
+
     def _shared_forward(self, state: torch.Tensor, inputs: torch.Tensor) -> ForceBreakdown:
         """`forward` of hybrids that share their MMG: F_MMG once, the members' gated F_NN averaged."""
         forces = self.members[0].mmg(state, inputs)

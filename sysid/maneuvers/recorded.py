@@ -45,7 +45,7 @@ from sysid.errors import DataError
 from sysid.maneuvers.any_model import load_maneuver_model
 from sysid.maneuvers.base import Conditions, Maneuver, Side, TurningCircle, ZigZag
 from sysid.maneuvers.indices import INDEX_COLUMNS, KIND_INDICES, Track, maneuver_indices, zigzag_overshoots
-from sysid.maneuvers.simulate import gate_off_share, simulate_maneuvers
+from sysid.maneuvers.simulate import gate_off_share, simulate_rows
 from sysid.device import compute_threads
 from sysid.store.manifest import has_manifest
 from sysid.store.files import write_csv
@@ -135,14 +135,19 @@ def approach_conditions(run: Run, execute: int, dt: float = CLOSED_LOOP_DT) -> C
                       wind_direction=direction % (2.0 * math.pi))
 
 
-def closed_loop_indices(model: nn.Module, run: Run, maneuver: Maneuver, execute: int,
-                        dt: float = CLOSED_LOOP_DT) -> dict[str, float] | None:
-    """A zig-zag's indices of `model` run closed loop from the record's approach
-    (`approach_conditions`, step `dt` [s]); None for another maneuver (its prediction is the
-    recorded run's)."""
-    if maneuver.kind != "zigzag":
-        return None
-    return simulate_maneuvers(model, [maneuver], approach_conditions(run, execute, dt))[0].indices.as_dict()
+def closed_loop_indices(model: nn.Module, runs: Sequence[Run], maneuvers: Sequence[Maneuver | None],
+                        executes: Sequence[int], dt: float = CLOSED_LOOP_DT) -> list[dict[str, float] | None]:
+    """Each zig-zag's indices of `model` run closed loop from its record's approach
+    (`approach_conditions`, step `dt` [s]), all zig-zags as rows of one batched rollout
+    (`simulate_rows`: each as if run alone, to round-off); None for another maneuver (its
+    prediction is the recorded run's) or a run without one."""
+    rows = [i for i, m in enumerate(maneuvers) if m is not None and m.kind == "zigzag"]
+    results = simulate_rows(model, [maneuvers[i] for i in rows],
+                            [approach_conditions(runs[i], executes[i], dt) for i in rows])
+    found: list[dict[str, float] | None] = [None] * len(maneuvers)
+    for i, result in zip(rows, results):
+        found[i] = result.indices.as_dict()
+    return found
 
 
 def _predictions(model: nn.Module, runs: Sequence[Run], starts: Sequence[int], method: Method,
@@ -161,13 +166,9 @@ def _predictions(model: nn.Module, runs: Sequence[Run], starts: Sequence[int], m
         inputs.append(np.concatenate([u, np.repeat(u[-1:], longest - len(u), 0)]))
     u = torch.tensor(np.stack(inputs, 1), dtype=torch.float64)
     states = eager_predict(model, x0, u, runs[0].dt, Integrator(method))
-    maneuvers = maneuvers if maneuvers is not None else [None] * len(runs)
-    out = []
-    for i, n in enumerate(lengths):
-        share = gate_off_share(model, states[:n - 1, i], u[:n - 1, i])
-        closed = closed_loop_indices(model, runs[i], maneuvers[i], starts[i], dt) if maneuvers[i] is not None else None
-        out.append((states[:n, i].numpy(), share, closed))
-    return out
+    closed = closed_loop_indices(model, runs, maneuvers if maneuvers is not None else [None] * len(runs), starts, dt)
+    return [(states[:n, i].numpy(), gate_off_share(model, states[:n - 1, i], u[:n - 1, i]), closed[i])
+            for i, n in enumerate(lengths)]
 
 
 def _row(scenario: str, run: Run, maneuver: Maneuver, model: str, values: list[dict], shares: list) -> dict:

@@ -133,6 +133,14 @@ def ahead_only(model: nn.Module) -> bool:
     return getattr(model, "kind", "mmg") != "nn" and ship_of(model).models.get("propeller") != "four_quadrant"
 
 
+def _check_ahead(model: nn.Module, maneuvers: Sequence[Maneuver]) -> None:
+    """One `ManeuverError` line when a crash stop is asked of an ahead-only propeller."""
+    if any(m.kind == "crash_stop" for m in maneuvers) and ahead_only(model):
+        raise ManeuverError(f"crash stop: the propeller model {ship_of(model).models.get('propeller')!r} of "
+                            f"{ship_of(model).name} is for ahead motion only (no astern thrust); a crash stop needs "
+                            "a four-quadrant propeller")
+
+
 def gate_off_share(model: nn.Module, states: torch.Tensor, inputs: torch.Tensor) -> float | None:
     """Share of the rows (states (N, 6), inputs (N, 4)) at which the model's kNN gate
     switches its FNN off; None for a model without a gate."""
@@ -211,10 +219,7 @@ def simulate_maneuvers(model: nn.Module, maneuvers: Sequence[Maneuver], conditio
     """
     if not maneuvers:
         return []
-    if any(m.kind == "crash_stop" for m in maneuvers) and ahead_only(model):
-        raise ManeuverError(f"crash stop: the propeller model {ship_of(model).models.get('propeller')!r} of "
-                            f"{ship_of(model).name} is for ahead motion only (no astern thrust); a crash stop needs "
-                            "a four-quadrant propeller")
+    _check_ahead(model, maneuvers)
     if compiled is None:
         compiled = choose_loop([model], maneuvers, conditions).compiled
     x0, orders, parameters = _start(maneuvers, conditions)
@@ -224,6 +229,28 @@ def simulate_maneuvers(model: nn.Module, maneuvers: Sequence[Maneuver], conditio
     else:
         record = run_compiled(loop, x0, orders, parameters, conditions.steps, conditions.dt)
     return _results(maneuvers, conditions, x0, record, label, limits)
+
+
+def simulate_rows(model: nn.Module, maneuvers: Sequence[Maneuver], conditions: Sequence[Conditions], *,
+                  label: str = "model", limits: PhysicalRange | None = None) -> list[ManeuverResult]:
+    """`simulate_maneuvers` (eager) of each maneuver under its own `Conditions` (approach
+    speed, revolutions, rudder rate, wind and duration per row; one dt and integration rule
+    for all), as one batched rollout to the longest duration: maneuver b is the first
+    ``conditions[b].steps`` steps of its row. Rows do not interact, so each result equals
+    the maneuver simulated alone to round-off."""
+    if len(maneuvers) != len(conditions):
+        raise ValueError(f"{len(maneuvers)} maneuvers with {len(conditions)} conditions")
+    if not maneuvers:
+        return []
+    first = conditions[0]
+    if any(c.dt != first.dt or c.method != first.method for c in conditions):
+        raise ManeuverError("maneuvers simulated side by side share one time step and integration rule")
+    _check_ahead(model, maneuvers)
+    starts = [_start([m], c) for m, c in zip(maneuvers, conditions)]
+    x0, orders, parameters = (torch.cat(parts) for parts in zip(*starts))
+    record = run_eager(model, x0, orders, parameters, max(c.steps for c in conditions), first.dt, first.method)
+    return [_results([m], c, x0[b:b + 1], record[:c.steps, b:b + 1], label, limits)[0]
+            for b, (m, c) in enumerate(zip(maneuvers, conditions))]
 
 
 def run_maneuvers(subject: ManeuverModel, maneuvers: Sequence[Maneuver], conditions: Conditions, *,

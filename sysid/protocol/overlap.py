@@ -65,7 +65,7 @@ class AfterTraining:
         exp = self.experiments[name]
         if group is not None and exp.experiment.model is not ModelKind.MMG and group.seeds:
             self.groups[name] = group
-            self.pool.add(("ensemble", name), ("ensemble", (name, exp, group)))
+            self.pool.add(("ensemble", name), ("ensemble", (name, exp, group)), first=True)
         for path in model_paths(self.out / "runs" / name):
             self.pool.add(("record", path), ("record", path))
 
@@ -84,6 +84,7 @@ class AfterTraining:
             group = self.groups[subject]
             self.ensembles[subject] = (group, result)
             self.log(f"[{result[0]}] mean of {len(group.seeds)} seeds' networks evaluated")
-            self.pool.add(("record", result[2]), ("record", result[2]))
+            # an ensemble's maneuvers take a few times a single model's: ahead of those queued
+            self.pool.add(("record", result[2]), ("record", result[2]), first=True)
         else:
             self.predicted[subject] = result

@@ -20,7 +20,7 @@ from sysid.maneuvers import (Conditions, CrashStop, ManeuverError, ManeuverModel
                              default_conditions, run_maneuvers, simulate_maneuvers, straight_running_rps)
 from sysid.maneuvers.controllers import rate_limited
 from sysid.maneuvers.outputs import indices_table
-from sysid.maneuvers.simulate import gate_off_share
+from sysid.maneuvers.simulate import gate_off_share, simulate_rows
 from sysid.maneuvers.straight import surge_acceleration
 from sysid.mmg.wind import relative_wind
 
@@ -104,6 +104,33 @@ def test_ensemble_indices_carry_the_members_spread():
     assert row["n_members"] == 2
     assert row["tactical_diameter_m_std"] == pytest.approx(abs(alone[0] - alone[1]) / math.sqrt(2), rel=1e-12)
     assert min(alone) < result.indices.tactical_diameter_m < max(alone)  # the mean-force model lies between
+
+
+@pytest.mark.parametrize("gated", [False, True])
+def test_rows_under_their_own_conditions_equal_each_maneuver_run_alone(gated):
+    """`simulate_rows`: zig-zags and a turn of different approach speed, revolutions,
+    rudder rate, wind and duration as rows of one rollout, each as `simulate_maneuvers`
+    runs it alone (the kNN gate deciding row by row when `gated`)."""
+    ship = load_ship("kvlcc2_l7")
+    bank = torch.zeros(400, 6, dtype=torch.float64)
+    bank[:, 1] = torch.linspace(1.0, 1.3, 400)
+    model = _hybrid_without_correction(ship, bank) if gated else MMG(ship)
+    maneuvers = [ZigZag(20.0, 20.0, "starboard"), ZigZag(10.0, 10.0, "port"), TurningCircle(35.0, "port")]
+    conditions = [Conditions(1.17, 11.8, 15.7, 0.2, 50.0, 0.0, 0.0),
+                  Conditions(1.05, 10.9, 9.0, 0.2, 34.0, 0.8, 2.0),
+                  Conditions(1.25, 12.5, 20.0, 0.2, 20.0, 0.3, 5.5)]
+    rows = simulate_rows(model, maneuvers, conditions)
+    for maneuver, condition, row in zip(maneuvers, conditions, rows):
+        alone = simulate_maneuvers(model, [maneuver], condition)[0]
+        assert row.states.shape == alone.states.shape == (condition.steps + 1, 6)
+        np.testing.assert_allclose(row.states, alone.states, rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(row.inputs, alone.inputs, rtol=1e-13, atol=1e-13)
+        assert row.gate_off_share == alone.gate_off_share and (row.gate_off_share is not None) == gated
+        for k, v in alone.indices.as_dict().items():
+            assert row.indices.as_dict()[k] == pytest.approx(v, rel=1e-12, nan_ok=True), k
+    assert rows[1].indices.first_overshoot_deg > 0  # the port zig-zag reversed within its 34 s
+    with pytest.raises(ManeuverError, match="one time step"):
+        simulate_rows(model, maneuvers[:2], [conditions[0], Conditions(1.05, 10.9, 9.0, 0.1, 34.0)])
 
 
 def test_crash_stop_needs_astern_thrust():
@@ -296,10 +323,11 @@ def test_the_held_orders_are_the_controllers_own_to_the_bit():
     assert reversed_once and float(expected[0][2, 0]) == pytest.approx(-conditions.rps)  # reversed; astern reached
 
 
-def _features_hybrid() -> CorrectedModel:
-    """An Esso Osaka hybrid with a 9-32-32-3 FNN and its kNN gate in the 32 features (more
-    than `BOX_DIMENSIONS`: principal boxes), fitted on straight running and gentle turns."""
-    torch.manual_seed(2)
+def _features_hybrid(seed: int = 2) -> CorrectedModel:
+    """An Esso Osaka hybrid with a 9-32-32-3 FNN (initialised from `seed`) and its kNN gate
+    in the 32 features (more than `BOX_DIMENSIONS`: principal boxes), fitted on straight
+    running and gentle turns."""
+    torch.manual_seed(seed)
     mmg = MMG(load_ship("esso_osaka"))
     net = ForceCorrection((32, 32), torch.float64)
     net.set_standardization(torch.tensor([0.3, 0.0, 0.0, 0.0, 8.8, 0.0, 0.0, 0.0, 0.0]),
@@ -319,19 +347,22 @@ def _features_hybrid() -> CorrectedModel:
     return CorrectedModel(mmg, net, KNNGate(k=5, alpha=0.99, features=32, dtype=torch.float64).fit(features))
 
 
-@pytest.mark.parametrize("kind", ["hybrid", "mmg"])
+@pytest.mark.parametrize("kind", ["hybrid", "mmg", "ensemble"])
 def test_the_eager_loop_equals_the_torch_step_with_the_whole_bank_scan(kind):
     """The eager loop (native MMG kernel, anchored kNN gate, FNN and orders looked up once)
     against the step it replaced, run here: the model's own torch MMG, the gate's
     whole-bank scan and `ManeuverOrders.forward` at every step. The same gate decision at
     every step start and the same states to round-off (the native kernel and F_NN added
-    through the mass terms reorder the sums; the gate and the FNN give the same bits)."""
+    through the mass terms reorder the sums; the gate and the FNN give the same bits). An
+    ensemble of hybrids of one MMG: the mean of its members' native rates against its
+    `forward` (F_MMG once, the members' gated F_NN averaged, the majority's gate)."""
     from sysid.device import compute_threads
     from sysid.dynamics.integrators import step_loop
     from sysid.maneuvers.closed_loop import ClosedLoopStep, run_eager
     from sysid.maneuvers.controllers import initial_orders, order_parameters
     from sysid.mmg import native
-    model = _features_hybrid() if kind == "hybrid" else MMG(load_ship("esso_osaka"))
+    model = {"hybrid": _features_hybrid, "mmg": lambda: MMG(load_ship("esso_osaka")),
+             "ensemble": lambda: SeedEnsemble([_features_hybrid(seed) for seed in (2, 3, 4)])}[kind]()
     maneuvers = [TurningCircle(35.0), ZigZag(20.0, 20.0, "port")]
     conditions = Conditions(0.35, 8.85, 24.1, 0.2, 60.0)
     x0 = torch.zeros(2, 6, dtype=torch.float64)
@@ -346,7 +377,7 @@ def test_the_eager_loop_equals_the_torch_step_with_the_whole_bank_scan(kind):
         return torch.cat((x, o, u, g), -1), (x, o)
     with native.torch_path(), torch.no_grad(), compute_threads(1):
         expected = torch.stack(step_loop(advance, (x0, orders), conditions.steps))
-    if kind == "hybrid":
+    if kind != "mmg":
         on = expected[..., 12]
         assert 0 < int(on.sum()) < on.numel()  # the turn leaves the bank: both decisions occur
     else:
