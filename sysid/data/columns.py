@@ -31,13 +31,17 @@ def to_channels(columns: ColumnMap, frame: pd.DataFrame, path) -> pd.DataFrame:
             else:
                 missing.append(spec)
             continue
-        values = _numbers(frame[spec.column], channel, path)
-        text = frame[spec.column].notna() & values.isna()
-        if text.any():   # every such column is named in one error below
-            row = int(np.argmax(text.to_numpy()))
-            text_cells.append(f"column {spec.column!r} (channel {channel}) holds "
-                              f"{frame[spec.column].iloc[row]!r} at data row {row + 2}")
-            continue
+        column = frame[spec.column]
+        if _is_plain_number(column):  # floats or integers: numbers as they are, no text cell
+            values = column
+        else:
+            values = _numbers(column, channel, path)
+            text = column.notna() & values.isna()
+            if text.any():   # every such column is named in one error below
+                row = int(np.argmax(text.to_numpy()))
+                text_cells.append(f"column {spec.column!r} (channel {channel}) holds "
+                                  f"{column.iloc[row]!r} at data row {row + 2}")
+                continue
         try:
             factor = spec.factor
         except ConfigError as exc:  # a unit in a header the config did not name
@@ -59,6 +63,12 @@ def to_channels(columns: ColumnMap, frame: pd.DataFrame, path) -> pd.DataFrame:
     if unknown_units:
         raise DataError(f"{path}: {'; '.join(unknown_units)}; set the unit(s) in [data.columns]{where}")
     return pd.DataFrame(out, index=frame.index)
+
+
+def _is_plain_number(column: pd.Series) -> bool:
+    """A column of float or integer numbers (NumPy dtypes, not boolean): `_numbers` would
+    return it unchanged."""
+    return column.dtype.kind in "fiu"
 
 
 def _numbers(column: pd.Series, channel: str, path) -> pd.Series:

@@ -339,8 +339,10 @@ def verdict_of(model: str, labels: tuple[str, ...], cells: tuple[ChannelCell, ..
     """Judge the evidence of every split against every baseline; the test logs decide when
     there are any."""
     decided = TEST if TEST in evidence else VALIDATION
-    judgements = {b: judged(model, b, cs, rule, seeds) for b, cs in evidence.get(decided, {}).items()}
     on_validation = {b: judged(model, b, cs, rule, seeds) for b, cs in evidence.get(VALIDATION, {}).items()}
+    # `judge` is pure: decided on the validation windows, their judgements are the same ones
+    judgements = (dict(on_validation) if decided == VALIDATION else
+                  {b: judged(model, b, cs, rule, seeds) for b, cs in evidence.get(decided, {}).items()})
     return BaselineVerdict(model, labels, cells, losses, decided, seeds, judgements, on_validation, evidence)
 
 

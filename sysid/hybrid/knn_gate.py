@@ -13,15 +13,20 @@ import torch
 from torch import nn
 
 
-def nearest(q: torch.Tensor, bank: torch.Tensor, bank_sq: torch.Tensor, k: int) -> tuple[torch.Tensor, torch.Tensor]:
+def nearest(q: torch.Tensor, bank: torch.Tensor, bank_sq: torch.Tensor, k: int,
+            out: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """The k smallest Euclidean distances (B, k), ascending, from q (B, F) to bank (N, F),
     and the bank rows they are to (B, k).
 
     |q - b|^2 = |q|^2 + |b|^2 - 2 q.b (bank_sq = |b|^2, (N,)): one matrix product, then
     the k smallest. Eager, the product accumulates into the (B, N) sum in place (one
-    (B, N) buffer and one pass fewer); compiled, as a plain difference.
+    (B, N) buffer and one pass fewer), held in `out` (at least (B, N), reused across
+    chunks) when given; compiled, as a plain difference.
     """
-    d2 = (q * q).sum(1, keepdim=True) + bank_sq
+    if out is not None and not torch.compiler.is_compiling():
+        d2 = torch.add((q * q).sum(1, keepdim=True), bank_sq, out=out[:q.shape[0]])
+    else:
+        d2 = (q * q).sum(1, keepdim=True) + bank_sq
     if torch.compiler.is_compiling():
         d2 = d2 - 2.0 * q @ bank.t()  # t(): a traceable op, not an attribute
     else:
@@ -30,9 +35,10 @@ def nearest(q: torch.Tensor, bank: torch.Tensor, bank_sq: torch.Tensor, k: int) 
     return found.values.clamp_min(0.0).sqrt(), found.indices
 
 
-def nearest_distances(q: torch.Tensor, bank: torch.Tensor, bank_sq: torch.Tensor, k: int) -> torch.Tensor:
+def nearest_distances(q: torch.Tensor, bank: torch.Tensor, bank_sq: torch.Tensor, k: int,
+                      out: torch.Tensor | None = None) -> torch.Tensor:
     """The k smallest Euclidean distances (B, k), ascending, from q (B, F) to bank (N, F) (`nearest`'s)."""
-    return nearest(q, bank, bank_sq, k)[0]
+    return nearest(q, bank, bank_sq, k, out)[0]
 
 
 class KNNGate(nn.Module):
@@ -70,8 +76,11 @@ class KNNGate(nn.Module):
         k = min(self.k + (1 if exclude_self else 0), self.bank.shape[0])
         bank_sq = self._bank_sq()
         out = []
+        # one (chunk, N) buffer of squared distances for every chunk: reusing it spares each
+        # new allocation's page faults (the products and their numbers are the same)
+        d2 = flat.new_empty(min(self.chunk, flat.shape[0]), self.bank.shape[0])
         for lo in range(0, flat.shape[0], self.chunk):
-            nearest = nearest_distances(flat[lo:lo + self.chunk], self.bank, bank_sq, k)
+            nearest = nearest_distances(flat[lo:lo + self.chunk], self.bank, bank_sq, k, d2)
             if exclude_self:  # drop the point itself (distance 0)
                 nearest = nearest[:, 1:]
             out.append(nearest.mean(1))

@@ -107,6 +107,20 @@ def test_knn_threshold_is_the_alpha_quantile_of_leave_one_out_distances():
     np.testing.assert_allclose(gate.distance(q).numpy(), dq, rtol=1e-10)
 
 
+def test_knn_gate_in_chunks_sharing_one_buffer_has_the_brute_force_distances():
+    """Leave-one-out and query distances in chunks of 64 rows (a partial last chunk, one
+    squared-distance buffer reused across chunks): the brute-force distances."""
+    g = torch.Generator().manual_seed(4)
+    feats = torch.randn(500, 8, generator=g, dtype=torch.float64)
+    gate = KNNGate(k=10, alpha=0.95, features=8, dtype=torch.float64, chunk=64).fit(feats)
+    d = np.linalg.norm(feats.numpy()[:, None] - feats.numpy()[None], axis=-1)
+    np.fill_diagonal(d, np.inf)
+    np.testing.assert_allclose(gate.train_distances.numpy(), np.sort(d, axis=1)[:, :10].mean(1), rtol=1e-10)
+    q = feats[:130] + 0.01
+    dq = np.sort(np.linalg.norm(q.numpy()[:, None] - feats.numpy()[None], axis=-1), axis=1)[:, :10].mean(1)
+    np.testing.assert_allclose(gate.distance(q).numpy(), dq, rtol=1e-10)
+
+
 @pytest.mark.slow
 def test_gate_returns_the_mmg_force_exactly_far_outside(trained):
     runs, trainer = trained
