@@ -285,6 +285,7 @@ Forces<T> forces(const T& u, const T& v, const T& psi, const T& r, double n, dou
         N = vu * H[2] + vua * H[5] + vr * H[8] + ru * H[11] + rua * H[14] + X0Uu * H[17] + I1 * H[20] + I2 * H[23];
     }
 
+    T F_N;  // the rudder's normal force, either family's; its components follow both
     if (families & PROPELLER_STANDARD) {
         // propeller: the standard thrust (`sysid.mmg.propeller_standard`), wake by beta_P
         const T beta = choose(slow, T(0.0), -beta_hat);
@@ -314,12 +315,7 @@ Forces<T> forces(const T& u, const T& v, const T& psi, const T& r, double n, dou
         const double gamma_R = val(beta_R) < 0.0 ? c[K::S_gamma_R_minus] : c[K::S_gamma_R_plus];
         const T v_R = (U * gamma_R) * beta_R;
         const T alpha_R = delta - angle_guarded(v_R, u_R);
-        const T F_N = muladd(u_R * u_R, v_R, v_R) * sine(alpha_R);
-        double sines[3];
-        rudder_sines(delta, c, sines);
-        X = X + (sines[0] * c[K::RUDDER + 3]) * F_N;
-        Y = Y + (sines[1] * c[K::RUDDER + 4]) * F_N;
-        N = N + (sines[2] * c[K::RUDDER + 5]) * F_N;
+        F_N = muladd(u_R * u_R, v_R, v_R) * sine(alpha_R);
     } else {
         // propeller: four quadrants
         const T s_raw = muladd(v, c[K::x_P_L], r) / Ug;
@@ -374,13 +370,13 @@ Forces<T> forces(const T& u, const T& v, const T& psi, const T& r, double n, dou
         const double straightening = val(muladd(v, c[K::x_R], r)) >= 0.0 ? c[K::minus_gamma_P] : c[K::minus_gamma_N];
         const T v_R = straightening * muladd(v, c[K::l_R], r);
         const T alpha_R = delta - angle(v_R, u_R);
-        const T F_N = muladd(u_R * u_R, v_R, v_R) * sine(alpha_R);
-        double sines[3];
-        rudder_sines(delta, c, sines);
-        X = X + (sines[0] * c[K::RUDDER + 3]) * F_N;
-        Y = Y + (sines[1] * c[K::RUDDER + 4]) * F_N;
-        N = N + (sines[2] * c[K::RUDDER + 5]) * F_N;
+        F_N = muladd(u_R * u_R, v_R, v_R) * sine(alpha_R);
     }
+    double sines[3];
+    rudder_sines(delta, c, sines);
+    X = X + (sines[0] * c[K::RUDDER + 3]) * F_N;
+    Y = Y + (sines[1] * c[K::RUDDER + 4]) * F_N;
+    N = N + (sines[2] * c[K::RUDDER + 5]) * F_N;
 
     // the relative wind (the lab's guards) and Fujiwara's force
     const T course = psi + beta_hat;
