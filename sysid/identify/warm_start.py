@@ -17,6 +17,7 @@ from sysid.dynamics.rollouts import WindowSet
 from sysid.errors import TrainingError
 from sysid.hybrid.correction import ForceCorrection, correction_inputs
 from sysid.hybrid.force_models import CorrectedModel
+from sysid.identify.adam import Adam
 from sysid.identify.journal import TrainingJournal
 from sysid.identify.losses import VEL
 
@@ -53,7 +54,7 @@ class OneStepRegression:
     """The warm start's regression of a `ForceCorrection` in closed form: the loss, the
     mean over members, rows and outputs of (y - target)^2 plus lambda_L2 |theta|^2 (the
     weights' `weight_norm`, per member), its gradient written out (`gradient`) and Adam
-    (`adam_step`, torch.optim.Adam's algorithm and defaults: betas 0.9, 0.999, eps 1e-8) on
+    (`adam_step`: `sysid.identify.adam.Adam`, the training loop's, with its defaults) on
     all parameters held as one flat vector ``theta`` (the layers' weights, then their
     biases; `write_back` copies it into the network). No autograd graph is built.
 
@@ -61,16 +62,13 @@ class OneStepRegression:
     lambda_L2 : weight of |theta|^2; lr : Adam's learning rate.
     """
 
-    betas = (0.9, 0.999)
-    eps = 1e-8
-
     def __init__(self, net: ForceCorrection, lambda_L2: float, lr: float):
-        self.net, self.lambda_L2, self.lr = net, float(lambda_L2), float(lr)
+        self.net, self.lambda_L2 = net, float(lambda_L2)
         self.parameters = [*net.weights, *net.biases]
         self.theta = torch.cat([q.detach().reshape(-1) for q in self.parameters])
         self.grad = torch.zeros_like(self.theta)
-        self.exp_avg, self.exp_avg_sq = torch.zeros_like(self.theta), torch.zeros_like(self.theta)
-        self.steps = 0
+        self.theta.grad = self.grad  # `gradient` writes into it; `adam_step` reads it there
+        self.adam = Adam([self.theta], lr)
         sizes, shapes = [q.numel() for q in self.parameters], [q.shape for q in self.parameters]
         self.views = [v.view(shape) for v, shape in zip(self.theta.split(sizes), shapes)]
         self.grads = [v.view(shape) for v, shape in zip(self.grad.split(sizes), shapes)]
@@ -113,16 +111,9 @@ class OneStepRegression:
         return value
 
     def adam_step(self) -> None:
-        """One Adam update of ``theta`` with ``grad``: torch.optim.Adam's operations (its
-        multi-tensor path without weight decay or amsgrad, which on the CPU runs them tensor
-        by tensor) on the flat vector, so the same numbers to the last bit."""
-        beta1, beta2 = self.betas
-        self.steps += 1
-        self.exp_avg.lerp_(self.grad, 1 - beta1)
-        self.exp_avg_sq.mul_(beta2).addcmul_(self.grad, self.grad, value=1 - beta2)
-        step_size = (self.lr / (1 - beta1 ** self.steps)) * -1
-        denominator = self.exp_avg_sq.sqrt().div_((1 - beta2 ** self.steps) ** 0.5).add_(self.eps)
-        self.theta.addcdiv_(self.exp_avg, denominator, value=step_size)
+        """One update of ``theta`` with ``grad`` by `sysid.identify.adam.Adam`, the training
+        loop's (torch.optim.Adam's operations, so the same numbers to the last bit)."""
+        self.adam.step()
 
     def write_back(self) -> None:
         """``theta`` into the network's parameters."""
