@@ -29,7 +29,7 @@ import torch
 from sysid.config.choices import Method, ModelKind, Validation
 from sysid.config.experiment import Experiment
 from sysid.data.recordings import Run
-from sysid.dynamics.equations import integrate_with_forces
+from sysid.dynamics.equations import integrate, integrate_training
 from sysid.dynamics.rollouts import WindowSet
 from sysid.errors import ConfigError, TrainingError
 from sysid.hybrid.correction import ForceCorrection
@@ -172,14 +172,16 @@ def _losses(stack: _Stack, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tenso
     k, m = len(stack.seeds), stack.per_seed
     states, inputs = (x.unsqueeze(2).expand(x.shape[0], k, m, *x.shape[2:]).reshape(x.shape[0], k * m, *x.shape[2:])
                       for x in (batch.states, batch.inputs))
-    trajectory = integrate_with_forces(stack.model, states[0], inputs, batch.dt, Method.EULER)
-    err = trajectory.states[1:, ..., VEL] - states[1:, ..., VEL]
+    if w_F is None:  # validation, without gradient: no forces kept
+        predicted = integrate(stack.model, states[0], inputs, batch.dt, Method.EULER)
+    else:  # the members' training right-hand side (`integrate_training`), as a seed alone trains
+        predicted, f_nn, f_mmg = integrate_training(stack.model, states[0], inputs, batch.dt)
+    err = predicted[1:, ..., VEL] - states[1:, ..., VEL]
     loss_v = ((err * err) * w_v).sum(-1).mean((0, 2)).reshape(k, m).mean(1)
     if w_F is None:
         loss_F = torch.zeros_like(loss_v)
     else:
-        forces = trajectory.forces
-        loss_F = output_penalty(forces.correction, forces.mmg, w_F, band).mean((0, 2)).reshape(k, m).mean(1)
+        loss_F = output_penalty(f_nn, f_mmg, w_F, band).mean((0, 2)).reshape(k, m).mean(1)
     l2 = sum((w * w).flatten(1).sum(1) for w in stack.net.weights).reshape(k, m).sum(1) / m
     return loss_v, loss_F, l2
 
