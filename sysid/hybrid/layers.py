@@ -58,6 +58,16 @@ def forward_single(z: torch.Tensor, weights, biases, scale: torch.Tensor, shift:
     return h
 
 
+def forward_members(z: torch.Tensor, weights, biases, scale: torch.Tensor,
+                    shift: torch.Tensor) -> tuple[torch.Tensor, list[torch.Tensor]]:
+    """(F (K, rows, n_L), the activations [z, h_1, ..., h_{L-1}]) of K networks side by side
+    from z (K, rows, n_0), without autograd; W_i (K, n_{i-1}, n_i), b_i (K, n_i)."""
+    h = [z]
+    for w, b in zip(weights[:-1], biases[:-1]):
+        h.append(_hidden_(torch.baddbmm(b.unsqueeze(1), h[-1], w, beta=2.0, alpha=2.0)))
+    return torch.addcmul(shift, torch.baddbmm(biases[-1].unsqueeze(1), h[-1], weights[-1]), scale), h
+
+
 def backward(grad: torch.Tensor, h, weights, scale: torch.Tensor, single: bool,
              input_gradient: bool) -> tuple[torch.Tensor | None, list[torch.Tensor]]:
     """(g_z or None, [dW_1, db_1, ..., dW_L, db_L]) for the gradient `grad` of F (rows, n_L) (one
@@ -94,10 +104,7 @@ class _Layers(torch.autograd.Function):
             force = z.new_empty(z.shape[0], weights[-1].shape[-1])
             h = forward_single(z, weights, [b[0] for b in biases], scale, shift, force)
         else:
-            h = [z]
-            for w, b in zip(weights[:-1], biases[:-1]):
-                h.append(_hidden_(torch.baddbmm(b.unsqueeze(1), h[-1], w, beta=2.0, alpha=2.0)))
-            force = torch.addcmul(shift, torch.baddbmm(biases[-1].unsqueeze(1), h[-1], weights[-1]), scale)
+            force, h = forward_members(z, weights, biases, scale, shift)
         ctx.save_for_backward(scale, *h, *weights)
         ctx.single = single
         return force
