@@ -198,8 +198,9 @@ class CorrectedModel(nn.Module):
         (..., 6), inputs (..., 4)) giving (dx/dt (..., 6), F_NN (..., 3), F_MMG (..., 3)), the
         MMG, the FNN's inputs and the equations of motion in one autograd Function with a
         hand-derived VJP (`sysid.mmg.vjp`), the FNN's layers in another
-        (`sysid.hybrid.layers`); for one network (K = 1) where the native kernel applies, all
-        of it in one (`sysid.hybrid.fused_rate`). The same numbers as `forward` and the
+        (`sysid.hybrid.layers`); for one network (K = 1), or K members each on its own rows
+        (`per_member`), where the native kernel applies, all of it in one
+        (`sysid.hybrid.fused_rate`). The same numbers as `forward` and the
         equations of motion, to round-off.
 
         It applies to a hybrid without an active gate, with gradients on, whose MMG
@@ -219,17 +220,18 @@ class CorrectedModel(nn.Module):
                 return None
             rate = self._native_training_rate(coefficients, net, families, per_member)
         families = native.families_of(self.mmg)
-        if net.members != 1 or families is None:
+        if (net.members != 1 and not per_member) or families is None:
             return rate
         return self._fused_training_rate(coefficients, net, families, rate)
 
     @staticmethod
     def _fused_training_rate(coefficients, net, families: int, otherwise):
-        """`training_rate` of one network (K = 1) as one autograd Function
-        (`sysid.hybrid.fused_rate`) where the native kernel applies to the rollout's tensors
-        (checked at its first call of each dtype; the FNN's tensors of the state's dtype), else
-        `otherwise`. One rollout: the parameters, the coefficients and the way tensors reach
-        the kernel stay as they are between its calls (a training rollout's)."""
+        """`training_rate` of one network (K = 1), or of K members each on its own rows, as one
+        autograd Function (`sysid.hybrid.fused_rate`) where the native kernel applies to the
+        rollout's tensors (checked at its first call of each dtype; the FNN's tensors of the
+        state's dtype; K members: states (K, ..., 6)), else `otherwise`. One rollout: the
+        parameters, the coefficients and the way tensors reach the kernel stay as they are
+        between its calls (a training rollout's)."""
         parameters = [p for pair in zip(net.weights, net.biases) for p in pair]
         plans: dict[torch.dtype, Plan] = {}
 
@@ -238,7 +240,8 @@ class CorrectedModel(nn.Module):
             if plan is None:  # the rollout's first call: the checks, then the lookups, once
                 c = coefficients.values_view(state.dtype)
                 if not (native.applies(state, inputs, c, differentiated=True)
-                        and all(t.dtype == state.dtype for t in (*parameters, net.input_mean, net.output_std))):
+                        and all(t.dtype == state.dtype for t in (*parameters, net.input_mean, net.output_std))
+                        and (net.members == 1 or (state.dim() > 1 and state.shape[0] == net.members))):
                     return otherwise(state, inputs)
                 kernel = native.TrainingKernel(c, families, net.input_mean, net.input_std, state.dtype)
                 plan = plans[state.dtype] = Plan(kernel, force_rate(c, state), net.output_std, net.output_mean,
