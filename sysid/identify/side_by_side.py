@@ -146,12 +146,16 @@ class _Stack:
         eps = groups[0]["eps"]
         step_size = [-g["lr"] / (1 - beta1 ** n) for g, n in zip(groups, self.steps)]
         bias2_sqrt = [(1 - beta2 ** n) ** 0.5 for n in self.steps]
+        columns: dict[int, tuple[torch.Tensor, torch.Tensor]] = {}  # by the parameter's dim
         for p, m, v in zip(self.net.parameters(), self.exp_avg, self.exp_avg_sq):
             g = p.grad
             m.lerp_(g, 1 - beta1)
             v.mul_(beta2).addcmul_(g, g, value=1 - beta2)
-            denom = (v.sqrt() / self._per_member(bias2_sqrt, v)).add_(eps)
-            p.add_(self._per_member(step_size, p) * m / denom)
+            if p.dim() not in columns:
+                columns[p.dim()] = (self._per_member(bias2_sqrt, v), self._per_member(step_size, p))
+            bias2, size = columns[p.dim()]
+            denom = (v.sqrt() / bias2).add_(eps)
+            p.add_(size * m / denom)
 
     @torch.no_grad()
     def write_back(self) -> None:
