@@ -724,16 +724,24 @@ def main() -> None:
             print(f"{batch:6d} {1e3 * seconds:9.1f} {min(batch, len(train)) * t.steps / seconds:15.0f} "
                   f"{1.0 / (seconds * steps_per_epoch):9.2f}")
         if args.members > 1:
-            one, many, separate = [], [], []
-            for _ in range(3):  # interleaved, medians
-                one.append(minibatch_seconds(exp, train, t.batch_size, members=1))
-                many.append(minibatch_seconds(exp, train, t.batch_size, members=args.members))
+            one = training_step(exp, train, t.batch_size, 1)[0]
+            many = training_step(exp, train, t.batch_size, args.members)[0]
+            unfused = training_step(exp, train, t.batch_size, args.members)[0]
+
+            def separate():
                 with separate_functions():
-                    separate.append(minibatch_seconds(exp, train, t.batch_size, members=args.members))
-            a, b, c = statistics.median(one), statistics.median(many), statistics.median(separate)
+                    unfused()
+            times: dict[str, list[tuple[float, float]]] = {"one": [], "many": [], "separate": []}
+            for _ in range(5):  # interleaved rounds of 4 steps, medians of wall and CPU
+                for label, fn in (("one", one), ("many", many), ("separate", separate)):
+                    times[label].append(per_step_seconds(fn, 4))
+            (a, a_cpu), (b, b_cpu), (c, c_cpu) = [
+                tuple(statistics.median(x[i] for x in times[label]) for i in (0, 1)) for label in times]
             print(f"{args.members} networks side by side, batch {t.batch_size}: {1e3 * b:.1f} ms/step against "
                   f"{1e3 * a:.1f} for one ({b / a:.2f}x the time for {args.members}x the networks); through the "
-                  f"separate Functions (kernel, layers) {1e3 * c:.1f} ms/step ({c / b:.2f}x the fused one)")
+                  f"separate Functions (kernel, layers) {1e3 * c:.1f} ms/step ({c / b:.2f}x the fused one); CPU "
+                  f"{1e3 * b_cpu:.1f}, {1e3 * a_cpu:.1f}, {1e3 * c_cpu:.1f} ms/step ({b_cpu / a_cpu:.2f}x, "
+                  f"{c_cpu / b_cpu:.2f}x)")
         if args.limit:
             widths = [9, *exp.network.hidden, 3]
             rows = min(t.batch_size, len(train))
