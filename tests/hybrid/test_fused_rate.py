@@ -193,3 +193,21 @@ def test_a_float32_rollout_of_members_side_by_side_equals_the_separate_functions
         for a, b in zip(one[2:], new[2:]):  # the loss is a mean over the K members' windows too
             b = 3.0 * b[k:k + 1]
             torch.testing.assert_close(a, b, rtol=2e-5, atol=2e-5 * float(b.abs().max()))
+
+
+def test_the_no_grad_rate_of_members_side_by_side_equals_the_torch_path(d2):
+    """`PerMember.eager_rate` (validation rollouts of seeds side by side: the native kernel and
+    the training layers' forward, member k's network on member k's rows) equals the equations
+    of motion over the torch MMG and each member's own F_NN, in float64 to 1e-12 of the largest
+    rate."""
+    from sysid.dynamics.equations import state_derivative
+    exp, states, inputs, _ = d2
+    model = PerMember(_hybrid(exp, states, torch.float64, (16, 8), members=3))
+    state, u = states[4, :96].reshape(3, 32, 6), inputs[4, :96].reshape(3, 32, 4)
+    with torch.no_grad():
+        rate, gate = model.eager_rate(state, u)
+        forces = model(state, u)
+        expected = state_derivative(state, forces.total, model.coefficients)
+    assert gate is None and rate.shape == (3, 32, 6)
+    torch.testing.assert_close(rate, expected, rtol=0, atol=1e-12 * float(expected.abs().max()))
+    assert model.eager_rate(state.requires_grad_(True), u) is None  # with gradient: the training path
