@@ -4,7 +4,8 @@ their networks stacked on the FNN's member axis.
 Each seed is an ordinary `Trainer`: `Trainer.prepare` (split, standardisation, warm start,
 or a checkpoint) and `Trainer.finish` (gate, validation loss) run per seed as when it trains
 alone. Only stage 5, the multi-step training, is shared: one Euler rollout per minibatch for
-the members of every seed still training, each seed on its own windows (its own batch
+the members of every seed still training (through the hybrid's training right-hand side,
+`integrate_training`, as a seed alone), each seed on its own windows (its own batch
 order, drawn with its own generator), the loss summed over seeds so that each seed's slice
 of the gradient is its solo gradient, and Adam applied per member (Adam is elementwise, so
 the stacked update is each seed's own). A seed that stops early leaves the stack: its
