@@ -1,6 +1,8 @@
 """``sysid train`` and ``sysid reproduce``."""
 from __future__ import annotations
 
+import atexit
+import gc
 import os
 import time
 from pathlib import Path
@@ -35,6 +37,7 @@ def train(
     """
     from sysid.runs.lifecycle import checkpoint_path, evaluation_runs, training_runs, validation_runs
 
+    _cheap_exit()
     start = time.perf_counter()
     exp = _experiment(config, epochs, threads, test)
     # a bad -o fails now, not after training
@@ -51,6 +54,15 @@ def train(
     _say_logs(exp, runs, validation, tests)
     result = _run_tracked(exp, output, tests, runs, data, resume, overwrite, validation, mlflow)
     _say_result(result, exp, output, tests, start)
+
+
+def _cheap_exit() -> None:
+    """At the process's exit, before the interpreter's own clean-up: every object then alive
+    out of the cyclic collector's last passes (`gc.freeze`), which would otherwise walk the
+    ~230 000 objects of torch, pandas and the rest (about 0.5 s CPU per process here). The
+    objects are still freed by their reference counts; nothing changes while the process runs."""
+    atexit.unregister(gc.freeze)  # once, however often the command runs in one process
+    atexit.register(gc.freeze)
 
 
 def _experiment(config: Path, epochs: Optional[int], threads: Optional[int], test: Optional[List[Path]]):
