@@ -270,6 +270,23 @@ def integrate_training(force_model: nn.Module, x0: torch.Tensor, inputs: torch.T
     if rate is None:
         trajectory = integrate_with_forces(force_model, x0, inputs, dt, Method.EULER)
         return trajectory.states, trajectory.forces.correction, trajectory.forces.mmg
+    return _training_rollout(rate, x0, inputs, dt)
+
+
+def integrate_loss(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float) -> torch.Tensor:
+    """States (T, ..., 6) of Euler rollouts from x0 (..., 6) with inputs (T, ..., 4) for a loss
+    without forces: with gradients on, through the model's ``training_rate`` where it has one
+    that applies (`integrate_training`'s rollout, its forces dropped), else `integrate`. The
+    same numbers either way, to round-off."""
+    training_rate = getattr(force_model, "training_rate", None) if torch.is_grad_enabled() else None
+    rate = training_rate() if training_rate is not None else None
+    if rate is None:
+        return integrate(force_model, x0, inputs, dt, Method.EULER)
+    return _training_rollout(rate, x0, inputs, dt)[0]
+
+
+def _training_rollout(rate, x0: torch.Tensor, inputs: torch.Tensor, dt: float):
+    """`integrate_training`'s rollout through `rate` (a ``training_rate``)."""
     check_shapes(x0, inputs)
     if inputs.shape[0] < 2:
         raise ValueError("no steps: inputs need at least two rows")

@@ -14,14 +14,15 @@ from torch import nn
 
 from sysid.hybrid.correction import ForceCorrection, correction_inputs
 from sysid.hybrid import layers
-from sysid.hybrid.fused_rate import Plan, hybrid_rate
+from sysid.hybrid.fused_rate import NNPlan, Plan, hybrid_rate, nn_rate
 from sysid.config.choices import GateSpace, ModelKind
 from sysid.config.experiment import Experiment, ship_overrides
 from sysid.mmg.coefficients import Coefficients
 from sysid.mmg.model import MMG, ForceBreakdown
 from sysid.mmg.tangents import supported
 from sysid.mmg import native
-from sysid.mmg.vjp import force_rate, rate_of_force, training_rate as mmg_training_rate
+from sysid.mmg.vjp import RATE_ROWS, force_rate, rate_of_force, training_rate as mmg_training_rate
+from sysid.mmg.coefficient_lookup import Rows, coefficient_matrix
 from sysid.mmg.wind import relative_wind
 from sysid.hybrid.knn_gate import KNNGate
 from sysid.mmg.ship import load_ship
@@ -209,8 +210,10 @@ class CorrectedModel(nn.Module):
         standard families too, fixed coefficients; a step the kernel does not apply to goes
         through autograd over `forward`)."""
         gated = self.gate is not None and self.gate_enabled and self.gate.bank.shape[0] > 0
-        if not (self.physics and torch.is_grad_enabled()) or gated:
+        if not torch.is_grad_enabled() or gated:
             return None
+        if not self.physics:
+            return self._nn_training_rate(per_member)
         coefficients, net = self.mmg.coefficients, self.correction_net
         if supported(self.mmg):
             rate = self._training_rate(coefficients, net, "wind" in self.mmg.families, per_member)
@@ -223,6 +226,35 @@ class CorrectedModel(nn.Module):
         if (net.members != 1 and not per_member) or families is None:
             return rate
         return self._fused_training_rate(coefficients, net, families, rate)
+
+    def _nn_training_rate(self, per_member: bool):
+        """`training_rate` of NN-only (F = F_NN) as one autograd Function
+        (`sysid.hybrid.fused_rate.nn_rate`) for one network (K = 1) or K members each on its
+        own rows (`per_member`: states (K, ..., 6)); None for the mean of K members. Where the
+        rollout's tensors do not fit it (checked at its first call of each dtype: the state's,
+        the inputs' and the FNN's dtype alike; constant mass terms), autograd through `forward`
+        and the equations of motion. One rollout: parameters and coefficients stay as they are
+        between its calls."""
+        coefficients, net = self.mmg.coefficients, self.correction_net
+        if net.members != 1 and not per_member:
+            return None
+        parameters = [p for pair in zip(net.weights, net.biases) for p in pair]
+        plans: dict[torch.dtype, NNPlan] = {}
+
+        def rate(state: torch.Tensor, inputs: torch.Tensor):
+            plan = plans.get(state.dtype)
+            if plan is None:  # the rollout's first call: the checks, then the lookups, once
+                c = coefficients.values_view(state.dtype)
+                rates = coefficient_matrix(c, _EOM_ROWS, state)
+                if (rates.requires_grad or inputs.dtype != state.dtype
+                        or not all(t.dtype == state.dtype for t in (*parameters, net.input_mean, net.output_std))
+                        or not (net.members == 1 or (state.dim() > 1 and state.shape[0] == net.members))):
+                    forces = self(state, inputs, per_member=per_member)
+                    return rate_of_force(state, forces.total, c), forces.correction, forces.mmg
+                plan = plans[state.dtype] = NNPlan(rates, net.input_mean, net.input_std, net.output_std,
+                                                   net.output_mean, parameters)
+            return nn_rate(state, inputs, plan)
+        return rate
 
     @staticmethod
     def _fused_training_rate(coefficients, net, families: int, otherwise):
@@ -274,6 +306,9 @@ class CorrectedModel(nn.Module):
             forces = self(state, inputs, per_member=per_member)
             return rate_of_force(state, forces.total, c), forces.correction, forces.mmg
         return rate
+
+
+_EOM_ROWS = Rows(RATE_ROWS)  # (16, 6): `sysid.mmg.vjp.rate_of_force`'s matrix of the equations of motion
 
 
 class PerMember(nn.Module):

@@ -24,7 +24,9 @@ from __future__ import annotations
 import torch
 
 from sysid.hybrid import layers
+from sysid.mmg.motion import constants
 from sysid.mmg.native import TrainingKernel
+from sysid.mmg.tangents import _motion, _relative_wind, basis
 
 
 class Plan:
@@ -101,3 +103,126 @@ def hybrid_rate(state: torch.Tensor, inputs: torch.Tensor, plan: Plan) -> tuple:
     """(dx/dt (..., 6), F_NN (..., 3), F_MMG (..., 3)) at state (..., 6) with inputs (..., 4)
     (see the module docstring), rows contiguous; `plan` of this rollout."""
     return _HybridRate.apply(state, inputs, plan, *plan.parameters)
+
+
+# NN-only (F = F_NN): the same Function shape without the MMG. The features of the equations
+# of motion, as `sysid.mmg.vjp.rate_of_force` lays them out: (F (3), a * b (7), state (6)) times
+# the (16, 6) matrix of the mass terms, a = (u, v, r, u, u, v, v), b = (r, r, r, cos psi, sin psi,
+# cos psi, sin psi) [m/s, 1/s]
+_KINEMATIC_A = (1, 3, 5, 1, 1, 3, 3)  # the state's columns of a
+_TABLES: dict[tuple, tuple[torch.Tensor, torch.Tensor]] = {}
+
+
+def _tables(like: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """((6, 7) tangents (columns) of a, (6, 7) of r in b), then (6, 5) tangents of the FNN
+    inputs u, v_m, r, delta, n_p; in `like`'s dtype and device, made once."""
+    key = (like.dtype, like.device)
+    found = _TABLES.get(key)
+    if found is None:
+        with torch.inference_mode(False), torch.no_grad():
+            E = torch.eye(6, dtype=like.dtype, device=like.device)
+            r_in_b = torch.zeros(6, 7, dtype=like.dtype, device=like.device)
+            r_in_b[5, :3] = 1.0
+            first = torch.cat([E[:, [1, 3, 5]], torch.zeros(6, 2, dtype=like.dtype, device=like.device)], -1)
+            found = _TABLES[key] = (E[:, list(_KINEMATIC_A)].clone(), r_in_b, first)
+    return found
+
+
+class NNPlan(Plan):
+    """`Plan` of an NN-only rollout: no kernel; the (16, 6) matrix of the equations of motion
+    (`sysid.mmg.vjp.rate_of_force`'s; its first 3 rows are the mass terms M), the FNN's
+    standardisation mean and std (9,)."""
+
+    def __init__(self, rates: torch.Tensor, mean: torch.Tensor, std: torch.Tensor, scale: torch.Tensor,
+                 shift: torch.Tensor, parameters):
+        super().__init__(None, rates[:3], scale, shift, parameters)
+        self.rates, self.mean, self.std = rates, mean, std
+        self.kinematic_T = rates[3:10].mT.contiguous()  # (6, 7)
+        self.state_T = rates[10:].mT.contiguous()       # (6, 6)
+
+
+def _inputs_and_kinematics(state: torch.Tensor, inputs: torch.Tensor, plan: NNPlan, jacobian: bool):
+    """(z (rows, 9) the FNN's standardised inputs, a * b (rows, 7), the Jacobian (rows, 6, 16) of
+    (a * b, z) with respect to the state, or None without `jacobian`); rows = the batch flattened."""
+    state, inputs = state.reshape(-1, 6), inputs.reshape(-1, 4)
+    k, B = constants(state), basis(state)
+    m = _motion(state, k, B)
+    n, delta, U_T, zeta = inputs.split_with_sizes((1, 1, 1, 1), -1)
+    wind = _relative_wind(m, U_T, zeta, k, B)
+    u, v, psi, r = m.u, m.v, m.psi, m.r
+    cos_psi, sin_psi = torch.cos(psi), torch.sin(psi)
+    a = torch.cat([u, v, r, u, u, v, v], -1)
+    b = torch.cat([r, r, r, cos_psi, sin_psi, cos_psi, sin_psi], -1)
+    s = torch.cat([u, v, r, delta, n, wind.omega, cos_psi, sin_psi], -1)
+    z = (s - plan.mean) / plan.std
+    if not jacobian:
+        return z, a * b, None
+    d_a, r_in_b, first = _tables(state)
+    zero = torch.zeros_like(u)
+    trig = torch.cat([-sin_psi, cos_psi], -1)
+    # d b = r's tangent (first three) + psi's times (0, 0, 0, -sin, cos, -sin, cos)
+    d_b = torch.addcmul(r_in_b, B.E[:, 4:5], torch.cat([zero, zero, zero, trig, trig], -1).unsqueeze(-2))
+    d_kinematic = torch.addcmul(a.unsqueeze(-2) * d_b, b.unsqueeze(-2), d_a)              # (rows, 6, 7)
+    d_s = torch.cat([first.expand(state.shape[0], 6, 5), wind.d_omega, B.E[:, 4:5] * trig.unsqueeze(-2)], -1)
+    return z, a * b, torch.cat([d_kinematic, d_s / plan.std], -1)
+
+
+class _NNRate(torch.autograd.Function):
+    """(state, inputs, plan, W_1, b_1, ..., W_L, b_L) -> (dx/dt, F_NN, zeros in place of F_MMG) of
+    an NN-only model; parameters as `_HybridRate`'s; with K > 1, state (K, ..., 6)."""
+
+    @staticmethod
+    def forward(ctx, state, inputs, plan, *parameters):
+        ctx.set_materialize_grads(False)
+        state_gradient = ctx.needs_input_grad[0]
+        z, kinematic, jacobian = _inputs_and_kinematics(state, inputs, plan, state_gradient)
+        rows = z.shape[0]
+        if plan.members == 1:
+            f_nn = z.new_empty(rows, 3)
+            h = layers.forward_single(z, plan.weights, plan.biases, plan.scale, plan.shift, f_nn,
+                                      (plan.last_T, plan.last_bias), plan.doubled)
+        else:
+            f_nn, h = layers.forward_members(z.view(plan.members, -1, 9), plan.weights, plan.biases, plan.scale,
+                                             plan.shift)
+            f_nn = f_nn.view(rows, 3)
+        rate = torch.cat([f_nn, kinematic, state.reshape(rows, 6)], -1) @ plan.rates
+        f_mmg = torch.zeros_like(f_nn)
+        ctx.mark_non_differentiable(f_mmg)
+        ctx.save_for_backward(jacobian, *h)
+        ctx.plan, ctx.batch = plan, state.shape[:-1]
+        return rate.view(state.shape), f_nn.view(*ctx.batch, 3), f_mmg.view(*ctx.batch, 3)
+
+    @staticmethod
+    def backward(ctx, grad_rate, grad_nn, grad_mmg):
+        jacobian, *h = ctx.saved_tensors
+        plan = ctx.plan
+        rows = h[0].shape[0] if plan.members == 1 else h[0].shape[0] * h[0].shape[1]
+        g_rate = None if grad_rate is None else grad_rate.reshape(rows, 6)
+        if grad_nn is None:
+            g_force = None if g_rate is None else torch.mm(g_rate, plan.mass_T)
+        else:
+            g_force = grad_nn.reshape(rows, 3) if g_rate is None else torch.addmm(grad_nn.reshape(rows, 3), g_rate,
+                                                                                    plan.mass_T)
+        state_gradient = ctx.needs_input_grad[0]
+        g_z, grads = None, [None] * len(plan.parameters)
+        if g_force is not None:
+            single = plan.members == 1
+            g_z, grads = layers.backward(g_force if single else g_force.view(plan.members, -1, 3), h, plan.weights,
+                                         plan.scale, single, state_gradient)
+        g_state = None
+        if state_gradient and (g_rate is not None or g_z is not None):
+            g_kinematic = jacobian.new_zeros(rows, 7) if g_rate is None else torch.mm(g_rate, plan.kinematic_T)
+            g_s = jacobian.new_zeros(rows, 9) if g_z is None else g_z.reshape(rows, 9)
+            g_state = torch.bmm(jacobian, torch.cat([g_kinematic, g_s], -1).unsqueeze(-1)).squeeze(-1)
+            if g_rate is not None:
+                g_state = torch.addmm(g_state, g_rate, plan.state_T)
+            g_state = g_state.view(*ctx.batch, 6)
+        return g_state, None, None, *grads
+
+
+def nn_rate(state: torch.Tensor, inputs: torch.Tensor, plan: NNPlan) -> tuple:
+    """(dx/dt (..., 6), F_NN (..., 3), zeros (..., 3) for F_MMG) of an NN-only model at state
+    (..., 6) with inputs (..., 4): s and the equations of motion in torch without autograd,
+    with their Jacobian (`sysid.mmg.tangents`' relative wind), F_NN by the FNN's layers; its
+    backward the chain rule written out as `_HybridRate`'s. `plan` of this rollout."""
+    return _NNRate.apply(state, inputs, plan, *plan.parameters)

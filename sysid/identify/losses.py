@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import torch
 
-from sysid.config.choices import Method
 from sysid.config.experiment import PAPER_FORCE_BAND
-from sysid.dynamics.equations import integrate, integrate_training
+from sysid.dynamics.equations import integrate_loss, integrate_training
 from sysid.dynamics.rollouts import WindowSet, velocity_loss
 from sysid.hybrid.correction import ForceCorrection
 from sysid.identify.adam import Adam
@@ -60,8 +59,8 @@ def multistep_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor
         k = model.model.correction_net.members
         states = states.unsqueeze(1).expand(states.shape[0], k, *states.shape[1:])
         inputs = inputs.unsqueeze(1).expand(inputs.shape[0], k, *inputs.shape[1:])
-    if w_F is None:
-        pred = integrate(model, states[0], inputs, batch.dt, Method.EULER)
+    if w_F is None:  # with gradients, the model's training right-hand side where it applies
+        pred = integrate_loss(model, states[0], inputs, batch.dt)
     else:  # the MMG's hand-derived VJP where it applies (`integrate_training`), else autograd
         pred, f_nn, f_mmg = integrate_training(model, states[0], inputs, batch.dt)
     loss_v = velocity_loss(pred[1:, ..., VEL] - states[1:, ..., VEL], w_v)

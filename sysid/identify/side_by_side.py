@@ -27,10 +27,10 @@ from typing import Callable, Sequence
 import numpy as np
 import torch
 
-from sysid.config.choices import Method, ModelKind, Validation
+from sysid.config.choices import ModelKind, Validation
 from sysid.config.experiment import Experiment
 from sysid.data.recordings import Run
-from sysid.dynamics.equations import integrate, integrate_training
+from sysid.dynamics.equations import integrate_loss, integrate_training
 from sysid.dynamics.rollouts import WindowSet
 from sysid.errors import ConfigError, TrainingError
 from sysid.hybrid.correction import ForceCorrection
@@ -177,8 +177,8 @@ def _losses(stack: _Stack, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tenso
     k, m = len(stack.seeds), stack.per_seed
     states, inputs = (x.unsqueeze(2).expand(x.shape[0], k, m, *x.shape[2:]).reshape(x.shape[0], k * m, *x.shape[2:])
                       for x in (batch.states, batch.inputs))
-    if w_F is None:  # validation, without gradient: no forces kept
-        predicted = integrate(stack.model, states[0], inputs, batch.dt, Method.EULER)
+    if w_F is None:  # no forces kept (validation; NN-only's training: its training right-hand side)
+        predicted = integrate_loss(stack.model, states[0], inputs, batch.dt)
     else:  # the members' training right-hand side (`integrate_training`), as a seed alone trains
         predicted, f_nn, f_mmg = integrate_training(stack.model, states[0], inputs, batch.dt)
     err = predicted[1:, ..., VEL] - states[1:, ..., VEL]
