@@ -213,7 +213,9 @@ class _NNRate(torch.autograd.Function):
         if state_gradient and (g_rate is not None or g_z is not None):
             g_kinematic = jacobian.new_zeros(rows, 7) if g_rate is None else torch.mm(g_rate, plan.kinematic_T)
             g_s = jacobian.new_zeros(rows, 9) if g_z is None else g_z.reshape(rows, 9)
-            g_state = torch.bmm(jacobian, torch.cat([g_kinematic, g_s], -1).unsqueeze(-1)).squeeze(-1)
+            # the Jacobian times the features' gradient, row by row (a product, a sum: quicker
+            # than a batched product of rows x (6, 16) by (16, 1))
+            g_state = (jacobian * torch.cat([g_kinematic, g_s], -1).unsqueeze(-2)).sum(-1)
             if g_rate is not None:
                 g_state = torch.addmm(g_state, g_rate, plan.state_T)
             g_state = g_state.view(*ctx.batch, 6)

@@ -20,8 +20,8 @@ VALIDATION_FILE = "berthing_12-Nov-2020_11_21_46.csv"
 SEEDS = (3, 4)
 
 
-def _experiment(seed: int, **training):
-    doc = {"experiment": {"name": "pair", "model": "hybrid", "seed": seed},
+def _experiment(seed: int, model: str = "hybrid", **training):
+    doc = {"experiment": {"name": "pair", "model": model, "seed": seed},
            "network": {"hidden": [16, 16]},
            "training": {"epochs": 12, "patience": 3, "warm_start_epochs": 3, "batch_size": 64, "steps": 5,
                         "learning_rate": 1e-2, "lr_factor": 0.5, "lr_patience": 1, **training},
@@ -67,6 +67,28 @@ def test_two_seeds_side_by_side_equal_each_alone(logs, tmp_path):
     for p, a in zip(pair, alone):
         _assert_same(p, a)
     assert not torch.allclose(pair[0].model_.correction_net.weights[0], pair[1].model_.correction_net.weights[0])
+
+
+def test_two_nn_only_seeds_side_by_side_equal_each_alone(logs, tmp_path, monkeypatch):
+    """NN-only trains through its training right-hand side (`sysid.hybrid.fused_rate.nn_rate`),
+    alone (K = 1) and side by side (K = 2): each seed ends with the model, history and
+    validation loss it reaches alone."""
+    from sysid.hybrid import force_models
+    shapes = []
+    original = force_models.nn_rate
+
+    def counted(state, inputs, plan):
+        shapes.append(state.shape[0])
+        return original(state, inputs, plan)
+    monkeypatch.setattr(force_models, "nn_rate", counted)
+    alone = [Trainer(_experiment(seed, "nn"), progress=False, log=lambda _: None).fit(*logs) for seed in SEEDS]
+    assert shapes and set(shapes) == {1}
+    shapes.clear()
+    pair = fit_side_by_side([Trainer(_experiment(seed, "nn"), progress=False, log=lambda _: None,
+                                     checkpoint=tmp_path / f"seed{seed}.pt") for seed in SEEDS], *logs)
+    assert shapes and set(shapes) <= {1, 2} and 2 in shapes  # K = 1 once a seed has stopped
+    for p, a in zip(pair, alone):
+        _assert_same(p, a)
 
 
 def test_interrupted_side_by_side_resumes_alone_to_the_same_model(logs, tmp_path, monkeypatch):
