@@ -159,12 +159,13 @@ class CorrectedModel(nn.Module):
         the leading axis of state and inputs is the FNN's K members (`PerMember`), each
         member's own F_NN (None with a fitted gate: training has none)."""
         gated = self.gate is not None and self.gate_enabled and self.gate.bank.shape[0] > 0
-        if not self.physics or (per_member and gated):
+        if per_member and gated:
             return None
-        families = native.families_of(self.mmg)
+        families = native.families_of(self.mmg) if self.physics else None
         with torch.no_grad():
             c = self.mmg.coefficients.values_view(like.dtype)
-            if families is None or not native.applies(like, like.new_empty(like.shape[:-1] + (4,)), c):
+            if self.physics and (families is None
+                                 or not native.applies(like, like.new_empty(like.shape[:-1] + (4,)), c)):
                 return None
             mass = force_rate(c, like)  # (3, 6)
         correction = self.correction_net
@@ -182,14 +183,20 @@ class CorrectedModel(nn.Module):
         mean, std = self.correction_net.input_mean, self.correction_net.input_std
 
         def rate(state: torch.Tensor, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
-            out = native.rate(state, inputs, c, families)
-            s = out[..., 9:]
+            if families is None:  # NN-only: s through torch, dx/dt of F_NN alone
+                wind = relative_wind(state[..., 1], state[..., 3], state[..., 4], inputs[..., 2], inputs[..., 3])
+                s = correction_inputs(state, inputs, torch.stack(wind, -1))
+            else:
+                out = native.rate(state, inputs, c, families)
+                s = out[..., 9:]
             f_nn, z = net(s)
             f_nn = f_nn.to(state.dtype)
             on = None
             if gated:
                 on = gate((s.to(mean.dtype) - mean) / std if inputs_space else z)[1]
                 f_nn = torch.where(on[..., None], f_nn, torch.zeros_like(f_nn))
+            if families is None:
+                return rate_of_force(state, f_nn, c), on
             return torch.addmm(out[..., :6].reshape(-1, 6), f_nn.reshape(-1, 3), mass).view(state.shape), on
         return rate
 

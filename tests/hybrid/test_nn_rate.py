@@ -121,3 +121,23 @@ def test_a_float32_nn_only_rollout_equals_autograd(d2, monkeypatch):
         for a, b in zip(single[3:], new[3:]):  # the loss is a mean over the K members' windows too
             b = 3.0 * b[k:k + 1]
             torch.testing.assert_close(a, b, rtol=2e-5, atol=2e-5 * float(b.abs().max()))
+
+
+@pytest.mark.parametrize("dtype, tolerance", [(torch.float64, 1e-12), (torch.float32, 1e-5)])
+def test_the_no_grad_rate_of_nn_only_equals_the_equations_of_motion_over_forward(d2, dtype, tolerance):
+    """`eager_rate` of NN-only (validation rollouts: one network, and K = 3 members each on its
+    own rows through the training layers' forward) equals the equations of motion over
+    `forward`'s F_NN, to `tolerance` of the largest rate; with gradient it does not apply."""
+    from sysid.dynamics.equations import state_derivative
+    exp, states, inputs, _ = d2
+    one = _nn_only(exp, states, dtype, (16, 8))
+    members = PerMember(_nn_only(exp, states, dtype, (16, 8), members=3))
+    for model, shape in ((one, (96, 6)), (members, (3, 32, 6))):
+        state = states[4, :96].reshape(shape).to(dtype)
+        u = inputs[4, :96].reshape(shape[:-1] + (4,)).to(dtype)
+        with torch.no_grad():
+            rate, gate = model.eager_rate(state, u)
+            expected = state_derivative(state, model(state, u).total, model.coefficients)
+        assert gate is None and rate.shape == shape
+        torch.testing.assert_close(rate, expected, rtol=0, atol=tolerance * float(expected.abs().max()))
+        assert model.eager_rate(state.requires_grad_(True), u) is None

@@ -144,7 +144,7 @@ def test_the_boundary_standard_families_trainable_coefficients_and_simpson_use_a
     # standard families: the native kernel's training rate (`sysid.mmg.native.families_of`)
     assert CorrectedModel(MMG(load_ship("kvlcc2_l7")), net).training_rate() is not None
     assert CorrectedModel(MMG(load_ship("esso_osaka"), quadrature="simpson"), net).training_rate() is None
-    assert CorrectedModel(ESSO, net, physics=False).training_rate() is None
+    assert CorrectedModel(ESSO, net, physics=False).training_rate() is not None  # NN-only: `fused_rate.nn_rate`
     assert CorrectedModel(ESSO, net).training_rate() is not None
     with torch.no_grad():
         assert CorrectedModel(ESSO, net).training_rate() is None
