@@ -6,7 +6,8 @@ config's network) on the config's batch of real training windows, then its backw
 seed alone) and K members each rolling out the batch (the rows seeds side by side train, K x
 batch). The validation loss is `validation_loss` on the same windows (no gradient). Each checkout
 runs in a subprocess with it first on PYTHONPATH (same interpreter and packages), one thread;
-the rounds alternate between the checkouts and the medians of the per-round medians are printed,
+the rounds alternate between the checkouts and the medians of the per-round medians (wall and the
+process's CPU time, the steadier one on a shared machine) are printed,
 with the ratio against / this (above 1: this checkout is faster), and the first step's loss of
 each (the same to round-off).
 
@@ -56,12 +57,15 @@ for k in (1, members):
         loss.backward()
         return float(loss)
     first = step()
-    times, val = [], []
+    times = {"step": [], "validation": [], "step CPU": [], "validation CPU": []}
     for _ in range(steps):
-        start = time.perf_counter(); step(); times.append(time.perf_counter() - start)
-        start = time.perf_counter(); validation_loss(model, batch, w_v); val.append(time.perf_counter() - start)
-    out[f"step K={k}"] = statistics.median(times)
-    out[f"validation K={k}"] = statistics.median(val)
+        for name, work in (("step", step), ("validation", lambda: validation_loss(model, batch, w_v))):
+            start, cpu = time.perf_counter(), time.process_time()
+            work()
+            times[name].append(time.perf_counter() - start)
+            times[name + " CPU"].append(time.process_time() - cpu)
+    for name, values in times.items():
+        out[f"{name} K={k}"] = statistics.median(values)
     out[f"loss K={k}"] = first
 print(json.dumps(out))
 """
