@@ -141,7 +141,7 @@ class CorrectedModel(nn.Module):
     def eager_rate(self, state: torch.Tensor, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None] | None:
         """(dx/dt (..., 6), the kNN gate's decision (...,) or None without a fitted gate)
         at state (..., 6) with inputs (..., 4) without gradient, where `no_grad_rate`
-        applies (a hybrid whose MMG the native kernel computes); else None (then
+        applies (NN-only, or a hybrid whose MMG the native kernel computes); else None (then
         `gated_force_channels` and the equations of motion, which this equals to round-off)."""
         if torch.is_grad_enabled():
             return None
@@ -152,10 +152,11 @@ class CorrectedModel(nn.Module):
         """A function (state (..., 6), inputs (..., 4)) -> (dx/dt (..., 6), the kNN gate's
         decision (...,) or None), to call without gradient on tensors of `like`'s dtype and
         device while the model stays as it is (the steps of one rollout); None where it
-        does not apply: NN-only, an MMG the native kernel (`sysid.mmg.native`) does not
+        does not apply: a hybrid whose MMG the native kernel (`sysid.mmg.native`) does not
         compute, tensors it does not take. dx/dt of F_MMG and the FNN's inputs s come from
         one native call, the (gated) F_NN is added through the mass terms (dx/dt is linear
-        in the force: ``+ F_NN @ force_rate``); everything looked up once. With `per_member`
+        in the force: ``+ F_NN @ force_rate``); NN-only: s from torch, dx/dt of F_NN
+        (`sysid.mmg.vjp.rate_of_force`); everything looked up once. With `per_member`
         the leading axis of state and inputs is the FNN's K members (`PerMember`), each
         member's own F_NN (None with a fitted gate: training has none)."""
         gated = self.gate is not None and self.gate_enabled and self.gate.bank.shape[0] > 0
@@ -211,7 +212,8 @@ class CorrectedModel(nn.Module):
         (`sysid.hybrid.fused_rate`). The same numbers as `forward` and the
         equations of motion, to round-off.
 
-        It applies to a hybrid without an active gate, with gradients on, whose MMG
+        NN-only (no active gate, gradients on): `_nn_training_rate`. It applies to a
+        hybrid without an active gate, with gradients on, whose MMG
         `sysid.mmg.tangents.supported` covers (the Esso Osaka's families, fixed
         coefficients) or the native kernel computes (`sysid.mmg.native.families_of`: the
         standard families too, fixed coefficients; a step the kernel does not apply to goes

@@ -18,6 +18,11 @@ casts between them: the same numbers as those (`sysid.hybrid.force_models.Correc
 without it) to round-off, `tests/hybrid/test_fused_rate.py`. A state without gradient (a rollout's first)
 skips the Jacobian. With K members the kernel takes all K x rows at once and the layers run as
 batched products (`sysid.hybrid.layers.forward_members`), member k's network on member k's rows.
+
+NN-only (F = F_NN, `nn_rate`) has the same shape without the kernel: s and the rigid-body part of
+the equations of motion (the Coriolis and kinematic features) with their Jacobian in torch
+(`sysid.mmg.tangents`' relative wind), F_NN by the layers, dx/dt = the features times the mass
+terms' matrix (`sysid.mmg.vjp.rate_of_force`'s), `tests/hybrid/test_nn_rate.py`.
 """
 from __future__ import annotations
 
