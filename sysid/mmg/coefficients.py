@@ -282,10 +282,14 @@ class Coefficients(nn.Module):
         them), every other entry (the constant coefficients, the derived constants that do
         not depend on a trainable one, and the constant vectors the force products look up)
         kept from the view of the first such call until a constant changes (`to`, `assign`,
-        `load_state_dict`, a replaced tensor). The same tensors as a view made anew, so the
+        `load_state_dict`, a replaced tensor, a step or a gradient switched on or off of a
+        trainable coefficient without gradient). The same tensors as a view made anew, so the
         forward and its gradient are the same to the bit; a derived constant that depends on
         a trainable coefficient, or a `torch.func` transform, makes every view anew."""
-        key = (self._buffers.changes, self._parameters.changes, self._loads)
+        raws = [self._parameters[f"raw_{n}"] for n in self.trainable_names]
+        # a trainable coefficient without gradient is a constant of the kept entries too
+        key = (self._buffers.changes, self._parameters.changes, self._loads,
+               tuple(None if p.requires_grad else p._version for p in raws))
         if key != self.__dict__.get("_live_key"):
             self._live_key, self._live_parts = key, {}
         parts = self._live_parts.get(dtype)

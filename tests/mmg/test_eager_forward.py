@@ -183,3 +183,17 @@ def test_identification_steps_equal_views_made_anew_to_the_bit(trainable, dtype,
         assert all(torch.equal(g, h) for g, h in zip(grads_k, grads_a))
     assert all(torch.equal(p, q) for p, q in zip(kept[-1], anew[-1]))
     assert not torch.equal(kept[0][0], kept[1][0])  # the steps moved the coefficients
+
+
+def test_the_live_view_sees_a_frozen_trainable_coefficient_change(monkeypatch):
+    # t_P trainable but without gradient: its derived constants (1 - t_P ...) are kept while
+    # Y_v is identified, and made anew when t_P changes in place
+    model = MMG(load_ship("esso_osaka"), ("Y_v", "t_P"), {"Y_v": (-1.0, 0.0)})
+    model.coefficients.raw_t_P.requires_grad_(False)
+    first = _forces(model)
+    with torch.no_grad():
+        model.coefficients.raw_t_P.mul_(0.5)
+    second = _forces(model)
+    assert not torch.equal(first, second)
+    monkeypatch.setattr(Coefficients, "_live_view", _made_anew)
+    assert torch.equal(second, _forces(model))
