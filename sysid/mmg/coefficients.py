@@ -300,20 +300,19 @@ class Coefficients(nn.Module):
             constant = not view.wrapped and not any(
                 isinstance(v, torch.Tensor) and (v.requires_grad or transformed(v))
                 for k, v in kept.items() if k not in flags)
-            vectors: dict = {}
-            view.__dict__["_vectors"] = vectors
-            self._live_parts[dtype] = (list(view.__dict__), kept, vectors) if constant else False
+            view.__dict__["_vectors"] = {}
+            # the kept entries in the view's order, a trainable value's place held (None)
+            self._live_parts[dtype] = {**view.__dict__, **dict.fromkeys(self.trainable_names)} if constant else False
             return view
         if parts is False:
             return coefficient_view({name: getattr(self, name) for name in self.names}, dtype)
-        order, kept, vectors = parts
         fresh = {name: _constant(getattr(self, name), dtype) for name in self.trainable_names}
         if any(transformed(v) for v in fresh.values()):
             return coefficient_view({name: getattr(self, name) for name in self.names}, dtype)
         view = SimpleNamespace()
-        view.__dict__.update((k, fresh[k] if k in fresh else kept[k]) for k in order if k != "_vectors")
+        view.__dict__.update(parts)   # the constant vectors' cache (``_vectors``) shared
+        view.__dict__.update(fresh)
         view.requires_grad = any(v.requires_grad for v in fresh.values())
-        view.__dict__["_vectors"] = vectors
         return view
 
     def _load_from_state_dict(self, *args, **kwargs):
