@@ -3,7 +3,8 @@
 Prints, per data set and batch size: time per minibatch (forward + backward + Adam step of
 the config's T Euler steps of the hybrid right-hand side), window-steps per second and epochs per
 second; with --members K the time of a step that trains K networks side by side (the
-FNN's member axis; what K seeds trained in one process would cost) beside one network;
+FNN's member axis; what K seeds trained in one process would cost) beside one network and
+beside the K networks' step through the separate Functions (kernel, layers; not fused);
 with --limit the step at the config's batch beside its arithmetic limit (the FLOP count of the
 FNN's products and the measured time of that arithmetic alone: the products and tanh of T
 forward steps and their backward, without the MMG, the integrator or autograd's bookkeeping)
@@ -35,6 +36,7 @@ machine shared with other jobs disturbs less than wall time).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import os
 import statistics
@@ -106,6 +108,21 @@ def minibatch_seconds(exp, train, batch: int, repeats: int = 8, members: int | N
     for _ in range(repeats):
         step()
     return (time.perf_counter() - start) / repeats
+
+
+@contextlib.contextmanager
+def separate_functions():
+    """Members side by side (K > 1) through the separate autograd Functions (the native
+    kernel's, the layers') instead of the fused right-hand side (`sysid.hybrid.fused_rate`)."""
+    fused = CorrectedModel._fused_training_rate
+
+    def fused_for_one(coefficients, net, families, otherwise):
+        return fused(coefficients, net, families, otherwise) if net.members == 1 else otherwise
+    CorrectedModel._fused_training_rate = staticmethod(fused_for_one)
+    try:
+        yield
+    finally:
+        CorrectedModel._fused_training_rate = staticmethod(fused)
 
 
 def per_step_seconds(step, repeats: int) -> tuple[float, float]:
@@ -707,13 +724,24 @@ def main() -> None:
             print(f"{batch:6d} {1e3 * seconds:9.1f} {min(batch, len(train)) * t.steps / seconds:15.0f} "
                   f"{1.0 / (seconds * steps_per_epoch):9.2f}")
         if args.members > 1:
-            one, many = [], []
-            for _ in range(3):  # interleaved, medians
-                one.append(minibatch_seconds(exp, train, t.batch_size, members=1))
-                many.append(minibatch_seconds(exp, train, t.batch_size, members=args.members))
-            a, b = statistics.median(one), statistics.median(many)
+            one = training_step(exp, train, t.batch_size, 1)[0]
+            many = training_step(exp, train, t.batch_size, args.members)[0]
+            unfused = training_step(exp, train, t.batch_size, args.members)[0]
+
+            def separate():
+                with separate_functions():
+                    unfused()
+            times: dict[str, list[tuple[float, float]]] = {"one": [], "many": [], "separate": []}
+            for _ in range(5):  # interleaved rounds of 4 steps, medians of wall and CPU
+                for label, fn in (("one", one), ("many", many), ("separate", separate)):
+                    times[label].append(per_step_seconds(fn, 4))
+            (a, a_cpu), (b, b_cpu), (c, c_cpu) = [
+                tuple(statistics.median(x[i] for x in times[label]) for i in (0, 1)) for label in times]
             print(f"{args.members} networks side by side, batch {t.batch_size}: {1e3 * b:.1f} ms/step against "
-                  f"{1e3 * a:.1f} for one ({b / a:.2f}x the time for {args.members}x the networks)")
+                  f"{1e3 * a:.1f} for one ({b / a:.2f}x the time for {args.members}x the networks); through the "
+                  f"separate Functions (kernel, layers) {1e3 * c:.1f} ms/step ({c / b:.2f}x the fused one); CPU "
+                  f"{1e3 * b_cpu:.1f}, {1e3 * a_cpu:.1f}, {1e3 * c_cpu:.1f} ms/step ({b_cpu / a_cpu:.2f}x, "
+                  f"{c_cpu / b_cpu:.2f}x)")
         if args.limit:
             widths = [9, *exp.network.hidden, 3]
             rows = min(t.batch_size, len(train))

@@ -122,6 +122,13 @@ def central_rate(t: np.ndarray, q: np.ndarray, span: int) -> np.ndarray:
     return (q[2 * span:] - q[:-2 * span]) / (t[2 * span:] - t[:-2 * span])
 
 
+def _dot(a: np.ndarray, b: np.ndarray) -> float:
+    """sum a_i b_i of two (N,) arrays on this thread (numpy's own loop: the BLAS ``a @ b`` of
+    a long log wakes its thread pool, milliseconds a call on a busy machine, and its sum's
+    round-off depends on the pool's size)."""
+    return float(np.einsum("i,i->", a, b))
+
+
 def scale_factor(log: np.ndarray, track: np.ndarray) -> tuple[float, float, int]:
     """(k, correlation, samples kept): log = k x track, from the least-squares slope of the
     track on the log refitted without residuals beyond 4 MADs (at least 0.1 % of the track's
@@ -130,16 +137,17 @@ def scale_factor(log: np.ndarray, track: np.ndarray) -> tuple[float, float, int]
     keep = np.isfinite(log) & np.isfinite(track)
     for _ in range(2):
         a, b = log[keep], track[keep]
-        power = float(a @ a)
+        power = _dot(a, a)
         if power <= 0.0:
             return 0.0, 0.0, int(keep.sum())
-        slope = float(a @ b) / power
+        slope = _dot(a, b) / power
         residual = track - slope * log
         mad = float(np.median(np.abs(residual[keep] - np.median(residual[keep]))))
         floor = 1e-3 * float(np.sqrt(np.mean(b**2)))   # a noise-free log: MAD near 0
         keep = keep & (np.abs(residual) <= max(4.0 * 1.4826 * mad, floor) + 1e-12)
     a, b = log[keep], track[keep]
-    slope = float(a @ b) / float(a @ a) if float(a @ a) > 0 else 0.0
+    power = _dot(a, a)
+    slope = _dot(a, b) / power if power > 0 else 0.0
     corr = float(np.corrcoef(a, b)[0, 1]) if len(a) > 2 and a.std() > 0 and b.std() > 0 else 0.0
     return (1.0 / slope if slope != 0 else np.inf), corr, int(keep.sum())
 

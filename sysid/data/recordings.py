@@ -236,18 +236,12 @@ def _quality_issues(t: np.ndarray, values: np.ndarray, period: float):
         suspect.append((float(t[i]), float(t[i + 1])))
     frozen = (np.diff(values[:, 1]) == 0) & (np.diff(values[:, 5]) == 0)  # x and psi unchanged
     run_len = max(2, int(round(1.0 / period)))
-    i = 0  # type: ignore[assignment]
-    while i < len(frozen):
-        if frozen[i]:
-            j = i
-            while j < len(frozen) and frozen[j]:
-                j += 1
-            if j - i >= run_len:
-                issues.append(f"GNSS frozen for {t[j] - t[i]:.1f} s at t = {t[i]:.1f} s")
-                suspect.append((float(t[i]), float(t[j])))
-            i = j
-        else:
-            i += 1
+    # each run of frozen steps [i, j): where the padded flags change, starts and ends alternate
+    edges = np.flatnonzero(np.diff(np.concatenate(([False], frozen, [False])).astype(np.int8)))
+    for i, j in zip(edges[0::2], edges[1::2]):
+        if j - i >= run_len:
+            issues.append(f"GNSS frozen for {t[j] - t[i]:.1f} s at t = {t[i]:.1f} s")
+            suspect.append((float(t[i]), float(t[j])))
     return issues, suspect
 
 

@@ -7,12 +7,13 @@ training, evaluation and plots never ask which one they hold: `MMG` (physics onl
 """
 from __future__ import annotations
 
-from typing import Protocol, runtime_checkable
+from typing import Callable, Protocol, runtime_checkable
 
 import torch
 from torch import nn
 
 from sysid.hybrid.correction import ForceCorrection, correction_inputs
+from sysid.hybrid import layers
 from sysid.hybrid.fused_rate import Plan, hybrid_rate
 from sysid.config.choices import GateSpace, ModelKind
 from sysid.config.experiment import Experiment, ship_overrides
@@ -146,15 +147,18 @@ class CorrectedModel(nn.Module):
         rate = self.no_grad_rate(state)
         return rate(state, inputs) if rate is not None else None
 
-    def no_grad_rate(self, like: torch.Tensor):
+    def no_grad_rate(self, like: torch.Tensor, per_member: bool = False):
         """A function (state (..., 6), inputs (..., 4)) -> (dx/dt (..., 6), the kNN gate's
         decision (...,) or None), to call without gradient on tensors of `like`'s dtype and
         device while the model stays as it is (the steps of one rollout); None where it
         does not apply: NN-only, an MMG the native kernel (`sysid.mmg.native`) does not
         compute, tensors it does not take. dx/dt of F_MMG and the FNN's inputs s come from
         one native call, the (gated) F_NN is added through the mass terms (dx/dt is linear
-        in the force: ``+ F_NN @ force_rate``); everything looked up once."""
-        if not self.physics:
+        in the force: ``+ F_NN @ force_rate``); everything looked up once. With `per_member`
+        the leading axis of state and inputs is the FNN's K members (`PerMember`), each
+        member's own F_NN (None with a fitted gate: training has none)."""
+        gated = self.gate is not None and self.gate_enabled and self.gate.bank.shape[0] > 0
+        if not self.physics or (per_member and gated):
             return None
         families = native.families_of(self.mmg)
         with torch.no_grad():
@@ -162,8 +166,19 @@ class CorrectedModel(nn.Module):
             if families is None or not native.applies(like, like.new_empty(like.shape[:-1] + (4,)), c):
                 return None
             mass = force_rate(c, like)  # (3, 6)
-        net = self.correction_net.frozen()
-        gated = self.gate is not None and self.gate_enabled and self.gate.bank.shape[0] > 0
+        correction = self.correction_net
+        net: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor | None]]
+        if per_member and correction.members != 1:  # the training layers' forward (`sysid.hybrid.layers`)
+            weights, biases = list(correction.weights), list(correction.biases)
+
+            def members_net(s: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+                z = correction.standardize_inputs(s)
+                f, _ = layers.forward_members(z.reshape(z.shape[0], -1, z.shape[-1]), weights, biases,
+                                              correction.output_std, correction.output_mean)
+                return f.view(*s.shape[:-1], f.shape[-1]), None
+            net = members_net
+        else:  # one member: its rows, any leading axes
+            net = correction.frozen()
         gate, inputs_space = self.gate, self.gate_space is GateSpace.INPUTS
         mean, std = self.correction_net.input_mean, self.correction_net.input_std
 
@@ -185,8 +200,9 @@ class CorrectedModel(nn.Module):
         (..., 6), inputs (..., 4)) giving (dx/dt (..., 6), F_NN (..., 3), F_MMG (..., 3)), the
         MMG, the FNN's inputs and the equations of motion in one autograd Function with a
         hand-derived VJP (`sysid.mmg.vjp`), the FNN's layers in another
-        (`sysid.hybrid.layers`); for one network (K = 1) where the native kernel applies, all
-        of it in one (`sysid.hybrid.fused_rate`). The same numbers as `forward` and the
+        (`sysid.hybrid.layers`); for one network (K = 1), or K members each on its own rows
+        (`per_member`), where the native kernel applies, all of it in one
+        (`sysid.hybrid.fused_rate`). The same numbers as `forward` and the
         equations of motion, to round-off.
 
         It applies to a hybrid without an active gate, with gradients on, whose MMG
@@ -206,17 +222,18 @@ class CorrectedModel(nn.Module):
                 return None
             rate = self._native_training_rate(coefficients, net, families, per_member)
         families = native.families_of(self.mmg)
-        if net.members != 1 or families is None:
+        if (net.members != 1 and not per_member) or families is None:
             return rate
         return self._fused_training_rate(coefficients, net, families, rate)
 
     @staticmethod
     def _fused_training_rate(coefficients, net, families: int, otherwise):
-        """`training_rate` of one network (K = 1) as one autograd Function
-        (`sysid.hybrid.fused_rate`) where the native kernel applies to the rollout's tensors
-        (checked at its first call of each dtype; the FNN's tensors of the state's dtype), else
-        `otherwise`. One rollout: the parameters, the coefficients and the way tensors reach
-        the kernel stay as they are between its calls (a training rollout's)."""
+        """`training_rate` of one network (K = 1), or of K members each on its own rows, as one
+        autograd Function (`sysid.hybrid.fused_rate`) where the native kernel applies to the
+        rollout's tensors (checked at its first call of each dtype; the FNN's tensors of the
+        state's dtype; K members: states (K, ..., 6)), else `otherwise`. One rollout: the
+        parameters, the coefficients and the way tensors reach the kernel stay as they are
+        between its calls (a training rollout's)."""
         parameters = [p for pair in zip(net.weights, net.biases) for p in pair]
         plans: dict[torch.dtype, Plan] = {}
 
@@ -225,7 +242,8 @@ class CorrectedModel(nn.Module):
             if plan is None:  # the rollout's first call: the checks, then the lookups, once
                 c = coefficients.values_view(state.dtype)
                 if not (native.applies(state, inputs, c, differentiated=True)
-                        and all(t.dtype == state.dtype for t in (*parameters, net.input_mean, net.output_std))):
+                        and all(t.dtype == state.dtype for t in (*parameters, net.input_mean, net.output_std))
+                        and (net.members == 1 or (state.dim() > 1 and state.shape[0] == net.members))):
                     return otherwise(state, inputs)
                 kernel = native.TrainingKernel(c, families, net.input_mean, net.input_std, state.dtype)
                 plan = plans[state.dtype] = Plan(kernel, force_rate(c, state), net.output_std, net.output_mean,
@@ -274,6 +292,14 @@ class PerMember(nn.Module):
 
     def forward(self, state: torch.Tensor, inputs: torch.Tensor) -> ForceBreakdown:
         return self.model(state, inputs, per_member=True)
+
+    def eager_rate(self, state: torch.Tensor, inputs: torch.Tensor) -> tuple[torch.Tensor, None] | None:
+        """`CorrectedModel.eager_rate` of the members (states and inputs (K, ..., ·)), each
+        member's own F_NN: without gradient, the native kernel's MMG where it applies; else None."""
+        if torch.is_grad_enabled():
+            return None
+        rate = self.model.no_grad_rate(state, per_member=True)
+        return rate(state, inputs) if rate is not None else None
 
     def training_rate(self):
         """`CorrectedModel.training_rate` of the members, each on its own copy of the batch."""

@@ -1,4 +1,5 @@
-"""The hybrid's training right-hand side of one network (K = 1) as one autograd Function.
+"""The hybrid's training right-hand side as one autograd Function: one network (K = 1), or K
+networks side by side on the member axis, each on its own rows (states (K, ..., 6)).
 
 At state x (..., 6) with inputs (..., 4), one call gives what a training rollout reads:
 
@@ -15,7 +16,8 @@ equations of motion (`sysid.mmg.vjp.force_rate`). Its backward is the chain rule
 in place of three autograd Functions (kernel, layers, the force's rate) and the views and
 casts between them: the same numbers as those (`sysid.hybrid.force_models.CorrectedModel.training_rate`
 without it) to round-off, `tests/hybrid/test_fused_rate.py`. A state without gradient (a rollout's first)
-skips the Jacobian. Several networks side by side (K > 1) go through the separate Functions.
+skips the Jacobian. With K members the kernel takes all K x rows at once and the layers run as
+batched products (`sysid.hybrid.layers.forward_members`), member k's network on member k's rows.
 """
 from __future__ import annotations
 
@@ -37,6 +39,10 @@ class Plan:
         self.kernel, self.mass, self.mass_T = kernel, mass, mass.mT.contiguous()
         self.scale, self.shift = scale, shift
         self.parameters = tuple(parameters)
+        self.members = self.parameters[0].shape[0]
+        if self.members != 1:  # K side by side: the parameters as they are, (K, ...)
+            self.weights, self.biases = list(self.parameters[0::2]), list(self.parameters[1::2])
+            return
         with torch.no_grad():
             self.weights = [w[0] for w in self.parameters[0::2]]
             self.biases = [b[0] for b in self.parameters[1::2]]
@@ -46,17 +52,23 @@ class Plan:
 
 
 class _HybridRate(torch.autograd.Function):
-    """(state, inputs, plan, W_1, b_1, ..., W_L, b_L) -> (dx/dt, F_NN, F_MMG); W_i (1, n_{i-1},
-    n_i), b_i (1, n_i) as `sysid.hybrid.correction.ForceCorrection` holds them (the plan's)."""
+    """(state, inputs, plan, W_1, b_1, ..., W_L, b_L) -> (dx/dt, F_NN, F_MMG); W_i (K, n_{i-1},
+    n_i), b_i (K, n_i) as `sysid.hybrid.correction.ForceCorrection` holds them (the plan's);
+    with K > 1, state (K, ..., 6)."""
 
     @staticmethod
     def forward(ctx, state, inputs, plan, *parameters):
         ctx.set_materialize_grads(False)
         state_gradient = ctx.needs_input_grad[0]
         rate_mmg, f_mmg, z, jacobian = plan.kernel(state, inputs, state_gradient)
-        f_nn = torch.empty_like(f_mmg)
-        h = layers.forward_single(z.view(-1, 9), plan.weights, plan.biases, plan.scale, plan.shift,
-                                  f_nn.view(-1, 3), (plan.last_T, plan.last_bias), plan.doubled)
+        if plan.members == 1:
+            f_nn = torch.empty_like(f_mmg)
+            h = layers.forward_single(z.view(-1, 9), plan.weights, plan.biases, plan.scale, plan.shift,
+                                      f_nn.view(-1, 3), (plan.last_T, plan.last_bias), plan.doubled)
+        else:
+            f_nn, h = layers.forward_members(z.view(plan.members, -1, 9), plan.weights, plan.biases, plan.scale,
+                                             plan.shift)
+            f_nn = f_nn.view(f_mmg.shape)
         rate = torch.empty_like(rate_mmg)
         torch.addmm(rate_mmg.view(-1, 6), f_nn.view(-1, 3), plan.mass, out=rate.view(-1, 6))
         ctx.save_for_backward(jacobian, *h)
@@ -67,7 +79,7 @@ class _HybridRate(torch.autograd.Function):
     def backward(ctx, grad_rate, grad_nn, grad_mmg):
         jacobian, *h = ctx.saved_tensors
         plan = ctx.plan
-        rows = h[0].shape[0]
+        rows = h[0].shape[-2] * plan.members
         g_rate = None if grad_rate is None else grad_rate.view(rows, 6)
         if grad_nn is None:
             g_force = None if g_rate is None else torch.mm(g_rate, plan.mass_T)
@@ -77,7 +89,9 @@ class _HybridRate(torch.autograd.Function):
         state_gradient = ctx.needs_input_grad[0]
         g_z, grads = None, [None] * len(plan.parameters)
         if g_force is not None:
-            g_z, grads = layers.backward(g_force, h, plan.weights, plan.scale, True, state_gradient)
+            single = plan.members == 1
+            g_z, grads = layers.backward(g_force if single else g_force.view(plan.members, -1, 3), h, plan.weights,
+                                         plan.scale, single, state_gradient)
         # (..., 6): the Jacobian's batch shape, the state's
         g_state = plan.kernel.state_gradient(jacobian, g_rate, grad_mmg, g_z) if state_gradient else None
         return g_state, None, None, *grads

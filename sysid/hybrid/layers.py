@@ -11,7 +11,9 @@ chain rule written out:
 the products and one elementwise pass per layer, in place of autograd's record of each
 product, bias, tanh and view. One network (K = 1) runs as 2-d products (`torch.addmm`,
 `torch.mm`); K networks side by side (the member axis) as batched ones (`torch.baddbmm`,
-`torch.bmm`).
+`torch.bmm`). The narrow products (the output layer's 3 columns, the 9 inputs' gradient) run
+transposed, with the narrow side as the product's rows: several times quicker on this CPU's
+BLAS (K = 5, 256 rows: 41-58 against 112-195 us).
 
 tanh is computed as 2 sigmoid(2 a) - 1 (`tanh`), about 4x quicker than `torch.tanh` on this
 CPU's float32, the same function: its absolute error against the exact tanh is below 2e-7 in
@@ -58,6 +60,19 @@ def forward_single(z: torch.Tensor, weights, biases, scale: torch.Tensor, shift:
     return h
 
 
+def forward_members(z: torch.Tensor, weights, biases, scale: torch.Tensor,
+                    shift: torch.Tensor) -> tuple[torch.Tensor, list[torch.Tensor]]:
+    """(F (K, rows, n_L), the activations [z, h_1, ..., h_{L-1}]) of K networks side by side
+    from z (K, rows, n_0), without autograd; W_i (K, n_{i-1}, n_i), b_i (K, n_i)."""
+    h = [z]
+    for w, b in zip(weights[:-1], biases[:-1]):
+        h.append(_hidden_(torch.baddbmm(b.unsqueeze(1), h[-1], w, beta=2.0, alpha=2.0)))
+    # the narrow output layer transposed, as `forward_single`: y^T = W_L^T h^T + b_L
+    y = torch.baddbmm(biases[-1].unsqueeze(-1), weights[-1].mT.contiguous(), h[-1].mT).mT
+    force = z.new_empty(y.shape)  # rows contiguous
+    return torch.addcmul(shift, y, scale, out=force), h
+
+
 def backward(grad: torch.Tensor, h, weights, scale: torch.Tensor, single: bool,
              input_gradient: bool) -> tuple[torch.Tensor | None, list[torch.Tensor]]:
     """(g_z or None, [dW_1, db_1, ..., dW_L, db_L]) for the gradient `grad` of F (rows, n_L) (one
@@ -70,14 +85,14 @@ def backward(grad: torch.Tensor, h, weights, scale: torch.Tensor, single: bool,
     g_in: torch.Tensor | None = None
     for i in range(n - 1, -1, -1):
         h_in = h[i]
-        # narrow products transposed (dW_L = (g^T h)^T, g_z = (W_1 g^T)^T), as in `forward_single`
-        d_w = mm(g.mT, h_in).mT if single and i == n - 1 else mm(h_in.mT, g)
+        # narrow products transposed (dW_L = (g^T h)^T, g_z = (W_1 g^T)^T), as in the forwards
+        d_w = mm(g.mT, h_in).mT if i == n - 1 else mm(h_in.mT, g)
         grads[2 * i] = d_w.unsqueeze(0) if single else d_w
         grads[2 * i + 1] = g.sum(-2, keepdim=single)  # (1, n_i) or (K, n_i)
         if i > 0:
             g = torch.ops.aten.tanh_backward(mm(g, weights[i].mT), h_in)
         elif input_gradient:
-            g_in = torch.mm(weights[0], g.mT).mT.contiguous() if single else torch.bmm(g, weights[0].mT)
+            g_in = mm(weights[0], g.mT).mT.contiguous()
     return g_in, grads
 
 
@@ -94,10 +109,7 @@ class _Layers(torch.autograd.Function):
             force = z.new_empty(z.shape[0], weights[-1].shape[-1])
             h = forward_single(z, weights, [b[0] for b in biases], scale, shift, force)
         else:
-            h = [z]
-            for w, b in zip(weights[:-1], biases[:-1]):
-                h.append(_hidden_(torch.baddbmm(b.unsqueeze(1), h[-1], w, beta=2.0, alpha=2.0)))
-            force = torch.addcmul(shift, torch.baddbmm(biases[-1].unsqueeze(1), h[-1], weights[-1]), scale)
+            force, h = forward_members(z, weights, biases, scale, shift)
         ctx.save_for_backward(scale, *h, *weights)
         ctx.single = single
         return force

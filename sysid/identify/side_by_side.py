@@ -4,7 +4,8 @@ their networks stacked on the FNN's member axis.
 Each seed is an ordinary `Trainer`: `Trainer.prepare` (split, standardisation, warm start,
 or a checkpoint) and `Trainer.finish` (gate, validation loss) run per seed as when it trains
 alone. Only stage 5, the multi-step training, is shared: one Euler rollout per minibatch for
-the members of every seed still training, each seed on its own windows (its own batch
+the members of every seed still training (through the hybrid's training right-hand side,
+`integrate_training`, as a seed alone), each seed on its own windows (its own batch
 order, drawn with its own generator), the loss summed over seeds so that each seed's slice
 of the gradient is its solo gradient, and Adam applied per member (Adam is elementwise, so
 the stacked update is each seed's own). A seed that stops early leaves the stack: its
@@ -29,7 +30,7 @@ import torch
 from sysid.config.choices import Method, ModelKind, Validation
 from sysid.config.experiment import Experiment
 from sysid.data.recordings import Run
-from sysid.dynamics.equations import integrate_with_forces
+from sysid.dynamics.equations import integrate, integrate_training
 from sysid.dynamics.rollouts import WindowSet
 from sysid.errors import ConfigError, TrainingError
 from sysid.hybrid.correction import ForceCorrection
@@ -146,12 +147,16 @@ class _Stack:
         eps = groups[0]["eps"]
         step_size = [-g["lr"] / (1 - beta1 ** n) for g, n in zip(groups, self.steps)]
         bias2_sqrt = [(1 - beta2 ** n) ** 0.5 for n in self.steps]
+        columns: dict[int, tuple[torch.Tensor, torch.Tensor]] = {}  # by the parameter's dim
         for p, m, v in zip(self.net.parameters(), self.exp_avg, self.exp_avg_sq):
             g = p.grad
             m.lerp_(g, 1 - beta1)
             v.mul_(beta2).addcmul_(g, g, value=1 - beta2)
-            denom = (v.sqrt() / self._per_member(bias2_sqrt, v)).add_(eps)
-            p.add_(self._per_member(step_size, p) * m / denom)
+            if p.dim() not in columns:
+                columns[p.dim()] = (self._per_member(bias2_sqrt, v), self._per_member(step_size, p))
+            bias2, size = columns[p.dim()]
+            denom = (v.sqrt() / bias2).add_(eps)
+            p.add_(size * m / denom)
 
     @torch.no_grad()
     def write_back(self) -> None:
@@ -172,14 +177,16 @@ def _losses(stack: _Stack, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tenso
     k, m = len(stack.seeds), stack.per_seed
     states, inputs = (x.unsqueeze(2).expand(x.shape[0], k, m, *x.shape[2:]).reshape(x.shape[0], k * m, *x.shape[2:])
                       for x in (batch.states, batch.inputs))
-    trajectory = integrate_with_forces(stack.model, states[0], inputs, batch.dt, Method.EULER)
-    err = trajectory.states[1:, ..., VEL] - states[1:, ..., VEL]
+    if w_F is None:  # validation, without gradient: no forces kept
+        predicted = integrate(stack.model, states[0], inputs, batch.dt, Method.EULER)
+    else:  # the members' training right-hand side (`integrate_training`), as a seed alone trains
+        predicted, f_nn, f_mmg = integrate_training(stack.model, states[0], inputs, batch.dt)
+    err = predicted[1:, ..., VEL] - states[1:, ..., VEL]
     loss_v = ((err * err) * w_v).sum(-1).mean((0, 2)).reshape(k, m).mean(1)
     if w_F is None:
         loss_F = torch.zeros_like(loss_v)
     else:
-        forces = trajectory.forces
-        loss_F = output_penalty(forces.correction, forces.mmg, w_F, band).mean((0, 2)).reshape(k, m).mean(1)
+        loss_F = output_penalty(f_nn, f_mmg, w_F, band).mean((0, 2)).reshape(k, m).mean(1)
     l2 = sum((w * w).flatten(1).sum(1) for w in stack.net.weights).reshape(k, m).sum(1) / m
     return loss_v, loss_F, l2
 

@@ -168,18 +168,23 @@ def _hybrid(ship, states, dtype, force_scale):
 
 
 def _rollout_through_the_kernel(model, states, inputs):
-    """`_rollout` and the dtype of every `native.training_rate` call it made."""
+    """`_rollout` and the dtype of every kernel call it made (`native.training_rate`, or a
+    `native.TrainingKernel`'s: the fused right-hand side, `sysid.hybrid.fused_rate`)."""
     calls = []
-    original = native.training_rate
+    original, original_call = native.training_rate, native.TrainingKernel.__call__
 
     def counted(*args):
         calls.append(args[0].dtype)
         return original(*args)
-    native.training_rate = counted
+
+    def counted_call(self, *args):
+        calls.append(args[0].dtype)
+        return original_call(self, *args)
+    native.training_rate, native.TrainingKernel.__call__ = counted, counted_call
     try:
         return _rollout(model, states, inputs), calls
     finally:
-        native.training_rate = original
+        native.training_rate, native.TrainingKernel.__call__ = original, original_call
 
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
