@@ -7,7 +7,7 @@ training, evaluation and plots never ask which one they hold: `MMG` (physics onl
 """
 from __future__ import annotations
 
-from typing import Protocol, runtime_checkable
+from typing import Callable, Protocol, runtime_checkable
 
 import torch
 from torch import nn
@@ -170,14 +170,16 @@ class CorrectedModel(nn.Module):
                 return None
             mass = force_rate(c, like)  # (3, 6)
         correction = self.correction_net
+        net: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor | None]]
         if per_member and correction.members != 1:  # the training layers' forward (`sysid.hybrid.layers`)
             weights, biases = list(correction.weights), list(correction.biases)
 
-            def net(s: torch.Tensor) -> tuple[torch.Tensor, None]:
+            def members_net(s: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
                 z = correction.standardize_inputs(s)
                 f, _ = layers.forward_members(z.reshape(z.shape[0], -1, z.shape[-1]), weights, biases,
                                               correction.output_std, correction.output_mean)
                 return f.view(*s.shape[:-1], f.shape[-1]), None
+            net = members_net
         else:  # one member: its rows, any leading axes
             net = correction.frozen()
         gate, inputs_space = self.gate, self.gate_space is GateSpace.INPUTS

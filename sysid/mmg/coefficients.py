@@ -269,11 +269,50 @@ class Coefficients(nn.Module):
                tuple(p._version for p in raws))
         if key != self._view_key:
             self._view_key, self._views = key, {}
-        view = None if live else self._views.get(dtype)
+        if live:
+            return self._live_view(dtype)
+        view = self._views.get(dtype)
         if view is None:
+            view = self._views[dtype] = coefficient_view({name: getattr(self, name) for name in self.names}, dtype)
+        return view
+
+    def _live_view(self, dtype: torch.dtype | None) -> SimpleNamespace:
+        """The values view while trainable coefficients carry gradient: the trainable values
+        anew (``low + (high-low)*sigmoid(raw)`` through autograd, as `coefficient_view` makes
+        them), every other entry (the constant coefficients, the derived constants that do
+        not depend on a trainable one, and the constant vectors the force products look up)
+        kept from the view of the first such call until a constant changes (`to`, `assign`,
+        `load_state_dict`, a replaced tensor, a step or a gradient switched on or off of a
+        trainable coefficient without gradient). The same tensors as a view made anew, so the
+        forward and its gradient are the same to the bit; a derived constant that depends on
+        a trainable coefficient, or a `torch.func` transform, makes every view anew."""
+        raws = [self._parameters[f"raw_{n}"] for n in self.trainable_names]
+        # a trainable coefficient without gradient is a constant of the kept entries too
+        key = (self._buffers.changes, self._parameters.changes, self._loads,
+               tuple(None if p.requires_grad else p._version for p in raws))
+        if key != self.__dict__.get("_live_key"):
+            self._live_key, self._live_parts = key, {}
+        parts = self._live_parts.get(dtype)
+        if parts is None:
             view = coefficient_view({name: getattr(self, name) for name in self.names}, dtype)
-            if not live:
-                self._views[dtype] = view
+            kept = {k: v for k, v in view.__dict__.items() if k not in self.trainable_names}
+            flags = ("requires_grad", "wrapped", "dtype")
+            constant = not view.wrapped and not any(
+                isinstance(v, torch.Tensor) and (v.requires_grad or transformed(v))
+                for k, v in kept.items() if k not in flags)
+            view.__dict__["_vectors"] = {}
+            # the kept entries in the view's order, a trainable value's place held (None)
+            self._live_parts[dtype] = {**view.__dict__, **dict.fromkeys(self.trainable_names)} if constant else False
+            return view
+        if parts is False:
+            return coefficient_view({name: getattr(self, name) for name in self.names}, dtype)
+        fresh = {name: _constant(getattr(self, name), dtype) for name in self.trainable_names}
+        if any(transformed(v) for v in fresh.values()):
+            return coefficient_view({name: getattr(self, name) for name in self.names}, dtype)
+        view = SimpleNamespace()
+        view.__dict__.update(parts)   # the constant vectors' cache (``_vectors``) shared
+        view.__dict__.update(fresh)
+        view.requires_grad = any(v.requires_grad for v in fresh.values())
         return view
 
     def _load_from_state_dict(self, *args, **kwargs):

@@ -140,3 +140,60 @@ def test_view_of_a_coefficients_module_matches_its_attributes():
     for name in coefficients.names:
         assert float(getattr(view, name)) == float(getattr(coefficients, name))
     assert float(view.q) == float(0.5 * coefficients.rho * coefficients.L_pp * coefficients.d)
+
+
+def _made_anew(self, dtype):
+    """The values view made anew on every call (no kept parts): the reference."""
+    from sysid.mmg.coefficients import coefficient_view
+    return coefficient_view({name: getattr(self, name) for name in self.names}, dtype)
+
+
+def _identification_steps(model, dtype, assign_between=None):
+    """Three Adam steps on the loss of a 5-step Euler rollout from two states (parameters
+    carry gradient: the live values view), the losses and the raw parameters after each."""
+    state = torch.tensor(STATE + [[0.0, 0.6, 0.0, -0.02, 0.1, -0.004]], dtype=dtype)
+    inputs = torch.tensor(INPUTS + [[8.0, -0.2, 5.0, 2.5]], dtype=dtype)
+    optimizer = torch.optim.Adam(model.parameters(), lr=1e-2)
+    out = []
+    for step in range(3):
+        x = state
+        for _ in range(5):
+            x = x + 0.1 * derivative(model, x, inputs)
+        loss = (x - state).square().sum()
+        optimizer.zero_grad()
+        loss.backward()
+        out.append((loss.detach().clone(), [p.grad.clone() for p in model.parameters()]))
+        optimizer.step()
+        if assign_between is not None and step == 0:
+            model.coefficients.assign(assign_between)
+    return out + [[p.detach().clone() for p in model.parameters()]]
+
+
+@pytest.mark.parametrize("trainable", [("X_vr", "Y_v", "Y_r", "N_v", "N_r"), ("Y_v", "t_P")])
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_identification_steps_equal_views_made_anew_to_the_bit(trainable, dtype, monkeypatch):
+    # the live view keeps the constants (and the derived constants of a trainable t_P are
+    # made anew); an assigned constant (the mass) after the first step is seen
+    bounds = {"Y_v": (-1.0, 0.0)}
+    kept = _identification_steps(MMG(load_ship("esso_osaka"), trainable, bounds), dtype, {"m": 3.0e5})
+    monkeypatch.setattr(Coefficients, "_live_view", _made_anew)
+    anew = _identification_steps(MMG(load_ship("esso_osaka"), trainable, bounds), dtype, {"m": 3.0e5})
+    for (loss_k, grads_k), (loss_a, grads_a) in zip(kept[:-1], anew[:-1]):
+        assert torch.equal(loss_k, loss_a)
+        assert all(torch.equal(g, h) for g, h in zip(grads_k, grads_a))
+    assert all(torch.equal(p, q) for p, q in zip(kept[-1], anew[-1]))
+    assert not torch.equal(kept[0][0], kept[1][0])  # the steps moved the coefficients
+
+
+def test_the_live_view_sees_a_frozen_trainable_coefficient_change(monkeypatch):
+    # t_P trainable but without gradient: its derived constants (1 - t_P ...) are kept while
+    # Y_v is identified, and made anew when t_P changes in place
+    model = MMG(load_ship("esso_osaka"), ("Y_v", "t_P"), {"Y_v": (-1.0, 0.0)})
+    model.coefficients.raw_t_P.requires_grad_(False)
+    first = _forces(model)
+    with torch.no_grad():
+        model.coefficients.raw_t_P.mul_(0.5)
+    second = _forces(model)
+    assert not torch.equal(first, second)
+    monkeypatch.setattr(Coefficients, "_live_view", _made_anew)
+    assert torch.equal(second, _forces(model))
