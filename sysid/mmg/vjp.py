@@ -25,6 +25,8 @@ constants here), so its backward is the state's VJP beside one product per coeff
 """
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import torch
 
 from sysid.mmg import native
@@ -230,6 +232,54 @@ def _slopes(c, names: tuple, like: torch.Tensor) -> torch.Tensor:
     return factors.unsqueeze(-1) * rows
 
 
+def _reading(names: tuple, families: int) -> tuple[list[int], tuple]:
+    """The places in the native kernel's coefficient vector (`sysid.mmg.native.SEGMENTS`) of
+    the entries that read one of `names`, and those entries."""
+    places, entries, offset = [], [], 0
+    for segment in native.SEGMENTS:
+        for entry in segment.entries():
+            read = entry if isinstance(entry, tuple) else (entry,)
+            if segment.used(families) and any(n in read for n in names):
+                places.append(offset)
+                entries.append(entry)
+            offset += 1
+    return places, tuple(entries)
+
+
+_F64 = torch.empty((), dtype=torch.float64)
+
+
+def _constants_of(live: SimpleNamespace, names: tuple, families: int, like: torch.Tensor):
+    """(the values view `live` as constants, the slopes (k, 6) of `_slopes`): `live`'s entries
+    with the trainable values detached and a copy of its constant vectors' cache (vectors
+    reading a trainable value are made anew in the copy). `live`'s cache, shared by the values
+    views until a constant changes, also keeps the slopes and the native kernel's coefficient
+    vector, of which only the entries reading a trainable value are made anew (the same
+    products as `sysid.mmg.native.coefficient_values` makes)."""
+    kept = live.__dict__.get("_vectors")
+    c = SimpleNamespace(**live.__dict__)
+    for n in names:
+        setattr(c, n, getattr(live, n).detach())
+    c.requires_grad = False
+    c._vectors = dict(kept) if kept is not None else {}
+    c.__dict__.pop("_native", None)
+    if kept is None:
+        return c, _slopes(c, names, like)
+    key = ("identified", names, families, like.dtype)
+    found = kept.get(key)
+    if found is None:
+        slope = _slopes(c, names, like)
+        base = native.coefficient_values(c, families) if native.available() else None
+        kept[key] = (slope, base, *_reading(names, families))
+        return c, slope
+    slope, base, places, entries = found
+    if base is not None:
+        vector = base.clone()
+        vector[places] = coefficient_vector(c, entries, _F64).detach().to(torch.float64)
+        c._native = {int(families): vector}
+    return c, slope
+
+
 def identified_rate(mmg, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor | None:
     """dx/dt (..., 6) of the `MMG` `mmg` at state (..., 6) with inputs (..., 4) through
     `_IdentifiedRate` (the native kernel's or `sysid.mmg.tangents`' values, autograd's to
@@ -255,8 +305,8 @@ def identified_rate(mmg, state: torch.Tensor, inputs: torch.Tensor) -> torch.Ten
     theta = torch.stack([getattr(live, n) for n in names])
     if transformed(theta):
         return None
+    wind = models.get("wind") is not None
     with torch.no_grad():
-        c = coefficients.values_view(state.dtype)  # the same values as constants (kept until a step)
-        slope = _slopes(c, names, state)
+        c, slope = _constants_of(live, names, int(native.Families.WIND) if wind else 0, state)
     columns = tuple(HULL_LINEAR[n][0] for n in names)
-    return _IdentifiedRate.apply(state, inputs, theta, c, models.get("wind") is not None, columns, slope)
+    return _IdentifiedRate.apply(state, inputs, theta, c, wind, columns, slope)
