@@ -90,11 +90,12 @@ def fit(code: Path, config: Path, seed: int, data: Path) -> dict:
 
 def difference(a: dict, b: dict) -> str:
     """'equal' when the identified coefficients and the validation loss are the same to the
-    bit, else the largest relative difference."""
+    bit, else the largest relative difference (and that of the coefficients and of the loss)."""
     pairs = [(a["val"], b["val"])] + [(a["identified"][k], b["identified"][k]) for k in a["identified"]]
     if all(x == y for x, y in pairs):
         return "equal"
-    return f"differ (max rel {max(abs(x - y) / max(abs(y), 1e-300) for x, y in pairs):.1e})"
+    rel = [abs(x - y) / max(abs(y), 1e-300) for x, y in pairs]
+    return f"differ (max rel {max(rel):.1e}: coefficients {max(rel[1:], default=0.0):.1e}, val_loss_multistep {rel[0]:.1e})"
 
 
 def line(r: dict) -> str:
