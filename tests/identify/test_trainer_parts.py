@@ -17,7 +17,7 @@ from pathlib import Path
 import torch
 
 ROOT = Path(__file__).resolve().parents[2]
-BEFORE = "d473cdc"  # the last commit of the one-piece trainer
+BEFORE = "c60db44"  # the identification through the coefficients' VJP (idvjp); d473cdc: the one-piece trainer
 SCRIPT = ROOT / "tests" / "support" / "trainer_cases.py"
 
 
