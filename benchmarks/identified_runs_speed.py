@@ -13,11 +13,13 @@ are equal to the bit (else their largest relative difference); then the totals a
     python benchmarks/identified_runs_speed.py --base /tmp/base [--seeds 5] [--only mmg_identified_D2]
         [--data DIR]
 
-With ``--step`` instead: one identification step of this code (a T = 5 Euler rollout of 512
-recorded-like states through autograd over the MMG with the five identified hull coefficients
-trainable, and its backward), beside the same rollout through the hand-derived VJP with the
-coefficients frozen (`sysid.mmg.vjp`, the native kernel: a gradient with respect to the state
-only), the floor a VJP with respect to the coefficients too would stand on.
+With ``--step`` instead: one identification step (a T = 5 Euler rollout of 512 recorded-like
+states with the five identified hull coefficients trainable, and its backward) three ways:
+through autograd over the MMG (`MMG.identified_rate` switched off), through this code's
+identification path (`sysid.mmg.vjp.identified_rate`: the hand-derived VJP with respect to
+the state and the coefficients, where it applies), and the floor: the same rollout through
+the state's VJP with the coefficients frozen (`sysid.mmg.vjp.mmg_rate`, no coefficient
+gradient); with the largest relative difference of the coefficients' gradients.
 
     python benchmarks/identified_runs_speed.py --step [--repeats 50]
 
@@ -88,11 +90,12 @@ def fit(code: Path, config: Path, seed: int, data: Path) -> dict:
 
 def difference(a: dict, b: dict) -> str:
     """'equal' when the identified coefficients and the validation loss are the same to the
-    bit, else the largest relative difference."""
+    bit, else the largest relative difference (and that of the coefficients and of the loss)."""
     pairs = [(a["val"], b["val"])] + [(a["identified"][k], b["identified"][k]) for k in a["identified"]]
     if all(x == y for x, y in pairs):
         return "equal"
-    return f"differ (max rel {max(abs(x - y) / max(abs(y), 1e-300) for x, y in pairs):.1e})"
+    rel = [abs(x - y) / max(abs(y), 1e-300) for x, y in pairs]
+    return f"differ (max rel {max(rel):.1e}: coefficients {max(rel[1:], default=0.0):.1e}, val_loss_multistep {rel[0]:.1e})"
 
 
 def line(r: dict) -> str:
@@ -122,14 +125,19 @@ def step_times(repeats: int) -> None:
         [1.0, 0.2, 1.0, 0.05, 1.0, 0.01])
     inputs = torch.tensor([8.0, 0.0, 3.0, 1.0]) + torch.randn(512, 4, generator=g) * torch.tensor([2.0, 0.3, 1.0, 1.0])
     trained = MMG(load_ship("esso_osaka"), ident.parameters, dict(ident.bounds), dtype=torch.float32)
+    autograd = MMG(load_ship("esso_osaka"), ident.parameters, dict(ident.bounds), dtype=torch.float32)
+    autograd.identified_rate = lambda state, inputs: None  # the torch path: autograd over the forward
     frozen = MMG(load_ship("esso_osaka"), dtype=torch.float32)
     c = frozen.coefficients.values_view(torch.float32)
 
-    def autograd_step():
-        x = state
-        for _ in range(5):
-            x = x + 0.1 * derivative(trained, x, inputs)
-        x[..., [1, 3, 5]].square().sum().backward()
+    def step(model):
+        def work():
+            model.zero_grad()
+            x = state
+            for _ in range(5):
+                x = x + 0.1 * derivative(model, x, inputs)
+            x[..., [1, 3, 5]].square().sum().backward()
+        return work
 
     def vjp_floor():
         x = state.clone().requires_grad_(True)
@@ -137,16 +145,19 @@ def step_times(repeats: int) -> None:
             x = x + 0.1 * vjp.mmg_rate(x, inputs, c)[..., :6]
         x[..., [1, 3, 5]].square().sum().backward()
 
-    times = {"autograd": [], "vjp": []}
+    ways = {"autograd": step(autograd), "identified": step(trained), "vjp": vjp_floor}
+    times: dict[str, list[float]] = {k: [] for k in ways}
     for _ in range(repeats):
-        for name, work in (("autograd", autograd_step), ("vjp", vjp_floor)):
+        for name, work in ways.items():
             started = time.perf_counter()
             work()
             times[name].append(time.perf_counter() - started)
-    a, v = (sorted(times[k])[len(times[k]) // 2] * 1e3 for k in ("autograd", "vjp"))
+    a, i, v = (sorted(times[k])[len(times[k]) // 2] * 1e3 for k in ways)
+    moved = max(float(((p.grad - q.grad).abs() / q.grad.abs()).max())
+                for p, q in zip(trained.parameters(), autograd.parameters()))
     print(f"one identification step, batch 512, T = 5, 1 thread (median of {repeats}, alternating): "
-          f"autograd over the MMG {a:.2f} ms, the VJP floor {v:.2f} ms ({a / v:.1f}x); load {os.getloadavg()[0]:.1f}")
-
+          f"autograd over the MMG {a:.2f} ms, the coefficients' VJP {i:.2f} ms ({a / i:.2f}x), the state-only "
+          f"VJP floor {v:.2f} ms; coefficient gradients differ by {moved:.1e} (relative); load {os.getloadavg()[0]:.1f}")
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -19,6 +19,7 @@ def report(
     sweep: Optional[List[Path]] = typer.Option(None, "--sweep", help="A sweep directory (sysid sweep) whose validation landscape and chosen configuration the report shows beside (repeatable)."),
 ) -> None:
     """Write an accuracy report (self-contained HTML and page-numbered PDF) for a run or a reproduction."""
+    from sysid.device import cpu_cores
     from sysid.report import build_report
     from sysid.report.maneuver_report import build_maneuver_report, is_maneuvers_directory
 
@@ -28,7 +29,7 @@ def report(
     if is_maneuvers_directory(source):  # sysid maneuver's output has a report of its own
         paths = build_maneuver_report(source, out)
     else:
-        paths = build_report(source, out, logs.indented(), sweeps)
+        paths = build_report(source, out, logs.indented(), sweeps, workers=cpu_cores())
     typer.echo(f"report: {paths.html}")
     typer.echo(f"        {paths.pdf} ({paths.n_pages} pages, {paths.n_figures} figures, {paths.seconds:.1f} s)")
     for note in paths.notes:

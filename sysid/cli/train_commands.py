@@ -241,7 +241,7 @@ def reproduce(
         from sysid.report import build_report
         on_interrupt(f"the reproduction in {output} is complete; its report was not written "
                      f"(sysid report {output} -o {output} writes it)")
-        paths = build_report(output, output)
+        paths = build_report(output, output, workers=cpu_cores())  # the HTML's figures beside the PDF's pages
         typer.echo(f"report: {paths.html} and {paths.pdf} ({paths.n_figures} figures, {paths.n_pages} pages)")
     _say_scorecards(summary, seeds)
     for name, why in (summary.failed or {}).items():

@@ -116,6 +116,10 @@ def lean_derivative(force_model: nn.Module, state: torch.Tensor, inputs: torch.T
     found = eager_rate(state, inputs) if eager_rate is not None else None
     if found is not None:  # no gradient, the native kernel's families: one native call for F_MMG
         return found[0]
+    identified_rate = getattr(force_model, "identified_rate", None) if last else None
+    rate = identified_rate(state, inputs) if identified_rate is not None else None
+    if rate is not None:  # an MMG identifying hull coefficients: their VJP by hand (`sysid.mmg.vjp`)
+        return rate
     rate_terms = getattr(force_model, "rate_terms", None)
     if rate_terms is not None and last and not captured():
         return motion_rate(state, *rate_terms(state, inputs))  # one product for the equations of motion (eager)

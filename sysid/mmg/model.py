@@ -127,6 +127,14 @@ class MMG(nn.Module):
         rate = self.no_grad_rate(state)
         return rate(state, inputs) if rate is not None else None
 
+    def identified_rate(self, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor | None:
+        """dx/dt (..., 6) of the equations of motion driven by F_MMG through the hand-derived
+        VJP with respect to the state and the identified hull coefficients
+        (`sysid.mmg.vjp.identified_rate`: the identification's rollouts) where it applies;
+        else None (the torch path, `rate_terms`, which this equals to round-off)."""
+        from sysid.mmg.vjp import identified_rate
+        return identified_rate(self, state, inputs)
+
     def no_grad_rate(self, like: torch.Tensor):
         """A function (state (..., 6), inputs (..., 4)) -> (dx/dt (..., 6), None), one call of
         the native kernel (`sysid.mmg.native.rate`), to call without gradient on tensors of

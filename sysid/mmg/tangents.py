@@ -410,3 +410,26 @@ def _wind_force(W: _Wind, total: torch.Tensor, d_total: torch.Tensor, c) -> tupl
     total = total + C * U_A2
     d_total = d_total + torch.addcmul(_col(W.d_gamma) * _row(U_A2 * dC), _col(W.d_UA), _row(2.0 * U_A * C))
     return total, d_total
+
+
+def _hull_linear_terms() -> dict[str, tuple[int, int, tuple]]:
+    """The hull coefficients Yoshimura's hull force is linear in, read off `_HULL`: each name
+    that is a lone factor of one entry among the products (v u, v |u|, v r, r u, r |u|), and
+    nowhere else in the hull (the X_0 U u row, the cross-flow rows and lanes), mapped to
+    (its product's column, its force component 0..2 = X, Y, N, the entry's other factors)."""
+    found: dict[str, list] = {}
+    for row, entries in enumerate(_HULL):
+        for component, entry in enumerate(entries):
+            for name in (entry,) if isinstance(entry, str) else entry or ():
+                if isinstance(name, str):
+                    others = tuple(n for n in ((entry,) if isinstance(entry, str) else entry) if n != name)
+                    found.setdefault(name, []).append((row, component, others))
+    elsewhere = {n for names in _CROSSFLOW for n in names if isinstance(n, str)}
+    return {name: places[0] for name, places in found.items()
+            if len(places) == 1 and places[0][0] < 5 and name not in elsewhere}
+
+
+# name -> (product column in (v u, v |u|, v r, r u, r |u|), force component, other factors):
+# X_vr (v r, X, q L_pp), Y_v (v |u|, Y, q), Y_r (r u, Y, q L_pp), N_v (v u, N, q L_pp),
+# N_r (r |u|, N, q L_pp L_pp) (q = 1/2 rho L_pp d [kg/m], qL = q L_pp [kg])
+HULL_LINEAR = _hull_linear_terms()

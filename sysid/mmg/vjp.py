@@ -16,14 +16,23 @@ batched product: what a training step differentiates in place of autograd's reco
 operation of the MMG, the FNN's inputs and the equations of motion. The inputs get no
 gradient (recorded, constant); the coefficients none either (`sysid.mmg.tangents.supported`
 says where this applies; elsewhere `MMG` runs through autograd).
+
+`identified_rate` is dx/dt (..., 6) of an `MMG` whose identified coefficients are among the
+hull's linear ones (`sysid.mmg.tangents.HULL_LINEAR`), differentiable with respect to the
+state and those coefficients: dF/dtheta_j is the product (v u, v |u|, v r, r u or r |u|) of
+its hull term times the term's other factors, and dx/dt is affine in F (the mass terms,
+constants here), so its backward is the state's VJP beside one product per coefficient.
 """
 from __future__ import annotations
+
+from types import SimpleNamespace
 
 import torch
 
 from sysid.mmg import native
-from sysid.mmg.coefficient_lookup import Rows, coefficient_matrix
-from sysid.mmg.tangents import basis, forces_with_tangents
+from sysid.mmg.coefficient_lookup import Rows, coefficient_matrix, coefficient_vector
+from sysid.mmg.capture import captured, transformed
+from sysid.mmg.tangents import FAMILIES, HULL_LINEAR, basis, forces_with_tangents
 
 # dx/dt (..., 6) as features (..., 16) times a (16, 6) matrix of the mass terms: features
 # (X, Y, N, u r, v r, r r, u cos psi, u sin psi, v cos psi, v sin psi, x, u, y, v, psi, r)
@@ -187,3 +196,117 @@ def training_rate(state: torch.Tensor, inputs: torch.Tensor, c, families: int, m
                          "only (call where `sysid.mmg.native.applies` holds)")
     rate, force, s = mmg_rate(state, inputs, c, bool(families)).split_with_sizes((6, 3, 9), -1)
     return rate, force, (s.to(mean.dtype) - mean) / std
+
+
+
+class _IdentifiedRate(torch.autograd.Function):
+    """(state, inputs, theta (k,)) -> dx/dt (..., 6); backward: the state's gradient (the
+    Jacobian (..., 6, 6) times the output's gradient) and theta's (the sum over rows of each
+    coefficient's hull product times the output's gradient along its slope, `identified_rate`)."""
+
+    @staticmethod
+    def forward(ctx, state, inputs, theta, c, wind, columns, slope):
+        out, jacobian = rate_with_jacobian(state, inputs, c, wind)
+        _, u, _, v, _, r = state.split_with_sizes([1] * 6, -1)
+        u_abs = u.abs()
+        products = torch.cat([v, v, v, r, r], -1) * torch.cat([u, u_abs, r, u, u_abs], -1)   # (..., 5)
+        ctx.save_for_backward(jacobian[..., :6], products[..., list(columns)], slope)
+        return out[..., :6]
+
+    @staticmethod
+    def backward(ctx, grad):
+        jacobian, products, slope = ctx.saved_tensors
+        grad_state = torch.matmul(jacobian, grad.unsqueeze(-1)).squeeze(-1) if ctx.needs_input_grad[0] else None
+        grad_theta = None
+        if ctx.needs_input_grad[2]:
+            k = slope.shape[0]  # d rate / d theta_j = products_j slope_j (6,)
+            grad_theta = (products.reshape(-1, k) * (grad.reshape(-1, 6) @ slope.T)).sum(0)
+        return grad_state, None, grad_theta, None, None, None, None
+
+
+def _slopes(c, names: tuple, like: torch.Tensor) -> torch.Tensor:
+    """(k, 6): d(dx/dt) / d theta_j per unit of coefficient j's hull product: its term's other
+    factors (q, L_pp, `HULL_LINEAR`) times the mass terms' row of its force component."""
+    factors = coefficient_vector(c, tuple(HULL_LINEAR[n][2] for n in names), like)     # (k,)
+    rows = force_rate(c, like)[[HULL_LINEAR[n][1] for n in names]]                   # (k, 6)
+    return factors.unsqueeze(-1) * rows
+
+
+def _reading(names: tuple, families: int) -> tuple[list[int], tuple]:
+    """The places in the native kernel's coefficient vector (`sysid.mmg.native.SEGMENTS`) of
+    the entries that read one of `names`, and those entries."""
+    places, entries, offset = [], [], 0
+    for segment in native.SEGMENTS:
+        for entry in segment.entries():
+            read = entry if isinstance(entry, tuple) else (entry,)
+            if segment.used(families) and any(n in read for n in names):
+                places.append(offset)
+                entries.append(entry)
+            offset += 1
+    return places, tuple(entries)
+
+
+_F64 = torch.empty((), dtype=torch.float64)
+
+
+def _constants_of(live: SimpleNamespace, names: tuple, families: int, like: torch.Tensor):
+    """(the values view `live` as constants, the slopes (k, 6) of `_slopes`): `live`'s entries
+    with the trainable values detached and a copy of its constant vectors' cache (vectors
+    reading a trainable value are made anew in the copy). `live`'s cache, shared by the values
+    views until a constant changes, also keeps the slopes and the native kernel's coefficient
+    vector, of which only the entries reading a trainable value are made anew (the same
+    products as `sysid.mmg.native.coefficient_values` makes)."""
+    kept = live.__dict__.get("_vectors")
+    c = SimpleNamespace(**live.__dict__)
+    for n in names:
+        setattr(c, n, getattr(live, n).detach())
+    c.requires_grad = False
+    c._vectors = dict(kept) if kept is not None else {}
+    c.__dict__.pop("_native", None)
+    if kept is None:
+        return c, _slopes(c, names, like)
+    key = ("identified", names, families, like.dtype)
+    found = kept.get(key)
+    if found is None:
+        slope = _slopes(c, names, like)
+        base = native.coefficient_values(c, families) if native.available() else None
+        kept[key] = (slope, base, *_reading(names, families))
+        return c, slope
+    slope, base, places, entries = found
+    if base is not None:
+        vector = base.clone()
+        vector[places] = coefficient_vector(c, entries, _F64).detach().to(torch.float64)
+        c._native = {int(families): vector}
+    return c, slope
+
+
+def identified_rate(mmg, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor | None:
+    """dx/dt (..., 6) of the `MMG` `mmg` at state (..., 6) with inputs (..., 4) through
+    `_IdentifiedRate` (the native kernel's or `sysid.mmg.tangents`' values, autograd's to
+    round-off), differentiable with respect to the state and the identified coefficients;
+    None where it does not apply (then `MMG` runs through autograd): no gradient recorded,
+    a family other than `FAMILIES`' or Simpson's quadrature, a trainable coefficient that is
+    not one of `HULL_LINEAR` (or none), a torch.func transform or swapped-in coefficients,
+    compiled-code capture, or tensors other than the CPU's float32/64."""
+    coefficients = mmg.coefficients
+    names = tuple(getattr(coefficients, "trainable_names", ()))
+    if not torch.is_grad_enabled() or not names or any(n not in HULL_LINEAR for n in names):
+        return None
+    models = mmg.ship.models
+    if any(models.get(k) != v for k, v in FAMILIES.items() if k != "wind") or \
+            models.get("wind") not in (None, FAMILIES["wind"]) or mmg.quadrature != "exact":
+        return None
+    if captured() or transformed(state) or transformed(inputs) or state.device.type != "cpu" or \
+            state.dtype not in (torch.float32, torch.float64) or inputs.dtype != state.dtype:
+        return None
+    live = coefficients.values_view(state.dtype)   # the trainable values through autograd
+    if getattr(live, "wrapped", False) or not getattr(live, "requires_grad", False):
+        return None
+    theta = torch.stack([getattr(live, n) for n in names])
+    if transformed(theta):
+        return None
+    wind = models.get("wind") is not None
+    with torch.no_grad():
+        c, slope = _constants_of(live, names, int(native.Families.WIND) if wind else 0, state)
+    columns = tuple(HULL_LINEAR[n][0] for n in names)
+    return _IdentifiedRate.apply(state, inputs, theta, c, wind, columns, slope)

@@ -17,9 +17,7 @@ from pathlib import Path
 import torch
 
 ROOT = Path(__file__).resolve().parents[2]
-# the one-piece trainer's numbers (d473cdc) with NN-only's training right-hand side (nnfast): against
-# d473cdc every case the same to the bit but nn_D1, whose losses moved at 1e-7 relative (round-off)
-BEFORE = "c0e7ce2ebd032885252b141409d4a66410b49c27"
+BEFORE = "c60db44"  # the identification through the coefficients' VJP (idvjp); d473cdc: the one-piece trainer
 SCRIPT = ROOT / "tests" / "support" / "trainer_cases.py"
 
 

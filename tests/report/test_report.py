@@ -151,6 +151,19 @@ def test_reproduction_pdf_numbered_with_table_values(reproduction, reproduction_
 
 
 @pytest.mark.slow
+def test_figures_drawn_in_workers_give_the_same_report(reproduction, reproduction_report, tmp_path):
+    """The HTML's figures drawn in a worker process beside this one's PDF pages: the HTML equal
+    to the one drawn here to the byte (but its "built" minute), the PDF's text page by page."""
+    paths = build_report(reproduction, tmp_path, workers=2)
+    built = re.compile(r"\d{4}-\d\d-\d\d \d\d:\d\d UTC")
+    assert built.sub("", paths.html.read_text()) == built.sub("", reproduction_report.html.read_text())
+    assert (paths.n_figures, paths.n_pages, paths.notes) == (reproduction_report.n_figures,
+                                                             reproduction_report.n_pages, reproduction_report.notes)
+    ours, theirs = _pdf_text(paths.pdf)[0], _pdf_text(reproduction_report.pdf)[0]
+    assert [built.sub("", t) for t in ours] == [built.sub("", t) for t in theirs]
+
+
+@pytest.mark.slow
 def test_single_run_report(tmp_path, small_runs):
     runs = small_runs
     run_dir = write_run(tmp_path / "hybrid_D2", "hybrid_D2", runs)
