@@ -115,10 +115,10 @@ def hybrid_rate(state: torch.Tensor, inputs: torch.Tensor, plan: Plan) -> tuple:
 # the (16, 6) matrix of the mass terms, a = (u, v, r, u, u, v, v), b = (r, r, r, cos psi, sin psi,
 # cos psi, sin psi) [m/s, 1/s]
 _KINEMATIC_A = (1, 3, 5, 1, 1, 3, 3)  # the state's columns of a
-_TABLES: dict[tuple, tuple[torch.Tensor, torch.Tensor]] = {}
+_TABLES: dict[tuple, tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = {}
 
 
-def _tables(like: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+def _tables(like: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """((6, 7) tangents (columns) of a, (6, 7) of r in b), then (6, 5) tangents of the FNN
     inputs u, v_m, r, delta, n_p; in `like`'s dtype and device, made once."""
     key = (like.dtype, like.device)

@@ -207,7 +207,7 @@ def _drawn_svg(item: tuple[str, tuple[str, ...], int]) -> DrawnFigure:
     number), from the plan `build_report` makes of the same directory, in its style."""
     path, sweeps, number = item
     _planned((path, sweeps))
-    with rc_context(STYLE), pdf_style():
+    with rc_context(STYLE), pdf_style():  # type: ignore[arg-type]
         return _drawn(_PLANS[(path, sweeps)][number - 1], number)
 
 
