@@ -31,7 +31,7 @@ import torch
 from sysid.hybrid import layers
 from sysid.mmg.motion import constants
 from sysid.mmg.native import TrainingKernel
-from sysid.mmg.tangents import _motion, _relative_wind, basis
+from sysid.mmg.tangents import basis, motion_tangents, relative_wind_tangents
 
 
 class Plan:
@@ -151,9 +151,9 @@ def _inputs_and_kinematics(state: torch.Tensor, inputs: torch.Tensor, plan: NNPl
     (a * b, z) with respect to the state, or None without `jacobian`); rows = the batch flattened."""
     state, inputs = state.reshape(-1, 6), inputs.reshape(-1, 4)
     k, B = constants(state), basis(state)
-    m = _motion(state, k, B)
+    m = motion_tangents(state, k, B)
     n, delta, U_T, zeta = inputs.split_with_sizes((1, 1, 1, 1), -1)
-    wind = _relative_wind(m, U_T, zeta, k, B)
+    wind = relative_wind_tangents(m, U_T, zeta, k, B)
     u, v, psi, r = m.u, m.v, m.psi, m.r
     cos_psi, sin_psi = torch.cos(psi), torch.sin(psi)
     a = torch.cat([u, v, r, u, u, v, v], -1)

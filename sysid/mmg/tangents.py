@@ -189,11 +189,11 @@ def forces_with_tangents(state: torch.Tensor, inputs: torch.Tensor, c, wind: boo
     B = basis(state)
     f = _Factors(*coefficient_vectors(c, _CONSTANTS, state))
     n, delta, U_T, zeta = inputs.split_with_sizes(_FOUR, -1)
-    m = _motion(state, k, B)
+    m = motion_tangents(state, k, B)
     hull, d_hull = _hull(m, c, k, B, f)
     P = _propeller(m, n, c, k, B, f)
     rudder, d_rudder = _rudder(m, delta, P, c, k, B, f)
-    W = _relative_wind(m, U_T, zeta, k, B)
+    W = relative_wind_tangents(m, U_T, zeta, k, B)
     total = hull + P.force + rudder
     d_total = d_hull + P.d_force + d_rudder
     if wind:
@@ -201,7 +201,7 @@ def forces_with_tangents(state: torch.Tensor, inputs: torch.Tensor, c, wind: boo
     return Tangents(total, d_total, W.omega, W.d_omega)
 
 
-def _motion(state: torch.Tensor, k, B: Basis) -> _Motion:
+def motion_tangents(state: torch.Tensor, k, B: Basis) -> _Motion:
     """Speed, guarded speed and drift angle beta_hat = atan2(v, u) [rad], with tangents."""
     _, u, _, v, psi, r = state.split_with_sizes(_SIX, -1)
     U = torch.hypot(u, v)
@@ -370,7 +370,7 @@ def _rudder_inflow(m: _Motion, P: _Propeller, c, k, B: Basis, f: _Factors) -> tu
     return u_R, d_uR
 
 
-def _relative_wind(m: _Motion, U_T: torch.Tensor, zeta: torch.Tensor, k, B: Basis) -> _Wind:
+def relative_wind_tangents(m: _Motion, U_T: torch.Tensor, zeta: torch.Tensor, k, B: Basis) -> _Wind:
     """The relative wind (the lab's guards): speed U_A, angle gamma_A and the body-frame
     components U_A (cos gamma_A, sin gamma_A), with tangents."""
     psi, Ug, slow, beta_hat, d_Ug, d_beta = m.psi, m.Ug, m.slow, m.beta_hat, m.d_Ug, m.d_beta
