@@ -58,6 +58,26 @@ class Plan:
             self.doubled = [(2.0 * w, 2.0 * b) for w, b in zip(self.weights[:-1], self.biases[:-1])]
 
 
+def _force_backward(plan: Plan, h, grad_rate, grad_nn, state_gradient: bool) -> tuple:
+    """The chain rule's part shared by both Functions' backwards: (rows, g_{dx/dt} (rows, 6) or
+    None, g_z or None, the parameters' gradients) from the gradients of dx/dt and F_NN, with
+    g_F = g_{F_NN} + g_{dx/dt} M^T through the layers' backward; rows = the batch flattened
+    (K x rows for K members)."""
+    rows = h[0].shape[-2] * plan.members
+    g_rate = None if grad_rate is None else grad_rate.reshape(rows, 6)
+    if grad_nn is None:
+        g_force = None if g_rate is None else torch.mm(g_rate, plan.mass_T)
+    else:
+        g_force = grad_nn.reshape(rows, 3) if g_rate is None else torch.addmm(grad_nn.reshape(rows, 3), g_rate,
+                                                                                plan.mass_T)
+    g_z, grads = None, [None] * len(plan.parameters)
+    if g_force is not None:
+        single = plan.members == 1
+        g_z, grads = layers.backward(g_force if single else g_force.view(plan.members, -1, 3), h, plan.weights,
+                                     plan.scale, single, state_gradient)
+    return rows, g_rate, g_z, grads
+
+
 class _HybridRate(torch.autograd.Function):
     """(state, inputs, plan, W_1, b_1, ..., W_L, b_L) -> (dx/dt, F_NN, F_MMG); W_i (K, n_{i-1},
     n_i), b_i (K, n_i) as `sysid.hybrid.correction.ForceCorrection` holds them (the plan's);
@@ -86,19 +106,8 @@ class _HybridRate(torch.autograd.Function):
     def backward(ctx, grad_rate, grad_nn, grad_mmg):
         jacobian, *h = ctx.saved_tensors
         plan = ctx.plan
-        rows = h[0].shape[-2] * plan.members
-        g_rate = None if grad_rate is None else grad_rate.view(rows, 6)
-        if grad_nn is None:
-            g_force = None if g_rate is None else torch.mm(g_rate, plan.mass_T)
-        else:
-            g_force = grad_nn.view(rows, 3) if g_rate is None else torch.addmm(grad_nn.view(rows, 3), g_rate,
-                                                                                 plan.mass_T)
         state_gradient = ctx.needs_input_grad[0]
-        g_z, grads = None, [None] * len(plan.parameters)
-        if g_force is not None:
-            single = plan.members == 1
-            g_z, grads = layers.backward(g_force if single else g_force.view(plan.members, -1, 3), h, plan.weights,
-                                         plan.scale, single, state_gradient)
+        _, g_rate, g_z, grads = _force_backward(plan, h, grad_rate, grad_nn, state_gradient)
         # (..., 6): the Jacobian's batch shape, the state's
         g_state = plan.kernel.state_gradient(jacobian, g_rate, grad_mmg, g_z) if state_gradient else None
         return g_state, None, None, *grads
@@ -201,19 +210,8 @@ class _NNRate(torch.autograd.Function):
     def backward(ctx, grad_rate, grad_nn, grad_mmg):
         jacobian, *h = ctx.saved_tensors
         plan = ctx.plan
-        rows = h[0].shape[0] if plan.members == 1 else h[0].shape[0] * h[0].shape[1]
-        g_rate = None if grad_rate is None else grad_rate.reshape(rows, 6)
-        if grad_nn is None:
-            g_force = None if g_rate is None else torch.mm(g_rate, plan.mass_T)
-        else:
-            g_force = grad_nn.reshape(rows, 3) if g_rate is None else torch.addmm(grad_nn.reshape(rows, 3), g_rate,
-                                                                                    plan.mass_T)
         state_gradient = ctx.needs_input_grad[0]
-        g_z, grads = None, [None] * len(plan.parameters)
-        if g_force is not None:
-            single = plan.members == 1
-            g_z, grads = layers.backward(g_force if single else g_force.view(plan.members, -1, 3), h, plan.weights,
-                                         plan.scale, single, state_gradient)
+        rows, g_rate, g_z, grads = _force_backward(plan, h, grad_rate, grad_nn, state_gradient)
         g_state = None
         if state_gradient and (g_rate is not None or g_z is not None):
             g_kinematic = jacobian.new_zeros(rows, 7) if g_rate is None else torch.mm(g_rate, plan.kinematic_T)
