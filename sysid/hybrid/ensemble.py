@@ -12,8 +12,14 @@ from typing import Sequence
 import torch
 from torch import nn
 
+from sysid.config.choices import GateSpace
+from sysid.hybrid.correction import correction_inputs
 from sysid.hybrid.force_models import CorrectedModel
+from sysid.mmg import native
+from sysid.mmg.coefficient_lookup import Rows, coefficient_matrix
 from sysid.mmg.model import ForceBreakdown
+from sysid.mmg.vjp import RATE_ROWS, force_rate, rate_of_force
+from sysid.mmg.wind import relative_wind
 
 
 class SeedEnsemble(nn.Module):
@@ -62,20 +68,38 @@ class SeedEnsemble(nn.Module):
             forces.gate_on = torch.stack([p.gate_on for p in parts]).to(state.dtype).mean(0) >= 0.5
         return forces
 
+    def eager_rate(self, state: torch.Tensor, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None] | None:
+        """(dx/dt (..., 6), the gate's decision (...,) or None) at state (..., 6) with inputs
+        (..., 4) without gradient where `no_grad_rate` applies, else None (then `forward` and
+        the equations of motion, which this equals to round-off)."""
+        if torch.is_grad_enabled():
+            return None
+        # looked up once while the members, their gates and parameters stay as they are (a rollout's steps)
+        key = (state.dtype, tuple(id(m.__dict__.get("_modules", {}).get("gate")) for m in self.members),
+               tuple((id(t), t._version) for t in (*self.parameters(), *self.buffers())))
+        found = self.__dict__.get("_eager_rate")
+        if found is None or found[0] != key:
+            found = self.__dict__["_eager_rate"] = (key, self.no_grad_rate(state))
+        rate = found[1]
+        return rate(state, inputs) if rate is not None else None
+
     def no_grad_rate(self, like: torch.Tensor):
         """A function (state (..., 6), inputs (..., 4)) -> (dx/dt (..., 6), the kNN gate's
-        decision (...,) or None) without gradient (the closed-loop maneuvers' eager steps,
-        `sysid.maneuvers.closed_loop.run_eager`): the mean of the members' own
-        `no_grad_rate`s. dx/dt is affine in the force, with the mass terms of the one MMG
-        the members share, so the mean of their rates is the rate of `forward`'s mean force,
-        to round-off; the gate on where at least half of the members apply their correction,
-        as `forward`. None unless the members are hybrids of one MMG whose every
-        `no_grad_rate` applies (then the equations of motion over `forward`)."""
-        if not self._shared_mmg:
+        decision (...,) or None) without gradient (the eager steps of maneuvers and
+        predictions): dx/dt of `forward`'s mean force, to round-off. The K members' FNNs run
+        side by side as one batched product on the member axis (`_members_rate`) where every
+        member is one network of one shape; else the mean of the members' own
+        `no_grad_rate`s. dx/dt is affine in the force, so either is the rate of the mean
+        force where the members share the mass terms of the equations of motion (hybrids of
+        one MMG, or of MMGs whose identified hull coefficients differ; NN-only); the gate
+        on where at least half of the members apply their correction, as `forward`. None
+        unless every member's own `no_grad_rate` applies and they share the mass terms."""
+        rates = [m.no_grad_rate(like) if isinstance(m, CorrectedModel) else None for m in self.members]
+        if any(r is None for r in rates) or not _common_mass(self.members, like):
             return None
-        rates = [m.no_grad_rate(like) for m in self.members]
-        if any(r is None for r in rates):
-            return None
+        batched = _members_rate(self.members, like, self._shared_mmg)
+        if batched is not None:
+            return batched
 
         def rate(state: torch.Tensor, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
             parts = [r(state, inputs) for r in rates]
@@ -109,3 +133,74 @@ def _common_mmg(members: Sequence[nn.Module]) -> bool:
                 or any(not torch.equal(mine[k], reference[k]) for k in reference)):
             return False
     return True
+
+
+def _common_mass(members: Sequence[nn.Module], like: torch.Tensor) -> bool:
+    """True when every member's equations of motion have the same matrix (the mass terms,
+    `sysid.mmg.vjp.RATE_ROWS`) in `like`'s dtype: dx/dt is then affine in the force with
+    one slope, and the mean of the members' rates is the rate of their mean force."""
+    with torch.no_grad():
+        first, *rest = (coefficient_matrix(m.coefficients.values_view(like.dtype), _EOM_ROWS, like) for m in members)
+        return all(torch.equal(first, other) for other in rest)
+
+
+_EOM_ROWS = Rows(RATE_ROWS)
+
+
+def _members_rate(members: Sequence[nn.Module], like: torch.Tensor, shared_mmg: bool):
+    """`SeedEnsemble.no_grad_rate` with the K members' FNNs side by side: each step the MMG's
+    rate and the FNN's inputs s from one native call (hybrids of one MMG; of MMGs with their
+    own identified coefficients, one call each, their rates averaged), s standardised by
+    each member's statistics (K, B, 9), the K networks as batched products on the member
+    axis (`torch.baddbmm`), each member's kNN gate on its own features (its gate as the
+    member holds it: the rollout's), the gated forces averaged over the members and added
+    through the shared mass terms. None where it does not apply: a member with several
+    networks, networks of different shapes or dtypes, gates of different spaces."""
+    first = members[0]
+    nets = [m.correction_net for m in members]
+    if (any(n.members != 1 for n in nets) or len({tuple(w.shape for w in n.weights) for n in nets}) != 1
+            or len({(m.physics, m.gate_space) for m in members}) != 1
+            or len({n.input_mean.dtype for n in nets}) != 1):
+        return None
+    physics, inputs_space = first.physics, first.gate_space is GateSpace.INPUTS
+    with torch.no_grad():
+        weights = [torch.stack([n.weights[i][0] for n in nets]) for i in range(len(first.correction_net.weights))]
+        biases = [torch.stack([n.biases[i][0] for n in nets]).unsqueeze(1) for i in range(len(weights))]
+        mean = torch.stack([n.input_mean for n in nets]).unsqueeze(1)  # (K, 1, 9)
+        std = torch.stack([n.input_std for n in nets]).unsqueeze(1)
+        scale = torch.stack([n.output_std for n in nets]).unsqueeze(1)  # (K, 1, 3)
+        shift = torch.stack([n.output_mean for n in nets]).unsqueeze(1)
+        coefficients = [m.mmg.coefficients.values_view(like.dtype) for m in (members[:1] if shared_mmg else members)]
+        families = native.families_of(first.mmg) if physics else None
+        mass = force_rate(coefficients[0], like)  # (3, 6), the members' (`_common_mass`)
+    gates = [m.gate if m.gate is not None and m.gate_enabled and m.gate.bank.shape[0] > 0 else None
+             for m in members]
+    gated = all(g is not None for g in gates)
+    if not gated and any(g is not None for g in gates):
+        return None
+    dtype = mean.dtype
+
+    def rate(state: torch.Tensor, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+        if physics:
+            outs = [native.rate(state, inputs, c, families) for c in coefficients]
+            s = outs[0][..., 9:]
+            rate_mmg = outs[0][..., :6] if len(outs) == 1 else torch.stack([o[..., :6] for o in outs]).mean(0)
+        else:  # NN-only: s through torch, dx/dt of F_NN alone
+            wind = relative_wind(state[..., 1], state[..., 3], state[..., 4], inputs[..., 2], inputs[..., 3])
+            s = correction_inputs(state, inputs, torch.stack(wind, -1))
+        rows = s.reshape(1, -1, s.shape[-1]).to(dtype)
+        z = (rows - mean) / std  # (K, B, 9)
+        h = z
+        for w, b in zip(weights[:-1], biases[:-1]):
+            h = torch.tanh(torch.baddbmm(b, h, w))
+        f = torch.baddbmm(biases[-1], h, weights[-1]) * scale + shift  # (K, B, 3)
+        on = None
+        if gated:
+            decisions = torch.stack([g(z[i] if inputs_space else h[i])[1] for i, g in enumerate(gates)])  # (K, B)
+            f = torch.where(decisions[..., None], f, torch.zeros_like(f))
+            on = (decisions.to(state.dtype).mean(0) >= 0.5).view(state.shape[:-1])
+        f_mean = f.mean(0).to(state.dtype)  # (B, 3)
+        if not physics:
+            return rate_of_force(state, f_mean.view(*state.shape[:-1], 3), coefficients[0]), on
+        return torch.addmm(rate_mmg.reshape(-1, 6), f_mean, mass).view(state.shape), on
+    return rate

@@ -105,8 +105,18 @@ class RolloutGate(nn.Module):
 
 def with_rollout_gate(model: nn.Module) -> nn.Module:
     """`model` with its fitted kNN gate replaced by a fresh `RolloutGate` (a shallow copy;
-    the model itself is untouched), or `model` itself when it has no fitted gate. For one
+    the model itself is untouched), or `model` itself when it has no fitted gate; a
+    mean-of-members ensemble (``members``) with each member's gate replaced. For one
     rollout without gradient."""
+    members = getattr(model, "members", None)
+    if isinstance(members, nn.ModuleList):
+        gated = [with_rollout_gate(m) for m in members]
+        if all(g is m for g, m in zip(gated, members)):
+            return model
+        rollout = copy.copy(model)
+        rollout._modules = dict(model._modules)
+        rollout._modules["members"] = nn.ModuleList(gated)
+        return rollout
     gate = getattr(model, "gate", None)
     if not isinstance(gate, KNNGate) or gate.bank.shape[0] <= gate.k:
         return model

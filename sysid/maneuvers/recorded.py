@@ -42,6 +42,7 @@ from sysid.data.scenario import FOLDERS, Maneuver as Kind, recognise
 from sysid.dynamics.equations import eager_predict
 from sysid.dynamics.integrators import Integrator, Method
 from sysid.errors import DataError
+from sysid.hybrid.rollout_gate import with_rollout_gate
 from sysid.maneuvers.any_model import load_maneuver_model
 from sysid.maneuvers.base import Conditions, Maneuver, Side, TurningCircle, ZigZag
 from sysid.maneuvers.indices import INDEX_COLUMNS, KIND_INDICES, Track, maneuver_indices, zigzag_overshoots
@@ -165,7 +166,8 @@ def _predictions(model: nn.Module, runs: Sequence[Run], starts: Sequence[int], m
         u = r.inputs[s:]
         inputs.append(np.concatenate([u, np.repeat(u[-1:], longest - len(u), 0)]))
     u = torch.tensor(np.stack(inputs, 1), dtype=torch.float64)
-    states = eager_predict(model, x0, u, runs[0].dt, Integrator(method))
+    # the kNN gate's decisions along the rollout from earlier steps' scans (`RolloutGate`: the gate's own)
+    states = eager_predict(with_rollout_gate(model), x0, u, runs[0].dt, Integrator(method))
     closed = closed_loop_indices(model, runs, maneuvers if maneuvers is not None else [None] * len(runs), starts, dt)
     return [(states[:n, i].numpy(), gate_off_share(model, states[:n - 1, i], u[:n - 1, i]), closed[i])
             for i, n in enumerate(lengths)]

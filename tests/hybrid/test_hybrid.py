@@ -317,6 +317,57 @@ def test_val_loss_multistep_is_the_final_models_validation_loss_at_the_objective
     assert longer.summary_.val_loss_multistep < losses[30.0]  # errors grow with the horizon
 
 
+@pytest.mark.parametrize("kind", ["shared", "identified", "nn", "features"])
+def test_seed_ensemble_no_grad_rate_is_the_rate_of_its_mean_force(kind):
+    """The ensemble's no-grad right-hand side (the members' FNNs as one batched product on
+    the member axis, the MMG from the native kernel) against `forward`'s mean force through
+    the equations of motion: the same dx/dt to round-off and the same gate decisions, for
+    hybrids of one MMG, hybrids whose identified hull coefficients differ (their mass terms
+    shared), NN-only members, and gates in the features (each member's own features)."""
+    from sysid.dynamics.equations import state_derivative
+    from sysid.hybrid.ensemble import SeedEnsemble
+    from sysid.hybrid.correction import correction_inputs
+    from sysid.hybrid.force_models import CorrectedModel
+    from sysid.mmg.wind import relative_wind
+
+    gen = torch.Generator().manual_seed(1)
+    state = torch.randn(40, 6, generator=gen, dtype=torch.float64) * torch.tensor([1, 2, 1, 0.3, 1, 0.01]) \
+        + torch.tensor([0, 6, 0, 0, 0, 0])
+    inputs = torch.randn(40, 4, generator=gen, dtype=torch.float64).abs() * torch.tensor([2, 0.3, 8, 3])
+
+    def member(seed: int, overrides: dict | None = None) -> CorrectedModel:
+        torch.manual_seed(seed)
+        net = ForceCorrection((16, 16), torch.float64)
+        net.set_standardization(torch.full((9,), 0.1 * seed), torch.full((9,), 3.0 + seed), torch.zeros(3),
+                                torch.tensor([1e5, 1e5, 1e7]))
+        space = "features" if kind == "features" else "inputs"
+        model = CorrectedModel(MMG(load_ship("esso_osaka", overrides)), net, None, kind != "nn", space)
+        bank = torch.randn(200, 9, dtype=torch.float64)
+        if space == "features":  # near the features of the first 20 rows below: both decisions occur
+            with torch.no_grad():
+                wind = torch.stack(relative_wind(state[:20, 1], state[:20, 3], state[:20, 4], inputs[:20, 2],
+                                                 inputs[:20, 3]), -1)
+                near = correction_inputs(state[:20], inputs[:20], wind).repeat(10, 1)
+                bank = net.features(near * (1 + 0.01 * torch.randn(200, 9, dtype=torch.float64)))
+        model.gate = KNNGate(3, 0.9, bank.shape[1], torch.float64).fit(bank)
+        model.gate_enabled = True
+        return model
+
+    overrides = [None, {"N_r": -0.07}, {"Y_v": -0.3}] if kind == "identified" else [None] * 3
+    ensemble = SeedEnsemble([member(k, o) for k, o in enumerate(overrides)])
+    with torch.no_grad():
+        forces = ensemble(state, inputs)
+        expected = state_derivative(state, forces.total, ensemble.coefficients)
+        rate = ensemble.no_grad_rate(state)
+        assert rate is not None
+        dx, on = rate(state, inputs)
+        assert ensemble.eager_rate(state, inputs)[0].equal(dx)
+    torch.testing.assert_close(dx, expected, rtol=1e-10, atol=1e-12)
+    assert torch.equal(on, forces.gate_on) and 0 < int(on.sum()) < len(on)
+    heavier = SeedEnsemble([member(0), member(1, {"m_x": 0.05})])  # other mass terms: no shared rate
+    assert heavier.no_grad_rate(state) is None
+
+
 def test_seed_ensemble_of_hybrids_is_their_mmg_plus_the_mean_gated_correction():
     """Hybrids sharing one MMG: the ensemble computes F_MMG once; its forces equal the mean
     of the members' own forces (each member called alone), gate decisions by majority.
