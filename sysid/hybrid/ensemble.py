@@ -147,7 +147,7 @@ def _common_mass(members: Sequence[nn.Module], like: torch.Tensor) -> bool:
 _EOM_ROWS = Rows(RATE_ROWS)
 
 
-def _members_rate(members: Sequence[nn.Module], like: torch.Tensor, shared_mmg: bool):
+def _members_rate(members: Sequence[nn.Module], like: torch.Tensor, shared_mmg: bool, side_by_side: bool = False):
     """`SeedEnsemble.no_grad_rate` with the K members' FNNs side by side: each step the MMG's
     rate and the FNN's inputs s from one native call (hybrids of one MMG; of MMGs with their
     own identified coefficients, one call each, their rates averaged), s standardised by
@@ -155,7 +155,12 @@ def _members_rate(members: Sequence[nn.Module], like: torch.Tensor, shared_mmg: 
     axis (`torch.baddbmm`), each member's kNN gate on its own features (its gate as the
     member holds it: the rollout's), the gated forces averaged over the members and added
     through the shared mass terms. None where it does not apply: a member with several
-    networks, networks of different shapes or dtypes, gates of different spaces."""
+    networks, networks of different shapes or dtypes, gates of different spaces.
+
+    `side_by_side` (`MembersSideBySide`): the rows are K + 1 blocks of B rows, block k
+    member k's own (its own F_NN, MMG and gate decision), the last the ensemble's (as
+    above); each member's network and gate take its own block and the ensemble's as one
+    batch of 2 B rows."""
     first = members[0]
     nets = [m.correction_net for m in members]
     if (any(n.members != 1 for n in nets) or len({tuple(w.shape for w in n.weights) for n in nets}) != 1
@@ -181,26 +186,94 @@ def _members_rate(members: Sequence[nn.Module], like: torch.Tensor, shared_mmg: 
     dtype = mean.dtype
 
     def rate(state: torch.Tensor, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+        k = len(members)
+        flat_state, flat_inputs = state.reshape(-1, 6), inputs.reshape(-1, 4)
         if physics:
-            outs = [native.rate(state, inputs, c, families) for c in coefficients]
-            s = outs[0][..., 9:]
-            rate_mmg = outs[0][..., :6] if len(outs) == 1 else torch.stack([o[..., :6] for o in outs]).mean(0)
+            outs = [native.rate(flat_state, flat_inputs, c, families) for c in coefficients]
+            s = outs[0][:, 9:]
+            if len(outs) == 1:
+                rate_mmg = outs[0][:, :6]
+            elif side_by_side:  # member j's MMG on its block; the ensemble's: the mean of theirs
+                b = flat_state.shape[0] // (k + 1)
+                rate_mmg = torch.cat([o[j * b:(j + 1) * b, :6] for j, o in enumerate(outs)]
+                                     + [torch.stack([o[k * b:, :6] for o in outs]).mean(0)])
+            else:
+                rate_mmg = torch.stack([o[:, :6] for o in outs]).mean(0)
         else:  # NN-only: s through torch, dx/dt of F_NN alone
-            wind = relative_wind(state[..., 1], state[..., 3], state[..., 4], inputs[..., 2], inputs[..., 3])
-            s = correction_inputs(state, inputs, torch.stack(wind, -1))
-        rows = s.reshape(1, -1, s.shape[-1]).to(dtype)
-        z = (rows - mean) / std  # (K, B, 9)
+            wind = relative_wind(flat_state[:, 1], flat_state[:, 3], flat_state[:, 4], flat_inputs[:, 2],
+                                 flat_inputs[:, 3])
+            s = correction_inputs(flat_state, flat_inputs, torch.stack(wind, -1))
+        s = s.to(dtype)
+        if side_by_side:  # (K, 2B, 9): member j's own block, then the ensemble's
+            blocks = s.view(k + 1, -1, s.shape[-1])
+            rows = torch.cat((blocks[:k], blocks[k:].expand(k, -1, -1)), 1)
+        else:
+            rows = s.unsqueeze(0)
+        z = (rows - mean) / std  # (K, rows, 9)
         h = z
         for w, b in zip(weights[:-1], biases[:-1]):
             h = torch.tanh(torch.baddbmm(b, h, w))
-        f = torch.baddbmm(biases[-1], h, weights[-1]) * scale + shift  # (K, B, 3)
-        on = None
+        f = torch.baddbmm(biases[-1], h, weights[-1]) * scale + shift  # (K, rows, 3)
+        decisions = None
         if gated:
-            decisions = torch.stack([g(z[i] if inputs_space else h[i])[1] for i, g in enumerate(gates)])  # (K, B)
+            decisions = torch.stack([g(z[i] if inputs_space else h[i])[1] for i, g in enumerate(gates)])  # (K, rows)
             f = torch.where(decisions[..., None], f, torch.zeros_like(f))
-            on = (decisions.to(state.dtype).mean(0) >= 0.5).view(state.shape[:-1])
-        f_mean = f.mean(0).to(state.dtype)  # (B, 3)
+        if side_by_side:
+            b = f.shape[1] // 2
+            force = torch.cat((f[:, :b].reshape(-1, 3), f[:, b:].mean(0))).to(state.dtype)  # (R, 3)
+            on = None if decisions is None else torch.cat(
+                (decisions[:, :b].reshape(-1), decisions[:, b:].to(state.dtype).mean(0) >= 0.5))
+        else:
+            force = f.mean(0).to(state.dtype)  # (B, 3)
+            on = None if decisions is None else decisions.to(state.dtype).mean(0) >= 0.5
+        on = None if on is None else on.view(state.shape[:-1])
         if not physics:
-            return rate_of_force(state, f_mean.view(*state.shape[:-1], 3), coefficients[0]), on
-        return torch.addmm(rate_mmg.reshape(-1, 6), f_mean, mass).view(state.shape), on
+            return rate_of_force(flat_state, force, coefficients[0]).view(state.shape), on
+        return torch.addmm(rate_mmg, force, mass).view(state.shape), on
     return rate
+
+
+class MembersSideBySide(nn.Module):
+    """K members of a `SeedEnsemble` and the ensemble itself predicting side by side, one
+    batched rollout for all of them (no gradient): a batch of R = (K + 1) B rows is K + 1
+    blocks of B rows, block k driven by member k alone (its own forces, gate and MMG), the
+    last block by the ensemble's mean force. Rows do not interact, so each block equals
+    its model's own rollout to round-off (`no_grad_rate`); only the eager no-grad steps
+    (`eager_rate`, ``no_grad_rate``) are defined, None where the ensemble's batched rate
+    does not apply."""
+
+    def __init__(self, ensemble: SeedEnsemble):
+        super().__init__()
+        self.members = ensemble.members
+        self._shared_mmg = ensemble._shared_mmg
+
+    @property
+    def coefficients(self):
+        return self.members[0].coefficients
+
+    @property
+    def kind(self) -> str:
+        return getattr(self.members[0], "kind", "mmg")
+
+    @property
+    def mmg(self):
+        return self.members[0].mmg
+
+    def no_grad_rate(self, like: torch.Tensor):
+        """As `SeedEnsemble.no_grad_rate`, block by block (the class docstring); None where
+        the batched rate does not apply or the rows are not K + 1 equal blocks."""
+        rows = like.reshape(-1, like.shape[-1]).shape[0]
+        if rows % (len(self.members) + 1):
+            return None
+        if any(not isinstance(m, CorrectedModel) or m.no_grad_rate(like) is None for m in self.members):
+            return None
+        if not _common_mass(self.members, like):
+            return None
+        return _members_rate(self.members, like, self._shared_mmg, side_by_side=True)
+
+    def eager_rate(self, state: torch.Tensor, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None] | None:
+        """`no_grad_rate` at state (R, 6) with inputs (R, 4), looked up once per rollout."""
+        return SeedEnsemble.eager_rate(self, state, inputs)
+
+    def forward(self, state: torch.Tensor, inputs: torch.Tensor) -> ForceBreakdown:
+        raise NotImplementedError("members side by side step without gradient only (eager_rate)")

@@ -42,6 +42,7 @@ from sysid.data.scenario import FOLDERS, Maneuver as Kind, recognise
 from sysid.dynamics.equations import eager_predict
 from sysid.dynamics.integrators import Integrator, Method
 from sysid.errors import DataError
+from sysid.hybrid.ensemble import MembersSideBySide, SeedEnsemble
 from sysid.hybrid.rollout_gate import with_rollout_gate
 from sysid.maneuvers.any_model import load_maneuver_model
 from sysid.maneuvers.base import Conditions, Maneuver, Side, TurningCircle, ZigZag
@@ -152,12 +153,13 @@ def closed_loop_indices(model: nn.Module, runs: Sequence[Run], maneuvers: Sequen
 
 
 def _predictions(model: nn.Module, runs: Sequence[Run], starts: Sequence[int], method: Method,
-                 maneuvers: Sequence[Maneuver] | None = None, dt: float = CLOSED_LOOP_DT
-                 ) -> list[tuple[np.ndarray, float | None, dict | None]]:
+                 maneuvers: Sequence[Maneuver] | None = None, dt: float = CLOSED_LOOP_DT,
+                 gates: Sequence[nn.Module] | None = None) -> list[tuple[np.ndarray, float | None, dict | None]]:
     """Each run predicted from its recorded state at `starts` with its recorded inputs, all
     runs in one batched integration (shorter ones padded with their last inputs), and each
     zig-zag of `maneuvers` run closed loop (`closed_loop_indices`): (states (T_i, 6), kNN
-    gate off share or None, closed-loop indices or None) per run."""
+    gate off share or None, closed-loop indices or None) per run; the gate's share of run i
+    from `gates[i]` (default: `model`)."""
     lengths = [len(r) - s for r, s in zip(runs, starts)]
     longest = max(lengths)
     x0 = torch.tensor(np.stack([r.states[s] for r, s in zip(runs, starts)]), dtype=torch.float64)
@@ -169,8 +171,30 @@ def _predictions(model: nn.Module, runs: Sequence[Run], starts: Sequence[int], m
     # the kNN gate's decisions along the rollout from earlier steps' scans (`RolloutGate`: the gate's own)
     states = eager_predict(with_rollout_gate(model), x0, u, runs[0].dt, Integrator(method))
     closed = closed_loop_indices(model, runs, maneuvers if maneuvers is not None else [None] * len(runs), starts, dt)
-    return [(states[:n, i].numpy(), gate_off_share(model, states[:n - 1, i], u[:n - 1, i]), closed[i])
+    return [(states[:n, i].numpy(), gate_off_share(gates[i] if gates is not None else model, states[:n - 1, i],
+                                                   u[:n - 1, i]), closed[i])
             for i, n in enumerate(lengths)]
+
+
+def group_predictions(members: Sequence[nn.Module], runs: Sequence[Run], starts: Sequence[int], method: Method,
+                      maneuvers: Sequence[Maneuver] | None = None, dt: float = CLOSED_LOOP_DT
+                      ) -> tuple[list[Predictions], Predictions]:
+    """(`_predictions` of each of the K `members`, of their mean-of-seeds ensemble
+    `SeedEnsemble`): all K + 1 models' predictions as one batched rollout (each model on its
+    own block of rows, `MembersSideBySide`: the same numbers as each model's own rollout, to
+    round-off) where the ensemble's batched rate applies, else one model after another."""
+    ensemble = SeedEnsemble(list(members))
+    side = MembersSideBySide(ensemble)
+    x0 = torch.zeros(len(runs) * (len(members) + 1), 6, dtype=torch.float64)
+    if side.no_grad_rate(x0) is None:
+        return ([_predictions(m, runs, starts, method, maneuvers, dt) for m in members],
+                _predictions(ensemble, runs, starts, method, maneuvers, dt))
+    blocks = len(members) + 1
+    found = _predictions(side, list(runs) * blocks, list(starts) * blocks, method,
+                         None if maneuvers is None else list(maneuvers) * blocks, dt,
+                         gates=[m for m in (*members, ensemble) for _ in runs])
+    n = len(runs)
+    return [found[j * n:(j + 1) * n] for j in range(len(members))], found[len(members) * n:]
 
 
 def _row(scenario: str, run: Run, maneuver: Maneuver, model: str, values: list[dict], shares: list) -> dict:
@@ -314,6 +338,27 @@ def _predicted_run(path: Path, runs: Sequence[Run], starts: Sequence[int], metho
     """(path, `_predictions` of the model of one run directory): one worker's item."""
     with compute_threads(threads):
         return path, _predictions(load_maneuver_model(path).model, runs, starts, method, maneuvers, dt)
+
+
+def _predicted_group(paths: Sequence[Path], ensemble: Path, runs: Sequence[Run], starts: Sequence[int],
+                     method: Method, threads: int, maneuvers: Sequence[Maneuver] | None = None,
+                     dt: float = CLOSED_LOOP_DT) -> dict[Path, Predictions]:
+    """{path: `_predictions`} of the models of the seed run directories `paths` and of their
+    mean-of-seeds ensemble under the path `ensemble` (`group_predictions`): one worker's item."""
+    with compute_threads(threads):
+        members = [load_maneuver_model(p).model for p in paths]
+        seeds, mean = group_predictions(members, runs, starts, method, maneuvers, dt)
+    return {**dict(zip(paths, seeds)), ensemble: mean}
+
+
+def group_predictor(runs: Mapping[str, Run], method: Method = Method.EULER, threads: int = 1,
+                    closed_loop_dt: float = CLOSED_LOOP_DT) -> Callable[[Sequence[Path], Path], dict[Path, Predictions]]:
+    """As `record_predictor`, for a protocol run's seeds and their mean-of-seeds ensemble
+    together: (the seeds' run directories, the ensemble's path) -> {path: predictions}, the
+    same predictions as `record_predictor` gives each path (to round-off: one batched
+    rollout, `group_predictions`); picklable."""
+    return functools.partial(_predicted_group, runs=list(runs.values()), starts=_execute_starts(runs),
+                             method=method, threads=threads, maneuvers=_maneuvers(runs), dt=closed_loop_dt)
 
 
 def record_predictor(runs: Mapping[str, Run], method: Method = Method.EULER, threads: int = 1,

@@ -19,18 +19,23 @@ from typing import Any, Callable, Hashable, Mapping, Sequence, cast
 from sysid.config.choices import ModelKind
 from sysid.config.experiment import Experiment
 from sysid.data.recordings import Run
-from sysid.maneuvers.recorded import Predictions, model_paths, record_predictor, recorded_test_runs
-from sysid.protocol.seed_runs import SeedGroup, write_ensemble
+from sysid.maneuvers.recorded import (Predictions, group_predictor, model_paths, record_predictor,
+                                      recorded_test_runs)
+from sysid.protocol.seed_runs import SeedGroup, ensemble_name, write_ensemble
 from sysid.workers import Overlap
 
 
-def _work(item: tuple, out: Path, tests: Sequence[Run], predict: Callable):
+def _work(item: tuple, out: Path, tests: Sequence[Run], predict: Callable, predict_group: Callable):
     """One worker's item: ("ensemble", (name, experiment, seed group)) -> `write_ensemble`'s
-    result, or ("record", path) -> the predictions of the model at path."""
+    result; ("record", path) -> the predictions of the model at path; ("group", (paths of
+    the seeds, the ensemble's path)) -> {path: predictions} of the seeds' models and their
+    mean-of-seeds ensemble, one batched rollout (`sysid.maneuvers.recorded.group_predictor`)."""
     kind, payload = item
     if kind == "ensemble":
         name, exp, group = payload
         return write_ensemble(name, exp, group, out, tests, threads=1)
+    if kind == "group":
+        return predict_group(*payload)
     return predict(payload)[1]
 
 
@@ -45,8 +50,9 @@ class AfterTraining:
     def __init__(self, experiments: Mapping[str, Experiment], out: Path, tests: Sequence[Run], data, workers: int,
                  log: Callable[[str], None] = print):
         self.experiments, self.out, self.log = experiments, out, log
-        predict = record_predictor(recorded_test_runs(data))
-        self.pool = Overlap(functools.partial(_work, out=out, tests=tuple(tests), predict=predict), workers,
+        runs = recorded_test_runs(data)
+        self.pool = Overlap(functools.partial(_work, out=out, tests=tuple(tests), predict=record_predictor(runs),
+                                              predict_group=group_predictor(runs)), workers,
                             multiprocessing.get_context("spawn"), self._done)
         self.groups: dict[str, SeedGroup] = {}
         self.ensembles: dict[str, tuple[SeedGroup, tuple]] = {}
@@ -63,10 +69,15 @@ class AfterTraining:
         """Run `name` is complete (`group`: its seeds; None: a run without seeds): its
         ensemble (a learned run) and its models' predictions queued."""
         exp = self.experiments[name]
+        paths = model_paths(self.out / "runs" / name)
         if group is not None and exp.experiment.model is not ModelKind.MMG and group.seeds:
             self.groups[name] = group
             self.pool.add(("ensemble", name), ("ensemble", (name, exp, group)), first=True)
-        for path in model_paths(self.out / "runs" / name):
+            # the seeds' and the ensemble's maneuvers, one batched rollout: the longest pieces, first
+            ensemble = self.out / "runs" / ensemble_name(name, exp.experiment.dataset)
+            self.pool.add(("group", name), ("group", (paths, ensemble)), first=True)
+            return
+        for path in paths:
             self.pool.add(("record", path), ("record", path))
 
     def finish(self) -> None:
@@ -84,7 +95,7 @@ class AfterTraining:
             group = self.groups[subject]
             self.ensembles[subject] = (group, result)
             self.log(f"[{result[0]}] mean of {len(group.seeds)} seeds' networks evaluated")
-            # an ensemble's maneuvers take a few times a single model's: ahead of those queued
-            self.pool.add(("record", result[2]), ("record", result[2]), first=True)
+        elif kind == "group":
+            self.predicted.update(cast(dict, result))
         else:
             self.predicted[subject] = result

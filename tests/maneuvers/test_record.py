@@ -127,3 +127,51 @@ def test_models_predicted_in_workers_write_the_same_file(dataset_dir, tmp_path):
     assert list(frame.model[:3]) == ["recorded", "MMG", "MMG again"]
     turning = frame[(frame.model == "MMG") & frame.maneuver.str.startswith("turning")]
     assert len(turning) == 2 and np.isfinite(turning.advance_m).all()
+
+
+def test_seeds_and_their_ensemble_side_by_side_equal_each_model_alone(runs):
+    """`group_predictions` (two gated hybrids and their mean-of-seeds ensemble as one batched
+    rollout, each on its own rows) against `_predictions` of each model alone: the same
+    open-loop states and closed-loop zig-zag indices to round-off, the same gate shares
+    (the gates' decisions are exact either way); the gate switches the FNN off on part of
+    the runs, so both decisions are taken."""
+    import torch
+    from sysid.dynamics.integrators import Method
+    from sysid.hybrid.correction import ForceCorrection, correction_inputs
+    from sysid.hybrid.ensemble import MembersSideBySide, SeedEnsemble
+    from sysid.hybrid.force_models import CorrectedModel
+    from sysid.hybrid.knn_gate import KNNGate
+    from sysid.maneuvers.recorded import _execute_starts, _maneuvers, _predictions, group_predictions
+    from sysid.mmg.wind import relative_wind
+
+    recorded = list(runs.values())
+    states = torch.tensor(np.concatenate([r.states[::4] for r in recorded[:2]]))  # the turning circles only
+    inputs = torch.tensor(np.concatenate([r.inputs[::4] for r in recorded[:2]]))
+    wind = torch.stack(relative_wind(states[:, 1], states[:, 3], states[:, 4], inputs[:, 2], inputs[:, 3]), -1)
+    s = correction_inputs(states, inputs, wind)
+
+    def hybrid(seed: int) -> CorrectedModel:
+        torch.manual_seed(seed)
+        net = ForceCorrection((16, 16), torch.float64)
+        net.set_standardization(s.mean(0), s.std(0), torch.zeros(3), torch.tensor([0.5, 0.5, 2.0]))
+        with torch.no_grad():
+            bank = net.features(s)
+        return CorrectedModel(MMG(load_ship("esso_osaka")), net, KNNGate(5, 0.99, 16, torch.float64).fit(bank))
+
+    members = [hybrid(1), hybrid(2)]
+    starts, maneuvers = _execute_starts(runs), _maneuvers(runs)
+    assert MembersSideBySide(SeedEnsemble(members)).no_grad_rate(torch.zeros(3 * len(recorded), 6,
+                                                                              dtype=torch.float64)) is not None
+    seeds, ensemble = group_predictions(members, recorded, starts, Method.EULER, maneuvers)
+    alone = [_predictions(m, recorded, starts, Method.EULER, maneuvers) for m in (*members, SeedEnsemble(members))]
+    shares = []
+    for together, own in zip((*seeds, ensemble), alone):
+        for (x, share, closed), (x_own, share_own, closed_own) in zip(together, own):
+            np.testing.assert_allclose(x, x_own, rtol=1e-9, atol=1e-9)
+            assert share == share_own
+            shares.append(share)
+            assert (closed is None) == (closed_own is None)
+            if closed is not None:
+                for key, value in closed.items():
+                    assert value == pytest.approx(closed_own[key], rel=1e-9, abs=1e-9, nan_ok=True)
+    assert 0.0 < max(shares) and min(shares) < 1.0
