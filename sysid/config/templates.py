@@ -148,8 +148,8 @@ def ship_template(name: str) -> str:
               "", "[maneuvering]",
               "# the defaults of `sysid maneuver` (no force depends on them); without rudder_rate, the",
               "# 2.32 deg/s at full scale (SOLAS: 35 deg to 30 deg the other side in 28 s), Froude-scaled by `scale`"]
-    for key, value in start.maneuvering.items():
-        lines.append(_line(key, repr(value), f"{MANEUVERING_KEYS[key][2]}, {_MANEUVERING_TEXT[key]}"))
+    for key, setting in start.maneuvering.items():
+        lines.append(_line(key, repr(setting), f"{MANEUVERING_KEYS[key][2]}, {_MANEUVERING_TEXT[key]}"))
     lines += ["", "[sensors]",
               "# where the instruments sit (used by `sysid preprocess` on raw logs only)"]
     for key, (unit, what) in SENSOR_KEYS.items():
