@@ -47,8 +47,6 @@ class Plan:
         self.scale, self.shift = scale, shift
         self.parameters = tuple(parameters)
         self.members = self.parameters[0].shape[0]
-        self.sums: layers.GradientSums | None = None
-        self._token: torch.Tensor | None = None
         if self.members != 1:  # K side by side: the parameters as they are, (K, ...)
             self.weights, self.biases = list(self.parameters[0::2]), list(self.parameters[1::2])
             return
@@ -59,37 +57,12 @@ class Plan:
             self.last_bias = self.biases[-1].unsqueeze(-1)
             self.doubled = [(2.0 * w, 2.0 * b) for w, b in zip(self.weights[:-1], self.biases[:-1])]
 
-    def token(self) -> torch.Tensor:
-        """The rollout's stand-in for the parameters (`_ParameterSum`'s output), made at the first
-        call with the sums of the parameters' gradients: every call takes it in their place."""
-        if self._token is None:
-            self.sums = layers.GradientSums(len(self.weights), self.members == 1)
-            self._token = _ParameterSum.apply(self.sums, *self.parameters)
-        return self._token
 
-
-class _ParameterSum(torch.autograd.Function):
-    """(sums, W_1, b_1, ..., W_L, b_L) -> an empty tensor that each call of a rollout takes in
-    place of the parameters; each call's backward adds its parameters' gradients to `sums`
-    (`sysid.hybrid.layers.GradientSums`) in place. Its backward, which runs after every call's,
-    returns those sums: in place of a new gradient per call and autograd's sum of them."""
-
-    @staticmethod
-    def forward(ctx, sums, *parameters):
-        ctx.set_materialize_grads(False)
-        ctx.sums = sums  # not the plan: the plan holds this Function's output
-        return parameters[0].new_empty(0)
-
-    @staticmethod
-    def backward(ctx, _):
-        return None, *ctx.sums.take()
-
-
-def _force_backward(plan: Plan, h, grad_rate, grad_nn, state_gradient: bool, parameters: bool) -> tuple:
+def _force_backward(plan: Plan, h, grad_rate, grad_nn, state_gradient: bool) -> tuple:
     """The chain rule's part shared by both Functions' backwards: (rows, g_{dx/dt} (rows, 6) or
-    None, g_z or None) from the gradients of dx/dt and F_NN, with g_F = g_{F_NN} + g_{dx/dt} M^T
-    through the layers' backward, the parameters' gradients (with `parameters`) added to the
-    rollout's sums (`_ParameterSum`); rows = the batch flattened (K x rows for K members)."""
+    None, g_z or None, the parameters' gradients) from the gradients of dx/dt and F_NN, with
+    g_F = g_{F_NN} + g_{dx/dt} M^T through the layers' backward; rows = the batch flattened
+    (K x rows for K members)."""
     rows = h[0].shape[-2] * plan.members
     g_rate = None if grad_rate is None else grad_rate.reshape(rows, 6)
     if grad_nn is None:
@@ -97,21 +70,21 @@ def _force_backward(plan: Plan, h, grad_rate, grad_nn, state_gradient: bool, par
     else:
         g_force = grad_nn.reshape(rows, 3) if g_rate is None else torch.addmm(grad_nn.reshape(rows, 3), g_rate,
                                                                                 plan.mass_T)
-    g_z = None
-    if g_force is not None and (state_gradient or parameters):
+    g_z, grads = None, [None] * len(plan.parameters)
+    if g_force is not None:
         single = plan.members == 1
-        g_z = layers.backward(g_force if single else g_force.view(plan.members, -1, 3), h, plan.weights,
-                              plan.scale, single, state_gradient, plan.sums if parameters else None)[0]
-    return rows, g_rate, g_z
+        g_z, grads = layers.backward(g_force if single else g_force.view(plan.members, -1, 3), h, plan.weights,
+                                     plan.scale, single, state_gradient)
+    return rows, g_rate, g_z, grads
 
 
 class _HybridRate(torch.autograd.Function):
-    """(state, inputs, plan, token) -> (dx/dt, F_NN, F_MMG), the parameters the plan's (W_i (K,
-    n_{i-1}, n_i), b_i (K, n_i) as `sysid.hybrid.correction.ForceCorrection` holds them), their
-    gradient through `token` (`Plan.token`); with K > 1, state (K, ..., 6)."""
+    """(state, inputs, plan, W_1, b_1, ..., W_L, b_L) -> (dx/dt, F_NN, F_MMG); W_i (K, n_{i-1},
+    n_i), b_i (K, n_i) as `sysid.hybrid.correction.ForceCorrection` holds them (the plan's);
+    with K > 1, state (K, ..., 6)."""
 
     @staticmethod
-    def forward(ctx, state, inputs, plan, token):
+    def forward(ctx, state, inputs, plan, *parameters):
         ctx.set_materialize_grads(False)
         state_gradient = ctx.needs_input_grad[0]
         rate_mmg, f_mmg, z, jacobian = plan.kernel(state, inputs, state_gradient)
@@ -134,17 +107,16 @@ class _HybridRate(torch.autograd.Function):
         jacobian, *h = ctx.saved_tensors
         plan = ctx.plan
         state_gradient = ctx.needs_input_grad[0]
-        _, g_rate, g_z = _force_backward(plan, h, grad_rate, grad_nn, state_gradient, ctx.needs_input_grad[3])
+        _, g_rate, g_z, grads = _force_backward(plan, h, grad_rate, grad_nn, state_gradient)
         # (..., 6): the Jacobian's batch shape, the state's
         g_state = plan.kernel.state_gradient(jacobian, g_rate, grad_mmg, g_z) if state_gradient else None
-        return g_state, None, None, None
+        return g_state, None, None, *grads
 
 
 def hybrid_rate(state: torch.Tensor, inputs: torch.Tensor, plan: Plan) -> tuple:
     """(dx/dt (..., 6), F_NN (..., 3), F_MMG (..., 3)) at state (..., 6) with inputs (..., 4)
-    (see the module docstring), rows contiguous; `plan` of this rollout (its calls' parameter
-    gradients summed once, `_ParameterSum`)."""
-    return _HybridRate.apply(state, inputs, plan, plan.token())
+    (see the module docstring), rows contiguous; `plan` of this rollout."""
+    return _HybridRate.apply(state, inputs, plan, *plan.parameters)
 
 
 # NN-only (F = F_NN): the same Function shape without the MMG. The features of the equations
@@ -210,11 +182,11 @@ def _inputs_and_kinematics(state: torch.Tensor, inputs: torch.Tensor, plan: NNPl
 
 
 class _NNRate(torch.autograd.Function):
-    """(state, inputs, plan, token) -> (dx/dt, F_NN, zeros in place of F_MMG) of an NN-only
-    model; parameters and token as `_HybridRate`'s; with K > 1, state (K, ..., 6)."""
+    """(state, inputs, plan, W_1, b_1, ..., W_L, b_L) -> (dx/dt, F_NN, zeros in place of F_MMG) of
+    an NN-only model; parameters as `_HybridRate`'s; with K > 1, state (K, ..., 6)."""
 
     @staticmethod
-    def forward(ctx, state, inputs, plan, token):
+    def forward(ctx, state, inputs, plan, *parameters):
         ctx.set_materialize_grads(False)
         state_gradient = ctx.needs_input_grad[0]
         z, kinematic, jacobian = _inputs_and_kinematics(state, inputs, plan, state_gradient)
@@ -239,7 +211,7 @@ class _NNRate(torch.autograd.Function):
         jacobian, *h = ctx.saved_tensors
         plan = ctx.plan
         state_gradient = ctx.needs_input_grad[0]
-        rows, g_rate, g_z = _force_backward(plan, h, grad_rate, grad_nn, state_gradient, ctx.needs_input_grad[3])
+        rows, g_rate, g_z, grads = _force_backward(plan, h, grad_rate, grad_nn, state_gradient)
         g_state = None
         if state_gradient and (g_rate is not None or g_z is not None):
             g_kinematic = jacobian.new_zeros(rows, 7) if g_rate is None else torch.mm(g_rate, plan.kinematic_T)
@@ -250,7 +222,7 @@ class _NNRate(torch.autograd.Function):
             if g_rate is not None:
                 g_state = torch.addmm(g_state, g_rate, plan.state_T)
             g_state = g_state.view(*ctx.batch, 6)
-        return g_state, None, None, None
+        return g_state, None, None, *grads
 
 
 def nn_rate(state: torch.Tensor, inputs: torch.Tensor, plan: NNPlan) -> tuple:
@@ -258,4 +230,4 @@ def nn_rate(state: torch.Tensor, inputs: torch.Tensor, plan: NNPlan) -> tuple:
     (..., 6) with inputs (..., 4): s and the equations of motion in torch without autograd,
     with their Jacobian (`sysid.mmg.tangents`' relative wind), F_NN by the FNN's layers; its
     backward the chain rule written out as `_HybridRate`'s. `plan` of this rollout."""
-    return _NNRate.apply(state, inputs, plan, plan.token())
+    return _NNRate.apply(state, inputs, plan, *plan.parameters)

@@ -88,74 +88,28 @@ def forward_members(z: torch.Tensor, weights, biases, scale: torch.Tensor,
     return torch.addcmul(shift, y, scale, out=force), h
 
 
-def backward(grad: torch.Tensor, h, weights, scale: torch.Tensor, single: bool, input_gradient: bool,
-             sums: GradientSums | None = None) -> tuple[torch.Tensor | None, list[torch.Tensor]]:
+def backward(grad: torch.Tensor, h, weights, scale: torch.Tensor, single: bool,
+             input_gradient: bool) -> tuple[torch.Tensor | None, list[torch.Tensor]]:
     """(g_z or None, [dW_1, db_1, ..., dW_L, db_L]) for the gradient `grad` of F (rows, n_L) (one
     network, `single`: 2-d tensors; gradients (1, ...) as the module holds them) or (K, rows,
-    n_L); `h` and `weights` as the forward used them. g_z only with `input_gradient`. With
-    `sums`, the parameters' gradients are added to it in place (then an empty list)."""
+    n_L); `h` and `weights` as the forward used them. g_z only with `input_gradient`."""
     mm = torch.mm if single else torch.bmm
     g = grad * scale
     n = len(weights)
-    grads: list[torch.Tensor] = [grad] * (2 * n) if sums is None else []
+    grads: list[torch.Tensor] = [grad] * (2 * n)
     g_in: torch.Tensor | None = None
     for i in range(n - 1, -1, -1):
         h_in = h[i]
-        if sums is not None:
-            sums.add(i, h_in, g)
-        else:
-            # narrow products transposed (dW_L = (g^T h)^T, g_z = (W_1 g^T)^T), as in the forwards
-            d_w = mm(g.mT, h_in).mT if i == n - 1 else mm(h_in.mT, g)
-            grads[2 * i] = d_w.unsqueeze(0) if single else d_w
-            grads[2 * i + 1] = g.sum(-2, keepdim=single)  # (1, n_i) or (K, n_i)
+        # narrow products transposed (dW_L = (g^T h)^T, g_z = (W_1 g^T)^T), as in the forwards
+        d_w = mm(g.mT, h_in).mT if i == n - 1 else mm(h_in.mT, g)
+        grads[2 * i] = d_w.unsqueeze(0) if single else d_w
+        grads[2 * i + 1] = g.sum(-2, keepdim=single)  # (1, n_i) or (K, n_i)
         if i > 0:  # (g W^T) (1 - h^2) in place of g W^T
             g_h = mm(g, weights[i].mT)
             g = torch.ops.aten.tanh_backward.grad_input(g_h, h_in, grad_input=g_h)
         elif input_gradient:
             g_in = mm(weights[0], g.mT).mT.contiguous()
     return g_in, grads
-
-
-class GradientSums:
-    """Every parameter's gradient summed over the calls of one rollout, each call's added in
-    place as its backward runs: dW_i += h_{i-1}^T g_i as one product into the sum (the output
-    layer's transposed, as `backward`'s), db_i += sum_rows g_i; in place of a new gradient per
-    call and autograd's sum of them. `take` gives the sums, as `backward` gives one call's."""
-
-    def __init__(self, layers: int, single: bool):
-        self.layers, self.single = layers, single
-        self.sums: list[torch.Tensor | None] = [None] * (2 * layers)
-
-    def add(self, i: int, h: torch.Tensor, g: torch.Tensor) -> None:
-        """Adds layer i's (0-based) dW and db of one call, from its input h (rows, n_{i-1}) and
-        gradient g (rows, n_i), or (K, rows, ·)."""
-        narrow = i == self.layers - 1
-        a, b = (g.mT, h) if narrow else (h.mT, g)  # dW (dW^T for the narrow layer) = a b
-        d_w, d_b = self.sums[2 * i], self.sums[2 * i + 1]
-        if d_w is None:
-            self.sums[2 * i] = torch.mm(a, b) if self.single else torch.bmm(a, b)
-            self.sums[2 * i + 1] = g.sum(-2)
-        else:
-            if self.single:
-                d_w.addmm_(a, b)
-            else:
-                d_w.baddbmm_(a, b)
-            assert d_b is not None
-            d_b.add_(g.sum(-2))
-
-    def take(self) -> list[torch.Tensor | None]:
-        """[dW_1, db_1, ..., dW_L, db_L] as the module holds them ((1, ...) for one network), or
-        Nones where no call added; the sums start afresh (a next backward of the rollout)."""
-        out: list[torch.Tensor | None] = []
-        for i in range(self.layers):
-            d_w, d_b = self.sums[2 * i], self.sums[2 * i + 1]
-            if d_w is not None and i == self.layers - 1:
-                d_w = d_w.mT
-            if d_w is not None and self.single:
-                d_w, d_b = d_w.unsqueeze(0), d_b.unsqueeze(0)
-            out += [d_w, d_b]
-        self.sums = [None] * (2 * self.layers)
-        return out
 
 
 class _Layers(torch.autograd.Function):

@@ -67,10 +67,10 @@ def test_gradcheck_of_the_fused_rate_in_float64(d2):
 
 @pytest.mark.parametrize("members", [1, 3])
 def test_gradcheck_of_a_rollout_of_calls_sharing_a_plan_in_float64(d2, members):
-    """Three Euler steps through one plan (one rollout: each parameter's gradient summed over
-    the calls in place, `fused_rate._ParameterSum`), and a fourth call whose outputs reach
-    nothing (its gradient counts as zero): gradcheck with respect to the first state and every
-    parameter, one network and K = 3 side by side."""
+    """Three Euler steps through one plan (a rollout's: the plan's views of the parameters shared
+    by its calls, each call's parameter gradients summed by autograd), and a fourth call whose
+    outputs reach nothing: gradcheck with respect to the first state and every parameter, one
+    network and K = 3 side by side."""
     exp, states, inputs, _ = d2
     model = _hybrid(exp, states, torch.float64, (8, 6), members=members)
     net = model.correction_net

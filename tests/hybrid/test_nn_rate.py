@@ -69,9 +69,9 @@ def test_gradcheck_of_the_nn_only_rate_in_float64(d2, members):
 
 @pytest.mark.parametrize("members", [1, 3])
 def test_gradcheck_of_a_rollout_of_calls_sharing_a_plan_in_float64(d2, members):
-    """Three Euler steps through one plan (each parameter's gradient summed over the calls in
-    place, `fused_rate._ParameterSum`), and a fourth call whose outputs reach nothing:
-    gradcheck with respect to the first state and every parameter."""
+    """Three Euler steps through one plan (a rollout's: its calls share the plan's views of the
+    parameters), and a fourth call whose outputs reach nothing: gradcheck with respect to the
+    first state and every parameter."""
     exp, states, inputs, _ = d2
     model = _nn_only(exp, states, torch.float64, (8, 6), members)
     net = model.correction_net
