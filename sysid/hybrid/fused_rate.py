@@ -124,28 +124,36 @@ def hybrid_rate(state: torch.Tensor, inputs: torch.Tensor, plan: Plan) -> tuple:
 # the (16, 6) matrix of the mass terms, a = (u, v, r, u, u, v, v), b = (r, r, r, cos psi, sin psi,
 # cos psi, sin psi) [m/s, 1/s]
 _KINEMATIC_A = (1, 3, 5, 1, 1, 3, 3)  # the state's columns of a
-_TABLES: dict[tuple, tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = {}
+_TABLES: dict[tuple, torch.Tensor] = {}
 
 
-def _tables(like: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """((6, 7) tangents (columns) of a, (6, 7) of r in b), then (6, 5) tangents of the FNN
-    inputs u, v_m, r, delta, n_p; in `like`'s dtype and device, made once."""
+def _chain(like: torch.Tensor) -> torch.Tensor:
+    """(23, 8) the constant part of the state gradient: rows (g_ab * b (7), g_ab * a (7), g_s
+    (9)), columns the state's six then the coefficients of cos psi and sin psi in g_psi. d(a b)
+    = b da + a db: da picks u, v or r (`_KINEMATIC_A`), db is r's (the first three) or psi's
+    (-sin, cos, -sin, cos); s = (u, v, r, delta, n, omega (2), cos psi, sin psi) (omega's
+    tangents are not constant: the backward adds them). In `like`'s dtype and device, made once."""
     key = (like.dtype, like.device)
     found = _TABLES.get(key)
     if found is None:
         with torch.inference_mode(False), torch.no_grad():
-            E = torch.eye(6, dtype=like.dtype, device=like.device)
-            r_in_b = torch.zeros(6, 7, dtype=like.dtype, device=like.device)
-            r_in_b[5, :3] = 1.0
-            first = torch.cat([E[:, [1, 3, 5]], torch.zeros(6, 2, dtype=like.dtype, device=like.device)], -1)
-            found = _TABLES[key] = (E[:, list(_KINEMATIC_A)].clone(), r_in_b, first)
+            C = torch.zeros(23, 8, dtype=like.dtype, device=like.device)
+            for j, i in enumerate(_KINEMATIC_A):
+                C[j, i] = 1.0                           # b_j da_j
+            C[7:10, 5] = 1.0                            # a_j dr (j < 3)
+            C[[10, 12], 7] = -1.0                       # a_j d(cos psi) = -a_j sin psi dpsi
+            C[[11, 13], 6] = 1.0                        # a_j d(sin psi) = a_j cos psi dpsi
+            C[14, 1] = C[15, 3] = C[16, 5] = 1.0        # s: u, v, r
+            C[21, 7], C[22, 6] = -1.0, 1.0              # s: cos psi, sin psi
+            found = _TABLES[key] = C
     return found
 
 
 class NNPlan(Plan):
     """`Plan` of an NN-only rollout: no kernel; the (16, 6) matrix of the equations of motion
     (`sysid.mmg.vjp.rate_of_force`'s; its first 3 rows are the mass terms M), the FNN's
-    standardisation mean and std (9,)."""
+    standardisation mean and std (9,); for the backward: the kinematic features' (6, 7) and
+    the state's (6, 6) blocks transposed, and `_chain`'s (23, 8)."""
 
     def __init__(self, rates: torch.Tensor, mean: torch.Tensor, std: torch.Tensor, scale: torch.Tensor,
                  shift: torch.Tensor, parameters):
@@ -153,11 +161,13 @@ class NNPlan(Plan):
         self.rates, self.mean, self.std = rates, mean, std
         self.kinematic_T = rates[3:10].mT.contiguous()  # (6, 7)
         self.state_T = rates[10:].mT.contiguous()       # (6, 6)
+        self.chain = _chain(rates)
 
 
 def _inputs_and_kinematics(state: torch.Tensor, inputs: torch.Tensor, plan: NNPlan, jacobian: bool):
-    """(z (rows, 9) the FNN's standardised inputs, a * b (rows, 7), the Jacobian (rows, 6, 16) of
-    (a * b, z) with respect to the state, or None without `jacobian`); rows = the batch flattened."""
+    """(z (rows, 9) the FNN's standardised inputs, a * b (rows, 7), then with `jacobian` what
+    the backward's chain rule reads: a, b (rows, 7) and the relative wind's tangents
+    (rows, 6, 2), else Nones); rows = the batch flattened."""
     state, inputs = state.reshape(-1, 6), inputs.reshape(-1, 4)
     k, B = constants(state), basis(state)
     m = motion_tangents(state, k, B)
@@ -170,15 +180,24 @@ def _inputs_and_kinematics(state: torch.Tensor, inputs: torch.Tensor, plan: NNPl
     s = torch.cat([u, v, r, delta, n, wind.omega, cos_psi, sin_psi], -1)
     z = (s - plan.mean) / plan.std
     if not jacobian:
-        return z, a * b, None
-    d_a, r_in_b, first = _tables(state)
-    zero = torch.zeros_like(u)
-    trig = torch.cat([-sin_psi, cos_psi], -1)
-    # d b = r's tangent (first three) + psi's times (0, 0, 0, -sin, cos, -sin, cos)
-    d_b = torch.addcmul(r_in_b, B.E[:, 4:5], torch.cat([zero, zero, zero, trig, trig], -1).unsqueeze(-2))
-    d_kinematic = torch.addcmul(a.unsqueeze(-2) * d_b, b.unsqueeze(-2), d_a)              # (rows, 6, 7)
-    d_s = torch.cat([first.expand(state.shape[0], 6, 5), wind.d_omega, B.E[:, 4:5] * trig.unsqueeze(-2)], -1)
-    return z, a * b, torch.cat([d_kinematic, d_s / plan.std], -1)
+        return z, a * b, None, None, None
+    return z, a * b, a, b, wind.d_omega
+
+
+def _state_gradient(plan: NNPlan, a, b, d_omega, g_rate, g_z, rows: int) -> torch.Tensor:
+    """g_x (rows, 6) from g_{dx/dt} (rows, 6) and g_z (rows, 9) (either None: zeros): the chain
+    rule through dx/dt's state and kinematic features and through s, with the Jacobian's
+    constant part as one product (`_chain`), psi's trigonometric and the wind's tangents
+    row by row."""
+    if g_rate is None:
+        g_rate = a.new_zeros(rows, 6)
+    g_kinematic = torch.mm(g_rate, plan.kinematic_T)
+    g_s = a.new_zeros(rows, 9) if g_z is None else g_z.reshape(rows, 9) / plan.std
+    out = torch.mm(torch.cat([g_kinematic * b, g_kinematic * a, g_s], -1), plan.chain)
+    g_state = torch.addmm(out[:, :6], g_rate, plan.state_T)
+    g_state = g_state + (d_omega * g_s[:, 5:7].unsqueeze(-2)).sum(-1)   # the wind's tangents
+    g_state[:, 4] += (out[:, 6:] * b[:, 3:5]).sum(-1)
+    return g_state
 
 
 class _NNRate(torch.autograd.Function):
@@ -189,7 +208,7 @@ class _NNRate(torch.autograd.Function):
     def forward(ctx, state, inputs, plan, *parameters):
         ctx.set_materialize_grads(False)
         state_gradient = ctx.needs_input_grad[0]
-        z, kinematic, jacobian = _inputs_and_kinematics(state, inputs, plan, state_gradient)
+        z, kinematic, a, b, d_omega = _inputs_and_kinematics(state, inputs, plan, state_gradient)
         rows = z.shape[0]
         if plan.members == 1:
             f_nn = z.new_empty(rows, 3)
@@ -202,26 +221,19 @@ class _NNRate(torch.autograd.Function):
         rate = torch.cat([f_nn, kinematic, state.reshape(rows, 6)], -1) @ plan.rates
         f_mmg = torch.zeros_like(f_nn)
         ctx.mark_non_differentiable(f_mmg)
-        ctx.save_for_backward(jacobian, *h)
+        ctx.save_for_backward(a, b, d_omega, *h)
         ctx.plan, ctx.batch = plan, state.shape[:-1]
         return rate.view(state.shape), f_nn.view(*ctx.batch, 3), f_mmg.view(*ctx.batch, 3)
 
     @staticmethod
     def backward(ctx, grad_rate, grad_nn, grad_mmg):
-        jacobian, *h = ctx.saved_tensors
+        a, b, d_omega, *h = ctx.saved_tensors
         plan = ctx.plan
         state_gradient = ctx.needs_input_grad[0]
         rows, g_rate, g_z, grads = _force_backward(plan, h, grad_rate, grad_nn, state_gradient)
         g_state = None
         if state_gradient and (g_rate is not None or g_z is not None):
-            g_kinematic = jacobian.new_zeros(rows, 7) if g_rate is None else torch.mm(g_rate, plan.kinematic_T)
-            g_s = jacobian.new_zeros(rows, 9) if g_z is None else g_z.reshape(rows, 9)
-            # the Jacobian times the features' gradient, row by row (a product, a sum: quicker
-            # than a batched product of rows x (6, 16) by (16, 1))
-            g_state = (jacobian * torch.cat([g_kinematic, g_s], -1).unsqueeze(-2)).sum(-1)
-            if g_rate is not None:
-                g_state = torch.addmm(g_state, g_rate, plan.state_T)
-            g_state = g_state.view(*ctx.batch, 6)
+            g_state = _state_gradient(plan, a, b, d_omega, g_rate, g_z, rows).view(*ctx.batch, 6)
         return g_state, None, None, *grads
 
 
