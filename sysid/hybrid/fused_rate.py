@@ -124,36 +124,11 @@ def hybrid_rate(state: torch.Tensor, inputs: torch.Tensor, plan: Plan) -> tuple:
 # the (16, 6) matrix of the mass terms, a = (u, v, r, u, u, v, v), b = (r, r, r, cos psi, sin psi,
 # cos psi, sin psi) [m/s, 1/s]
 _KINEMATIC_A = (1, 3, 5, 1, 1, 3, 3)  # the state's columns of a
-_TABLES: dict[tuple, torch.Tensor] = {}
-
-
-def _chain(like: torch.Tensor) -> torch.Tensor:
-    """(23, 8) the constant part of the state gradient: rows (g_ab * b (7), g_ab * a (7), g_s
-    (9)), columns the state's six then the coefficients of cos psi and sin psi in g_psi. d(a b)
-    = b da + a db: da picks u, v or r (`_KINEMATIC_A`), db is r's (the first three) or psi's
-    (-sin, cos, -sin, cos); s = (u, v, r, delta, n, omega (2), cos psi, sin psi) (omega's
-    tangents are not constant: the backward adds them). In `like`'s dtype and device, made once."""
-    key = (like.dtype, like.device)
-    found = _TABLES.get(key)
-    if found is None:
-        with torch.inference_mode(False), torch.no_grad():
-            C = torch.zeros(23, 8, dtype=like.dtype, device=like.device)
-            for j, i in enumerate(_KINEMATIC_A):
-                C[j, i] = 1.0                           # b_j da_j
-            C[7:10, 5] = 1.0                            # a_j dr (j < 3)
-            C[[10, 12], 7] = -1.0                       # a_j d(cos psi) = -a_j sin psi dpsi
-            C[[11, 13], 6] = 1.0                        # a_j d(sin psi) = a_j cos psi dpsi
-            C[14, 1] = C[15, 3] = C[16, 5] = 1.0        # s: u, v, r
-            C[21, 7], C[22, 6] = -1.0, 1.0              # s: cos psi, sin psi
-            found = _TABLES[key] = C
-    return found
-
-
 class NNPlan(Plan):
     """`Plan` of an NN-only rollout: no kernel; the (16, 6) matrix of the equations of motion
     (`sysid.mmg.vjp.rate_of_force`'s; its first 3 rows are the mass terms M), the FNN's
-    standardisation mean and std (9,); for the backward: the kinematic features' (6, 7) and
-    the state's (6, 6) blocks transposed, and `_chain`'s (23, 8)."""
+    standardisation mean and std (9,); for the backward the kinematic features' (6, 7) and
+    the state's (6, 6) blocks transposed."""
 
     def __init__(self, rates: torch.Tensor, mean: torch.Tensor, std: torch.Tensor, scale: torch.Tensor,
                  shift: torch.Tensor, parameters):
@@ -161,13 +136,13 @@ class NNPlan(Plan):
         self.rates, self.mean, self.std = rates, mean, std
         self.kinematic_T = rates[3:10].mT.contiguous()  # (6, 7)
         self.state_T = rates[10:].mT.contiguous()       # (6, 6)
-        self.chain = _chain(rates)
 
 
 def _inputs_and_kinematics(state: torch.Tensor, inputs: torch.Tensor, plan: NNPlan, jacobian: bool):
     """(z (rows, 9) the FNN's standardised inputs, a * b (rows, 7), then with `jacobian` what
-    the backward's chain rule reads: a, b (rows, 7) and the relative wind's tangents
-    (rows, 6, 2), else Nones); rows = the batch flattened."""
+    the backward's chain rule reads: a, b (rows, 7), the tangents (rows, 6) of the relative
+    wind's speed U_A and angle gamma_A, cos gamma_A, sin gamma_A and U_A (rows, 1), else
+    None); rows = the batch flattened."""
     state, inputs = state.reshape(-1, 6), inputs.reshape(-1, 4)
     k, B = constants(state), basis(state)
     m = motion_tangents(state, k, B)
@@ -180,23 +155,36 @@ def _inputs_and_kinematics(state: torch.Tensor, inputs: torch.Tensor, plan: NNPl
     s = torch.cat([u, v, r, delta, n, wind.omega, cos_psi, sin_psi], -1)
     z = (s - plan.mean) / plan.std
     if not jacobian:
-        return z, a * b, None, None, None
-    return z, a * b, a, b, wind.d_omega
+        return z, a * b, None
+    return z, a * b, (a, b, wind.d_UA, wind.d_gamma, wind.cos_g, wind.sin_g, wind.U_A)
 
 
-def _state_gradient(plan: NNPlan, a, b, d_omega, g_rate, g_z, rows: int) -> torch.Tensor:
-    """g_x (rows, 6) from g_{dx/dt} (rows, 6) and g_z (rows, 9) (either None: zeros): the chain
-    rule through dx/dt's state and kinematic features and through s, with the Jacobian's
-    constant part as one product (`_chain`), psi's trigonometric and the wind's tangents
-    row by row."""
+def _state_gradient(plan: NNPlan, saved, g_rate, g_z, rows: int) -> torch.Tensor:
+    """g_x (rows, 6) from g_{dx/dt} (rows, 6) and g_z (rows, 9) (either None: zeros), the chain
+    rule column by column: x and y enter nothing; u, v, r through s = (u, v, r, ...) and a * b
+    with d(a b) = b da + a db (a = (u, v, r, u, u, v, v), b = (r, r, r, cos psi, sin psi, cos
+    psi, sin psi)); psi through cos psi and sin psi; u, v, psi through the relative wind
+    omega = U_A (cos g, sin g) (g = gamma_A): g_omega . d omega = (g_omega . (cos g, sin g)) dU_A
+    + U_A (g_omega . (-sin g, cos g)) dg; and dx/dt's own state terms (psi_dot = r)."""
+    a, b, d_UA, d_gamma, cos_g, sin_g, U_A = saved
     if g_rate is None:
         g_rate = a.new_zeros(rows, 6)
-    g_kinematic = torch.mm(g_rate, plan.kinematic_T)
-    g_s = a.new_zeros(rows, 9) if g_z is None else g_z.reshape(rows, 9) / plan.std
-    out = torch.mm(torch.cat([g_kinematic * b, g_kinematic * a, g_s], -1), plan.chain)
-    g_state = torch.addmm(out[:, :6], g_rate, plan.state_T)
-    g_state = g_state + (d_omega * g_s[:, 5:7].unsqueeze(-2)).sum(-1)   # the wind's tangents
-    g_state[:, 4] += (out[:, 6:] * b[:, 3:5]).sum(-1)
+    g_ab = torch.mm(g_rate, plan.kinematic_T).split(1, -1)        # (rows, 1) each, of a * b's 7
+    g_s = (a.new_zeros(rows, 9) if g_z is None else g_z.reshape(rows, 9) / plan.std).split(1, -1)
+    u, v, r, cos_psi, sin_psi = a[:, :1], a[:, 1:2], a[:, 2:3], b[:, 3:4], b[:, 4:5]
+    g_u = torch.addcmul(torch.addcmul(torch.addcmul(g_s[0], g_ab[0], r), g_ab[3], cos_psi), g_ab[4], sin_psi)
+    g_v = torch.addcmul(torch.addcmul(torch.addcmul(g_s[1], g_ab[1], r), g_ab[5], cos_psi), g_ab[6], sin_psi)
+    g_r = torch.addcmul(torch.addcmul(torch.addcmul(g_s[2], g_ab[0], u), g_ab[1], v), g_ab[2], r, value=2.0)
+    g_cos = torch.addcmul(torch.addcmul(g_s[7], g_ab[3], u), g_ab[5], v)  # of cos psi, then of sin psi
+    g_sin = torch.addcmul(torch.addcmul(g_s[8], g_ab[4], u), g_ab[6], v)
+    g_psi = torch.addcmul(g_sin * cos_psi, g_cos, sin_psi, value=-1.0)
+    g_speed = torch.addcmul(g_s[5] * cos_g, g_s[6], sin_g)                 # of U_A
+    g_angle = torch.addcmul(g_s[6] * cos_g, g_s[5], sin_g, value=-1.0) * U_A
+    g_state = torch.addmm(torch.addcmul(g_speed * d_UA, g_angle, d_gamma), g_rate, plan.state_T)
+    g_state[:, 1:2] += g_u
+    g_state[:, 3:4] += g_v
+    g_state[:, 4:5] += g_psi
+    g_state[:, 5:6] += g_r
     return g_state
 
 
@@ -208,7 +196,7 @@ class _NNRate(torch.autograd.Function):
     def forward(ctx, state, inputs, plan, *parameters):
         ctx.set_materialize_grads(False)
         state_gradient = ctx.needs_input_grad[0]
-        z, kinematic, a, b, d_omega = _inputs_and_kinematics(state, inputs, plan, state_gradient)
+        z, kinematic, saved = _inputs_and_kinematics(state, inputs, plan, state_gradient)
         rows = z.shape[0]
         if plan.members == 1:
             f_nn = z.new_empty(rows, 3)
@@ -221,19 +209,19 @@ class _NNRate(torch.autograd.Function):
         rate = torch.cat([f_nn, kinematic, state.reshape(rows, 6)], -1) @ plan.rates
         f_mmg = torch.zeros_like(f_nn)
         ctx.mark_non_differentiable(f_mmg)
-        ctx.save_for_backward(a, b, d_omega, *h)
+        ctx.save_for_backward(*(saved or (None,) * 7), *h)
         ctx.plan, ctx.batch = plan, state.shape[:-1]
         return rate.view(state.shape), f_nn.view(*ctx.batch, 3), f_mmg.view(*ctx.batch, 3)
 
     @staticmethod
     def backward(ctx, grad_rate, grad_nn, grad_mmg):
-        a, b, d_omega, *h = ctx.saved_tensors
+        saved, h = ctx.saved_tensors[:7], ctx.saved_tensors[7:]
         plan = ctx.plan
         state_gradient = ctx.needs_input_grad[0]
         rows, g_rate, g_z, grads = _force_backward(plan, h, grad_rate, grad_nn, state_gradient)
         g_state = None
         if state_gradient and (g_rate is not None or g_z is not None):
-            g_state = _state_gradient(plan, a, b, d_omega, g_rate, g_z, rows).view(*ctx.batch, 6)
+            g_state = _state_gradient(plan, saved, g_rate, g_z, rows).view(*ctx.batch, 6)
         return g_state, None, None, *grads
 
 

@@ -169,14 +169,16 @@ class _Propeller(NamedTuple):
 
 
 class _Wind(NamedTuple):
-    """The relative wind: body-frame components, its speed and angle, with tangents."""
+    """The relative wind: body-frame components, its speed and angle, with tangents (the
+    components' own: `omega_tangents`)."""
 
-    omega: torch.Tensor       # (..., 2) [m/s]
-    d_omega: torch.Tensor     # (..., 6, 2)
+    omega: torch.Tensor       # (..., 2) [m/s] = U_A (cos gamma_A, sin gamma_A)
     U_A: torch.Tensor         # (..., 1) [m/s]
     d_UA: torch.Tensor        # (..., 6)
     gamma_A: torch.Tensor     # (..., 1) [rad] in [0, 2 pi)
     d_gamma: torch.Tensor     # (..., 6)
+    cos_g: torch.Tensor       # (..., 1) cos gamma_A
+    sin_g: torch.Tensor       # (..., 1) sin gamma_A
 
 
 def forces_with_tangents(state: torch.Tensor, inputs: torch.Tensor, c, wind: bool = True) -> Tangents:
@@ -198,7 +200,7 @@ def forces_with_tangents(state: torch.Tensor, inputs: torch.Tensor, c, wind: boo
     d_total = d_hull + P.d_force + d_rudder
     if wind:
         total, d_total = _wind_force(W, total, d_total, c)
-    return Tangents(total, d_total, W.omega, W.d_omega)
+    return Tangents(total, d_total, W.omega, omega_tangents(W))
 
 
 def motion_tangents(state: torch.Tensor, k, B: Basis) -> _Motion:
@@ -393,10 +395,15 @@ def relative_wind_tangents(m: _Motion, U_T: torch.Tensor, zeta: torch.Tensor, k,
     d_gamma = torch.where(calm, d_beta, torch.where(slow, k.zero, d_direction) - B.e_psi)
     cos_g, sin_g = torch.cos(gamma_A), torch.sin(gamma_A)
     omega = torch.cat([U_A * cos_g, U_A * sin_g], -1)
-    # d(U_A cos g, U_A sin g) = (cos g, sin g) dU_A + U_A (-sin g, cos g) dg
-    d_omega = torch.addcmul(_col(d_UA) * _row(torch.cat([cos_g, sin_g], -1)),
-                            _col(d_gamma), _row(U_A * torch.cat([-sin_g, cos_g], -1)))  # (..., 6, 2)
-    return _Wind(omega, d_omega, U_A, d_UA, gamma_A, d_gamma)
+    return _Wind(omega, U_A, d_UA, gamma_A, d_gamma, cos_g, sin_g)
+
+
+def omega_tangents(W: _Wind) -> torch.Tensor:
+    """The tangents (..., 6, 2) of the relative wind's body-frame components omega:
+    d(U_A cos g, U_A sin g) = (cos g, sin g) dU_A + U_A (-sin g, cos g) dg."""
+    cos_g, sin_g = W.cos_g, W.sin_g
+    return torch.addcmul(_col(W.d_UA) * _row(torch.cat([cos_g, sin_g], -1)),
+                         _col(W.d_gamma), _row(W.U_A * torch.cat([-sin_g, cos_g], -1)))
 
 
 def _wind_force(W: _Wind, total: torch.Tensor, d_total: torch.Tensor, c) -> tuple[torch.Tensor, torch.Tensor]:
