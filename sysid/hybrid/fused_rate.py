@@ -31,7 +31,7 @@ import torch
 from sysid.hybrid import layers
 from sysid.mmg.motion import constants
 from sysid.mmg.native import TrainingKernel
-from sysid.mmg.tangents import basis, motion_tangents, relative_wind_tangents
+from sysid.mmg.tangents import basis, motion_columns, relative_wind_tangents
 
 
 class Plan:
@@ -127,27 +127,27 @@ _KINEMATIC_A = (1, 3, 5, 1, 1, 3, 3)  # the state's columns of a
 class NNPlan(Plan):
     """`Plan` of an NN-only rollout: no kernel; the (16, 6) matrix of the equations of motion
     (`sysid.mmg.vjp.rate_of_force`'s; its first 3 rows are the mass terms M), the FNN's
-    standardisation mean and std (9,); for the backward the kinematic features' (6, 7) and
-    the state's (6, 6) blocks transposed."""
+    standardisation mean and std (9,); for the backward the kinematic features' (7, 6) and
+    the state's (6, 6) blocks."""
 
     def __init__(self, rates: torch.Tensor, mean: torch.Tensor, std: torch.Tensor, scale: torch.Tensor,
                  shift: torch.Tensor, parameters):
         super().__init__(None, rates[:3], scale, shift, parameters)
         self.rates, self.mean, self.std = rates, mean, std
-        self.kinematic_T = rates[3:10].mT.contiguous()  # (6, 7)
-        self.state_T = rates[10:].mT.contiguous()       # (6, 6)
+        # (7, 6), (6, 6): products with a gradient's transpose (rows last: quicker than rows first)
+        self.kinematic, self.state_rates = rates[3:10].contiguous(), rates[10:].contiguous()
 
 
 def _inputs_and_kinematics(state: torch.Tensor, inputs: torch.Tensor, plan: NNPlan, jacobian: bool):
     """(z (rows, 9) the FNN's standardised inputs, a * b (rows, 7), then with `jacobian` what
-    the backward's chain rule reads: a, b (rows, 7), the tangents (rows, 6) of the relative
-    wind's speed U_A and angle gamma_A, cos gamma_A, sin gamma_A and U_A (rows, 1), else
-    None); rows = the batch flattened."""
+    the backward's chain rule reads: a, b (rows, 7), the tangents over (u, v, psi) (rows, 3) of
+    the relative wind's speed U_A and angle gamma_A, cos gamma_A, sin gamma_A and U_A (rows, 1),
+    else None); rows = the batch flattened."""
     state, inputs = state.reshape(-1, 6), inputs.reshape(-1, 4)
-    k, B = constants(state), basis(state)
-    m = motion_tangents(state, k, B)
+    k = constants(state)
+    m = motion_columns(state, k)
     n, delta, U_T, zeta = inputs.split_with_sizes((1, 1, 1, 1), -1)
-    wind = relative_wind_tangents(m, U_T, zeta, k, B)
+    wind = relative_wind_tangents(m, U_T, zeta, k, basis(state).psi_of_uvpsi)
     u, v, psi, r = m.u, m.v, m.psi, m.r
     cos_psi, sin_psi = torch.cos(psi), torch.sin(psi)
     a = torch.cat([u, v, r, u, u, v, v], -1)
@@ -169,7 +169,8 @@ def _state_gradient(plan: NNPlan, saved, g_rate, g_z, rows: int) -> torch.Tensor
     a, b, d_UA, d_gamma, cos_g, sin_g, U_A = saved
     if g_rate is None:
         g_rate = a.new_zeros(rows, 6)
-    g_ab = torch.mm(g_rate, plan.kinematic_T).split(1, -1)        # (rows, 1) each, of a * b's 7
+    zero = a.new_zeros(rows, 1)
+    g_ab = torch.mm(plan.kinematic, g_rate.mT).unsqueeze(-1)       # (7, rows, 1): of a * b's 7
     g_s = (a.new_zeros(rows, 9) if g_z is None else g_z.reshape(rows, 9) / plan.std).split(1, -1)
     u, v, r, cos_psi, sin_psi = a[:, :1], a[:, 1:2], a[:, 2:3], b[:, 3:4], b[:, 4:5]
     g_u = torch.addcmul(torch.addcmul(torch.addcmul(g_s[0], g_ab[0], r), g_ab[3], cos_psi), g_ab[4], sin_psi)
@@ -177,15 +178,12 @@ def _state_gradient(plan: NNPlan, saved, g_rate, g_z, rows: int) -> torch.Tensor
     g_r = torch.addcmul(torch.addcmul(torch.addcmul(g_s[2], g_ab[0], u), g_ab[1], v), g_ab[2], r, value=2.0)
     g_cos = torch.addcmul(torch.addcmul(g_s[7], g_ab[3], u), g_ab[5], v)  # of cos psi, then of sin psi
     g_sin = torch.addcmul(torch.addcmul(g_s[8], g_ab[4], u), g_ab[6], v)
-    g_psi = torch.addcmul(g_sin * cos_psi, g_cos, sin_psi, value=-1.0)
     g_speed = torch.addcmul(g_s[5] * cos_g, g_s[6], sin_g)                 # of U_A
     g_angle = torch.addcmul(g_s[6] * cos_g, g_s[5], sin_g, value=-1.0) * U_A
-    g_state = torch.addmm(torch.addcmul(g_speed * d_UA, g_angle, d_gamma), g_rate, plan.state_T)
-    g_state[:, 1:2] += g_u
-    g_state[:, 3:4] += g_v
-    g_state[:, 4:5] += g_psi
-    g_state[:, 5:6] += g_r
-    return g_state
+    wind = torch.addcmul(g_speed * d_UA, g_angle, d_gamma)                  # of (u, v, psi)
+    g_psi = torch.addcmul(torch.addcmul(wind[:, 2:], g_sin, cos_psi), g_cos, sin_psi, value=-1.0)
+    g_state = torch.cat([zero, g_u + wind[:, :1], zero, g_v + wind[:, 1:2], g_psi, g_r], -1)
+    return g_state + torch.mm(plan.state_rates, g_rate.mT).mT
 
 
 class _NNRate(torch.autograd.Function):
