@@ -20,9 +20,12 @@ skips the Jacobian. With K members the kernel takes all K x rows at once and the
 batched products (`sysid.hybrid.layers.forward_members`), member k's network on member k's rows.
 
 NN-only (F = F_NN, `nn_rate`) has the same shape without the kernel: s and the rigid-body part of
-the equations of motion (the Coriolis and kinematic features) with their Jacobian in torch
-(`sysid.mmg.tangents`' relative wind), F_NN by the layers, dx/dt = the features times the mass
-terms' matrix (`sysid.mmg.vjp.rate_of_force`'s), `tests/hybrid/test_nn_rate.py`.
+the equations of motion (the Coriolis and kinematic features) in torch, F_NN by the layers, dx/dt
+= the features times the mass terms' matrix (`sysid.mmg.vjp.rate_of_force`'s). No Jacobian is
+built: u, v, r enter s and the features through a few products, x and y not at all, so the
+backward applies the chain rule column by column from the forward's (rows, 1) columns and the
+relative wind's tangents over (u, v, psi) (`sysid.mmg.tangents.motion_columns`),
+`tests/hybrid/test_nn_rate.py`.
 """
 from __future__ import annotations
 
