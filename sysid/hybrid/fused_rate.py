@@ -126,7 +126,8 @@ def hybrid_rate(state: torch.Tensor, inputs: torch.Tensor, plan: Plan) -> tuple:
 # of motion, as `sysid.mmg.vjp.rate_of_force` lays them out: (F (3), a * b (7), state (6)) times
 # the (16, 6) matrix of the mass terms, a = (u, v, r, u, u, v, v), b = (r, r, r, cos psi, sin psi,
 # cos psi, sin psi) [m/s, 1/s]
-_KINEMATIC_A = (1, 3, 5, 1, 1, 3, 3)  # the state's columns of a
+
+
 class NNPlan(Plan):
     """`Plan` of an NN-only rollout: no kernel; the (16, 6) matrix of the equations of motion
     (`sysid.mmg.vjp.rate_of_force`'s; its first 3 rows are the mass terms M), the FNN's
