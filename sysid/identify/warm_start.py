@@ -77,7 +77,7 @@ class OneStepRegression:
         weights, biases = self.views[:L], self.views[L:]
         self._hidden = [(w, b.unsqueeze(1)) for w, b in zip(weights[:-1], biases[:-1])]  # W_i, b_i (K, 1, n)
         self._hidden_T = [w.mT for w in weights[:-1]]
-        self._output = (weights[-1], weights[-1].mT, biases[-1].unsqueeze(-1))  # W, W^T, b (K, 3, 1)
+        self._output = (weights[-1].mT, biases[-1].unsqueeze(-1))  # W^T (K, 3, n), b (K, 3, 1)
         self._weights, self._d_weights, self._d_biases = weights, self.grads[:L], self.grads[L:]
         self._beta = 2.0 * self.lambda_L2 / net.members
 
@@ -93,7 +93,7 @@ class OneStepRegression:
         y^T = W^T h^T, which the matrix library does several times faster than h W. Equal
         to autograd's gradient to float round-off.
         """
-        layers, (w, w_T, b_col) = self._hidden, self._output
+        layers, (w_T, b_col) = self._hidden, self._output
         beta = self._beta
         h = [z]
         for w_i, b_row in layers:
