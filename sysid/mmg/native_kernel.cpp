@@ -22,11 +22,28 @@ namespace {
 
 constexpr int NT = 4;  // tangents: d/d(u, v, psi, r) (nothing depends on x, y)
 
+// the NT tangents as two pairs of the compiler's generic vector extension: every operation on
+// them is the same IEEE operation on each lane as on a double (no fusing, no reordering), done
+// in pairs by SSE2 on x86-64 and lane by lane where the target has no vectors
+typedef double Pair __attribute__((vector_size(2 * sizeof(double))));
+
+struct Tangents {
+    Pair lo, hi;  // d/du, d/dv; d/dpsi, d/dr
+    double operator[](int i) const { return i < 2 ? lo[i] : hi[i - 2]; }
+    void set(int i, double x) { if (i < 2) lo[i] = x; else hi[i - 2] = x; }
+};
+inline Tangents operator+(const Tangents& a, const Tangents& b) { return {a.lo + b.lo, a.hi + b.hi}; }
+inline Tangents operator-(const Tangents& a, const Tangents& b) { return {a.lo - b.lo, a.hi - b.hi}; }
+inline Tangents operator-(const Tangents& a) { return {-a.lo, -a.hi}; }
+inline Tangents operator*(const Tangents& a, double b) { return {a.lo * b, a.hi * b}; }
+inline Tangents operator*(double a, const Tangents& b) { return {a * b.lo, a * b.hi}; }
+inline Tangents operator/(const Tangents& a, double b) { return {a.lo / b, a.hi / b}; }
+
 struct Dual {
+    Tangents d;
     double v;
-    double d[NT];
-    Dual() : v(0.0), d{} {}
-    Dual(double value) : v(value), d{} {}  // a constant: zero tangent
+    Dual() = default;  // unset, as a double's: every variable is assigned before it is read
+    Dual(double value) : d{}, v(value) {}  // a constant: zero tangent
 };
 
 inline double val(double x) { return x; }
@@ -34,28 +51,28 @@ inline double val(const Dual& x) { return x.v; }
 
 inline Dual operator+(const Dual& a, const Dual& b) {
     Dual o(a.v + b.v);
-    for (int i = 0; i < NT; ++i) o.d[i] = a.d[i] + b.d[i];
+    o.d = a.d + b.d;
     return o;
 }
 inline Dual operator-(const Dual& a, const Dual& b) {
     Dual o(a.v - b.v);
-    for (int i = 0; i < NT; ++i) o.d[i] = a.d[i] - b.d[i];
+    o.d = a.d - b.d;
     return o;
 }
 inline Dual operator-(const Dual& a) {
     Dual o(-a.v);
-    for (int i = 0; i < NT; ++i) o.d[i] = -a.d[i];
+    o.d = -a.d;
     return o;
 }
 inline Dual operator*(const Dual& a, const Dual& b) {
     Dual o(a.v * b.v);
-    for (int i = 0; i < NT; ++i) o.d[i] = a.d[i] * b.v + a.v * b.d[i];
+    o.d = a.d * b.v + a.v * b.d;
     return o;
 }
 inline Dual operator/(const Dual& a, const Dual& b) {
     const double q = a.v / b.v;
     Dual o(q);
-    for (int i = 0; i < NT; ++i) o.d[i] = (a.d[i] - q * b.d[i]) / b.v;
+    o.d = (a.d - q * b.d) / b.v;
     return o;
 }
 inline Dual operator+(const Dual& a, double b) { Dual o = a; o.v += b; return o; }
@@ -64,20 +81,20 @@ inline Dual operator-(const Dual& a, double b) { Dual o = a; o.v -= b; return o;
 inline Dual operator-(double a, const Dual& b) { return -b + a; }
 inline Dual operator*(const Dual& a, double b) {
     Dual o(a.v * b);
-    for (int i = 0; i < NT; ++i) o.d[i] = a.d[i] * b;
+    o.d = a.d * b;
     return o;
 }
 inline Dual operator*(double a, const Dual& b) { return b * a; }
 inline Dual operator/(const Dual& a, double b) {
     Dual o(a.v / b);
-    for (int i = 0; i < NT; ++i) o.d[i] = a.d[i] / b;
+    o.d = a.d / b;
     return o;
 }
 
 // a function of one argument: value f, derivative slope
 inline Dual chain(const Dual& x, double f, double slope) {
     Dual o(f);
-    for (int i = 0; i < NT; ++i) o.d[i] = slope * x.d[i];
+    o.d = slope * x.d;
     return o;
 }
 
@@ -137,7 +154,7 @@ inline Dual length(const Dual& x, const Dual& y) {
     const double h = std::hypot(x.v, y.v);
     const double inv = 1.0 / (h > 0.0 ? h : 1.0);
     Dual o(h);
-    for (int i = 0; i < NT; ++i) o.d[i] = (x.v * x.d[i] + y.v * y.d[i]) * inv;
+    o.d = (x.v * x.d + y.v * y.d) * inv;
     return o;
 }
 
@@ -147,7 +164,7 @@ inline Dual angle(const Dual& y, const Dual& x) {
     const double r2 = x.v * x.v + y.v * y.v;
     const double inv2 = 1.0 / (r2 > 0.0 ? r2 : 1.0);
     Dual o(std::atan2(y.v, x.v));
-    for (int i = 0; i < NT; ++i) o.d[i] = (x.v * y.d[i] - y.v * x.d[i]) * inv2;
+    o.d = (x.v * y.d - y.v * x.d) * inv2;
     return o;
 }
 
@@ -171,33 +188,33 @@ inline Dual wrapped(const Dual& x, double m) { Dual o = x; o.v = wrapped(x.v, m)
 inline double muladd(double a, double b, double c) { return std::fma(b, c, a); }
 inline Dual muladd(const Dual& a, const Dual& b, const Dual& c) {
     Dual o(std::fma(b.v, c.v, a.v));
-    for (int i = 0; i < NT; ++i) o.d[i] = a.d[i] + b.d[i] * c.v + b.v * c.d[i];
+    o.d = a.d + b.d * c.v + b.v * c.d;
     return o;
 }
 // the same with constant operands (their zero tangents left out: the same numbers)
 inline Dual muladd(double a, double b, const Dual& c) {
     Dual o(std::fma(b, c.v, a));
-    for (int i = 0; i < NT; ++i) o.d[i] = b * c.d[i];
+    o.d = b * c.d;
     return o;
 }
 inline Dual muladd(const Dual& a, double b, const Dual& c) {
     Dual o(std::fma(b, c.v, a.v));
-    for (int i = 0; i < NT; ++i) o.d[i] = a.d[i] + b * c.d[i];
+    o.d = a.d + b * c.d;
     return o;
 }
 inline Dual muladd(double a, const Dual& b, const Dual& c) {
     Dual o(std::fma(b.v, c.v, a));
-    for (int i = 0; i < NT; ++i) o.d[i] = b.d[i] * c.v + b.v * c.d[i];
+    o.d = b.d * c.v + b.v * c.d;
     return o;
 }
 inline Dual muladd(const Dual& a, const Dual& b, double c) {
     Dual o(std::fma(b.v, c, a.v));
-    for (int i = 0; i < NT; ++i) o.d[i] = a.d[i] + b.d[i] * c;
+    o.d = a.d + b.d * c;
     return o;
 }
 inline Dual muladd(double a, const Dual& b, double c) {
     Dual o(std::fma(b.v, c, a));
-    for (int i = 0; i < NT; ++i) o.d[i] = b.d[i] * c;
+    o.d = b.d * c;
     return o;
 }
 inline Dual muladd(const Dual& a, double b, double c) { Dual o = a; o.v = std::fma(b, c, a.v); return o; }
@@ -207,7 +224,7 @@ template <class T> inline T choose(bool condition, const T& a, const T& b) { ret
 // the state's component i as a T: a Dual carries the unit tangent e_i
 template <class T> inline T component(double value, int i);
 template <> inline double component<double>(double value, int) { return value; }
-template <> inline Dual component<Dual>(double value, int i) { Dual o(value); o.d[i] = 1.0; return o; }
+template <> inline Dual component<Dual>(double value, int i) { Dual o(value); o.d.set(i, 1.0); return o; }
 
 template <class T>
 struct Forces {
@@ -500,7 +517,7 @@ void values_and_jacobian(int64_t rows, const S* state, const S* inputs, const do
         row<Dual>(x, in, c, families, o);
         for (int j = 0; j < 9; ++j) {
             o[9 + j].v = (o[9 + j].v - shift[j]) / scale[j];
-            for (int k = 0; k < NT; ++k) o[9 + j].d[k] = o[9 + j].d[k] / scale[j];
+            o[9 + j].d = o[9 + j].d / scale[j];
         }
         for (int j = 0; j < 6; ++j) out.rate[out.stride_rate * i + j] = static_cast<S>(o[j].v);
         for (int j = 0; j < 3; ++j) out.force[out.stride_force * i + j] = static_cast<S>(o[6 + j].v);
@@ -525,12 +542,22 @@ void state_gradient(int64_t rows, const S* jac, const S* g_rate, const S* g_forc
         if (g_rate != nullptr) for (int j = 0; j < 6; ++j) g[j] = static_cast<double>(g_rate[6 * i + j]);
         if (g_force != nullptr) for (int j = 0; j < 3; ++j) g[6 + j] = static_cast<double>(g_force[3 * i + j]);
         if (g_s != nullptr) for (int j = 0; j < 9; ++j) g[9 + j] = static_cast<double>(g_s[9 * i + j]);
+        // the sums of rows (x, y), (u, v), (psi, r) side by side, each over j = 0..17 in order
         const S* J = jac + 108 * i;
-        for (int k = 0; k < 6; ++k) {
-            double sum = 0.0;
-            for (int j = 0; j < 18; ++j) sum += static_cast<double>(J[18 * k + j]) * g[j];
-            out[6 * i + k] = static_cast<S>(sum);
+        Pair xy = {0.0, 0.0}, uv = {0.0, 0.0}, pr = {0.0, 0.0};
+        for (int j = 0; j < 18; ++j) {
+            const Pair gj = {g[j], g[j]};
+            xy += Pair{static_cast<double>(J[j]), static_cast<double>(J[36 + j])} * gj;
+            uv += Pair{static_cast<double>(J[18 + j]), static_cast<double>(J[54 + j])} * gj;
+            pr += Pair{static_cast<double>(J[72 + j]), static_cast<double>(J[90 + j])} * gj;
         }
+        S* o = out + 6 * i;
+        o[0] = static_cast<S>(xy[0]);
+        o[1] = static_cast<S>(uv[0]);
+        o[2] = static_cast<S>(xy[1]);
+        o[3] = static_cast<S>(uv[1]);
+        o[4] = static_cast<S>(pr[0]);
+        o[5] = static_cast<S>(pr[1]);
     }
 }
 
