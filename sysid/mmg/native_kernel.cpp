@@ -219,7 +219,6 @@ inline Dual muladd(double a, const Dual& b, double c) {
 }
 inline Dual muladd(const Dual& a, double b, double c) { Dual o = a; o.v = std::fma(b, c, a.v); return o; }
 
-template <class T> inline T choose(bool condition, const T& a, const T& b) { return condition ? a : b; }
 
 // the state's component i as a T: a Dual carries the unit tangent e_i
 template <class T> inline T component(double value, int i);
@@ -264,14 +263,14 @@ Forces<T> forces(const T& u, const T& v, const T& psi, const T& r, double n, dou
     // motion: speed with the simulator's guard, drift angle beta_hat = atan2(v, u)
     const T U = length(u, v);
     const bool slow = val(U) < SPEED_GUARD;
-    const T Ug = choose(slow, T(LOW_SPEED), U);
+    const T Ug = slow ? T(LOW_SPEED) : U;
     const T beta_hat = angle(v, u);
     const double sign_u = sgn(u);
 
     T X, Y, N;
     if (families & HULL_STANDARD) {
         // hull: the standard polynomials (`sysid.mmg.hull_standard`), features times (16, 3)
-        const T inverse_U = choose(slow, T(0.0), T(1.0) / Ug);
+        const T inverse_U = slow ? T(0.0) : T(1.0) / Ug;
         const T w[2] = {v, r * c[K::S_L_pp]};
         T f[16];
         f[0] = u * u + v * v;
@@ -305,8 +304,8 @@ Forces<T> forces(const T& u, const T& v, const T& psi, const T& r, double n, dou
     T F_N;  // the rudder's normal force, either family's; its components follow both
     if (families & PROPELLER_STANDARD) {
         // propeller: the standard thrust (`sysid.mmg.propeller_standard`), wake by beta_P
-        const T beta = choose(slow, T(0.0), -beta_hat);
-        const T r_nd = choose(slow, T(0.0), (r * c[K::S_L_pp]) / Ug);
+        const T beta = slow ? T(0.0) : -beta_hat;
+        const T r_nd = slow ? T(0.0) : (r * c[K::S_L_pp]) / Ug;
         const T beta_P = muladd(beta, c[K::S_minus_x_P], r_nd);
         T omw;
         if (families & WAKE_GAUSSIAN) {
@@ -336,22 +335,22 @@ Forces<T> forces(const T& u, const T& v, const T& psi, const T& r, double n, dou
     } else {
         // propeller: four quadrants
         const T s_raw = muladd(v, c[K::x_P_L], r) / Ug;
-        const T s = choose(slow, T(c[K::slow_lateral_inflow]), s_raw);
+        const T s = slow ? T(c[K::slow_lateral_inflow]) : s_raw;
         const T s_abs = absolute(s);
         const T wake = muladd(c[K::one_minus_wP0], muladd(c[K::tau], c[K::C_P], s_abs), s_abs);
-        const T omw = choose(val(u) > 0.0, clamped(wake, TINY, 1.0), T(1.0));
+        const T omw = val(u) > 0.0 ? clamped(wake, TINY, 1.0) : T(1.0);
         const bool n_stopped = std::fabs(n) < TINY;
         const bool u_stopped = std::fabs(val(u)) < TINY;
         const double nD = n * c[K::D];
         const T J_s = n_stopped ? T(sign_u * STOPPED_RATIO) : (u_stopped ? T(TINY) : u / nD);
         const bool moving_ahead = val(u) >= 0.0;
         const bool turning_ahead = n >= 0.0;
-        const T J = choose(moving_ahead, J_s * omw, J_s);
+        const T J = moving_ahead ? J_s * omw : J_s;
         const T K_T_ahead = muladd(c[K::k0], muladd(c[K::k1], c[K::k2], J), J);
-        const T K_T_reverse = choose(val(J_s) >= c[K::C10], muladd(c[K::C6], c[K::C7], J_s), T(c[K::C3]));
-        const T K_T = n_stopped ? T(0.0) : choose(turning_ahead, K_T_ahead, K_T_reverse);
+        const T K_T_reverse = val(J_s) >= c[K::C10] ? muladd(c[K::C6], c[K::C7], J_s) : T(c[K::C3]);
+        const T K_T = n_stopped ? T(0.0) : (turning_ahead ? K_T_ahead : K_T_reverse);
         const double n2 = n * n;
-        const T X_P = choose(turning_ahead, K_T_ahead * c[K::one_minus_tP_rho_D4], K_T * c[K::rho_D4]);
+        const T X_P = turning_ahead ? K_T_ahead * c[K::one_minus_tP_rho_D4] : K_T * c[K::rho_D4];
         const double* A = c + K::LATERAL;  // (A6, A7, A8, A1, ..., A5) x (Y, N) lanes, then the J_s bounds
         T lateral[2];
         for (int lane = 0; lane < 2; ++lane) {
@@ -402,8 +401,7 @@ Forces<T> forces(const T& u, const T& v, const T& psi, const T& r, double n, dou
     const T W_x = muladd(U_T * std::cos(zeta), Ug, cos_course);
     const T W_y = muladd(U_T * std::sin(zeta), Ug, sin_course);
     const T U_A = length(W_x, W_y);
-    const T direction = choose(slow, T(zeta), angle(W_y, W_x)) - psi;
-    const T gamma_A = wrapped(choose(U_T < SPEED_GUARD, beta_hat, direction), TWO_PI);
+    const T gamma_A = wrapped(U_T < SPEED_GUARD ? beta_hat : (slow ? T(zeta) : angle(W_y, W_x)) - psi, TWO_PI);
     T sin_g, cos_g;
     sin_cos(gamma_A, sin_g, cos_g);
     if (wind) {
