@@ -1,0 +1,175 @@
+"""The native MMG kernel's entries (`sysid.mmg.native`) of this checkout beside those of another
+commit (default ``main``), side by side in one process, on the hybrid D2 training step's own calls.
+
+The calls are recorded from one training step of ``configs/experiments/hybrid_D2.toml`` (batch
+256, T = 10, one network, float32): the rollout's first call (the values alone), its 9 calls
+with the Jacobian and the backward's 9 vector-Jacobian products, with their gradients. Each
+entry is timed through its Python face, the ctypes call and what surrounds it included:
+
+* ``values + Jacobian``: `TrainingKernel.__call__` with the Jacobian (9 calls);
+* ``values alone``: `TrainingKernel.__call__` without it (the rollout's first call);
+* ``state_gradient``: `TrainingKernel.state_gradient` (9 calls);
+* ``rate``: the no-grad entry `rate` (maneuvers, predictions) on the 9 states;
+
+at 256 rows (one network), 1280 rows (K = 5 side by side, ``sysid reproduce --seeds 5``: the rows
+repeated 5 times) and 1 row (the Python around the call). The other commit's ``native.py`` and
+``native_kernel.cpp`` (``git show REF:...``) are loaded as a second module with their library
+built into a scratch cache, so both run on the same tensors in one process: interleaved rounds
+(the two in alternating order), medians per call, the ratio before / after, and whether the
+outputs are the same bits.
+
+    python benchmarks/native_kernel_speed.py [--base main] [--rounds 15] [--repeats 20] [--data DIR]
+"""
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+
+def recorded_calls(data: str | None):
+    """(c, families, mean, std, calls, gradients) of one hybrid D2 training step: `calls` the
+    kernel's (state, inputs, jacobian) and `gradients` its (jacobian, g_rate, g_force, g_z), in
+    order, cloned."""
+    import training_speed
+    from sysid.config.experiment import load_experiment
+    from sysid.identify.trainer import split_windows
+    from sysid.mmg import native
+    from sysid.runs.lifecycle import training_runs
+    exp = load_experiment(ROOT / training_speed.CONFIGS["D2"])
+    t = exp.training
+    train = split_windows(training_runs(exp, data), t.steps, t.stride_s, t.val_fraction, True, torch.float32,
+                          t.block_s, exp.experiment.seed)[0]
+    calls, gradients, kernels = [], [], []
+    call, gradient = native.TrainingKernel.__call__, native.TrainingKernel.state_gradient
+
+    def recording_call(self, state, inputs, jacobian=True):
+        kernels.append(self)
+        calls.append((state.detach().clone(), inputs.detach().clone(), jacobian))
+        return call(self, state, inputs, jacobian)
+
+    def recording_gradient(self, jacobian, g_rate, g_force, g_z):
+        gradients.append((jacobian.clone(), *[None if g is None else g.clone() for g in (g_rate, g_force, g_z)]))
+        return gradient(self, jacobian, g_rate, g_force, g_z)
+    step = training_speed.training_step(exp, train, 256, 1, fast=True, trainer=True)[0]
+    native.TrainingKernel.__call__, native.TrainingKernel.state_gradient = recording_call, recording_gradient
+    try:
+        step()
+    finally:
+        native.TrainingKernel.__call__, native.TrainingKernel.state_gradient = call, gradient
+    if not calls:
+        raise SystemExit("native_kernel_speed: the step made no native kernel call (is the kernel built? see the log)")
+    from sysid.hybrid.force_models import build_mmg
+    c = build_mmg(exp, torch.float32).coefficients.values_view(torch.float32)
+    kernel = kernels[0]
+    return c, kernel.families, kernel._keep[1], kernel._keep[2], calls, gradients
+
+
+def module_at(ref: str, scratch: Path):
+    """``sysid.mmg.native`` of commit `ref` as a module of its own, its library built in `scratch`."""
+    for name in ("native.py", "native_kernel.cpp"):
+        shown = subprocess.run(["git", "show", f"{ref}:sysid/mmg/{name}"], cwd=ROOT, capture_output=True, text=True)
+        if shown.returncode != 0:
+            raise SystemExit(f"native_kernel_speed: git show {ref}:sysid/mmg/{name} failed: {shown.stderr.strip()}")
+        (scratch / name).write_text(shown.stdout)
+    spec = importlib.util.spec_from_file_location("native_before", scratch / "native.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # its dataclasses look their module up there
+    spec.loader.exec_module(module)
+    module._STATE["library"] = module.load(module.build(scratch / "cache").path)
+    return module
+
+
+def repeated(t: torch.Tensor | None, k: int) -> torch.Tensor | None:
+    """`t` (1, rows, ...) as (k, rows, ...) (K members' rows), or its first row (1, 1, ...) for k = 0."""
+    if t is None:
+        return None
+    if k == 0:
+        return t[:, :1].contiguous() if t.dim() > 2 else t[:1].contiguous()
+    return t.expand(k, *t.shape[1:]).contiguous() if t.dim() > 2 else t.repeat(k, *[1] * (t.dim() - 1))
+
+
+def entries(module, c, families, mean, std, calls, gradients):
+    """name -> a function of no argument running that entry over the recorded calls, with its
+    outputs (for the bit check) from the last run."""
+    kernel = module.TrainingKernel(c, families, mean, std, torch.float32)
+    first = [x for x in calls if not x[2]]
+    rest = [x for x in calls if x[2]]
+    jacobians = [kernel(s, i, True)[3] for s, i, _ in rest]
+    gradients = [(j, *g[1:]) for j, g in zip(jacobians, gradients)]
+
+    def with_jacobian():
+        return [kernel(s, i, True) for s, i, _ in rest]
+
+    def alone():
+        return [kernel(s, i, False) for s, i, _ in first]
+
+    def vjp():
+        return [kernel.state_gradient(*g) for g in gradients]
+
+    def rate():
+        return [module.rate(s, i, c, families) for s, i, _ in rest]
+    return {"values + Jacobian": (with_jacobian, len(rest)), "values alone": (alone, len(first)),
+            "state_gradient": (vjp, len(gradients)), "rate": (rate, len(rest))}
+
+
+def same_bits(a, b) -> bool:
+    if isinstance(a, (list, tuple)):
+        return len(a) == len(b) and all(same_bits(x, y) for x, y in zip(a, b))
+    if a is None or b is None:
+        return a is None and b is None
+    return a.shape == b.shape and bool(torch.equal(a.view(torch.int32), b.view(torch.int32)))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--base", default="main", help="the commit to compare against (default: main)")
+    parser.add_argument("--rounds", type=int, default=15)
+    parser.add_argument("--repeats", type=int, default=20, help="passes over the recorded calls per round")
+    parser.add_argument("--data", default=None)
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    from sysid.mmg import native
+    if not native.available():
+        raise SystemExit("native_kernel_speed: the native kernel is not available here (see the log line above)")
+    c, families, mean, std, calls, gradients = recorded_calls(args.data)
+    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout
+    base = subprocess.run(["git", "rev-parse", "--short", args.base], cwd=ROOT, capture_output=True, text=True).stdout
+    print(f"torch {torch.__version__}, 1 thread; before: {args.base} ({base.strip()}), after: this checkout "
+          f"({head.strip()}, working tree); {args.rounds} interleaved rounds of {args.repeats} passes, medians per call")
+    with tempfile.TemporaryDirectory() as scratch:
+        before = module_at(args.base, Path(scratch))
+        print(f"{'entry':18s} {'rows':>5s} {'before us':>10s} {'after us':>9s} {'ratio':>6s}  same bits")
+        for k, label in ((1, 256), (5, 1280), (0, 1)):
+            sized = [(repeated(s, k), repeated(i, k), j) for s, i, j in calls]
+            grads = [(None, *[repeated(g, k) for g in x[1:]]) for x in gradients]
+            sides = {"before": entries(before, c, families, mean, std, sized, grads),
+                     "after": entries(native, c, families, mean, std, sized, grads)}
+            for name in sides["after"]:
+                times: dict[str, list[float]] = {"before": [], "after": []}
+                outputs = {}
+                for r in range(args.rounds):
+                    for side in (("before", "after") if r % 2 == 0 else ("after", "before")):
+                        run, n = sides[side][name]
+                        outputs[side] = run()
+                        start = time.perf_counter()
+                        for _ in range(args.repeats):
+                            run()
+                        times[side].append((time.perf_counter() - start) / (args.repeats * n))
+                b, a = statistics.median(times["before"]), statistics.median(times["after"])
+                same = "yes" if same_bits(outputs["before"], outputs["after"]) else "NO"
+                print(f"{name:18s} {label:5d} {1e6 * b:10.1f} {1e6 * a:9.1f} {b / a:5.2f}x  {same}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
