@@ -18,7 +18,14 @@ built into a scratch cache, so both run on the same tensors in one process: inte
 (the two in alternating order), medians per call, the ratio before / after, and whether the
 outputs are the same bits.
 
+With ``--step DIR`` instead: the whole training step (batch 256, T = 10, 1 thread, as `Trainer`
+takes it: `training_speed.CheckoutStep`) of this checkout and of the checkout at DIR (e.g. a
+worktree at main's commit), each in a worker process of its own, in alternating order for
+``--rounds`` rounds of ``--repeats`` steps: medians of wall and process CPU time per step, their
+ratios, and each side's loss before the first step.
+
     python benchmarks/native_kernel_speed.py [--base main] [--rounds 15] [--repeats 20] [--data DIR]
+    python benchmarks/native_kernel_speed.py --step DIR [--rounds 15] [--repeats 10] [--data DIR]
 """
 from __future__ import annotations
 
@@ -131,14 +138,45 @@ def same_bits(a, b) -> bool:
     return a.shape == b.shape and bool(torch.equal(a.view(torch.int32), b.view(torch.int32)))
 
 
+def steps_side_by_side(other: str, data: str | None, rounds: int, repeats: int) -> None:
+    """The training step of this checkout and of `other`, in worker processes, alternating."""
+    from training_speed import CONFIGS, CheckoutStep
+    sides = {"this": CheckoutStep(str(ROOT), CONFIGS["D2"], data, 256, 1),
+             "other": CheckoutStep(other, CONFIGS["D2"], data, 256, 1)}
+    wall: dict[str, list[float]] = {k: [] for k in sides}
+    cpu: dict[str, list[float]] = {k: [] for k in sides}
+    try:
+        for r in range(rounds):
+            for side in (("this", "other") if r % 2 == 0 else ("other", "this")):
+                w, c = sides[side].times(repeats)
+                wall[side].append(w)
+                cpu[side].append(c)
+    finally:
+        for step in sides.values():
+            step.close()
+    w = {k: statistics.median(v) for k, v in wall.items()}
+    c = {k: statistics.median(v) for k, v in cpu.items()}
+    print(f"training step, hybrid D2, batch 256, T = 10, 1 thread ({rounds} alternating rounds of {repeats} steps, "
+          f"medians; ratio: the other's time over this one's)")
+    print(f"{'':6s} {'wall ms':>8s} {'ratio':>7s} {'CPU ms':>8s} {'ratio':>7s}  loss before the first step")
+    for k, name in (("this", str(ROOT)), ("other", other)):
+        print(f"{k:6s} {1e3 * w[k]:8.2f} {w[k] / w['this']:6.3f}x {1e3 * c[k]:8.2f} {c[k] / c['this']:6.3f}x  "
+              f"{sides[k].first_loss:.10g} ({name})")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--base", default="main", help="the commit to compare against (default: main)")
     parser.add_argument("--rounds", type=int, default=15)
     parser.add_argument("--repeats", type=int, default=20, help="passes over the recorded calls per round")
     parser.add_argument("--data", default=None)
+    parser.add_argument("--step", default=None, metavar="DIR",
+                        help="instead: the whole training step of this checkout beside the checkout at DIR")
     args = parser.parse_args()
     torch.set_num_threads(1)
+    if args.step:
+        steps_side_by_side(args.step, args.data, args.rounds, args.repeats)
+        return
     from sysid.mmg import native
     if not native.available():
         raise SystemExit("native_kernel_speed: the native kernel is not available here (see the log line above)")
