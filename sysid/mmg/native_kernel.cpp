@@ -20,11 +20,10 @@
 
 namespace {
 
-constexpr int NT = 4;  // tangents: d/d(u, v, psi, r) (nothing depends on x, y)
-
-// the NT tangents as two pairs of the compiler's generic vector extension: every operation on
-// them is the same IEEE operation on each lane as on a double (no fusing, no reordering), done
-// in pairs by SSE2 on x86-64 and lane by lane where the target has no vectors
+// the four tangents d/d(u, v, psi, r) (nothing depends on x, y) as two pairs of the compiler's
+// generic vector extension: every operation on a pair is the same IEEE operation on each lane
+// as on a double (no fusing, no reordering: the same bits as four scalar loops), done two at a
+// time by SSE2 on x86-64 and lane by lane where the target has no vectors
 typedef double Pair __attribute__((vector_size(2 * sizeof(double))));
 
 struct Tangents {
