@@ -10,12 +10,15 @@ entry is timed through its Python face, the ctypes call and what surrounds it in
 * ``values alone``: `TrainingKernel.__call__` without it (the rollout's first call);
 * ``state_gradient``: `TrainingKernel.state_gradient` (9 calls);
 * ``rate``: the no-grad entry `rate` (maneuvers, predictions) on the 9 states;
+* ``C: values + Jac.``, ``C: state_gradient``: the library's two training entries alone (ctypes,
+  outputs allocated once): the kernel without the Python around it;
 
 at 256 rows (one network), 1280 rows (K = 5 side by side, ``sysid reproduce --seeds 5``: the rows
 repeated 5 times) and 1 row (the Python around the call). The other commit's ``native.py`` and
 ``native_kernel.cpp`` (``git show REF:...``) are loaded as a second module with their library
 built into a scratch cache, so both run on the same tensors in one process: interleaved rounds
-(the two in alternating order), medians per call, the ratio before / after, and whether the
+(the two in alternating order), medians of the thread's CPU time per call (which the other jobs
+of a shared machine disturb less than wall time), the ratio before / after, and whether the
 outputs are the same bits.
 
 With ``--step DIR`` instead: the whole training step (batch 256, T = 10, 1 thread, as `Trainer`
@@ -126,8 +129,29 @@ def entries(module, c, families, mean, std, calls, gradients):
 
     def rate():
         return [module.rate(s, i, c, families) for s, i, _ in rest]
+
+    # the C entries alone (ctypes, outputs allocated once): the kernel without the Python around it
+    pointers = [(s.numel() // 6, s.data_ptr(), i.data_ptr()) for s, i, _ in rest]
+    out = [torch.empty(n * 126, dtype=torch.float32) for n, _, _ in pointers]
+    coefficients, mean_p, std_p = kernel._pointers
+
+    def raw_jacobian():
+        for (n, s, i), o in zip(pointers, out):
+            p = o.data_ptr()
+            kernel._training(n, s, i, coefficients, kernel.families, mean_p, std_p, p, p + 24 * n, p + 36 * n,
+                             p + 72 * n)
+        return out
+    vjp_out = [torch.empty(j.numel() // 18, dtype=torch.float32) for j in jacobians]
+    keep = [[None if x is None else x.contiguous() for x in g[1:]] for g in gradients]
+    vjp_pointers = [tuple(None if x is None else x.data_ptr() for x in k) for k in keep]
+
+    def raw_vjp():
+        for j, g, o in zip(jacobians, vjp_pointers, vjp_out):
+            kernel._gradient(j.numel() // 108, j.data_ptr(), *g, o.data_ptr())
+        return vjp_out
     return {"values + Jacobian": (with_jacobian, len(rest)), "values alone": (alone, len(first)),
-            "state_gradient": (vjp, len(gradients)), "rate": (rate, len(rest))}
+            "state_gradient": (vjp, len(gradients)), "rate": (rate, len(rest)),
+            "C: values + Jac.": (raw_jacobian, len(rest)), "C: state_gradient": (raw_vjp, len(gradients))}
 
 
 def same_bits(a, b) -> bool:
@@ -184,10 +208,10 @@ def main() -> None:
     head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout
     base = subprocess.run(["git", "rev-parse", "--short", args.base], cwd=ROOT, capture_output=True, text=True).stdout
     print(f"torch {torch.__version__}, 1 thread; before: {args.base} ({base.strip()}), after: this checkout "
-          f"({head.strip()}, working tree); {args.rounds} interleaved rounds of {args.repeats} passes, medians per call")
+          f"({head.strip()}, working tree); {args.rounds} interleaved rounds of {args.repeats} passes, medians of CPU time per call")
     with tempfile.TemporaryDirectory() as scratch:
         before = module_at(args.base, Path(scratch))
-        print(f"{'entry':18s} {'rows':>5s} {'before us':>10s} {'after us':>9s} {'ratio':>6s}  same bits")
+        print(f"{'entry':18s} {'rows':>5s} {'before us':>10s} {'after us':>9s} {'ratio':>6s}  same bits (CPU us per call)")
         for k, label in ((1, 256), (5, 1280), (0, 1)):
             sized = [(repeated(s, k), repeated(i, k), j) for s, i, j in calls]
             grads = [(None, *[repeated(g, k) for g in x[1:]]) for x in gradients]
@@ -200,10 +224,10 @@ def main() -> None:
                     for side in (("before", "after") if r % 2 == 0 else ("after", "before")):
                         run, n = sides[side][name]
                         outputs[side] = run()
-                        start = time.perf_counter()
+                        start = time.thread_time()
                         for _ in range(args.repeats):
                             run()
-                        times[side].append((time.perf_counter() - start) / (args.repeats * n))
+                        times[side].append((time.thread_time() - start) / (args.repeats * n))
                 b, a = statistics.median(times["before"]), statistics.median(times["after"])
                 same = "yes" if same_bits(outputs["before"], outputs["after"]) else "NO"
                 print(f"{name:18s} {label:5d} {1e6 * b:10.1f} {1e6 * a:9.1f} {b / a:5.2f}x  {same}", flush=True)

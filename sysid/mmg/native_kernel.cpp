@@ -259,6 +259,10 @@ template <class T>
 Forces<T> forces(const T& u, const T& v, const T& psi, const T& r, double n, double delta, double U_T,
                  double zeta, const double* c, int families) {
     const bool wind = (families & WIND) != 0;
+    // what the inputs alone give, first (fewer values live across these calls)
+    double sines[3];
+    rudder_sines(delta, c, sines);
+    const double wind_x = U_T * std::cos(zeta), wind_y = U_T * std::sin(zeta);
     // motion: speed with the simulator's guard, drift angle beta_hat = atan2(v, u)
     const T U = length(u, v);
     const bool slow = val(U) < SPEED_GUARD;
@@ -387,8 +391,6 @@ Forces<T> forces(const T& u, const T& v, const T& psi, const T& r, double n, dou
         const T alpha_R = delta - angle(v_R, u_R);
         F_N = muladd(u_R * u_R, v_R, v_R) * sine(alpha_R);
     }
-    double sines[3];
-    rudder_sines(delta, c, sines);
     X = X + (sines[0] * c[K::RUDDER + 3]) * F_N;
     Y = Y + (sines[1] * c[K::RUDDER + 4]) * F_N;
     N = N + (sines[2] * c[K::RUDDER + 5]) * F_N;
@@ -397,8 +399,8 @@ Forces<T> forces(const T& u, const T& v, const T& psi, const T& r, double n, dou
     const T course = psi + beta_hat;
     T sin_course, cos_course;
     sin_cos(course, sin_course, cos_course);
-    const T W_x = muladd(U_T * std::cos(zeta), Ug, cos_course);
-    const T W_y = muladd(U_T * std::sin(zeta), Ug, sin_course);
+    const T W_x = muladd(wind_x, Ug, cos_course);
+    const T W_y = muladd(wind_y, Ug, sin_course);
     const T U_A = length(W_x, W_y);
     const T gamma_A = wrapped(U_T < SPEED_GUARD ? beta_hat : (slow ? T(zeta) : angle(W_y, W_x)) - psi, TWO_PI);
     T sin_g, cos_g;
