@@ -416,7 +416,7 @@ def _call(entry: str, state: torch.Tensor, inputs: torch.Tensor, c, families: in
 
 def rate(state: torch.Tensor, inputs: torch.Tensor, c, families: int = Families.WIND) -> torch.Tensor:
     """out (..., 18) (see the module docstring), no gradient; where `applies` holds."""
-    out = torch.empty(state.shape[:-1] + (WIDTH,), dtype=state.dtype)
+    out = torch.empty(*state.shape[:-1], WIDTH, dtype=state.dtype)  # integer sizes: parsed quicker
     _call("rate", state, inputs, c, families, [out])
     return out
 
