@@ -522,12 +522,14 @@ void values_and_jacobian(int64_t rows, const S* state, const S* inputs, const do
         for (int j = 0; j < 3; ++j) out.force[out.stride_force * i + j] = static_cast<S>(o[6 + j].v);
         for (int j = 0; j < 9; ++j) out.s[out.stride_s * i + j] = static_cast<S>(o[9 + j].v);
         S* J = jac + 108 * i;
+        typedef S PairS __attribute__((vector_size(2 * sizeof(S))));
         for (int j = 0; j < 18; ++j) {  // rows x, u, y, v, psi, r: x and y enter nothing
             J[j] = J[36 + j] = static_cast<S>(0.0);
-            J[18 + j] = static_cast<S>(o[j].d[0]);
-            J[54 + j] = static_cast<S>(o[j].d[1]);
-            J[72 + j] = static_cast<S>(o[j].d[2]);
-            J[90 + j] = static_cast<S>(o[j].d[3]);
+            const PairS lo = __builtin_convertvector(o[j].d.lo, PairS), hi = __builtin_convertvector(o[j].d.hi, PairS);
+            J[18 + j] = lo[0];
+            J[54 + j] = lo[1];
+            J[72 + j] = hi[0];
+            J[90 + j] = hi[1];
         }
     }
 }
