@@ -29,6 +29,12 @@ ratios, and each side's loss before the first step.
 
     python benchmarks/native_kernel_speed.py [--base main] [--rounds 15] [--repeats 20] [--data DIR]
     python benchmarks/native_kernel_speed.py --step DIR [--rounds 15] [--repeats 10] [--data DIR]
+
+With ``--in-step``: the same training step in this process, its kernel this checkout's
+`TrainingKernel` or the other commit's (``--base``), alternating: the kernel's effect on the step
+with the caches as a step leaves them; medians of CPU time per step and their ratio.
+
+    python benchmarks/native_kernel_speed.py --in-step [--base main] [--rounds 15] [--repeats 10]
 """
 from __future__ import annotations
 
@@ -188,6 +194,45 @@ def steps_side_by_side(other: str, data: str | None, rounds: int, repeats: int) 
               f"{sides[k].first_loss:.10g} ({name})")
 
 
+def kernels_in_the_step(base: str, data: str | None, rounds: int, repeats: int) -> None:
+    """The training step with this checkout's `TrainingKernel` and with `base`'s, alternating."""
+    import training_speed
+    from sysid.config.experiment import load_experiment
+    from sysid.identify.trainer import split_windows
+    from sysid.mmg import native
+    from sysid.runs.lifecycle import training_runs
+    exp = load_experiment(ROOT / training_speed.CONFIGS["D2"])
+    t = exp.training
+    train = split_windows(training_runs(exp, data), t.steps, t.stride_s, t.val_fraction, True, torch.float32,
+                          t.block_s, exp.experiment.seed)[0]
+    ours = native.TrainingKernel
+    with tempfile.TemporaryDirectory() as scratch:
+        classes = {"before": module_at(base, Path(scratch)).TrainingKernel, "after": ours}
+        steps = {k: training_speed.training_step(exp, train, 256, 1, fast=True, trainer=True) for k in classes}
+        times: dict[str, list[float]] = {k: [] for k in classes}
+        losses = {}
+        try:
+            for r in range(rounds):
+                for side in (("before", "after") if r % 2 == 0 else ("after", "before")):
+                    native.TrainingKernel = classes[side]
+                    step, loss = steps[side]
+                    if r == 0:
+                        with torch.no_grad():
+                            losses[side] = float(loss())
+                    step()
+                    start = time.thread_time()
+                    for _ in range(repeats):
+                        step()
+                    times[side].append((time.thread_time() - start) / repeats)
+        finally:
+            native.TrainingKernel = ours
+    b, a = statistics.median(times["before"]), statistics.median(times["after"])
+    print(f"training step, hybrid D2, batch 256, T = 10, 1 thread, one process, its kernel {base}'s or this "
+          f"checkout's ({rounds} alternating rounds of {repeats} steps, medians of CPU time): before {1e3 * b:.2f} ms, "
+          f"after {1e3 * a:.2f} ms, {b / a:.3f}x; loss before the first step {losses['before']:.10g} and "
+          f"{losses['after']:.10g}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--base", default="main", help="the commit to compare against (default: main)")
@@ -196,8 +241,13 @@ def main() -> None:
     parser.add_argument("--data", default=None)
     parser.add_argument("--step", default=None, metavar="DIR",
                         help="instead: the whole training step of this checkout beside the checkout at DIR")
+    parser.add_argument("--in-step", action="store_true",
+                        help="instead: the training step in this process with either commit's kernel")
     args = parser.parse_args()
     torch.set_num_threads(1)
+    if args.in_step:
+        kernels_in_the_step(args.base, args.data, args.rounds, args.repeats)
+        return
     if args.step:
         steps_side_by_side(args.step, args.data, args.rounds, args.repeats)
         return
