@@ -247,6 +247,7 @@ class TrainingDynamics(nn.Module):
         self.rate = rate
         self.inputs = inputs
         self.dt = float(dt)
+        self._dt: dict[torch.dtype, torch.Tensor] = {}  # dt as a 0-d tensor of the rate's dtype
         self.f_nn: list[torch.Tensor] = []
         self.f_mmg: list[torch.Tensor] = []
 
@@ -255,7 +256,10 @@ class TrainingDynamics(nn.Module):
         rate, f_nn, f_mmg = self.rate(state, self.inputs[k])
         self.f_nn.append(f_nn)
         self.f_mmg.append(f_mmg)
-        return self.dt * rate
+        dt = self._dt.get(rate.dtype)
+        if dt is None:  # the same product as with the number dt, without converting it at every call
+            dt = self._dt[rate.dtype] = torch.tensor(self.dt, dtype=rate.dtype, device=rate.device)
+        return rate * dt
 
 
 def integrate_training(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
