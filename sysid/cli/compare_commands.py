@@ -88,11 +88,17 @@ def compare(
     sources = list(models) + list(ship or [])
     if len(sources) < 2 and against == FIRST:
         raise DataError("compare: give at least two models (the first is the reference), or --against baseline")
+    inputs = [Path(s) if Path(s).exists() else ship_file(s) for s in sources]
+    for s, found in zip(sources, inputs):
+        if found is None and (Path(s).name != str(s) or s in models):  # a path, or a model that is none
+            from sysid.mmg.ship import ships_dir
+            known = ", ".join(sorted(p.stem for p in ships_dir().glob("*.toml")))
+            raise DataError(f"compare: {s}: no such run directory, folder of seed runs or ship file, and no bundled "
+                            f"ship of that name ({known}); check the path")
     files = _logs(data, exp)
     horizons = tuple(horizon) if horizon else (exp.evaluation.horizons if exp is not None else (30.0, 100.0))
     method = Method.parse(integrator, "--integrator", offered_only=True) if integrator else (
         exp.evaluation.integrator if exp is not None else Method.EULER)
-    inputs = [Path(s) if Path(s).exists() else ship_file(s) for s in sources]
     target = claim(output, OutputKind.COMPARISON, [config, *(data or []), *files, *inputs],   # --data folders too
                    overwrite)  # a bad -o fails now
 

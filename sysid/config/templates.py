@@ -112,10 +112,15 @@ def _line(key: str, value: str, comment: str, width: int = 24) -> str:
     return line if len(line) <= WIDTH else "\n".join(_comment(comment) + [f"{key} = {value}"])
 
 
+_MANEUVERING_TEXT = {"approach_speed": "speed at the start of every maneuver (--speed)",
+                     "scale": "full-scale L_pp over this ship's, for the IMO criteria at full scale",
+                     "rudder_rate": "the steering gear's rate at this ship's scale"}
+
+
 def ship_template(name: str) -> str:
     """A ship file of the standard MMG families for a ship called `name`, every value the
     KVLCC2 7 m model's and commented with its unit and source."""
-    from sysid.mmg.ship import active_parameters, load_ship
+    from sysid.mmg.ship import MANEUVERING_KEYS, active_parameters, load_ship
 
     start = load_ship(START_SHIP)
     lines = [
@@ -140,9 +145,12 @@ def ship_template(name: str) -> str:
         lines.append(_line(key, repr(start.parameters[key]), f"{unit}, {what}" if what else unit))
     lines += ["", "# No [wind] section: no wind force acts. With wind in your logs, add [wind] model = \"fujiwara\"",
               "# with A_T, A_L, L_wind, X0, X1, X3, X5, Y1, Y3, Y5, N1, N2, N3 and rho_air under [principal].",
-              "# Optional [maneuvering], the defaults of `sysid maneuver`: approach_speed [m/s], scale (full-scale",
-              "# L_pp / this L_pp, for IMO criteria at full scale), rudder_rate [deg/s] of the steering gear.",
-              "", "[sensors]",
+              "", "[maneuvering]",
+              "# the defaults of `sysid maneuver` (no force depends on them); without rudder_rate, the",
+              "# 2.32 deg/s at full scale (SOLAS: 35 deg to 30 deg the other side in 28 s), Froude-scaled by `scale`"]
+    for key, setting in start.maneuvering.items():
+        lines.append(_line(key, repr(setting), f"{MANEUVERING_KEYS[key][2]}, {_MANEUVERING_TEXT[key]}"))
+    lines += ["", "[sensors]",
               "# where the instruments sit (used by `sysid preprocess` on raw logs only)"]
     for key, (unit, what) in SENSOR_KEYS.items():
         value = getattr(start.sensors, key)

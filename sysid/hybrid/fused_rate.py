@@ -20,9 +20,12 @@ skips the Jacobian. With K members the kernel takes all K x rows at once and the
 batched products (`sysid.hybrid.layers.forward_members`), member k's network on member k's rows.
 
 NN-only (F = F_NN, `nn_rate`) has the same shape without the kernel: s and the rigid-body part of
-the equations of motion (the Coriolis and kinematic features) with their Jacobian in torch
-(`sysid.mmg.tangents`' relative wind), F_NN by the layers, dx/dt = the features times the mass
-terms' matrix (`sysid.mmg.vjp.rate_of_force`'s), `tests/hybrid/test_nn_rate.py`.
+the equations of motion (the Coriolis and kinematic features) in torch, F_NN by the layers, dx/dt
+= the features times the mass terms' matrix (`sysid.mmg.vjp.rate_of_force`'s). No Jacobian is
+built: u, v, r enter s and the features through a few products, x and y not at all, so the
+backward applies the chain rule column by column from the forward's (rows, 1) columns and the
+relative wind's tangents over (u, v, psi) (`sysid.mmg.tangents.motion_columns`),
+`tests/hybrid/test_nn_rate.py`.
 """
 from __future__ import annotations
 
@@ -31,7 +34,7 @@ import torch
 from sysid.hybrid import layers
 from sysid.mmg.motion import constants
 from sysid.mmg.native import TrainingKernel
-from sysid.mmg.tangents import basis, motion_tangents, relative_wind_tangents
+from sysid.mmg.tangents import basis, motion_columns, relative_wind_tangents
 
 
 class Plan:
@@ -123,46 +126,32 @@ def hybrid_rate(state: torch.Tensor, inputs: torch.Tensor, plan: Plan) -> tuple:
 # of motion, as `sysid.mmg.vjp.rate_of_force` lays them out: (F (3), a * b (7), state (6)) times
 # the (16, 6) matrix of the mass terms, a = (u, v, r, u, u, v, v), b = (r, r, r, cos psi, sin psi,
 # cos psi, sin psi) [m/s, 1/s]
-_KINEMATIC_A = (1, 3, 5, 1, 1, 3, 3)  # the state's columns of a
-_TABLES: dict[tuple, tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = {}
-
-
-def _tables(like: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """((6, 7) tangents (columns) of a, (6, 7) of r in b), then (6, 5) tangents of the FNN
-    inputs u, v_m, r, delta, n_p; in `like`'s dtype and device, made once."""
-    key = (like.dtype, like.device)
-    found = _TABLES.get(key)
-    if found is None:
-        with torch.inference_mode(False), torch.no_grad():
-            E = torch.eye(6, dtype=like.dtype, device=like.device)
-            r_in_b = torch.zeros(6, 7, dtype=like.dtype, device=like.device)
-            r_in_b[5, :3] = 1.0
-            first = torch.cat([E[:, [1, 3, 5]], torch.zeros(6, 2, dtype=like.dtype, device=like.device)], -1)
-            found = _TABLES[key] = (E[:, list(_KINEMATIC_A)].clone(), r_in_b, first)
-    return found
 
 
 class NNPlan(Plan):
     """`Plan` of an NN-only rollout: no kernel; the (16, 6) matrix of the equations of motion
     (`sysid.mmg.vjp.rate_of_force`'s; its first 3 rows are the mass terms M), the FNN's
-    standardisation mean and std (9,)."""
+    standardisation mean and std (9,); for the backward the kinematic features' (7, 6) and
+    the state's (6, 6) blocks."""
 
     def __init__(self, rates: torch.Tensor, mean: torch.Tensor, std: torch.Tensor, scale: torch.Tensor,
                  shift: torch.Tensor, parameters):
         super().__init__(None, rates[:3], scale, shift, parameters)
         self.rates, self.mean, self.std = rates, mean, std
-        self.kinematic_T = rates[3:10].mT.contiguous()  # (6, 7)
-        self.state_T = rates[10:].mT.contiguous()       # (6, 6)
+        # (7, 6), (6, 6): products with a gradient's transpose (rows last: quicker than rows first)
+        self.kinematic, self.state_rates = rates[3:10].contiguous(), rates[10:].contiguous()
 
 
 def _inputs_and_kinematics(state: torch.Tensor, inputs: torch.Tensor, plan: NNPlan, jacobian: bool):
-    """(z (rows, 9) the FNN's standardised inputs, a * b (rows, 7), the Jacobian (rows, 6, 16) of
-    (a * b, z) with respect to the state, or None without `jacobian`); rows = the batch flattened."""
+    """(z (rows, 9) the FNN's standardised inputs, a * b (rows, 7), then with `jacobian` what
+    the backward's chain rule reads: a, b (rows, 7), the tangents over (u, v, psi) (rows, 3) of
+    the relative wind's speed U_A and angle gamma_A, cos gamma_A, sin gamma_A and U_A (rows, 1),
+    else None); rows = the batch flattened."""
     state, inputs = state.reshape(-1, 6), inputs.reshape(-1, 4)
-    k, B = constants(state), basis(state)
-    m = motion_tangents(state, k, B)
+    k = constants(state)
+    m = motion_columns(state, k)
     n, delta, U_T, zeta = inputs.split_with_sizes((1, 1, 1, 1), -1)
-    wind = relative_wind_tangents(m, U_T, zeta, k, B)
+    wind = relative_wind_tangents(m, U_T, zeta, k, basis(state).psi_of_uvpsi)
     u, v, psi, r = m.u, m.v, m.psi, m.r
     cos_psi, sin_psi = torch.cos(psi), torch.sin(psi)
     a = torch.cat([u, v, r, u, u, v, v], -1)
@@ -171,14 +160,34 @@ def _inputs_and_kinematics(state: torch.Tensor, inputs: torch.Tensor, plan: NNPl
     z = (s - plan.mean) / plan.std
     if not jacobian:
         return z, a * b, None
-    d_a, r_in_b, first = _tables(state)
-    zero = torch.zeros_like(u)
-    trig = torch.cat([-sin_psi, cos_psi], -1)
-    # d b = r's tangent (first three) + psi's times (0, 0, 0, -sin, cos, -sin, cos)
-    d_b = torch.addcmul(r_in_b, B.E[:, 4:5], torch.cat([zero, zero, zero, trig, trig], -1).unsqueeze(-2))
-    d_kinematic = torch.addcmul(a.unsqueeze(-2) * d_b, b.unsqueeze(-2), d_a)              # (rows, 6, 7)
-    d_s = torch.cat([first.expand(state.shape[0], 6, 5), wind.d_omega, B.E[:, 4:5] * trig.unsqueeze(-2)], -1)
-    return z, a * b, torch.cat([d_kinematic, d_s / plan.std], -1)
+    return z, a * b, (a, b, wind.d_UA, wind.d_gamma, wind.cos_g, wind.sin_g, wind.U_A)
+
+
+def _state_gradient(plan: NNPlan, saved, g_rate, g_z, rows: int) -> torch.Tensor:
+    """g_x (rows, 6) from g_{dx/dt} (rows, 6) and g_z (rows, 9) (either None: zeros), the chain
+    rule column by column: x and y enter nothing; u, v, r through s = (u, v, r, ...) and a * b
+    with d(a b) = b da + a db (a = (u, v, r, u, u, v, v), b = (r, r, r, cos psi, sin psi, cos
+    psi, sin psi)); psi through cos psi and sin psi; u, v, psi through the relative wind
+    omega = U_A (cos g, sin g) (g = gamma_A): g_omega . d omega = (g_omega . (cos g, sin g)) dU_A
+    + U_A (g_omega . (-sin g, cos g)) dg; and dx/dt's own state terms (psi_dot = r)."""
+    a, b, d_UA, d_gamma, cos_g, sin_g, U_A = saved
+    if g_rate is None:
+        g_rate = a.new_zeros(rows, 6)
+    zero = a.new_zeros(rows, 1)
+    g_ab = torch.mm(plan.kinematic, g_rate.mT).unsqueeze(-1)       # (7, rows, 1): of a * b's 7
+    g_s = (a.new_zeros(rows, 9) if g_z is None else g_z.reshape(rows, 9) / plan.std).split(1, -1)
+    u, v, r, cos_psi, sin_psi = a[:, :1], a[:, 1:2], a[:, 2:3], b[:, 3:4], b[:, 4:5]
+    g_u = torch.addcmul(torch.addcmul(torch.addcmul(g_s[0], g_ab[0], r), g_ab[3], cos_psi), g_ab[4], sin_psi)
+    g_v = torch.addcmul(torch.addcmul(torch.addcmul(g_s[1], g_ab[1], r), g_ab[5], cos_psi), g_ab[6], sin_psi)
+    g_r = torch.addcmul(torch.addcmul(torch.addcmul(g_s[2], g_ab[0], u), g_ab[1], v), g_ab[2], r, value=2.0)
+    g_cos = torch.addcmul(torch.addcmul(g_s[7], g_ab[3], u), g_ab[5], v)  # of cos psi, then of sin psi
+    g_sin = torch.addcmul(torch.addcmul(g_s[8], g_ab[4], u), g_ab[6], v)
+    g_speed = torch.addcmul(g_s[5] * cos_g, g_s[6], sin_g)                 # of U_A
+    g_angle = torch.addcmul(g_s[6] * cos_g, g_s[5], sin_g, value=-1.0) * U_A
+    wind = torch.addcmul(g_speed * d_UA, g_angle, d_gamma)                  # of (u, v, psi)
+    g_psi = torch.addcmul(torch.addcmul(wind[:, 2:], g_sin, cos_psi), g_cos, sin_psi, value=-1.0)
+    g_state = torch.cat([zero, g_u + wind[:, :1], zero, g_v + wind[:, 1:2], g_psi, g_r], -1)
+    return g_state + torch.mm(plan.state_rates, g_rate.mT).mT
 
 
 class _NNRate(torch.autograd.Function):
@@ -189,7 +198,7 @@ class _NNRate(torch.autograd.Function):
     def forward(ctx, state, inputs, plan, *parameters):
         ctx.set_materialize_grads(False)
         state_gradient = ctx.needs_input_grad[0]
-        z, kinematic, jacobian = _inputs_and_kinematics(state, inputs, plan, state_gradient)
+        z, kinematic, saved = _inputs_and_kinematics(state, inputs, plan, state_gradient)
         rows = z.shape[0]
         if plan.members == 1:
             f_nn = z.new_empty(rows, 3)
@@ -202,26 +211,19 @@ class _NNRate(torch.autograd.Function):
         rate = torch.cat([f_nn, kinematic, state.reshape(rows, 6)], -1) @ plan.rates
         f_mmg = torch.zeros_like(f_nn)
         ctx.mark_non_differentiable(f_mmg)
-        ctx.save_for_backward(jacobian, *h)
+        ctx.save_for_backward(*(saved or (None,) * 7), *h)
         ctx.plan, ctx.batch = plan, state.shape[:-1]
         return rate.view(state.shape), f_nn.view(*ctx.batch, 3), f_mmg.view(*ctx.batch, 3)
 
     @staticmethod
     def backward(ctx, grad_rate, grad_nn, grad_mmg):
-        jacobian, *h = ctx.saved_tensors
+        saved, h = ctx.saved_tensors[:7], ctx.saved_tensors[7:]
         plan = ctx.plan
         state_gradient = ctx.needs_input_grad[0]
         rows, g_rate, g_z, grads = _force_backward(plan, h, grad_rate, grad_nn, state_gradient)
         g_state = None
         if state_gradient and (g_rate is not None or g_z is not None):
-            g_kinematic = jacobian.new_zeros(rows, 7) if g_rate is None else torch.mm(g_rate, plan.kinematic_T)
-            g_s = jacobian.new_zeros(rows, 9) if g_z is None else g_z.reshape(rows, 9)
-            # the Jacobian times the features' gradient, row by row (a product, a sum: quicker
-            # than a batched product of rows x (6, 16) by (16, 1))
-            g_state = (jacobian * torch.cat([g_kinematic, g_s], -1).unsqueeze(-2)).sum(-1)
-            if g_rate is not None:
-                g_state = torch.addmm(g_state, g_rate, plan.state_T)
-            g_state = g_state.view(*ctx.batch, 6)
+            g_state = _state_gradient(plan, saved, g_rate, g_z, rows).view(*ctx.batch, 6)
         return g_state, None, None, *grads
 
 

@@ -75,6 +75,7 @@ class Basis(NamedTuple):
     swap_uv: torch.Tensor     # (6,) long: the state's columns with u and v swapped
     hull_first: torch.Tensor  # (6, 5) tangents (columns) of the hull products' first factors v, v, v, r, r
     hull_r: torch.Tensor      # (6, 6) r's tangent in the second factors (u, |u|, r, u, |u|, u)
+    psi_of_uvpsi: torch.Tensor  # (3,) (0, 0, 1): psi's tangent over (u, v, psi) (`motion_columns`)
 
 
 _BASES: dict[tuple, Basis] = {}
@@ -94,7 +95,8 @@ def basis(like: torch.Tensor) -> Basis:
                 E, E[1].clone(), E[3].clone(), E[4].clone(), E[5].clone(),
                 E[:, 1:2].clone(), E[:, 3:4].clone(), E[:, 5:6].clone(),
                 torch.tensor([0.0, 1.0, 0.0, 1.0, 0.0, 0.0], **kw), torch.tensor([0.0, -1.0, 0.0, 1.0, 0.0, 0.0], **kw),
-                torch.tensor([0, 3, 2, 1, 4, 5], device=like.device), E[:, [3, 3, 3, 5, 5]].clone(), hull_r)
+                torch.tensor([0, 3, 2, 1, 4, 5], device=like.device), E[:, [3, 3, 3, 5, 5]].clone(), hull_r,
+                E[4, [1, 3, 4]].clone())
     return found
 
 
@@ -169,14 +171,16 @@ class _Propeller(NamedTuple):
 
 
 class _Wind(NamedTuple):
-    """The relative wind: body-frame components, its speed and angle, with tangents."""
+    """The relative wind: body-frame components, its speed and angle, with tangents (the
+    components' own: `omega_tangents`)."""
 
-    omega: torch.Tensor       # (..., 2) [m/s]
-    d_omega: torch.Tensor     # (..., 6, 2)
+    omega: torch.Tensor       # (..., 2) [m/s] = U_A (cos gamma_A, sin gamma_A)
     U_A: torch.Tensor         # (..., 1) [m/s]
     d_UA: torch.Tensor        # (..., 6)
     gamma_A: torch.Tensor     # (..., 1) [rad] in [0, 2 pi)
     d_gamma: torch.Tensor     # (..., 6)
+    cos_g: torch.Tensor       # (..., 1) cos gamma_A
+    sin_g: torch.Tensor       # (..., 1) sin gamma_A
 
 
 def forces_with_tangents(state: torch.Tensor, inputs: torch.Tensor, c, wind: bool = True) -> Tangents:
@@ -193,24 +197,38 @@ def forces_with_tangents(state: torch.Tensor, inputs: torch.Tensor, c, wind: boo
     hull, d_hull = _hull(m, c, k, B, f)
     P = _propeller(m, n, c, k, B, f)
     rudder, d_rudder = _rudder(m, delta, P, c, k, B, f)
-    W = relative_wind_tangents(m, U_T, zeta, k, B)
+    W = relative_wind_tangents(m, U_T, zeta, k, B.e_psi)
     total = hull + P.force + rudder
     d_total = d_hull + P.d_force + d_rudder
     if wind:
         total, d_total = _wind_force(W, total, d_total, c)
-    return Tangents(total, d_total, W.omega, W.d_omega)
+    return Tangents(total, d_total, W.omega, omega_tangents(W))
+
+
+def _speed_and_drift(u: torch.Tensor, v: torch.Tensor, k):
+    """(U, slow, guarded U, beta_hat = atan2(v, u), 1 / U (1 at U = 0)), each (..., 1)."""
+    U = torch.hypot(u, v)
+    slow = U < k.speed_guard
+    return U, slow, torch.where(slow, k.low_speed, U), torch.atan2(v, u), 1.0 / torch.where(U > k.zero, U, k.one)
 
 
 def motion_tangents(state: torch.Tensor, k, B: Basis) -> _Motion:
     """Speed, guarded speed and drift angle beta_hat = atan2(v, u) [rad], with tangents."""
     _, u, _, v, psi, r = state.split_with_sizes(_SIX, -1)
-    U = torch.hypot(u, v)
-    slow = U < k.speed_guard
-    Ug = torch.where(slow, k.low_speed, U)
-    beta_hat = torch.atan2(v, u)
-    inv_U = 1.0 / torch.where(U > k.zero, U, k.one)
+    U, slow, Ug, beta_hat, inv_U = _speed_and_drift(u, v, k)
     d_Ug = state * (B.uv * torch.where(slow, k.zero, inv_U))          # (u, v) / U
     d_beta = state[..., B.swap_uv] * (B.vu * (inv_U * inv_U))         # (-v, u) / U^2
+    return _Motion(u, v, psi, r, slow, Ug, beta_hat, torch.sign(u), d_Ug, d_beta)
+
+
+def motion_columns(state: torch.Tensor, k) -> _Motion:
+    """`motion_tangents` with the tangents over (u, v, psi) alone (..., 3) (the others' are
+    zero): what the relative wind reads (`relative_wind_tangents` with `Basis.psi_of_uvpsi`)."""
+    _, u, _, v, psi, r = state.split_with_sizes(_SIX, -1)
+    U, slow, Ug, beta_hat, inv_U = _speed_and_drift(u, v, k)
+    zero = torch.zeros_like(u)
+    d_Ug = torch.cat([u, v, zero], -1) * torch.where(slow, k.zero, inv_U)    # (u, v, 0) / U
+    d_beta = torch.cat([-v, u, zero], -1) * (inv_U * inv_U)                 # (-v, u, 0) / U^2
     return _Motion(u, v, psi, r, slow, Ug, beta_hat, torch.sign(u), d_Ug, d_beta)
 
 
@@ -370,15 +388,17 @@ def _rudder_inflow(m: _Motion, P: _Propeller, c, k, B: Basis, f: _Factors) -> tu
     return u_R, d_uR
 
 
-def relative_wind_tangents(m: _Motion, U_T: torch.Tensor, zeta: torch.Tensor, k, B: Basis) -> _Wind:
+def relative_wind_tangents(m: _Motion, U_T: torch.Tensor, zeta: torch.Tensor, k, e_psi: torch.Tensor) -> _Wind:
     """The relative wind (the lab's guards): speed U_A, angle gamma_A and the body-frame
-    components U_A (cos gamma_A, sin gamma_A), with tangents."""
+    components U_A (cos gamma_A, sin gamma_A), with tangents of `m`'s width: over the state
+    (`motion_tangents`, e_psi = `Basis.e_psi`) or over (u, v, psi) (`motion_columns`, e_psi =
+    `Basis.psi_of_uvpsi`)."""
     psi, Ug, slow, beta_hat, d_Ug, d_beta = m.psi, m.Ug, m.slow, m.beta_hat, m.d_Ug, m.d_beta
     course = psi + beta_hat
     cos_c, sin_c = torch.cos(course), torch.sin(course)
     W_x = torch.addcmul(U_T * torch.cos(zeta), Ug, cos_c)
     W_y = torch.addcmul(U_T * torch.sin(zeta), Ug, sin_c)
-    d_course = d_beta + B.e_psi
+    d_course = d_beta + e_psi
     d_Wx = torch.addcmul(cos_c * d_Ug, -Ug * sin_c, d_course)
     d_Wy = torch.addcmul(sin_c * d_Ug, Ug * cos_c, d_course)
     U_A = torch.hypot(W_x, W_y)
@@ -390,13 +410,18 @@ def relative_wind_tangents(m: _Motion, U_T: torch.Tensor, zeta: torch.Tensor, k,
     angle = torch.where(calm, beta_hat, angle)
     gamma_A = torch.remainder(angle, k.two_pi)
     d_direction = torch.addcmul(W_x * d_Wy, -W_y, d_Wx) * (inv_UA * inv_UA)
-    d_gamma = torch.where(calm, d_beta, torch.where(slow, k.zero, d_direction) - B.e_psi)
+    d_gamma = torch.where(calm, d_beta, torch.where(slow, k.zero, d_direction) - e_psi)
     cos_g, sin_g = torch.cos(gamma_A), torch.sin(gamma_A)
     omega = torch.cat([U_A * cos_g, U_A * sin_g], -1)
-    # d(U_A cos g, U_A sin g) = (cos g, sin g) dU_A + U_A (-sin g, cos g) dg
-    d_omega = torch.addcmul(_col(d_UA) * _row(torch.cat([cos_g, sin_g], -1)),
-                            _col(d_gamma), _row(U_A * torch.cat([-sin_g, cos_g], -1)))  # (..., 6, 2)
-    return _Wind(omega, d_omega, U_A, d_UA, gamma_A, d_gamma)
+    return _Wind(omega, U_A, d_UA, gamma_A, d_gamma, cos_g, sin_g)
+
+
+def omega_tangents(W: _Wind) -> torch.Tensor:
+    """The tangents (..., 6, 2) of the relative wind's body-frame components omega:
+    d(U_A cos g, U_A sin g) = (cos g, sin g) dU_A + U_A (-sin g, cos g) dg."""
+    cos_g, sin_g = W.cos_g, W.sin_g
+    return torch.addcmul(_col(W.d_UA) * _row(torch.cat([cos_g, sin_g], -1)),
+                         _col(W.d_gamma), _row(W.U_A * torch.cat([-sin_g, cos_g], -1)))
 
 
 def _wind_force(W: _Wind, total: torch.Tensor, d_total: torch.Tensor, c) -> tuple[torch.Tensor, torch.Tensor]:

@@ -53,6 +53,8 @@ def test_init_writes_a_project_that_loads_from_another_working_directory(tmp_pat
     assert set(ship.parameters) == set(active_parameters(ship.models))
     kvlcc2 = load_ship("kvlcc2_l7")  # its values are the bundled KVLCC2's, said so in the file
     assert dict(ship.parameters) == dict(kvlcc2.parameters) and ship.sensors == kvlcc2.sensors
+    # `sysid maneuver`'s defaults are there too (the README's own-ship path runs it with no --speed)
+    assert dict(ship.maneuvering) == dict(kvlcc2.maneuvering) and "approach_speed" in ship.maneuvering
     ship_text = (project / "my_tanker.toml").read_text()
     assert "KVLCC2" in ship_text.splitlines()[1]
     for line in ship_text.splitlines():  # every value line has its comment (inline or above)

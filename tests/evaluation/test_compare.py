@@ -126,6 +126,10 @@ def test_compare_hybrid_nn_and_ship_mmg_on_two_held_back_logs(project, dataset_d
                      "-o", "cmp_x")
     assert bad.code == 2 and len(bad.error_lines) == 1 and "--against" in bad.error_lines[0]
     assert not (project / "cmp_x").exists()
+    # a run directory that is not there is named as such, not taken for a ship
+    typo = in_process(capsys, "compare", "runs/hybrid", "runs/second", "--config", "hybrid.toml", "-o", "cmp_y")
+    assert typo.code == 2 and len(typo.error_lines) == 1 and "runs/second: no such run directory" in typo.error_lines[0]
+    assert not (project / "cmp_y").exists()
     shutil.rmtree(out)
 
 

@@ -67,6 +67,31 @@ def test_gradcheck_of_the_nn_only_rate_in_float64(d2, members):
     assert torch.autograd.gradcheck(rate, (state, *parameters))
 
 
+@pytest.mark.parametrize("members", [1, 3])
+def test_gradcheck_of_a_rollout_of_calls_sharing_a_plan_in_float64(d2, members):
+    """Three Euler steps through one plan (a rollout's: its calls share the plan's views of the
+    parameters), and a fourth call whose outputs reach nothing: gradcheck with respect to the
+    first state and every parameter."""
+    exp, states, inputs, _ = d2
+    model = _nn_only(exp, states, torch.float64, (8, 6), members)
+    net = model.correction_net
+    state = states[3, :60:4].reshape(members, -1, 6) if members > 1 else states[3, :60:4]
+    state = state.clone().requires_grad_(True)
+    u = [inputs[1 + k, :60:4].reshape(state.shape[:-1] + (4,)) for k in range(4)]
+    parameters = [p for pair in zip(net.weights, net.biases) for p in pair]
+
+    def rollout(state, *parameters):
+        plan = _plan(model, state, parameters)
+        x, outputs = state, []
+        for k in range(3):
+            rate, f_nn, _ = fused_rate.nn_rate(x, u[k], plan)
+            outputs.append(f_nn)
+            x = x + 0.5 * rate
+        fused_rate.nn_rate(x, u[3], plan)  # reaches no output
+        return x, *outputs
+    assert torch.autograd.gradcheck(rollout, (state, *parameters))
+
+
 def _rollout(model, states, inputs, dt, fast=True):
     """Loss, states and every network gradient of a T-step Euler rollout, member k on its own
     windows (states (T + 1, K, B, 6))."""
@@ -141,3 +166,29 @@ def test_the_no_grad_rate_of_nn_only_equals_the_equations_of_motion_over_forward
         assert gate is None and rate.shape == shape
         torch.testing.assert_close(rate, expected, rtol=0, atol=tolerance * float(expected.abs().max()))
         assert model.eager_rate(state.requires_grad_(True), u) is None
+
+
+def test_the_wind_tangents_over_u_v_psi_are_the_state_wide_ones_columns(d2):
+    """`motion_columns` with psi's tangent over (u, v, psi) gives the relative wind's values and
+    the (u, v, psi) columns of the tangents `motion_tangents` gives over the whole state (zero
+    in x, y, r), on real rows and at the guards: a ship at rest (u = v = 0, the speed guard),
+    a calm (U_T = 0), and both."""
+    from sysid.mmg.motion import constants
+    from sysid.mmg.tangents import basis, motion_columns, motion_tangents, relative_wind_tangents
+    _, states, inputs, _ = d2
+    state, u = states[2, :64].clone(), inputs[2, :64].clone()
+    state[:8, [1, 3]] = 0.0
+    u[4:12, 2] = 0.0
+    k, B = constants(state), basis(state)
+    U_T, zeta = u[:, 2:3], u[:, 3:4]
+    wide = relative_wind_tangents(motion_tangents(state, k, B), U_T, zeta, k, B.e_psi)
+    narrow = relative_wind_tangents(motion_columns(state, k), U_T, zeta, k, B.psi_of_uvpsi)
+    for name in ("omega", "U_A", "gamma_A"):
+        assert torch.equal(getattr(narrow, name), getattr(wide, name))
+    for name in ("d_UA", "d_gamma"):
+        w, n = getattr(wide, name), getattr(narrow, name)
+        assert not w[:, [0, 2, 5]].any()
+        torch.testing.assert_close(n, w[:, [1, 3, 4]], rtol=1e-15, atol=0.0)
+    # the guards were taken: at rest the angle is the true wind's (d gamma = -d psi), at rest in
+    # a calm the drift angle's (its tangent 0 at u = v = 0)
+    assert wide.d_gamma[:4, 4].eq(-1.0).all() and not wide.d_gamma[4:8].any()
