@@ -22,7 +22,21 @@ from sysid.mmg.vjp import RATE_ROWS, force_rate, rate_of_force
 from sysid.mmg.wind import relative_wind
 
 
-class SeedEnsemble(nn.Module):
+class _Members(nn.Module):
+    """Models of one structure (``members``): the first one's mass terms and kind."""
+
+    members: nn.ModuleList
+
+    @property
+    def coefficients(self):
+        return self.members[0].coefficients
+
+    @property
+    def kind(self) -> str:
+        return getattr(self.members[0], "kind", "mmg")
+
+
+class SeedEnsemble(_Members):
     """Forces [N, N, N m] averaged over `members` (trained models of one structure).
 
     ``ood_distance`` is the members' mean kNN distance; ``gate_on`` holds where at least half
@@ -36,14 +50,6 @@ class SeedEnsemble(nn.Module):
         self.members = nn.ModuleList(members)
         # hybrids of one MMG (coefficients not identified): F_MMG is computed once, not per member
         self._shared_mmg = _common_mmg(self.members)
-
-    @property
-    def coefficients(self):
-        return self.members[0].coefficients
-
-    @property
-    def kind(self) -> str:
-        return getattr(self.members[0], "kind", "mmg")
 
     def gate_decision(self, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor | None:
         """(...,) True where at least half of the members apply their correction (as
@@ -233,7 +239,7 @@ def _members_rate(members: Sequence[nn.Module], like: torch.Tensor, shared_mmg: 
     return rate
 
 
-class MembersSideBySide(nn.Module):
+class MembersSideBySide(_Members):
     """K members of a `SeedEnsemble` and the ensemble itself predicting side by side, one
     batched rollout for all of them (no gradient): a batch of R = (K + 1) B rows is K + 1
     blocks of B rows, block k driven by member k alone (its own forces, gate and MMG), the
@@ -246,14 +252,6 @@ class MembersSideBySide(nn.Module):
         super().__init__()
         self.members = ensemble.members
         self._shared_mmg = ensemble._shared_mmg
-
-    @property
-    def coefficients(self):
-        return self.members[0].coefficients
-
-    @property
-    def kind(self) -> str:
-        return getattr(self.members[0], "kind", "mmg")
 
     @property
     def mmg(self):
