@@ -11,6 +11,7 @@ hundred (the MMG's coefficients are scalars of their own in a state dict). Versi
 from __future__ import annotations
 
 import enum
+import io
 import math
 import os
 from dataclasses import dataclass, fields
@@ -47,12 +48,14 @@ def pack(tensors: dict) -> dict:
     `unpack` gives back equal tensors (contiguous, each its own storage)."""
     lines, parts = [], {}
     for name, t in tensors.items():
-        dtype = str(t.dtype).removeprefix("torch.")
+        dtype = str(t.dtype)[6:]   # "torch.float32" -> "float32"
         lines.append(f"{name}\t{dtype}\t{','.join(map(str, t.shape))}")
-        parts.setdefault(dtype, []).append(t.detach())
+        parts.setdefault(dtype, []).append(t)
     # torch's flatten of a tensor list (one C++ call, its DDP buckets') is torch.cat of the
     # flattened tensors in about a third of the time for many small tensors
-    return {"layout": "\n".join(lines), "values": {d: _flatten_dense_tensors(ts) for d, ts in parts.items()}}
+    with torch.no_grad():
+        values = {d: _flatten_dense_tensors(ts) for d, ts in parts.items()}
+    return {"layout": "\n".join(lines), "values": values}
 
 
 def unpack(packed, source: str | os.PathLike, key: str) -> dict:
@@ -179,8 +182,12 @@ class TrainingCheckpoint:
         self.config = config
 
     def save(self, state: CheckpointState) -> None:
+        # serialized in memory, then one write: torch's zip writer on a path writes record by
+        # record (about a fifth slower for a ~300 kB checkpoint)
+        buffer = io.BytesIO()
+        torch.save({"version": VERSION, "config": self.config, **state.to_packed()}, buffer)
         with atomic_path(self.path, ".pt") as tmp:
-            torch.save({"version": VERSION, "config": self.config, **state.to_packed()}, tmp)
+            tmp.write_bytes(buffer.getbuffer())
 
     def load(self) -> CheckpointState | None:
         """The saved state, None when there is none; refuses another config's checkpoint."""
