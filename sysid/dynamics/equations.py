@@ -202,8 +202,7 @@ def integrate(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt
     rhs = ShipDynamics(force_model, inputs, dt, record)
     if integrator.method not in _ODEINT_NAME:  # classical RK4: a plain step loop
         return rollout(rhs.rate, x0, inputs, dt, integrator.method)
-    from torchdiffeq import odeint  # here: its import loads scipy.integrate (about 0.5 s), which eager
-    # maneuvers and predictions (step loops) never need
+    from sysid.dynamics.odeint import odeint  # here: maneuvers and predictions (step loops) never need it
     tau = torch.arange(inputs.shape[0], dtype=x0.dtype, device=x0.device)
     options = {"perturb": True} if integrator.method is not Method.EULER else None
     return odeint(rhs, x0, tau, method=_ODEINT_NAME[integrator.method], options=options)
@@ -247,6 +246,7 @@ class TrainingDynamics(nn.Module):
         self.rate = rate
         self.inputs = inputs
         self.dt = float(dt)
+        self._dt: dict[torch.dtype, torch.Tensor] = {}  # dt as a 0-d tensor of the rate's dtype
         self.f_nn: list[torch.Tensor] = []
         self.f_mmg: list[torch.Tensor] = []
 
@@ -255,7 +255,10 @@ class TrainingDynamics(nn.Module):
         rate, f_nn, f_mmg = self.rate(state, self.inputs[k])
         self.f_nn.append(f_nn)
         self.f_mmg.append(f_mmg)
-        return self.dt * rate
+        dt = self._dt.get(rate.dtype)
+        if dt is None:  # the same product as with the number dt, without converting it at every call
+            dt = self._dt[rate.dtype] = torch.tensor(self.dt, dtype=rate.dtype, device=rate.device)
+        return rate * dt
 
 
 def integrate_training(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,
@@ -294,7 +297,7 @@ def _training_rollout(rate, x0: torch.Tensor, inputs: torch.Tensor, dt: float):
     check_shapes(x0, inputs)
     if inputs.shape[0] < 2:
         raise ValueError("no steps: inputs need at least two rows")
-    from torchdiffeq import odeint  # here, as in `integrate`
+    from sysid.dynamics.odeint import odeint  # here, as in `integrate`
     rhs = TrainingDynamics(rate, inputs.contiguous(), dt)  # each step's inputs one contiguous slice
     tau = torch.arange(inputs.shape[0], dtype=x0.dtype, device=x0.device)
     states = odeint(rhs, x0, tau, method=_ODEINT_NAME[Method.EULER])

@@ -13,32 +13,65 @@ import torch
 from torch import nn
 
 
-def nearest(q: torch.Tensor, bank: torch.Tensor, bank_sq: torch.Tensor, k: int,
-            out: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
-    """The k smallest Euclidean distances (B, k), ascending, from q (B, F) to bank (N, F),
-    and the bank rows they are to (B, k).
-
-    |q - b|^2 = |q|^2 + |b|^2 - 2 q.b (bank_sq = |b|^2, (N,)): one matrix product, then
-    the k smallest. Eager, the product accumulates into the (B, N) sum in place (one
-    (B, N) buffer and one pass fewer), held in `out` (at least (B, N), reused across
-    chunks) when given; compiled, as a plain difference.
-    """
+def squared_distances(q: torch.Tensor, bank: torch.Tensor, bank_sq: torch.Tensor,
+                      out: torch.Tensor | None = None) -> torch.Tensor:
+    """|q - b|^2 (B, N) from q (B, F) to every bank row b (N, F) as |q|^2 + |b|^2 - 2 q.b
+    (bank_sq = |b|^2, (N,)): one matrix product. Eager, the product accumulates into the
+    (B, N) sum in place (one (B, N) buffer and one pass fewer), held in `out` (at least
+    (B, N), reused across chunks) when given; compiled, as a plain difference."""
     if out is not None and not torch.compiler.is_compiling():
         d2 = torch.add((q * q).sum(1, keepdim=True), bank_sq, out=out[:q.shape[0]])
     else:
         d2 = (q * q).sum(1, keepdim=True) + bank_sq
     if torch.compiler.is_compiling():
-        d2 = d2 - 2.0 * q @ bank.t()  # t(): a traceable op, not an attribute
-    else:
-        d2.addmm_(q, bank.t(), alpha=-2.0)
-    found = torch.topk(d2, k, dim=1, largest=False)
+        return d2 - 2.0 * q @ bank.t()  # t(): a traceable op, not an attribute
+    return d2.addmm_(q, bank.t(), alpha=-2.0)
+
+
+def nearest(q: torch.Tensor, bank: torch.Tensor, bank_sq: torch.Tensor, k: int,
+            out: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """The k smallest Euclidean distances (B, k), ascending, from q (B, F) to bank (N, F),
+    and the bank rows they are to (B, k): the k smallest of `squared_distances`."""
+    found = torch.topk(squared_distances(q, bank, bank_sq, out), k, dim=1, largest=False)
     return found.values.clamp_min(0.0).sqrt(), found.indices
 
 
 def nearest_distances(q: torch.Tensor, bank: torch.Tensor, bank_sq: torch.Tensor, k: int,
                       out: torch.Tensor | None = None) -> torch.Tensor:
-    """The k smallest Euclidean distances (B, k), ascending, from q (B, F) to bank (N, F) (`nearest`'s)."""
-    return nearest(q, bank, bank_sq, k, out)[0]
+    """`nearest`'s distances (B, k) alone: the same numbers, their k smallest by `smallest`
+    (eager; compiled, by the top-k)."""
+    d2 = squared_distances(q, bank, bank_sq, out)
+    if torch.compiler.is_compiling():
+        return torch.topk(d2, k, dim=1, largest=False).values.clamp_min(0.0).sqrt()
+    return smallest(d2, k).clamp_min(0.0).sqrt()
+
+
+GROUPS = 8  # strided column groups of `smallest`
+
+
+def smallest(d2: torch.Tensor, k: int) -> torch.Tensor:
+    """The k smallest values of every row of d2 (B, N), ascending: the values of
+    ``torch.topk(d2, k, largest=False)``, the same numbers, found in about half its time.
+
+    The first 8 W columns (W = N // 8) as W sets {j, j + W, ..., j + 7 W}: their minima in one
+    elementwise pass over 8 rows of W, the k sets of smallest minima (largest of them m) by a
+    top-k over W. Every value below m lies in those sets (any other set's values are >= m),
+    and they hold k values <= m, so the k smallest of their 8 k values and the N - 8 W columns
+    left over are the row's k smallest. Rows of fewer than 8 k columns, and a chunk with a NaN
+    (which a minimum would carry), take the top-k over all columns."""
+    rows, n = d2.shape
+    width = n // GROUPS
+    if width < k or rows == 0:
+        return torch.topk(d2, k, dim=1, largest=False).values
+    full = width * GROUPS
+    minima = d2[:, :full].view(rows, GROUPS, width).amin(1)  # (B, W): set j's minimum
+    rest = d2[:, full:]
+    if minima.isnan().any() or rest.isnan().any():
+        return torch.topk(d2, k, dim=1, largest=False).values
+    sets = torch.topk(minima, k, dim=1, largest=False, sorted=False).indices  # (B, k)
+    columns = (sets.unsqueeze(2) + width * torch.arange(GROUPS, device=d2.device)).reshape(rows, -1)
+    candidates = torch.cat([torch.gather(d2, 1, columns), rest], 1)  # (B, 8 k + N - 8 W)
+    return torch.topk(candidates, k, dim=1, largest=False).values
 
 
 class KNNGate(nn.Module):

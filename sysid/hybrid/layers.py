@@ -33,8 +33,23 @@ def tanh(a: torch.Tensor) -> torch.Tensor:
 
 
 def _hidden_(a2: torch.Tensor) -> torch.Tensor:
-    """tanh(a) in place of `a2` = 2 a (the pre-activation doubled inside its product; exact)."""
-    return a2.sigmoid_().mul_(2.0).sub_(1.0)
+    """tanh(a) in place of `a2` = 2 a (the pre-activation doubled inside its product; exact):
+    -1 + 2 s in one pass (a fused multiply-add: 2 s is exact, so the same numbers as 2 s - 1)."""
+    return torch.add(_minus_one(a2), a2.sigmoid_(), alpha=2.0, out=a2)
+
+
+_MINUS_ONE: dict[tuple, torch.Tensor] = {}
+
+
+def _minus_one(like: torch.Tensor) -> torch.Tensor:
+    """-1 as a 0-d tensor of `like`'s dtype and device (a Python number would be converted at
+    every call)."""
+    key = (like.dtype, like.device)
+    found = _MINUS_ONE.get(key)
+    if found is None:
+        with torch.inference_mode(False):
+            found = _MINUS_ONE[key] = torch.tensor(-1.0, dtype=like.dtype, device=like.device)
+    return found
 
 
 def forward_single(z: torch.Tensor, weights, biases, scale: torch.Tensor, shift: torch.Tensor,
@@ -89,8 +104,9 @@ def backward(grad: torch.Tensor, h, weights, scale: torch.Tensor, single: bool,
         d_w = mm(g.mT, h_in).mT if i == n - 1 else mm(h_in.mT, g)
         grads[2 * i] = d_w.unsqueeze(0) if single else d_w
         grads[2 * i + 1] = g.sum(-2, keepdim=single)  # (1, n_i) or (K, n_i)
-        if i > 0:
-            g = torch.ops.aten.tanh_backward(mm(g, weights[i].mT), h_in)
+        if i > 0:  # (g W^T) (1 - h^2) in place of g W^T
+            g_h = mm(g, weights[i].mT)
+            g = torch.ops.aten.tanh_backward.grad_input(g_h, h_in, grad_input=g_h)
         elif input_gradient:
             g_in = mm(weights[0], g.mT).mT.contiguous()
     return g_in, grads

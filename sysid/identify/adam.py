@@ -52,13 +52,12 @@ class Adam:
         params = [p for p in self.params if p.grad is not None]
         if not params:
             return
+        if len(params) == 1 and params[0].device.type == "cpu":  # one tensor (the warm start's flat vector)
+            self._step_one(params[0], lr, beta1, beta2, eps)
+            return
         grads, exp_avgs, exp_avg_sqs, steps = [], [], [], []
         for p in params:
-            state = self.state.get(p)
-            if state is None:
-                state = self.state[p] = {"step": torch.tensor(0.0),
-                                         "exp_avg": torch.zeros_like(p, memory_format=torch.preserve_format),
-                                         "exp_avg_sq": torch.zeros_like(p, memory_format=torch.preserve_format)}
+            state = self._state_of(p)
             grads.append(p.grad)
             exp_avgs.append(state["exp_avg"])
             exp_avg_sqs.append(state["exp_avg_sq"])
@@ -73,6 +72,29 @@ class Adam:
         torch._foreach_div_(denominator, bias_correction2_sqrt)
         torch._foreach_add_(denominator, eps)
         torch._foreach_addcdiv_(params, exp_avgs, denominator, step_size)
+
+    def _state_of(self, p: torch.Tensor) -> dict[str, torch.Tensor]:
+        state = self.state.get(p)
+        if state is None:
+            state = self.state[p] = {"step": torch.tensor(0.0),
+                                     "exp_avg": torch.zeros_like(p, memory_format=torch.preserve_format),
+                                     "exp_avg_sq": torch.zeros_like(p, memory_format=torch.preserve_format)}
+        return state
+
+    def _step_one(self, p: torch.Tensor, lr: float, beta1: float, beta2: float, eps: float) -> None:
+        """`step` of one parameter: each multi-tensor operation as its one-tensor operation
+        (what torch's multi-tensor kernels run per tensor on the CPU), the same numbers."""
+        state, grad = self._state_of(p), p.grad
+        step, exp_avg, exp_avg_sq = state["step"], state["exp_avg"], state["exp_avg_sq"]
+        step.add_(self._one, alpha=1.0)
+        exp_avg.lerp_(grad, 1 - beta1)
+        exp_avg_sq.mul_(beta2)
+        exp_avg_sq.addcmul_(grad, grad, value=1 - beta2)
+        t = step.item()
+        denominator = torch.sqrt(exp_avg_sq)
+        denominator.div_((1 - beta2 ** t) ** 0.5)
+        denominator.add_(eps)
+        p.addcdiv_(exp_avg, denominator, value=(lr / (1 - beta1 ** t)) * -1)
 
     def state_dict(self) -> dict:
         """torch.optim.Adam's layout: ``state`` by parameter index, ``param_groups``."""

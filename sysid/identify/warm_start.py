@@ -72,6 +72,14 @@ class OneStepRegression:
         sizes, shapes = [q.numel() for q in self.parameters], [q.shape for q in self.parameters]
         self.views = [v.view(shape) for v, shape in zip(self.theta.split(sizes), shapes)]
         self.grads = [v.view(shape) for v, shape in zip(self.grad.split(sizes), shapes)]
+        # the views `gradient` reads, made once (they follow ``theta`` and ``grad`` in place)
+        L = len(self.views) // 2
+        weights, biases = self.views[:L], self.views[L:]
+        self._hidden = [(w, b.unsqueeze(1)) for w, b in zip(weights[:-1], biases[:-1])]  # W_i, b_i (K, 1, n)
+        self._hidden_T = [w.mT for w in weights[:-1]]
+        self._output = (weights[-1].mT, biases[-1].unsqueeze(-1))  # W^T (K, 3, n), b (K, 3, 1)
+        self._weights, self._d_weights, self._d_biases = weights, self.grads[:L], self.grads[L:]
+        self._beta = 2.0 * self.lambda_L2 / net.members
 
     def gradient(self, z: torch.Tensor, target_T: torch.Tensor, loss: bool = False) -> torch.Tensor | None:
         """The loss's gradient at ``theta`` into ``grad``, for standardised inputs z (K, B, 9)
@@ -85,29 +93,29 @@ class OneStepRegression:
         y^T = W^T h^T, which the matrix library does several times faster than h W. Equal
         to autograd's gradient to float round-off.
         """
-        L, K = len(self.views) // 2, self.net.members
-        weights, biases = self.views[:L], self.views[L:]
-        d_weights, d_biases = self.grads[:L], self.grads[L:]
-        beta = 2.0 * self.lambda_L2 / K
+        layers, (w_T, b_col) = self._hidden, self._output
+        beta = self._beta
         h = [z]
-        for w, b in zip(weights[:-1], biases[:-1]):
-            # tanh a = 2 sigmoid(2 a) - 1: torch's sigmoid is several times faster than its tanh
-            h.append(torch.baddbmm(b.unsqueeze(1), h[-1], w).mul_(2.0).sigmoid_().mul_(2.0).sub_(1.0))
-        w = weights[-1]
-        g_T = torch.baddbmm(biases[-1].unsqueeze(-1), w.mT, h[-1].mT).sub_(target_T)  # y^T - target^T (K, 3, B)
+        for w_i, b_row in layers:
+            # tanh a = 2 sigmoid(2 a) - 1 (torch's sigmoid is several times faster than its
+            # tanh): 2 a by the product's own factors (exact: a power of two), then -1 + 2 s
+            a = torch.baddbmm(b_row, h[-1], w_i, beta=2.0, alpha=2.0).sigmoid_()
+            h.append(torch.add(_MINUS_ONE, a, alpha=2.0, out=a))
+        g_T = torch.baddbmm(b_col, w_T, h[-1].mT).sub_(target_T)  # y^T - target^T (K, 3, B)
         value = None
         if loss:
-            value = g_T.square().mean() + self.lambda_L2 * sum((v * v).sum() for v in weights) / K
+            value = g_T.square().mean() + self.lambda_L2 * sum((v * v).sum() for v in self._weights) / self.net.members
         g_T.mul_(2.0 / g_T.numel())  # dL/dy, transposed
-        d_weights[-1].copy_(torch.baddbmm(w.mT, g_T, h[-1], beta=beta).mT)  # dW^T = g^T h, transposed back
+        d_weights, d_biases = self._d_weights, self._d_biases
+        d_weights[-1].copy_(torch.baddbmm(w_T, g_T, h[-1], beta=beta).mT)  # dW^T = g^T h, transposed back
         torch.sum(g_T, 2, out=d_biases[-1])
-        g = torch.bmm(g_T.mT, w.mT)  # (K, B, n) at the last hidden layer, before its tanh'
-        for i in range(L - 2, -1, -1):
+        g = torch.bmm(g_T.mT, w_T)  # (K, B, n) at the last hidden layer, before its tanh'
+        for i in range(len(layers) - 1, -1, -1):
             g.mul_(torch.addcmul(_ONE, h[i + 1], h[i + 1], value=-1.0))
-            torch.baddbmm(weights[i], h[i].mT, g, beta=beta, out=d_weights[i])
+            torch.baddbmm(layers[i][0], h[i].mT, g, beta=beta, out=d_weights[i])
             torch.sum(g, 1, out=d_biases[i])
             if i:
-                g = torch.bmm(g, weights[i].mT)
+                g = torch.bmm(g, self._hidden_T[i])
         return value
 
     def adam_step(self) -> None:
@@ -123,6 +131,7 @@ class OneStepRegression:
 
 
 _ONE = torch.ones(())
+_MINUS_ONE = -torch.ones(())
 
 
 def warm_start(net: ForceCorrection, s: torch.Tensor, residual: torch.Tensor, device, experiment: Experiment,

@@ -80,8 +80,8 @@ _log = logging.getLogger(__name__)
 
 SOURCE = Path(__file__).with_name("native_kernel.cpp")
 # IEEE arithmetic as written: no fast-math, no contraction into FMA, no host-specific code (the
-# same numbers on every x86-64 machine); -O3's vectorised tangent loops give the same bits as
-# -O2's (checked on the D2 windows), 1.3x faster
+# same numbers on every x86-64 machine: the tangents' pairs are SSE2, x86-64's baseline); -O3
+# gives the same bits as -O2 (checked on the D2 windows), 1.3x faster
 FLAGS = ("-O3", "-fPIC", "-shared", "-std=c++17", "-ffp-contract=off")
 WIDTH = 18  # dx/dt (6), F_MMG (3), s (9)
 
@@ -416,7 +416,7 @@ def _call(entry: str, state: torch.Tensor, inputs: torch.Tensor, c, families: in
 
 def rate(state: torch.Tensor, inputs: torch.Tensor, c, families: int = Families.WIND) -> torch.Tensor:
     """out (..., 18) (see the module docstring), no gradient; where `applies` holds."""
-    out = torch.empty(state.shape[:-1] + (WIDTH,), dtype=state.dtype)
+    out = torch.empty(*state.shape[:-1], WIDTH, dtype=state.dtype)  # integer sizes: parsed quicker
     _call("rate", state, inputs, c, families, [out])
     return out
 
@@ -486,23 +486,35 @@ class TrainingKernel:
     def __call__(self, state: torch.Tensor, inputs: torch.Tensor,
                  jacobian: bool = True) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None]:
         state, inputs = state.contiguous(), inputs.contiguous()
-        batch = state.shape[:-1]
-        rate_out, force = state.new_empty(batch + (6,)), state.new_empty(batch + (3,))
-        z = state.new_empty(batch + (9,))
-        jac = state.new_empty(batch + (6, WIDTH)) if jacobian else None
+        *batch, _ = state.shape
+        # the sizes as integers: torch.empty parses them quicker than a torch.Size (once per call)
+        empty, dtype, device = torch.empty, self.dtype, state.device
+        rate_out, force = empty(*batch, 6, dtype=dtype, device=device), empty(*batch, 3, dtype=dtype, device=device)
+        z = empty(*batch, 9, dtype=dtype, device=device)
+        jac = empty(*batch, 6, WIDTH, dtype=dtype, device=device) if jacobian else None
         coefficients, mean, std = self._pointers
         self._training(state.numel() // 6, state.data_ptr(), inputs.data_ptr(), coefficients, self.families, mean,
                        std, rate_out.data_ptr(), force.data_ptr(), z.data_ptr(),
                        None if jac is None else jac.data_ptr())
         return rate_out, force, z, jac
 
+    def _gradient_of(self, grad: torch.Tensor | None) -> torch.Tensor | None:
+        """`grad` in this kernel's dtype, rows contiguous (None stays None)."""
+        if grad is None:
+            return None
+        if grad.dtype != self.dtype:
+            grad = grad.to(self.dtype)
+        return grad if grad.is_contiguous() else grad.contiguous()
+
     def state_gradient(self, jacobian: torch.Tensor, grad_rate: torch.Tensor | None,
                        grad_force: torch.Tensor | None, grad_z: torch.Tensor | None) -> torch.Tensor:
         """`state_gradient` of this kernel's dtype."""
-        grads = [None if g is None else g.to(self.dtype).contiguous() for g in (grad_rate, grad_force, grad_z)]
-        out = jacobian.new_empty(jacobian.shape[:-2] + (6,))
-        self._gradient(out.shape.numel() // 6, jacobian.data_ptr(),
-                       *[None if g is None else g.data_ptr() for g in grads], out.data_ptr())
+        g_rate, g_force, g_z = self._gradient_of(grad_rate), self._gradient_of(grad_force), self._gradient_of(grad_z)
+        *batch, _, _ = jacobian.shape
+        out = torch.empty(*batch, 6, dtype=jacobian.dtype, device=jacobian.device)
+        self._gradient(jacobian.numel() // 108, jacobian.data_ptr(), None if g_rate is None else g_rate.data_ptr(),
+                       None if g_force is None else g_force.data_ptr(), None if g_z is None else g_z.data_ptr(),
+                       out.data_ptr())
         return out
 
 

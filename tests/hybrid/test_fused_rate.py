@@ -65,6 +65,34 @@ def test_gradcheck_of_the_fused_rate_in_float64(d2):
     assert torch.autograd.gradcheck(rate, (state, *parameters))
 
 
+@pytest.mark.parametrize("members", [1, 3])
+def test_gradcheck_of_a_rollout_of_calls_sharing_a_plan_in_float64(d2, members):
+    """Three Euler steps through one plan (a rollout's: the plan's views of the parameters shared
+    by its calls, each call's parameter gradients summed by autograd), and a fourth call whose
+    outputs reach nothing: gradcheck with respect to the first state and every parameter, one
+    network and K = 3 side by side."""
+    exp, states, inputs, _ = d2
+    model = _hybrid(exp, states, torch.float64, (8, 6), members=members)
+    net = model.correction_net
+    c = model.mmg.coefficients.values_view(torch.float64)
+    kernel = native.TrainingKernel(c, native.families_of(model.mmg), net.input_mean, net.input_std, torch.float64)
+    state = states[3, :60:4].reshape(members, -1, 6) if members > 1 else states[3, :60:4]
+    state = state.clone().requires_grad_(True)
+    u = [inputs[1 + k, :60:4].reshape(state.shape[:-1] + (4,)) for k in range(4)]
+    parameters = [p for pair in zip(net.weights, net.biases) for p in pair]
+
+    def rollout(state, *parameters):
+        plan = fused_rate.Plan(kernel, force_rate(c, state), net.output_std, net.output_mean, parameters)
+        x, outputs = state, []
+        for k in range(3):
+            rate, f_nn, f_mmg = fused_rate.hybrid_rate(x, u[k], plan)
+            outputs += [f_nn, f_mmg]
+            x = x + 0.5 * rate
+        fused_rate.hybrid_rate(x, u[3], plan)  # reaches no output
+        return x, *outputs
+    assert torch.autograd.gradcheck(rollout, (state, *parameters))
+
+
 def _rollout(model, states, inputs, dt, fast=True):
     """Loss, states and every network gradient of a T = 10 Euler rollout (one network on the
     member axis, as training takes it)."""

@@ -67,6 +67,31 @@ def test_gradcheck_of_the_nn_only_rate_in_float64(d2, members):
     assert torch.autograd.gradcheck(rate, (state, *parameters))
 
 
+@pytest.mark.parametrize("members", [1, 3])
+def test_gradcheck_of_a_rollout_of_calls_sharing_a_plan_in_float64(d2, members):
+    """Three Euler steps through one plan (a rollout's: its calls share the plan's views of the
+    parameters), and a fourth call whose outputs reach nothing: gradcheck with respect to the
+    first state and every parameter."""
+    exp, states, inputs, _ = d2
+    model = _nn_only(exp, states, torch.float64, (8, 6), members)
+    net = model.correction_net
+    state = states[3, :60:4].reshape(members, -1, 6) if members > 1 else states[3, :60:4]
+    state = state.clone().requires_grad_(True)
+    u = [inputs[1 + k, :60:4].reshape(state.shape[:-1] + (4,)) for k in range(4)]
+    parameters = [p for pair in zip(net.weights, net.biases) for p in pair]
+
+    def rollout(state, *parameters):
+        plan = _plan(model, state, parameters)
+        x, outputs = state, []
+        for k in range(3):
+            rate, f_nn, _ = fused_rate.nn_rate(x, u[k], plan)
+            outputs.append(f_nn)
+            x = x + 0.5 * rate
+        fused_rate.nn_rate(x, u[3], plan)  # reaches no output
+        return x, *outputs
+    assert torch.autograd.gradcheck(rollout, (state, *parameters))
+
+
 def _rollout(model, states, inputs, dt, fast=True):
     """Loss, states and every network gradient of a T-step Euler rollout, member k on its own
     windows (states (T + 1, K, B, 6))."""

@@ -55,6 +55,29 @@ def test_adam_is_torch_adam_to_the_bit():
     assert all(p.grad is None for p in ours_params)
 
 
+def test_adam_of_one_tensor_is_torch_adam_to_the_bit():
+    """One flat float32 parameter (as the warm start's), gradients from 1e-7 to 10, a change
+    of the learning rate: parameter and moments equal torch's multi-tensor Adam's."""
+    gen = torch.Generator().manual_seed(5)
+    ours_p = torch.nn.Parameter(torch.randn(18179, generator=gen))
+    their_p = torch.nn.Parameter(ours_p.detach().clone())
+    ours, theirs = Adam([ours_p], 3e-3), torch.optim.Adam([their_p], lr=3e-3, foreach=True)
+    for n in range(20):
+        if n == 12:
+            ours.param_groups[0]["lr"] = theirs.param_groups[0]["lr"] = 1e-3
+        scale = 10.0 ** float(torch.randint(-7, 2, (), generator=gen))
+        ours_p.grad = torch.randn(18179, generator=gen) * scale
+        their_p.grad = ours_p.grad.clone()
+        ours.step()
+        theirs.step()
+    assert torch.equal(ours_p.detach(), their_p.detach())
+    assert not torch.equal(ours_p.detach(), torch.randn(18179, generator=torch.Generator().manual_seed(5)))
+    mine, torch_state = ours.state[ours_p], theirs.state[their_p]
+    assert float(mine["step"]) == float(torch_state["step"]) == 20.0
+    assert torch.equal(mine["exp_avg"], torch_state["exp_avg"])
+    assert torch.equal(mine["exp_avg_sq"], torch_state["exp_avg_sq"])
+
+
 @pytest.mark.parametrize("direction", ["torch to ours", "ours to torch"])
 def test_adam_resumes_from_the_other_ones_state_dict(tmp_path, direction):
     """A checkpoint (torch.save, weights_only load) of one continues with the other to the

@@ -205,6 +205,33 @@ def test_a_training_rollout_equals_the_torch_path(kernel, d2_rows, dtype):
         torch.testing.assert_close(a, b, rtol=rtol, atol=rtol * float(b.abs().max()))
 
 
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_the_state_gradient_is_the_jacobian_times_the_gradients(kernel, dtype):
+    """`state_gradient` of any Jacobian (its x and y rows too) equals torch's product of the
+    Jacobian with (g_rate, g_force, g_z) in float64, a None gradient as zero; a non-finite
+    gradient gives NaN (or the infinity) where the product does, in the x and y rows too."""
+    torch.manual_seed(3)
+    rows = 300
+    jacobian = torch.randn(2, rows // 2, 6, 18, dtype=torch.float64)
+    jacobian[0, :5, [0, 2]] = 0.0  # rows x, y zero, as the kernel's
+    g = [torch.randn(rows, n, dtype=torch.float64) * 10 for n in (6, 3, 9)]
+    g[0][7, 2] = float("inf")
+    g[2][11, 4] = float("nan")
+    for grads in (g, [None, g[1], g[2]], [g[0], None, None]):
+        full = torch.cat([torch.zeros(rows, n, dtype=torch.float64) if x is None else x
+                          for x, n in zip(grads, (6, 3, 9))], -1)
+        expected = (jacobian.reshape(rows, 6, 18) * full.unsqueeze(1)).sum(-1).reshape(2, rows // 2, 6)
+        got = native.state_gradient(jacobian.to(dtype), *[None if x is None else x.to(dtype) for x in grads])
+        assert got.shape == (2, rows // 2, 6) and got.dtype == dtype
+        if dtype == torch.float32:  # the product of the float32 entries, summed in double
+            expected = (jacobian.to(dtype).double().reshape(rows, 6, 18)
+                        * torch.cat([torch.zeros(rows, n, dtype=torch.float64) if x is None else x.to(dtype).double()
+                                     for x, n in zip(grads, (6, 3, 9))], -1).unsqueeze(1)).sum(-1)
+            expected = expected.reshape(2, rows // 2, 6).to(dtype)
+        torch.testing.assert_close(got, expected, rtol=1e-6 if dtype == torch.float32 else 1e-13, atol=1e-12,
+                                   equal_nan=True)
+        assert torch.equal(got.isnan(), expected.isnan())
 def test_a_second_build_reuses_the_library_and_a_corrupt_one_is_not_loaded(tmp_path):
     first = native.build(tmp_path)
     assert first.compiled and first.path.parent == tmp_path
