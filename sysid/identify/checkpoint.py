@@ -74,13 +74,15 @@ def unpack(packed, source: str | os.PathLike, key: str) -> dict:
             shape = [int(n) for n in dims.split(",")] if dims else []
             size = math.prod(shape)
             flat, at = packed["values"][dtype], offsets[dtype]
-            if not isinstance(flat, torch.Tensor) or flat.dim() != 1 or at + size > flat.numel():
+            if (not isinstance(flat, torch.Tensor) or flat.dim() != 1 or str(flat.dtype)[6:] != dtype
+                    or size < 0 or at + size > flat.numel()):
                 raise bad
             tensors[name] = flat[at:at + size].reshape(shape).clone()
             offsets[dtype] = at + size
-    except (ValueError, KeyError):
+    except (ValueError, KeyError, RuntimeError):
         raise bad from None
-    if any(packed["values"][d].numel() != n for d, n in offsets.items()):
+    if any(not isinstance(packed["values"][d], torch.Tensor) or packed["values"][d].numel() != n
+           for d, n in offsets.items()):
         raise bad
     return tensors
 

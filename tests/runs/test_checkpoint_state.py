@@ -72,6 +72,9 @@ def test_a_packed_table_unpacks_to_equal_tensors():
     assert list(back) == list(tensors)
     assert all(b.dtype == t.dtype and b.shape == t.shape and torch.equal(b, t) for b, t in zip(back.values(), tensors.values()))
     assert unpack(pack({}), "x.pt", "model") == {}
+    for layout in ("w\tfloat64\t3,5", "w\tfloat64\t-3,4", "w\tfloat16\t3,4", "w\tfloat64"):
+        with pytest.raises(CheckpointError, match=r"^x.pt: training checkpoint's 'model' is not a packed tensor table"):
+            unpack({"layout": layout, "values": {"float64": torch.zeros(12, dtype=torch.float64)}}, "x.pt", "model")
 
 
 def test_a_damaged_packed_table_is_refused_in_one_line(written, tmp_path):
