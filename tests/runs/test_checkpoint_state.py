@@ -86,3 +86,13 @@ def test_a_damaged_packed_table_is_refused_in_one_line(written, tmp_path):
     with pytest.raises(CheckpointError, match=r"ckpt.pt: training checkpoint's 'model' is not a packed tensor "
                                               r"table; delete it to start afresh$"):
         TrainingCheckpoint(tmp_path / "ckpt.pt", config).load()
+
+
+def test_the_packed_values_are_the_tensors_flattened_in_order():
+    """`pack`'s flat values per dtype equal torch.cat of the tensors' flattened values (the
+    stand-in a torch without its private flatten gets)."""
+    from sysid.identify.checkpoint import pack
+    a, b, c = torch.arange(6.0).reshape(2, 3).t(), torch.tensor(7.0), torch.arange(3, dtype=torch.int64)
+    packed = pack({"a": a, "b": b, "c": c})
+    assert torch.equal(packed["values"]["float32"], torch.cat([a.reshape(-1), b.reshape(-1)]))
+    assert torch.equal(packed["values"]["int64"], c)
