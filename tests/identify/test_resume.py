@@ -4,7 +4,7 @@ import json
 import pytest
 import torch
 
-from sysid.identify.checkpoint import CheckpointState, TrainingCheckpoint
+from sysid.identify.checkpoint import CheckpointState, TrainingCheckpoint, plain
 from sysid.cli import main, run as sysid
 from sysid.runs.lifecycle import checkpoint_path
 from tiny_experiment import tiny_experiment, tiny_test_file
@@ -83,7 +83,35 @@ def test_a_checkpoint_of_torch_adam_resumes_to_the_same_metrics(dataset_dir, tmp
         main(["train", str(config), "-o", str(out), "--test", str(test_file)])
     monkeypatch.undo()
     assert made and saves == [1, 2]
-    assert torch.load(checkpoint_path(out), weights_only=True)["optimizer"]["state"][0]["step"] > 0
+    saved = CheckpointState.from_state_dict(torch.load(checkpoint_path(out), weights_only=True), "checkpoint")
+    assert saved.optimizer["state"][0]["step"] > 0
     sysid(["train", str(config), "-o", str(out), "--test", str(test_file), "--resume"])
     assert "resumed after epoch 2" in capsys.readouterr().out
+    assert (out / "metrics.csv").read_text() == whole
+
+
+def test_a_version_1_checkpoint_resumes_to_the_same_metrics(dataset_dir, tmp_path, monkeypatch, capsys):
+    """A checkpoint in version 1's layout (every tensor on its own, what sysid wrote before the
+    packed tables) resumes to the metrics of an uninterrupted run."""
+    config, test_file = _config(tmp_path, dataset_dir)
+    sysid(["train", str(config), "-o", str(tmp_path / "whole"), "--test", str(test_file)])
+    whole = (tmp_path / "whole" / "metrics.csv").read_text()
+
+    saves = []
+
+    def save_version_1_then_interrupt(self, state):
+        torch.save(plain({"version": 1, "config": self.config, **state.to_state_dict()}), self.path)
+        saves.append(state.epoch)
+        if len(saves) == 3:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(TrainingCheckpoint, "save", save_version_1_then_interrupt)
+    out = tmp_path / "parted"
+    with pytest.raises(SystemExit):
+        main(["train", str(config), "-o", str(out), "--test", str(test_file)])
+    monkeypatch.undo()
+    raw = torch.load(checkpoint_path(out), weights_only=True)
+    assert raw["version"] == 1 and isinstance(raw["model"], dict) and len(raw["model"]) > 10
+    sysid(["train", str(config), "-o", str(out), "--test", str(test_file), "--resume"])
+    assert "resumed after epoch 3" in capsys.readouterr().out
     assert (out / "metrics.csv").read_text() == whole
