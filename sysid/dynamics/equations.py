@@ -202,7 +202,8 @@ def integrate(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt
     rhs = ShipDynamics(force_model, inputs, dt, record)
     if integrator.method not in _ODEINT_NAME:  # classical RK4: a plain step loop
         return rollout(rhs.rate, x0, inputs, dt, integrator.method)
-    from sysid.dynamics.odeint import odeint  # here: maneuvers and predictions (step loops) never need it
+    from torchdiffeq import odeint  # here: its import loads scipy.integrate (about 0.4 s), which eager
+    # maneuvers and predictions (step loops) never need
     tau = torch.arange(inputs.shape[0], dtype=x0.dtype, device=x0.device)
     options = {"perturb": True} if integrator.method is not Method.EULER else None
     return odeint(rhs, x0, tau, method=_ODEINT_NAME[integrator.method], options=options)
@@ -297,7 +298,7 @@ def _training_rollout(rate, x0: torch.Tensor, inputs: torch.Tensor, dt: float):
     check_shapes(x0, inputs)
     if inputs.shape[0] < 2:
         raise ValueError("no steps: inputs need at least two rows")
-    from sysid.dynamics.odeint import odeint  # here, as in `integrate`
+    from torchdiffeq import odeint  # here, as in `integrate`
     rhs = TrainingDynamics(rate, inputs.contiguous(), dt)  # each step's inputs one contiguous slice
     tau = torch.arange(inputs.shape[0], dtype=x0.dtype, device=x0.device)
     states = odeint(rhs, x0, tau, method=_ODEINT_NAME[Method.EULER])

@@ -85,6 +85,9 @@ def run_case(name: str, dataset: Path, root: Path, out: Path) -> dict:
     summary.pop("train_seconds")
     history = trainer.history_.drop(columns="seconds").to_dict("list")
     saved = torch.load(checkpoint, weights_only=True) if checkpoint.is_file() else {}
+    if saved:  # the state the file holds as the package reads it back (its file layout's version apart)
+        from sysid.identify.checkpoint import CheckpointState
+        saved = {"config": saved["config"], **CheckpointState.from_state_dict(saved, checkpoint).to_state_dict()}
     for row in saved.get("stage_history", []) + saved.get("history", []):
         row.pop("seconds")
     saved.get("summary", {}).pop("train_seconds", None)

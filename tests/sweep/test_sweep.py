@@ -87,7 +87,9 @@ def test_sweep_killed_part_way_resumes_without_training_a_trial_twice(tmp_path, 
                                          "'training.learning_rate' = [1e-3, 3e-3]\n")
     out = tmp_path / "sweep"
     env = {**os.environ, "SYSID_DATA": str(dataset_dir.parent)}
-    first = _sysid("sweep", str(path), "-o", str(out), "--workers", "2", env=env, start_new_session=True)
+    # one trial at a time, so that the kill after the first trained trial lands with trials left
+    # (two workers can finish both points' trials, two seeds each side by side, within one poll)
+    first = _sysid("sweep", str(path), "-o", str(out), "--workers", "1", env=env, start_new_session=True)
     _wait_for_a_trained_trial(first, out)
     os.killpg(first.pid, signal.SIGKILL)  # the whole sweep, Ray's workers too
     first.wait()
