@@ -16,6 +16,7 @@ from sysid.hybrid.correction import ForceCorrection
 from sysid.hybrid.force_models import CorrectedModel, PerMember, build_mmg
 from sysid.mmg import native
 from sysid.mmg.vjp import force_rate
+from rollout_gradcheck import gradcheck_of_a_rollout, rollout_case
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -76,21 +77,12 @@ def test_gradcheck_of_a_rollout_of_calls_sharing_a_plan_in_float64(d2, members):
     net = model.correction_net
     c = model.mmg.coefficients.values_view(torch.float64)
     kernel = native.TrainingKernel(c, native.families_of(model.mmg), net.input_mean, net.input_std, torch.float64)
-    state = states[3, :60:4].reshape(members, -1, 6) if members > 1 else states[3, :60:4]
-    state = state.clone().requires_grad_(True)
-    u = [inputs[1 + k, :60:4].reshape(state.shape[:-1] + (4,)) for k in range(4)]
+    state, u = rollout_case(states, inputs, members)
     parameters = [p for pair in zip(net.weights, net.biases) for p in pair]
 
-    def rollout(state, *parameters):
-        plan = fused_rate.Plan(kernel, force_rate(c, state), net.output_std, net.output_mean, parameters)
-        x, outputs = state, []
-        for k in range(3):
-            rate, f_nn, f_mmg = fused_rate.hybrid_rate(x, u[k], plan)
-            outputs += [f_nn, f_mmg]
-            x = x + 0.5 * rate
-        fused_rate.hybrid_rate(x, u[3], plan)  # reaches no output
-        return x, *outputs
-    assert torch.autograd.gradcheck(rollout, (state, *parameters))
+    def plan_of(state, parameters):
+        return fused_rate.Plan(kernel, force_rate(c, state), net.output_std, net.output_mean, parameters)
+    assert gradcheck_of_a_rollout(fused_rate.hybrid_rate, plan_of, state, u, parameters, forces=2)
 
 
 def _rollout(model, states, inputs, dt, fast=True):

@@ -16,6 +16,7 @@ from sysid.hybrid.correction import ForceCorrection
 from sysid.hybrid.force_models import CorrectedModel, PerMember, build_mmg
 from sysid.mmg.coefficient_lookup import Rows, coefficient_matrix
 from sysid.mmg.vjp import RATE_ROWS
+from rollout_gradcheck import gradcheck_of_a_rollout, rollout_case
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -75,21 +76,10 @@ def test_gradcheck_of_a_rollout_of_calls_sharing_a_plan_in_float64(d2, members):
     exp, states, inputs, _ = d2
     model = _nn_only(exp, states, torch.float64, (8, 6), members)
     net = model.correction_net
-    state = states[3, :60:4].reshape(members, -1, 6) if members > 1 else states[3, :60:4]
-    state = state.clone().requires_grad_(True)
-    u = [inputs[1 + k, :60:4].reshape(state.shape[:-1] + (4,)) for k in range(4)]
+    state, u = rollout_case(states, inputs, members)
     parameters = [p for pair in zip(net.weights, net.biases) for p in pair]
-
-    def rollout(state, *parameters):
-        plan = _plan(model, state, parameters)
-        x, outputs = state, []
-        for k in range(3):
-            rate, f_nn, _ = fused_rate.nn_rate(x, u[k], plan)
-            outputs.append(f_nn)
-            x = x + 0.5 * rate
-        fused_rate.nn_rate(x, u[3], plan)  # reaches no output
-        return x, *outputs
-    assert torch.autograd.gradcheck(rollout, (state, *parameters))
+    assert gradcheck_of_a_rollout(fused_rate.nn_rate, lambda state, parameters: _plan(model, state, parameters),
+                                  state, u, parameters, forces=1)
 
 
 def _rollout(model, states, inputs, dt, fast=True):
