@@ -14,11 +14,11 @@ from torch import nn
 
 from sysid.config.choices import GateSpace
 from sysid.hybrid.correction import correction_inputs
-from sysid.hybrid.force_models import CorrectedModel
+from sysid.hybrid.force_models import _EOM_ROWS, CorrectedModel
 from sysid.mmg import native
-from sysid.mmg.coefficient_lookup import Rows, coefficient_matrix
+from sysid.mmg.coefficient_lookup import coefficient_matrix
 from sysid.mmg.model import ForceBreakdown
-from sysid.mmg.vjp import RATE_ROWS, force_rate, rate_of_force
+from sysid.mmg.vjp import force_rate, rate_of_force
 from sysid.mmg.wind import relative_wind
 
 
@@ -34,6 +34,35 @@ class _Members(nn.Module):
     @property
     def kind(self) -> str:
         return getattr(self.members[0], "kind", "mmg")
+
+    def eager_rate(self, state: torch.Tensor, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None] | None:
+        """(dx/dt (..., 6), the gate's decision (...,) or None) at state (..., 6) with inputs
+        (..., 4) without gradient where `no_grad_rate` applies, else None (then `forward` and
+        the equations of motion, which this equals to round-off)."""
+        if torch.is_grad_enabled():
+            return None
+        # looked up once while the members, their gates and parameters stay as they are (a rollout's steps)
+        key = (state.dtype, tuple(id(m.__dict__.get("_modules", {}).get("gate")) for m in self.members),
+               tuple((id(t), t._version) for t in (*self.parameters(), *self.buffers())))
+        found = self.__dict__.get("_eager_rate")
+        if found is None or found[0] != key:
+            found = self.__dict__["_eager_rate"] = (key, self.no_grad_rate(state))
+        rate = found[1]
+        return rate(state, inputs) if rate is not None else None
+
+    def no_grad_rate(self, like: torch.Tensor):
+        """A function (state, inputs) -> (dx/dt, the gate's decision or None) without gradient,
+        or None where there is none (each kind of members says how)."""
+        raise NotImplementedError
+
+    def _own_rates(self, like: torch.Tensor) -> list | None:
+        """The members' own `no_grad_rate`s in `like`'s dtype; None unless every member is a
+        `CorrectedModel` whose own one applies and the members share the mass terms
+        (`_common_mass`)."""
+        rates = [m.no_grad_rate(like) if isinstance(m, CorrectedModel) else None for m in self.members]
+        if any(r is None for r in rates) or not _common_mass(self.members, like):
+            return None
+        return rates
 
 
 class SeedEnsemble(_Members):
@@ -74,21 +103,6 @@ class SeedEnsemble(_Members):
             forces.gate_on = torch.stack([p.gate_on for p in parts]).to(state.dtype).mean(0) >= 0.5
         return forces
 
-    def eager_rate(self, state: torch.Tensor, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None] | None:
-        """(dx/dt (..., 6), the gate's decision (...,) or None) at state (..., 6) with inputs
-        (..., 4) without gradient where `no_grad_rate` applies, else None (then `forward` and
-        the equations of motion, which this equals to round-off)."""
-        if torch.is_grad_enabled():
-            return None
-        # looked up once while the members, their gates and parameters stay as they are (a rollout's steps)
-        key = (state.dtype, tuple(id(m.__dict__.get("_modules", {}).get("gate")) for m in self.members),
-               tuple((id(t), t._version) for t in (*self.parameters(), *self.buffers())))
-        found = self.__dict__.get("_eager_rate")
-        if found is None or found[0] != key:
-            found = self.__dict__["_eager_rate"] = (key, self.no_grad_rate(state))
-        rate = found[1]
-        return rate(state, inputs) if rate is not None else None
-
     def no_grad_rate(self, like: torch.Tensor):
         """A function (state (..., 6), inputs (..., 4)) -> (dx/dt (..., 6), the kNN gate's
         decision (...,) or None) without gradient (the eager steps of maneuvers and
@@ -100,8 +114,8 @@ class SeedEnsemble(_Members):
         one MMG, or of MMGs whose identified hull coefficients differ; NN-only); the gate
         on where at least half of the members apply their correction, as `forward`. None
         unless every member's own `no_grad_rate` applies and they share the mass terms."""
-        rates = [m.no_grad_rate(like) if isinstance(m, CorrectedModel) else None for m in self.members]
-        if any(r is None for r in rates) or not _common_mass(self.members, like):
+        rates = self._own_rates(like)
+        if rates is None:
             return None
         batched = _members_rate(self.members, like, self._shared_mmg)
         if batched is not None:
@@ -149,8 +163,6 @@ def _common_mass(members: Sequence[nn.Module], like: torch.Tensor) -> bool:
         first, *rest = (coefficient_matrix(m.coefficients.values_view(like.dtype), _EOM_ROWS, like) for m in members)
         return all(torch.equal(first, other) for other in rest)
 
-
-_EOM_ROWS = Rows(RATE_ROWS)
 
 
 def _members_rate(members: Sequence[nn.Module], like: torch.Tensor, shared_mmg: bool, side_by_side: bool = False):
@@ -263,15 +275,9 @@ class MembersSideBySide(_Members):
         rows = like.reshape(-1, like.shape[-1]).shape[0]
         if rows % (len(self.members) + 1):
             return None
-        if any(not isinstance(m, CorrectedModel) or m.no_grad_rate(like) is None for m in self.members):
-            return None
-        if not _common_mass(self.members, like):
+        if self._own_rates(like) is None:
             return None
         return _members_rate(self.members, like, self._shared_mmg, side_by_side=True)
-
-    def eager_rate(self, state: torch.Tensor, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None] | None:
-        """`no_grad_rate` at state (R, 6) with inputs (R, 4), looked up once per rollout."""
-        return SeedEnsemble.eager_rate(self, state, inputs)
 
     def forward(self, state: torch.Tensor, inputs: torch.Tensor) -> ForceBreakdown:
         raise NotImplementedError("members side by side step without gradient only (eager_rate)")
