@@ -91,8 +91,8 @@ def compare(
     inputs = [Path(s) if Path(s).exists() else ship_file(s) for s in sources]
     for s, found in zip(sources, inputs):
         if found is None and (Path(s).name != str(s) or s in models):  # a path, or a model that is none
-            from sysid.mmg.ship import ships_dir
-            known = ", ".join(sorted(p.stem for p in ships_dir().glob("*.toml")))
+            from sysid.mmg.ship import known_ships
+            known = ", ".join(known_ships())
             raise DataError(f"compare: {s}: no such run directory, folder of seed runs or ship file, and no bundled "
                             f"ship of that name ({known}); check the path")
     files = _logs(data, exp)

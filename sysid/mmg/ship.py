@@ -167,6 +167,11 @@ def ships_dir() -> Path:
     return bundled_dir("ships")
 
 
+def known_ships() -> list[str]:
+    """The bundled ship names (`ships_dir`'s TOML files), sorted."""
+    return sorted(p.stem for p in ships_dir().glob("*.toml"))
+
+
 def resolve_ship_path(name_or_path: str | os.PathLike) -> Path:
     """A ship name (``esso_osaka``) or a path to a TOML file, to an existing path."""
     candidate = Path(name_or_path)
@@ -176,7 +181,7 @@ def resolve_ship_path(name_or_path: str | os.PathLike) -> Path:
         return candidate
     path = ships_dir() / f"{name_or_path}.toml"
     if not path.is_file():
-        known = sorted(p.stem for p in ships_dir().glob("*.toml"))
+        known = known_ships()
         raise ShipDefinitionError(
             f"unknown ship {str(name_or_path)!r}: no {path}; known ships: {', '.join(known) or 'none'}"
         )
