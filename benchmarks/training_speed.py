@@ -65,7 +65,8 @@ def training_step(exp, train, batch: int, members: int | None = None, fast: bool
     function, and its loss function: the multi-step loss L_v + 1e-3 L_F through the
     hand-derived VJP of the MMG (`fast`, the training default) or through autograd; with
     `trainer`, the step as `Trainer` takes it: lambda_v L_v + lambda_F L_F + lambda_L2
-    |theta|^2 of the config, Adam with ``foreach`` (`_WORKER`'s step)."""
+    |theta|^2 of the config, Adam with ``foreach`` (`_WORKER`'s step; with `fast`, the
+    trainer's `sysid.identify.loop.GradientStep` itself)."""
     from sysid.dynamics.equations import integrate_training
     from sysid.identify.trainer import VEL, adam, output_penalty, velocity_loss, weight_norm
     torch.manual_seed(0)
@@ -87,6 +88,14 @@ def training_step(exp, train, batch: int, members: int | None = None, fast: bool
         loss_v = velocity_loss(pred[1:, ..., VEL] - states[1:, ..., VEL], w_v)
         value = lambdas[0] * loss_v + lambdas[1] * output_penalty(f_nn, f_mmg, w_F).mean()
         return value + lambdas[2] * weight_norm(net) if trainer else value
+
+    if trainer and fast:  # the trainer's own step (its loss: `loss`'s numbers)
+        from sysid.identify.loop import GradientStep
+        gradient_step = GradientStep(exp)
+
+        def step():
+            gradient_step(model, chunk, w_v, w_F, opt, "train", 1, t.learning_rate)
+        return step, loss
 
     def step():
         value = loss()
@@ -179,11 +188,17 @@ chunk = train.select(torch.arange(min(batch, len(train))))
 def loss():
     loss_v, loss_F = multistep_loss(model, chunk, w_v, torch.ones(3))
     return t.lambda_v * loss_v + t.lambda_F * loss_F + t.lambda_L2 * weight_norm(net)
-def step():
-    value = loss()
-    opt.zero_grad()
-    value.backward()
-    opt.step()
+try:  # the trainer's own step where the checkout has one (sysid.identify.loop.GradientStep)
+    from sysid.identify.loop import GradientStep
+    gradient_step = GradientStep(exp)
+    def step():
+        gradient_step(model, chunk, w_v, torch.ones(3), opt, "train", 1, t.learning_rate)
+except ImportError:
+    def step():
+        value = loss()
+        opt.zero_grad()
+        value.backward()
+        opt.step()
 with torch.no_grad():
     first = float(loss())
 step()

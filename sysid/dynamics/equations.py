@@ -240,14 +240,17 @@ def stack_forces(calls: list[ForceBreakdown]) -> ForceBreakdown:
 class TrainingDynamics(nn.Module):
     """Right-hand side f(tau, x) = dt `rate`(x, inputs[floor(tau)]) of a training rollout;
     `rate` (a force model's ``training_rate``) gives (dx/dt, F_NN, F_MMG), and each call's
-    F_NN and F_MMG are kept in ``f_nn`` and ``f_mmg`` (the output penalty's)."""
+    F_NN and F_MMG are kept in ``f_nn`` and ``f_mmg`` (the output penalty's). Where dt in the
+    rate's dtype is 1 (dt = 1 s; a recorded grid's 0.99999999999998 s rounds to 1 in float32)
+    the rate itself: the product with 1 is exact, so the same numbers with one operation and
+    one autograd node fewer per step."""
 
     def __init__(self, rate, inputs: torch.Tensor, dt: float):
         super().__init__()
         self.rate = rate
         self.inputs = inputs
         self.dt = float(dt)
-        self._dt: dict[torch.dtype, torch.Tensor] = {}  # dt as a 0-d tensor of the rate's dtype
+        self._dt: dict[torch.dtype, torch.Tensor | None] = {}  # dt as a 0-d tensor of the rate's dtype (None: 1)
         self.f_nn: list[torch.Tensor] = []
         self.f_mmg: list[torch.Tensor] = []
 
@@ -256,10 +259,11 @@ class TrainingDynamics(nn.Module):
         rate, f_nn, f_mmg = self.rate(state, self.inputs[k])
         self.f_nn.append(f_nn)
         self.f_mmg.append(f_mmg)
-        dt = self._dt.get(rate.dtype)
-        if dt is None:  # the same product as with the number dt, without converting it at every call
-            dt = self._dt[rate.dtype] = torch.tensor(self.dt, dtype=rate.dtype, device=rate.device)
-        return rate * dt
+        if rate.dtype not in self._dt:  # the same product as with the number dt, without converting it at every call
+            dt = torch.tensor(self.dt, dtype=rate.dtype, device=rate.device)
+            self._dt[rate.dtype] = None if bool(dt == 1) else dt
+        dt = self._dt[rate.dtype]
+        return rate if dt is None else rate * dt
 
 
 def integrate_training(force_model: nn.Module, x0: torch.Tensor, inputs: torch.Tensor, dt: float,

@@ -25,7 +25,7 @@ from sysid.errors import TrainingError
 from sysid.identify.adam import Adam
 from sysid.identify.checkpoint import CheckpointState, Checkpointing
 from sysid.identify.journal import TrainingJournal
-from sysid.identify.losses import adam, model_weight_norm, multistep_loss, validation_loss
+from sysid.identify.losses import adam, step_loss, validation_loss
 from sysid.identify.plateau import Plateau
 
 
@@ -89,10 +89,8 @@ class GradientStep:
         self.training, self.source = experiment.training, experiment.source
 
     def __call__(self, model, batch: WindowSet, w_v, w_F, optimizer, label: str, epoch: int, lr: float):
-        t = self.training
-        loss_v, loss_F = multistep_loss(model, batch, w_v, w_F, t.force_band)
-        loss = t.lambda_v * loss_v + t.lambda_F * loss_F + t.lambda_L2 * model_weight_norm(model)
-        if not torch.isfinite(loss):
+        loss, loss_v, loss_F = step_loss(model, batch, w_v, w_F, self.training)
+        if not math.isfinite(loss.item()):
             raise TrainingError(f"{self.source}: [training] the {label} loss became "
                                 f"{loss.detach().item()} at epoch {epoch} (learning_rate = {lr:g}?); no run written")
         optimizer.zero_grad()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import torch
 
-from sysid.config.experiment import PAPER_FORCE_BAND
+from sysid.config.experiment import PAPER_FORCE_BAND, TrainingOptions
 from sysid.dynamics.equations import integrate_loss, integrate_training
 from sysid.dynamics.rollouts import WindowSet, velocity_loss
 from sysid.hybrid.correction import ForceCorrection
@@ -35,8 +35,16 @@ def adam(params, lr: float) -> Adam:
 
 
 def weight_norm(net: ForceCorrection) -> torch.Tensor:
-    """||theta||^2 of the FNN weights (Eq. 13), per member (losses are means over members)."""
-    return sum((w * w).sum() for w in net.weights) / net.members
+    """||theta||^2 of the FNN weights (Eq. 13), per member (losses are means over members):
+    the layers' sums of squares added in order (no leading 0 +, no / 1 for one member: the
+    same numbers with fewer operations and autograd nodes)."""
+    norm = None
+    for w in net.weights:
+        square = (w * w).sum()
+        norm = square if norm is None else norm + square
+    if norm is None:
+        raise ValueError("weight_norm: the network has no weights")
+    return norm if net.members == 1 else norm / net.members
 
 
 def model_weight_norm(model) -> torch.Tensor:
@@ -67,6 +75,22 @@ def multistep_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor
     if w_F is None:
         return loss_v, loss_v.new_zeros(())
     return loss_v, output_penalty(f_nn, f_mmg, w_F, band).mean()
+
+
+def step_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor | None, training: TrainingOptions
+              ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(lambda_v L_v + lambda_F L_F + lambda_L2 |theta|^2, L_v, L_F) of a gradient step (Eq. 13)
+    with `training`'s lambdas and force band: `multistep_loss` and `model_weight_norm`
+    without the operations that cannot change a number (lambda_v = 1; L_F = 0 without
+    `w_F`, |theta|^2 = 0 without a network: a non-negative loss plus +0 is itself)."""
+    t = training
+    loss_v, loss_F = multistep_loss(model, batch, w_v, w_F, t.force_band)
+    loss = loss_v if t.lambda_v == 1.0 else t.lambda_v * loss_v
+    if w_F is not None:
+        loss = loss + t.lambda_F * loss_F
+    if correction_of(model.model if isinstance(model, PerMember) else model) is not None:
+        loss = loss + t.lambda_L2 * model_weight_norm(model)
+    return loss, loss_v, loss_F
 
 
 def validation_loss(model, batch: WindowSet, w_v: torch.Tensor) -> torch.Tensor:
