@@ -7,7 +7,6 @@ a 9-64-64-3 tanh network (Table 6); output de-standardised to N, N, N m (Eq. 10)
 from __future__ import annotations
 
 import math
-import weakref
 from typing import Callable, Sequence
 
 import torch
@@ -17,9 +16,6 @@ from sysid.hybrid.layers import forces as network_forces
 
 INPUT_NAMES = ("u", "v_m", "r", "delta", "n_p", "omega_u", "omega_v", "cos_psi", "sin_psi")
 OUTPUT_NAMES = ("X_NN", "Y_NN", "N_NN")
-
-# each network's flat theta while its parameters stay as they are: (key, theta)
-_FLAT: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def correction_inputs(state: torch.Tensor, inputs: torch.Tensor, relative_wind: torch.Tensor) -> torch.Tensor:
@@ -63,35 +59,6 @@ class ForceCorrection(nn.Module):
         self.register_buffer("input_std", torch.ones(len(INPUT_NAMES), dtype=dtype))
         self.register_buffer("output_mean", torch.zeros(len(OUTPUT_NAMES), dtype=dtype))
         self.register_buffer("output_std", torch.ones(len(OUTPUT_NAMES), dtype=dtype))
-
-    def ordered_parameters(self) -> list[nn.Parameter]:
-        """(W_1, b_1, ..., W_L, b_L): W_i (K, n_{i-1}, n_i), b_i (K, n_i)."""
-        return [p for pair in zip(self.weights, self.biases) for p in pair]
-
-    def _flat_key(self) -> tuple:
-        return (torch.is_grad_enabled(), tuple((id(p), p._version, p.requires_grad) for p in self.ordered_parameters()))
-
-    def flat_parameters(self) -> torch.Tensor:
-        """theta = (W_1, b_1, ..., W_L, b_L), each flattened (member by member, row-major), as one
-        tensor, made once while the parameters stay as they are (a training step's rollout and
-        its loss). With gradients on it is one `torch.cat`: the training right-hand side
-        (`sysid.hybrid.fused_rate`) takes it in place of the 2L parameters, autograd sums its
-        calls' gradients in one buffer and the cat's backward hands each parameter its part."""
-        key, found = self._flat_key(), _FLAT.get(self)
-        if found is None or found[0] != key:
-            found = _FLAT[self] = (key, torch.cat([p.reshape(-1) for p in self.ordered_parameters()]))
-        return found[1]
-
-    def training_weights(self) -> list[torch.Tensor]:
-        """W_1, ..., W_L for the loss's weight norm: views of `flat_parameters` where a rollout
-        made it for the parameters as they are (same values, same layout), else the parameters.
-        Through the views the norm's gradient joins the rollout's in theta's one sum, first, as
-        it joins each weight's own sum first without them: the same numbers either way."""
-        found = _FLAT.get(self)
-        if found is None or not found[1].requires_grad or found[0] != self._flat_key():
-            return list(self.weights)
-        parts = found[1].split_with_sizes([p.numel() for p in self.ordered_parameters()])
-        return [part.view(w.shape) for part, w in zip(parts[0::2], self.weights)]
 
     def set_standardization(self, input_mean, input_std, output_mean, output_std) -> "ForceCorrection":
         """Training statistics of s and of the force residual (zero std is replaced by 1)."""

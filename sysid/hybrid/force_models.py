@@ -263,7 +263,7 @@ class CorrectedModel(nn.Module):
                     forces = self(state, inputs, per_member=per_member)
                     return rate_of_force(state, forces.total, c), forces.correction, forces.mmg
                 plan = plans[state.dtype] = NNPlan(rates, net.input_mean, net.input_std, net.output_std,
-                                                   net.output_mean, parameters, net.flat_parameters())
+                                                   net.output_mean, parameters)
             return nn_rate(state, inputs, plan)
         return rate
 
@@ -288,7 +288,7 @@ class CorrectedModel(nn.Module):
                     return otherwise(state, inputs)
                 kernel = native.TrainingKernel(c, families, net.input_mean, net.input_std, state.dtype)
                 plan = plans[state.dtype] = Plan(kernel, force_rate(c, state), net.output_std, net.output_mean,
-                                                 parameters, net.flat_parameters())
+                                                 parameters)
             return hybrid_rate(state, inputs, plan)
         return rate
 

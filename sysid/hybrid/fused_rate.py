@@ -40,25 +40,16 @@ from sysid.mmg.tangents import basis, motion_columns, relative_wind_tangents
 class Plan:
     """What each call of one rollout reads, looked up once (the parameters stay where they are
     during a rollout: an optimizer steps between rollouts): the kernel, the mass terms M (3, 6)
-    and M^T, sigma_F and mu_F (3,), the network's parameters (W_1, b_1, ..., W_L, b_L) and
-    their 2-d views (W_L^T as a contiguous copy, b_L as a column, the hidden layers' doubled:
-    `sysid.hybrid.layers.forward_single`), and theta, the parameters flattened into one tensor
-    (`sysid.hybrid.correction.ForceCorrection.flat_parameters`, else their `torch.cat` here):
-    the Function's input in place of the 2L parameters, its gradient one tensor of theta's
-    layout, which autograd sums over the rollout's calls in one buffer."""
+    and M^T, sigma_F and mu_F (3,), the network's parameters as the Function's inputs and their
+    2-d views (W_L^T as a contiguous copy, b_L as a column, the hidden layers' doubled:
+    `sysid.hybrid.layers.forward_single`)."""
 
     def __init__(self, kernel: TrainingKernel, mass: torch.Tensor, scale: torch.Tensor, shift: torch.Tensor,
-                 parameters, theta: torch.Tensor | None = None):
+                 parameters):
         self.kernel, self.mass, self.mass_T = kernel, mass, mass.mT.contiguous()
         self.scale, self.shift = scale, shift
         self.parameters = tuple(parameters)
-        self.theta = torch.cat([p.reshape(-1) for p in self.parameters]) if theta is None else theta
-        self.sizes = [p.numel() for p in self.parameters]
         self.members = self.parameters[0].shape[0]
-        # the gradient's parts as `layers.backward` writes them: W_i (n_{i-1}, n_i) or (K, ...), b_i (n_i,) or (K, n_i)
-        self.shapes = [p.shape[1:] if self.members == 1 else p.shape for p in self.parameters]
-        self.calls = 0  # the Function's calls so far: each its row of `gradient_row`'s buffer
-        self._rows: list | None = None
         if self.members != 1:  # K side by side: the parameters as they are, (K, ...)
             self.weights, self.biases = list(self.parameters[0::2]), list(self.parameters[1::2])
             return
@@ -69,27 +60,12 @@ class Plan:
             self.last_bias = self.biases[-1].unsqueeze(-1)
             self.doubled = [(2.0 * w, 2.0 * b) for w, b in zip(self.weights[:-1], self.biases[:-1])]
 
-    def gradient_row(self, ctx) -> tuple[torch.Tensor, list[torch.Tensor]]:
-        """(theta's gradient of the call of `ctx`, its parts as `sysid.hybrid.layers.backward`
-        writes them). Every call of the rollout has its row of one (calls, theta) buffer, made
-        at the rollout's first backward (its views too: none per call); a call's second
-        backward (a retained graph) and a call after that get a buffer of their own."""
-        g = self.theta.new_empty(self.theta.shape)
-        return g, [part if len(shape) == 1 else part.view(shape)
-                   for part, shape in zip(g.split_with_sizes(self.sizes), self.shapes)]
 
-    def _buffer(self, rows: int) -> list:
-        g = self.theta.new_empty(rows, self.theta.shape[0])
-        parts = [part.view(rows, *shape).unbind(0)
-                 for part, shape in zip(g.split_with_sizes(self.sizes, 1), self.shapes)]
-        return list(zip(g.unbind(0), zip(*parts)))
-
-
-def _force_backward(ctx, plan: Plan, h, grad_rate, grad_nn, state_gradient: bool) -> tuple:
+def _force_backward(plan: Plan, h, grad_rate, grad_nn, state_gradient: bool) -> tuple:
     """The chain rule's part shared by both Functions' backwards: (rows, g_{dx/dt} (rows, 6) or
-    None, g_z or None, theta's gradient or None) from the gradients of dx/dt and F_NN, with
-    g_F = g_{F_NN} + g_{dx/dt} M^T through the layers' backward (each parameter's gradient
-    written into its part of theta's); rows = the batch flattened (K x rows for K members)."""
+    None, g_z or None, the parameters' gradients) from the gradients of dx/dt and F_NN, with
+    g_F = g_{F_NN} + g_{dx/dt} M^T through the layers' backward; rows = the batch flattened
+    (K x rows for K members)."""
     rows = h[0].shape[-2] * plan.members
     g_rate = None if grad_rate is None else grad_rate.reshape(rows, 6)
     if grad_nn is None:
@@ -97,24 +73,22 @@ def _force_backward(ctx, plan: Plan, h, grad_rate, grad_nn, state_gradient: bool
     else:
         g_force = grad_nn.reshape(rows, 3) if g_rate is None else torch.addmm(grad_nn.reshape(rows, 3), g_rate,
                                                                                 plan.mass_T)
-    g_z, g_theta = None, None
+    g_z, grads = None, [None] * len(plan.parameters)
     if g_force is not None:
         single = plan.members == 1
-        g_theta, parts = plan.gradient_row(ctx)
-        g_z, _ = layers.backward(g_force if single else g_force.view(plan.members, -1, 3), h, plan.weights,
-                                 plan.scale, single, state_gradient, parts)
-    return rows, g_rate, g_z, g_theta
+        g_z, grads = layers.backward(g_force if single else g_force.view(plan.members, -1, 3), h, plan.weights,
+                                     plan.scale, single, state_gradient)
+    return rows, g_rate, g_z, grads
 
 
 class _HybridRate(torch.autograd.Function):
-    """(state, inputs, plan, theta) -> (dx/dt, F_NN, F_MMG); theta the plan's flat parameters
-    (W_i (K, n_{i-1}, n_i), b_i (K, n_i) as `sysid.hybrid.correction.ForceCorrection` holds
-    them, flattened); with K > 1, state (K, ..., 6)."""
+    """(state, inputs, plan, W_1, b_1, ..., W_L, b_L) -> (dx/dt, F_NN, F_MMG); W_i (K, n_{i-1},
+    n_i), b_i (K, n_i) as `sysid.hybrid.correction.ForceCorrection` holds them (the plan's);
+    with K > 1, state (K, ..., 6)."""
 
     @staticmethod
-    def forward(ctx, state, inputs, plan, theta):
+    def forward(ctx, state, inputs, plan, *parameters):
         ctx.set_materialize_grads(False)
-        ctx.row, plan.calls = plan.calls, plan.calls + 1
         state_gradient = ctx.needs_input_grad[0]
         rate_mmg, f_mmg, z, jacobian = plan.kernel(state, inputs, state_gradient)
         if plan.members == 1:
@@ -136,16 +110,16 @@ class _HybridRate(torch.autograd.Function):
         jacobian, *h = ctx.saved_tensors
         plan = ctx.plan
         state_gradient = ctx.needs_input_grad[0]
-        _, g_rate, g_z, g_theta = _force_backward(ctx, plan, h, grad_rate, grad_nn, state_gradient)
+        _, g_rate, g_z, grads = _force_backward(plan, h, grad_rate, grad_nn, state_gradient)
         # (..., 6): the Jacobian's batch shape, the state's
         g_state = plan.kernel.state_gradient(jacobian, g_rate, grad_mmg, g_z) if state_gradient else None
-        return g_state, None, None, g_theta
+        return g_state, None, None, *grads
 
 
 def hybrid_rate(state: torch.Tensor, inputs: torch.Tensor, plan: Plan) -> tuple:
     """(dx/dt (..., 6), F_NN (..., 3), F_MMG (..., 3)) at state (..., 6) with inputs (..., 4)
     (see the module docstring), rows contiguous; `plan` of this rollout."""
-    return _HybridRate.apply(state, inputs, plan, plan.theta)
+    return _HybridRate.apply(state, inputs, plan, *plan.parameters)
 
 
 # NN-only (F = F_NN): the same Function shape without the MMG. The features of the equations
@@ -161,8 +135,8 @@ class NNPlan(Plan):
     the state's (6, 6) blocks."""
 
     def __init__(self, rates: torch.Tensor, mean: torch.Tensor, std: torch.Tensor, scale: torch.Tensor,
-                 shift: torch.Tensor, parameters, theta: torch.Tensor | None = None):
-        super().__init__(None, rates[:3], scale, shift, parameters, theta)
+                 shift: torch.Tensor, parameters):
+        super().__init__(None, rates[:3], scale, shift, parameters)
         self.rates, self.mean, self.std = rates, mean, std
         # (7, 6), (6, 6): products with a gradient's transpose (rows last: quicker than rows first)
         self.kinematic, self.state_rates = rates[3:10].contiguous(), rates[10:].contiguous()
@@ -217,13 +191,12 @@ def _state_gradient(plan: NNPlan, saved, g_rate, g_z, rows: int) -> torch.Tensor
 
 
 class _NNRate(torch.autograd.Function):
-    """(state, inputs, plan, theta) -> (dx/dt, F_NN, zeros in place of F_MMG) of an NN-only
-    model; theta as `_HybridRate`'s; with K > 1, state (K, ..., 6)."""
+    """(state, inputs, plan, W_1, b_1, ..., W_L, b_L) -> (dx/dt, F_NN, zeros in place of F_MMG) of
+    an NN-only model; parameters as `_HybridRate`'s; with K > 1, state (K, ..., 6)."""
 
     @staticmethod
-    def forward(ctx, state, inputs, plan, theta):
+    def forward(ctx, state, inputs, plan, *parameters):
         ctx.set_materialize_grads(False)
-        ctx.row, plan.calls = plan.calls, plan.calls + 1
         state_gradient = ctx.needs_input_grad[0]
         z, kinematic, saved = _inputs_and_kinematics(state, inputs, plan, state_gradient)
         rows = z.shape[0]
@@ -247,11 +220,11 @@ class _NNRate(torch.autograd.Function):
         saved, h = ctx.saved_tensors[:7], ctx.saved_tensors[7:]
         plan = ctx.plan
         state_gradient = ctx.needs_input_grad[0]
-        rows, g_rate, g_z, g_theta = _force_backward(ctx, plan, h, grad_rate, grad_nn, state_gradient)
+        rows, g_rate, g_z, grads = _force_backward(plan, h, grad_rate, grad_nn, state_gradient)
         g_state = None
         if state_gradient and (g_rate is not None or g_z is not None):
             g_state = _state_gradient(plan, saved, g_rate, g_z, rows).view(*ctx.batch, 6)
-        return g_state, None, None, g_theta
+        return g_state, None, None, *grads
 
 
 def nn_rate(state: torch.Tensor, inputs: torch.Tensor, plan: NNPlan) -> tuple:
@@ -259,4 +232,4 @@ def nn_rate(state: torch.Tensor, inputs: torch.Tensor, plan: NNPlan) -> tuple:
     (..., 6) with inputs (..., 4): s and the equations of motion in torch without autograd,
     with their Jacobian (`sysid.mmg.tangents`' relative wind), F_NN by the FNN's layers; its
     backward the chain rule written out as `_HybridRate`'s. `plan` of this rollout."""
-    return _NNRate.apply(state, inputs, plan, plan.theta)
+    return _NNRate.apply(state, inputs, plan, *plan.parameters)

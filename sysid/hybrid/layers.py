@@ -89,12 +89,10 @@ def forward_members(z: torch.Tensor, weights, biases, scale: torch.Tensor,
 
 
 def backward(grad: torch.Tensor, h, weights, scale: torch.Tensor, single: bool,
-             input_gradient: bool, out: list | None = None) -> tuple[torch.Tensor | None, list[torch.Tensor]]:
+             input_gradient: bool) -> tuple[torch.Tensor | None, list[torch.Tensor]]:
     """(g_z or None, [dW_1, db_1, ..., dW_L, db_L]) for the gradient `grad` of F (rows, n_L) (one
     network, `single`: 2-d tensors; gradients (1, ...) as the module holds them) or (K, rows,
-    n_L); `h` and `weights` as the forward used them. g_z only with `input_gradient`. With
-    `out` (contiguous tensors: dW_i (n_{i-1}, n_i), db_i (n_i,) for one network, (K, ...) for
-    K), the gradients are written there (the same numbers) and those are returned."""
+    n_L); `h` and `weights` as the forward used them. g_z only with `input_gradient`."""
     mm = torch.mm if single else torch.bmm
     g = grad * scale
     n = len(weights)
@@ -103,17 +101,9 @@ def backward(grad: torch.Tensor, h, weights, scale: torch.Tensor, single: bool,
     for i in range(n - 1, -1, -1):
         h_in = h[i]
         # narrow products transposed (dW_L = (g^T h)^T, g_z = (W_1 g^T)^T), as in the forwards
-        if out is not None:
-            if i == n - 1:
-                out[2 * i].copy_(mm(g.mT, h_in).mT)
-            else:
-                mm(h_in.mT, g, out=out[2 * i])
-            torch.sum(g, -2, out=out[2 * i + 1])
-            grads[2 * i], grads[2 * i + 1] = out[2 * i], out[2 * i + 1]
-        else:
-            d_w = mm(g.mT, h_in).mT if i == n - 1 else mm(h_in.mT, g)
-            grads[2 * i] = d_w.unsqueeze(0) if single else d_w
-            grads[2 * i + 1] = g.sum(-2, keepdim=single)  # (1, n_i) or (K, n_i)
+        d_w = mm(g.mT, h_in).mT if i == n - 1 else mm(h_in.mT, g)
+        grads[2 * i] = d_w.unsqueeze(0) if single else d_w
+        grads[2 * i + 1] = g.sum(-2, keepdim=single)  # (1, n_i) or (K, n_i)
         if i > 0:  # (g W^T) (1 - h^2) in place of g W^T
             g_h = mm(g, weights[i].mT)
             g = torch.ops.aten.tanh_backward.grad_input(g_h, h_in, grad_input=g_h)

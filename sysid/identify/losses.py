@@ -36,7 +36,7 @@ def adam(params, lr: float) -> Adam:
 
 def weight_norm(net: ForceCorrection) -> torch.Tensor:
     """||theta||^2 of the FNN weights (Eq. 13), per member (losses are means over members)."""
-    return sum((w * w).sum() for w in net.training_weights()) / net.members
+    return sum((w * w).sum() for w in net.weights) / net.members
 
 
 def model_weight_norm(model) -> torch.Tensor:

@@ -187,7 +187,7 @@ def _losses(stack: _Stack, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tenso
         loss_F = torch.zeros_like(loss_v)
     else:
         loss_F = output_penalty(f_nn, f_mmg, w_F, band).mean((0, 2)).reshape(k, m).mean(1)
-    l2 = sum((w * w).flatten(1).sum(1) for w in stack.net.training_weights()).reshape(k, m).sum(1) / m
+    l2 = sum((w * w).flatten(1).sum(1) for w in stack.net.weights).reshape(k, m).sum(1) / m
     return loss_v, loss_F, l2
 
 
