@@ -20,48 +20,6 @@
 
 namespace {
 
-// ---- elementary functions (prototype)
-
-constexpr double INV_HALF_PI = 0x1.45f306dc9c883p-1;
-constexpr double P1 = 0x1.921fb54400000p+0, P2 = 0x1.0b4611a600000p-34, P3 = 0x1.3198a2e037073p-69;
-constexpr double ROUND = 0x1.8p52;
-constexpr double REDUCE_BOUND = 0x1p20;  // |x| below: k < 2^20, k P1 and k P2 exact
-// sin(r + rr), cos(r + rr) for |r| <= pi/4 + tiny, |rr| <= ulp(r)
-inline void kernel_sin_cos(double r, double rr, double& s, double& c) {
-    const double z = r * r;
-    // sin: r + r^3 p(z) + rr (1 - z / 2)
-    const double ps = -0x1.5555555555555p-3 + z * (0x1.1111111110c77p-7 + z * (-0x1.a01a019e9dd9bp-13 + z * (0x1.71de37ad349adp-19 + z * (-0x1.ae601c18f5d78p-26 + z * 0x1.5e0fc26f4e8fcp-33))));
-    s = r + ((z * r) * ps + (rr - (0.5 * z) * rr));
-    // cos: 1 - z / 2 + z^2 q(z) - r rr
-    const double qc = 0x1.5555555555555p-5 + z * (-0x1.6c16c16c168c7p-10 + z * (0x1.a01a019f37447p-16 + z * (-0x1.27e4fa0175388p-22 + z * (0x1.1eeb5630e02b1p-29 + z * -0x1.9072445b50f4dp-37))));
-    const double hz = 0.5 * z;
-    const double w = 1.0 - hz;
-    c = w + ((((1.0 - w) - hz) + (z * z) * qc) - r * rr);
-}
-inline void sin_cos(double x, double& s, double& c) {
-    const double a = std::fabs(x);
-    if (!(a < REDUCE_BOUND) || a < 0x1p-27) {
-        if (a < 0x1p-27) { s = x; c = 1.0; } else { s = std::sin(x); c = std::cos(x); }
-        return;
-    }
-    const double k = (x * INV_HALF_PI + ROUND) - ROUND;
-    const double y = x - k * P1;
-    const double w2 = k * P2;
-    const double r1 = y - w2;
-    const double e1 = (y - r1) - w2;
-    const double w3 = k * P3;
-    const double r = r1 - w3;
-    const double rr = ((r1 - r) - w3) + e1;
-    if (std::fabs(r) < 0x1p-20 && k != 0.0) { s = std::sin(x); c = std::cos(x); return; }
-    double sr, cr;
-    kernel_sin_cos(r, rr, sr, cr);
-    const int64_t q = static_cast<int64_t>(k);
-    const double a0 = (q & 1) ? cr : sr, b0 = (q & 1) ? sr : cr;
-    s = (q & 2) ? -a0 : a0;
-    c = ((q + 1) & 2) ? -b0 : b0;
-}
-
-
 // the four tangents d/d(u, v, psi, r) (nothing depends on x, y) as two pairs of the compiler's
 // generic vector extension: every operation on a pair is the same IEEE operation on each lane
 // as on a double (no fusing, no reordering: the same bits as four scalar loops), done two at a
@@ -152,13 +110,13 @@ inline Dual exponential(const Dual& x) {
     return chain(x, e, e);
 }
 
-inline double sine(double x) { double s, c; sin_cos(x, s, c); return s; }
-inline Dual sine(const Dual& x) { double s, c; sin_cos(x.v, s, c); return chain(x, s, c); }
+inline double sine(double x) { return std::sin(x); }
+inline Dual sine(const Dual& x) { return chain(x, std::sin(x.v), std::cos(x.v)); }
 
 // (sin x, cos x) of one argument
+inline void sin_cos(double x, double& s, double& c) { s = std::sin(x); c = std::cos(x); }
 inline void sin_cos(const Dual& x, Dual& s, Dual& c) {
-    double sv, cv;
-    sin_cos(x.v, sv, cv);
+    const double sv = std::sin(x.v), cv = std::cos(x.v);
     s = chain(x, sv, cv);
     c = chain(x, cv, -sv);
 }
@@ -292,9 +250,9 @@ inline T crossflow(const T& v, const T& r, const double* c, int lane) {
 // reuses its sine (the same number)
 inline void rudder_sines(double delta, const double* c, double* sines) {
     const double* phase = c + K::RUDDER;
-    sines[0] = sine(delta + phase[0]);
-    sines[1] = phase[1] == phase[0] ? sines[0] : sine(delta + phase[1]);
-    sines[2] = phase[2] == phase[1] ? sines[1] : (phase[2] == phase[0] ? sines[0] : sine(delta + phase[2]));
+    sines[0] = std::sin(delta + phase[0]);
+    sines[1] = phase[1] == phase[0] ? sines[0] : std::sin(delta + phase[1]);
+    sines[2] = phase[2] == phase[1] ? sines[1] : (phase[2] == phase[0] ? sines[0] : std::sin(delta + phase[2]));
 }
 
 template <class T>
@@ -304,9 +262,7 @@ Forces<T> forces(const T& u, const T& v, const T& psi, const T& r, double n, dou
     // what the inputs alone give, first (fewer values live across these calls)
     double sines[3];
     rudder_sines(delta, c, sines);
-    double sin_zeta, cos_zeta;
-    sin_cos(zeta, sin_zeta, cos_zeta);
-    const double wind_x = U_T * cos_zeta, wind_y = U_T * sin_zeta;
+    const double wind_x = U_T * std::cos(zeta), wind_y = U_T * std::sin(zeta);
     // motion: speed with the simulator's guard, drift angle beta_hat = atan2(v, u)
     const T U = length(u, v);
     const bool slow = val(U) < SPEED_GUARD;
