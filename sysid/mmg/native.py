@@ -38,7 +38,9 @@ with/without Fujiwara's wind), parsed once from the ship's families:
 
 The library is compiled on first use with the system's C++ compiler (``$CXX``, else ``c++``
 or ``g++``; flags `FLAGS`: no fast-math, no host-specific code, so every machine computes the
-same numbers) into a per-user cache (``$SYSID_CACHE_DIR``, else ``$XDG_CACHE_HOME/sysid/native``,
+kernel's own arithmetic alike; its sin, cos, atan2, hypot and exp are the C library's: glibc's
+FMA variants, picked on CPUs with FMA, differ from its SSE2 ones in the last bit for up to
+0.07 % of arguments) into a per-user cache (``$SYSID_CACHE_DIR``, else ``$XDG_CACHE_HOME/sysid/native``,
 else ``~/.cache/sysid/native``), named by a hash of the source, the compiler's version and the flags
 and by the SHA-256 of its bytes (written to a temporary file, then renamed: concurrent
 processes and Ray workers never load a partial file; one whose bytes do not match its name is
@@ -80,8 +82,11 @@ _log = logging.getLogger(__name__)
 
 SOURCE = Path(__file__).with_name("native_kernel.cpp")
 # IEEE arithmetic as written: no fast-math, no contraction into FMA, no host-specific code (the
-# same numbers on every x86-64 machine: the tangents' pairs are SSE2, x86-64's baseline); -O3
-# gives the same bits as -O2 (checked on the D2 windows), 1.3x faster
+# kernel's own arithmetic is the same on every x86-64 machine: the tangents' pairs are SSE2, x86-64's
+# baseline; the C library's functions it calls are glibc's variant for the CPU: on the D2 step's
+# calls its FMA and SSE2 variants change 26 of 322 560 float32 outputs, all in two Jacobian entries
+# of round-off size (|value| < 1e-15), and no weight of a 15-epoch D2 training; benchmarks/
+# speed_results.md, session 19, kernelmath); -O3 gives the same bits as -O2 (checked on the D2 windows), 1.3x faster
 FLAGS = ("-O3", "-fPIC", "-shared", "-std=c++17", "-ffp-contract=off")
 WIDTH = 18  # dx/dt (6), F_MMG (3), s (9)
 
