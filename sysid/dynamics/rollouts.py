@@ -1,14 +1,15 @@
 """Windows of a recording and the velocity errors of rollouts over them: the training loss's
 and the validation score's common ground (the trainer and evaluation both use it).
 
-A `WindowSet` holds L = T + 1 samples of W windows; `rollout_errors` integrates T Euler
-steps from each window's first recorded state with its recorded inputs; `velocity_loss` is
-L_v (Eq. 15) of those errors.
+A `WindowSet` holds L = T + 1 samples of W windows; `WindowOrigins` says which log and time
+each was cut from; `rollout_errors` integrates T Euler steps from each window's first recorded
+state with its recorded inputs; `velocity_loss` is L_v (Eq. 15) of those errors.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 
 from sysid.dynamics.equations import integrate
@@ -35,6 +36,32 @@ class WindowSet:
         def rows(x: torch.Tensor) -> torch.Tensor:
             return x.index_select(1, flat).reshape(x.shape[0], *index.shape, x.shape[-1])
         return WindowSet(rows(self.states), rows(self.inputs), self.dt)
+
+
+@dataclass(frozen=True, eq=False)
+class WindowOrigins:
+    """Where each of W windows was cut, in the windows' order: logs (W,) the name of its log
+    (the file stem, as evaluation names the test logs), start_s (W,) the log's time [s] of
+    its first sample."""
+
+    logs: tuple[str, ...]
+    start_s: np.ndarray
+
+    def __post_init__(self):
+        starts = np.asarray(self.start_s, dtype=float).reshape(-1)
+        if starts.size != len(self.logs):
+            raise ValueError(f"{len(self.logs)} window logs and {starts.size} start times do not pair")
+        object.__setattr__(self, "logs", tuple(str(name) for name in self.logs))
+        object.__setattr__(self, "start_s", starts)
+
+    def __len__(self) -> int:
+        return len(self.logs)
+
+    def by_log(self) -> dict[str, np.ndarray]:
+        """log name -> the indices (W_log,) of its windows, the logs in the order of their
+        first window."""
+        names = np.asarray(self.logs, dtype=object)
+        return {name: np.flatnonzero(names == name) for name in dict.fromkeys(self.logs)}
 
 
 def velocity_loss(err: torch.Tensor, w_v: torch.Tensor) -> torch.Tensor:

@@ -7,7 +7,9 @@ the identified MMG. The evidence is paired per-window RMSE of u, v_m [m/s] and r
 - test: the benchmark protocol's windows of every test log at each evaluation horizon, one
   cell per (log, horizon, channel);
 - validation: the windows of ``val_loss_multistep`` (`sysid.records.summary.VAL_LOSS_DEFINITION`),
-  one cell per channel, over their predicted steps.
+  over their predicted steps, one cell per (validation log, horizon, channel) with that log's
+  windows (`WindowOrigins`: a held-out log, or a training log's validation blocks); scores
+  without origins (`WindowScore.origins` None) are one pseudo-log, `VALIDATION_LOG`.
 
 The test logs decide whenever there are any (a diverged prediction there is a DIVERGED
 verdict, never a fall back to validation); without them the validation windows decide. The
@@ -25,7 +27,7 @@ import numpy as np
 import pandas as pd
 import torch
 
-from sysid.dynamics.rollouts import WindowSet, rollout_errors, velocity_loss
+from sysid.dynamics.rollouts import WindowOrigins, WindowSet, rollout_errors, velocity_loss
 from sysid.evaluation.judgement import (CHANNELS, DEFAULT_RULE, UNITS, Divergence, Judgement, Outcome, PairedCell, VerdictRule,
                                         judge, percent_text)
 
@@ -36,7 +38,7 @@ IDENTIFIED_MMG = "MMG (identified)"
 VALIDATION, TEST = "validation", "test"
 MODEL_NAMES = {"mmg": "identified MMG", "nn": "NN-only model", "hybrid": "hybrid"}
 MATERIAL = VerdictRule().material   # a cell this much worse than its baseline, with confidence, fails the verdict
-VALIDATION_LOG = "validation windows"
+VALIDATION_LOG = "validation windows"   # the one pseudo-log of validation windows whose logs are not known
 
 
 @dataclass(frozen=True)
@@ -234,21 +236,33 @@ def cell_from_dict(d: Mapping) -> PairedCell:
 @dataclass(frozen=True)
 class WindowScore:
     """A model on validation windows: ``val_loss_multistep``, the RMSE of u, v_m [m/s], r
-    [rad/s] over the windows' predicted steps, and each window's own (W, 3)."""
+    [rad/s] over the windows' predicted steps, and each window's own (W, 3); origins: the log
+    and start time of each window (None: not known, one pseudo-log); nonfinite_after_s (W,):
+    the time [s] from a window's first sample to its first non-finite predicted one, NaN
+    where the prediction stayed finite."""
 
     val_loss_multistep: float
     rmse: tuple[float, float, float]
     window_rmse: np.ndarray | None = None
+    origins: WindowOrigins | None = None
+    nonfinite_after_s: np.ndarray | None = None
 
 
-def window_score(model, windows: WindowSet, w_v: torch.Tensor, errors: torch.Tensor | None = None) -> WindowScore:
+def window_score(model, windows: WindowSet, w_v: torch.Tensor, errors: torch.Tensor | None = None,
+                 origins: WindowOrigins | None = None) -> WindowScore:
     """`WindowScore` of `model` on `windows` (Euler rollouts, as in training); `errors`: the
-    velocity errors (T, W, 3) of those rollouts when already computed (`rollout_errors`)."""
+    velocity errors (T, W, 3) of those rollouts when already computed (`rollout_errors`);
+    `origins`: the log and start time of each window."""
     err = rollout_errors(model, windows) if errors is None else errors
+    if origins is not None and len(origins) != err.shape[1]:
+        raise ValueError(f"{len(origins)} window origins for {err.shape[1]} validation windows")
     rmse = torch.sqrt((err * err).reshape(-1, 3).mean(0))
     per_window = torch.sqrt((err * err).mean(0)).reshape(-1, 3)
+    bad = ~torch.isfinite(err).all(-1)                          # (T, W): step k predicts sample k + 1
+    first = (bad.to(torch.int8).argmax(0) + 1).double() * windows.dt
+    after = torch.where(bad.any(0), first, torch.full_like(first, math.nan))
     return WindowScore(float(velocity_loss(err, w_v)), tuple(float(v) for v in rmse),  # type: ignore[arg-type]
-                       per_window.detach().cpu().double().numpy())
+                       per_window.detach().cpu().double().numpy(), origins, after.cpu().numpy())
 
 
 def pooled_rmse(metrics: pd.DataFrame) -> dict[float, tuple[float, float, float]]:
@@ -279,10 +293,16 @@ def test_cells(model: "Evaluation", baseline: "Evaluation") -> list[PairedCell]:
 
 
 def validation_cells(model: WindowScore, baseline: WindowScore, horizon_s: float) -> list[PairedCell]:
-    """One `PairedCell` per channel on the validation windows of one horizon (one log: the
-    validation set)."""
+    """The model's and the baseline's per-window RMSE on the validation windows of one horizon
+    [s]: one `PairedCell` per (validation log, channel), holding that log's windows, when the
+    windows' origins are known (a diverged one named by its log and time); else one per
+    channel, every window in the one pseudo-log `VALIDATION_LOG`."""
     if model.window_rmse is None or baseline.window_rmse is None or not len(model.window_rmse):
         return []
+    origins = model.origins if model.origins is not None else baseline.origins
+    if origins is not None:
+        after = model.nonfinite_after_s if model.nonfinite_after_s is not None else np.zeros(len(origins))
+        return _cells_per_log(model.window_rmse, baseline.window_rmse, after, origins, horizon_s)
     W = len(model.window_rmse)
     bad = ~np.all(np.isfinite(model.window_rmse), axis=1)
     divergence = Divergence(VALIDATION_LOG, horizon_s, float(np.argmax(bad)), "", "non-finite (window "
@@ -290,6 +310,27 @@ def validation_cells(model: WindowScore, baseline: WindowScore, horizon_s: float
     return [PairedCell(VALIDATION_LOG, "", horizon_s, channel, model.window_rmse[:, j][None, :],
                        baseline.window_rmse[:, j][None, :], np.arange(W, dtype=float), divergence)
             for j, channel in enumerate(CHANNELS)]
+
+
+def _cells_per_log(model: np.ndarray, baseline: np.ndarray, nonfinite_after_s: np.ndarray, origins: WindowOrigins,
+                   horizon_s: float) -> list[PairedCell]:
+    """One `PairedCell` per (log of `origins`, channel) at `horizon_s` [s] from the per-window
+    RMSE (W, 3) of model and baseline; a log with a non-finite window diverged at the first
+    non-finite predicted sample (`nonfinite_after_s` (W,) [s] after each window's start)."""
+    if len(origins) != len(model):
+        raise ValueError(f"{len(origins)} window origins for {len(model)} validation windows")
+    out = []
+    for log, index in origins.by_log().items():
+        starts = origins.start_s[index]
+        bad = np.flatnonzero(~np.all(np.isfinite(model[index]), axis=1))
+        divergence = None
+        if bad.size:
+            at = starts[bad] + np.nan_to_num(nonfinite_after_s[index][bad])   # log time [s]
+            divergence = Divergence(log, horizon_s, float(at.min()), "",
+                                    f"non-finite (in {bad.size} of its {index.size} validation windows)")
+        out += [PairedCell(log, "", horizon_s, channel, model[index, j][None, :], baseline[index, j][None, :], starts,
+                           divergence) for j, channel in enumerate(CHANNELS)]
+    return out
 
 
 def judged(model: str, label: str, cells: Sequence[PairedCell], rule: VerdictRule, seeds: int = 1) -> Judgement:
@@ -346,11 +387,49 @@ def verdict_of(model: str, labels: tuple[str, ...], cells: tuple[ChannelCell, ..
     return BaselineVerdict(model, labels, cells, losses, decided, seeds, judgements, on_validation, evidence)
 
 
+def _members(seeds: Sequence[tuple[PairedCell, ...]]) -> tuple[PairedCell, ...] | None:
+    """The cells of several seeds (each seed's cells in the same order) as one model's, every
+    seed a member (a baseline the same in every seed counts once); None when the seeds' cells
+    are not on the same logs and windows."""
+    first = seeds[0]
+    if any(len(cells) != len(first) for cells in seeds):
+        return None
+    same_baseline = all(np.array_equal(cells[i].baseline, c.baseline, equal_nan=True)
+                        for cells in seeds for i, c in enumerate(first))
+    stacked = []
+    for i, c in enumerate(first):
+        others = [cells[i] for cells in seeds]
+        if any(o.key != c.key or not np.array_equal(o.window_start_s, c.window_start_s) for o in others):
+            return None
+        stacked.append(PairedCell(c.log, c.scenario, c.horizon_s, c.channel, np.concatenate([o.model for o in others]),
+                                  c.baseline if same_baseline else np.concatenate([o.baseline for o in others]),
+                                  c.window_start_s, next((o.divergence for o in others if o.divergence is not None), None)))
+    return tuple(stacked)
+
+
+def pseudo_log(cells: Sequence[PairedCell]) -> tuple[PairedCell, ...]:
+    """Validation `cells` as the one pseudo-log `VALIDATION_LOG`: per (horizon, channel) every
+    log's windows in the cells' order, numbered 0, 1, ... (the first divergence kept)."""
+    groups: dict[tuple[float, str], list[PairedCell]] = {}
+    for c in cells:
+        groups.setdefault((float(c.horizon_s), c.channel), []).append(c)
+    out = []
+    for (horizon, channel), group in groups.items():
+        model = np.concatenate([c.model for c in group], axis=1)
+        out.append(PairedCell(VALIDATION_LOG, "", horizon, channel, model,
+                              np.concatenate([c.baseline for c in group], axis=1), np.arange(model.shape[1], dtype=float),
+                              next((c.divergence for c in group if c.divergence is not None), None)))
+    return tuple(out)
+
+
 def seed_mean_verdict(verdicts: Sequence[BaselineVerdict], rule: VerdictRule = DEFAULT_RULE) -> BaselineVerdict:
     """The verdict of several seeds of one experiment: every seed is a member of the model
     (the bootstrap draws seeds too; their spread is shown); a baseline the same in every seed
-    (the ship file's MMG) counts once, one identified per seed counts every seed. The pooled
-    cells are the seeds' mean with their std."""
+    (the ship file's MMG) counts once, one identified per seed counts every seed. A seed's
+    cells pair with another's on the same log and windows; validation blocks drawn per seed
+    (``[training] validation = "blocks"``) give the seeds different windows, and their
+    validation cells are then paired by position in one pseudo-log per horizon
+    (`pseudo_log`). The pooled cells are the seeds' mean with their std."""
     first = verdicts[0]
     if len(verdicts) == 1:
         return first
@@ -364,26 +443,18 @@ def seed_mean_verdict(verdicts: Sequence[BaselineVerdict], rule: VerdictRule = D
               for k in first.val_loss_multistep}
     evidence: dict[str, dict[str, tuple[PairedCell, ...]]] = {}
     for split, by in first.evidence.items():
-        if not all(split in v.evidence for v in verdicts):
+        if not all(split in v.evidence and v.evidence[split].keys() == by.keys() for v in verdicts):
             continue
         evidence[split] = {}
-        for label, seed_cells in by.items():
-            stacked = []
-            if any(len(v.evidence[split][label]) != len(seed_cells) for v in verdicts):
-                continue
-            same_baseline = all(np.array_equal(v.evidence[split][label][i].baseline, c.baseline, equal_nan=True)
-                                for v in verdicts for i, c in enumerate(seed_cells))
-            for i, c in enumerate(seed_cells):
-                others = [v.evidence[split][label][i] for v in verdicts]
-                if any(o.key != c.key or o.n_windows != c.n_windows for o in others):
-                    break
-                stacked.append(PairedCell(c.log, c.scenario, c.horizon_s, c.channel,
-                                          np.concatenate([o.model for o in others]),
-                                          c.baseline if same_baseline else np.concatenate([o.baseline for o in others]),
-                                          c.window_start_s,
-                                          next((o.divergence for o in others if o.divergence is not None), None)))
-            else:
-                evidence[split][label] = tuple(stacked)
+        for label in by:
+            seeds = [v.evidence[split][label] for v in verdicts]
+            stacked = _members(seeds)
+            if stacked is None and split == VALIDATION:
+                # validation blocks drawn per seed: the seeds' windows differ, so each log's cannot
+                # pair; paired by position in one pseudo-log per horizon, as before per-log cells
+                stacked = _members([pseudo_log(cells) for cells in seeds])
+            if stacked is not None:
+                evidence[split][label] = stacked
         if len(evidence[split]) != len(by):
             del evidence[split]
     if not evidence:

@@ -58,7 +58,7 @@ from sysid.config.choices import DType, ModelKind, Solver, Stage
 from sysid.config.experiment import Experiment
 from sysid.data.recordings import Run
 from sysid.device import resolve_device
-from sysid.dynamics.rollouts import WindowSet, rollout_errors, velocity_loss
+from sysid.dynamics.rollouts import WindowOrigins, WindowSet, rollout_errors, velocity_loss
 from sysid.errors import ConfigError, DataError
 from sysid.hybrid.correction import ForceCorrection, correction_inputs
 from sysid.hybrid.force_models import CorrectedModel, PerMember, build_mmg
@@ -72,7 +72,8 @@ from sysid.identify.solvers.base import Identification, IdentificationData, coef
 from sysid.identify.solvers.gradient import GradientIdentification, gradient_estimator, gradient_uncertainty
 from sysid.identify.solvers.least_squares import LevenbergMarquardtIdentification
 from sysid.identify.warm_start import implied_residual, standardize, warm_start
-from sysid.identify.windowing import SplitReport, held_out_validation, objective_horizons, split_windows
+from sysid.identify.windowing import (SplitReport, WindowCut, cut_windows, held_out_validation, objective_horizons,
+                                      split_windows)
 from sysid.records.base import JsonRecord
 from sysid.records.summary import VAL_LOSS_DEFINITION, GateSummary, IdentificationSummary, UncertaintySummary
 
@@ -139,7 +140,7 @@ class Prepared:
     logs `runs` (held-out validation logs removed), dtype, device, the start time
     (``time.perf_counter``), the windows, the training samples, w_v (3,), the MMG, and for a
     learned model still to train (``trains``): the model, the trained parameters and w_F (3,)
-    (None: NN-only)."""
+    (None: NN-only); val_origins: the log and start time of each validation window."""
 
     runs: Sequence[Run]
     dtype: torch.dtype
@@ -153,6 +154,7 @@ class Prepared:
     model: CorrectedModel | None = None
     params: list = field(default_factory=list)
     w_F: torch.Tensor | None = None
+    val_origins: WindowOrigins | None = None
 
     @property
     def trains(self) -> bool:
@@ -193,8 +195,10 @@ class Trainer:
         given, else from logs of `runs` held out whole (``[training] validation = "files"``,
         `sysid.data.splits.hold_out_files`), else from the validation blocks of `runs`.
         Sets ``model_``, ``history_``,
-        ``summary_``, ``validation_windows_`` (the windows of ``val_loss_multistep``) and
-        ``velocity_weights_`` (w_v (3,), 1 / variance of u, v_m, r in the training windows)."""
+        ``summary_``, ``validation_windows_`` (the windows of ``val_loss_multistep``),
+        ``validation_sets_`` / ``validation_origins_`` (those windows per horizon [s], and the
+        log and start time of each) and ``velocity_weights_`` (w_v (3,), 1 / variance of u,
+        v_m, r in the training windows)."""
         prepared = self.prepare(runs, validation)
         stage = None
         if prepared.trains:
@@ -232,10 +236,12 @@ class Trainer:
         self.velocity_weights_ = w_v
         self.validation_windows_ = val
         self.validation_sets_ = {round(t.steps * val.dt, 6): val}
+        self.validation_origins_: dict[float, WindowOrigins] = (
+            {} if prepared.val_origins is None else {round(t.steps * val.dt, 6): prepared.val_origins})
         self.validation_errors_: dict[float, torch.Tensor] = {}
         if summary.failure is None:
             summary.val_loss_multistep = self.objective(model, prepared.runs, val, w_v, prepared.dtype,
-                                                        prepared.device)
+                                                        prepared.device, prepared.val_origins)
             self.journal.objective(summary.val_loss_multistep, self.validation_sets_, summary.gate is not None,
                                    stopping_best)
         history = self._run.history
@@ -264,7 +270,8 @@ class Trainer:
         started = time.perf_counter()
         deadline = started + 60.0 * t.max_minutes if t.max_minutes > 0 else math.inf
         resumed = self.checkpointing.start()
-        train, val, samples, report = self.split(runs, dtype, device)
+        cut = self.split(runs, dtype, device)
+        train, val, samples = cut.train, cut.val, cut.samples
         if exp.experiment.model is not ModelKind.MMG and exp.gate.enabled and exp.gate.k > len(samples[0]):
             raise ConfigError(f"{exp.source or 'experiment'}: [gate] k = {exp.gate.k}: more neighbours than "
                               f"the {len(samples[0])} training samples the gate's bank holds")
@@ -274,19 +281,19 @@ class Trainer:
         if resumed is not None and resumed.stage == "train":  # earlier stages are done: from the checkpoint
             self._run = RunProgress(list(resumed.history), TrainingSummary.from_dict(resumed.summary))
         else:
-            self._run = RunProgress([], TrainingSummary(len(train), len(val), report, str(device)))
+            self._run = RunProgress([], TrainingSummary(len(train), len(val), cut.report, str(device)))
         self.loop = TrainingLoop(exp, self.checkpointing, self.journal, self._run, deadline, self.on_epoch)
-        return Prepared(runs, dtype, device, started, train, val, samples, w_v, mmg)
+        return Prepared(runs, dtype, device, started, train, val, samples, w_v, mmg, val_origins=cut.val_origins)
 
     # -- stages ----------------------------------------------------------------------
-    def split(self, runs: Sequence[Run], dtype, device) -> tuple[WindowSet, WindowSet, tuple, SplitReport]:
-        """Stage 1: training and validation windows, training samples, the split report."""
+    def split(self, runs: Sequence[Run], dtype, device) -> WindowCut:
+        """Stage 1: training and validation windows, training samples, the split report and
+        the validation windows' origins."""
         exp, t = self.experiment, self.experiment.training
-        train, val, samples, report = split_windows(runs, t.steps, t.stride_s, t.val_fraction,
-                                                    exp.data.exclude_suspect, dtype, t.block_s,
-                                                    exp.experiment.seed, device, self._validation_runs)
-        self.journal.split(report, len(train), len(val), t.steps)
-        return train, val, samples, report
+        cut = cut_windows(runs, t.steps, t.stride_s, t.val_fraction, exp.data.exclude_suspect, dtype, t.block_s,
+                          exp.experiment.seed, device, self._validation_runs)
+        self.journal.split(cut.report, len(cut.train), len(cut.val), t.steps)
+        return cut
 
     def disjoint_windows(self, runs: Sequence[Run], dtype, device) -> WindowSet:
         """Windows of T+1 samples of the training part that share no sample (slid by T+1):
@@ -409,15 +416,18 @@ class Trainer:
         return GateSummary(k=gate.k, alpha=gate.alpha, space=gate.space, bank=int(z.shape[0]),
                            threshold=float(model.gate.threshold))
 
-    def objective(self, model, runs: Sequence[Run], val: WindowSet, w_v, dtype, device) -> float:
+    def objective(self, model, runs: Sequence[Run], val: WindowSet, w_v, dtype, device,
+                  val_origins: WindowOrigins | None = None) -> float:
         """The run's validation loss ``val_loss_multistep`` (`VAL_LOSS_DEFINITION`): L_v of the
         final model (gate included) on validation windows of each of its horizons
         (`objective_horizons`), averaged over the horizons the validation data hold a window
-        of; T steps when they hold none. The windows are kept per horizon as
-        ``validation_sets_`` (the first as ``validation_windows_``), the model's velocity errors
-        (T, W, 3) on them as ``validation_errors_``."""
+        of; the T-step windows `val` (cut from the logs `val_origins` names) when they hold
+        none. The windows are kept per horizon as ``validation_sets_`` (the first as
+        ``validation_windows_``), their logs and start times as ``validation_origins_``, the
+        model's velocity errors (T, W, 3) on them as ``validation_errors_``."""
         exp, t = self.experiment, self.experiment.training
         sets: dict[float, WindowSet] = {}
+        origins: dict[float, WindowOrigins] = {}
         for horizon in objective_horizons(exp):
             # objective_s: that many seconds of steps; an evaluation horizon: windows of as many
             # samples as the test windows (H = h / dt points, first included)
@@ -426,17 +436,20 @@ class Trainer:
                 self.journal.horizon_left_out(horizon, t.block_s)
                 continue
             try:
-                windows = split_windows(runs, steps, t.stride_s, t.val_fraction, exp.data.exclude_suspect, dtype,
-                                        t.block_s, exp.experiment.seed, device, self._validation_runs)[1]
+                cut = cut_windows(runs, steps, t.stride_s, t.val_fraction, exp.data.exclude_suspect, dtype,
+                                  t.block_s, exp.experiment.seed, device, self._validation_runs)
             except DataError:   # none that long
-                windows = None
-            if windows is not None and len(windows):
-                sets[horizon] = windows
+                cut = None
+            if cut is not None and len(cut.val):
+                sets[horizon], origins[horizon] = cut.val, cut.val_origins
             else:
                 self.journal.horizon_left_out(horizon, None)
         if not sets:
             sets[round(t.steps * val.dt, 6)] = val
+            if val_origins is not None:
+                origins[round(t.steps * val.dt, 6)] = val_origins
         self.validation_sets_ = sets
+        self.validation_origins_ = origins
         self.validation_windows_ = next(iter(sets.values()))
         # the rollouts' errors, kept per horizon for the verdict's validation scores; the gate's
         # decisions along each rollout from its earlier steps' scans (`RolloutGate`: the same decisions)

@@ -6,6 +6,8 @@ Each file's time axis is cut into ``block_s`` blocks, a seeded ``val_fraction`` 
 validation, and a window lies wholly in one part; or, given validation logs, every window of
 those is validation and every window of the training logs training. Exact copies of another
 file (``turn_cut_...``) and windows touching frozen-GNSS segments are left out and reported.
+Each validation window keeps its log and start time (`WindowOrigins`): the verdict judges
+validation per log.
 """
 from __future__ import annotations
 
@@ -20,7 +22,7 @@ from sysid.config.choices import Validation
 from sysid.config.experiment import Experiment
 from sysid.data.recordings import Run, duplicate_runs, sliding_windows, stack_windows, window_touches
 from sysid.data.splits import HeldOutFiles, hold_out_files
-from sysid.dynamics.rollouts import WindowSet
+from sysid.dynamics.rollouts import WindowOrigins, WindowSet
 from sysid.errors import ConfigError, DataError
 
 
@@ -102,15 +104,37 @@ def _training_samples(run: Run, part_of: np.ndarray, exclude_suspect: bool, dtyp
             torch.as_tensor(run.inputs[keep], dtype=dtype, device=device))
 
 
+@dataclass(frozen=True, eq=False)
+class WindowCut:
+    """Stage 1 cut: training and validation `WindowSet`s, the training samples (N, 6) states
+    and (N, 4) inputs, the `SplitReport`, and where each validation window was cut."""
+
+    train: WindowSet
+    val: WindowSet
+    samples: tuple[torch.Tensor, torch.Tensor]
+    report: SplitReport
+    val_origins: WindowOrigins
+
+
 def split_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction: float,
                   exclude_suspect: bool = True, dtype=torch.float64, block_s: float = 30.0, seed: int = 0,
                   device: str | torch.device = "cpu", validation_runs: Sequence[Run] = ()):
     """Training and validation `WindowSet`s, the training samples (N, 6)/(N, 4), and a
-    `SplitReport`.
+    `SplitReport` (`cut_windows` without the validation windows' origins)."""
+    cut = cut_windows(runs, steps, stride_s, val_fraction, exclude_suspect, dtype, block_s, seed, device,
+                      validation_runs)
+    return cut.train, cut.val, cut.samples, cut.report
+
+
+def cut_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction: float,
+                exclude_suspect: bool = True, dtype=torch.float64, block_s: float = 30.0, seed: int = 0,
+                device: str | torch.device = "cpu", validation_runs: Sequence[Run] = ()) -> WindowCut:
+    """The `WindowCut` of `runs` into windows of `steps` + 1 samples slid by `stride_s` [s].
 
     Each file is cut into blocks of `block_s`; a random `val_fraction` of the blocks (seeded)
     is validation. Windows lie wholly inside one part, so none overlaps across the split.
-    Given `validation_runs`, those are validation whole and `runs` training whole.
+    Given `validation_runs`, those are validation whole and `runs` training whole. The
+    windows follow the files' order, each file's in time order.
     """
     rng = np.random.default_rng(seed)
     report = SplitReport()
@@ -118,6 +142,8 @@ def split_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction
     copies = {copy for copy, _ in duplicate_runs(list(runs) + validation_runs)}
     parts: dict[str, list] = {"train": [], "val": []}
     samples: tuple[list, list] = ([], [])
+    val_logs: list[str] = []
+    val_starts: list[np.ndarray] = []
     dt = None
     length = steps + 1
     for run in list(runs) + validation_runs:
@@ -132,6 +158,8 @@ def split_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction
         for part, mine in cut.items():
             if len(mine):
                 parts[part].append(stack_windows(run, mine, length, dtype, device))
+        val_logs += [run.name] * len(cut["val"])
+        val_starts.append(run.t[cut["val"]])
         for kept, sample in zip(samples, _training_samples(run, part_of, exclude_suspect, dtype, device)):
             kept.append(sample)
         report.files.append({"file": run.name, "train_windows": len(cut["train"]),
@@ -145,5 +173,6 @@ def split_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction
     def window_set(chunks) -> WindowSet:
         return WindowSet(torch.cat([c[0] for c in chunks], 1), torch.cat([c[1] for c in chunks], 1), dt)
 
-    return window_set(parts["train"]), window_set(parts["val"]), \
-        (torch.cat(samples[0]), torch.cat(samples[1])), report
+    return WindowCut(window_set(parts["train"]), window_set(parts["val"]),
+                     (torch.cat(samples[0]), torch.cat(samples[1])), report,
+                     WindowOrigins(tuple(val_logs), np.concatenate(val_starts)))

@@ -287,14 +287,16 @@ def _fitted(exp: Experiment, runs: Sequence[Run], validation: Sequence[Run], out
 
 
 def _validation_scores(exp: Experiment, trainer: Trainer) -> dict:
-    """horizon [s] -> "model" or baseline label -> `WindowScore` on the trainer's validation windows."""
+    """horizon [s] -> "model" or baseline label -> `WindowScore` on the trainer's validation
+    windows, each window named by its log (the verdict's cells per validation log)."""
     validation_scores = {}
     for horizon, windows in trainer.validation_sets_.items():
         scored = {"model": trainer.model_, **physics_baselines(exp, trainer.model_, windows.states.dtype,
                                                                 windows.states.device)}
         # the model's rollouts are the ones of its val_loss_multistep (`Trainer.objective`)
         errors = {"model": trainer.validation_errors_.get(horizon)}
-        validation_scores[horizon] = {k: window_score(m, windows, trainer.velocity_weights_, errors.get(k))
+        origins = trainer.validation_origins_.get(horizon)
+        validation_scores[horizon] = {k: window_score(m, windows, trainer.velocity_weights_, errors.get(k), origins)
                                       for k, m in scored.items()}
     return validation_scores
 
