@@ -1,6 +1,7 @@
 """`sysid train` and `sysid evaluate RUN` end to end on two short real files."""
 import json
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -31,3 +32,36 @@ def test_train_then_evaluate_run(dataset_dir, tmp_path):
     bad.write_text(config.read_text().replace(TRAIN_FILES[1], "no_such_file.csv"))
     with pytest.raises(DataError, match="no_such_file.csv: file not found"):
         sysid(["train", str(bad), "-o", str(tmp_path / "y")])
+
+
+def test_d2_without_test_logs_judges_each_held_out_validation_log(dataset_dir, tmp_path, capsys):
+    """The shipped hybrid D2 config (3 epochs): no test logs, so its 5 held-out validation
+    logs decide, each its own cell named by its file, resampled by log."""
+    from pathlib import Path
+
+    from cli_harness import in_process
+    from sysid.evaluation.verdict import SHIP_FILE_MMG, VALIDATION, BaselineVerdict
+
+    config = Path(__file__).resolve().parents[2] / "configs" / "experiments" / "hybrid_D2.toml"
+    trained = in_process(capsys, "train", config, "--epochs", "3", "--threads", "1", "-o", tmp_path / "run")
+    assert trained.code == 0, trained.err
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    held_out = sorted(n for names in summary["data"]["held_out"]["groups"].values() for n in names)
+    assert held_out == ["berthing_12-Nov-2020_11_38_50", "random_31-Jul-2020_12_29_58", "turn_14-Oct-2020_14_17_39",
+                        "turn_14-Oct-2020_14_29_49", "zigzag_31-Jul-2020_13_42_53"]
+    verdict = BaselineVerdict.from_dict(summary["verdict"])
+    j = verdict.judgements[SHIP_FILE_MMG]
+    assert verdict.decided_on == VALIDATION and (j.n_logs, j.n_windows) == (5, 827)
+    assert "val_loss_multistep" in trained.out and "validation windows: 827 of 30 s" in trained.out
+    assert sorted({c.log for c in j.cells}) == held_out and all(c.scenario == "" for c in j.cells)
+    assert ", on 5 logs, 827 windows, 1 seed" in verdict.statement()
+    assert verdict.statement() in trained.out + trained.err
+    assert all(c.log in held_out for c in j.worst)
+    # each log's cells hold its own windows: pooled again, they give the run's pooled validation RMSE
+    pooled = {c.channel: c.model for c in verdict.cells if c.split == VALIDATION}
+    for channel, rmse in pooled.items():
+        cells = [c for c in j.cells if c.channel == channel]
+        n = np.array([c.n_windows for c in cells])
+        assert sum(n) == 827
+        again = np.sqrt((n * np.array([c.model_rmse for c in cells]) ** 2).sum() / n.sum())
+        assert again == pytest.approx(rmse, rel=1e-6)   # float32 rollouts

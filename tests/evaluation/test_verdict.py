@@ -99,5 +99,9 @@ def test_without_test_logs_the_verdict_is_on_validation_and_says_so(dataset_dir,
     assert verdict.decided_on == "validation" and {c.split for c in verdict.cells} == {"validation"}
     assert "Decided on the validation windows at 5 s: there are no test logs." in verdict.statement()
     judgement = verdict.judgements[SHIP_FILE_MMG]
-    assert judgement.n_logs == 1 and judgement.n_windows == summary["n_val_windows"]
+    # the 5-s validation windows are the training split's (no 30-s window fits a block): one cell
+    # per training log and channel, with that log's validation blocks' windows
+    per_log = {f["file"]: f["val_windows"] for f in summary["training"]["split"]["files"] if f["val_windows"]}
+    assert judgement.n_logs == len(per_log) == 2 and judgement.n_windows == summary["n_val_windows"]
+    assert {(c.log, c.n_windows) for c in judgement.cells} == set(per_log.items())
     assert pd.read_csv(tmp_path / "run" / "metrics.csv").empty

@@ -1,0 +1,52 @@
+"""Every validation window keeps the log and time it was cut from (`cut_windows`,
+`WindowOrigins`): checked on real logs against the logs themselves, for validation blocks of
+training logs and for held-out validation logs."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from sysid.data.recordings import read_run
+from sysid.identify.windowing import cut_windows, split_windows
+
+BERTHING = ("berthing_12-Nov-2020_11_07_23.csv", "berthing_12-Nov-2020_11_14_47.csv",
+            "berthing_12-Nov-2020_11_38_50.csv")
+
+
+@pytest.fixture(scope="module")
+def runs(dataset_dir):
+    return [read_run(dataset_dir / "berthing" / name) for name in BERTHING]
+
+
+def check_origins(cut, runs) -> None:
+    """Each validation window's first state is its log's sample at its start time, the
+    windows follow the files' order, and each log has the report's count."""
+    by_name = {r.name: r for r in runs}
+    o = cut.val_origins
+    assert len(o) == len(cut.val)
+    for w, (log, start) in enumerate(zip(o.logs, o.start_s)):
+        run = by_name[log]
+        i = int(np.flatnonzero(run.t == start)[0])
+        np.testing.assert_array_equal(cut.val.states[:, w].numpy(), run.states[i:i + cut.val.states.shape[0]])
+    counts = {f["file"]: f["val_windows"] for f in cut.report.files if f["val_windows"]}
+    assert {log: idx.size for log, idx in o.by_log().items()} == counts
+    assert list(o.by_log()) == list(counts)                          # the files' order
+    for idx in o.by_log().values():
+        assert np.all(np.diff(o.start_s[idx]) > 0)                   # each log's in time order
+
+
+def test_validation_blocks_keep_their_training_log_and_time(runs):
+    cut = cut_windows(runs, 10, 2.0, 0.3, True, torch.float64, 30.0, 0)
+    check_origins(cut, runs)
+    assert len(cut.val_origins.by_log()) == 3                       # every log has validation blocks
+    # split_windows is the same cut, without the origins
+    train, val, samples, report = split_windows(runs, 10, 2.0, 0.3, True, torch.float64, 30.0, 0)
+    assert torch.equal(val.states, cut.val.states) and torch.equal(train.states, cut.train.states)
+    assert report.files == cut.report.files
+
+
+def test_held_out_logs_are_the_origins_of_their_windows(runs):
+    cut = cut_windows(runs[:2], 29, 2.0, 0.3, True, torch.float64, 30.0, 0, validation_runs=runs[2:])
+    check_origins(cut, runs)
+    assert set(cut.val_origins.logs) == {runs[2].name}
