@@ -46,7 +46,8 @@ def validation_losses(runs_dir: Path, name: str, data) -> dict:
     trainer = Trainer(exp, progress=False, log=lambda _: None)
     trainer._validation_runs = validation   # as `Trainer.prepare` sets it
     dtype, device = torch.float64, torch.device("cpu")
-    train, val, _, _ = trainer.split(train_logs, dtype, device)
+    cut = trainer.split(train_logs, dtype, device)
+    train, val = cut.train, cut.val
     w_v = 1.0 / train.states[:, :, VEL].reshape(-1, 3).var(0)
 
     def loss(model) -> float:
