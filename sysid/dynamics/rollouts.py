@@ -7,6 +7,7 @@ state with its recorded inputs; `velocity_loss` is L_v (Eq. 15) of those errors.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,6 +63,24 @@ class WindowOrigins:
         first window."""
         names = np.asarray(self.logs, dtype=object)
         return {name: np.flatnonzero(names == name) for name in dict.fromkeys(self.logs)}
+
+    def non_overlapping(self, span_s: float) -> dict[str, np.ndarray]:
+        """log name -> the indices of its windows that do not overlap, as the test logs'
+        consecutive windows: greedy from the log's first window in time order, a window is kept
+        when it starts at least `span_s` [s] (one window span, H = h / dt samples of dt) after
+        the last one kept (1e-6 relative slack for the logs' float times); the logs in the
+        order of `by_log`."""
+        slack = 1e-6 * max(1.0, span_s)
+        out = {}
+        for name, index in self.by_log().items():
+            order = index[np.argsort(self.start_s[index], kind="stable")]
+            kept, last = [], -math.inf
+            for i in order:               # one pass per log; a log holds at most a few thousand windows
+                if self.start_s[i] >= last + span_s - slack:
+                    kept.append(i)
+                    last = self.start_s[i]
+            out[name] = np.asarray(kept, dtype=int)
+        return out
 
 
 def velocity_loss(err: torch.Tensor, w_v: torch.Tensor) -> torch.Tensor:

@@ -8,8 +8,10 @@ the identified MMG. The evidence is paired per-window RMSE of u, v_m [m/s] and r
   cell per (log, horizon, channel);
 - validation: the windows of ``val_loss_multistep`` (`sysid.records.summary.VAL_LOSS_DEFINITION`),
   over their predicted steps, one cell per (validation log, horizon, channel) with that log's
-  windows (`WindowOrigins`: a held-out log, or a training log's validation blocks); scores
-  without origins (`WindowScore.origins` None) are one pseudo-log, `VALIDATION_LOG`.
+  non-overlapping windows, as the test logs' (`WindowOrigins.non_overlapping`: a held-out log,
+  or a training log's validation blocks; the loss and `ChannelCell` keep every window); scores
+  without origins (`WindowScore.origins` None) are one pseudo-log, `VALIDATION_LOG`, of every
+  window.
 
 The test logs decide whenever there are any (a diverged prediction there is a DIVERGED
 verdict, never a fall back to validation); without them the validation windows decide. The
@@ -148,12 +150,22 @@ class BaselineVerdict:
         """The horizons [s] that decided."""
         return tuple(sorted({h for j in self.judgements.values() for h in j.horizons_s}))
 
+    @property
+    def validation_windows(self) -> str:
+        """"the non-overlapping validation windows" when every judged validation cell's windows
+        start at least its horizon apart (per-log cells), else "the validation windows" (the
+        pseudo-log of overlapping ones)."""
+        cells = [c for by in self.evidence.get(VALIDATION, {}).values() for c in by]
+        apart = cells and all(c.log != VALIDATION_LOG and np.all(np.diff(np.sort(c.window_start_s))
+                                                                  >= c.horizon_s - 1e-6 * max(1.0, c.horizon_s)) for c in cells)
+        return "the non-overlapping validation windows" if apart else "the validation windows"
+
     def decided_text(self) -> str:
         """"Decided on the test logs at 30 s and 100 s." (what the report and log say)."""
         hs = " and ".join(f"{h:g} s" for h in self.horizons_s)
         if self.decided_on == TEST:
             return f"Decided on the test logs at {hs}."
-        return f"Decided on the validation windows at {hs}: there are no test logs."
+        return f"Decided on {self.validation_windows} at {hs}: there are no test logs."
 
     def statement(self) -> str:
         """The verdict in a few sentences (the report's first lines, the CLI's last)."""
@@ -164,7 +176,7 @@ class BaselineVerdict:
             off = [j.outcome.value.replace("its baseline", label) for label, j in self.validation_judgements.items()
                    if j.outcome is not Outcome.BEATS]
             if off:
-                text += f" On the validation windows the {self.model_name} " + " and ".join(off) + "."
+                text += f" On {self.validation_windows} the {self.model_name} " + " and ".join(off) + "."
         if not self.beats_baseline:
             text += {Outcome.DIVERGED: " Use the baseline; train again with a smaller step or check the logs.",
                      Outcome.WORSE: " Use the baseline, or train and check again, before trusting this model.",
@@ -294,9 +306,11 @@ def test_cells(model: "Evaluation", baseline: "Evaluation") -> list[PairedCell]:
 
 def validation_cells(model: WindowScore, baseline: WindowScore, horizon_s: float) -> list[PairedCell]:
     """The model's and the baseline's per-window RMSE on the validation windows of one horizon
-    [s]: one `PairedCell` per (validation log, channel), holding that log's windows, when the
-    windows' origins are known (a diverged one named by its log and time); else one per
-    channel, every window in the one pseudo-log `VALIDATION_LOG`."""
+    [s]: one `PairedCell` per (validation log, channel) when the windows' origins are known,
+    holding that log's non-overlapping windows (`WindowOrigins.non_overlapping`: starts at least
+    `horizon_s` apart, as the test logs' windows; a divergence in any of its windows named by its
+    log and time); else, origins unknown, one per channel with every window, overlapping ones
+    too, in the one pseudo-log `VALIDATION_LOG` (its interval then narrower than its evidence)."""
     if model.window_rmse is None or baseline.window_rmse is None or not len(model.window_rmse):
         return []
     origins = model.origins if model.origins is not None else baseline.origins
@@ -315,21 +329,23 @@ def validation_cells(model: WindowScore, baseline: WindowScore, horizon_s: float
 def _cells_per_log(model: np.ndarray, baseline: np.ndarray, nonfinite_after_s: np.ndarray, origins: WindowOrigins,
                    horizon_s: float) -> list[PairedCell]:
     """One `PairedCell` per (log of `origins`, channel) at `horizon_s` [s] from the per-window
-    RMSE (W, 3) of model and baseline; a log with a non-finite window diverged at the first
+    RMSE (W, 3) of model and baseline, on the log's non-overlapping windows (starts at least
+    `horizon_s` apart); a log with a non-finite window, kept or not, diverged at the first
     non-finite predicted sample (`nonfinite_after_s` (W,) [s] after each window's start)."""
     if len(origins) != len(model):
         raise ValueError(f"{len(origins)} window origins for {len(model)} validation windows")
+    kept = origins.non_overlapping(horizon_s)
     out = []
     for log, index in origins.by_log().items():
-        starts = origins.start_s[index]
         bad = np.flatnonzero(~np.all(np.isfinite(model[index]), axis=1))
         divergence = None
         if bad.size:
-            at = starts[bad] + np.nan_to_num(nonfinite_after_s[index][bad])   # log time [s]
+            at = origins.start_s[index][bad] + np.nan_to_num(nonfinite_after_s[index][bad])   # log time [s]
             divergence = Divergence(log, horizon_s, float(at.min()), "",
                                     f"non-finite (in {bad.size} of its {index.size} validation windows)")
-        out += [PairedCell(log, "", horizon_s, channel, model[index, j][None, :], baseline[index, j][None, :], starts,
-                           divergence) for j, channel in enumerate(CHANNELS)]
+        judged = kept[log]
+        out += [PairedCell(log, "", horizon_s, channel, model[judged, j][None, :], baseline[judged, j][None, :],
+                           origins.start_s[judged], divergence) for j, channel in enumerate(CHANNELS)]
     return out
 
 

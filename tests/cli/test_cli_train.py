@@ -36,10 +36,12 @@ def test_train_then_evaluate_run(dataset_dir, tmp_path):
 
 def test_d2_without_test_logs_judges_each_held_out_validation_log(dataset_dir, tmp_path, capsys):
     """The shipped hybrid D2 config (3 epochs): no test logs, so its 5 held-out validation
-    logs decide, each its own cell named by its file, resampled by log."""
+    logs decide, each its own cell named by its file, resampled by log, on its non-overlapping
+    30-s windows: the test path's windows of the same logs."""
     from pathlib import Path
 
     from cli_harness import in_process
+    from sysid.data.recordings import protocol_windows, read_run
     from sysid.evaluation.verdict import SHIP_FILE_MMG, VALIDATION, BaselineVerdict
 
     config = Path(__file__).resolve().parents[2] / "configs" / "experiments" / "hybrid_D2.toml"
@@ -51,17 +53,23 @@ def test_d2_without_test_logs_judges_each_held_out_validation_log(dataset_dir, t
                         "turn_14-Oct-2020_14_29_49", "zigzag_31-Jul-2020_13_42_53"]
     verdict = BaselineVerdict.from_dict(summary["verdict"])
     j = verdict.judgements[SHIP_FILE_MMG]
-    assert verdict.decided_on == VALIDATION and (j.n_logs, j.n_windows) == (5, 827)
+    # val_loss_multistep and the pooled rows keep all 827 windows slid by 2 s; the verdict judges
+    # the 58 of them that do not overlap
+    assert verdict.decided_on == VALIDATION and (j.n_logs, j.n_windows) == (5, 58)
     assert "val_loss_multistep" in trained.out and "validation windows: 827 of 30 s" in trained.out
     assert sorted({c.log for c in j.cells}) == held_out and all(c.scenario == "" for c in j.cells)
-    assert ", on 5 logs, 827 windows, 1 seed" in verdict.statement()
+    assert ", on 5 logs, 58 windows, 1 seed" in verdict.statement()
+    assert "Decided on the non-overlapping validation windows at 30 s" in verdict.statement()
     assert verdict.statement() in trained.out + trained.err
     assert all(c.log in held_out for c in j.worst)
-    # each log's cells hold its own windows: pooled again, they give the run's pooled validation RMSE
-    pooled = {c.channel: c.model for c in verdict.cells if c.split == VALIDATION}
-    for channel, rmse in pooled.items():
-        cells = [c for c in j.cells if c.channel == channel]
-        n = np.array([c.n_windows for c in cells])
-        assert sum(n) == 827
-        again = np.sqrt((n * np.array([c.model_rmse for c in cells]) ** 2).sum() / n.sum())
-        assert again == pytest.approx(rmse, rel=1e-6)   # float32 rollouts
+    # each log's judged windows are the test path's 30-s windows of that log (consecutive, from
+    # its first sample), except after a window left out for frozen GNSS (random, t = 645.7 s)
+    files = {p.stem: p for p in dataset_dir.rglob("*.csv")}
+    for cell in verdict.evidence[VALIDATION][SHIP_FILE_MMG]:
+        run = read_run(files[cell.log])
+        test_starts = run.t[protocol_windows(len(run), 30)]
+        assert cell.n_windows == test_starts.size, cell.log
+        same = test_starts[:-1] if cell.log.startswith("random") else test_starts
+        np.testing.assert_allclose(cell.window_start_s[:same.size], same, atol=1e-6)
+        assert np.all(np.diff(cell.window_start_s) >= 30.0 - 1e-6)
+    assert [c.n_windows for c in j.cells if c.channel == "u"] == [4, 22, 12, 14, 6]

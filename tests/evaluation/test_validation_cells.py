@@ -1,7 +1,9 @@
 """The verdict on validation windows judges each validation log as its own cell, resampled by
 log as the test logs are: a synthetic case with a known truth (the model 40 % better than its
 baseline on one log, 60 % worse on the other), one log against the old pseudo-log, a
-diverged window named by its log and time, seeds pooled as members, and summary.json."""
+diverged window named by its log and time, seeds pooled as members, and summary.json; the
+windows judged are each log's non-overlapping ones, whose intervals hold the truth as often as
+their confidence says (overlapping ones, resampled as if independent, do not)."""
 from __future__ import annotations
 
 import math
@@ -12,7 +14,7 @@ import torch
 
 from sysid.dynamics.rollouts import WindowOrigins, WindowSet
 from sysid.evaluation.judgement import CHANNELS, CellDecision, Outcome, VerdictRule
-from sysid.evaluation.verdict import (SHIP_FILE_MMG, VALIDATION, VALIDATION_LOG, BaselineVerdict, pseudo_log,
+from sysid.evaluation.verdict import (SHIP_FILE_MMG, VALIDATION, VALIDATION_LOG, BaselineVerdict, WindowScore, pseudo_log,
                                       seed_mean_verdict, validation_cells, window_score, baseline_verdict)
 
 RULE = VerdictRule(resamples=1000)
@@ -33,9 +35,11 @@ def errors(factor: np.ndarray, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
 
 
 def origins() -> WindowOrigins:
-    """The good log's windows first (starts every 2 s), then the bad log's (from t = 100 s)."""
+    """The good log's windows first, then the bad log's (from t = 100 s), each starting one
+    horizon after the last: independent draws cut as non-overlapping windows, so the verdict
+    judges every one."""
     return WindowOrigins(("turn_good",) * W_GOOD + ("zigzag_bad",) * W_BAD,
-                         np.concatenate([2.0 * np.arange(W_GOOD), 100 + 2.0 * np.arange(W_BAD)]))
+                         np.concatenate([HORIZON * np.arange(W_GOOD), 100 + HORIZON * np.arange(W_BAD)]))
 
 
 def scores(model: torch.Tensor, baseline: torch.Tensor, where: WindowOrigins | None) -> dict:
@@ -86,7 +90,7 @@ def test_a_log_materially_worse_fails_the_verdict_and_is_named_where_the_pseudo_
 def test_one_validation_log_judges_as_the_pseudo_log_did():
     factor = np.full(W_GOOD, 0.8)
     model, baseline = errors(factor, 3)
-    one = WindowOrigins(("random_31-Jul",) * W_GOOD, 5.0 + 2.0 * np.arange(W_GOOD))
+    one = WindowOrigins(("random_31-Jul",) * W_GOOD, 5.0 + HORIZON * np.arange(W_GOOD))
     per_log = baseline_verdict("hybrid", scores(model, baseline, one), None, RULE).judgements[SHIP_FILE_MMG]
     before = baseline_verdict("hybrid", scores(model, baseline, None), None, RULE).judgements[SHIP_FILE_MMG]
     assert {c.log for c in per_log.cells} == {"random_31-Jul"} and {c.log for c in before.cells} == {VALIDATION_LOG}
@@ -102,15 +106,15 @@ def test_one_validation_log_judges_as_the_pseudo_log_did():
 
 def test_a_non_finite_validation_window_names_its_log_and_time():
     model, baseline = case()
-    w = W_GOOD + 5                  # the bad log's sixth window, from t = 110 s
-    model[7:, w, :] = math.nan      # its prediction non-finite from step 8 on: sample 8, t = 118 s
+    w = W_GOOD + 5                  # the bad log's sixth window, from t = 250 s
+    model[7:, w, :] = math.nan      # its prediction non-finite from step 8 on: sample 8, t = 258 s
     verdict = baseline_verdict("hybrid", scores(model, baseline, origins()), None, RULE)
     j = verdict.judgements[SHIP_FILE_MMG]
     assert j.outcome is Outcome.DIVERGED and not verdict.beats_baseline
     assert [d.text() for d in j.divergences] == \
-        ["zigzag_bad at 30 s, t = 118 s: non-finite (in 1 of its 24 validation windows)"]
+        ["zigzag_bad at 30 s, t = 258 s: non-finite (in 1 of its 24 validation windows)"]
     assert {c.log for c in j.cells if c.decision is CellDecision.DIVERGED} == {"zigzag_bad"}
-    assert "DIVERGED (non-finite or far outside the training data's range) in zigzag_bad at 30 s, t = 118 s" \
+    assert "DIVERGED (non-finite or far outside the training data's range) in zigzag_bad at 30 s, t = 258 s" \
         in verdict.statement()
 
 
@@ -147,7 +151,101 @@ def test_per_log_validation_cells_read_back_from_summary_json():
     assert again.statement() == verdict.statement() and again.outcome is Outcome.WORSE
     cells = again.evidence[VALIDATION][SHIP_FILE_MMG]
     assert [c.log for c in cells] == ["turn_good"] * 3 + ["zigzag_bad"] * 3
-    assert np.array_equal(cells[3].window_start_s, 100 + 2.0 * np.arange(W_BAD))
+    assert np.array_equal(cells[3].window_start_s, 100 + HORIZON * np.arange(W_BAD))
     # the cells are those `validation_cells` gives for the same scores
     found = validation_cells(*scores(model, baseline, origins())[HORIZON].values(), HORIZON)
     assert all(np.array_equal(a.model, b.model) and a.key == b.key for a, b in zip(found, cells))
+
+
+# Overlapping validation windows: a log of N samples (dt 1 s) cut into windows of SPAN samples slid
+# by one sample, as `[training] stride_s` slides them; the verdict judges the non-overlapping ones.
+SPAN, N_SAMPLES, LOGS_DRAWN = 10, 600, 120
+TRUE_CHANGE = -0.02      # the model's RMSE 2 % below its baseline's, in truth
+
+
+def overlapping_log(seed: int) -> tuple[WindowScore, WindowScore]:
+    """A model and its baseline on every window of one log: the baseline's error per sample
+    N(0, 0.01) m/s (or rad/s), the model's that error times a factor exp(N(mu, 0.25)) drawn
+    once per SPAN samples, so windows that share samples share their factors; mu sets the true
+    change: sqrt(E[f^2]) = exp(mu + 0.25^2) = 1 + TRUE_CHANGE."""
+    rng = np.random.default_rng(seed)
+    s = 0.25
+    mu = math.log(1 + TRUE_CHANGE) - s**2
+    base = 0.01 * rng.normal(0, 1, (N_SAMPLES, 3))
+    factor = np.repeat(np.exp(rng.normal(mu, s, (N_SAMPLES // SPAN, 3))), SPAN, axis=0)
+    model = base * factor
+    starts = np.arange(N_SAMPLES - SPAN + 1)                        # stride: one sample
+    points = starts[:, None] + np.arange(1, SPAN)[None, :]          # each window's predicted samples
+    where = WindowOrigins(("random_log",) * starts.size, starts.astype(float))
+
+    def score(err: np.ndarray) -> WindowScore:
+        per_window = np.sqrt((err[points] ** 2).mean(1))            # (W, 3)
+        return WindowScore(math.nan, (math.nan,) * 3, per_window, where, np.full(starts.size, math.nan))  # type: ignore[arg-type]
+    return score(model), score(base)
+
+
+def test_the_validation_windows_judged_start_one_horizon_apart_and_give_the_change_on_them_alone():
+    model, baseline = overlapping_log(0)
+    cells = validation_cells(model, baseline, float(SPAN))
+    assert [c.channel for c in cells] == list(CHANNELS)
+    # greedy from t = 0 with stride 1 s and span 10 s: exactly every tenth window
+    expected = 10.0 * np.arange(N_SAMPLES // SPAN)
+    for c in cells:
+        assert c.log == "random_log" and np.array_equal(c.window_start_s, expected)
+    # recomputed independently from the per-window RMSE, windows 0, 10, 20, ...
+    for j, c in enumerate(cells):
+        m, b = model.window_rmse[::SPAN, j], baseline.window_rmse[::SPAN, j]
+        assert np.array_equal(c.model[0], m) and np.array_equal(c.baseline[0], b)
+    j = baseline_verdict("hybrid", {float(SPAN): {"model": model, SHIP_FILE_MMG: baseline}}, None,
+                         RULE).judgements[SHIP_FILE_MMG]
+    for c, k in zip(j.cells, range(3)):
+        m, b = model.window_rmse[::SPAN, k], baseline.window_rmse[::SPAN, k]
+        assert c.n_windows == 60 and c.change == pytest.approx(math.sqrt(np.mean(m**2) / np.mean(b**2)) - 1, rel=1e-9)
+    assert (j.n_logs, j.n_windows) == (1, 60)
+
+
+def test_greedy_thinning_keeps_windows_a_span_apart_across_gaps_and_in_time_order():
+    # two validation blocks of one log (starts every 2 s), listed out of time order, and another log
+    o = WindowOrigins(("a",) * 6 + ("b",) * 3 + ("a",) * 4,
+                      np.array([100, 102, 104, 130, 131, 160, 0, 29.9999999, 30, 0, 2, 28, 32.0]))
+    kept = o.non_overlapping(30.0)
+    assert list(kept) == ["a", "b"]
+    assert o.start_s[kept["a"]].tolist() == [0.0, 32.0, 100.0, 130.0, 160.0]
+    assert o.start_s[kept["b"]].tolist() == [0.0, 29.9999999]      # float times within 1e-6 relative
+
+
+def test_a_divergence_in_a_window_left_out_still_diverges_the_cell():
+    model, baseline = overlapping_log(1)
+    bad = model.window_rmse.copy()
+    bad[13, 0] = math.nan              # window 13 (t = 13 s) is not among 0, 10, 20, ...
+    after = model.nonfinite_after_s.copy()
+    after[13] = 4.0
+    cells = validation_cells(WindowScore(math.nan, (math.nan,) * 3, bad, model.origins, after), baseline, float(SPAN))
+    assert all(np.all(np.isfinite(c.model)) for c in cells)
+    assert cells[0].divergence is not None and cells[0].divergence.text() == \
+        "random_log at 10 s, t = 17 s: non-finite (in 1 of its 591 validation windows)"
+
+
+def test_overlapping_windows_resampled_as_independent_are_falsely_confident_the_non_overlapping_are_not():
+    """Over LOGS_DRAWN logs with a known true change of -2 %, the share of cells whose 95 %
+    interval misses the truth: more than half on every overlapping window (the pseudo-log, 591
+    windows as if independent), about the nominal 5 % on the non-overlapping ones (60 windows)."""
+    missed = {"overlapping": 0, "non-overlapping": 0}
+    confident = {"overlapping": 0, "non-overlapping": 0}
+    for seed in range(LOGS_DRAWN):
+        model, baseline = overlapping_log(100 + seed)
+        blind = [WindowScore(math.nan, s.rmse, s.window_rmse) for s in (model, baseline)]   # origins unknown
+        for name, (m, b) in {"overlapping": blind, "non-overlapping": (model, baseline)}.items():
+            cell = judge_u(validation_cells(m, b, float(SPAN)))
+            missed[name] += not cell.change_low <= TRUE_CHANGE <= cell.change_high
+            confident[name] += cell.decision is not CellDecision.NOT_DISTINGUISHABLE
+    # measured: 72 and 12 of 120 missed; 68 and 17 decided with confidence (BETTER or WORSE)
+    assert missed["overlapping"] / LOGS_DRAWN > 0.4
+    # nominal 5 %: a percentile bootstrap on 60 windows covers a little less (binomial sd 2 %)
+    assert missed["non-overlapping"] / LOGS_DRAWN < 0.15
+    assert confident["overlapping"] > 3 * confident["non-overlapping"]
+
+
+def judge_u(cells):
+    from sysid.evaluation.judgement import judge
+    return next(c for c in judge(cells, RULE).cells if c.channel == "u")

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pandas as pd
 import pytest
 from pypdf import PdfReader
@@ -40,7 +41,7 @@ def test_a_bad_model_is_flagged_in_summary_on_stderr_and_on_page_one(dataset_dir
     assert summary["beats_baseline"] is False and summary["verdict"]["beats_baseline"] is False
     assert verdict.decided_on == "test" and verdict.baselines == (SHIP_FILE_MMG,) and verdict.worse
     # one test log of 3 windows at 30 s: 54-116 % worse in every cell, but its windows scatter too
-    # much to say so at 95 % confidence; the validation windows (hundreds) say it: worse
+    # much to say so at 95 % confidence; the non-overlapping validation windows say it: worse
     judgement = verdict.judgements[SHIP_FILE_MMG]
     assert judgement.outcome is Outcome.NOT_DISTINGUISHABLE and (judgement.n_logs, judgement.n_windows) == (1, 3)
     assert all(c.change > 0.5 and c.n_windows == 3 for c in judgement.cells)
@@ -48,8 +49,8 @@ def test_a_bad_model_is_flagged_in_summary_on_stderr_and_on_page_one(dataset_dir
     warning = trained.err.strip().splitlines()[-1]   # the last line, on stderr
     assert warning.startswith("WARNING: The hybrid cannot be told apart from its physics baseline MMG (ship file) "
                               "on 3 windows: RMSE +"), trained.err
-    assert "Decided on the test logs at 30 s. On the validation windows the hybrid is worse than MMG (ship file)." \
-        in warning
+    assert "Decided on the test logs at 30 s. On the non-overlapping validation windows the hybrid is worse than " \
+           "MMG (ship file)." in warning
     # the verdict's test cells: the run's own metrics, and the MMG evaluated independently
     metrics = pd.read_csv(run / "metrics.csv").iloc[0]
     mmg_csv = tmp_path / "mmg.csv"
@@ -97,11 +98,15 @@ def test_without_test_logs_the_verdict_is_on_validation_and_says_so(dataset_dir,
     assert summary["data"]["test_set"] == "none" and summary["data"]["test"] == []
     verdict = BaselineVerdict.from_dict(summary["verdict"])
     assert verdict.decided_on == "validation" and {c.split for c in verdict.cells} == {"validation"}
-    assert "Decided on the validation windows at 5 s: there are no test logs." in verdict.statement()
+    assert "Decided on the non-overlapping validation windows at 5 s: there are no test logs." in verdict.statement()
     judgement = verdict.judgements[SHIP_FILE_MMG]
     # the 5-s validation windows are the training split's (no 30-s window fits a block): one cell
-    # per training log and channel, with that log's validation blocks' windows
+    # per training log and channel, with that log's validation blocks' windows slid by 2 s; judged
+    # are those at least 5 s apart: every third of a block (6 s apart), or the next block's first
     per_log = {f["file"]: f["val_windows"] for f in summary["training"]["split"]["files"] if f["val_windows"]}
-    assert judgement.n_logs == len(per_log) == 2 and judgement.n_windows == summary["n_val_windows"]
-    assert {(c.log, c.n_windows) for c in judgement.cells} == set(per_log.items())
+    assert judgement.n_logs == len(per_log) == 2 and sum(per_log.values()) == summary["n_val_windows"] == 18
+    assert {(c.log, c.n_windows) for c in judgement.cells} == {(log, -(-n // 3)) for log, n in per_log.items()}
+    for c in verdict.evidence["validation"][SHIP_FILE_MMG]:
+        gaps = np.diff(c.window_start_s)
+        assert np.all(np.isclose(gaps, 6.0) | (gaps > 6.0)), gaps
     assert pd.read_csv(tmp_path / "run" / "metrics.csv").empty

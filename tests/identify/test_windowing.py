@@ -50,3 +50,28 @@ def test_held_out_logs_are_the_origins_of_their_windows(runs):
     cut = cut_windows(runs[:2], 29, 2.0, 0.3, True, torch.float64, 30.0, 0, validation_runs=runs[2:])
     check_origins(cut, runs)
     assert set(cut.val_origins.logs) == {runs[2].name}
+
+
+@pytest.mark.parametrize("held_out", [False, True])
+def test_the_verdicts_windows_are_each_logs_non_overlapping_ones(runs, held_out):
+    """`WindowOrigins.non_overlapping` at 30 s on real validation windows slid by 2 s (training
+    logs' blocks, or a held-out log's 30-s windows: 30 samples of 1 s, as a test window): kept
+    starts lie at least 30 s apart, and every window left out starts within 30 s after a kept
+    one (greedy from each log's first)."""
+    if held_out:
+        cut = cut_windows(runs[:2], 29, 2.0, 0.3, True, torch.float64, 30.0, 0, validation_runs=runs[2:])
+    else:
+        cut = cut_windows(runs, 10, 2.0, 0.3, True, torch.float64, 30.0, 0)
+    o = cut.val_origins
+    kept = o.non_overlapping(30.0)
+    assert list(kept) == list(o.by_log())
+    for log, index in o.by_log().items():
+        starts, judged = o.start_s[index], o.start_s[kept[log]]
+        assert judged[0] == starts.min() and np.all(np.diff(judged) >= 30.0 - 1e-6)
+        assert set(judged) <= set(starts)
+        for s in set(starts) - set(judged):
+            assert np.any((judged <= s) & (s < judged + 30.0 - 1e-6)), (log, s)
+    if held_out:   # one log, no gap: every 15th window, 30 s apart
+        (log, index), = o.by_log().items()
+        assert np.allclose(o.start_s[kept[log]], o.start_s[index][::15])
+        assert kept[log].size == -(-index.size // 15)
