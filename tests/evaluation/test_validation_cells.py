@@ -249,3 +249,16 @@ def test_overlapping_windows_resampled_as_independent_are_falsely_confident_the_
 def judge_u(cells):
     from sysid.evaluation.judgement import judge
     return next(c for c in judge(cells, RULE).cells if c.channel == "u")
+
+
+def test_seeds_on_the_same_held_out_windows_pair_on_the_same_non_overlapping_ones():
+    verdicts = []
+    for seed in (0, 1):
+        model, baseline = overlapping_log(7 + seed)
+        _, same_baseline = overlapping_log(7)
+        verdicts.append(baseline_verdict("hybrid", {float(SPAN): {"model": model, SHIP_FILE_MMG: same_baseline}},
+                                         None, RULE))
+    j = seed_mean_verdict(verdicts, RULE).judgements[SHIP_FILE_MMG]
+    assert (j.n_logs, j.n_windows, j.n_members) == (1, 60, 2) and {c.log for c in j.cells} == {"random_log"}
+    cells = seed_mean_verdict(verdicts, RULE).evidence[VALIDATION][SHIP_FILE_MMG]
+    assert all(np.array_equal(c.window_start_s, 10.0 * np.arange(60)) and c.model.shape == (2, 60) for c in cells)
