@@ -47,12 +47,6 @@ def weight_norm(net: ForceCorrection) -> torch.Tensor:
     return norm if net.members == 1 else norm / net.members
 
 
-def model_weight_norm(model) -> torch.Tensor:
-    """||theta||^2 of the FNN of a force model or `PerMember` (a zero without a network)."""
-    net = correction_of(model.model if isinstance(model, PerMember) else model)
-    return weight_norm(net) if net is not None else torch.zeros(())
-
-
 def multistep_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor | None = None,
                    band: float = PAPER_FORCE_BAND):
     """(L_v, L_F) of Eqs. (15)-(17) as means over windows and steps: Euler rollouts of T steps
@@ -80,16 +74,18 @@ def multistep_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor
 def step_loss(model, batch: WindowSet, w_v: torch.Tensor, w_F: torch.Tensor | None, training: TrainingOptions
               ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """(lambda_v L_v + lambda_F L_F + lambda_L2 |theta|^2, L_v, L_F) of a gradient step (Eq. 13)
-    with `training`'s lambdas and force band: `multistep_loss` and `model_weight_norm`
-    without the operations that cannot change a number (lambda_v = 1; L_F = 0 without
-    `w_F`, |theta|^2 = 0 without a network: a non-negative loss plus +0 is itself)."""
+    with `training`'s lambdas and force band: `multistep_loss` and the `weight_norm` of the
+    model's network (a force model's or a `PerMember`'s), without the operations that cannot
+    change a number (lambda_v = 1; L_F = 0 without `w_F`, |theta|^2 = 0 without a network: a
+    non-negative loss plus +0 is itself)."""
     t = training
     loss_v, loss_F = multistep_loss(model, batch, w_v, w_F, t.force_band)
     loss = loss_v if t.lambda_v == 1.0 else t.lambda_v * loss_v
     if w_F is not None:
         loss = loss + t.lambda_F * loss_F
-    if correction_of(model.model if isinstance(model, PerMember) else model) is not None:
-        loss = loss + t.lambda_L2 * model_weight_norm(model)
+    net = correction_of(model.model if isinstance(model, PerMember) else model)
+    if net is not None:
+        loss = loss + t.lambda_L2 * weight_norm(net)
     return loss, loss_v, loss_F
 
 
