@@ -83,6 +83,7 @@ class RmseTable:
     title: str
     groups: list[str]
     rows: list[TableRow] = field(default_factory=list)
+    units: str = "u, v_m in m/s, r in rad/s"   # the units of the cells, said under the table
 
     @property
     def has_best(self) -> bool:
@@ -202,7 +203,8 @@ def run_table(run: RunRecord, paper: bool = True) -> RmseTable:
 
     table = RmseTable("table_run", f"RMSE of {label}" + (" beside its physics baselines" if baselines else "")
                       + f" (u [{units.unit('u')}], v_m [{units.unit('v_m')}], r [{units.unit('r')}])",
-                      [f"{h} s" for h in horizons])
+                      [f"{h} s" for h in horizons],
+                      units=f"u in {units.unit('u')}, v_m in {units.unit('v_m')}, r in {units.unit('r')}")
     for scenario in _scenario_order(s for s, _ in rmse):
         cells = []
         for horizon in horizons:
