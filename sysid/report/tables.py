@@ -15,7 +15,7 @@ from pathlib import Path
 from sysid.protocol.paper import SCENARIO_ORDER, comparison_table, model_label, paper_rmse, run_label, scenario_key
 from sysid.report.palette import model_colour
 from sysid.data.display_units import DisplayUnits
-from sysid.evaluation.judgement import interval_text
+from sysid.evaluation.judgement import interval_text, place_names
 from sysid.evaluation.verdict import BaselineVerdict as Verdict, percent_text
 from sysid.report.source import ReportSource, RunRecord
 
@@ -256,13 +256,14 @@ class VerdictTable:
 
 def _judged_rows(verdict: Verdict, split: str, judgements: dict, units: DisplayUnits) -> list[list[str]]:
     first = next(iter(judgements.values()))
+    names = place_names(first.cells)
     rows = []
     for i, cell in enumerate(first.cells):
         label = split + (" (decides)" if split == verdict.decided_on else "")
         shown = functools.partial(units.value, cell.channel)
         std = verdict.member_spread(split, cell.log, cell.horizon_s, cell.channel)
         spread = f" ± {shown(std):.5f}" if std is not None and math.isfinite(std) else ""
-        row = [label, cell.scenario or cell.log, f"{cell.horizon_s:g} s",
+        row = [label, names[cell.log], f"{cell.horizon_s:g} s",
                f"{cell.channel} [{units.unit(cell.channel)}]", str(cell.n_windows),
                format_rmse(shown(cell.model_rmse)) + spread]
         for b in verdict.baselines:

@@ -270,3 +270,33 @@ def test_a_judgement_reads_back_from_its_dict():
 
 def test_every_scenario_of_the_paper_is_a_log():
     assert {c.log for c in paper_cells("NN", "D1")} == set(SCENARIO_ORDER)
+
+
+def test_logs_of_one_scenario_are_named_by_the_log_in_the_sentence():
+    """A user's test logs: two turning circles of 20 deg (one materially worse, one better)
+    and one zig-zag. The sentence names the worse cell by its log ("Turning 20: turn_b"),
+    never the bare scenario the two share; the zig-zag, alone in its scenario, keeps its
+    scenario's name."""
+    from sysid.evaluation.judgement import place_names
+
+    rng = np.random.default_rng(7)
+    ratios = {("turn_a", 30.0, c): np.full(12, 0.8) for c in CHANNELS}
+    ratios.update({("turn_b", 30.0, c): np.full(12, 1.6 if c == "r" else 0.8) for c in CHANNELS})
+    ratios.update({("zz_1", 30.0, c): np.full(12, 0.9) for c in CHANNELS})
+    scenario = {"turn_a": "Turning 20", "turn_b": "Turning 20", "zz_1": "Zigzag 20/20"}
+    cells = [PairedCell(c.log, scenario[c.log], c.horizon_s, c.channel, c.model, c.baseline, c.window_start_s)
+             for c in cells_of(ratios, rng=rng)]
+    j = judge(cells, RULE, model="The hybrid", baseline="MMG (ship file)")
+    assert j.outcome is Outcome.WORSE
+    assert "in Turning 20: turn_b r at 30 s +60 %" in j.sentence
+    assert "Turning 20 r" not in j.sentence and "turn_a" not in j.sentence
+    assert place_names(j.cells) == {"turn_a": "Turning 20: turn_a", "turn_b": "Turning 20: turn_b",
+                                    "zz_1": "Zigzag 20/20"}
+    # the report's first page names the same logs, cell by cell
+    from sysid.evaluation.verdict import BaselineVerdict
+    from sysid.report.tables import verdict_table
+
+    table = verdict_table(BaselineVerdict("hybrid", ("MMG (ship file)",), (), judgements={"MMG (ship file)": j}),
+                          "hybrid")
+    assert [row[1] for row in table.rows] == [place_names(j.cells)[c.log] for c in j.cells]
+    assert {row[1] for row in table.rows} == {"Turning 20: turn_a", "Turning 20: turn_b", "Zigzag 20/20"}
