@@ -16,6 +16,9 @@ from sysid.errors import DataError
 from sysid.store.target import OutputKind
 
 
+RMSE_UNITS = "RMSE of u, v_m [m/s] and r [rad/s]"   # the printed tables, as the metrics files: SI
+
+
 @app.command()
 def evaluate(
     run_dir: Optional[Path] = typer.Argument(None, help="A run directory (sysid train); omit with --model mmg."),
@@ -69,7 +72,7 @@ def evaluate(
     table = evaluation.metrics
     write_csv(table, output, float_format="%.6g")
     with pd.option_context("display.width", 120, "display.float_format", "{:.5f}".format):
-        typer.echo(table.to_string(index=False))
+        typer.echo(f"{RMSE_UNITS}:\n" + table.to_string(index=False))
     typer.echo(f"evaluate: {len(runs)} file(s), horizons {', '.join(f'{h:g}' for h in horizons)} s, "
                f"{label} -> {output} ({time.perf_counter() - start:.1f} s)")
     if run_exp is not None:
@@ -187,7 +190,7 @@ def _beside_baselines(exp, model, baselines, runs, horizons, method) -> None:
     with pd.option_context("display.width", 140, "display.float_format", "{:.5f}".format):
         order = {(e.log, e.horizon_s): i for i, e in enumerate(errors)}   # horizon, then the logs' order
         side = side.iloc[sorted(range(len(side)), key=lambda i: order[(side.file[i], side.horizon_s[i])])]
-        typer.echo("beside its physics baseline(s), on the same windows:\n" + side.to_string(index=False))
+        typer.echo(f"beside its physics baseline(s), on the same windows ({RMSE_UNITS}):\n" + side.to_string(index=False))
     for judgement in verdicts.values():
         if judgement.beats:
             typer.echo("verdict: " + judgement.sentence)

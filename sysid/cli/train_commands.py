@@ -166,7 +166,8 @@ def _say_result(result, exp, output: Path, tests, start: float) -> None:
     from sysid.data.display_units import DisplayUnits
 
     if tests:
-        typer.echo(result.evaluation.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+        typer.echo("test logs, RMSE of u, v_m [m/s] and r [rad/s]:\n"
+                   + result.evaluation.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     if result.failure:
         typer.secho(f"train: FAILED: {result.failure}; the run in {output} is marked failed", fg=typer.colors.RED, err=True)
         raise SystemExit(1)

@@ -171,7 +171,8 @@ def test_evaluate_scores_remapped_logs_with_a_config_and_a_run_beside_its_baseli
     run = in_process(capsys, "evaluate", "runs/hybrid", "-o", "hybrid.csv")
     assert run.code == 0, run.err
     lines = run.out.splitlines()
-    at = lines.index("beside its physics baseline(s), on the same windows:")
+    assert "RMSE of u, v_m [m/s] and r [rad/s]:" in lines   # SI, said: the logs are in knots and deg/s
+    at = lines.index("beside its physics baseline(s), on the same windows (RMSE of u, v_m [m/s] and r [rad/s]):")
     baseline_rows = [line.split() for line in lines[at + 2:] if "MMG (ship file)" in line]
     assert len(baseline_rows) == 4
     for row, expected in zip(baseline_rows, truth.itertuples(index=False)):
