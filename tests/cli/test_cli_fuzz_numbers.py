@@ -92,6 +92,16 @@ def test_export_refuses_bad_steps_and_batches(sysid, trained, tmp_path, case):
     assert_refused(sysid("export", trained, "-o", out, "--portable", *options), 2, says, absent=(out,))
 
 
+@pytest.mark.parametrize("name", ["export", "model.pt", "model.pt2.bak"])
+def test_export_refuses_a_file_not_ending_in_pt2(sysid, trained, tmp_path, name):
+    """torch loads a package or program by its .pt2 suffix (else it warns, and its next
+    versions refuse): another name is one line before anything is compiled, nothing written."""
+    out = tmp_path / name
+    assert_refused(sysid("export", trained, "-o", out, "--portable"), 2,
+                   f"-o {out}: an exported step is a .pt2 file; name it e.g. -o {out.with_suffix('.pt2')}",
+                   absent=(out,))
+
+
 # -- horizons: whole samples, and no longer than the data ----------------------------------
 def test_fractional_horizon_is_refused_by_evaluate_simulate_and_train(sysid, files, tmp_path):
     out = tmp_path / "out.csv"
