@@ -310,6 +310,21 @@ def _pooled_mse(errors: np.ndarray, members: np.ndarray, windows: np.ndarray) ->
     return ((members @ sq) * windows).sum(1) / (members.sum(1) * windows.sum(1))
 
 
+RATIO_CAP = 1e6   # the largest RMSE ratio of a draw: one whose baseline is exact and whose model is not
+
+
+def _resampled_ratio(mse_model: np.ndarray, mse_baseline: np.ndarray) -> np.ndarray:
+    """(R,) RMSE ratio model / baseline of each draw, rounded to 12 digits (a model equal to
+    its baseline gives exactly 1). A draw whose baseline error is exactly 0 (an exact baseline
+    on every window drawn: straight running with v = r = 0 in noise-free logs) is 1 when the
+    model's is 0 too, else `RATIO_CAP`; no ratio exceeds `RATIO_CAP`, so every quantile and
+    the overall change stay finite."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.sqrt(mse_model / mse_baseline)
+    ratio = np.where(mse_baseline > 0, ratio, np.where(mse_model > 0, RATIO_CAP, 1.0))
+    return np.round(np.minimum(ratio, RATIO_CAP), 12)
+
+
 def _decided(cell: CellJudgement, low: float, high: float, rule: VerdictRule) -> CellJudgement:
     """`cell` with its interval [low, high] of the relative change and the decision it gives."""
     if cell.n_windows < rule.min_windows:
@@ -428,9 +443,8 @@ def _cell_judgements(groups: dict[tuple[str, float], list[PairedCell]], rng: np.
                 judged.append(CellJudgement(**common, change=math.nan, change_low=math.nan, change_high=math.nan,
                                             decision=CellDecision.BASELINE_DIVERGED))
                 continue
-            # rounded to 12 digits: a model equal to its baseline gives exactly 1 in every draw
-            ratio = np.round(np.sqrt(_pooled_mse(c.model, members, windows)
-                                     / _pooled_mse(c.baseline, baselines, windows)), 12)
+            ratio = _resampled_ratio(_pooled_mse(c.model, members, windows),
+                                     _pooled_mse(c.baseline, baselines, windows))
             change = round(model_rmse / baseline_rmse, 12) - 1
             judged.append(CellJudgement(**common, change=change, change_low=math.nan, change_high=math.nan,
                                         decision=CellDecision.NOT_DISTINGUISHABLE))

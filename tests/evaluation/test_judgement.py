@@ -300,3 +300,28 @@ def test_logs_of_one_scenario_are_named_by_the_log_in_the_sentence():
                           "hybrid")
     assert [row[1] for row in table.rows] == [place_names(j.cells)[c.log] for c in j.cells]
     assert {row[1] for row in table.rows} == {"Turning 20: turn_a", "Turning 20: turn_b", "Zigzag 20/20"}
+
+
+def test_a_baseline_exact_on_some_windows_gives_finite_intervals_without_warnings():
+    """Noise-free logs of the ship file's own MMG: in straight running the baseline's v_m and
+    r errors are exactly 0, so some draws of a cell hold only such windows. Such a draw's
+    ratio is capped (RATIO_CAP), not infinite: every interval and the overall change stay
+    finite, numpy warns of nothing, and a model worse on every window is WORSE. Cells with
+    no exact window are judged as before (ratios below the cap are untouched)."""
+    import warnings
+
+    from sysid.evaluation.judgement import RATIO_CAP, _resampled_ratio
+
+    base = np.r_[np.zeros(6), np.full(4, 0.01)]     # 6 straight windows, exact; 4 turning ones
+    cells = [PairedCell(log, log.title(), 30.0, ch, (base + 0.004)[None, :], base[None, :], 30.0 * np.arange(10))
+             for log in ("a", "b") for ch in CHANNELS]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        j = judge(cells, RULE)
+    assert j.outcome is Outcome.WORSE
+    assert all(math.isfinite(v) for c in j.cells for v in (c.change, c.change_low, c.change_high))
+    assert math.isfinite(j.change_low) and math.isfinite(j.change_high)
+    assert j.cells[0].change == pytest.approx(math.sqrt(np.mean((base + 0.004) ** 2) / np.mean(base**2)) - 1, rel=1e-10)
+    assert j.cells[0].change_high <= RATIO_CAP - 1
+    np.testing.assert_array_equal(_resampled_ratio(np.array([4.0, 0.0, 1.0, 1e14]), np.array([1.0, 0.0, 0.0, 1.0])),
+                                  [2.0, 1.0, RATIO_CAP, RATIO_CAP])
