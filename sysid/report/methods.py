@@ -38,8 +38,12 @@ INTEGRATORS = {"euler": "explicit Euler", "rk4": "classical RK4"}
 
 def protocol_text(source: ReportSource) -> str:
     """The evaluation paragraph: the runs' horizons, their `[evaluation] integrator` and
-    `[data] rate` (each run's config; the protocol's Euler at 1 Hz when not recorded)."""
+    `[data] rate` (each run's config; the protocol's Euler at 1 Hz when not recorded); that no
+    test log was evaluated when no run has test metrics."""
     horizons = sorted({h for r in source.runs for h in r.horizons()})
+    if not horizons:
+        return ("No test log was evaluated (a sweep's runs, or a run trained without test logs): the verdict is "
+                "on the validation windows; score a run on test logs with `sysid evaluate RUN --data LOGS`.")
     configs = [r.config or {} for r in source.runs]
     methods = sorted({str((c.get("evaluation") or {}).get("integrator", "euler")) for c in configs})
     rates = sorted({float((c.get("data") or {}).get("rate", 1.0)) for c in configs})

@@ -98,3 +98,23 @@ def test_report_says_the_units_its_table_is_in(tmp_path):
     pdf = "\n".join(p.extract_text() or "" for p in pypdf.PdfReader(str(paths.pdf)).pages)
     assert "u in knots, v_m in m/s, r in rad/s" in " ".join(pdf.split())
     assert "u, v_m [m/s]" not in pdf
+
+
+def test_methods_of_a_run_without_test_logs_say_so(tmp_path):
+    """A run trained without test logs (a sweep's trial): metrics.csv holds its header only,
+    and the methods say no test log was evaluated instead of "H =  s" windows of test files;
+    the same run with its test metrics names their horizons."""
+    from synthetic_rundir import measured_runs, write_run
+
+    from sysid.report.methods import methods_paragraphs
+    from sysid.report.source import read_source
+    from sysid.store.manifest import write_manifest
+
+    runs = {k: v for k, v in measured_runs(0.3).items() if k == "Berthing"}
+    out = write_run(tmp_path / "run", "mmg_lab", runs, horizons=(30,))
+    assert "(H = 30 s)" in methods_paragraphs(read_source(out))[0]
+    metrics = pd.read_csv(out / "metrics.csv")
+    metrics.iloc[:0].to_csv(out / "metrics.csv", index=False)
+    write_manifest(out, "run")
+    first = methods_paragraphs(read_source(out))[0]
+    assert first.startswith("No test log was evaluated") and "H = " not in first
