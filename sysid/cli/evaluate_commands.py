@@ -3,6 +3,7 @@ beside its physics baselines with its verdict."""
 from __future__ import annotations
 
 import dataclasses
+import glob
 import time
 from pathlib import Path
 from typing import List, Optional
@@ -57,7 +58,7 @@ def evaluate(
     chosen = integrator_of(integrator or (str(source.evaluation.integrator) if source is not None else "euler"), False)
     ship_input = None if run_dir is not None else ship_file(ship or (exp.experiment.ship if exp is not None
                                                                      else "esso_osaka"))
-    claim(output, OutputKind.FILE, [run_dir, config, *(data or []), *files, ship_input])  # --data folders too
+    claim(output, OutputKind.FILE, [run_dir, config, *(data or []), *files, ship_input, *_logs_of_run(run_exp)])
     rate = source.data.rate if source is not None else 1.0
     runs = read_runs(progress(files, desc="reading", unit="files", quiet=len(files) < 4), rate, columns)
     _check_windows_fit(runs, horizons)
@@ -116,6 +117,15 @@ def _logs(data, source):
         raise DataError("evaluate: no logs: name them with --data, or give --config EXP (or a run) whose "
                         "[data] test lists them")
     return files, columns
+
+
+def _logs_of_run(run_exp) -> list[Path]:
+    """The logs a run was made from (its config's [data] train, validation and test, as
+    written: resolved files): -o may not overwrite them, read or not."""
+    if run_exp is None:
+        return []
+    listed = [*run_exp.data.train, *run_exp.data.validation, *run_exp.data.test]
+    return [Path(p) for f in listed for p in (sorted(glob.glob(f)) if glob.has_magic(f) else [f])]
 
 
 def _check_windows_fit(runs, horizons) -> None:

@@ -6,7 +6,7 @@ import pandas as pd
 import pytest
 
 from sysid.cli import run as sysid
-from sysid.errors import CheckpointError, ConfigError, DataError
+from sysid.errors import CheckpointError, ConfigError, DataError, OutputError
 from tiny_experiment import TRAIN_FILES, tiny_experiment, tiny_test_file
 
 
@@ -87,3 +87,24 @@ def test_train_refuses_data_it_would_ignore(files, tmp_path):
                                         r"own.toml names its own logs \(\[data\] train\): drop --data"):
         sysid(["train", str(config), "-o", str(tmp_path / "run"), "--data", str(files["test"].parent)])
     assert not (tmp_path / "run").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["own.toml"]
+
+
+def test_evaluate_never_writes_over_a_log_the_run_was_trained_on(files, tmp_path):
+    """``sysid evaluate RUN --data OTHER -o LOG`` where LOG is one of the run's training logs
+    (a slip of the shell's completion): refused in one line naming it, the log unchanged;
+    a new file beside it is written."""
+    import shutil
+
+    from tiny_experiment import tiny_config
+
+    log = shutil.copy(files["train"], tmp_path / "monday.csv")
+    config = tmp_path / "own.toml"
+    config.write_text(tiny_config({"train": log}))
+    sysid(["train", str(config), "-o", str(tmp_path / "run")])
+    before = (tmp_path / "monday.csv").read_bytes()
+    with pytest.raises(OutputError, match=r"monday.csv: is .*monday.csv, an input of this command"):
+        sysid(["evaluate", str(tmp_path / "run"), "--data", str(files["test"]), "--horizon", "30", "-o", str(log)])
+    assert (tmp_path / "monday.csv").read_bytes() == before
+    sysid(["evaluate", str(tmp_path / "run"), "--data", str(files["test"]), "--horizon", "30",
+           "-o", str(tmp_path / "metrics.csv")])
+    assert list(pd.read_csv(tmp_path / "metrics.csv").horizon_s) == [30.0]
