@@ -119,10 +119,14 @@ def maneuver(
     config: Optional[Path] = typer.Option(None, "--config", help="Experiment config whose [data.columns] maps the "
                                                                  "--recorded logs' columns and units (default: the "
                                                                  "run directory's)."),
+    baseline: bool = typer.Option(True, "--baseline/--no-baseline", help="Of a learned model (NN-only, hybrid, "
+                                  "their ensembles or seeds): run the same maneuvers under the same conditions with "
+                                  "its physics baseline, the MMG of its ship file, and show it beside."),
     report: bool = typer.Option(True, "--report/--no-report", help="Write report.html and report.pdf too."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output directory (all of it)."),
 ) -> None:
-    """Turning circles, zig-zags and a crash stop of any model: IMO indices and criteria, trajectories, report."""
+    """Turning circles, zig-zags and a crash stop of any model: IMO indices and criteria, trajectories, report;
+    a learned model beside its physics baseline (the MMG of its ship file)."""
     from sysid.cli.outputs import claim, ship_file
     from sysid.store.target import OutputKind
 
@@ -132,11 +136,12 @@ def maneuver(
     source = model if model.is_dir() else ship_file(model)  # what the command reads
     target = claim(output, OutputKind.MANEUVERS, [source, *(recorded or []), config], overwrite)  # a bad -o fails now
     subject, logged, maneuvers = _loaded(model, maneuvers, bool(turning or zigzag or crash_stop), recorded, config)
+    physics = _baseline_of(subject, baseline)
     conditions, sources = _approach(subject, maneuvers, speed, rps, rudder_rate, dt, duration, wind_from, method)
     on_interrupt(f"nothing written to {output} (it is moved into place only when complete)")
-    results, compiled, seconds = _simulated(subject, maneuvers, conditions, compiled)
-    compared = _written(target, subject, conditions, sources, results, compiled, seconds, logged, report)
-    _say_outcome(output, results, compared)
+    results, shown, compiled, seconds = _simulated(subject, physics, maneuvers, conditions, compiled)
+    compared = _written(target, subject, conditions, sources, results, shown, compiled, seconds, logged, report)
+    _say_outcome(output, results, shown, compared)
     typer.echo(f"maneuver: {output} ({seconds:.1f} s simulating, {time.perf_counter() - start:.1f} s in all)")
 
 
@@ -176,6 +181,22 @@ def _loaded(model: Path, maneuvers: list, asked: bool, recorded: Optional[List[P
     return subject, logged, maneuvers
 
 
+def _baseline_of(subject, wanted: bool):
+    """The physics baseline of a learned subject (`physics_baseline`), said in one line;
+    None for an MMG, or with --no-baseline (said)."""
+    from sysid.maneuvers import physics_baseline
+
+    physics = physics_baseline(subject)
+    if physics is None:
+        return None
+    if not wanted:
+        typer.echo(f"maneuver: --no-baseline: {subject.label} ({subject.kind}) is shown without its physics baseline")
+        return None
+    typer.echo(f"maneuver: beside {subject.label} ({subject.kind}): its physics baseline {physics.label}, the MMG of "
+               f"{subject.ship.source or subject.ship.name}, with the same maneuvers and conditions")
+    return physics
+
+
 def _approach(subject, maneuvers: list, speed, rps, rudder_rate, dt: float, duration, wind_from, method):
     """The approach conditions (`default_conditions`) and where each came from, said in one line."""
     from sysid.maneuvers import default_conditions
@@ -196,30 +217,41 @@ def _approach(subject, maneuvers: list, speed, rps, rudder_rate, dt: float, dura
     return conditions, sources
 
 
-def _simulated(subject, maneuvers: list, conditions, compiled: Optional[bool]):
-    """The maneuvers run on the chosen path (`choose_loop`, said): the results, whether the
-    compiled loop ran, and the seconds simulating."""
-    from sysid.maneuvers import run_maneuvers
+def _simulated(subject, physics, maneuvers: list, conditions, compiled: Optional[bool]):
+    """The maneuvers run on the chosen path (`choose_loop` over every model, the physics
+    baseline's too, said): the results, the baseline's (`run_baseline`: results and the
+    maneuvers it cannot run; None without a baseline), whether the compiled loop ran, and
+    the seconds simulating."""
+    from sysid.maneuvers import run_baseline, run_maneuvers
     from sysid.maneuvers.simulate import choose_loop
 
     simulated = time.perf_counter()
-    choice = choose_loop([subject.model, *(m for _, m in subject.members)], maneuvers, conditions, compiled)
+    models = [subject.model, *(m for _, m in subject.members), *([physics.model] if physics else [])]
+    choice = choose_loop(models, maneuvers, conditions, compiled)
     typer.echo(f"maneuver: {choice.reason}")
     results = run_maneuvers(subject, maneuvers, conditions, compiled=choice.compiled)
-    return results, choice.compiled, time.perf_counter() - simulated
+    shown = None
+    if physics is not None:
+        shown = run_baseline(physics, maneuvers, conditions, compiled=choice.compiled)
+        if shown[1]:
+            typer.echo(f"maneuver: {physics.label} does not run {', '.join(shown[1])}: the propeller model "
+                       f"{physics.ship.models.get('propeller')!r} is for ahead motion only")
+    return results, shown, choice.compiled, time.perf_counter() - simulated
 
 
-def _written(target, subject, conditions, sources, results, compiled: bool, seconds: float, logged: dict,
+def _written(target, subject, conditions, sources, results, shown, compiled: bool, seconds: float, logged: dict,
              report: bool):
     """The output directory written (staged, moved into place when complete): the maneuvers'
-    files, the comparison with the --recorded logs (returned; None without) and the report."""
+    files (the physics baseline's rows after the model's), the comparison with the
+    --recorded logs (returned; None without) and the report."""
     from sysid.maneuvers.outputs import summary_document, write_maneuvers
 
+    beside, left_out = shown if shown is not None else (None, ())
     summary = summary_document(subject.label, subject.kind, subject.ship, conditions, sources, results, compiled,
-                               seconds, subject.spread)
+                               seconds, subject.spread, beside, left_out)
     compared = None
     with target.staged() as staging:
-        write_maneuvers(staging, results, subject.ship, conditions, summary)
+        write_maneuvers(staging, results, subject.ship, conditions, summary, beside or ())
         if logged:
             compared = _against_record(staging, subject, logged)
         if report:
@@ -228,15 +260,19 @@ def _written(target, subject, conditions, sources, results, compiled: bool, seco
     return compared
 
 
-def _say_outcome(output: Path, results, compared) -> None:
-    """The indices, the comparison with the recorded maneuvers (if any), and warnings for
-    diverged maneuvers and for maneuvers mostly outside the kNN gate's training data."""
+def _say_outcome(output: Path, results, shown, compared) -> None:
+    """The indices (beside the physics baseline's, if any), the comparison with the recorded
+    maneuvers (if any), and warnings for diverged maneuvers and for maneuvers mostly outside
+    the kNN gate's training data."""
     from sysid.maneuvers.outputs import MOSTLY_OUTSIDE
 
     _print_results(output, results)
+    if shown is not None and results:
+        _print_beside(output, results[0].model)
     if compared is not None:
         _print_record(compared)
-    diverged = [own for r in results for own in (r, *r.members) if own.diverged]
+    beside = shown[0] if shown is not None else []
+    diverged = [own for r in [*results, *beside] for own in (r, *r.members) if own.diverged]
     if diverged:
         typer.secho("WARNING: diverged (indices not valid): " + "; ".join(
             f"{own.maneuver.name} ({own.model}) at t = {own.diverged_at_s:.1f} s, {own.divergence}" for own in diverged),
@@ -299,8 +335,25 @@ def _print_results(output: Path, results) -> None:
 
     frame = pd.read_csv(output / "indices.csv")
     shown = [c for c in frame.columns if c.endswith(("_m", "_deg", "_ratio")) and frame[c].notna().any()]
+    several = frame["model"].nunique() > 1  # a learned model and its physics baseline
     with pd.option_context("display.width", 160, "display.max_columns", 20, "display.float_format", "{:.3f}".format):
-        typer.echo(frame[["maneuver", *shown]].to_string(index=False, na_rep=""))
+        typer.echo(frame[["maneuver", *(["model"] if several else []), *shown]].to_string(index=False, na_rep=""))
     criteria = pd.read_csv(output / "criteria.csv")
     for row in criteria.itertuples(index=False):
-        typer.echo(f"  IMO {row.maneuver}: {row.rule}: {row.met}")
+        typer.echo(f"  IMO {row.maneuver}{f' ({row.model})' if several else ''}: {row.rule}: {row.met}")
+
+
+def _print_beside(output: Path, learned: str) -> None:
+    """Each index of the learned model beside its physics baseline's, and the difference."""
+    import pandas as pd
+    from sysid.maneuvers import BASELINE_LABEL
+    from sysid.maneuvers.outputs import beside_baseline
+
+    table = beside_baseline(pd.read_csv(output / "indices.csv"), learned)
+    if table.empty:
+        return
+    typer.echo(f"{learned} beside its physics baseline {BASELINE_LABEL} (same maneuvers and conditions; difference = "
+               f"{learned} - {BASELINE_LABEL}; no pass/fail rule for indices: docs/maneuvers.md):")
+    table = table.rename(columns={"learned": learned, "baseline": BASELINE_LABEL})
+    with pd.option_context("display.width", 160, "display.max_columns", 20, "display.float_format", "{:.3f}".format):
+        typer.echo(table.to_string(index=False, na_rep="NaN"))

@@ -11,15 +11,15 @@ file or a run directory).
 """
 from __future__ import annotations
 
-from sysid.maneuvers.any_model import ManeuverModel, load_maneuver_model, ship_of
+from sysid.maneuvers.any_model import BASELINE_LABEL, ManeuverModel, load_maneuver_model, physics_baseline, ship_of
 from sysid.maneuvers.base import (Conditions, CrashStop, Maneuver, ManeuverError, ManeuverResult, Side,
                                   TurningCircle, ZigZag, imo_maneuvers)
 from sysid.maneuvers.criteria import Criterion, criteria_for, overshoot_limits_10_10
 from sysid.maneuvers.indices import INDEX_COLUMNS, ManeuverIndices, Track, maneuver_indices
-from sysid.maneuvers.simulate import default_conditions, run_maneuvers, simulate_maneuvers
+from sysid.maneuvers.simulate import default_conditions, run_baseline, run_maneuvers, simulate_maneuvers
 from sysid.maneuvers.straight import straight_running_rps
 
-__all__ = ["ManeuverModel", "load_maneuver_model", "ship_of", "Conditions", "CrashStop", "Maneuver", "ManeuverError",
+__all__ = ["BASELINE_LABEL", "ManeuverModel", "load_maneuver_model", "physics_baseline", "ship_of", "Conditions", "CrashStop", "Maneuver", "ManeuverError",
            "ManeuverResult", "Side", "TurningCircle", "ZigZag", "imo_maneuvers", "Criterion", "criteria_for",
            "overshoot_limits_10_10", "INDEX_COLUMNS", "ManeuverIndices", "Track", "maneuver_indices",
-           "default_conditions", "run_maneuvers", "simulate_maneuvers", "straight_running_rps"]
+           "default_conditions", "run_baseline", "run_maneuvers", "simulate_maneuvers", "straight_running_rps"]

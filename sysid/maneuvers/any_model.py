@@ -20,6 +20,9 @@ from sysid.runs.rundir import RunDir
 from sysid.runs.layout import load_model
 from sysid.store.manifest import has_manifest
 
+BASELINE_LABEL = "MMG (ship file)"  # the physics baseline of a learned model, as `sysid compare` names it
+LEARNED_KINDS = ("nn", "hybrid")
+
 
 @dataclass
 class ManeuverModel:
@@ -79,6 +82,17 @@ def load_maneuver_model(path: str | os.PathLike) -> ManeuverModel:
                              loaded[0][0].data.columns)
     ship = load_ship(path)
     return ManeuverModel(ship.name, MMG(ship), ship, "mmg")
+
+
+def physics_baseline(subject: ManeuverModel) -> ManeuverModel | None:
+    """The physics baseline of a learned model (kind "nn" or "hybrid", alone, an ensemble or
+    a folder of seeds): the MMG of its ship file with the run's [mmg] overrides
+    (``MMG(subject.ship)``, the baseline ``sysid compare`` shows), labelled `BASELINE_LABEL`,
+    judged against the subject's training range; None for an MMG (it is the physics model)."""
+    if subject.kind not in LEARNED_KINDS:
+        return None
+    return ManeuverModel(BASELINE_LABEL, MMG(subject.ship), subject.ship, "mmg",
+                         training_range=subject.training_range, columns=subject.columns)
 
 
 def _training_range(runs: list[Path]) -> PhysicalRange | None:

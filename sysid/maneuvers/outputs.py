@@ -10,9 +10,14 @@
   not valid); each IMO criterion that applies as ``imo_<index>`` = "met" / "not met" /
   "not assessed" (always for a diverged maneuver);
 - ``criteria.csv`` (`criteria_table`): every criterion with value, limit, the values as
-  ratios to L (lengths) or in deg (angles), met, and the rule;
+  ratios to L (lengths) or in deg (angles), met, the rule, and the model;
 - ``trajectories.csv`` (`trajectory_table`): every step of every maneuver (and of every
   member), states and inputs in `sysid.channel_names`'s units (m, m/s, rad, rad/s, rps).
+
+A learned model's physics baseline (`sysid.maneuvers.any_model.physics_baseline`) runs the
+same maneuvers under the same conditions: its rows follow the learned model's in all three
+tables, their ``model`` column naming it (`BASELINE_LABEL`), and `beside_baseline` sets the
+two models' indices side by side with their difference.
 """
 from __future__ import annotations
 
@@ -24,6 +29,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
+from sysid.maneuvers.any_model import BASELINE_LABEL
 from sysid.maneuvers.base import ManeuverResult
 from sysid.maneuvers.criteria import Criterion, criteria_for
 from sysid.maneuvers.indices import INDEX_COLUMNS
@@ -33,6 +39,7 @@ from sysid.store.target import RECORD_FILES, OutputKind
 
 MOSTLY_OUTSIDE = 0.5  # gate off on more than this share of the steps: "mostly outside the training data"
 CRITERION_COLUMNS = ("maneuver", "index", "value", "limit", "ratio", "limit_ratio", "met", "rule")
+INDEX_UNITS = {"m": "m", "deg": "deg", "ratio": "-"}  # unit of an index column, from its name's last part
 
 
 def spread(result: ManeuverResult) -> dict[str, float]:
@@ -76,12 +83,35 @@ def indices_table(results: Sequence[ManeuverResult], L: float, U: float, scale: 
 def criteria_table(results: Sequence[ManeuverResult], L: float, U: float, scale: float | None) -> pd.DataFrame:
     """Every IMO criterion of every maneuver (`Criterion` fields; met as "met", "not met" or
     "not assessed")."""
-    pairs: list[tuple[Criterion, bool]] = [(c, r.diverged) for r in results
-                                           for c in criteria_for(r.maneuver, r.indices, L, U, scale)]
+    pairs: list[tuple[Criterion, ManeuverResult]] = [(c, r) for r in results
+                                                     for c in criteria_for(r.maneuver, r.indices, L, U, scale)]
     frame = pd.DataFrame([{k: getattr(c, k) for k in CRITERION_COLUMNS} for c, _ in pairs],
                          columns=list(CRITERION_COLUMNS))
-    frame["met"] = [_verdict(None if diverged else c.met) for c, diverged in pairs]
+    frame["met"] = [_verdict(None if r.diverged else c.met) for c, r in pairs]
+    frame["model"] = [r.model for _, r in pairs]
     return frame
+
+
+def beside_baseline(indices: pd.DataFrame, learned: str, baseline: str = BASELINE_LABEL) -> pd.DataFrame:
+    """Each index (`INDEX_COLUMNS`) of each maneuver that both models of an indices table
+    ran and that applies to either: one row with ``maneuver``, ``index``, ``unit`` (m, deg or
+    -), the `learned` model's value, the `baseline`'s, and ``difference`` = learned minus
+    baseline (NaN where either is NaN: not reached or diverged runs keep their NaN). No
+    pass/fail: docs/verdict.md defines no rule for maneuver indices."""
+    columns = ["maneuver", "index", "unit", "learned", "baseline", "difference"]
+    mine = indices[indices["model"] == learned].set_index("maneuver")
+    theirs = indices[indices["model"] == baseline].set_index("maneuver")
+    rows = []
+    for name in mine.index:
+        if name not in theirs.index:
+            continue
+        for c in INDEX_COLUMNS:
+            a, b = float(mine.at[name, c]), float(theirs.at[name, c])
+            if math.isnan(a) and math.isnan(b):
+                continue
+            rows.append({"maneuver": name, "index": c, "unit": INDEX_UNITS[c.rsplit("_", 1)[1]], "learned": a,
+                         "baseline": b, "difference": a - b})
+    return pd.DataFrame(rows, columns=columns)
 
 
 def trajectory_table(results: Sequence[ManeuverResult]) -> pd.DataFrame:
@@ -102,9 +132,17 @@ def trajectory_table(results: Sequence[ManeuverResult]) -> pd.DataFrame:
 
 
 def summary_document(subject_label: str, kind: str, ship, conditions, sources: dict[str, str],
-                     results: Sequence[ManeuverResult], compiled: bool, seconds: float, spread: str = "") -> dict:
+                     results: Sequence[ManeuverResult], compiled: bool, seconds: float, spread: str = "",
+                     baseline: Sequence[ManeuverResult] | None = None, left_out: Sequence[str] = ()) -> dict:
     """maneuvers.json of a maneuvers directory: the model, the ship's dimensions and scale,
-    every condition with where it came from, per maneuver the kNN gate's off share."""
+    every condition with where it came from, per maneuver the kNN gate's off share, and the
+    physics baseline (None: the model is an MMG): its label, the maneuvers it ran, those it
+    could not (`left_out`), where it diverged."""
+    shown = None
+    if baseline is not None:
+        shown = {"model": BASELINE_LABEL, "kind": "mmg", "ship_file": ship.source,
+                 "maneuvers": [r.maneuver.name for r in baseline], "left_out": list(left_out),
+                 "diverged_at_s": {r.maneuver.name: r.diverged_at_s for r in baseline if r.diverged}}
     L, B = float(ship["L_pp"]), float(ship["B"])
     scale = ship.maneuvering.get("scale")
     return {
@@ -122,13 +160,17 @@ def summary_document(subject_label: str, kind: str, ship, conditions, sources: d
         "maneuvers": [r.maneuver.name for r in results],
         "gate_off_share": {r.maneuver.name: r.gate_off_share for r in results},
         "diverged_at_s": {r.maneuver.name: r.diverged_at_s for r in results if r.diverged},
+        "baseline": shown,
     }
 
 
-def write_maneuvers(directory, results: Sequence[ManeuverResult], ship, conditions, summary: dict) -> None:
+def write_maneuvers(directory, results: Sequence[ManeuverResult], ship, conditions, summary: dict,
+                    baseline: Sequence[ManeuverResult] = ()) -> None:
     """indices.csv, criteria.csv, trajectories.csv and maneuvers.json into `directory` (a
-    staging directory: `sysid.store.staging.staged_directory`)."""
+    staging directory: `sysid.store.staging.staged_directory`); the `baseline`'s results
+    (a learned model's physics baseline) as rows after the model's."""
     directory = Path(directory)
+    results = [*results, *baseline]
     L, scale = float(ship["L_pp"]), ship.maneuvering.get("scale")
     write_csv(indices_table(results, L, conditions.speed, scale), directory / "indices.csv", float_format="%.8g")
     write_csv(criteria_table(results, L, conditions.speed, scale), directory / "criteria.csv", float_format="%.8g")

@@ -267,3 +267,15 @@ def run_maneuvers(subject: ManeuverModel, maneuvers: Sequence[Maneuver], conditi
                                                            label=label, limits=subject.training_range)):
             result.members.append(own)
     return results
+
+
+def run_baseline(baseline: ManeuverModel, maneuvers: Sequence[Maneuver], conditions: Conditions, *,
+                 compiled: bool | None = False) -> tuple[list[ManeuverResult], list[str]]:
+    """The `maneuvers` of a learned model's physics baseline (`sysid.maneuvers.any_model.physics_baseline`)
+    under the learned model's own `conditions` (its approach revolutions included): (results
+    labelled with the baseline's label, names of the maneuvers it cannot run: a crash stop
+    with a propeller model for ahead motion only)."""
+    runnable = [m for m in maneuvers if not (m.kind == "crash_stop" and ahead_only(baseline.model))]
+    left_out = [m.name for m in maneuvers if m not in runnable]
+    return (simulate_maneuvers(baseline.model, runnable, conditions, compiled=compiled, label=baseline.label,
+                               limits=baseline.training_range), left_out)
