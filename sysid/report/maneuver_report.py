@@ -2,8 +2,10 @@
 (self-contained) and ``report.pdf`` (A4 pages) with the same content: conditions and where
 each came from, the indices (± their spread over an ensemble's members or seeds), each IMO
 criterion marked met or not, the kNN gate's share along each maneuver, and the figures
-(tracks with the hull outline, heading and rudder, crash stop, indices against the limits).
-Everything is read from the directory's files (`sysid.maneuvers.outputs`)."""
+(tracks with the hull outline, heading and rudder, crash stop, indices against the limits);
+a learned model's physics baseline beside it in every table and figure, and a table of the
+two models' indices and their difference. Everything is read from the directory's files
+(`sysid.maneuvers.outputs`)."""
 from __future__ import annotations
 
 import datetime as _dt
@@ -23,7 +25,7 @@ from sysid.report import maneuver_figures as MF
 from sysid.report.build import STYLE, ReportPaths
 from sysid.report.html import HtmlFigure, figure_svg
 from sysid.report.pdf import PdfReport, paginate, pdf_style, text_lines
-from sysid.report.maneuver_tables import criteria_plain_table, indices_plain_table
+from sysid.report.maneuver_tables import beside_plain_table, criteria_plain_table, indices_plain_table
 from sysid.report.plain_tables import table_figure
 from sysid.store.files import atomic_path, write_text
 from sysid.store.manifest import verify_manifest
@@ -63,6 +65,12 @@ def _summary_items(s: dict) -> list[tuple[str, str]]:
               f"{c['wind_speed_m_s']:g} m/s from {c['wind_direction_deg']:g} deg")]
     if s.get("n_members"):
         items.append(("Spread", f"over {s['n_members']} {s.get('spread', 'members')}"))
+    base = s.get("baseline")
+    if base:
+        left = base.get("left_out") or []
+        items.append(("Physics baseline", f"{base['model']}: the MMG of {base.get('ship_file') or s['ship']}, the same "
+                      "maneuvers under the same conditions, dashed in the figures"
+                      + (f"; it does not run {', '.join(left)} (propeller for ahead motion only)" if left else "")))
     return items
 
 
@@ -83,27 +91,33 @@ def build_maneuver_report(source_dir: str | os.PathLike, out_dir: str | os.PathL
     out = Path(out_dir) if out_dir is not None else source
     summary, indices, criteria, traj = _read(source)
     main, L, B = summary["model"], float(summary["L_pp_m"]), float(summary["B_m"])
+    baseline = (summary.get("baseline") or {}).get("model")
     tables = [indices_plain_table(indices), criteria_plain_table(criteria)]
+    if baseline is not None:
+        tables.insert(1, beside_plain_table(indices, main, baseline))
+    beside = f" beside {baseline} (dashed)" if baseline is not None else ""
     checks = {}
     for name in indices["maneuver"]:
         if name.startswith("zigzag"):
             checks[name] = float(name.split("_")[2])
+    dashed = f"; dashed: the physics baseline {baseline}" if baseline is not None else ""
     specs = [("tracks", "Tracks", "Midship tracks of every maneuver from the execute at the origin, approach along "
-              "x0; members of the ensemble or seeds as thin lines",
-              partial(MF.tracks, traj, main, L, B, f"Tracks of {main}"))]
+              f"x0; members of the ensemble or seeds as thin lines{dashed}",
+              partial(MF.tracks, traj, main, L, B, f"Tracks of {main}{beside}", baseline=baseline))]
     for kind, words, extra in (("turning", "turning circles", "speed U [m/s] on the right axis"),
-                               ("zigzag", "zig-zags", "dashed: check angles")):
+                               ("zigzag", "zig-zags", "dotted: check angles")):
         if indices["maneuver"].str.startswith(kind).any():
             specs.append((kind, f"Heading and rudder, {words}",
-                          f"Heading change and rudder angle over time from the execute; {extra}",
+                          f"Heading change and rudder angle over time from the execute; {extra}{dashed}",
                           partial(MF.heading_rudder, traj, main, kind, checks if kind == "zigzag" else {},
-                                  f"Heading and rudder, {words} of {main}")))
-    if (indices["maneuver"] == "crash_stop").any():
-        specs.append(("crash", "Crash stop", "Surge speed and propeller revolutions over time",
-                      partial(MF.crash_stop, traj, main, f"Crash stop of {main}")))
+                                  f"Heading and rudder, {words} of {main}{beside}", baseline=baseline)))
+    if ((indices["maneuver"] == "crash_stop") & (indices["model"] == main)).any():
+        specs.append(("crash", "Crash stop", f"Surge speed and propeller revolutions over time{dashed}",
+                      partial(MF.crash_stop, traj, main, f"Crash stop of {main}{beside}", baseline=baseline)))
     if criteria["met"].isin(["met", "not met"]).any():
-        specs.append(("criteria", "Indices against the IMO criteria", "Each assessed index divided by its IMO limit",
-                      partial(MF.criteria_chart, criteria, f"IMO criteria, {main}")))
+        specs.append(("criteria", "Indices against the IMO criteria", "Each assessed index divided by its IMO limit"
+                      + (", each model on its own" if baseline is not None else ""),
+                      partial(MF.criteria_chart, criteria, f"IMO criteria, {main}{beside.replace(' (dashed)', '')}")))
     warnings = [f"{r.maneuver}: kNN gate off on {100 * r.gate_off_share:.0f} % of the steps: the maneuver runs "
                 "mostly outside the training data" for r in indices.itertuples(index=False)
                 if "gate_off_share" in indices and not pd.isna(r.gate_off_share) and r.gate_off_share > 0.5]

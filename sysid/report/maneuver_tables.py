@@ -19,14 +19,23 @@ INDEX_LABELS = {"advance_m": "advance [m]", "transfer_m": "transfer [m]", "tacti
                 "open_loop_second_peak_deg": "2nd peak, open loop [deg]"}
 
 
+def _several_models(frame: pd.DataFrame) -> bool:
+    """Whether a maneuvers table holds more than one model (a learned model and its baseline)."""
+    return "model" in frame and frame["model"].nunique() > 1
+
+
 def indices_plain_table(indices: pd.DataFrame) -> PlainTable:
-    """Indices per maneuver (± the members' standard deviation) and the kNN gate's share."""
+    """Indices per maneuver (± the members' standard deviation) and the kNN gate's share;
+    one row per maneuver and model where there are several (a learned model and its
+    physics baseline)."""
     shown = [c for c in INDEX_LABELS if c in indices and indices[c].notna().any()]
     gate = indices["gate_off_share"].notna().any() if "gate_off_share" in indices else False
+    several = _several_models(indices)
     rows, marks = [], []
     for r in indices.itertuples(index=False):
         d = r._asdict()
-        cells = [d["maneuver"]] + [number(d[c], 4, d.get(f"{c}_std")) for c in shown]
+        cells = [d["maneuver"], *([d["model"]] if several else [])] + [number(d[c], 4, d.get(f"{c}_std"))
+                                                                       for c in shown]
         mark = [""] * len(cells)
         if gate:
             share = d["gate_off_share"]
@@ -35,7 +44,8 @@ def indices_plain_table(indices: pd.DataFrame) -> PlainTable:
             mark.append("not-met" if not pd.isna(share) and share > 0.5 else "")
         rows.append(cells)
         marks.append(mark)
-    columns = ["maneuver"] + [INDEX_LABELS[c] for c in shown] + (["kNN gate off"] if gate else [])
+    columns = ["maneuver", *(["model"] if several else [])] + [INDEX_LABELS[c] for c in shown] + (
+        ["kNN gate off"] if gate else [])
     spread = "n_members" in indices and indices["n_members"].notna().any()
     note = ("Empty: not applicable or not reached in the run. ± : standard deviation over the members. "
             if spread else "Empty: not applicable or not reached in the run. ")
@@ -45,16 +55,36 @@ def indices_plain_table(indices: pd.DataFrame) -> PlainTable:
 
 
 def criteria_plain_table(criteria: pd.DataFrame) -> PlainTable:
-    """Every IMO criterion: value, limit, in L (lengths) or deg (angles), met or not."""
+    """Every IMO criterion: value, limit, in L (lengths) or deg (angles), met or not; per
+    model where there are several (a learned model and its physics baseline)."""
+    several = _several_models(criteria)
     rows, marks = [], []
     for r in criteria.itertuples(index=False):
         unit = "deg" if r.index.endswith("_deg") else "L"
-        rows.append([r.maneuver, r.rule, number(r.value, 4), number(r.limit, 4), f"{number(r.ratio, 3)} {unit}",
-                     r.met])
-        marks.append(["", "", "", "", "", {"met": "met", "not met": "not-met"}.get(r.met, "muted")])
-    return PlainTable("criteria", "IMO MSC.137(76) criteria", ["maneuver", "criterion", "value", "limit",
-                                                                "value in L or deg", "verdict"], rows, marks,
-                      "Lengths in m and as multiples of L = L_pp (Froude-invariant); overshoot angles in deg.")
+        rows.append([r.maneuver, *([r.model] if several else []), r.rule, number(r.value, 4), number(r.limit, 4),
+                     f"{number(r.ratio, 3)} {unit}", r.met])
+        marks.append([""] * (5 + several) + [{"met": "met", "not met": "not-met"}.get(r.met, "muted")])
+    columns = ["maneuver", *(["model"] if several else []), "criterion", "value", "limit", "value in L or deg",
+               "verdict"]
+    return PlainTable("criteria", "IMO MSC.137(76) criteria", columns, rows, marks,
+                      "Lengths in m and as multiples of L = L_pp (Froude-invariant); overshoot angles in deg."
+                      + (" Each model is held to the criteria on its own." if several else ""))
+
+
+def beside_plain_table(indices: pd.DataFrame, learned: str, baseline: str) -> PlainTable:
+    """Each index of the learned model beside its physics baseline's, and the difference
+    (`sysid.maneuvers.outputs.beside_baseline`)."""
+    from sysid.maneuvers.outputs import beside_baseline
+
+    table = beside_baseline(indices, learned, baseline)
+    rows = [[r.maneuver, INDEX_LABELS[r.index], number(r.learned, 4), number(r.baseline, 4),
+             number(r.difference, 3) or "n/a"] for r in table.itertuples(index=False)]
+    return PlainTable("beside-baseline", f"{learned} beside its physics baseline {baseline}",
+                      ["maneuver", "index", learned, baseline, f"difference ({learned} - {baseline})"], rows, [],
+                      "The same maneuvers under the same conditions (approach speed, revolutions, rudder rate, "
+                      "time step, duration, wind, integrator). Difference in the index's unit; n/a: one of the two "
+                      "did not reach it. No pass/fail rule is defined for maneuver indices: which model is nearer the "
+                      "ship cannot be told from simulations alone (--recorded logs of the same maneuvers can).")
 
 
 def record_plain_table(frame: pd.DataFrame) -> PlainTable:
