@@ -103,3 +103,78 @@ def test_a_maneuver_that_diverged_is_one_warning_line_and_marked_in_the_indices(
     warnings = [line for line in result.err.splitlines() if line.startswith("WARNING: diverged")]
     assert len(warnings) == 1
     assert f"turning_35_starboard (kvlcc2_l7) at t = {table['diverged_at_s'][0]:.1f} s" in warnings[0]
+
+
+@pytest.fixture(scope="module")
+def beside(trained, tmp_path_factory):
+    """``sysid maneuver`` of the session's tiny trained hybrid: its directory and output."""
+    import contextlib
+    import io
+    from sysid.cli import run
+    out = tmp_path_factory.mktemp("beside") / "m"
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        run(["maneuver", str(trained), "-o", str(out), "--turning", "35", "--zigzag", "10/10", "--side", "starboard",
+             "--dt", "0.5", "--duration", "120", "--eager"])
+    return out, printed.getvalue()
+
+
+def test_a_learned_model_is_shown_beside_its_physics_baseline_run_as_a_ship_file(beside, trained, tmp_path, capsys):
+    """The baseline's rows in the run's maneuvers directory are those of ``sysid maneuver
+    SHIPFILE`` run on its own (an independent path) under the same conditions given as
+    options; the learned model's rows and columns are those of before, the baseline's after."""
+    from sysid.maneuvers import BASELINE_LABEL, load_maneuver_model
+
+    out, _ = beside
+    ship = load_maneuver_model(trained).ship
+    assert not ship.overrides  # the tiny run changes no MMG coefficient: its baseline is the ship file's MMG
+    summary = json.loads((out / "maneuvers.json").read_text())
+    assert summary["baseline"]["model"] == BASELINE_LABEL and summary["baseline"]["left_out"] == []
+    c = summary["conditions"]
+    alone = tmp_path / "alone"
+    done = in_process(capsys, "maneuver", ship.source, "-o", alone, "--turning", "35", "--zigzag", "10/10", "--side",
+                      "starboard", "--dt", "0.5", "--duration", "120", "--eager", "--no-report",
+                      "--speed", repr(c["speed_m_s"]), "--rps", repr(c["rps"]), "--rudder-rate",
+                      repr(c["rudder_rate_deg_s"]))
+    assert done.code == 0, done.err
+    assert "physics baseline" not in done.out  # a ship file is the physics model: nothing beside it
+    indices = pd.read_csv(out / "indices.csv")
+    assert list(indices.model) == [trained.name] * 2 + [BASELINE_LABEL] * 2
+    assert list(indices.columns[3:3 + len(INDEX_COLUMNS)]) == list(INDEX_COLUMNS)
+    mine = indices[indices.model == BASELINE_LABEL].drop(columns="model").reset_index(drop=True)
+    theirs = pd.read_csv(alone / "indices.csv").drop(columns="model")
+    shared = [c for c in theirs.columns if c.endswith(("_m", "_deg", "_ratio"))]
+    assert theirs.tactical_diameter_m.notna().any() and theirs.first_overshoot_deg.notna().any()
+    pd.testing.assert_frame_equal(mine[["maneuver", *shared]], theirs[["maneuver", *shared]], rtol=1e-12)
+    assert list(mine.imo_advance[:1]) == list(theirs.imo_advance[:1])
+    traj = pd.read_csv(out / "trajectories.csv")
+    ours = traj[traj.model == BASELINE_LABEL].drop(columns="model").reset_index(drop=True)
+    np.testing.assert_allclose(ours[["t", "x", "u", "y", "v", "psi", "r"]],
+                               pd.read_csv(alone / "trajectories.csv")[["t", "x", "u", "y", "v", "psi", "r"]],
+                               rtol=1e-9, atol=1e-12)
+    criteria = pd.read_csv(out / "criteria.csv")
+    assert set(criteria.model) == {trained.name, BASELINE_LABEL}
+
+
+def test_the_printout_and_the_report_name_the_baseline(beside, trained, tmp_path, capsys):
+    """Printed: a row per model and a table of both models' indices with the difference;
+    the report: the table, the legend and the summary name the baseline; --no-baseline
+    leaves it out (said)."""
+    from sysid.maneuvers import BASELINE_LABEL
+
+    out, printed = beside
+    indices = pd.read_csv(out / "indices.csv").set_index(["maneuver", "model"])
+    advance = [indices.loc[("turning_35_starboard", m), "advance_m"] for m in (trained.name, BASELINE_LABEL)]
+    line = next(row for row in printed.splitlines() if row.split()[:2] == ["turning_35_starboard", "advance_m"])
+    assert line.split()[2:] == ["m", f"{advance[0]:.3f}", f"{advance[1]:.3f}", f"{advance[0] - advance[1]:.3f}"]
+    assert f"{trained.name} beside its physics baseline {BASELINE_LABEL}" in printed
+    html = (out / "report.html").read_text()
+    assert f"{trained.name} beside its physics baseline {BASELINE_LABEL}" in html
+    assert f"dashed: physics baseline {BASELINE_LABEL}" in html and "Physics baseline" in html
+    assert "x0 (north) [m]" in html and "t from the execute [s]" in html  # the figures keep their units
+    bare = in_process(capsys, "maneuver", trained, "-o", tmp_path / "bare", "--turning", "35", "--side", "starboard",
+                      "--dt", "0.5", "--duration", "60", "--eager", "--no-report", "--no-baseline")
+    assert bare.code == 0, bare.err
+    assert "--no-baseline" in bare.out
+    assert list(pd.read_csv(tmp_path / "bare" / "indices.csv").model) == [trained.name]
+    assert json.loads((tmp_path / "bare" / "maneuvers.json").read_text())["baseline"] is None

@@ -16,10 +16,12 @@ from sysid.hybrid.correction import ForceCorrection, correction_inputs
 from sysid.hybrid.ensemble import SeedEnsemble
 from sysid.hybrid.force_models import CorrectedModel
 from sysid.hybrid.knn_gate import KNNGate
-from sysid.maneuvers import (Conditions, CrashStop, ManeuverError, ManeuverModel, TurningCircle, ZigZag,
-                             default_conditions, run_maneuvers, simulate_maneuvers, straight_running_rps)
+from sysid.maneuvers import (BASELINE_LABEL, Conditions, CrashStop, ManeuverError, ManeuverModel, TurningCircle,
+                             ZigZag, default_conditions, physics_baseline, run_baseline, run_maneuvers,
+                             simulate_maneuvers, straight_running_rps)
 from sysid.maneuvers.controllers import rate_limited
-from sysid.maneuvers.outputs import indices_table
+from sysid.maneuvers.indices import INDEX_COLUMNS
+from sysid.maneuvers.outputs import beside_baseline, criteria_table, indices_table
 from sysid.maneuvers.simulate import gate_off_share, simulate_rows
 from sysid.maneuvers.straight import surge_acceleration
 from sysid.mmg.wind import relative_wind
@@ -90,6 +92,51 @@ def test_gate_share_says_a_maneuver_runs_outside_the_training_data():
     assert ours.gate_off_share == scan  # the loop's decisions are the gate's own scan's
     row = indices_table([ours], float(ship["L_pp"]), U0, None).iloc[0]
     assert bool(row["mostly_outside"]) and row["gate_off_share"] == ours.gate_off_share
+
+
+def test_a_hybrid_without_correction_has_the_indices_of_its_physics_baseline():
+    """F_NN = 0 (last layer zeroed): the hybrid's motion is its MMG's, so beside its physics
+    baseline every index is the same to round-off and every difference is zero; the
+    baseline is the MMG of the subject's ship, labelled as `sysid compare` labels it."""
+    ship = load_ship("kvlcc2_l7")
+    bank = torch.zeros(400, 6, dtype=torch.float64)
+    bank[:, 1] = torch.linspace(1.12, 1.22, 400)
+    subject = ManeuverModel("zero", _hybrid_without_correction(ship, bank), ship, "hybrid")
+    physics = physics_baseline(subject)
+    assert physics.label == BASELINE_LABEL == "MMG (ship file)" and physics.kind == "mmg"
+    assert isinstance(physics.model, MMG) and physics.model.ship is ship
+    maneuvers = [TurningCircle(35.0), ZigZag(10.0, 10.0), CrashStop()]
+    conditions = Conditions(1.17248, 11.8, 15.7, 0.2, 120.0)
+    ours = run_maneuvers(subject, maneuvers[:2], conditions)
+    theirs, left_out = run_baseline(physics, maneuvers, conditions)
+    assert left_out == ["crash_stop"]  # kvlcc2_l7's propeller is for ahead motion only
+    assert [r.model for r in theirs] == [BASELINE_LABEL] * 2
+    for mine, base in zip(ours, theirs):
+        assert mine.maneuver == base.maneuver
+        for name, value in mine.indices.as_dict().items():
+            other = getattr(base.indices, name)
+            assert (math.isnan(value) and math.isnan(other)) or value == pytest.approx(other, rel=1e-10, abs=1e-10)
+    assert ours[0].indices.tactical_diameter_m > 7.0 and ours[1].indices.first_overshoot_deg > 0  # reached
+    table = indices_table([*ours, *theirs], 7.0, 1.17248, None)
+    assert list(table.model) == ["zero", "zero", BASELINE_LABEL, BASELINE_LABEL]
+    both = beside_baseline(table, "zero")
+    assert {"advance_m", "tactical_diameter_m", "first_overshoot_deg", "second_overshoot_deg"} <= set(both["index"])
+    np.testing.assert_allclose(both["difference"], 0.0, atol=1e-9)
+    assert set(both["unit"]) == {"m", "deg", "-"}
+    assert list(criteria_table([*ours, *theirs], 7.0, 1.17248, None).model.unique()) == ["zero", BASELINE_LABEL]
+    assert physics_baseline(ManeuverModel("mmg", MMG(ship), ship, "mmg")) is None  # an MMG is its own physics
+
+
+def test_beside_baseline_keeps_a_nan_and_differences_what_both_reached():
+    """An index one model reached and the other not: both shown, the difference NaN."""
+    import pandas as pd
+    table = pd.DataFrame([{"maneuver": "turning_35_starboard", "model": m, **{c: math.nan for c in INDEX_COLUMNS},
+                           "advance_m": a, "tactical_diameter_m": d} for m, a, d in
+                          (("run", 20.0, 30.0), (BASELINE_LABEL, 18.5, math.nan))])
+    both = beside_baseline(table, "run").set_index("index")
+    assert list(both.index) == ["advance_m", "tactical_diameter_m"]
+    assert both.loc["advance_m", "difference"] == 1.5 and both.loc["advance_m", "unit"] == "m"
+    assert math.isnan(both.loc["tactical_diameter_m", "difference"]) and both.loc["tactical_diameter_m", "learned"] == 30
 
 
 def test_ensemble_indices_carry_the_members_spread():
