@@ -140,7 +140,8 @@ def maneuver(
     conditions, sources = _approach(subject, maneuvers, speed, rps, rudder_rate, dt, duration, wind_from, method)
     on_interrupt(f"nothing written to {output} (it is moved into place only when complete)")
     results, shown, compiled, seconds = _simulated(subject, physics, maneuvers, conditions, compiled)
-    compared = _written(target, subject, conditions, sources, results, shown, compiled, seconds, logged, report)
+    compared = _written(target, subject, physics, conditions, sources, results, shown, compiled, seconds, logged,
+                        report)
     _say_outcome(output, results, shown, compared)
     typer.echo(f"maneuver: {output} ({seconds:.1f} s simulating, {time.perf_counter() - start:.1f} s in all)")
 
@@ -239,11 +240,12 @@ def _simulated(subject, physics, maneuvers: list, conditions, compiled: Optional
     return results, shown, choice.compiled, time.perf_counter() - simulated
 
 
-def _written(target, subject, conditions, sources, results, shown, compiled: bool, seconds: float, logged: dict,
-             report: bool):
+def _written(target, subject, physics, conditions, sources, results, shown, compiled: bool, seconds: float,
+             logged: dict, report: bool):
     """The output directory written (staged, moved into place when complete): the maneuvers'
     files (the physics baseline's rows after the model's), the comparison with the
-    --recorded logs (returned; None without) and the report."""
+    --recorded logs (returned; None without; the baseline's predictions of them too) and
+    the report."""
     from sysid.maneuvers.outputs import summary_document, write_maneuvers
 
     beside, left_out = shown if shown is not None else (None, ())
@@ -253,7 +255,7 @@ def _written(target, subject, conditions, sources, results, shown, compiled: boo
     with target.staged() as staging:
         write_maneuvers(staging, results, subject.ship, conditions, summary, beside or ())
         if logged:
-            compared = _against_record(staging, subject, logged)
+            compared = _against_record(staging, subject, physics, logged)
         if report:
             from sysid.report.maneuver_report import build_maneuver_report
             build_maneuver_report(staging)
@@ -309,14 +311,16 @@ def _recorded_runs(paths: list[Path], config: Optional[Path], run_columns=None):
     return found
 
 
-def _against_record(staging: Path, subject, logged):
+def _against_record(staging: Path, subject, physics, logged):
     """recorded_indices.csv in `staging`: the logged maneuvers' indices beside the model's
-    (`sysid.maneuvers.recorded.record_comparison`); the frame."""
+    and its physics baseline's (if any) (`sysid.maneuvers.recorded.record_comparison`); the
+    frame."""
     from sysid.maneuvers.recorded import record_comparison
     from sysid.store.files import write_csv
 
     members = [m for _, m in subject.members] if subject.spread == "seeds" else [subject.model]
-    frame = record_comparison({subject.label: members}, logged)
+    models = {subject.label: members, **({physics.label: [physics.model]} if physics is not None else {})}
+    frame = record_comparison(models, logged)
     write_csv(frame, staging / "recorded_indices.csv", float_format="%.6g")
     return frame
 
