@@ -94,14 +94,21 @@ def test_gate_share_says_a_maneuver_runs_outside_the_training_data():
     assert bool(row["mostly_outside"]) and row["gate_off_share"] == ours.gate_off_share
 
 
-def test_a_hybrid_without_correction_has_the_indices_of_its_physics_baseline():
-    """F_NN = 0 (last layer zeroed): the hybrid's motion is its MMG's, so beside its physics
-    baseline every index is the same to round-off and every difference is zero; the
-    baseline is the MMG of the subject's ship, labelled as `sysid compare` labels it."""
+@pytest.mark.parametrize("seeds", [False, True])
+def test_a_hybrid_without_correction_has_the_indices_of_its_physics_baseline(seeds):
+    """F_NN = 0 (last layer zeroed): the hybrid's motion (alone, or a folder of two such
+    seeds) is its MMG's, so beside its physics baseline every index is the same to
+    round-off and every difference is zero; the baseline is the MMG of the subject's ship,
+    labelled as `sysid compare` labels it."""
     ship = load_ship("kvlcc2_l7")
     bank = torch.zeros(400, 6, dtype=torch.float64)
     bank[:, 1] = torch.linspace(1.12, 1.22, 400)
-    subject = ManeuverModel("zero", _hybrid_without_correction(ship, bank), ship, "hybrid")
+    if seeds:
+        members = [(f"zero seed{i}", _hybrid_without_correction(ship, bank[i::2])) for i in range(2)]
+        model = SeedEnsemble([m for _, m in members])
+        subject = ManeuverModel("zero", model, ship, model.kind, members, "seeds")
+    else:
+        subject = ManeuverModel("zero", _hybrid_without_correction(ship, bank), ship, "hybrid")
     physics = physics_baseline(subject)
     assert physics.label == BASELINE_LABEL == "MMG (ship file)" and physics.kind == "mmg"
     assert isinstance(physics.model, MMG) and physics.model.ship is ship
