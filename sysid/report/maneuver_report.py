@@ -94,7 +94,8 @@ def build_maneuver_report(source_dir: str | os.PathLike, out_dir: str | os.PathL
     baseline = (summary.get("baseline") or {}).get("model")
     tables = [indices_plain_table(indices), criteria_plain_table(criteria)]
     if baseline is not None:
-        tables.insert(1, beside_plain_table(indices, main, baseline))
+        tables[:1] = [indices_plain_table(indices, main), indices_plain_table(indices, baseline),
+                      beside_plain_table(indices, main, baseline)]
     beside = f" beside {baseline} (dashed)" if baseline is not None else ""
     checks = {}
     for name in indices["maneuver"]:

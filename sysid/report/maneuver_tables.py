@@ -24,18 +24,18 @@ def _several_models(frame: pd.DataFrame) -> bool:
     return "model" in frame and frame["model"].nunique() > 1
 
 
-def indices_plain_table(indices: pd.DataFrame) -> PlainTable:
-    """Indices per maneuver (± the members' standard deviation) and the kNN gate's share;
-    one row per maneuver and model where there are several (a learned model and its
-    physics baseline)."""
+def indices_plain_table(indices: pd.DataFrame, model: str | None = None) -> PlainTable:
+    """Indices per maneuver (± the members' standard deviation) and the kNN gate's share, of
+    the rows of `model` (all rows: None), which the title then names (a learned model and
+    its physics baseline get a table each, as wide as one model's)."""
+    if model is not None:
+        indices = indices[indices["model"] == model]
     shown = [c for c in INDEX_LABELS if c in indices and indices[c].notna().any()]
     gate = indices["gate_off_share"].notna().any() if "gate_off_share" in indices else False
-    several = _several_models(indices)
     rows, marks = [], []
     for r in indices.itertuples(index=False):
         d = r._asdict()
-        cells = [d["maneuver"], *([d["model"]] if several else [])] + [number(d[c], 4, d.get(f"{c}_std"))
-                                                                       for c in shown]
+        cells = [d["maneuver"]] + [number(d[c], 4, d.get(f"{c}_std")) for c in shown]
         mark = [""] * len(cells)
         if gate:
             share = d["gate_off_share"]
@@ -44,14 +44,14 @@ def indices_plain_table(indices: pd.DataFrame) -> PlainTable:
             mark.append("not-met" if not pd.isna(share) and share > 0.5 else "")
         rows.append(cells)
         marks.append(mark)
-    columns = ["maneuver", *(["model"] if several else [])] + [INDEX_LABELS[c] for c in shown] + (
-        ["kNN gate off"] if gate else [])
+    columns = ["maneuver"] + [INDEX_LABELS[c] for c in shown] + (["kNN gate off"] if gate else [])
     spread = "n_members" in indices and indices["n_members"].notna().any()
     note = ("Empty: not applicable or not reached in the run. ± : standard deviation over the members. "
             if spread else "Empty: not applicable or not reached in the run. ")
     if gate:
         note += "kNN gate off: share of the steps at which the FNN is switched off (outside the training data)."
-    return PlainTable("indices", "Maneuver indices", columns, rows, marks, note)
+    key = "indices" if model is None else "indices-" + "".join(ch if ch.isalnum() else "-" for ch in model.lower())
+    return PlainTable(key, "Maneuver indices" + ("" if model is None else f": {model}"), columns, rows, marks, note)
 
 
 def criteria_plain_table(criteria: pd.DataFrame) -> PlainTable:

@@ -171,6 +171,7 @@ def test_the_printout_and_the_report_name_the_baseline(beside, trained, tmp_path
     html = (out / "report.html").read_text()
     assert f"{trained.name} beside its physics baseline {BASELINE_LABEL}" in html
     assert f"dashed: physics baseline {BASELINE_LABEL}" in html and "Physics baseline" in html
+    assert f"Maneuver indices: {trained.name}" in html and f"Maneuver indices: {BASELINE_LABEL}" in html
     assert "x0 (north) [m]" in html and "t from the execute [s]" in html  # the figures keep their units
     bare = in_process(capsys, "maneuver", trained, "-o", tmp_path / "bare", "--turning", "35", "--side", "starboard",
                       "--dt", "0.5", "--duration", "60", "--eager", "--no-report", "--no-baseline")
