@@ -359,5 +359,7 @@ def _print_beside(output: Path, learned: str) -> None:
     typer.echo(f"{learned} beside its physics baseline {BASELINE_LABEL} (same maneuvers and conditions; difference = "
                f"{learned} - {BASELINE_LABEL}; no pass/fail rule for indices: docs/maneuvers.md):")
     table = table.rename(columns={"learned": learned, "baseline": BASELINE_LABEL})
+    if not (table["diverged"] != "").any():
+        table = table.drop(columns="diverged")
     with pd.option_context("display.width", 160, "display.max_columns", 20, "display.float_format", "{:.3f}".format):
         typer.echo(table.to_string(index=False, na_rep="NaN"))

@@ -95,22 +95,26 @@ def criteria_table(results: Sequence[ManeuverResult], L: float, U: float, scale:
 def beside_baseline(indices: pd.DataFrame, learned: str, baseline: str = BASELINE_LABEL) -> pd.DataFrame:
     """Each index (`INDEX_COLUMNS`) of each maneuver that both models of an indices table
     ran and that applies to either: one row with ``maneuver``, ``index``, ``unit`` (m, deg or
-    -), the `learned` model's value, the `baseline`'s, and ``difference`` = learned minus
-    baseline (NaN where either is NaN: not reached or diverged runs keep their NaN). No
+    -), the `learned` model's value, the `baseline`'s, ``difference`` = learned minus
+    baseline (NaN where either is NaN, not reached, or where either run diverged: its
+    indices are not valid) and ``diverged``, the model(s) that diverged ("" none). No
     pass/fail: docs/verdict.md defines no rule for maneuver indices."""
-    columns = ["maneuver", "index", "unit", "learned", "baseline", "difference"]
+    columns = ["maneuver", "index", "unit", "learned", "baseline", "difference", "diverged"]
     mine = indices[indices["model"] == learned].set_index("maneuver")
     theirs = indices[indices["model"] == baseline].set_index("maneuver")
     rows = []
     for name in mine.index:
         if name not in theirs.index:
             continue
+        diverged = [label for label, own in ((learned, mine), (baseline, theirs))
+                    if "diverged" in own and bool(own.at[name, "diverged"])]
         for c in INDEX_COLUMNS:
             a, b = float(mine.at[name, c]), float(theirs.at[name, c])
             if math.isnan(a) and math.isnan(b):
                 continue
             rows.append({"maneuver": name, "index": c, "unit": INDEX_UNITS[c.rsplit("_", 1)[1]], "learned": a,
-                         "baseline": b, "difference": a - b})
+                         "baseline": b, "difference": math.nan if diverged else a - b,
+                         "diverged": ", ".join(diverged)})
     return pd.DataFrame(rows, columns=columns)
 
 

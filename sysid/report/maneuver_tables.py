@@ -78,12 +78,13 @@ def beside_plain_table(indices: pd.DataFrame, learned: str, baseline: str) -> Pl
 
     table = beside_baseline(indices, learned, baseline)
     rows = [[r.maneuver, INDEX_LABELS[r.index], number(r.learned, 4), number(r.baseline, 4),
-             number(r.difference, 3) or "n/a"] for r in table.itertuples(index=False)]
+             number(r.difference, 3) or ("n/a: diverged" if r.diverged else "n/a")]
+            for r in table.itertuples(index=False)]
     return PlainTable("beside-baseline", f"{learned} beside its physics baseline {baseline}",
                       ["maneuver", "index", learned, baseline, f"difference ({learned} - {baseline})"], rows, [],
                       "The same maneuvers under the same conditions (approach speed, revolutions, rudder rate, "
                       "time step, duration, wind, integrator). Difference in the index's unit; n/a: one of the two "
-                      "did not reach it. No pass/fail rule is defined for maneuver indices: which model is nearer the "
+                      "did not reach it or diverged (its indices are not valid). No pass/fail rule is defined for maneuver indices: which model is nearer the "
                       "ship cannot be told from simulations alone (--recorded logs of the same maneuvers can).")
 
 

@@ -135,15 +135,21 @@ def test_a_hybrid_without_correction_has_the_indices_of_its_physics_baseline(see
 
 
 def test_beside_baseline_keeps_a_nan_and_differences_what_both_reached():
-    """An index one model reached and the other not: both shown, the difference NaN."""
+    """An index one model reached and the other not: both shown, the difference NaN; so too
+    where one of them diverged."""
     import pandas as pd
     table = pd.DataFrame([{"maneuver": "turning_35_starboard", "model": m, **{c: math.nan for c in INDEX_COLUMNS},
                            "advance_m": a, "tactical_diameter_m": d} for m, a, d in
                           (("run", 20.0, 30.0), (BASELINE_LABEL, 18.5, math.nan))])
+    table["diverged"] = False
     both = beside_baseline(table, "run").set_index("index")
     assert list(both.index) == ["advance_m", "tactical_diameter_m"]
     assert both.loc["advance_m", "difference"] == 1.5 and both.loc["advance_m", "unit"] == "m"
     assert math.isnan(both.loc["tactical_diameter_m", "difference"]) and both.loc["tactical_diameter_m", "learned"] == 30
+    table.loc[1, "diverged"] = True  # the baseline's indices are not valid: no difference, the values kept
+    both = beside_baseline(table, "run").set_index("index")
+    assert both.loc["advance_m", "diverged"] == BASELINE_LABEL and math.isnan(both.loc["advance_m", "difference"])
+    assert both.loc["advance_m", "baseline"] == 18.5
 
 
 def test_ensemble_indices_carry_the_members_spread():
