@@ -6,6 +6,7 @@ physics baseline dashed beside it. Positions [m], speeds [m/s], angles [deg], re
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -17,7 +18,7 @@ from sysid.report.figures import _canvas, _legend_top, _outline_at, ship_outline
 RAD2DEG = 180.0 / math.pi
 COLOURS = ["#1f5fbf", "#d62728", "#1b8a3a", "#e06c00", "#8c3fbf", "#17a2a2", "#6f6f2f", "#bf3f6f"]
 OUTLINES = 12  # hull outlines drawn along each track
-BASELINE_STYLE = {"ls": "--", "lw": 1.0}  # the physics baseline's lines
+BASELINE_STYLE: dict[str, Any] = {"ls": "--", "lw": 1.0}  # the physics baseline's lines
 
 
 def _by_maneuver(frame: pd.DataFrame, main: str, baseline: str | None = None
