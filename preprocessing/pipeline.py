@@ -377,7 +377,8 @@ def process_file(path: str, layout: SensorLayout, settings: PreprocessSettings, 
                  ) -> dict:
     """Process one raw log and write its outputs (a worker for process pools).
 
-    Returns {'file', 'ok', 'error' | 'outputs', 'report'}; a failed file writes nothing.
+    Returns {'file', 'ok', 'error' | 'outputs', 'report'}; a failed file writes nothing, and
+    its 'bad_input' says whether the log is at fault (`RawLogError`) rather than sysid.
     """
     from preprocessing import writer
     try:
@@ -391,6 +392,6 @@ def process_file(path: str, layout: SensorLayout, settings: PreprocessSettings, 
         return {"file": str(path), "ok": True, "outputs": [str(p) for p in outputs],
                 "report": result.report}
     except RawLogError as exc:
-        return {"file": str(path), "ok": False, "error": str(exc)}
+        return {"file": str(path), "ok": False, "error": str(exc), "bad_input": True}
     except Exception as exc:  # anything else is a bug, but one file must not stop the rest
-        return {"file": str(path), "ok": False, "error": f"{path}: internal error: {exc!r}"}
+        return {"file": str(path), "ok": False, "error": f"{path}: internal error: {exc!r}", "bad_input": False}

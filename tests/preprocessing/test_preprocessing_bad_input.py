@@ -51,7 +51,27 @@ def test_clean_log_matches_truth(synthetic, raw):
 
 def test_missing_column(raw):
     msg = error_of(raw.drop(columns=["anemo_2_dir [rad]"]))
-    assert "log.csv" in msg and "anemo_2_dir" in msg and "missing" in msg
+    assert "log.csv" in msg and "anemo_2_dir" in msg and "missing" in msg and "add it" in msg
+
+
+def test_processed_log_is_named_as_one():
+    processed = analytic_run(20.0)
+    processed.columns = [f"{c} [{u}]" for c, u in synth.schema.PROCESSED.items()]
+    msg = error_of(processed)
+    assert "a processed log, not a raw" in msg and "u_velo" in msg
+
+
+def test_rpm_in_rps_column_names_the_unit_and_the_largest_value(raw):
+    raw["n_prop [rps]"] = raw["n_prop [rps]"] * 60.0  # 10 rps logged as 600 rpm
+    msg = error_of(raw)
+    assert "column n_prop" in msg and "rpm / 60" in msg and "degrees" not in msg
+    assert f"{len(raw)} row(s) outside" in msg and "up to 600 " in msg
+
+
+def test_knots_in_anemometer_speed_beyond_range(raw):
+    raw["anemo_1_speed [m/s]"] = 31.0 * 1.943844  # 31 m/s, a gale, logged in knots: 60.3
+    msg = error_of(raw)
+    assert "anemo_1_speed" in msg and "knots" in msg and "up to 60.2592 " in msg
 
 
 def test_misnamed_column(raw):
@@ -170,7 +190,7 @@ def test_cli_failed_file_leaves_no_output(synthetic, tmp_path, capsys):
     out = tmp_path / "out"
     with pytest.raises(SystemExit) as info:
         main(["preprocess", str(good), str(bad), "--ship", "esso_osaka", "-o", str(out), "--jobs", "2"])
-    assert info.value.code == 1
+    assert info.value.code == 2  # the bad log's fault (bad input), the good one kept
     names = sorted(p.name for p in out.iterdir())
     assert names == ["good.csv", "good.report.json", "manifest.json"]  # complete, sealed
     assert sorted(verify_manifest(out, "preprocessing")["files"]) == ["good.csv", "good.report.json"]
@@ -184,6 +204,53 @@ def test_cli_failed_file_leaves_no_output(synthetic, tmp_path, capsys):
     from sysid.data.recordings import read_run                  # loads straight into training/evaluation
     loaded = read_run(out / "good.csv")
     assert len(loaded) == len(processed) and loaded.dt == pytest.approx(1.0)
+
+
+def test_truncated_file_is_refused(synthetic, tmp_path):
+    from preprocessing.schema import read_raw
+    path = tmp_path / "cut.csv"
+    synthetic.raw.to_csv(path, index=False)
+    text = path.read_text()
+    lines = text.splitlines()
+    cut = "\n".join(lines[:501]) + "\n" + lines[501][: len(lines[501]) // 3]  # header, 500 rows, a third of row 501
+    path.write_text(cut)
+    with pytest.raises(RawLogError) as info:
+        read_raw(path)
+    assert "cut.csv: row 501:" in str(info.value) and "cut off" in str(info.value)
+    path.write_text("\n".join(lines[:501]))  # the last row complete, no line end: read as it is
+    assert len(read_raw(path)[0]) == 500
+
+
+def test_cli_bad_inputs_exit_2_and_write_nothing(synthetic, tmp_path, capsys):
+    from sysid.cli import main
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    broken = synthetic.raw.copy()
+    broken["delta_rudder [rad]"] = np.degrees(broken["delta_rudder [rad]"])
+    broken.to_csv(logs / "deg.csv", index=False)
+    before = (logs / "deg.csv").read_bytes()
+    for args, said in ((["preprocess", str(logs / "deg.csv")], "delta_rudder"),
+                       (["preprocess", str(logs)], "is a directory, not a raw log; it holds 1 .csv file(s)"),
+                       (["preprocess", str(tmp_path)], "it holds no .csv file")):
+        with pytest.raises(SystemExit) as info:
+            main([*args, "-o", str(tmp_path / "out")])
+        assert info.value.code == 2
+        assert said in capsys.readouterr().err
+        assert not (tmp_path / "out").exists()
+    assert (logs / "deg.csv").read_bytes() == before
+
+
+def test_cli_internal_failure_exits_1(synthetic, tmp_path, monkeypatch):
+    from preprocessing import pipeline
+    from sysid.cli import main
+    synthetic.raw.to_csv(tmp_path / "good.csv", index=False)
+
+    def broken(self, path, name=None):
+        raise RuntimeError("a bug")
+    monkeypatch.setattr(pipeline.Pipeline, "run", broken)
+    with pytest.raises(SystemExit) as info:
+        main(["preprocess", str(tmp_path / "good.csv"), "-o", str(tmp_path / "out")])
+    assert info.value.code == 1
 
 
 def test_cli_synth_raw_writes_truth(tmp_path, capsys):
