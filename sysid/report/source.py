@@ -58,6 +58,16 @@ class RunRecord:
             raise CheckpointError(f"{self.run_dir.summary}: malformed verdict ({exc})") from None
 
     @property
+    def model_verdict(self) -> BaselineVerdict | None:
+        """The model against its physics baselines: a seed group's seeds as members of one model
+        (`seed_mean_verdict`, docs: How sysid judges a model), else the run's own verdict; None
+        when a run or any seed has none."""
+        if not self.seeds:
+            return self.verdict
+        verdicts = [r.verdict for r in self.seeds]
+        return seed_mean_verdict([v for v in verdicts if v is not None]) if all(verdicts) else None
+
+    @property
     def paper_protocol(self) -> bool:
         """Trained on D1/D2 (or not trained) and tested on the paper's six test files."""
         data = self.summary.data
