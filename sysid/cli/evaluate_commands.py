@@ -69,6 +69,7 @@ def evaluate(
     table = evaluation.metrics
     write_csv(table, output, float_format="%.6g")
     with pd.option_context("display.width", 120, "display.float_format", "{:.5f}".format):
+        typer.echo("RMSE of u, v_m [m/s] and r [rad/s] per file and horizon [s]:")
         typer.echo(table.to_string(index=False))
     typer.echo(f"evaluate: {len(runs)} file(s), horizons {', '.join(f'{h:g}' for h in horizons)} s, "
                f"{label} -> {output} ({time.perf_counter() - start:.1f} s)")
