@@ -40,6 +40,9 @@ def export(
     checks.BATCH.check("--batch", batch)
     dtype = torch.float32 if float32 else torch.float64
     claim(output, OutputKind.FILE, [run_dir])
+    if output.suffix != ".pt2":  # torch's loaders warn on any other name, and tools look for .pt2
+        raise DataError(f"{output}: an exported step is a .pt2 file (torch.export and AOTInductor packages); "
+                        f"give -o {output.with_suffix('.pt2')}")
     exp, model = load_model(run_dir, dtype)
     export_model(model, output, method, dt, batch, dtype, compiled=not portable,
                  log=logs.indented())

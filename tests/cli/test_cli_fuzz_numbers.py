@@ -92,6 +92,12 @@ def test_export_refuses_bad_steps_and_batches(sysid, trained, tmp_path, case):
     assert_refused(sysid("export", trained, "-o", out, "--portable", *options), 2, says, absent=(out,))
 
 
+def test_export_refuses_a_name_torch_does_not_load_as_a_package(sysid, trained, tmp_path):
+    out = tmp_path / "model.pt"  # torch.export and AOTInductor packages are .pt2 files
+    assert_refused(sysid("export", trained, "-o", out, "--portable"), 2, f"{out}: an exported step is a .pt2 file",
+                   f"give -o {tmp_path / 'model.pt2'}", absent=(out, tmp_path / "model.pt2"))
+
+
 # -- horizons: whole samples, and no longer than the data ----------------------------------
 def test_fractional_horizon_is_refused_by_evaluate_simulate_and_train(sysid, files, tmp_path):
     out = tmp_path / "out.csv"
