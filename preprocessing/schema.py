@@ -122,6 +122,8 @@ def validate_raw(df: pd.DataFrame, path: str = "<raw log>",
         raise RawLogError(f"{path}: GNSS columns incomplete")  # pragma: no cover
     _need(have, gnss, path, repairs, scale)
     empty = df.isna().all(axis=1).to_numpy()
+    if len(empty) and empty.all():
+        raise RawLogError(f"{path}: no data: every one of its {len(empty)} rows is empty (no number in any column)")
     if empty.any():  # blank lines, typically trailing ones from spreadsheet exports
         repairs.append(f"dropped {int(empty.sum())} empty row(s), first at row "
                        f"{int(np.flatnonzero(empty)[0]) + 1}")

@@ -158,6 +158,11 @@ def test_short_nan_burst_interpolated_long_one_splits(synthetic, raw):
     assert s["r"] < 1e-3 and s["wind_speed"] < 0.05
 
 
+def test_every_row_empty(raw):
+    raw.iloc[:, :] = np.nan
+    assert error_of(raw) == f"log.csv: no data: every one of its {len(raw)} rows is empty (no number in any column)"
+
+
 def test_all_nan_channel(raw):
     raw["anemo_2_speed [m/s]"] = np.nan
     assert "anemo_2_speed" in error_of(raw)
@@ -172,6 +177,13 @@ def test_swapped_antennas_error_and_repair(synthetic, raw):
     out = run(swapped, swapped_antennas="repair")
     assert out.report.swapped_antennas is True
     assert synth.score(out.segments, synthetic.truth)["psi_deg"] < 0.3
+
+
+def test_antenna_positions_in_feet(raw):
+    for column in ("gnss_fore_x [m]", "gnss_fore_y [m]", "gnss_aft_x [m]", "gnss_aft_y [m]"):
+        raw[column] = raw[column] / 0.3048
+    msg = error_of(raw)
+    assert "gnss_fore_x" in msg and "3.28 x the nominal: positions in feet? convert the antenna columns to metres" in msg
 
 
 def test_baseline_never_matches(raw):
