@@ -18,7 +18,7 @@ from sysid.errors import CheckpointError
 from sysid.config.choices import ModelKind, TestLogs
 from sysid.data.splits import PAPER_TEST_STEMS
 from sysid.evaluation.verdict import BaselineVerdict, seed_mean_verdict
-from sysid.store.manifest import has_manifest, verify_manifest
+from sysid.store.manifest import has_manifest, seed_folder, verify_manifest
 from sysid.store.target import OutputKind, record_file
 from sysid.runs.rundir import RunDir, read_table
 from sysid.records.base import read_json_object
@@ -266,6 +266,8 @@ def _read_source(path: Path) -> ReportSource:
         return ReportSource(path, "run", [read_run_dir(path)], quality)
     if quality:
         return ReportSource(path, "preprocessing", [], quality)
+    if seed_folder(path):
+        raise CheckpointError(str(seed_folder(path)))
     raise CheckpointError(f"{path}: neither a run directory (summary.json, metrics.csv), "
                           "a reproduction directory (runs/), a sweep directory (sweep.toml, results.csv) nor "
                           "preprocessing output (*.report.json)")
