@@ -65,7 +65,8 @@ def compare(
                                                              "windows.csv, comparison.json, report.html/.pdf)."),
     data: Optional[List[Path]] = typer.Option(None, "--data", help="Logs to compare on: files, folders or patterns "
                                                                     "(several may follow one --data; default: the "
-                                                                    "config's [data] test)."),
+                                                                    "config's [data] test, else for runs of D1/D2 "
+                                                                    "the paper's six test files)."),
     config: Optional[Path] = typer.Option(None, "--config", help="Experiment config whose [data] test logs, "
                                                                   "[data.columns], [data] rate and [evaluation] "
                                                                   "horizons and integrator are used."),
