@@ -3,6 +3,7 @@ beside its physics baselines with its verdict."""
 from __future__ import annotations
 
 import dataclasses
+import glob
 import time
 from pathlib import Path
 from typing import List, Optional
@@ -14,6 +15,9 @@ from sysid.cli.mmg_options import CompiledOption, QuadratureOption, SetOption, i
 from sysid.cli.outputs import claim, ship_file
 from sysid.errors import DataError
 from sysid.store.target import OutputKind
+
+
+RMSE_UNITS = "RMSE of u, v_m [m/s] and r [rad/s]"   # the printed tables, as the metrics files: SI
 
 
 @app.command()
@@ -54,7 +58,7 @@ def evaluate(
     chosen = integrator_of(integrator or (str(source.evaluation.integrator) if source is not None else "euler"), False)
     ship_input = None if run_dir is not None else ship_file(ship or (exp.experiment.ship if exp is not None
                                                                      else "esso_osaka"))
-    claim(output, OutputKind.FILE, [run_dir, config, *(data or []), *files, ship_input])  # --data folders too
+    claim(output, OutputKind.FILE, [run_dir, config, *(data or []), *files, ship_input, *_logs_of_run(run_exp)])
     rate = source.data.rate if source is not None else 1.0
     runs = read_runs(progress(files, desc="reading", unit="files", quiet=len(files) < 4), rate, columns)
     _check_windows_fit(runs, horizons)
@@ -69,8 +73,7 @@ def evaluate(
     table = evaluation.metrics
     write_csv(table, output, float_format="%.6g")
     with pd.option_context("display.width", 120, "display.float_format", "{:.5f}".format):
-        typer.echo("RMSE of u, v_m [m/s] and r [rad/s] per file and horizon [s]:")
-        typer.echo(table.to_string(index=False))
+        typer.echo(f"{RMSE_UNITS}:\n" + table.to_string(index=False))
     typer.echo(f"evaluate: {len(runs)} file(s), horizons {', '.join(f'{h:g}' for h in horizons)} s, "
                f"{label} -> {output} ({time.perf_counter() - start:.1f} s)")
     if run_exp is not None:
@@ -114,6 +117,15 @@ def _logs(data, source):
         raise DataError("evaluate: no logs: name them with --data, or give --config EXP (or a run) whose "
                         "[data] test lists them")
     return files, columns
+
+
+def _logs_of_run(run_exp) -> list[Path]:
+    """The logs a run was made from (its config's [data] train, validation and test, as
+    written: resolved files): -o may not overwrite them, read or not."""
+    if run_exp is None:
+        return []
+    listed = [*run_exp.data.train, *run_exp.data.validation, *run_exp.data.test]
+    return [Path(p) for f in listed for p in (sorted(glob.glob(f)) if glob.has_magic(f) else [f])]
 
 
 def _check_windows_fit(runs, horizons) -> None:
@@ -188,7 +200,7 @@ def _beside_baselines(exp, model, baselines, runs, horizons, method) -> None:
     with pd.option_context("display.width", 140, "display.float_format", "{:.5f}".format):
         order = {(e.log, e.horizon_s): i for i, e in enumerate(errors)}   # horizon, then the logs' order
         side = side.iloc[sorted(range(len(side)), key=lambda i: order[(side.file[i], side.horizon_s[i])])]
-        typer.echo("beside its physics baseline(s), on the same windows:\n" + side.to_string(index=False))
+        typer.echo(f"beside its physics baseline(s), on the same windows ({RMSE_UNITS}):\n" + side.to_string(index=False))
     for judgement in verdicts.values():
         if judgement.beats:
             typer.echo("verdict: " + judgement.sentence)

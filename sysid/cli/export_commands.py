@@ -15,7 +15,7 @@ from sysid.errors import DataError
 @app.command()
 def export(
     run_dir: Path = typer.Argument(..., help="A run directory (sysid train)."),
-    output: Path = typer.Option(..., "-o", "--output", help="File to write (model.pt2)."),
+    output: Path = typer.Option(..., "-o", "--output", help="File to write, ending in .pt2 (model.pt2)."),
     integrator: str = typer.Option("euler", "--integrator", help="euler (the paper's), rk4 (classical) or rk4_3/8."),
     dt: float = typer.Option(1.0, "--dt", help="Step length [s]."),
     batch: int = typer.Option(1, "--batch", help="Ships per call (fixed in the file)."),
@@ -40,9 +40,8 @@ def export(
     checks.BATCH.check("--batch", batch)
     dtype = torch.float32 if float32 else torch.float64
     claim(output, OutputKind.FILE, [run_dir])
-    if output.suffix != ".pt2":  # torch's loaders warn on any other name, and tools look for .pt2
-        raise DataError(f"{output}: an exported step is a .pt2 file (torch.export and AOTInductor packages); "
-                        f"give -o {output.with_suffix('.pt2')}")
+    if output.suffix != ".pt2":   # torch loads a package or program by this suffix (else warns, later refuses)
+        raise DataError(f"-o {output}: an exported step is a .pt2 file; name it e.g. -o {output.with_suffix('.pt2')}")
     exp, model = load_model(run_dir, dtype)
     export_model(model, output, method, dt, batch, dtype, compiled=not portable,
                  log=logs.indented())

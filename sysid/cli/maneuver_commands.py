@@ -117,7 +117,8 @@ def maneuver(
                                                   "circles and zig-zags (recognised from rudder and heading) beside "
                                                   "the model's, like for like (recorded_indices.csv)."),
     config: Optional[Path] = typer.Option(None, "--config", help="Experiment config whose [data.columns] maps the "
-                                                                 "--recorded logs' columns and units."),
+                                                                 "--recorded logs' columns and units (default: the "
+                                                                 "run directory's)."),
     report: bool = typer.Option(True, "--report/--no-report", help="Write report.html and report.pdf too."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output directory (all of it)."),
 ) -> None:
@@ -167,7 +168,7 @@ def _loaded(model: Path, maneuvers: list, asked: bool, recorded: Optional[List[P
     from sysid.maneuvers.simulate import ahead_only
 
     subject = load_maneuver_model(model)
-    logged = _recorded_runs(recorded or [], config)
+    logged = _recorded_runs(recorded or [], config, subject.columns)
     if not asked and ahead_only(subject.model):
         maneuvers = [m for m in maneuvers if m.kind != "crash_stop"]
         typer.echo(f"maneuver: no crash stop: the propeller model {subject.ship.models.get('propeller')!r} is for "
@@ -247,9 +248,10 @@ def _say_outcome(output: Path, results, compared) -> None:
                         fg=typer.colors.YELLOW)
 
 
-def _recorded_runs(paths: list[Path], config: Optional[Path]):
+def _recorded_runs(paths: list[Path], config: Optional[Path], run_columns=None):
     """label -> run of the turning circles and zig-zags among the logs of `paths` (read
-    and checked, through the config's [data.columns]); {} without --recorded."""
+    and checked, through the config's [data.columns], else the run's `run_columns`); {}
+    without --recorded."""
     if not paths:
         if config is not None:
             raise _error("--config maps the columns of --recorded logs: give --recorded too")
@@ -257,7 +259,7 @@ def _recorded_runs(paths: list[Path], config: Optional[Path]):
     from sysid.data.recordings import expand_paths, read_runs
     from sysid.maneuvers.recorded import recorded_maneuver_runs
 
-    columns = None
+    columns = run_columns
     if config is not None:
         from sysid.config.experiment import load_experiment
         columns = load_experiment(config).data.columns

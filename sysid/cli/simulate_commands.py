@@ -9,8 +9,8 @@ import typer
 
 from sysid.channel_names import FORCE, INPUTS, STATE, force_column
 from sysid.cli.app import app
-from sysid.cli.mmg_options import (MMG_COMPONENTS, CompiledOption, QuadratureOption, SetOption, ShipOption,
-                                   integrator_of, mmg_of, prediction_path)
+from sysid.cli.mmg_options import (MMG_COMPONENTS, CompiledOption, QuadratureOption, SetOption, integrator_of,
+                                   mmg_of, prediction_path)
 from sysid.cli.outputs import claim, ship_file
 from sysid.errors import DataError
 from sysid.store.target import OutputKind
@@ -18,13 +18,18 @@ from sysid.store.target import OutputKind
 
 @app.command()
 def simulate(
-    log: Path = typer.Option(..., "--log", help="Processed run (public schema, 10 Hz or 1 Hz)."),
+    log: Path = typer.Option(..., "--log", help="Processed run (the processed columns, or yours with --config; "
+                                                "10 Hz or 1 Hz)."),
     start: float = typer.Option(..., "--start", help="Start time T [s] (recorded state at T)."),
     horizon: float = typer.Option(..., "--horizon", help="Prediction horizon H [s]."),
     output: Path = typer.Option(..., "-o", "--output", help="Output CSV."),
     integrator: str = typer.Option("euler", "--integrator", help="euler (the paper's) or rk4 (classical)."),
     rate: float = typer.Option(1.0, "--rate", help="Step rate [Hz]: 1 = the protocol's 1 Hz grid."),
-    ship: str = ShipOption,
+    ship: Optional[str] = typer.Option(None, "--ship", help="Ship name (configs/ships/NAME.toml) or path to a ship "
+                                                            "TOML (default: the config's, else esso_osaka)."),
+    config: Optional[Path] = typer.Option(None, "--config", help="Experiment config: its [data.columns] read the log "
+                                                                 "(your column names and units); its ship and [mmg] "
+                                                                 "overrides are the MMG's unless --ship is given."),
     set_: Optional[List[str]] = SetOption,
     quadrature: str = QuadratureOption,
     compiled: Optional[bool] = CompiledOption,
@@ -36,14 +41,18 @@ def simulate(
     from sysid.data.recordings import read_run
     from sysid.store.files import write_csv
     from sysid.config import checks
+    from sysid.config.experiment import load_experiment
 
     chosen = integrator_of(integrator, False)
     checks.RATE.check("--rate", rate)
     checks.DURATION.check("--horizon", horizon)
     checks.TIME.check("--start", start)
-    model = mmg_of(ship, set_, quadrature)
-    claim(output, OutputKind.FILE, [log, ship_file(ship)])
-    run = read_run(log, rate)
+    exp = load_experiment(config) if config is not None else None
+    ship_name = ship or (exp.experiment.ship if exp is not None else "esso_osaka")
+    overrides = [f"{k}={v!r}" for k, v in (exp.mmg.overrides.items() if exp is not None and not ship else ())]
+    model = mmg_of(ship_name, overrides + list(set_ or []), quadrature)
+    claim(output, OutputKind.FILE, [log, config, ship_file(ship_name)])
+    run = read_run(log, rate, exp.data.columns if exp is not None else None)
     i0, steps = _window(run, log, start, horizon, rate)
     sl = slice(i0, i0 + steps + 1)
     x0 = torch.as_tensor(run.states[i0], dtype=torch.float64)

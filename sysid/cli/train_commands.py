@@ -16,6 +16,7 @@ from sysid.cli.app import app
 from sysid.cli.interrupts import on_interrupt
 from sysid.cli.outputs import claim, experiment_inputs
 from sysid.config.choices import Solver
+from sysid.errors import DataError
 from sysid.store.target import OutputKind
 
 
@@ -23,7 +24,7 @@ from sysid.store.target import OutputKind
 def train(
     config: Path = typer.Argument(..., help="Experiment TOML (configs/experiments/*.toml)."),
     output: Path = typer.Option(..., "-o", "--output", help="Run directory to write (runs/NAME)."),
-    data: Optional[Path] = typer.Option(None, "--data", help="Dataset root (default: SYSID_DATA or ../shared/data/frt-ds-esso)."),
+    data: Optional[Path] = typer.Option(None, "--data", help="Root of the paper's FRT-DS-ESSO data set, for a config with [experiment] dataset = D1 or D2 (default: SYSID_DATA or ../shared/data/frt-ds-esso); your own logs are listed in the config's [data] train."),
     test: Optional[List[Path]] = typer.Option(None, "--test", help="Logs to score the run on after training, instead of the config's [data] test (default: [data] test; the paper's six test files are never read by training: sysid evaluate or sysid reproduce score on them)."),
     epochs: Optional[int] = typer.Option(None, "--epochs", help="Override [training] epochs."),
     threads: Optional[int] = typer.Option(None, "--threads", help="Override [training] threads (torch CPU threads; 0: one per core)."),
@@ -42,6 +43,10 @@ def train(
     _cheap_exit()
     start = time.perf_counter()
     exp = _experiment(config, epochs, threads, test)
+    if data is not None and not exp.experiment.dataset:   # it would be ignored: the config names its logs
+        raise DataError(f"--data {data}: the root of the paper's FRT-DS-ESSO data set, read only with [experiment] "
+                        f"dataset = \"D1\" or \"D2\"; {config} names its own logs ([data] train): drop --data "
+                        "(list the logs to train on in [data] train, those to score on with --test)")
     # a bad -o fails now, not after training
     claim(output, OutputKind.RUN, [config, *experiment_inputs(exp, data)], overwrite)
     checkpoint = checkpoint_path(output)
@@ -166,7 +171,8 @@ def _say_result(result, exp, output: Path, tests, start: float) -> None:
     from sysid.data.display_units import DisplayUnits
 
     if tests:
-        typer.echo(result.evaluation.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+        typer.echo("test logs, RMSE of u, v_m [m/s] and r [rad/s]:\n"
+                   + result.evaluation.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     if result.failure:
         typer.secho(f"train: FAILED: {result.failure}; the run in {output} is marked failed", fg=typer.colors.RED, err=True)
         raise SystemExit(1)

@@ -26,7 +26,7 @@ def not_a_file(path: str | os.PathLike) -> str:
     kinds = ((stat.S_ISFIFO, "a named pipe"), (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"),
              (stat.S_ISBLK, "a block device"))
     if stat.S_ISDIR(mode):
-        return "is a directory, not a file: give the log files in it"
+        return "is a directory, not a file"
     kind = next((name for test, name in kinds if test(mode)), None)
     if kind is None:
         return "file not found"

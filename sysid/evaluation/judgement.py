@@ -182,16 +182,18 @@ class CellJudgement:
         """"Zigzag 30/30 u at 100 s" (the log's name when it has no scenario)."""
         return f"{self.scenario or self.log} {self.channel} at {self.horizon_s:g} s"
 
-    def text(self) -> str:
-        """"Zigzag 30/30 u at 100 s +141 % (+120 % to +160 %, 1 window)"."""
+    def text(self, place: str | None = None) -> str:
+        """"Zigzag 30/30 u at 100 s +141 % (+120 % to +160 %, 1 window)"; `place` names the
+        log instead of its scenario (`place_names`)."""
+        where = f"{place} {self.channel} at {self.horizon_s:g} s" if place else self.where
         if self.decision is CellDecision.DIVERGED:
-            return f"{self.where} diverged" + (f" ({self.divergence.text()})" if self.divergence else "")
+            return f"{where} diverged" + (f" ({self.divergence.text()})" if self.divergence else "")
         if self.decision is CellDecision.BASELINE_DIVERGED:
-            return f"{self.where}: the baseline diverged"
+            return f"{where}: the baseline diverged"
         windows = f"{self.n_windows} window" + ("s" if self.n_windows != 1 else "")
         if self.decision is CellDecision.TOO_FEW_WINDOWS:
-            return f"{self.where} {percent_text(self.change)} ({windows}, too few to decide)"
-        return f"{self.where} {percent_text(self.change)} ({interval_text(self.change_low, self.change_high)}, {windows})"
+            return f"{where} {percent_text(self.change)} ({windows}, too few to decide)"
+        return f"{where} {percent_text(self.change)} ({interval_text(self.change_low, self.change_high)}, {windows})"
 
     def to_dict(self) -> dict:
         d = {k: getattr(self, k) for k in ("log", "scenario", "horizon_s", "channel", "n_windows", "n_members",
@@ -307,6 +309,21 @@ def _pooled_mse(errors: np.ndarray, members: np.ndarray, windows: np.ndarray) ->
     """(R,) mean squared per-window RMSE over resampled members (R, M) and windows (R, W)."""
     sq = errors**2
     return ((members @ sq) * windows).sum(1) / (members.sum(1) * windows.sum(1))
+
+
+RATIO_CAP = 1e6   # the largest RMSE ratio of a draw: one whose baseline is exact and whose model is not
+
+
+def _resampled_ratio(mse_model: np.ndarray, mse_baseline: np.ndarray) -> np.ndarray:
+    """(R,) RMSE ratio model / baseline of each draw, rounded to 12 digits (a model equal to
+    its baseline gives exactly 1). A draw whose baseline error is exactly 0 (an exact baseline
+    on every window drawn: straight running with v = r = 0 in noise-free logs) is 1 when the
+    model's is 0 too, else `RATIO_CAP`; no ratio exceeds `RATIO_CAP`, so every quantile and
+    the overall change stay finite."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.sqrt(mse_model / mse_baseline)
+    ratio = np.where(mse_baseline > 0, ratio, np.where(mse_model > 0, RATIO_CAP, 1.0))
+    return np.round(np.minimum(ratio, RATIO_CAP), 12)
 
 
 def _decided(cell: CellJudgement, low: float, high: float, rule: VerdictRule) -> CellJudgement:
@@ -429,9 +446,8 @@ def _cell_judgements(groups: dict[tuple[str, float], list[PairedCell]], rng: np.
                 judged.append(CellJudgement(**common, change=math.nan, change_low=math.nan, change_high=math.nan,
                                             decision=CellDecision.BASELINE_DIVERGED))
                 continue
-            # rounded to 12 digits: a model equal to its baseline gives exactly 1 in every draw
-            ratio = np.round(np.sqrt(_pooled_mse(c.model, members, windows)
-                                     / _pooled_mse(c.baseline, baselines, windows)), 12)
+            ratio = _resampled_ratio(_pooled_mse(c.model, members, windows),
+                                     _pooled_mse(c.baseline, baselines, windows))
             change = round(model_rmse / baseline_rmse, 12) - 1
             judged.append(CellJudgement(**common, change=change, change_low=math.nan, change_high=math.nan,
                                         decision=CellDecision.NOT_DISTINGUISHABLE))
@@ -460,9 +476,20 @@ def _overall_change(compared: _Compared, rng: np.random.Generator, R: int, M: in
     return change, change_low, change_high, member_changes
 
 
-def _listed(cells: Sequence[CellJudgement], limit: int = 3) -> str:
+def place_names(cells: Sequence[CellJudgement]) -> dict[str, str]:
+    """log -> the name its cells go by: the scenario it records, or "scenario: log" when
+    another log among `cells` records the same scenario (a user's several turning circles of
+    20 deg); the log's own name when it has no scenario."""
+    logs_of: dict[str, set[str]] = {}
+    for c in cells:
+        logs_of.setdefault(c.scenario, set()).add(c.log)
+    return {c.log: c.scenario if c.scenario and len(logs_of[c.scenario]) == 1
+            else f"{c.scenario}: {c.log}" if c.scenario else c.log for c in cells}
+
+
+def _listed(cells: Sequence[CellJudgement], names: Mapping[str, str], limit: int = 3) -> str:
     more = f"; and {len(cells) - limit} more" if len(cells) > limit else ""
-    return "; ".join(c.text() for c in cells[:limit]) + more
+    return "; ".join(c.text(names.get(c.log)) for c in cells[:limit]) + more
 
 
 def _with_sentence(j: Judgement, model: str, baseline: str, material: list[CellJudgement],
@@ -474,29 +501,32 @@ def _with_sentence(j: Judgement, model: str, baseline: str, material: list[CellJ
     overall = (f"RMSE {percent_text(j.change)} overall ({conf} interval {interval_text(j.change_low, j.change_high)})"
                if math.isfinite(j.change) else "no cell to compare")
     evidence = f"on {j.evidence()}"
+    names = place_names(j.cells)
     if j.outcome is Outcome.DIVERGED:
-        places = list(dict.fromkeys(c.divergence.text() if c.divergence else c.where for c in diverged))
+        places = list(dict.fromkeys(c.divergence.text() if c.divergence
+                                    else f"{names[c.log]} {c.channel} at {c.horizon_s:g} s"
+                                    for c in diverged))
         where = "; ".join(places[:3]) + (f"; and {len(places) - 3} more" if len(places) > 3 else "")
         finite = f"{overall} in the cells that stayed finite" if math.isfinite(j.change) else "no cell stayed finite"
         text = (f"{model} DIVERGED (non-finite or far outside the training data's range) in {where}, "
                 f"so it does not beat {baseline}; {finite}, {evidence}.")
     elif j.outcome is Outcome.WORSE:
-        why = (f"more than {tolerance} worse at {conf} confidence in {_listed(material)}" if material
+        why = (f"more than {tolerance} worse at {conf} confidence in {_listed(material, names)}" if material
                else f"worse overall at {conf} confidence")
         text = f"{model} is WORSE than {baseline}: {why}; {overall}, {evidence}."
     elif j.outcome is Outcome.BEATS:
         text = (f"{model} beats {baseline} at {conf} confidence: {overall}, {evidence}; no cell more than "
-                f"{tolerance} worse at that confidence; worst cells: {_listed(j.worst)}.")
+                f"{tolerance} worse at that confidence; worst cells: {_listed(j.worst, names)}.")
     elif too_few is not None:
         text = (f"{model} cannot be told apart from {baseline}: {overall}, {evidence}; {j.n_windows} "
                 f"window{'s are' if j.n_windows != 1 else ' is'} too few to decide at {conf} confidence (a "
-                f"verdict needs at least {too_few}); worst cells: {_listed(j.worst)}.")
+                f"verdict needs at least {too_few}); worst cells: {_listed(j.worst, names)}.")
     elif unjudged_material:
         text = (f"{model} cannot be told apart from {baseline} on {j.n_windows} windows: {overall}, {evidence}; "
                 f"but {len(unjudged_material)} cell{'s are' if len(unjudged_material) > 1 else ' is'} more than "
                 f"{tolerance} worse without the evidence to decide at {conf} confidence: "
-                f"{_listed(sorted(unjudged_material, key=lambda c: -c.change))}.")
+                f"{_listed(sorted(unjudged_material, key=lambda c: -c.change), names)}.")
     else:
         text = (f"{model} cannot be told apart from {baseline} on {j.n_windows} windows: {overall} includes no change, "
-                f"{evidence}; worst cells: {_listed(j.worst)}.")
+                f"{evidence}; worst cells: {_listed(j.worst, names)}.")
     return replace(j, sentence=text)

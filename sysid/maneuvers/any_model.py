@@ -10,6 +10,7 @@ from pathlib import Path
 
 from torch import nn
 
+from sysid.data.columns import ColumnMap
 from sysid.errors import CheckpointError
 from sysid.evaluation.divergence import PhysicalRange
 from sysid.hybrid.ensemble import SeedEnsemble
@@ -29,7 +30,8 @@ class ManeuverModel:
     (label, model) of an ensemble's members or a folder's seeds, whose maneuvers give the
     spread of the indices (empty for a single model); spread : what the members are;
     training_range : the training logs' range a run recorded (None: unknown), against
-    which a maneuver diverged.
+    which a maneuver diverged; columns : the run's `[data.columns]` (its logs' names and
+    units; None for a ship file or a run on the processed columns).
     """
 
     label: str
@@ -39,6 +41,7 @@ class ManeuverModel:
     members: list[tuple[str, nn.Module]] = field(default_factory=list)
     spread: str = ""
     training_range: PhysicalRange | None = None
+    columns: ColumnMap | None = None
 
 
 def ship_of(model: nn.Module) -> Ship:
@@ -59,19 +62,21 @@ def load_maneuver_model(path: str | os.PathLike) -> ManeuverModel:
     path = Path(path)
     if path.is_dir():
         if has_manifest(path):
-            _, model = load_model(path)
+            exp, model = load_model(path)
             members = []
             if isinstance(model, SeedEnsemble):
                 members = [(f"{path.name} member {i}", m) for i, m in enumerate(model.members)]
             return ManeuverModel(path.name, model, ship_of(model), getattr(model, "kind", "mmg"), members,
-                                 "ensemble members" if members else "", _training_range([path]))
+                                 "ensemble members" if members else "", _training_range([path]), exp.data.columns)
         seeds = sorted((p for p in path.glob("seed*") if has_manifest(p)), key=lambda p: (len(p.name), p.name))
         if not seeds:
             raise CheckpointError(f"{path}: neither a run directory (no manifest.json) nor a folder of seed run "
                                   "directories (seed0/, seed1/, ...)")
-        members = [(f"{path.name} {p.name}", load_model(p)[1]) for p in seeds]
+        loaded = [load_model(p) for p in seeds]
+        members = [(f"{path.name} {p.name}", m) for p, (_, m) in zip(seeds, loaded)]
         model = SeedEnsemble([m for _, m in members])
-        return ManeuverModel(path.name, model, ship_of(model), model.kind, members, "seeds", _training_range(seeds))
+        return ManeuverModel(path.name, model, ship_of(model), model.kind, members, "seeds", _training_range(seeds),
+                             loaded[0][0].data.columns)
     ship = load_ship(path)
     return ManeuverModel(ship.name, MMG(ship), ship, "mmg")
 

@@ -28,11 +28,29 @@ SOURCE_KINDS = {"reproduction": "reproduction, {n} runs", "run": "single run",
                 "sweep": "sweep; runs: its chosen configuration's first seed",
                 "preprocessing": "preprocessing output, {q} files"}
 PROTOCOL_TEXT = (
-    "Evaluation follows the benchmark protocol: each 1 Hz test file is cut into consecutive windows of "
+    "Evaluation follows the benchmark protocol: each {rate} test file is cut into consecutive windows of "
     "H samples (H = {horizons} s); each window starts from the recorded state at its first sample and is "
-    "integrated with explicit Euler, dt = 1 s, with the recorded propeller speed, rudder angle and true "
-    "wind held over each step (the relative wind follows the predicted state). The RMSE of u, v_m [m/s] "
-    "and r [rad/s] is pooled over the H points of every window of a file.")
+    "integrated with {integrator}, dt = {dt}, with the recorded propeller speed, rudder angle and true "
+    "wind held over each step (the relative wind follows the predicted state). The RMSE of u, v_m and r "
+    "is pooled over the H points of every window of a file (in the units its table states).")
+INTEGRATORS = {"euler": "explicit Euler", "rk4": "classical RK4"}
+
+
+def protocol_text(source: ReportSource) -> str:
+    """The evaluation paragraph: the runs' horizons, their `[evaluation] integrator` and
+    `[data] rate` (each run's config; the protocol's Euler at 1 Hz when not recorded); that no
+    test log was evaluated when no run has test metrics."""
+    horizons = sorted({h for r in source.runs for h in r.horizons()})
+    if not horizons:
+        return ("No test log was evaluated (a sweep's runs, or a run trained without test logs): the verdict is "
+                "on the validation windows; score a run on test logs with `sysid evaluate RUN --data LOGS`.")
+    configs = [r.config or {} for r in source.runs]
+    methods = sorted({str((c.get("evaluation") or {}).get("integrator", "euler")) for c in configs})
+    rates = sorted({float((c.get("data") or {}).get("rate", 1.0)) for c in configs})
+    return PROTOCOL_TEXT.format(horizons=" and ".join(str(h) for h in horizons),
+                                rate=" / ".join(f"{r:g} Hz" for r in rates),
+                                integrator=" / ".join(INTEGRATORS.get(m, m) for m in methods),
+                                dt=" / ".join(f"{1.0 / r:g} s" for r in rates))
 
 
 @dataclass
@@ -278,8 +296,7 @@ def start_state_check_text(check: StartStateCheckSummary | None) -> str:
 
 def methods_paragraphs(source: ReportSource) -> list[str]:
     """A few paragraphs: the protocol, then what was trained, how and on what, per run."""
-    horizons = sorted({h for r in source.runs for h in r.horizons()})
-    out = [PROTOCOL_TEXT.format(horizons=" and ".join(str(h) for h in horizons))] if source.runs else []
+    out = [protocol_text(source)] if source.runs else []
     if source.quality:
         settings = source.quality[0].settings
         out.append("Preprocessing: raw 10 Hz logs converted to the processed schema (GNSS to local metres, "

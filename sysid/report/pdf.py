@@ -200,9 +200,9 @@ class PdfReport:
                     fig.text(xr / W, (y + row_h * 0.15) / H, f"{cell.paper_text} {cell.change_text}",
                              ha="right", fontsize=6.5, color=colour)
         wins, total = table.wins
-        said = ("First line: our RMSE (u, v_m [m/s], r [rad/s]); second line: the paper's value and our change "
+        said = (f"First line: our RMSE ({table.units}); second line: the paper's value and our change "
                 f"(green: better than the paper). {wins} of {total} cells better than the paper."
-                if table.has_paper else "RMSE of u, v_m [m/s] and r [rad/s] on the test logs.")
+                if table.has_paper else f"RMSE on the test logs: {table.units}.")
         fig.text(MARGIN / W, (y - 0.35) / H,
                  said + (" Bold on yellow: lowest RMSE of the test's models in that column." if table.has_best else ""),
                  fontsize=7.5, color="#333", wrap=True)

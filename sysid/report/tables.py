@@ -15,7 +15,7 @@ from pathlib import Path
 from sysid.protocol.paper import SCENARIO_ORDER, comparison_table, model_label, paper_rmse, run_label, scenario_key
 from sysid.report.palette import model_colour
 from sysid.data.display_units import DisplayUnits
-from sysid.evaluation.judgement import interval_text
+from sysid.evaluation.judgement import interval_text, place_names
 from sysid.evaluation.verdict import BaselineVerdict as Verdict, percent_text
 from sysid.report.source import ReportSource, RunRecord
 
@@ -83,6 +83,7 @@ class RmseTable:
     title: str
     groups: list[str]
     rows: list[TableRow] = field(default_factory=list)
+    units: str = "u, v_m in m/s, r in rad/s"   # the units of the cells, said under the table
 
     @property
     def has_best(self) -> bool:
@@ -202,7 +203,8 @@ def run_table(run: RunRecord, paper: bool = True) -> RmseTable:
 
     table = RmseTable("table_run", f"RMSE of {label}" + (" beside its physics baselines" if baselines else "")
                       + f" (u [{units.unit('u')}], v_m [{units.unit('v_m')}], r [{units.unit('r')}])",
-                      [f"{h} s" for h in horizons])
+                      [f"{h} s" for h in horizons],
+                      units=f"u in {units.unit('u')}, v_m in {units.unit('v_m')}, r in {units.unit('r')}")
     for scenario in _scenario_order(s for s, _ in rmse):
         cells = []
         for horizon in horizons:
@@ -254,13 +256,14 @@ class VerdictTable:
 
 def _judged_rows(verdict: Verdict, split: str, judgements: dict, units: DisplayUnits) -> list[list[str]]:
     first = next(iter(judgements.values()))
+    names = place_names(first.cells)
     rows = []
     for i, cell in enumerate(first.cells):
         label = split + (" (decides)" if split == verdict.decided_on else "")
         shown = functools.partial(units.value, cell.channel)
         std = verdict.member_spread(split, cell.log, cell.horizon_s, cell.channel)
         spread = f" ± {shown(std):.5f}" if std is not None and math.isfinite(std) else ""
-        row = [label, cell.scenario or cell.log, f"{cell.horizon_s:g} s",
+        row = [label, names[cell.log], f"{cell.horizon_s:g} s",
                f"{cell.channel} [{units.unit(cell.channel)}]", str(cell.n_windows),
                format_rmse(shown(cell.model_rmse)) + spread]
         for b in verdict.baselines:

@@ -77,7 +77,7 @@ def test_forces_input_missing_or_a_directory(sysid, tmp_path):
     out = tmp_path / "forces.csv"
     assert_refused(sysid("forces", tmp_path / "nope.csv", "-o", out), 2, "nope.csv: file not found", absent=(out,))
     (tmp_path / "adir").mkdir()
-    assert_refused(sysid("forces", tmp_path / "adir", "-o", out), 2, "adir: file not found", absent=(out,))
+    assert_refused(sysid("forces", tmp_path / "adir", "-o", out), 2, "adir: is a directory, not a file", absent=(out,))
 
 
 @pytest.mark.parametrize("where", ["under /proc", "an existing directory", "below a file"])

@@ -65,7 +65,7 @@ def test_preprocess_rate_that_leaves_one_row_is_refused(sysid, tmp_path):
     raw.to_csv(tmp_path / "run.csv", index=False)
     out = tmp_path / "processed"
     # 0.01 Hz divides 10 Hz, but a 60-s log then holds one sample (t = 0)
-    assert_refused(sysid("preprocess", tmp_path / "run.csv", "-o", out, "--rate", "0.01"), 1,
+    assert_refused(sysid("preprocess", tmp_path / "run.csv", "-o", out, "--rate", "0.01"), 2,
                    "run.csv", "--rate 0.01 Hz leaves fewer than 2 samples", absent=(out,))
     done = sysid("preprocess", tmp_path / "run.csv", "-o", out, "--rate", "0.1")  # every 10 s: 7 samples
     assert done.code == 0, done.err
@@ -92,10 +92,14 @@ def test_export_refuses_bad_steps_and_batches(sysid, trained, tmp_path, case):
     assert_refused(sysid("export", trained, "-o", out, "--portable", *options), 2, says, absent=(out,))
 
 
-def test_export_refuses_a_name_torch_does_not_load_as_a_package(sysid, trained, tmp_path):
-    out = tmp_path / "model.pt"  # torch.export and AOTInductor packages are .pt2 files
-    assert_refused(sysid("export", trained, "-o", out, "--portable"), 2, f"{out}: an exported step is a .pt2 file",
-                   f"give -o {tmp_path / 'model.pt2'}", absent=(out, tmp_path / "model.pt2"))
+@pytest.mark.parametrize("name", ["export", "model.pt", "model.pt2.bak"])
+def test_export_refuses_a_file_not_ending_in_pt2(sysid, trained, tmp_path, name):
+    """torch loads a package or program by its .pt2 suffix (else it warns, and its next
+    versions refuse): another name is one line before anything is compiled, nothing written."""
+    out = tmp_path / name
+    assert_refused(sysid("export", trained, "-o", out, "--portable"), 2,
+                   f"-o {out}: an exported step is a .pt2 file; name it e.g. -o {out.with_suffix('.pt2')}",
+                   absent=(out,))
 
 
 # -- horizons: whole samples, and no longer than the data ----------------------------------

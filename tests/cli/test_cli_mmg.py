@@ -43,6 +43,31 @@ def test_simulate_command_reproduces_the_oracle_trajectory(oracle_dir, dataset_d
     assert np.abs(sim[[f"obs_{c}" for c in cols]].to_numpy() - ref[[f"obs_{c}" for c in cols]].to_numpy()).max() < 1e-12
 
 
+def test_simulate_reads_a_users_log_through_the_configs_columns(oracle_dir, dataset_dir, tmp_path):
+    """``sysid simulate --config EXP`` on the user's copy of the oracle's zig-zag (knots, deg,
+    rpm under other names): the config's [data.columns] read it and its ship is the MMG's, so
+    the prediction is the oracle's trajectory (in SI); without --config the log is refused
+    with one line."""
+    from own_logs import columns_table, write_own_log
+
+    ref = pd.read_csv(oracle_dir / "traj_zigzag_dt1p0.csv")  # zigzag 13_14_21 from t = 15 s
+    log = write_own_log(dataset_dir / ref.source[0], tmp_path / "my_zigzag.csv")
+    config = tmp_path / "exp.toml"
+    config.write_text('[experiment]\nmodel = "mmg"\nship = "esso_osaka"\n[data]\ntrain = ["my_zigzag.csv"]\n'
+                      + columns_table())
+    out = tmp_path / "sim.csv"
+    options = ["--start", "15", "--horizon", "100", "--integrator", "rk4", "--quadrature", "simpson", "-o", str(out)]
+    with pytest.raises(DataError, match="my_zigzag.csv: no column"):
+        main(["simulate", "--log", str(log), *options])
+    assert not out.exists()
+    main(["simulate", "--log", str(log), "--config", str(config), *options])
+    sim = pd.read_csv(out)
+    cols = ["x", "u", "y", "v", "psi", "r"]
+    assert len(sim) == 101
+    assert np.abs(sim[cols].to_numpy() - ref[cols].to_numpy()).max() < 1e-6
+    assert np.abs(sim[[f"obs_{c}" for c in cols]].to_numpy() - ref[[f"obs_{c}" for c in cols]].to_numpy()).max() < 1e-9
+
+
 def _forces_input(tmp_path, frame):
     path = tmp_path / "in.csv"
     frame.to_csv(path, index=False)

@@ -6,7 +6,7 @@ import pandas as pd
 import pytest
 
 from sysid.cli import run as sysid
-from sysid.errors import CheckpointError, ConfigError, DataError
+from sysid.errors import CheckpointError, ConfigError, DataError, OutputError
 from tiny_experiment import TRAIN_FILES, tiny_experiment, tiny_test_file
 
 
@@ -73,3 +73,38 @@ def test_d2_without_test_logs_judges_each_held_out_validation_log(dataset_dir, t
         np.testing.assert_allclose(cell.window_start_s[:same.size], same, atol=1e-6)
         assert np.all(np.diff(cell.window_start_s) >= 30.0 - 1e-6)
     assert [c.n_windows for c in j.cells if c.channel == "u"] == [4, 22, 12, 14, 6]
+
+
+def test_train_refuses_data_it_would_ignore(files, tmp_path):
+    """``sysid train CONFIG --data DIR`` where CONFIG names its own logs: --data is the paper's
+    data set root, read only with [experiment] dataset = D1/D2, so it would be ignored and the
+    run trained on other logs than the user meant: one error naming --data, nothing written."""
+    from tiny_experiment import tiny_config
+
+    config = tmp_path / "own.toml"
+    config.write_text(tiny_config(files))
+    with pytest.raises(DataError, match=r"--data .*read only with \[experiment\] dataset = \"D1\" or \"D2\".*"
+                                        r"own.toml names its own logs \(\[data\] train\): drop --data"):
+        sysid(["train", str(config), "-o", str(tmp_path / "run"), "--data", str(files["test"].parent)])
+    assert not (tmp_path / "run").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["own.toml"]
+
+
+def test_evaluate_never_writes_over_a_log_the_run_was_trained_on(files, tmp_path):
+    """``sysid evaluate RUN --data OTHER -o LOG`` where LOG is one of the run's training logs
+    (a slip of the shell's completion): refused in one line naming it, the log unchanged;
+    a new file beside it is written."""
+    import shutil
+
+    from tiny_experiment import tiny_config
+
+    log = shutil.copy(files["train"], tmp_path / "monday.csv")
+    config = tmp_path / "own.toml"
+    config.write_text(tiny_config({"train": log}))
+    sysid(["train", str(config), "-o", str(tmp_path / "run")])
+    before = (tmp_path / "monday.csv").read_bytes()
+    with pytest.raises(OutputError, match=r"monday.csv: is .*monday.csv, an input of this command"):
+        sysid(["evaluate", str(tmp_path / "run"), "--data", str(files["test"]), "--horizon", "30", "-o", str(log)])
+    assert (tmp_path / "monday.csv").read_bytes() == before
+    sysid(["evaluate", str(tmp_path / "run"), "--data", str(files["test"]), "--horizon", "30",
+           "-o", str(tmp_path / "metrics.csv")])
+    assert list(pd.read_csv(tmp_path / "metrics.csv").horizon_s) == [30.0]

@@ -171,7 +171,8 @@ def test_evaluate_scores_remapped_logs_with_a_config_and_a_run_beside_its_baseli
     run = in_process(capsys, "evaluate", "runs/hybrid", "-o", "hybrid.csv")
     assert run.code == 0, run.err
     lines = run.out.splitlines()
-    at = lines.index("beside its physics baseline(s), on the same windows:")
+    assert "RMSE of u, v_m [m/s] and r [rad/s]:" in lines   # SI, said: the logs are in knots and deg/s
+    at = lines.index("beside its physics baseline(s), on the same windows (RMSE of u, v_m [m/s] and r [rad/s]):")
     baseline_rows = [line.split() for line in lines[at + 2:] if "MMG (ship file)" in line]
     assert len(baseline_rows) == 4
     for row, expected in zip(baseline_rows, truth.itertuples(index=False)):
@@ -209,6 +210,29 @@ def test_maneuver_puts_the_users_recorded_zigzag_beside_the_model(project, datas
                          "--config", "hybrid.toml", "--no-report")
     assert refused.code == 2 and len(refused.error_lines) == 1 and "--recorded" in refused.error_lines[0]
     assert not (project / "man2").exists()
+
+
+@pytest.mark.slow
+def test_maneuver_of_a_run_reads_the_recorded_logs_in_the_runs_units(project, dataset_dir, capsys, monkeypatch):
+    """``sysid maneuver RUN --recorded LOG`` without --config: the user's zig-zag (knots, deg)
+    is read through the run's own [data.columns], as ``sysid evaluate RUN --data LOG`` reads
+    it; the record's overshoots equal those of the same record read in SI from the dataset."""
+    from sysid.data.recordings import read_run
+    from sysid.maneuvers.recorded import record_comparison
+    from sysid.mmg import MMG
+    from sysid.mmg.ship import load_ship
+
+    monkeypatch.chdir(project)
+    done = in_process(capsys, "maneuver", "runs/hybrid", "-o", "man_run", "--zigzag", "10/10", "--side",
+                      "starboard", "--dt", "0.5", "--duration", "60", "--eager", "--no-report",
+                      "--recorded", "logs/zigzag_b.csv")
+    assert done.code == 0, done.err
+    ours = pd.read_csv(project / "man_run" / "recorded_indices.csv")
+    si = read_run(dataset_dir / LOGS["zigzag_b.csv"][0])
+    truth = record_comparison({"esso_osaka": [MMG(load_ship("esso_osaka"))]}, {ours.scenario.iloc[0]: si})
+    assert list(ours.model) == ["recorded", "hybrid"]
+    for column in ("first_overshoot_deg", "second_overshoot_deg"):
+        np.testing.assert_allclose(ours[column].iloc[0], truth[column].iloc[0], rtol=1e-5)
 
 
 @pytest.mark.slow

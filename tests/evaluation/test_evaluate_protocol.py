@@ -31,15 +31,12 @@ WINDOWS = {"Berthing": (4, 1), "Turning 20": (10, 3), "Turning 35": (17, 5), "Zi
 
 
 @pytest.mark.parametrize("xvr", [0.4535, -0.0081])
-def test_mmg_only_reproduces_the_lab_table_within_one_percent(dataset_dir, tmp_path, xvr, capsys):
+def test_mmg_only_reproduces_the_lab_table_within_one_percent(dataset_dir, tmp_path, xvr):
     out = tmp_path / "metrics.csv"
     files = [str(dataset_dir / f) for f in TEST_FILES.values()]
     main(["evaluate", "--model", "mmg", "--ship", "esso_osaka", "--set", f"Xvr={xvr}",
           "--data", *files, "--horizon", "30", "--horizon", "100", "-o", str(out)])
     table = pd.read_csv(out)
-    printed = capsys.readouterr().out.splitlines()  # the printed table says its units
-    assert printed[printed.index("RMSE of u, v_m [m/s] and r [rad/s] per file and horizon [s]:") + 1].split() == \
-        ["scenario", "file", "horizon_s", "n_windows", "rmse_u", "rmse_v", "rmse_r", "diverged", "diverged_at_s"]
     assert list(table.columns) == ["scenario", "file", "horizon_s", "n_windows", "rmse_u", "rmse_v", "rmse_r",
                                    "diverged", "diverged_at_s"]
     assert not table.diverged.any() and table.diverged_at_s.isna().all()   # the lab MMG stays finite

@@ -70,3 +70,51 @@ def test_run_table_in_the_run_s_units(tmp_path):
         assert (b.cells[1].ours, b.cells[2].ours) == (a.cells[1].ours, a.cells[2].ours)  # v_m, r
     metrics = pd.read_csv(out / "metrics.csv")
     assert metrics["rmse_u"].iloc[0] == pytest.approx(si.rows[0].cells[0].ours, rel=1e-12)
+
+
+def test_report_says_the_units_its_table_is_in(tmp_path):
+    """The report of a run read in knots and evaluated with RK4: the note under the RMSE table
+    names the table's units (u in knots), in the HTML and the PDF, not m/s; the run's u cell is
+    its SI RMSE in knots; the methods name the run's integrator, not the protocol's Euler."""
+    import pypdf
+    from synthetic_rundir import measured_runs, write_run
+
+    from sysid.report.build import build_report
+    from sysid.store.manifest import write_manifest
+
+    runs = {k: v for k, v in measured_runs(0.3).items() if k == "Berthing"}
+    out = write_run(tmp_path / "run", "mmg_lab", runs, horizons=(30,))
+    config = out / "config.toml"
+    config.write_text(config.read_text() + '\n[evaluation]\nintegrator = "rk4"\n'
+                      '\n[data.columns]\nu = { column = "u_velo [m/s]", unit = "knots" }\n')
+    write_manifest(out, "run")
+    paths = build_report(out, tmp_path / "report")
+    html = paths.html.read_text()
+    assert "Units: u in knots, v_m in m/s, r in rad/s." in html
+    assert "u, v_m in m/s" not in html
+    assert "integrated with classical RK4, dt = 1 s" in html and "explicit Euler" not in html
+    u_knots = pd.read_csv(out / "metrics.csv")["rmse_u"].iloc[0] / KNOT
+    assert f"{u_knots:.5f}" in html
+    pdf = "\n".join(p.extract_text() or "" for p in pypdf.PdfReader(str(paths.pdf)).pages)
+    assert "u in knots, v_m in m/s, r in rad/s" in " ".join(pdf.split())
+    assert "u, v_m [m/s]" not in pdf
+
+
+def test_methods_of_a_run_without_test_logs_say_so(tmp_path):
+    """A run trained without test logs (a sweep's trial): metrics.csv holds its header only,
+    and the methods say no test log was evaluated instead of "H =  s" windows of test files;
+    the same run with its test metrics names their horizons."""
+    from synthetic_rundir import measured_runs, write_run
+
+    from sysid.report.methods import methods_paragraphs
+    from sysid.report.source import read_source
+    from sysid.store.manifest import write_manifest
+
+    runs = {k: v for k, v in measured_runs(0.3).items() if k == "Berthing"}
+    out = write_run(tmp_path / "run", "mmg_lab", runs, horizons=(30,))
+    assert "(H = 30 s)" in methods_paragraphs(read_source(out))[0]
+    metrics = pd.read_csv(out / "metrics.csv")
+    metrics.iloc[:0].to_csv(out / "metrics.csv", index=False)
+    write_manifest(out, "run")
+    first = methods_paragraphs(read_source(out))[0]
+    assert first.startswith("No test log was evaluated") and "H = " not in first
