@@ -155,7 +155,8 @@ def _check_time(df: pd.DataFrame, path: str, repairs: list[str]) -> pd.DataFrame
         raise RawLogError(f"{path}: column t: fewer than 2 rows")
     nan = np.isnan(t)
     if nan.any():
-        raise RawLogError(f"{path}: column t: row {int(np.flatnonzero(nan)[0]) + 1}: empty time")
+        raise RawLogError(f"{path}: column t: row {int(np.flatnonzero(nan)[0]) + 1}: empty time ({int(nan.sum())} "
+                          "row(s); every row needs its time stamp: fill it in, or delete the row)")
     dup = df.duplicated(keep="first").to_numpy()
     if dup.any():
         rows = np.flatnonzero(dup) + 1

@@ -141,6 +141,12 @@ def test_exact_duplicate_rows_are_dropped_and_logged(synthetic, raw):
     assert synth.score(out.segments, synthetic.truth)["u"] < 5e-3
 
 
+def test_empty_time_stamps_are_counted_with_the_fix(raw):
+    raw.loc[500:520, "t [s]"] = np.nan   # rows 501-521
+    assert error_of(raw) == ("log.csv: column t: row 501: empty time (21 row(s); every row needs its time stamp: "
+                             "fill it in, or delete the row)")
+
+
 def test_time_in_milliseconds(raw):
     raw["t [s]"] = raw["t [s]"] * 1000.0
     assert "median step" in error_of(raw)
