@@ -50,6 +50,9 @@ def train(
     # a bad -o fails now, not after training
     claim(output, OutputKind.RUN, [config, *experiment_inputs(exp, data)], overwrite)
     checkpoint = checkpoint_path(output)
+    if resume and exp.needs_training and not checkpoint.is_file():
+        logs.warning(f"--resume: no checkpoint {checkpoint} to resume from: {output} trains from the first epoch "
+                     "(a checkpoint is kept beside the run directory only after an interrupted training)")
     on_interrupt(lambda: f"nothing written to {output}" + (
         f"; the training checkpoint {checkpoint} is kept: rerun with --resume to continue"
         if checkpoint.is_file() else ""))
