@@ -298,7 +298,8 @@ def _warn_below_baseline(output: Path) -> None:
     unjudged = [name for name, summaries in models.items() if any(s.verdict is None for s in summaries)
                 and any(s.model.lower() != "mmg" or s.identified for s in summaries)]
     if unjudged:
-        typer.echo(f"not judged against a physics baseline (no verdict recorded): {', '.join(unjudged)}")
+        typer.echo(f"not judged against a physics baseline (no verdict recorded): {', '.join(unjudged)}; "
+                   f"sysid compare {output / 'runs' / unjudged[0]} --against baseline judges one")
     for name, summaries in models.items():
         verdicts = [s.verdict for s in summaries]
         if any(v is None for v in verdicts):

@@ -256,8 +256,9 @@ def verdict_items(source: ReportSource) -> list[tuple[str, str]]:
         verdict = run.model_verdict
         label = f"Verdict: {run_label(run.name, run.model, run.dataset)}"
         if verdict is None:
-            items.append((label, "not judged: sysid records no verdict for a mean-of-seeds ensemble; its seeds, "
-                                 "as members of one model, are judged in the row of the same model without '(ensemble)'"
+            items.append((label, "not judged: sysid reproduce records no verdict for a mean-of-seeds ensemble "
+                                 f"(sysid compare runs/{run.name} --against baseline judges it); its seeds, as members "
+                                 "of one model, are judged in the row of the same model without '(ensemble)'"
                           if "ensemble" in run.name else "not judged: the run records no verdict"))
         else:
             items.append((label, ("" if verdict.beats_baseline else "WARNING: ") + verdict.statement()))

@@ -77,7 +77,8 @@ def test_reproduce_prints_one_verdict_per_model(reproduction, capsys):
 
     _warn_below_baseline(reproduction)
     out, err = capsys.readouterr()
-    assert "not judged against a physics baseline (no verdict recorded): nn_D1\n" in out
+    assert (f"not judged against a physics baseline (no verdict recorded): nn_D1; sysid compare "
+            f"{reproduction / 'runs' / 'nn_D1'} --against baseline judges one\n") in out
     assert [line.split(":")[1] for line in out.splitlines() if line.startswith("verdict:")] == [" run hybrid_D2 (2 seeds)"]
     assert "each alone -40 % to -20 %" in out
     assert [line.split(": The")[0] for line in err.splitlines()] == ["WARNING: run hybrid_D1"]
