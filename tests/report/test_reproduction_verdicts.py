@@ -7,30 +7,16 @@ from __future__ import annotations
 import json
 import shutil
 
-import numpy as np
 import pytest
 
-from sysid.evaluation.judgement import CHANNELS, PairedCell, VerdictRule
-from sysid.evaluation.verdict import SHIP_FILE_MMG, TEST, ChannelCell, verdict_of
 from sysid.store.manifest import write_manifest
 
 from synthetic_rundir import write_reproduction
-
-RULE = VerdictRule(resamples=500)
-
+from verdict_cases import seed_verdict
 
 def verdict(model: str, factor: float) -> dict:
-    """summary.json's verdict of a model whose per-window RMSE is `factor` x the MMG's on 3
-    logs of 8 windows (the same logs and MMG for every call)."""
-    rng = np.random.default_rng(0)
-    cells = []
-    for log in ("a", "b", "c"):
-        base = 0.01 + 0.01 * rng.random(8)
-        for channel in CHANNELS:
-            cells.append(PairedCell(log, log.upper(), 30.0, channel, (factor * base)[None, :], base[None, :],
-                                    30.0 * np.arange(8)))
-    pooled = tuple(ChannelCell(TEST, 30.0, c, factor, {SHIP_FILE_MMG: 1.0}) for c in CHANNELS)
-    return verdict_of(model, (SHIP_FILE_MMG,), pooled, {}, {TEST: {SHIP_FILE_MMG: tuple(cells)}}, RULE).to_dict()
+    """summary.json's verdict of a model whose per-window RMSE is `factor` x the MMG's."""
+    return seed_verdict(factor, model).to_dict()
 
 
 def with_summary(run_dir, **fields) -> None:
