@@ -58,6 +58,7 @@ PLAUSIBLE_MIN = {"anemo_1_dir": -np.pi - 0.01, "anemo_2_dir": -np.pi - 0.01,
                  "anemo_1_speed": 0.0, "anemo_2_speed": 0.0}
 
 NOMINAL_DT = 0.1  # s, raw log step
+ABSOLUTE_TIME_S = 86400.0  # s; a first time stamp a day or more: a clock time, not time since the start
 
 
 def header(columns: dict[str, str]) -> list[str]:
@@ -174,6 +175,9 @@ def _check_time(df: pd.DataFrame, path: str, repairs: list[str]) -> pd.DataFrame
     if abs(med - NOMINAL_DT) > 0.02:
         raise RawLogError(f"{path}: column t: median step {med:.4f} s, expected {NOMINAL_DT} s "
                           "(10 Hz log; time in ms?)")
+    if t[0] >= ABSOLUTE_TIME_S:   # a clock time (Unix seconds): the processed log counts from the run's start
+        repairs.append(f"column t: starts at {t[0]:.1f} s, a clock time; counted from the first sample")
+        df = df.assign(t=t - t[0])
     return df
 
 

@@ -147,6 +147,16 @@ def test_empty_time_stamps_are_counted_with_the_fix(raw):
                              "fill it in, or delete the row)")
 
 
+def test_clock_time_is_counted_from_the_first_sample(synthetic, raw):
+    shifted = raw.copy()
+    shifted["t [s]"] = shifted["t [s]"] + 1_700_000_000.0   # Unix seconds of the logger's clock
+    out, plain = run(shifted), run(raw)
+    assert out.report.repairs == ["column t: starts at 1700000000.0 s, a clock time; counted from the first sample"]
+    assert len(out.segments) == len(plain.segments) == 1
+    assert out.segments[0]["t"].iloc[0] == 0.0
+    pd.testing.assert_frame_equal(out.segments[0], plain.segments[0], rtol=1e-6)
+
+
 def test_time_in_milliseconds(raw):
     raw["t [s]"] = raw["t [s]"] * 1000.0
     assert "median step" in error_of(raw)
