@@ -37,8 +37,9 @@ def evaluate(
     """The protocol's windowed RMSE of u, v_m, r per file and horizon (MMG or a trained run).
 
     A trained run is shown beside its physics baselines (the ship file's MMG with the run's
-    [mmg] overrides; the identified MMG under a hybrid's FNN) on the same windows, with its
-    verdict (docs: How sysid judges a model)."""
+    [mmg] overrides, from the run's copy of the ship file it was trained with; the identified
+    MMG under a hybrid's FNN) on the same windows, with its verdict (docs: How sysid judges a
+    model)."""
     import pandas as pd
     from sysid.config.experiment import load_experiment
     from sysid.data.recordings import read_runs

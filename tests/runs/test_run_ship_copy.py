@@ -24,6 +24,8 @@ from sysid.hybrid.ensemble import _common_mmg
 from sysid.hybrid.force_models import build_model
 from sysid.config.experiment import parse_experiment
 from sysid.maneuvers import load_maneuver_model
+from sysid.report.build import ship_size
+from sysid.report.source import read_source
 from sysid.runs.layout import load_model
 from sysid.runs.lifecycle import physics_baselines
 from sysid.runs.rundir import RunDir
@@ -122,6 +124,7 @@ def test_moved_project_evaluates_and_maneuvers_as_before(project, tmp_path, caps
         subject = load_maneuver_model(run)
         assert subject.ship.name == "tanker"   # the file's stem, as when it was trained
         assert subject.ship.source == str(run.absolute() / "ship" / "tanker.toml")
+        assert ship_size(read_source(run)) == (4.0, 0.72)   # the report's outlines: L_pp, B [m] of SHIP
     finally:
         shutil.move(moved, project)
 
