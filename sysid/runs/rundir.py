@@ -13,6 +13,7 @@ before the copy was kept names the original, as its config.toml does.
 """
 from __future__ import annotations
 
+import hashlib
 import logging
 import os
 import tomllib
@@ -70,19 +71,21 @@ def ship_copy_name(ship: str) -> str:
     return Path(ship).name if is_ship_path(ship) else f"{ship}.toml"
 
 
-_told: set[tuple[str, str, int]] = set()   # (original, copy, original's mtime_ns) already said
+_told: set[tuple[str, int, str]] = set()   # (original, its mtime_ns, the copy's SHA-256) already said
 
 
 def _say_if_edited(ship: str, copy: Path, run: Path) -> None:
     """One warning line when the ship file `ship` the run at `run` was made from still
-    exists and differs from the run's `copy` of it (once per process for the same files)."""
+    exists and differs from the run's `copy` of it; said once per process for an original
+    and the copies with the same bytes (an ensemble's members, a run loaded twice)."""
     from sysid.errors import ShipDefinitionError
     from sysid.mmg.ship import resolve_ship_path  # no torch
 
     try:
         original = resolve_ship_path(ship)
-        edited = original.read_bytes() != copy.read_bytes()
-        key = (str(original.resolve()), str(copy.resolve()), original.stat().st_mtime_ns)
+        kept = copy.read_bytes()
+        edited = original.read_bytes() != kept
+        key = (str(original.resolve()), original.stat().st_mtime_ns, hashlib.sha256(kept).hexdigest())
     except (ShipDefinitionError, OSError):  # moved away, renamed or unreadable: the copy is all there is
         return
     if edited and key not in _told:

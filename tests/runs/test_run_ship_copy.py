@@ -153,6 +153,13 @@ def test_edited_ship_file_leaves_the_run_as_judged_and_says_so(project, tmp_path
         assert abs(edited[0, 2] - kept[0, 2]) > 1e-4   # N_r and N_v moved the yaw rate's error
         out = in_process(capsys, "evaluate", run, "--data", test_log, "--ship", original, "-o", tmp_path / "e.csv")
         assert out.code == 0 and "differs from" not in out.err, out.err
+        # edited again: runs with the same copy (an ensemble's seeds) say it once per process
+        original.write_text(EDITED.replace("N_v = -0.150", "N_v = -0.140"))
+        seeds = [shutil.copytree(run, tmp_path / "seeds" / f"seed{k}") for k in (0, 1)]
+        out = in_process(capsys, "maneuver", tmp_path / "seeds", "-o", tmp_path / "mnv", *MANEUVER)
+        assert out.code == 0, out.err
+        assert sum("differs from" in line for line in out.err.splitlines()) == 1, out.err
+        assert str(seeds[0] / "ship" / "tanker.toml") in out.err
     finally:
         original.write_text(SHIP)
 
