@@ -7,7 +7,6 @@ maneuvers before the move; an older run without the copy loads from its config's
 The run: the scratch tanker's N_r identified by Levenberg-Marquardt (2 iterations) from two
 logs simulated with known derivatives, tested on a third (a few seconds)."""
 import json
-import math
 import shutil
 
 import numpy as np
@@ -15,7 +14,7 @@ import pandas as pd
 import pytest
 import torch
 
-from sysid import MMG, integrate, load_ship
+from sysid import MMG, load_ship
 from sysid.data.recordings import read_runs
 from sysid.dynamics.integrators import Integrator
 from sysid.evaluation.evaluate import evaluate_model
@@ -32,8 +31,7 @@ from sysid.runs.rundir import RunDir
 from sysid.store.manifest import verify_manifest, write_manifest
 
 from cli_harness import in_process
-from processed_runs import write_processed_csv
-from scratch_ship import SCRATCH
+from scratch_ship import SCRATCH, simulated_logs
 
 TRUTH = {"Y_v": -0.36, "N_r": -0.055}   # the ship file says -0.315, -0.049
 # the ship file without its [ship] name: the ship is called by the file's stem, "tanker"
@@ -41,21 +39,6 @@ SHIP = SCRATCH.replace('name = "scratch_tanker"\n', "") + "\n[maneuvering]\nappr
 EDITED = SHIP.replace("N_r = -0.049", "N_r = -0.060").replace("N_v = -0.137", "N_v = -0.150")
 RMSE = ["rmse_u", "rmse_v", "rmse_r"]
 MANEUVER = ["--turning", "35", "--side", "starboard", "--duration", "40", "--dt", "0.4", "--no-report", "--eager"]
-
-
-def _simulated_logs(ship_path, folder):
-    model = MMG(load_ship(ship_path, TRUTH))
-    paths = []
-    for name, law in {"turn": lambda t: math.radians(30) * (t > 5),
-                      "zigzag": lambda t: math.radians(15) * np.sign(np.sin(2 * math.pi * t / 50) + 1e-9),
-                      "random": lambda t: math.radians(25) * np.sin(t / 7.0) * np.cos(t / 23.0)}.items():
-        t = np.arange(0.0, 120.0, 1.0)
-        inputs = np.zeros((len(t), 4))
-        inputs[:, 0], inputs[:, 1] = 14.0, [law(s) for s in t]
-        x0 = torch.tensor([0.0, 0.9, 0.0, 0.0, 0.0, 0.0], dtype=torch.float64)
-        states = integrate(model, x0, torch.tensor(inputs), 1.0, "rk4").numpy()
-        paths.append(write_processed_csv(folder / f"{name}.csv", t, states, inputs))
-    return paths
 
 
 @pytest.fixture(scope="module")
@@ -66,7 +49,7 @@ def project(tmp_path_factory):
     folder = tmp_path_factory.mktemp("own") / "project"
     folder.mkdir()
     (folder / "tanker.toml").write_text(SHIP)
-    logs = _simulated_logs(folder / "tanker.toml", folder)
+    logs = simulated_logs(folder / "tanker.toml", folder, TRUTH, seconds=120.0)
     (folder / "identify.toml").write_text(
         "[experiment]\nname = 'first'\nmodel = 'mmg'\nship = 'tanker.toml'\nseed = 0\n"
         f"[data]\ntrain = {json.dumps([p.name for p in logs[:2]])}\ntest = [{json.dumps(logs[2].name)}]\n"
