@@ -284,11 +284,16 @@ class Pipeline:
         passed = gnss.baseline_ok(berr, s.baseline_tolerance)
         share = passed.sum() / max(1, have.sum())
         if share < s.min_baseline_pass:
+            median = np.nanmedian(berr) + lay.gnss_baseline
+            ratio = median / lay.gnss_baseline
+            units = {"feet": 1 / 0.3048, "centimetres": 100.0, "millimetres": 1000.0}  # positions logged in them
+            unit = next((u for u, k in units.items() if abs(ratio / k - 1) < 0.02), None)
+            cause = (f"{ratio:.3g} x the nominal: positions in {unit}? convert the antenna columns to metres"
+                     if unit else "check [sensors] gnss_baseline and the antenna columns")
             raise RawLogError(
                 f"{report['file']}: column gnss_fore_x: antenna distance median "
-                f"{np.nanmedian(berr) + lay.gnss_baseline:.3f} m, nominal {lay.gnss_baseline:.3f} m; "
-                f"only {100 * share:.0f}% of fixes within {s.baseline_tolerance} m "
-                "(check [sensors] gnss_baseline and the antenna columns)")
+                f"{median:.3f} m, nominal {lay.gnss_baseline:.3f} m; "
+                f"only {100 * share:.0f}% of fixes within {s.baseline_tolerance} m ({cause})")
         rejected = have & ~passed
         report["baseline"] = {
             "rejected": int(rejected.sum()),
@@ -377,7 +382,8 @@ def process_file(path: str, layout: SensorLayout, settings: PreprocessSettings, 
                  ) -> dict:
     """Process one raw log and write its outputs (a worker for process pools).
 
-    Returns {'file', 'ok', 'error' | 'outputs', 'report'}; a failed file writes nothing.
+    Returns {'file', 'ok', 'error' | 'outputs', 'report'}; a failed file writes nothing, and
+    its 'bad_input' says whether the log is at fault (`RawLogError`) rather than sysid.
     """
     from preprocessing import writer
     try:
@@ -391,6 +397,6 @@ def process_file(path: str, layout: SensorLayout, settings: PreprocessSettings, 
         return {"file": str(path), "ok": True, "outputs": [str(p) for p in outputs],
                 "report": result.report}
     except RawLogError as exc:
-        return {"file": str(path), "ok": False, "error": str(exc)}
+        return {"file": str(path), "ok": False, "error": str(exc), "bad_input": True}
     except Exception as exc:  # anything else is a bug, but one file must not stop the rest
-        return {"file": str(path), "ok": False, "error": f"{path}: internal error: {exc!r}"}
+        return {"file": str(path), "ok": False, "error": f"{path}: internal error: {exc!r}", "bad_input": False}

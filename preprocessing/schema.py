@@ -58,6 +58,7 @@ PLAUSIBLE_MIN = {"anemo_1_dir": -np.pi - 0.01, "anemo_2_dir": -np.pi - 0.01,
                  "anemo_1_speed": 0.0, "anemo_2_speed": 0.0}
 
 NOMINAL_DT = 0.1  # s, raw log step
+ABSOLUTE_TIME_S = 86400.0  # s; a first time stamp a day or more: a clock time, not time since the start
 
 
 def header(columns: dict[str, str]) -> list[str]:
@@ -78,9 +79,11 @@ def _need(have: dict[str, str | None], names: dict[str, str], path: str, repairs
     """Check presence and unit of each column; record degree->radian repairs in `scale`."""
     for name, unit in names.items():
         if name not in have:
-            close = difflib.get_close_matches(name, list(have), n=1, cutoff=0.6)
-            hint = f" (found {close[0]!r}: misnamed?)" if close else ""
-            raise RawLogError(f"{path}: column {name} [{unit}]: missing{hint}")
+            known = {**RAW_COMMON, **RAW_LOCAL, **RAW_LATLON, **RAW_OPTIONAL}  # each needed as itself
+            close = difflib.get_close_matches(name, [h for h in have if h not in known], n=1, cutoff=0.6)
+            fix = (f"found {close[0]!r}: misnamed? rename it" if close else
+                   "add it (a raw log's columns: docs, Input formats, Raw logs)")
+            raise RawLogError(f"{path}: column {name} [{unit}]: missing; {fix}")
         got = have[name]
         if got is None or got == unit:
             continue
@@ -103,6 +106,10 @@ def validate_raw(df: pd.DataFrame, path: str = "<raw log>",
     for col in df.columns:
         name, unit = _split_header(str(col))
         have[name] = unit
+    processed = [name for name in ("x_position_mid", "u_velo", "psi_hat", "r_angvelo") if name in have]
+    if processed and "fog_yaw_rate" not in have:
+        raise RawLogError(f"{path}: columns {', '.join(processed)}: a processed log, not a raw 10 Hz one; "
+                          "train, evaluate and simulate read it as it is (preprocess reads raw logs)")
     scale: dict[str, float] = {}
     _need(have, RAW_COMMON, path, repairs, scale)
     if all(k in have for k in RAW_LOCAL):
@@ -116,6 +123,8 @@ def validate_raw(df: pd.DataFrame, path: str = "<raw log>",
         raise RawLogError(f"{path}: GNSS columns incomplete")  # pragma: no cover
     _need(have, gnss, path, repairs, scale)
     empty = df.isna().all(axis=1).to_numpy()
+    if len(empty) and empty.all():
+        raise RawLogError(f"{path}: no data: every one of its {len(empty)} rows is empty (no number in any column)")
     if empty.any():  # blank lines, typically trailing ones from spreadsheet exports
         repairs.append(f"dropped {int(empty.sum())} empty row(s), first at row "
                        f"{int(np.flatnonzero(empty)[0]) + 1}")
@@ -147,7 +156,8 @@ def _check_time(df: pd.DataFrame, path: str, repairs: list[str]) -> pd.DataFrame
         raise RawLogError(f"{path}: column t: fewer than 2 rows")
     nan = np.isnan(t)
     if nan.any():
-        raise RawLogError(f"{path}: column t: row {int(np.flatnonzero(nan)[0]) + 1}: empty time")
+        raise RawLogError(f"{path}: column t: row {int(np.flatnonzero(nan)[0]) + 1}: empty time ({int(nan.sum())} "
+                          "row(s); every row needs its time stamp: fill it in, or delete the row)")
     dup = df.duplicated(keep="first").to_numpy()
     if dup.any():
         rows = np.flatnonzero(dup) + 1
@@ -165,19 +175,36 @@ def _check_time(df: pd.DataFrame, path: str, repairs: list[str]) -> pd.DataFrame
     if abs(med - NOMINAL_DT) > 0.02:
         raise RawLogError(f"{path}: column t: median step {med:.4f} s, expected {NOMINAL_DT} s "
                           "(10 Hz log; time in ms?)")
+    if t[0] >= ABSOLUTE_TIME_S:   # a clock time (Unix seconds): the processed log counts from the run's start
+        repairs.append(f"column t: starts at {t[0]:.1f} s, a clock time; counted from the first sample")
+        df = df.assign(t=t - t[0])
     return df
 
 
+# the likely cause of a value beyond PLAUSIBLE_ABS, and its fix, by the column's unit
+_RANGE_FIX = {
+    "rad": "degrees in a radian column? label the column [deg] and sysid converts it",
+    "rad/s": "degrees per second in a rad/s column? label the column [deg/s] and sysid converts it",
+    "m/s": "knots or km/h in an m/s column? convert the column to m/s",
+    "rps": "rpm in an rps column? convert the column to rps (rpm / 60)",
+}
+
+
 def _check_ranges(df: pd.DataFrame, path: str) -> None:
+    """Values within PLAUSIBLE_ABS (and PLAUSIBLE_MIN); beyond: one error naming the file, the
+    column, the first row outside, the most extreme value and the likely unit fix."""
     for col, lim in PLAUSIBLE_ABS.items():
         v = df[col].to_numpy()
         lo = PLAUSIBLE_MIN.get(col, -lim)
         bad = np.flatnonzero((v > lim) | (v < lo))
         if len(bad):
             unit = RAW_COMMON[col]
+            worst = bad[np.argmax(np.abs(v[bad]))]
+            low = bool(np.all(v[bad] < lo))
+            fix = f"a negative {col}: the sensor's offset or sign?" if low and lo == 0.0 else _RANGE_FIX[unit]
             raise RawLogError(
-                f"{path}: column {col}: row {int(df.index[bad[0]]) + 1}: value {v[bad[0]]:.4g} outside "
-                f"[{lo:.3g}, {lim:.3g}] {unit} (degrees in a radian column?)")
+                f"{path}: column {col}: row {int(df.index[bad[0]]) + 1}: {len(bad)} row(s) outside "
+                f"[{lo:.3g}, {lim:.3g}] {unit}, up to {v[worst]:.6g} (row {int(df.index[worst]) + 1}): {fix}")
 
 
 def read_raw(path: str | os.PathLike, repairs: list[str] | None = None) -> tuple[pd.DataFrame, bool]:
@@ -189,4 +216,19 @@ def read_raw(path: str | os.PathLike, repairs: list[str] | None = None) -> tuple
         df = pd.read_csv(path, skipinitialspace=True)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         raise RawLogError(f"{path}: not a readable CSV ({exc})") from None
+    _check_last_row(path, len(df.columns), len(df))
     return validate_raw(df, str(path), repairs)
+
+
+def _check_last_row(path: Path, n_columns: int, n_rows: int) -> None:
+    """A file cut off in its last row (a copy or download that stopped): that row has fewer
+    fields than the header, and its last one may be cut too; `RawLogError` naming it."""
+    with open(path, "rb") as f:
+        f.seek(max(0, os.path.getsize(path) - 65536))
+        tail = f.read()
+    if not tail or tail.endswith(b"\n") or tail.endswith(b"\r"):
+        return
+    fields = tail.rsplit(b"\n", 1)[-1].count(b",") + 1
+    if fields < n_columns:
+        raise RawLogError(f"{path}: row {n_rows}: {fields} of {n_columns} fields and no line end: the file "
+                          "is cut off (an interrupted copy?); copy it again, or delete its last row")

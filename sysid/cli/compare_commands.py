@@ -29,6 +29,17 @@ def _label(path: str, taken: set[str], ship_name: str | None) -> str:
     return label
 
 
+def _run_experiment(path: Path):
+    """The experiment of a run directory (a seed folder: its first seed's), or None for a ship
+    file."""
+    from sysid.maneuvers.recorded import model_paths
+    from sysid.runs.rundir import RunDir
+    from sysid.store.manifest import has_manifest
+
+    first = model_paths(path)[0]
+    return RunDir.open(first).read_experiment() if first.is_dir() and has_manifest(first) else None
+
+
 def _run_columns(path: Path):
     """The ``[data.columns]`` of a run directory (a seed folder: its first seed's), or None
     for a ship file."""
@@ -54,7 +65,8 @@ def compare(
                                                              "windows.csv, comparison.json, report.html/.pdf)."),
     data: Optional[List[Path]] = typer.Option(None, "--data", help="Logs to compare on: files, folders or patterns "
                                                                     "(several may follow one --data; default: the "
-                                                                    "config's [data] test)."),
+                                                                    "config's [data] test, else for runs of D1/D2 "
+                                                                    "the paper's six test files)."),
     config: Optional[Path] = typer.Option(None, "--config", help="Experiment config whose [data] test logs, "
                                                                   "[data.columns], [data] rate and [evaluation] "
                                                                   "horizons and integrator are used."),
@@ -95,7 +107,7 @@ def compare(
             known = ", ".join(known_ships())
             raise DataError(f"compare: {s}: no such run directory, folder of seed runs or ship file, and no bundled "
                             f"ship of that name ({known}); check the path")
-    files = _logs(data, exp)
+    files = _logs(data, exp, sources)
     horizons = tuple(horizon) if horizon else (exp.evaluation.horizons if exp is not None else (30.0, 100.0))
     method = Method.parse(integrator, "--integrator", offered_only=True) if integrator else (
         exp.evaluation.integrator if exp is not None else Method.EULER)
@@ -149,19 +161,25 @@ def _check_options(against: str, threads, horizon) -> None:
         checks.DURATION.check("--horizon", h)
 
 
-def _logs(data, exp) -> list[Path]:
+def _logs(data, exp, sources=()) -> list[Path]:
     """The logs to compare on: ``--data``, else the config's [data] test logs, else the
-    paper's six test logs; exit 2 without any."""
+    paper's six test logs (a config, or without one every run given, of the paper's data
+    sets D1/D2 and no [data] test); exit 2 without any."""
     from sysid.data.datasets import test_files
     from sysid.data.recordings import expand_paths
     from sysid.data.splits import config_paths
 
+    runs = [e for e in (_run_experiment(Path(s)) for s in sources if Path(s).is_dir()) if e is not None]
     if data:
         files = expand_paths(data)
     elif exp is not None and exp.data.test:   # only the test logs need to exist here
         files = list(config_paths(exp.data.test, "test", exp.source))
     elif exp is not None and exp.experiment.dataset:
         files = list(test_files().values())   # the paper's six test files
+    elif exp is None and runs and all(e.experiment.dataset and not e.data.test for e in runs):
+        files = list(test_files().values())
+        logs.info("compare: the paper's six test files (every run was trained on its data sets D1/D2; --data names "
+                  "others)")
     else:
         raise DataError("compare: no logs to compare on: name them with --data, or give --config with [data] test")
     return files

@@ -143,19 +143,29 @@ def preprocess(
     results.sort(key=lambda r: order[r["file"]])
     _summary(results, outdir, time.perf_counter() - start)
     failed = [r for r in results if not r["ok"]]
-    if failed:
-        raise SystemExit(1)  # (typer.Exit is swallowed by standalone_mode=False)
+    if failed:  # (typer.Exit is swallowed by standalone_mode=False)
+        raise SystemExit(_failure_code(failed))
+
+
+def _failure_code(failed: list[dict]) -> int:
+    """The exit code of failed files: 2 when every one is bad input (the log's fault, its line
+    names file, column and fix), 1 when any is sysid's own failure."""
+    return 2 if all(r.get("bad_input") for r in failed) else 1
 
 
 def _check_inputs(raw: List[Path], outdir: Path) -> None:
     """Exit 2 for two raw logs of one file name (their outputs would collide) or one that is
-    not a file."""
+    not a file (a directory: how many logs it holds)."""
     stems: dict[str, Path] = {}
     for p in raw:
         if p.stem in stems:
             raise DataError(f"{p}: same file name as {stems[p.stem]}; outputs would collide in {outdir}")
         stems[p.stem] = p
     for p in raw:
+        if p.is_dir():
+            logs = sorted(q.name for q in p.glob("*.csv") if not q.name.endswith(".truth.csv"))
+            held = f"it holds {len(logs)} .csv file(s): give them, e.g. {p / '*.csv'}" if logs else "it holds no .csv file"
+            raise DataError(f"{p}: is a directory, not a raw log; {held}")
         if not p.is_file():
             from sysid.data.csvfiles import not_a_file
             raise DataError(f"{p}: {not_a_file(p)}")
@@ -163,8 +173,8 @@ def _check_inputs(raw: List[Path], outdir: Path) -> None:
 
 def _processed(paths: list[str], layout, settings, staging: Path, jobs: int, outdir: Path) -> list[dict]:
     """Every raw log preprocessed into `staging` (in `jobs` worker processes); each file's
-    result. A file that cannot be written (a full disk) keeps none; exit 1 when no file
-    could be processed."""
+    result. A file that cannot be written (a full disk) keeps none; exit 2 when no file
+    could be processed (1 when sysid itself failed on one)."""
     from preprocessing import pipeline
     from sysid.progress import progress
     from sysid.workers import in_workers
@@ -186,7 +196,7 @@ def _processed(paths: list[str], layout, settings, staging: Path, jobs: int, out
     if not any(r["ok"] for r in results):
         for r in results:
             typer.secho(f"error: {r['error']}", fg=typer.colors.RED, err=True)
-        raise SystemExit(1)  # nothing to move into place: no output directory at all
+        raise SystemExit(_failure_code(results))  # nothing to move into place: no output directory at all
     return results
 
 

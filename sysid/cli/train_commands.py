@@ -50,6 +50,9 @@ def train(
     # a bad -o fails now, not after training
     claim(output, OutputKind.RUN, [config, *experiment_inputs(exp, data)], overwrite)
     checkpoint = checkpoint_path(output)
+    if resume and exp.needs_training and not checkpoint.is_file():
+        logs.warning(f"--resume: no checkpoint {checkpoint} to resume from: {output} trains from the first epoch "
+                     "(a checkpoint is kept beside the run directory only after an interrupted training)")
     on_interrupt(lambda: f"nothing written to {output}" + (
         f"; the training checkpoint {checkpoint} is kept: rerun with --resume to continue"
         if checkpoint.is_file() else ""))
@@ -221,6 +224,7 @@ def reproduce(
     from sysid.protocol.reproduce import reproduce as run_protocol
     from sysid.config import checks
 
+    started = time.perf_counter()
     if jobs is not None:  # on a cluster: its cores, not this machine's
         checks.workers("--jobs", jobs, cluster=address or os.environ.get("RAY_ADDRESS"))
     checks.POSITIVE_COUNT.check("--seeds", seeds)
@@ -247,12 +251,15 @@ def reproduce(
         from sysid.report import build_report
         on_interrupt(f"the reproduction in {output} is complete; its report was not written "
                      f"(sysid report {output} -o {output} writes it)")
-        paths = build_report(output, output, workers=cpu_cores())  # the HTML's figures beside the PDF's pages
-        typer.echo(f"report: {paths.html} and {paths.pdf} ({paths.n_figures} figures, {paths.n_pages} pages)")
+        logs.info("report: writing report.html and report.pdf")
+        paths = build_report(output, output, logs.indented(), workers=cpu_cores())  # the HTML's figures beside the PDF's pages
+        typer.echo(f"report: {paths.html} and {paths.pdf} ({paths.n_figures} figures, {paths.n_pages} pages, "
+                   f"{paths.seconds:.0f} s)")
     _say_scorecards(summary, seeds)
     for name, why in (summary.failed or {}).items():
         typer.secho(f"reproduce: run {name} FAILED: {why}", fg=typer.colors.RED, err=True)
-    typer.echo(f"reproduce: {output} in {summary.seconds / 60:.1f} min")
+    typer.echo(f"reproduce: {output} in {(time.perf_counter() - started) / 60:.1f} min"
+               + (f" (runs and tables {summary.seconds / 60:.1f} min, the rest the report)" if report else ""))
     _warn_below_baseline(output)
     if summary.failed:
         raise SystemExit(1)
@@ -275,18 +282,31 @@ def _say_scorecards(summary, seeds: int) -> None:
 
 
 def _warn_below_baseline(output: Path) -> None:
-    """Every run's verdict: a WARNING on stderr for a run of a reproduction that does not beat
-    its physics baseline (`RunSummary.beats_baseline` false), a "verdict:" line otherwise,
-    each with its verdict's statement (evidence, interval and worst cells)."""
+    """Every model's verdict, as the report states it: a WARNING on stderr for a model of a
+    reproduction that does not beat its physics baseline, a "verdict:" line otherwise, each
+    with its verdict's statement (evidence, interval and worst cells). The seeds of
+    ``--seeds N`` (``runs/NAME/seed*/``) are members of one model (`seed_mean_verdict`)."""
+    from sysid.evaluation.verdict import BaselineVerdict, seed_mean_verdict
     from sysid.runs.rundir import RunDir
 
     runs = output / "runs"
+    models: dict[str, list] = {}  # the model's name -> its run's summary, or its seeds'
     for path in sorted(runs.glob("**/summary.json")):
-        summary = RunDir(path.parent).read_summary()
-        if summary.verdict is None:
+        rel = path.parent.relative_to(runs)
+        group = rel.parent if rel.name.startswith("seed") and rel.parent != Path(".") else rel
+        models.setdefault(group.as_posix(), []).append(RunDir(path.parent).read_summary())
+    unjudged = [name for name, summaries in models.items() if any(s.verdict is None for s in summaries)
+                and any(s.model.lower() != "mmg" or s.identified for s in summaries)]
+    if unjudged:
+        typer.echo(f"not judged against a physics baseline (no verdict recorded): {', '.join(unjudged)}; "
+                   f"sysid compare {output / 'runs' / unjudged[0]} --against baseline judges one")
+    for name, summaries in models.items():
+        verdicts = [s.verdict for s in summaries]
+        if any(v is None for v in verdicts):
             continue
-        if summary.beats_baseline is False:
-            typer.secho(f"WARNING: run {path.parent.relative_to(runs)}: {summary.verdict.statement}",
-                        fg=typer.colors.YELLOW, err=True)
+        verdict = seed_mean_verdict([BaselineVerdict.from_dict(v.to_json()) for v in verdicts])
+        seeds = f" ({len(verdicts)} seeds)" if len(verdicts) > 1 else ""
+        if not verdict.beats_baseline:
+            typer.secho(f"WARNING: run {name}{seeds}: {verdict.statement()}", fg=typer.colors.YELLOW, err=True)
         else:
-            typer.echo(f"verdict: run {path.parent.relative_to(runs)}: {summary.verdict.statement}")
+            typer.echo(f"verdict: run {name}{seeds}: {verdict.statement()}")

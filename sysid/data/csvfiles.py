@@ -16,7 +16,7 @@ _UTF16_MARKS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE, codecs.BOM_UTF32_LE, c
 
 def not_a_file(path: str | os.PathLike) -> str:
     """Why `path`, which is no regular file, cannot be read: "file not found", or what it is
-    instead (a named pipe, a socket, a device)."""
+    instead (a directory, a named pipe, a socket, a device)."""
     import stat
 
     try:
@@ -25,6 +25,8 @@ def not_a_file(path: str | os.PathLike) -> str:
         return "file not found"
     kinds = ((stat.S_ISFIFO, "a named pipe"), (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"),
              (stat.S_ISBLK, "a block device"))
+    if stat.S_ISDIR(mode):
+        return "is a directory, not a file"
     kind = next((name for test, name in kinds if test(mode)), None)
     if kind is None:
         return "file not found"

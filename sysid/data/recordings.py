@@ -184,11 +184,25 @@ def _channels(path: Path, columns: ColumnMap) -> tuple[pd.DataFrame, list[str]]:
     if len(frame) < 2:
         raise DataError(f"{path}: fewer than two data rows")
     bad = ~np.isfinite(values)
+    if bad[-1].any() and not bad[:-1].any() and _ends_mid_row(path):
+        raise DataError(f"{path}: data row {len(frame) + 1}: the file ends in the middle of it (no line end, "
+                        f"{int(bad[-1].sum())} of {bad.shape[1]} channels missing): it is cut off (an interrupted "
+                        "copy?); copy it again, or delete its last row")
     if bad.any():   # every channel with an empty cell, in one line
         listed = "; ".join(f"{columns.describe(channel)} (channel {channel}) is empty, NaN or inf at data row "
                            f"{int(np.argmax(bad[:, j])) + 2}" for j, channel in enumerate(recorded) if bad[:, j].any())
         raise DataError(f"{path}: {listed} ({int(bad.any(axis=1).sum())} bad rows)")
     return frame, recorded
+
+
+def _ends_mid_row(path: Path) -> bool:
+    """A CSV file whose last byte ends no line (a copy or download that stopped mid-row)."""
+    if path.suffix.lower() != ".csv":
+        return False
+    with open(path, "rb") as f:
+        f.seek(max(0, path.stat().st_size - 1))
+        last = f.read(1)
+    return last not in (b"\n", b"\r", b"")
 
 
 def log_track(path: str | os.PathLike, columns: ColumnMap | None = None) -> TrackCheck:

@@ -14,7 +14,8 @@ within logs, over logs and over members, and decides at a stated confidence (`Ve
 - BEATS: better overall (interval below 0) and no cell more than ``material`` worse, neither
   with confidence nor in its point estimate (a cell +12 % worse on too few windows to be sure
   keeps the verdict open: more windows only sharpen a decision, never flip it);
-- NOT_DISTINGUISHABLE: otherwise, "on N windows".
+- NOT_DISTINGUISHABLE: otherwise, "on N windows"; always on fewer than ``min_windows`` windows
+  in all (one window's resampled interval has no width: no evidence either way).
 
 The overall change is the geometric mean of the cells' ratios minus 1, every log, horizon and
 channel alike, so a scenario with few windows weighs as much as one with many.
@@ -367,22 +368,24 @@ def judge(cells: Sequence[PairedCell], rule: VerdictRule = VerdictRule(), model:
     material = [c for c in judged if c.decision is CellDecision.MATERIALLY_WORSE]
     unjudged_material = [c for c in judged if c.decision is not CellDecision.MATERIALLY_WORSE
                          and c.change > rule.material]
+    n_windows = sum(group[0].n_windows for group in groups.values())
+    enough = n_windows >= rule.min_windows   # fewer: the resampled interval is no evidence (one window: no width)
     if diverged:
         outcome = Outcome.DIVERGED
-    elif material or change_low > 0:
+    elif material or (enough and change_low > 0):
         outcome = Outcome.WORSE
-    elif change_high < 0 and not unjudged_material:
+    elif enough and change_high < 0 and not unjudged_material:
         outcome = Outcome.BEATS
     else:
         outcome = Outcome.NOT_DISTINGUISHABLE
     ranked = sorted((c for c in judged if math.isfinite(c.change)), key=lambda c: -c.change)
     worst = tuple(diverged[:3] + ranked[:max(0, 3 - len(diverged))])
-    n_windows = sum(group[0].n_windows for group in groups.values())
     divergences = tuple(dict.fromkeys(c.divergence for c in diverged if c.divergence is not None))
     result = Judgement(outcome, rule.confidence, rule.material, tuple(judged), change, change_low, change_high,
                        member_changes, worst, len({c.log for c in cells}), n_windows, M,
                        tuple(sorted({float(c.horizon_s) for c in cells})), "", divergences)
-    return _with_sentence(result, model, baseline, material, unjudged_material, diverged)
+    return _with_sentence(result, model, baseline, material, unjudged_material, diverged,
+                          None if enough else rule.min_windows)
 
 
 def _checked(cells: Sequence[PairedCell]) -> tuple[list[PairedCell], dict[tuple[str, float], list[PairedCell]]]:
@@ -490,7 +493,9 @@ def _listed(cells: Sequence[CellJudgement], names: Mapping[str, str], limit: int
 
 
 def _with_sentence(j: Judgement, model: str, baseline: str, material: list[CellJudgement],
-                   unjudged_material: list[CellJudgement], diverged: list[CellJudgement]) -> Judgement:
+                   unjudged_material: list[CellJudgement], diverged: list[CellJudgement],
+                   too_few: int | None = None) -> Judgement:
+    """`j` with its sentence; `too_few`: the windows a decision needs, when there are fewer."""
     conf = f"{100 * j.confidence:g} %"
     tolerance = f"{100 * j.material:g} %"
     overall = (f"RMSE {percent_text(j.change)} overall ({conf} interval {interval_text(j.change_low, j.change_high)})"
@@ -512,6 +517,10 @@ def _with_sentence(j: Judgement, model: str, baseline: str, material: list[CellJ
     elif j.outcome is Outcome.BEATS:
         text = (f"{model} beats {baseline} at {conf} confidence: {overall}, {evidence}; no cell more than "
                 f"{tolerance} worse at that confidence; worst cells: {_listed(j.worst, names)}.")
+    elif too_few is not None:
+        text = (f"{model} cannot be told apart from {baseline}: {overall}, {evidence}; {j.n_windows} "
+                f"window{'s are' if j.n_windows != 1 else ' is'} too few to decide at {conf} confidence (a "
+                f"verdict needs at least {too_few}); worst cells: {_listed(j.worst, names)}.")
     elif unjudged_material:
         text = (f"{model} cannot be told apart from {baseline} on {j.n_windows} windows: {overall}, {evidence}; "
                 f"but {len(unjudged_material)} cell{'s are' if len(unjudged_material) > 1 else ' is'} more than "

@@ -254,19 +254,20 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
     ensembles: list[str] = []
     predicted: dict = {}
 
-    def run_here(i: int, name: str) -> None:
+    def run_here(name: str) -> None:
         exp = experiments[name]
         dataset = exp.experiment.dataset if exp.needs_training else "D1+D2"
-        log(f"[{i}/{len(names)}] {name}: {model_label(name, exp.experiment.model, dataset)} on {dataset}")
+        # counted in the order the runs start here, after those already done in workers
+        log(f"[{len(done) + 1}/{len(names)}] {name}: {model_label(name, exp.experiment.model, dataset)} on {dataset}")
         run = done[name] = _run_one(name, exp, out, data, progress, lambda m: log("    " + m))
         if run.failure:
             log(f"    FAILED: {run.failure}")
         log(f"    done in {run.seconds:.0f} s")
 
     if seeds > 1 and trained:
-        for i, name in enumerate(names, 1):  # the MMGs as defined first: their maneuvers overlap the training
+        for name in names:  # the MMGs as defined first: their maneuvers overlap the training
             if name not in trained:
-                run_here(i, name)
+                run_here(name)
         ensembles, predicted = _seeded(names, trained, experiments, seeds, out, data, jobs, address, log, done,
                                        storage, mlflow)
     elif jobs > 1 and len(trained) > 1:
@@ -274,14 +275,15 @@ def reproduce(out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
 
         def finished(run: ProtocolRun) -> None:
             done[run.name] = run
-            log(f"[{run.name}] done in {run.seconds:.0f} s" + (f"; FAILED: {run.failure}" if run.failure else ""))
+            log(f"[{len(done)}/{len(names)}] {run.name} done in {run.seconds:.0f} s"
+                + (f"; FAILED: {run.failure}" if run.failure else ""))
 
         longest_first = sorted(trained, key=lambda n: -expected_cost(experiments[n]))
         work = functools.partial(_worker, experiments=experiments, out=out, data=data)
         in_workers(work, longest_first, jobs, multiprocessing.get_context("spawn"), finished)
-    for i, name in enumerate(names, 1):
+    for name in names:
         if name not in done:
-            run_here(i, name)
+            run_here(name)
     names = names + ensembles
     runs = [done[n] for n in names]
     results = [(r.name, r.kind, r.dataset, r.metrics) for r in runs]

@@ -93,7 +93,8 @@ def train_seeds(experiments: dict[str, Experiment], seeds: int, out: Path, data:
             callbacks.append(_watch_callback(watch, trials, together, out, session.concurrency))
         outcomes = run_trials(trials, out, trial_data, session, max_retries=1,
                               storage=TuneStorage(storage, "reproduce") if storage else None,
-                              callbacks=callbacks, log=log, prefix="seeds", groups=together)
+                              callbacks=callbacks, log=log, prefix="seeds", groups=together,
+                              rank_trials=False)  # D1 and D2, NN and hybrid: their losses do not compare
         if tracker is not None:
             tracker.finish(parent)
     return {name: seed_group(name, trials, out, outcomes.errors) for name in experiments}

@@ -18,7 +18,7 @@ from sysid.records.summary import RunSummary, StartStateCheckSummary
 from sysid.store.versions import software_versions
 
 MODEL_TEXT = {
-    "mmg": "MMG model (hull, propeller, rudder and wind forces of the ship definition); not trained",
+    "mmg": "MMG model (hull, propeller, rudder and wind forces of the ship definition)",
     "nn": "NN-only model: a feed-forward network maps the standardized state, actuator and relative-wind "
           "inputs to the forces",
     "hybrid": "hybrid MMG + FNN model: the MMG forces plus a feed-forward correction F_NN, switched off "
@@ -124,7 +124,7 @@ def reproduction_items(summary: Reproduction) -> list[tuple[str, str]]:
     """Readable lines of a reproduction's summary.json (time, scorecard, gate shares)."""
     items = []
     if summary.seconds is not None:
-        items.append(("Reproduction time", _seconds(float(summary.seconds))))
+        items.append(("Reproduction time", _seconds(float(summary.seconds)) + " (runs, evaluation, tables; the report not included)"))
     seeds = summary.seeds or 1
     if seeds > 1:
         items.append(("Seeds", f"every learned model trained with {seeds} seeds: table cells are the mean ± std "
@@ -222,7 +222,7 @@ def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -
         ("Training time", _seconds(sum(trained)) + " in total"),
     ]
     if source.reproduction is not None:   # the scorecard first: page 1 of the report
-        items = reproduction_items(source.reproduction) + nn_count_items(source) + items
+        items = reproduction_items(source.reproduction) + nn_count_items(source) + verdict_items(source) + items
     if source.sweep is not None:
         items = sweep_items(source) + items
     missing = source.missing_runs
@@ -241,6 +241,27 @@ def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -
                                                   "Test logs",
                                                   "Configuration digest", "Software (runs)", "Runs created",
                                                   "Training time", "Ship")]
+    return items
+
+
+def verdict_items(source: ReportSource) -> list[tuple[str, str]]:
+    """Each learned model of a reproduction against its physics baselines, by the one rule
+    (docs: How sysid judges a model), as `sysid reproduce` prints it: a seed group's seeds
+    are members of one model; a learned run without a recorded verdict says so."""
+    items = []
+    for run in source.runs:
+        learned = run.model != ModelKind.MMG or bool(run.summary.identified)
+        if not learned:
+            continue
+        verdict = run.model_verdict
+        label = f"Verdict: {run_label(run.name, run.model, run.dataset)}"
+        if verdict is None:
+            items.append((label, "not judged: sysid reproduce records no verdict for a mean-of-seeds ensemble "
+                                 f"(sysid compare runs/{run.name} --against baseline judges it); its seeds, as members "
+                                 "of one model, are judged in the row of the same model without '(ensemble)'"
+                          if "ensemble" in run.name else "not judged: the run records no verdict"))
+        else:
+            items.append((label, ("" if verdict.beats_baseline else "WARNING: ") + verdict.statement()))
     return items
 
 
@@ -285,7 +306,9 @@ def methods_paragraphs(source: ReportSource) -> list[str]:
                    + (", ".join(f"{k} = {v}" for k, v in _flatten(settings)) or "not recorded") + ".")
     for run in source.runs:
         s = run.summary
-        text = f"{run_label(run.name, run.model, run.dataset)}: {MODEL_TEXT.get(run.model, run.model)}."
+        text = f"{run_label(run.name, run.model, run.dataset)}: {MODEL_TEXT.get(run.model, run.model)}"
+        identified = bool(s.identified) or (s.identified_uncertainty is not None and bool(s.identified_uncertainty.names))
+        text += "; not trained." if run.model == ModelKind.MMG and not identified else "."
         if s.mmg_overrides:
             text += " MMG coefficients changed from the ship file: " + ", ".join(
                 f"{k} = {v}" for k, v in s.mmg_overrides.items()) + "."
@@ -295,8 +318,9 @@ def methods_paragraphs(source: ReportSource) -> list[str]:
                      f"the weights of epoch {_or(s.best_epoch, '?')} were kept "
                      f"(training time {_seconds(s.train_seconds)}, seed {_or(s.seed, '?')}).")
         if s.val_loss_multistep is not None:
+            gated = run.model == ModelKind.HYBRID and run.gate_threshold is not None
             text += (f" val_loss_multistep {s.val_loss_multistep:.5f}: the validation loss, L_v of the final "
-                     "model (kNN gate included) on the validation windows.")
+                     f"model{' (kNN gate included)' if gated else ''} on the validation windows.")
         u = s.identified_uncertainty
         if u is not None and u.names:
             prior = s.identified_initial

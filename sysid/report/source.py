@@ -18,7 +18,7 @@ from sysid.errors import CheckpointError
 from sysid.config.choices import ModelKind, TestLogs
 from sysid.data.splits import PAPER_TEST_STEMS
 from sysid.evaluation.verdict import BaselineVerdict, seed_mean_verdict
-from sysid.store.manifest import has_manifest, verify_manifest
+from sysid.store.manifest import has_manifest, seed_folder, verify_manifest
 from sysid.store.target import OutputKind, record_file
 from sysid.runs.rundir import RunDir, read_table
 from sysid.records.base import read_json_object
@@ -56,6 +56,16 @@ class RunRecord:
             return BaselineVerdict.from_dict(self.summary.verdict.to_json())
         except (KeyError, TypeError, ValueError) as exc:
             raise CheckpointError(f"{self.run_dir.summary}: malformed verdict ({exc})") from None
+
+    @property
+    def model_verdict(self) -> BaselineVerdict | None:
+        """The model against its physics baselines: a seed group's seeds as members of one model
+        (`seed_mean_verdict`, docs: How sysid judges a model), else the run's own verdict; None
+        when a run or any seed has none."""
+        if not self.seeds:
+            return self.verdict
+        verdicts = [r.verdict for r in self.seeds]
+        return seed_mean_verdict([v for v in verdicts if v is not None]) if all(verdicts) else None
 
     @property
     def paper_protocol(self) -> bool:
@@ -256,6 +266,8 @@ def _read_source(path: Path) -> ReportSource:
         return ReportSource(path, "run", [read_run_dir(path)], quality)
     if quality:
         return ReportSource(path, "preprocessing", [], quality)
+    if seed_folder(path):
+        raise CheckpointError(str(seed_folder(path)))
     raise CheckpointError(f"{path}: neither a run directory (summary.json, metrics.csv), "
                           "a reproduction directory (runs/), a sweep directory (sweep.toml, results.csv) nor "
                           "preprocessing output (*.report.json)")

@@ -61,12 +61,25 @@ def write_manifest(directory: str | os.PathLike, kind: str) -> Path:
     return write_text(json.dumps(doc, indent=1), directory / MANIFEST)
 
 
+def seed_folder(directory: str | os.PathLike) -> str | None:
+    """What to give instead when `directory` is a folder of seed runs (``runs/NAME/seed0``, ...
+    of ``sysid reproduce --seeds N``) rather than one run; None otherwise."""
+    directory = Path(directory)
+    seeds = sorted((p.name for p in directory.glob("seed*") if (p / MANIFEST).is_file()), key=lambda n: (len(n), n))
+    if (directory / MANIFEST).exists() or not seeds:
+        return None
+    return (f"{directory}: a folder of {len(seeds)} seed runs ({', '.join(seeds)}), not one run: give one seed "
+            f"({directory / seeds[0]}); sysid compare and sysid maneuver take the folder, its seeds as members of one model")
+
+
 def read_manifest(directory: str | os.PathLike, what: str = "output") -> dict:
     """The manifest of `directory`, or `IncompleteOutputError` naming what is wrong."""
     directory = Path(directory)
     path = directory / MANIFEST
     if not directory.is_dir():
         raise IncompleteOutputError(f"{directory}: no such directory")
+    if not path.is_file() and seed_folder(directory):
+        raise IncompleteOutputError(str(seed_folder(directory)))
     if not path.is_file():
         raise IncompleteOutputError(
             f"{directory}: incomplete {what} directory: no {MANIFEST} (it was interrupted while "

@@ -87,10 +87,11 @@ class Outcomes:
 
 
 def progress_callback(total: int, names: Callable[[dict], str], log: Callable[[str], None],
-                      inbox: str | None = None, prefix: str = "sweep"):
+                      inbox: str | None = None, prefix: str = "sweep", rank_trials: bool = True):
     """A Tune callback printing one line per trial event with the counts (done, running,
-    failed, stopped early) and the best validation loss so far; it also releases the
-    claims of every Tune trial that ends in the inbox named `inbox`."""
+    failed, stopped early) and, with `rank_trials` (trials of one experiment, a sweep), the
+    best validation loss so far; it also releases the claims of every Tune trial that ends in
+    the inbox named `inbox`."""
     _, tune = import_ray()
 
     class SweepProgress(tune.Callback):  # type: ignore[name-defined]
@@ -99,7 +100,8 @@ def progress_callback(total: int, names: Callable[[dict], str], log: Callable[[s
             self.best = (math.inf, "")
 
         def _line(self, event: str) -> None:
-            best = f"; best val_loss_multistep {self.best[0]:.5f} ({self.best[1]})" if math.isfinite(self.best[0]) else ""
+            best = (f"; best val_loss_multistep {self.best[0]:.5f} ({self.best[1]})"
+                    if rank_trials and math.isfinite(self.best[0]) else "")
             log(f"{prefix}: {event} | {self.done}/{total} done, {len(self.running)} running, {self.failed} failed, "
                 f"{self.stopped} stopped early{f', {self.retried} retried' if self.retried else ''}{best}")
 
@@ -216,13 +218,14 @@ def ray_session(out: Path, workers: int | None, address: str | None, log: Callab
 def run_trials(trials: list[TrialSpec], out: Path, data: TrialData, session: Session, max_retries: int = 2,
                storage: TuneStorage | None = None, scheduler=None, callbacks: Sequence = (),
                log: Callable[[str], None] = print, prefix: str = "sweep",
-               groups: Sequence[Sequence[int]] | None = None) -> Outcomes:
+               groups: Sequence[Sequence[int]] | None = None, rank_trials: bool = True) -> Outcomes:
     """Run `trials` (one Tune trial each, one CPU each) in a `ray_session`; trials already
     complete in `out` are reused. Returns what Tune ended without a complete run.
 
     `groups` (indices into `trials`, each index in one group; None: each trial alone):
     one Tune trial per group, its seeds side by side (`sysid.sweep.trial.run_group`);
-    ``config["trial"]`` is the group's first index."""
+    ``config["trial"]`` is the group's first index. `rank_trials` false: the progress lines
+    name no "best" trial (trials of different experiments, whose losses do not compare)."""
     _, tune = import_ray()
     storage = storage or TuneStorage(str(out.resolve()))
     groups = [list(g) for g in groups] if groups is not None else [[i] for i in range(len(trials))]
@@ -230,7 +233,7 @@ def run_trials(trials: list[TrialSpec], out: Path, data: TrialData, session: Ses
     trainable = tune.with_resources(tune.with_parameters(tune_trainable, trials=trials, inbox=session.inbox_name,
                                                          data=data, groups=by_first), {"cpu": 1})
     progress = progress_callback(len(groups), lambda c: group_name([trials[i] for i in by_first[int(c["trial"])]]),
-                                 log, session.inbox_name, prefix)
+                                 log, session.inbox_name, prefix, rank_trials)
     tuner = tune.Tuner(
         trainable, param_space=trial_space(tune, trials, [g[0] for g in groups]),
         tune_config=tune.TuneConfig(max_concurrent_trials=session.concurrency, reuse_actors=True,

@@ -77,7 +77,7 @@ def test_forces_input_missing_or_a_directory(sysid, tmp_path):
     out = tmp_path / "forces.csv"
     assert_refused(sysid("forces", tmp_path / "nope.csv", "-o", out), 2, "nope.csv: file not found", absent=(out,))
     (tmp_path / "adir").mkdir()
-    assert_refused(sysid("forces", tmp_path / "adir", "-o", out), 2, "adir: file not found", absent=(out,))
+    assert_refused(sysid("forces", tmp_path / "adir", "-o", out), 2, "adir: is a directory, not a file", absent=(out,))
 
 
 @pytest.mark.parametrize("where", ["under /proc", "an existing directory", "below a file"])
@@ -215,13 +215,13 @@ def test_preprocess_refuses_bad_options(sysid, raw_logs, tmp_path, case):
 @pytest.mark.parametrize("bad", ["empty.csv", "binary.csv", "utf16.csv", "backwards.csv"])
 def test_preprocess_bad_file_alone_writes_nothing(sysid, raw_logs, tmp_path, bad):
     out = tmp_path / "processed"
-    assert_refused(sysid("preprocess", raw_logs / bad, "-o", out), 1, bad, absent=(out,))
+    assert_refused(sysid("preprocess", raw_logs / bad, "-o", out), 2, bad, absent=(out,))
 
 
 def test_preprocess_bad_file_among_good_ones(sysid, raw_logs, tmp_path):
     out = tmp_path / "processed"
     outcome = sysid("preprocess", raw_logs / "run.csv", raw_logs / "binary.csv", "-o", out)
-    assert_refused(outcome, 1, "binary.csv")
+    assert_refused(outcome, 2, "binary.csv")
     files = verify_manifest(out, "preprocessing")["files"]  # the good file: complete and sealed
     assert sorted(files) == ["run.csv", "run.report.json"]
     assert leftovers(tmp_path) == [] and leftovers(out) == []

@@ -65,7 +65,7 @@ def test_preprocess_rate_that_leaves_one_row_is_refused(sysid, tmp_path):
     raw.to_csv(tmp_path / "run.csv", index=False)
     out = tmp_path / "processed"
     # 0.01 Hz divides 10 Hz, but a 60-s log then holds one sample (t = 0)
-    assert_refused(sysid("preprocess", tmp_path / "run.csv", "-o", out, "--rate", "0.01"), 1,
+    assert_refused(sysid("preprocess", tmp_path / "run.csv", "-o", out, "--rate", "0.01"), 2,
                    "run.csv", "--rate 0.01 Hz leaves fewer than 2 samples", absent=(out,))
     done = sysid("preprocess", tmp_path / "run.csv", "-o", out, "--rate", "0.1")  # every 10 s: 7 samples
     assert done.code == 0, done.err

@@ -108,6 +108,17 @@ def _processed(dataset_dir, tmp_path, edit):
     return path
 
 
+def test_a_processed_log_cut_off_mid_row_is_named_as_such(dataset_dir, tmp_path):
+    path = _processed(dataset_dir, tmp_path, lambda f: None)
+    lines = path.read_text().splitlines()           # the header and 300 rows
+    path.write_text("\n".join(lines[:-1] + [lines[-1][:40]]))   # the last row cut after 40 characters
+    with pytest.raises(DataError, match=r"run.csv: data row 301: the file ends in the middle of it \(no line end, "
+                                        r"\d+ of 13 channels missing\): it is cut off"):
+        read_run(path)
+    path.write_text("\n".join(lines))              # complete, only the last line end missing: read
+    assert len(read_run(path, rate=10.0)) == 300
+
+
 def test_processed_run_errors_name_file_and_field(dataset_dir, tmp_path):
     def nan(f): f.loc[120, "r_angvelo [rad/s]"] = np.nan
     with pytest.raises(DataError, match=r"run.csv: column 'r_angvelo \[rad/s\]' \(channel r\) is empty, NaN or inf at data row 122"):

@@ -266,3 +266,25 @@ def test_an_identified_mmg_run_with_validation_logs_evaluates_again(project, dat
     assert [float(r[-3]) for r in rows] == pytest.approx(list(truth.rmse_u), abs=6e-6)
     assert any("The identified MMG" in line and "MMG (ship file)" in line
                for line in (again.out + again.err).splitlines() if line.startswith(("verdict:", "WARNING:")))
+
+
+def test_runs_of_the_paper_data_sets_compare_on_its_six_test_files(dataset_dir, tmp_path, capsys):
+    """Without --data or --config, runs trained on D1/D2 are compared on the paper's test files
+    (as `sysid evaluate RUN` is); an own-logs run still needs them named."""
+    from sysid.data.splits import PAPER_TEST_STEMS
+
+    (tmp_path / "d1.toml").write_text('[experiment]\nname = "m"\nmodel = "mmg"\ndataset = "D1"\n')
+    assert in_process(capsys, "train", tmp_path / "d1.toml", "-o", tmp_path / "run").code == 0
+    done = in_process(capsys, "compare", tmp_path / "run", "esso_osaka", "-o", tmp_path / "cmp", "--no-report")
+    assert done.code == 0, done.err
+    logs = set(pd.read_csv(tmp_path / "cmp" / "comparison.csv")["log"])
+    assert logs == set(PAPER_TEST_STEMS) and len(logs) == 6
+    own = tmp_path / "own.toml"
+    own.write_text(f'[experiment]\nname = "o"\nmodel = "mmg"\n[data]\nfiles = ["{tiny_file(dataset_dir)}"]\n')
+    assert in_process(capsys, "train", own, "-o", tmp_path / "own").code == 0
+    refused = in_process(capsys, "compare", tmp_path / "own", "esso_osaka", "-o", tmp_path / "cmp2")
+    assert refused.code == 2 and "no logs to compare on" in refused.err
+
+
+def tiny_file(dataset_dir):
+    return dataset_dir / "berthing" / "berthing_12-Nov-2020_11_07_23.csv"

@@ -327,3 +327,18 @@ def test_a_baseline_exact_on_some_windows_gives_finite_intervals_without_warning
     assert j.cells[0].change_high <= RATIO_CAP - 1
     np.testing.assert_array_equal(_resampled_ratio(np.array([4.0, 0.0, 1.0, 1e14]), np.array([1.0, 0.0, 0.0, 1.0])),
                                   [2.0, 1.0, RATIO_CAP, RATIO_CAP])
+
+
+def test_fewer_windows_than_a_verdict_needs_decide_nothing():
+    """One window (a short log's only 100-s window): its resampled interval has no width, so it
+    is no evidence either way; three windows of the same halving beat the baseline."""
+    def windows(n: int, ratio: float) -> list[PairedCell]:
+        return [PairedCell(f"log{k}", f"Log {k}", 30.0, channel, [[ratio * 0.01]], [[0.01]], [0.0])
+                for k in range(n) for channel in CHANNELS]
+
+    better, worse = judge(windows(1, 0.5), RULE), judge(windows(1, 2.0), RULE)
+    assert better.change_low == pytest.approx(-0.5) and better.change_high == pytest.approx(-0.5)
+    assert better.outcome is Outcome.NOT_DISTINGUISHABLE and worse.outcome is Outcome.NOT_DISTINGUISHABLE
+    assert "; 1 window is too few to decide at 95 % confidence (a verdict needs at least 3)" in better.sentence
+    assert judge(windows(3, 0.5), RULE).outcome is Outcome.BEATS
+    assert judge(windows(3, 2.0), RULE).outcome is Outcome.WORSE

@@ -6,26 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sysid.evaluation.judgement import CHANNELS, Outcome, PairedCell, VerdictRule
-from sysid.evaluation.verdict import (SHIP_FILE_MMG, TEST, BaselineVerdict, ChannelCell, seed_mean_verdict,
-                                      verdict_of)
+from sysid.evaluation.judgement import Outcome
+from sysid.evaluation.verdict import SHIP_FILE_MMG, TEST, BaselineVerdict, seed_mean_verdict
 from sysid.report.tables import verdict_table
 
-RULE = VerdictRule(resamples=500)
-
-
-def seed_verdict(factor: float) -> BaselineVerdict:
-    """One seed: the model's per-window RMSE `factor` x the MMG's on 3 logs of 8 windows."""
-    rng = np.random.default_rng(0)          # the same logs and MMG in every seed
-    cells = []
-    for log in ("a", "b", "c"):
-        base = 0.01 + 0.01 * rng.random(8)
-        for channel in CHANNELS:
-            cells.append(PairedCell(log, log.upper(), 30.0, channel, (factor * base)[None, :], base[None, :],
-                                    30.0 * np.arange(8)))
-    pooled = tuple(ChannelCell(TEST, 30.0, c, factor, {SHIP_FILE_MMG: 1.0}) for c in CHANNELS)
-    return verdict_of("hybrid", (SHIP_FILE_MMG,), pooled, {}, {TEST: {SHIP_FILE_MMG: tuple(cells)}}, RULE)
-
+from verdict_cases import RULE, seed_verdict
 
 def test_seeds_are_members_their_spread_is_shown_and_the_mmg_counts_once():
     seeds = [seed_verdict(f) for f in (0.6, 0.8, 1.3)]

@@ -17,7 +17,11 @@ def _config(tmp_path, dataset_dir):
 
 def test_interrupted_training_resumes_to_the_same_metrics(dataset_dir, tmp_path, monkeypatch, capsys):
     config, test_file = _config(tmp_path, dataset_dir)
-    sysid(["train", str(config), "-o", str(tmp_path / "whole"), "--test", str(test_file)])
+    capsys.readouterr()
+    # --resume without a checkpoint: said, and the run trains from its first epoch
+    sysid(["train", str(config), "-o", str(tmp_path / "whole"), "--test", str(test_file), "--resume"])
+    assert (f"WARNING: --resume: no checkpoint {checkpoint_path(tmp_path / 'whole')} to resume from: "
+            f"{tmp_path / 'whole'} trains from the first epoch") in capsys.readouterr().err
     whole = (tmp_path / "whole" / "metrics.csv").read_text()
 
     saves = {"n": 0}
@@ -64,7 +68,11 @@ def test_a_checkpoint_of_torch_adam_resumes_to_the_same_metrics(dataset_dir, tmp
     from sysid.identify import loop
 
     config, test_file = _config(tmp_path, dataset_dir)
-    sysid(["train", str(config), "-o", str(tmp_path / "whole"), "--test", str(test_file)])
+    capsys.readouterr()
+    # --resume without a checkpoint: said, and the run trains from its first epoch
+    sysid(["train", str(config), "-o", str(tmp_path / "whole"), "--test", str(test_file), "--resume"])
+    assert (f"WARNING: --resume: no checkpoint {checkpoint_path(tmp_path / 'whole')} to resume from: "
+            f"{tmp_path / 'whole'} trains from the first epoch") in capsys.readouterr().err
     whole = (tmp_path / "whole" / "metrics.csv").read_text()
 
     original = TrainingCheckpoint.save
@@ -94,7 +102,11 @@ def test_a_version_1_checkpoint_resumes_to_the_same_metrics(dataset_dir, tmp_pat
     """A checkpoint in version 1's layout (every tensor on its own, what sysid wrote before the
     packed tables) resumes to the metrics of an uninterrupted run."""
     config, test_file = _config(tmp_path, dataset_dir)
-    sysid(["train", str(config), "-o", str(tmp_path / "whole"), "--test", str(test_file)])
+    capsys.readouterr()
+    # --resume without a checkpoint: said, and the run trains from its first epoch
+    sysid(["train", str(config), "-o", str(tmp_path / "whole"), "--test", str(test_file), "--resume"])
+    assert (f"WARNING: --resume: no checkpoint {checkpoint_path(tmp_path / 'whole')} to resume from: "
+            f"{tmp_path / 'whole'} trains from the first epoch") in capsys.readouterr().err
     whole = (tmp_path / "whole" / "metrics.csv").read_text()
 
     saves = []

@@ -51,7 +51,27 @@ def test_clean_log_matches_truth(synthetic, raw):
 
 def test_missing_column(raw):
     msg = error_of(raw.drop(columns=["anemo_2_dir [rad]"]))
-    assert "log.csv" in msg and "anemo_2_dir" in msg and "missing" in msg
+    assert "log.csv" in msg and "anemo_2_dir" in msg and "missing" in msg and "add it" in msg
+
+
+def test_processed_log_is_named_as_one():
+    processed = analytic_run(20.0)
+    processed.columns = [f"{c} [{u}]" for c, u in synth.schema.PROCESSED.items()]
+    msg = error_of(processed)
+    assert "a processed log, not a raw" in msg and "u_velo" in msg
+
+
+def test_rpm_in_rps_column_names_the_unit_and_the_largest_value(raw):
+    raw["n_prop [rps]"] = raw["n_prop [rps]"] * 60.0  # 10 rps logged as 600 rpm
+    msg = error_of(raw)
+    assert "column n_prop" in msg and "rpm / 60" in msg and "degrees" not in msg
+    assert f"{len(raw)} row(s) outside" in msg and "up to 600 " in msg
+
+
+def test_knots_in_anemometer_speed_beyond_range(raw):
+    raw["anemo_1_speed [m/s]"] = 31.0 * 1.943844  # 31 m/s, a gale, logged in knots: 60.3
+    msg = error_of(raw)
+    assert "anemo_1_speed" in msg and "knots" in msg and "up to 60.2592 " in msg
 
 
 def test_misnamed_column(raw):
@@ -121,6 +141,22 @@ def test_exact_duplicate_rows_are_dropped_and_logged(synthetic, raw):
     assert synth.score(out.segments, synthetic.truth)["u"] < 5e-3
 
 
+def test_empty_time_stamps_are_counted_with_the_fix(raw):
+    raw.loc[500:520, "t [s]"] = np.nan   # rows 501-521
+    assert error_of(raw) == ("log.csv: column t: row 501: empty time (21 row(s); every row needs its time stamp: "
+                             "fill it in, or delete the row)")
+
+
+def test_clock_time_is_counted_from_the_first_sample(synthetic, raw):
+    shifted = raw.copy()
+    shifted["t [s]"] = shifted["t [s]"] + 1_700_000_000.0   # Unix seconds of the logger's clock
+    out, plain = run(shifted), run(raw)
+    assert out.report.repairs == ["column t: starts at 1700000000.0 s, a clock time; counted from the first sample"]
+    assert len(out.segments) == len(plain.segments) == 1
+    assert out.segments[0]["t"].iloc[0] == 0.0
+    pd.testing.assert_frame_equal(out.segments[0], plain.segments[0], rtol=1e-6)
+
+
 def test_time_in_milliseconds(raw):
     raw["t [s]"] = raw["t [s]"] * 1000.0
     assert "median step" in error_of(raw)
@@ -136,6 +172,11 @@ def test_short_nan_burst_interpolated_long_one_splits(synthetic, raw):
     assert len(out.segments) == 2
     s = synth.score(out.segments, synthetic.truth, dropouts=[(60.0, 62.9)])
     assert s["r"] < 1e-3 and s["wind_speed"] < 0.05
+
+
+def test_every_row_empty(raw):
+    raw.iloc[:, :] = np.nan
+    assert error_of(raw) == f"log.csv: no data: every one of its {len(raw)} rows is empty (no number in any column)"
 
 
 def test_all_nan_channel(raw):
@@ -154,6 +195,13 @@ def test_swapped_antennas_error_and_repair(synthetic, raw):
     assert synth.score(out.segments, synthetic.truth)["psi_deg"] < 0.3
 
 
+def test_antenna_positions_in_feet(raw):
+    for column in ("gnss_fore_x [m]", "gnss_fore_y [m]", "gnss_aft_x [m]", "gnss_aft_y [m]"):
+        raw[column] = raw[column] / 0.3048
+    msg = error_of(raw)
+    assert "gnss_fore_x" in msg and "3.28 x the nominal: positions in feet? convert the antenna columns to metres" in msg
+
+
 def test_baseline_never_matches(raw):
     with pytest.raises(RawLogError, match="gnss_baseline"):
         Pipeline(SensorLayout(gnss_fore=(1.0, 0.0), gnss_aft=(-1.0, 0.0), gnss_baseline=2.0)).run(raw)
@@ -170,7 +218,7 @@ def test_cli_failed_file_leaves_no_output(synthetic, tmp_path, capsys):
     out = tmp_path / "out"
     with pytest.raises(SystemExit) as info:
         main(["preprocess", str(good), str(bad), "--ship", "esso_osaka", "-o", str(out), "--jobs", "2"])
-    assert info.value.code == 1
+    assert info.value.code == 2  # the bad log's fault (bad input), the good one kept
     names = sorted(p.name for p in out.iterdir())
     assert names == ["good.csv", "good.report.json", "manifest.json"]  # complete, sealed
     assert sorted(verify_manifest(out, "preprocessing")["files"]) == ["good.csv", "good.report.json"]
@@ -184,6 +232,53 @@ def test_cli_failed_file_leaves_no_output(synthetic, tmp_path, capsys):
     from sysid.data.recordings import read_run                  # loads straight into training/evaluation
     loaded = read_run(out / "good.csv")
     assert len(loaded) == len(processed) and loaded.dt == pytest.approx(1.0)
+
+
+def test_truncated_file_is_refused(synthetic, tmp_path):
+    from preprocessing.schema import read_raw
+    path = tmp_path / "cut.csv"
+    synthetic.raw.to_csv(path, index=False)
+    text = path.read_text()
+    lines = text.splitlines()
+    cut = "\n".join(lines[:501]) + "\n" + lines[501][: len(lines[501]) // 3]  # header, 500 rows, a third of row 501
+    path.write_text(cut)
+    with pytest.raises(RawLogError) as info:
+        read_raw(path)
+    assert "cut.csv: row 501:" in str(info.value) and "cut off" in str(info.value)
+    path.write_text("\n".join(lines[:501]))  # the last row complete, no line end: read as it is
+    assert len(read_raw(path)[0]) == 500
+
+
+def test_cli_bad_inputs_exit_2_and_write_nothing(synthetic, tmp_path, capsys):
+    from sysid.cli import main
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    broken = synthetic.raw.copy()
+    broken["delta_rudder [rad]"] = np.degrees(broken["delta_rudder [rad]"])
+    broken.to_csv(logs / "deg.csv", index=False)
+    before = (logs / "deg.csv").read_bytes()
+    for args, said in ((["preprocess", str(logs / "deg.csv")], "delta_rudder"),
+                       (["preprocess", str(logs)], "is a directory, not a raw log; it holds 1 .csv file(s)"),
+                       (["preprocess", str(tmp_path)], "it holds no .csv file")):
+        with pytest.raises(SystemExit) as info:
+            main([*args, "-o", str(tmp_path / "out")])
+        assert info.value.code == 2
+        assert said in capsys.readouterr().err
+        assert not (tmp_path / "out").exists()
+    assert (logs / "deg.csv").read_bytes() == before
+
+
+def test_cli_internal_failure_exits_1(synthetic, tmp_path, monkeypatch):
+    from preprocessing import pipeline
+    from sysid.cli import main
+    synthetic.raw.to_csv(tmp_path / "good.csv", index=False)
+
+    def broken(self, path, name=None):
+        raise RuntimeError("a bug")
+    monkeypatch.setattr(pipeline.Pipeline, "run", broken)
+    with pytest.raises(SystemExit) as info:
+        main(["preprocess", str(tmp_path / "good.csv"), "-o", str(tmp_path / "out")])
+    assert info.value.code == 1
 
 
 def test_cli_synth_raw_writes_truth(tmp_path, capsys):

@@ -180,16 +180,19 @@ def test_a_summary_that_is_not_a_json_object_is_a_record_error_naming_the_file(t
 
 
 def test_reproduce_warns_for_every_run_below_its_baseline(hybrid_run, tmp_path, capsys):
-    """``sysid reproduce``'s last lines: one WARNING per run whose summary says it does not beat
-    its physics baseline, with that run's verdict statement; none for a run that does."""
+    """``sysid reproduce``'s last lines: one line per model with its verdict statement (a
+    WARNING on stderr when it does not beat its physics baseline); a model's seeds are members
+    of one model, judged once."""
     import shutil
 
     from sysid.cli.train_commands import _warn_below_baseline
 
     data = json.loads(RunDir(hybrid_run.path).summary.read_text())
-    for name, beats in (("a", False), ("b", True)):
-        shutil.copytree(hybrid_run.path, tmp_path / "runs" / name / "seed0")
-        (tmp_path / "runs" / name / "seed0" / "summary.json").write_text(json.dumps({**data, "beats_baseline": beats}))
+    assert data["beats_baseline"] is False
+    shutil.copytree(hybrid_run.path, tmp_path / "runs" / "a")
+    for seed in ("seed0", "seed1"):
+        shutil.copytree(hybrid_run.path, tmp_path / "runs" / "b" / seed)
     _warn_below_baseline(tmp_path)
     said = capsys.readouterr().err.splitlines()
-    assert said == [f"WARNING: run a/seed0: {data['verdict']['statement']}"]
+    assert said[0] == f"WARNING: run a: {data['verdict']['statement']}"
+    assert said[1].startswith("WARNING: run b (2 seeds): The hybrid (mean over 2 seeds) ") and len(said) == 2
