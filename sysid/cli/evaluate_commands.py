@@ -29,7 +29,7 @@ def evaluate(
     model_kind: str = typer.Option("mmg", "--model", help="mmg (the physical model alone)."),
     config: Optional[Path] = typer.Option(None, "--config", help="Experiment config: its [data.columns] and [data] rate read the logs, its [data] test logs, [evaluation] horizons and integrator are the defaults; with --model mmg its ship and [mmg] overrides are the MMG's."),
     integrator: Optional[str] = typer.Option(None, "--integrator", help="euler (the protocol's) or rk4 (default: the config's, else euler)."),
-    ship: Optional[str] = typer.Option(None, "--ship", help="Ship name (configs/ships/NAME.toml) or path to a ship TOML (default: the config's, else esso_osaka)."),
+    ship: Optional[str] = typer.Option(None, "--ship", help="Ship name (configs/ships/NAME.toml) or path to a ship TOML (default: the config's, else esso_osaka; with a run: the run's copy of the ship file it was trained with, and --ship FILE loads the run with FILE instead)."),
     set_: Optional[List[str]] = SetOption,
     quadrature: str = QuadratureOption,
     compiled: Optional[bool] = CompiledOption,
@@ -37,8 +37,9 @@ def evaluate(
     """The protocol's windowed RMSE of u, v_m, r per file and horizon (MMG or a trained run).
 
     A trained run is shown beside its physics baselines (the ship file's MMG with the run's
-    [mmg] overrides; the identified MMG under a hybrid's FNN) on the same windows, with its
-    verdict (docs: How sysid judges a model)."""
+    [mmg] overrides, from the run's copy of the ship file it was trained with; the identified
+    MMG under a hybrid's FNN) on the same windows, with its verdict (docs: How sysid judges a
+    model)."""
     import pandas as pd
     from sysid.config.experiment import load_experiment
     from sysid.data.recordings import read_runs
@@ -56,8 +57,8 @@ def evaluate(
     files, columns = _logs(data, source)
     horizons = list(horizon) if horizon else list(source.evaluation.horizons if source is not None else (30.0, 100.0))
     chosen = integrator_of(integrator or (str(source.evaluation.integrator) if source is not None else "euler"), False)
-    ship_input = None if run_dir is not None else ship_file(ship or (exp.experiment.ship if exp is not None
-                                                                     else "esso_osaka"))
+    ship_input = ship_file(ship) if ship is not None else (
+        None if run_dir is not None else ship_file(exp.experiment.ship if exp is not None else "esso_osaka"))
     claim(output, OutputKind.FILE, [run_dir, config, *(data or []), *files, ship_input, *_logs_of_run(run_exp)])
     rate = source.data.rate if source is not None else 1.0
     runs = read_runs(progress(files, desc="reading", unit="files", quiet=len(files) < 4), rate, columns)
@@ -81,12 +82,13 @@ def evaluate(
 
 
 def _model_to_judge(run_dir, model_kind: str, exp, ship, set_, quadrature: str):
-    """(the run's config or None, the model, its label): a trained run's, or the MMG of
-    ``--ship`` (else the config's) with the config's [mmg] overrides and ``--set``."""
+    """(the run's config or None, the model, its label): a trained run's (its MMG and physics
+    baseline from its copy of its ship file, or from ``--ship``), or the MMG of ``--ship``
+    (else the config's) with the config's [mmg] overrides and ``--set``."""
     if run_dir is not None:
         from sysid.runs.layout import load_model
-        run_exp, model = load_model(run_dir)
-        label = f"{run_exp.experiment.model} run {run_dir}"
+        run_exp, model = load_model(run_dir, ship=ship)
+        label = f"{run_exp.experiment.model} run {run_dir}" + (f" with ship {ship}" if ship is not None else "")
     else:
         from sysid.config.choices import ModelKind
         if model_kind != ModelKind.MMG:

@@ -456,7 +456,7 @@ def _check_coefficient_names(exp: Experiment, src: str) -> None:
 _PATH_OPTIONS = {("data", "train"), ("data", "validation"), ("data", "test")}
 
 
-def _is_ship_path(ship: str) -> bool:
+def is_ship_path(ship: str) -> bool:
     """A ship given as a file (``my_ship.toml``, ``ships/a``), not a bundled name."""
     return ship.endswith(".toml") or "/" in ship or os.sep in ship
 
@@ -469,7 +469,7 @@ def resolve_paths(sections: dict, directory: Path) -> dict:
     """Relative file options of parsed `sections` made absolute against `directory`."""
     out = dict(sections)
     ship = out["experiment"].ship
-    if _is_ship_path(ship):
+    if is_ship_path(ship):
         out["experiment"] = dataclasses.replace(out["experiment"], ship=_anchored(ship, directory))
     for section, key in _PATH_OPTIONS:
         value = getattr(out[section], key)

@@ -7,6 +7,7 @@ coefficients average their whole forces, component by component.
 """
 from __future__ import annotations
 
+import dataclasses
 from typing import Sequence
 
 import torch
@@ -147,9 +148,11 @@ def _common_mmg(members: Sequence[nn.Module]) -> bool:
         return False
     first = members[0].mmg
     reference = first.state_dict()
+    ship = dataclasses.replace(first.ship, source="")   # one ship, wherever each member read it (its run's copy)
     for m in members[1:]:
         mine = m.mmg.state_dict()
-        if (m.mmg.ship != first.ship or m.mmg.quadrature != first.quadrature or mine.keys() != reference.keys()
+        if (dataclasses.replace(m.mmg.ship, source="") != ship or m.mmg.quadrature != first.quadrature
+                or mine.keys() != reference.keys()
                 or any(not torch.equal(mine[k], reference[k]) for k in reference)):
             return False
     return True

@@ -65,13 +65,15 @@ class ReportPaths:
 
 
 def ship_size(source: ReportSource) -> tuple[float, float] | None:
-    """(L_pp, B) [m] of the runs' ship, or None when its definition cannot be loaded."""
+    """(L_pp, B) [m] of the runs' ship (the first run's copy of its ship file, else the file
+    its summary names), or None when its definition cannot be loaded."""
     from sysid.mmg.ship import load_ship
-    name = next((r.summary.ship for r in source.runs if r.summary.ship), None)
-    if not name:
+    run = next((r for r in source.runs if r.summary.ship), None)
+    if run is None:
         return None
+    copy = run.run_dir.ship_copy(run.summary.ship)
     try:
-        ship = load_ship(name)
+        ship = load_ship(copy if copy.is_file() else run.summary.ship)
         return float(ship["L_pp"]), float(ship["B"])
     except Exception:  # noqa: BLE001 - an unknown ship only costs the outlines
         return None

@@ -31,6 +31,9 @@ A **run directory** (``sysid train CONFIG -o runs/NAME``)::
     baseline_metrics.csv  the physics baselines on the same test logs: "baseline" (its label,
                        `sysid.evaluation.verdict`) + METRICS_COLUMNS; with a verdict and test logs
     traces/            one CSV per (file, horizon): ``{file_stem}_h{H}.csv``, `TRACE_COLUMNS`
+    ship/NAME.toml     the ship file the run was made with, byte for byte (a bundled ship's too;
+                       NAME: the file's own name, `sysid.runs.rundir.ship_copy_name`): the run's
+                       MMG and physics baseline are read from it (`RunDir.read_experiment`)
     manifest.json      written last: every other file with its SHA-256 (`sysid.store.manifest`)
 
 Untrained MMG-only runs have no model.pt, knn.pt or history.csv. A run is written into a
@@ -71,7 +74,7 @@ from sysid.errors import CheckpointError
 from sysid.evaluation.divergence import PhysicalRange
 from sysid.evaluation.evaluate import Evaluation
 from sysid.config.experiment import Experiment, ship_overrides
-from sysid.store.files import write_csv, write_text
+from sysid.store.files import write_bytes, write_csv, write_text
 from sysid.mmg.model import MMG
 from sysid.hybrid.force_models import CorrectedModel, build_model
 from sysid.runs.rundir import BASELINE_METRICS_COLUMNS, RunDir
@@ -107,11 +110,14 @@ def save_model(model: torch.nn.Module, run_dir: Path) -> None:
             KnnBank.of(model.gate).save(run.knn)
 
 
-def load_model(run_dir: str | os.PathLike, dtype: torch.dtype = torch.float64, _within: tuple[Path, ...] = ()):
+def load_model(run_dir: str | os.PathLike, dtype: torch.dtype = torch.float64, _within: tuple[Path, ...] = (),
+               *, ship: str | None = None):
     """(experiment, model) of a run directory; clear errors for a missing or corrupt one, and
-    for an ensemble whose members lead back to itself."""
+    for an ensemble whose members lead back to itself. The model's MMG (and the experiment's
+    ship, the physics baseline's) is the run's copy of its ship file, or `ship` when given
+    (`RunDir.read_experiment`)."""
     run = RunDir.open(run_dir)
-    exp = run.read_experiment()
+    exp = run.read_experiment(ship)
     if exp.ensemble.members:
         here = run.path.resolve()
         chain = (*_within, here)
@@ -122,7 +128,7 @@ def load_model(run_dir: str | os.PathLike, dtype: torch.dtype = torch.float64, _
                 raise CheckpointError(f"{run.config}: [ensemble] members names {member!r}, which is "
                                       f"{'this run itself' if path == here else f'the ensemble {path} it belongs to'}"
                                       "; an ensemble's members are other run directories: remove it from the list")
-            members.append(load_model(path, dtype, chain)[1])
+            members.append(load_model(path, dtype, chain, ship=ship)[1])
         return exp, SeedEnsemble(members)
     model = build_model(exp, dtype)
     if not exp.needs_training:
@@ -198,17 +204,29 @@ def run_summary(exp: Experiment, evaluation: Evaluation, training=None, seconds:
 def write_run(run_dir: str | os.PathLike, exp: Experiment, model, evaluation: Evaluation,
               history: pd.DataFrame | None = None, training=None,
               seconds: float | None = None, overwrite: bool = False, verdict=None,
-              data: dict | None = None, baseline_metrics: pd.DataFrame | None = None, limits: PhysicalRange | None = None) -> Path:
-    """Write a complete run directory (config, weights, kNN bank, history, metrics, traces).
+              data: dict | None = None, baseline_metrics: pd.DataFrame | None = None, limits: PhysicalRange | None = None,
+              ship_definition: bytes | None = None) -> Path:
+    """Write a complete run directory (config, ship file, weights, kNN bank, history,
+    metrics, traces).
 
-    Staged (`sysid.store.staging`): the files go into a hidden directory beside `run_dir`, sealed
-    with a manifest and moved into place complete; an existing `run_dir` is refused unless
-    `overwrite`, which replaces all of it.
+    `ship_definition`: the bytes of the ship file the run was made with, read when it
+    started (`ship_definition`); None: read now. Staged (`sysid.store.staging`): the files
+    go into a hidden directory beside `run_dir`, sealed with a manifest and moved into place
+    complete; an existing `run_dir` is refused unless `overwrite`, which replaces all of it.
     """
+    if ship_definition is None:
+        ship_definition = read_ship_definition(exp)
     with staged_directory(run_dir, "run", overwrite) as staging:
         _write_run_files(RunDir(staging), exp, model, evaluation, history, training, seconds, verdict, data,
-                         baseline_metrics, limits)
+                         baseline_metrics, limits, ship_definition)
     return Path(run_dir)
+
+
+def read_ship_definition(exp: Experiment) -> bytes:
+    """The bytes of the experiment's ship file (``[experiment] ship``: a file, or a bundled
+    ship's), which its run directory keeps a copy of."""
+    from sysid.mmg.ship import resolve_ship_path
+    return resolve_ship_path(exp.experiment.ship).read_bytes()
 
 
 def _used_files(exp: Experiment, data: dict | None) -> Experiment:
@@ -225,8 +243,11 @@ def _used_files(exp: Experiment, data: dict | None) -> Experiment:
 
 def _write_run_files(run: RunDir, exp: Experiment, model, evaluation: Evaluation,
                      history: pd.DataFrame | None, training, seconds: float | None, verdict=None,
-                     data: dict | None = None, baseline_metrics: pd.DataFrame | None = None, limits: PhysicalRange | None = None) -> None:
+                     data: dict | None = None, baseline_metrics: pd.DataFrame | None = None, limits: PhysicalRange | None = None,
+                     ship_definition: bytes | None = None) -> None:
     write_text(_used_files(exp, data).to_toml(), run.config)
+    write_bytes(ship_definition if ship_definition is not None else read_ship_definition(exp),
+                run.ship_copy(exp.experiment.ship))
     save_model(model, run.path)
     if history is not None and len(history):
         write_csv(history, run.history, float_format="%.6g")

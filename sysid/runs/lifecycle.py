@@ -32,7 +32,7 @@ from sysid.evaluation.verdict import (IDENTIFIED_MMG, SHIP_FILE_MMG, BaselineVer
 from sysid.config.experiment import Experiment
 from sysid.hybrid.force_models import CorrectedModel, build_mmg, build_model
 from sysid.mmg.coverage import outside_force_models
-from sysid.runs.layout import write_run
+from sysid.runs.layout import read_ship_definition, write_run
 from sysid.identify.trainer import EpochReport, Trainer, TrainingSummary, held_out_validation
 from sysid.config.checks import threads
 
@@ -181,6 +181,7 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
     log = log if log is not None else logging.getLogger(__name__).info
     check_experiment_fits(exp, tests)
     started = time.perf_counter()
+    ship_definition = read_ship_definition(exp)   # the run keeps the ship file it was made with
     checked: list[Run] = list(validation) if validation is not None else []
     with compute_threads(exp.training.threads):
         runs: list[Run] = []
@@ -188,7 +189,8 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
         if exp.needs_training:
             runs, checked, held_out = _training_logs(exp, train_runs, data, checked, tests, log)
             trainer = _fitted(exp, runs, checked, out_dir, progress, log, resume, on_epoch)
-        return _written(exp, out_dir, tests, runs, checked, held_out, trainer, started, overwrite, log)
+        return _written(exp, out_dir, tests, runs, checked, held_out, trainer, started, overwrite, log,
+                        ship_definition)
 
 
 def run_seeds(experiments: Sequence[Experiment], out_dirs: Sequence[str | os.PathLike], tests: Sequence[Run],
@@ -212,6 +214,7 @@ def run_seeds(experiments: Sequence[Experiment], out_dirs: Sequence[str | os.Pat
     on_epochs = list(on_epochs) if on_epochs is not None else [None] * len(experiments)
     check_experiment_fits(exp0, tests)
     started = time.perf_counter()
+    ship_definitions = [read_ship_definition(exp) for exp in experiments]
     with compute_threads(exp0.training.threads):
         runs, shared, held_out = _training_logs(exp0, train_runs, data, list(validation or []), tests, logs[0])
         trainers = [Trainer(exp, progress=progress, log=log, checkpoint=checkpoint_path(out), resume=resume,
@@ -225,16 +228,17 @@ def run_seeds(experiments: Sequence[Experiment], out_dirs: Sequence[str | os.Pat
             raise
         share = (time.perf_counter() - started) / len(trainers)   # each seed's share of the group's time
         return [_written(exp, out, tests, runs, shared, held_out, trainer, time.perf_counter() - share, overwrite,
-                         log)
-                for exp, out, trainer, log in zip(experiments, out_dirs, trainers, logs)]
+                         log, ship)
+                for exp, out, trainer, log, ship in zip(experiments, out_dirs, trainers, logs, ship_definitions)]
 
 
 def _written(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[Run], runs: list[Run],
              validation: list[Run], held_out, trainer: Trainer | None, started: float, overwrite: bool,
-             log: Callable[[str], None]) -> RunResult:
+             log: Callable[[str], None], ship_definition: bytes | None = None) -> RunResult:
     """A run after its training (`trainer` fitted; None: an MMG used as defined): validation
     scores beside the physics baselines, evaluation on `tests` with its verdict, the run
-    directory written (its seconds counted from `started`) and the checkpoint removed."""
+    directory written (its seconds counted from `started`; with `ship_definition`, the ship
+    file's bytes read when the run started) and the checkpoint removed."""
     history, training, validation_scores = None, None, None
     if trainer is not None:
         history, training = trainer.history_, trainer.summary_
@@ -250,7 +254,8 @@ def _written(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[Run], 
                            held_out, exp.training.split_seed)
     seconds = time.perf_counter() - started
     path = write_run(out_dir, exp, model, evaluation, history, training, seconds, overwrite,
-                     verdict=verdict, data=data_used, baseline_metrics=baseline_metrics, limits=limits)
+                     verdict=verdict, data=data_used, baseline_metrics=baseline_metrics, limits=limits,
+                     ship_definition=ship_definition)
     if training is not None:
         TrainingCheckpoint(checkpoint_path(out_dir), exp.to_toml()).remove()
     return RunResult(path, exp, model, evaluation, history, training, seconds, verdict)

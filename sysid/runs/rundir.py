@@ -5,9 +5,16 @@ Every read is checked: a missing or corrupt file raises `CheckpointError` naming
 run whose manifest is missing or disagrees with its files is refused by `RunDir.open`
 (`IncompleteOutputError`). A pure reader: importing it loads neither torch nor training
 code (the weights and the kNN bank are read with torch only when asked for).
+
+A run keeps a copy of the ship file it was made with (``ship/NAME.toml``); its experiment
+(`RunDir.read_experiment`) names that copy, so the run's MMG and physics baseline stay
+those it was trained and judged with after the original is moved or edited. A run written
+before the copy was kept names the original, as its config.toml does.
 """
 from __future__ import annotations
 
+import hashlib
+import logging
 import os
 import tomllib
 from dataclasses import dataclass
@@ -16,7 +23,7 @@ from typing import TYPE_CHECKING, ClassVar
 
 import pandas as pd
 
-from sysid.config.experiment import Experiment, load_experiment
+from sysid.config.experiment import Experiment, is_ship_path, load_experiment
 from sysid.errors import CheckpointError, ConfigError, IncompleteOutputError
 from sysid.records.columns import (BASELINE_METRICS_COLUMNS, HISTORY_COLUMNS, METRICS_COLUMNS,  # noqa: F401
                                    REQUIRED_METRICS_COLUMNS, TRACE_COLUMNS, trace_name)
@@ -52,6 +59,40 @@ def with_divergence(frame: pd.DataFrame) -> pd.DataFrame:
     if "diverged_at_s" not in frame.columns:
         frame = frame.assign(diverged_at_s=float("nan"))
     return frame.assign(diverged=frame["diverged"].fillna(False).astype(bool))
+
+
+SHIP_FOLDER = "ship"   # a run's copy of its ship file: ship/NAME.toml
+
+
+def ship_copy_name(ship: str) -> str:
+    """The file name of a run's copy of the ship file `ship` (``[experiment] ship``): the
+    file's own name (so a ship file without ``[ship] name`` keeps its name, the file's
+    stem), ``NAME.toml`` for a bundled ship."""
+    return Path(ship).name if is_ship_path(ship) else f"{ship}.toml"
+
+
+_told: set[tuple[str, int, str]] = set()   # (original, its mtime_ns, the copy's SHA-256) already said
+
+
+def _say_if_edited(ship: str, copy: Path, run: Path) -> None:
+    """One warning line when the ship file `ship` the run at `run` was made from still
+    exists and differs from the run's `copy` of it; said once per process for an original
+    and the copies with the same bytes (an ensemble's members, a run loaded twice)."""
+    from sysid.errors import ShipDefinitionError
+    from sysid.mmg.ship import resolve_ship_path  # no torch
+
+    try:
+        original = resolve_ship_path(ship)
+        kept = copy.read_bytes()
+        edited = original.read_bytes() != kept
+        key = (str(original.resolve()), original.stat().st_mtime_ns, hashlib.sha256(kept).hexdigest())
+    except (ShipDefinitionError, OSError):  # moved away, renamed or unreadable: the copy is all there is
+        return
+    if edited and key not in _told:
+        _told.add(key)
+        logging.getLogger(__name__).warning(
+            f"{original} differs from {copy}, the copy of it the run was made with: the run uses its copy "
+            f"(to judge the run against the edited file: sysid evaluate {run} --ship {original})")
 
 
 def _file(name: str, what: str) -> property:
@@ -101,7 +142,13 @@ class RunDir:
     baseline_metrics = _file("baseline_metrics.csv", "the physics baselines on the same test logs "
                              "(`BASELINE_METRICS_COLUMNS`; runs with a verdict and test logs)")
     traces = _file("traces", "one CSV per (test file, horizon)")
+    ship_folder = _file(SHIP_FOLDER, "the copy of the ship file the run was made with "
+                        "(runs written before sysid kept it: none)")
     manifest = _file(MANIFEST, "every other file with its SHA-256, written last")
+
+    def ship_copy(self, ship: str) -> Path:
+        """Where the run keeps its copy of the ship file `ship` (``[experiment] ship``)."""
+        return self.ship_folder / ship_copy_name(ship)
 
     def trace(self, file_stem: str, horizon_s: float) -> Path:
         """The trace of a test file at a horizon [s]."""
@@ -123,11 +170,22 @@ class RunDir:
         except tomllib.TOMLDecodeError as exc:
             raise CheckpointError(f"{self.config}: not valid TOML ({exc})") from None
 
-    def read_experiment(self) -> Experiment:
+    def read_experiment(self, ship: str | None = None) -> Experiment:
+        """config.toml as an `Experiment` whose ship is the run's copy of its ship file
+        (`ship_copy`; a run without one: the file config.toml names), or `ship` when given
+        (a ship file or bundled name the user chose instead). When the original ship file
+        still exists and differs from the copy, one warning line names both."""
         try:
-            return load_experiment(self.config)
+            exp = load_experiment(self.config)
         except ConfigError as exc:
             raise CheckpointError(f"{self.path}: bad run config ({exc})") from None
+        if ship is not None:
+            return exp.replace(experiment={"ship": str(ship)})
+        copy = self.ship_copy(exp.experiment.ship)
+        if not copy.is_file():   # written before runs kept their ship file
+            return exp
+        _say_if_edited(exp.experiment.ship, copy, self.path)
+        return exp.replace(experiment={"ship": str(copy.absolute())})
 
     def read_metrics(self) -> pd.DataFrame:
         """metrics.csv as written (RMSE of u, v_m [m/s] and r [rad/s]); a run written before

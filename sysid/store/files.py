@@ -80,6 +80,13 @@ def write_text(text: str, path: str | os.PathLike) -> Path:
     return Path(path)
 
 
+def write_bytes(data: bytes, path: str | os.PathLike) -> Path:
+    """Bytes to `path`, atomically (a file's copy, byte for byte)."""
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
+
+
 def write_float_csv(frame, path: str | os.PathLike, rows_per_block: int = 20000, on_block=None) -> Path:
     """An all-float DataFrame to CSV, atomically, each number as Python's shortest exact
     repr (reads back bit for bit; about 3 times faster than ``to_csv(float_format="%.17g")``).

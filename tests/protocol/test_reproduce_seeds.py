@@ -57,6 +57,13 @@ def test_reproduce_with_two_seeds(tmp_path, dataset_dir):
     assert set(hybrid.n_seeds) == {2}
     assert "Hybrid (ensemble)" in set(table.model)
     assert "± " in (out / "table7.md").read_text()
+    # every run (sweep trials, side-by-side seeds, ensembles) keeps the ship file it was made with
+    from sysid.mmg.ship import ships_dir
+    from sysid.store.manifest import verify_manifest
+    bundled = (ships_dir() / "esso_osaka.toml").read_bytes()
+    for name in ("mmg_lab", "nn_D1/seed0", "hybrid_D1/seed1", "hybrid_ensemble_D1"):
+        assert (out / "runs" / name / "ship" / "esso_osaka.toml").read_bytes() == bundled, name
+        assert "ship/esso_osaka.toml" in verify_manifest(out / "runs" / name, "run")["files"], name
 
     # after training, overlapped with the last trial (sysid.protocol.overlap): NN-only's ensemble
     # and the recorded maneuvers of its seeds and of the MMG may take the slot its trial left;

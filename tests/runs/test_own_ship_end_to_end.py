@@ -4,43 +4,23 @@ derivatives), evaluates and reports end to end with ``sysid train/evaluate/repor
 The "measured" runs are the same ship simulated with known derivatives (Y_v, N_r scaled),
 so identification has a truth to move towards."""
 import json
-import math
 
-import numpy as np
 import pandas as pd
 import pytest
-import torch
 
-from sysid import MMG, integrate, load_ship
+from sysid import load_ship
 from sysid.cli import run as sysid
 
-from processed_runs import write_processed_csv
-from scratch_ship import SCRATCH
+from scratch_ship import SCRATCH, simulated_logs
 
 TRUTH = {"Y_v": -0.36, "N_r": -0.055}  # the ship file says -0.315, -0.049
-
-
-def _write_runs(ship_path, out_dir):
-    ship = load_ship(ship_path, TRUTH)
-    model = MMG(ship)
-    paths = []
-    for name, law in {"turn": lambda t: math.radians(30) * (t > 5),
-                      "zigzag": lambda t: math.radians(15) * np.sign(np.sin(2 * math.pi * t / 50) + 1e-9),
-                      "random": lambda t: math.radians(25) * np.sin(t / 7.0) * np.cos(t / 23.0)}.items():
-        t = np.arange(0.0, 150.0, 1.0)
-        inputs = np.zeros((len(t), 4))
-        inputs[:, 0], inputs[:, 1] = 14.0, [law(s) for s in t]
-        x0 = torch.tensor([0.0, 0.9, 0.0, 0.0, 0.0, 0.0], dtype=torch.float64)
-        states = integrate(model, x0, torch.tensor(inputs), 1.0, "rk4").numpy()
-        paths.append(write_processed_csv(out_dir / f"{name}.csv", t, states, inputs))
-    return paths
 
 
 @pytest.mark.slow
 def test_scratch_ship_trains_evaluates_and_reports(tmp_path):
     ship_path = tmp_path / "scratch_tanker.toml"
     ship_path.write_text(SCRATCH.replace("x_R = -0.5", "x_R = -2.0"))
-    files = _write_runs(ship_path, tmp_path)
+    files = simulated_logs(ship_path, tmp_path, TRUTH)
     config = tmp_path / "identify.toml"
     config.write_text(
         f"[experiment]\nname = 'scratch'\nmodel = 'mmg'\nship = {json.dumps(str(ship_path))}\nseed = 0\n"

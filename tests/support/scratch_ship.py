@@ -1,5 +1,10 @@
 """A standard-MMG ship written from scratch: a 4 m tanker model, every value invented for
-the tests (the KVLCC2 derivatives)."""
+the tests (the KVLCC2 derivatives); `simulated_logs`: processed logs of it with known
+derivatives."""
+import math
+
+import numpy as np
+import torch
 
 SCRATCH = """
 [ship]
@@ -75,3 +80,24 @@ anemometer_1 = [1.2, 0.0]
 anemometer_2 = [-0.8, 0.0]
 fog = [0.0, 0.0]
 """
+
+
+def simulated_logs(ship_path, folder, truth: dict[str, float], seconds: float = 150.0) -> list:
+    """Three processed logs (turn.csv, zigzag.csv, random.csv in `folder`, 1 Hz, `seconds`
+    long, 14 rps) of the ship file `ship_path`'s MMG with the coefficients `truth`
+    replacing the file's: the "measured" runs identification has a truth to move towards."""
+    from sysid import MMG, integrate, load_ship
+    from processed_runs import write_processed_csv
+
+    model = MMG(load_ship(ship_path, truth))
+    paths = []
+    for name, law in {"turn": lambda t: math.radians(30) * (t > 5),
+                      "zigzag": lambda t: math.radians(15) * np.sign(np.sin(2 * math.pi * t / 50) + 1e-9),
+                      "random": lambda t: math.radians(25) * np.sin(t / 7.0) * np.cos(t / 23.0)}.items():
+        t = np.arange(0.0, seconds, 1.0)
+        inputs = np.zeros((len(t), 4))
+        inputs[:, 0], inputs[:, 1] = 14.0, [law(s) for s in t]   # n [rps], delta [rad]
+        x0 = torch.tensor([0.0, 0.9, 0.0, 0.0, 0.0, 0.0], dtype=torch.float64)
+        states = integrate(model, x0, torch.tensor(inputs), 1.0, "rk4").numpy()
+        paths.append(write_processed_csv(folder / f"{name}.csv", t, states, inputs))
+    return paths
