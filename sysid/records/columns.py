@@ -27,6 +27,13 @@ TRACE_COLUMNS = (
 )
 
 
+def baseline_folder(label: str) -> str:
+    """Folder of a physics baseline's traces under ``baseline_traces/``: its label
+    (`sysid.evaluation.verdict`) in lower case, runs of other characters as ``_``
+    ("MMG (ship file)" -> ``mmg_ship_file``)."""
+    return re.sub(r"[^a-z0-9]+", "_", label.lower()).strip("_")
+
+
 def trace_name(file_stem: str, horizon_s: float) -> str:
     """File name of a trace: ``{file_stem}_h{H}.csv`` (H: the horizon in whole seconds)."""
     safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", file_stem)

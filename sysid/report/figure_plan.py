@@ -18,7 +18,7 @@ from sysid.config.choices import ModelKind
 from sysid.report import figures as F
 from sysid.protocol.paper import run_label
 from sysid.report.methods import estimator_text
-from sysid.report.palette import model_colour
+from sysid.report.palette import BASELINE_COLOURS, model_colour
 from sysid.protocol.paper import scenario_key
 from sysid.report.quality import FILES_PER_FIGURE, quality_timeline
 from sysid.report.source import ReportSource, RunRecord
@@ -75,13 +75,25 @@ def _horizon(runs: list[RunRecord], wanted: int, short: bool) -> int | None:
     return horizons[0] if short else horizons[-1]
 
 
-def _traces(runs: list[RunRecord], scenario: str, horizon: int) -> list[F.ModelTrace]:
+def _traces(runs: list[RunRecord], scenario: str, horizon: int, baselines: bool = False) -> list[F.ModelTrace]:
+    """Each run's trace of `scenario` at `horizon` [s]; `baselines`: each run's physics
+    baselines' traces on the same windows after it (dashed)."""
     out = []
     for i, run in enumerate(runs):
         frame = run.trace(scenario, horizon)
         if frame is not None and len(frame):
             out.append(F.ModelTrace(_label(run), _colour(run, i), frame))
+            for j, label in enumerate(run.baselines if baselines else []):
+                base = run.trace(scenario, horizon, baseline=label)
+                if base is not None and len(base):
+                    out.append(F.ModelTrace(baseline_label(label), BASELINE_COLOURS[j % len(BASELINE_COLOURS)],
+                                            base, baseline=True))
     return out
+
+
+def baseline_label(label: str) -> str:
+    """A physics baseline's name in the figures' legends."""
+    return f"{label}, physics baseline"
 
 
 def _quality_figures(source: ReportSource, plan: FigurePlan) -> FigurePlan:
@@ -111,6 +123,24 @@ class _Context:
     short: int | None           # horizon [s] of the 30 s figures
     long: int | None            # horizon [s] of the 100 s figures
     paper: bool = True          # a paper protocol: captions point to the paper's figures
+    baselines: bool = False     # a learned run's physics baselines drawn beside it (a run's or sweep's report)
+
+    def traces(self, runs: list[RunRecord], scenario: str, horizon: int | None) -> list[F.ModelTrace]:
+        """`_traces` of the runs, with their physics baselines when `baselines`; [] without a horizon."""
+        return _traces(runs, scenario, horizon, self.baselines) if horizon else []
+
+    @property
+    def beside(self) -> str:
+        return self.beside_as("Dashed grey")
+
+    def beside_as(self, drawn: str) -> str:
+        """The captions' sentence naming the physics baselines `drawn` so (empty when none)."""
+        labels = list(dict.fromkeys(b for r in self.runs for b in r.baselines)) if self.baselines else []
+        if not labels:
+            return ""
+        named = " and ".join(labels)
+        return (f" {drawn}: the learned model's physics baseline{'s' if len(labels) > 1 else ''} {named}, "
+                "on the same windows.")
 
     @property
     def trained_on(self) -> str:
@@ -127,13 +157,30 @@ class _Context:
             self.plan.notes.append(f"{title}: skipped, {caption}")
 
 
+def _baseline_notes(c: _Context) -> None:
+    """Say when a learned run's figures cannot show its physics baseline."""
+    if not c.baselines:
+        return
+    for run in c.runs:
+        if run.model == ModelKind.MMG or len(run.metrics) == 0:
+            continue
+        if not run.baselines:
+            c.plan.notes.append(f"{_label(run)}: no physics baseline on its test logs (baseline_metrics.csv): "
+                                "its figures show it alone")
+        elif not run.run_dir.baseline_traces.is_dir():
+            c.plan.notes.append(f"{_label(run)}: its physics baseline's traces are not in the run directory "
+                                "(written before sysid kept baseline_traces/): its figures show it alone; "
+                                "train it again to draw the baseline beside it")
+
+
 def _error_figures(c: _Context) -> None:
     """Figs. 3-5: absolute-error box plots, every model, 30 s."""
     for scenario in _pick(BOX_SCENARIOS, c.scenarios):
-        traces = _traces(c.runs, scenario, c.short) if c.short else []
+        traces = c.traces(c.runs, scenario, c.short)
         c.add(f"box_{scenario}", "Prediction errors", f"Absolute error, {scenario}, {c.short} s predictions",
               f"Absolute errors of u, v_m and r pooled over every point of every {c.short} s window of the "
-              f"{scenario} test, per model (cf. the paper's Figs. 3-5)." if traces else "no traces in the source",
+              f"{scenario} test, per model (cf. the paper's Figs. 3-5).{c.beside_as('Hatched grey')}" if traces
+              else "no traces in the source",
               partial(F.error_boxplots, traces, f"Absolute error, {scenario} ({c.short} s predictions)"), traces)
 
 
@@ -141,18 +188,19 @@ def _series_figures(c: _Context) -> None:
     """Figs. 6-9: actuators, relative wind and states over one 100 s window."""
     series = [(_find(s, c.scenarios), t0) for s, t0 in SERIES_WINDOWS if _find(s, c.scenarios)]
     for scenario, start in series or [(s, 0.0) for s in c.scenarios]:
-        traces = _traces(c.compared, scenario, c.long) if c.long else []
+        traces = c.traces(c.compared, scenario, c.long)
         span = f"{start:.0f}-{start + c.long:.0f} s" if c.long else ""
         missing = "no traces in the source"
         c.add(f"inputs_{scenario}", "Time series", f"Actuators and relative wind, {scenario}, {span}",
               f"Propeller speed, rudder angle and relative wind in the {c.long} s window of the {scenario} "
               f"test starting nearest {start:.0f} s{c.trained_on}; each model's relative wind follows its "
-              "own predicted state, 'measured' uses the recorded state (cf. Figs. 6, 8)." if traces else missing,
+              f"own predicted state, 'measured' uses the recorded state (cf. Figs. 6, 8).{c.beside}" if traces
+              else missing,
               partial(F.actuator_wind, traces, start, f"Actuator and relative wind state, {scenario} ({span})"),
               traces)
         c.add(f"states_{scenario}", "Time series", f"Heading and velocities, {scenario}, {span}",
               f"Heading ψ and velocities u, v_m, r predicted over the {c.long} s window of the {scenario} "
-              f"test against the measurement{c.trained_on} (cf. Figs. 7, 9)." if traces else missing,
+              f"test against the measurement{c.trained_on} (cf. Figs. 7, 9).{c.beside}" if traces else missing,
               partial(F.state_timeseries, traces, start, f"Attitude and velocity, {scenario} ({span})"), traces)
 
 
@@ -160,13 +208,13 @@ def _trajectory_figures(c: _Context, ship_size: tuple[float, float] | None) -> N
     """Figs. 10-12: earth-frame tracks with the ship's outline."""
     L, B = ship_size or (0.0, 0.0)
     for scenario in _pick(TRAJECTORY_SCENARIOS, c.scenarios):
-        traces = _traces(c.compared, scenario, c.long) if c.long else []
+        traces = c.traces(c.compared, scenario, c.long)
         ok = bool(traces) and ship_size is not None
         why = "no traces in the source" if not traces else "ship dimensions unknown"
         c.add(f"track_{scenario}", "Trajectories", f"Trajectories, {scenario}, {c.long} s predictions",
               f"Earth-frame track of the {scenario} test and every {c.long} s window predicted from the "
               f"recorded start state{c.trained_on}; outlines of the {L:g} m x {B:g} m ship at fixed "
-              "intervals (cf. Figs. 10-12)." if ok else why,
+              f"intervals (cf. Figs. 10-12).{c.beside}" if ok else why,
               partial(F.trajectories, traces, L, B, f"Trajectory prediction, {scenario} ({c.long} s windows)"), ok)
 
 
@@ -347,7 +395,9 @@ def figure_plan(source: ReportSource, ship_size: tuple[float, float] | None) -> 
         c = _Context(plan, runs, list(dict.fromkeys(s for r in runs for s in r.scenarios())),
                      [r for r in runs if r.model == ModelKind.MMG or r.dataset == fig_dataset],
                      [r for r in runs if r.model == ModelKind.HYBRID], fig_dataset,
-                     _horizon(runs, 30, short=True), _horizon(runs, 100, short=False), source.paper_protocol)
+                     _horizon(runs, 30, short=True), _horizon(runs, 100, short=False), source.paper_protocol,
+                     baselines=source.kind != "reproduction")
+        _baseline_notes(c)
         if source.kind == "reproduction":
             _cell_figures(source, c)
         _error_figures(c)

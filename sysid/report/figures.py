@@ -28,13 +28,23 @@ TALL = (10.0, 7.0)
 RATIO_TICKS = [0.05, 0.1, 0.2, 0.3, 0.5, 0.7, 1.0, 1.5, 2.0, 3.0, 5.0, 10.0]   # RMSE ratios [-] on a log axis
 
 
+BASELINE_LINE = {"ls": "--", "lw": 1.0}   # a physics baseline's lines, beside its learned model's solid ones
+BASELINE_HATCH = "//"                      # and its boxes
+
+
 @dataclass
 class ModelTrace:
-    """A model's trace of one file at one horizon, with the model's label and colour."""
+    """A model's trace of one file at one horizon, with the model's label and colour;
+    `baseline`: a learned model's physics baseline on the same windows, drawn dashed."""
 
     label: str
     colour: str
     frame: pd.DataFrame
+    baseline: bool = False
+
+    def line(self, lw: float) -> dict:
+        """Line style: solid of width `lw` [pt], a baseline's dashed and thinner."""
+        return dict(BASELINE_LINE) if self.baseline else {"lw": lw}
 
 
 def _broken(frame: pd.DataFrame, column: str, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
@@ -58,9 +68,9 @@ def _legend_top(fig: FigureBase, handles: Sequence[Artist], ncol: int | None = N
                frameon=False, fontsize=8)
 
 
-def _model_handles(traces: list[ModelTrace], measured: bool = True, **line) -> list:
+def _model_handles(traces: list[ModelTrace], measured: bool = True) -> list:
     handles = [Line2D([], [], color=MEASURED, lw=1.6, label="measured")] if measured else []
-    return handles + [Line2D([], [], color=t.colour, lw=1.4, label=t.label, **line) for t in traces]
+    return handles + [Line2D([], [], color=t.colour, label=t.label, **t.line(1.4)) for t in traces]
 
 
 def error_boxplots(traces: list[ModelTrace], title: str, into: FigureBase | None = None) -> FigureBase:
@@ -77,11 +87,15 @@ def error_boxplots(traces: list[ModelTrace], title: str, into: FigureBase | None
                          flierprops={"marker": ".", "markersize": 2, "alpha": 0.4})
         for patch, t in zip(box["boxes"], traces):
             patch.set_facecolor(t.colour)
+            if t.baseline:
+                patch.set_hatch(BASELINE_HATCH)
+                patch.set_linestyle("--")
         ax.set_xticks(range(1, len(traces) + 1), [t.label for t in traces], rotation=35,
                       ha="right", fontsize=8)
         ax.set_ylabel(f"|error of {name}| [{unit}]")
         ax.set_title(name)
-    handles: list[Artist] = [Patch(facecolor=t.colour, edgecolor="black", label=t.label) for t in traces]
+    handles: list[Artist] = [Patch(facecolor=t.colour, edgecolor="black", label=t.label,
+                                   hatch=BASELINE_HATCH if t.baseline else None) for t in traces]
     handles += [Line2D([], [], color="black", label="median"),
                 Line2D([], [], marker="D", ls="", markerfacecolor="white", markeredgecolor="black",
                        label="mean")]
@@ -131,9 +145,9 @@ def actuator_wind(traces: list[ModelTrace], start_s: float, title: str,
     axes[3].plot(t, _signed_deg(gamma_A), color=MEASURED, lw=1.6, ls="", marker=".", ms=3)
     for tr in traces:
         w = _window(tr.frame, start_s)
-        axes[2].plot(w["t"], w["wind_velo_relative"], color=tr.colour, lw=1.1)
+        axes[2].plot(w["t"], w["wind_velo_relative"], color=tr.colour, **tr.line(1.1))
         axes[3].plot(w["t"], _signed_deg(w["wind_dir_relative"].to_numpy()), color=tr.colour, ls="",
-                     marker=".", ms=2.5)
+                     marker="x" if tr.baseline else ".", ms=2.5)
     labels = ["n_P [rps]", "δ [deg]", "U_A [m/s]", "γ_A [deg]\n(0 = from ahead)"]
     for ax, label in zip(axes, labels):
         ax.set_ylabel(label)
@@ -165,7 +179,7 @@ def state_timeseries(traces: list[ModelTrace], start_s: float, title: str,
             if col == "psi":
                 y = np.rad2deg(np.unwrap(w["pred_psi"].to_numpy()))
                 y += 360.0 * np.round((obs[0] - y[0]) / 360.0)
-            ax.plot(w["t"], y, color=tr.colour, lw=1.2)
+            ax.plot(w["t"], y, color=tr.colour, **tr.line(1.2))
         ax.set_ylabel(label)
     axes[-1].set_xlabel("t [s]")
     _legend_top(fig, _model_handles(traces))
@@ -207,12 +221,12 @@ def trajectories(traces: list[ModelTrace], L: float, B: float, title: str,
     for ax, tr in zip(axes, traces):
         ax.plot(measured["obs_y"], measured["obs_x"], color=MEASURED, lw=1.4)
         for _, w in tr.frame.groupby("window", sort=True):
-            ax.plot(w["pred_y"], w["pred_x"], color=tr.colour, lw=1.3)
+            ax.plot(w["pred_y"], w["pred_x"], color=tr.colour, **tr.line(1.3))
             ax.plot(w["pred_y"].iloc[0], w["pred_x"].iloc[0], "o", color=tr.colour, ms=3)
             marks = w[((w["t_rel"] % interval) < 0.5)]
             for row in marks.itertuples(index=False):
                 e, nn = _outline_at(outline, row.pred_x, row.pred_y, row.pred_psi)
-                ax.plot(e, nn, color=tr.colour, lw=0.7)
+                ax.plot(e, nn, color=tr.colour, lw=0.7, ls="--" if tr.baseline else "-")
                 e, nn = _outline_at(outline, row.obs_x, row.obs_y, row.obs_psi)
                 ax.plot(e, nn, color=MEASURED, lw=0.6, alpha=0.7)
         ax.set_title(tr.label, fontsize=9)

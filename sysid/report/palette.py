@@ -8,6 +8,7 @@ from __future__ import annotations
 from sysid.config.choices import ModelKind
 
 MEASURED = "#000000"
+BASELINE_COLOURS = ["#7f7f7f", "#4d4d4d"]   # a learned run's physics baselines (dashed), in their order
 
 MODEL_COLOURS = {
     "mmg_paper": "#1f5fbf",

@@ -107,15 +107,26 @@ class RunRecord:
     def horizons(self) -> list[int]:
         return sorted({int(round(h)) for h in self.metrics["horizon_s"]})
 
-    def trace(self, scenario: str, horizon_s: float) -> pd.DataFrame | None:
-        """The trace of the scenario's (first) file at a horizon, or None when absent."""
-        key = (scenario, int(round(horizon_s)))
+    @property
+    def baselines(self) -> list[str]:
+        """The labels of the physics baselines scored beside the run (baseline_metrics.csv), in
+        its order; [] for a run without them."""
+        if self.baseline_metrics is None:
+            return []
+        return list(dict.fromkeys(self.baseline_metrics["baseline"].astype(str)))
+
+    def trace(self, scenario: str, horizon_s: float, baseline: str | None = None) -> pd.DataFrame | None:
+        """The trace of the scenario's (first) file at a horizon, or None when absent;
+        `baseline`: that physics baseline's trace on the same windows (`baselines`)."""
+        key = (scenario, int(round(horizon_s)), baseline)
         if key not in self._traces:
             rows = self.metrics[(self.metrics["scenario"].astype(str) == scenario)
                                 & ((self.metrics["horizon_s"] - horizon_s).abs() < 0.5)]
             frame = None
             if len(rows):
-                frame = self.run_dir.read_trace(Path(str(rows.iloc[0]["file"])).stem, horizon_s)
+                stem = Path(str(rows.iloc[0]["file"])).stem
+                frame = (self.run_dir.read_trace(stem, horizon_s) if baseline is None
+                         else self.run_dir.read_baseline_trace(baseline, stem, horizon_s))
             self._traces[key] = frame
         return self._traces[key]
 

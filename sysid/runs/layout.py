@@ -31,6 +31,9 @@ A **run directory** (``sysid train CONFIG -o runs/NAME``)::
     baseline_metrics.csv  the physics baselines on the same test logs: "baseline" (its label,
                        `sysid.evaluation.verdict`) + METRICS_COLUMNS; with a verdict and test logs
     traces/            one CSV per (file, horizon): ``{file_stem}_h{H}.csv``, `TRACE_COLUMNS`
+    baseline_traces/LABEL/  each physics baseline's traces on the same windows, as traces/
+                       (LABEL: `sysid.records.columns.baseline_folder` of its label); with
+                       baseline_metrics.csv, the report draws them beside the model's
     ship/NAME.toml     the ship file the run was made with, byte for byte (a bundled ship's too;
                        NAME: the file's own name, `sysid.runs.rundir.ship_copy_name`): the run's
                        MMG and physics baseline are read from it (`RunDir.read_experiment`)
@@ -77,6 +80,7 @@ from sysid.config.experiment import Experiment, ship_overrides
 from sysid.store.files import write_bytes, write_csv, write_text
 from sysid.mmg.model import MMG
 from sysid.hybrid.force_models import CorrectedModel, build_model
+from sysid.records.columns import baseline_folder
 from sysid.runs.rundir import BASELINE_METRICS_COLUMNS, RunDir
 from sysid.runs.knn_bank import KnnBank
 from sysid.records.summary import (VAL_LOSS_DEFINITION, DataSummary, GateSummary, IdentificationSummary, RangeSummary,
@@ -205,9 +209,10 @@ def write_run(run_dir: str | os.PathLike, exp: Experiment, model, evaluation: Ev
               history: pd.DataFrame | None = None, training=None,
               seconds: float | None = None, overwrite: bool = False, verdict=None,
               data: dict | None = None, baseline_metrics: pd.DataFrame | None = None, limits: PhysicalRange | None = None,
-              ship_definition: bytes | None = None) -> Path:
+              ship_definition: bytes | None = None, baseline_traces: dict[str, dict[str, pd.DataFrame]] | None = None
+              ) -> Path:
     """Write a complete run directory (config, ship file, weights, kNN bank, history,
-    metrics, traces).
+    metrics, traces; `baseline_traces`: baseline label -> trace name -> `TRACE_COLUMNS` frame).
 
     `ship_definition`: the bytes of the ship file the run was made with, read when it
     started (`ship_definition`); None: read now. Staged (`sysid.store.staging`): the files
@@ -218,7 +223,7 @@ def write_run(run_dir: str | os.PathLike, exp: Experiment, model, evaluation: Ev
         ship_definition = read_ship_definition(exp)
     with staged_directory(run_dir, "run", overwrite) as staging:
         _write_run_files(RunDir(staging), exp, model, evaluation, history, training, seconds, verdict, data,
-                         baseline_metrics, limits, ship_definition)
+                         baseline_metrics, limits, ship_definition, baseline_traces)
     return Path(run_dir)
 
 
@@ -244,7 +249,8 @@ def _used_files(exp: Experiment, data: dict | None) -> Experiment:
 def _write_run_files(run: RunDir, exp: Experiment, model, evaluation: Evaluation,
                      history: pd.DataFrame | None, training, seconds: float | None, verdict=None,
                      data: dict | None = None, baseline_metrics: pd.DataFrame | None = None, limits: PhysicalRange | None = None,
-                     ship_definition: bytes | None = None) -> None:
+                     ship_definition: bytes | None = None,
+                     baseline_traces: dict[str, dict[str, pd.DataFrame]] | None = None) -> None:
     write_text(_used_files(exp, data).to_toml(), run.config)
     write_bytes(ship_definition if ship_definition is not None else read_ship_definition(exp),
                 run.ship_copy(exp.experiment.ship))
@@ -256,4 +262,7 @@ def _write_run_files(run: RunDir, exp: Experiment, model, evaluation: Evaluation
         write_csv(baseline_metrics[BASELINE_METRICS_COLUMNS], run.baseline_metrics, float_format="%.6g")
     for name, frame in evaluation.traces.items():
         write_csv(frame, run.traces / name, float_format="%.8g")
+    for label, frames in (baseline_traces or {}).items():
+        for name, frame in frames.items():
+            write_csv(frame, run.baseline_traces / baseline_folder(label) / name, float_format="%.8g")
     write_text(run_summary(exp, evaluation, training, seconds, verdict, data, limits).to_text(), run.summary)

@@ -105,13 +105,13 @@ def physics_baselines(exp: Experiment, model: torch.nn.Module, dtype: torch.dtyp
 def scores_on_tests(exp: Experiment, model: torch.nn.Module, evaluation: Evaluation,
                     tests: Sequence[Run], limits: PhysicalRange | None = None) -> dict[str, Evaluation] | None:
     """Evaluations of the model (its `evaluation`) and of each physics baseline on the test
-    logs, divergence checked against `limits` (None without test logs)."""
+    logs with their traces, divergence checked against `limits` (None without test logs)."""
     if not tests:
         return None
     scores = {"model": evaluation}
     for label, baseline in physics_baselines(exp, model, torch.float64).items():
         scores[label] = evaluate_model(baseline, tests, exp.evaluation.horizons, Integrator(exp.evaluation.integrator),
-                                       traces=False, limits=limits)
+                                       limits=limits)
     return scores
 
 
@@ -248,14 +248,15 @@ def _written(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[Run], 
     else:
         model = build_model(exp)
     limits = PhysicalRange.of_runs(runs)   # the training logs' range: beyond it a prediction diverged
-    evaluation, verdict, baseline_metrics = _evaluated(exp, model, tests, limits, validation_scores, log)
+    evaluation, verdict, baseline_metrics, baseline_traces = _evaluated(exp, model, tests, limits, validation_scores,
+                                                                        log)
     source = "files" if exp.data.train else (exp.experiment.dataset if exp.needs_training else "-")
     data_used = provenance(source, runs, validation, tests, exp.training.val_fraction, exp.training.block_s,
                            held_out, exp.training.split_seed)
     seconds = time.perf_counter() - started
     path = write_run(out_dir, exp, model, evaluation, history, training, seconds, overwrite,
                      verdict=verdict, data=data_used, baseline_metrics=baseline_metrics, limits=limits,
-                     ship_definition=ship_definition)
+                     ship_definition=ship_definition, baseline_traces=baseline_traces)
     if training is not None:
         TrainingCheckpoint(checkpoint_path(out_dir), exp.to_toml()).remove()
     return RunResult(path, exp, model, evaluation, history, training, seconds, verdict)
@@ -309,16 +310,18 @@ def _validation_scores(exp: Experiment, trainer: Trainer) -> dict:
 def _evaluated(exp: Experiment, model, tests: Sequence[Run], limits: PhysicalRange, validation_scores: dict | None,
                log: Callable[[str], None]):
     """(the model's `Evaluation` on the test logs, its verdict or None, the baselines'
-    metrics on the same logs or None); a WARNING line per diverged prediction."""
+    metrics on the same logs or None, their traces: label -> trace name -> frame); a WARNING
+    line per diverged prediction."""
     evaluation = evaluate_model(model, tests, exp.evaluation.horizons, Integrator(exp.evaluation.integrator),
                                 limits=limits)
     for divergence in evaluation.divergences:
         log(f"WARNING: the prediction diverged on {divergence.text()}")
-    verdict, baseline_metrics = None, None
+    verdict, baseline_metrics, baseline_traces = None, None, {}
     if validation_scores is not None:
         scores = scores_on_tests(exp, model, evaluation, tests, limits)
         verdict = baseline_verdict(str(exp.experiment.model), validation_scores, scores)
         if scores:
             baseline_metrics = pd.concat([e.metrics.assign(baseline=label) for label, e in scores.items()
                                           if label != "model"], ignore_index=True)
-    return evaluation, verdict, baseline_metrics
+            baseline_traces = {label: e.traces for label, e in scores.items() if label != "model"}
+    return evaluation, verdict, baseline_metrics, baseline_traces

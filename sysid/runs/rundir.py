@@ -26,7 +26,7 @@ import pandas as pd
 from sysid.config.experiment import Experiment, is_ship_path, load_experiment
 from sysid.errors import CheckpointError, ConfigError, IncompleteOutputError
 from sysid.records.columns import (BASELINE_METRICS_COLUMNS, HISTORY_COLUMNS, METRICS_COLUMNS,  # noqa: F401
-                                   REQUIRED_METRICS_COLUMNS, TRACE_COLUMNS, trace_name)
+                                   REQUIRED_METRICS_COLUMNS, TRACE_COLUMNS, baseline_folder, trace_name)
 from sysid.records.summary import RunSummary
 from sysid.store.manifest import MANIFEST, has_manifest, verify_manifest
 
@@ -142,6 +142,8 @@ class RunDir:
     baseline_metrics = _file("baseline_metrics.csv", "the physics baselines on the same test logs "
                              "(`BASELINE_METRICS_COLUMNS`; runs with a verdict and test logs)")
     traces = _file("traces", "one CSV per (test file, horizon)")
+    baseline_traces = _file("baseline_traces", "each physics baseline's traces on the same windows, one "
+                            "folder per baseline (`baseline_folder`; runs written before sysid kept them: none)")
     ship_folder = _file(SHIP_FOLDER, "the copy of the ship file the run was made with "
                         "(runs written before sysid kept it: none)")
     manifest = _file(MANIFEST, "every other file with its SHA-256, written last")
@@ -211,6 +213,15 @@ class RunDir:
     def read_trace(self, file_stem: str, horizon_s: float) -> pd.DataFrame | None:
         """A trace (`TRACE_COLUMNS`), None when the run has none for that file and horizon."""
         return read_table(self.trace(file_stem, horizon_s), TRACE_COLUMNS, required=False)
+
+    def baseline_trace(self, label: str, file_stem: str, horizon_s: float) -> Path:
+        """The trace of the physics baseline `label` on a test file at a horizon [s]."""
+        return self.baseline_traces / baseline_folder(label) / trace_name(file_stem, horizon_s)
+
+    def read_baseline_trace(self, label: str, file_stem: str, horizon_s: float) -> pd.DataFrame | None:
+        """A physics baseline's trace (`TRACE_COLUMNS`) on the windows of the run's own trace,
+        None when the run has none for that baseline, file and horizon."""
+        return read_table(self.baseline_trace(label, file_stem, horizon_s), TRACE_COLUMNS, required=False)
 
     def read_model_state(self) -> dict:
         """model.pt: the state dict (plain tensors, all finite)."""
