@@ -91,9 +91,12 @@ def _traces(runs: list[RunRecord], scenario: str, horizon: int, baselines: bool 
     return out
 
 
+BASELINE_SUFFIX = ", physics baseline"
+
+
 def baseline_label(label: str) -> str:
     """A physics baseline's name in the figures' legends."""
-    return f"{label}, physics baseline"
+    return label + BASELINE_SUFFIX
 
 
 def _quality_figures(source: ReportSource, plan: FigurePlan) -> FigurePlan:
@@ -129,18 +132,15 @@ class _Context:
         """`_traces` of the runs, with their physics baselines when `baselines`; [] without a horizon."""
         return _traces(runs, scenario, horizon, self.baselines) if horizon else []
 
-    @property
-    def beside(self) -> str:
-        return self.beside_as("Dashed grey")
-
-    def beside_as(self, drawn: str) -> str:
-        """The captions' sentence naming the physics baselines `drawn` so (empty when none)."""
-        labels = list(dict.fromkeys(b for r in self.runs for b in r.baselines)) if self.baselines else []
+    @staticmethod
+    def beside(traces: list[F.ModelTrace], drawn: str = "Dashed grey") -> str:
+        """The caption's sentence naming the physics baselines among `traces`, `drawn` so
+        (empty when none)."""
+        labels = list(dict.fromkeys(t.label.removesuffix(BASELINE_SUFFIX) for t in traces if t.baseline))
         if not labels:
             return ""
-        named = " and ".join(labels)
-        return (f" {drawn}: the learned model's physics baseline{'s' if len(labels) > 1 else ''} {named}, "
-                "on the same windows.")
+        return (f" {drawn}: the learned model's physics baseline{'s' if len(labels) > 1 else ''} "
+                f"{' and '.join(labels)}, on the same windows.")
 
     @property
     def trained_on(self) -> str:
@@ -179,7 +179,7 @@ def _error_figures(c: _Context) -> None:
         traces = c.traces(c.runs, scenario, c.short)
         c.add(f"box_{scenario}", "Prediction errors", f"Absolute error, {scenario}, {c.short} s predictions",
               f"Absolute errors of u, v_m and r pooled over every point of every {c.short} s window of the "
-              f"{scenario} test, per model (cf. the paper's Figs. 3-5).{c.beside_as('Hatched grey')}" if traces
+              f"{scenario} test, per model (cf. the paper's Figs. 3-5).{c.beside(traces, 'Hatched grey')}" if traces
               else "no traces in the source",
               partial(F.error_boxplots, traces, f"Absolute error, {scenario} ({c.short} s predictions)"), traces)
 
@@ -194,13 +194,13 @@ def _series_figures(c: _Context) -> None:
         c.add(f"inputs_{scenario}", "Time series", f"Actuators and relative wind, {scenario}, {span}",
               f"Propeller speed, rudder angle and relative wind in the {c.long} s window of the {scenario} "
               f"test starting nearest {start:.0f} s{c.trained_on}; each model's relative wind follows its "
-              f"own predicted state, 'measured' uses the recorded state (cf. Figs. 6, 8).{c.beside}" if traces
+              f"own predicted state, 'measured' uses the recorded state (cf. Figs. 6, 8).{c.beside(traces)}" if traces
               else missing,
               partial(F.actuator_wind, traces, start, f"Actuator and relative wind state, {scenario} ({span})"),
               traces)
         c.add(f"states_{scenario}", "Time series", f"Heading and velocities, {scenario}, {span}",
               f"Heading ψ and velocities u, v_m, r predicted over the {c.long} s window of the {scenario} "
-              f"test against the measurement{c.trained_on} (cf. Figs. 7, 9).{c.beside}" if traces else missing,
+              f"test against the measurement{c.trained_on} (cf. Figs. 7, 9).{c.beside(traces)}" if traces else missing,
               partial(F.state_timeseries, traces, start, f"Attitude and velocity, {scenario} ({span})"), traces)
 
 
@@ -214,7 +214,7 @@ def _trajectory_figures(c: _Context, ship_size: tuple[float, float] | None) -> N
         c.add(f"track_{scenario}", "Trajectories", f"Trajectories, {scenario}, {c.long} s predictions",
               f"Earth-frame track of the {scenario} test and every {c.long} s window predicted from the "
               f"recorded start state{c.trained_on}; outlines of the {L:g} m x {B:g} m ship at fixed "
-              f"intervals (cf. Figs. 10-12).{c.beside}" if ok else why,
+              f"intervals (cf. Figs. 10-12).{c.beside(traces)}" if ok else why,
               partial(F.trajectories, traces, L, B, f"Trajectory prediction, {scenario} ({c.long} s windows)"), ok)
 
 
