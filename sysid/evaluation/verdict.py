@@ -361,25 +361,34 @@ def _cells_per_log(model: np.ndarray, baseline: np.ndarray, nonfinite_after_s: n
     return out
 
 
-def judged(model: str, label: str, cells: Sequence[PairedCell], rule: VerdictRule, seeds: int = 1) -> Judgement:
+def judged(model: str, label: str, cells: Sequence[PairedCell], rule: VerdictRule, seeds: int = 1,
+           ensemble_of: int = 0) -> Judgement:
     """`judge` with the sentence's names: "The hybrid" against "its physics baseline MMG (ship file)";
-    `seeds` > 1 on cells of one member (`seed_logs`: the seeds' windows pooled per log) says so."""
+    `seeds` > 1 on cells of one member (`seed_logs`: the seeds' windows pooled per log) says so,
+    as does `ensemble_of` > 0 (one model, the mean-of-seeds ensemble of that many seeds)."""
     name = MODEL_NAMES.get(model, model)
     pooled = seeds > 1 and all(c.model.shape[0] == 1 for c in cells)
     spread = (f" ({seeds} seeds' windows pooled)" if pooled else f" (mean over {seeds} seeds)") if seeds > 1 else ""
+    if ensemble_of:
+        spread = f" ensemble (the mean of {ensemble_of} seeds' forces)"
     found = judge(cells, rule, model=f"The {name}{spread}", baseline=f"its physics baseline {label}")
+    one = "1 seed (no spread: one model)"
     if pooled:   # one member: every seed's windows, no seed's spread of its own
         found = dataclasses.replace(found, sentence=found.sentence.replace(
-            "1 seed (no spread: one model)", f"{seeds} seeds' windows pooled as one model's (no spread per seed)"))
+            one, f"{seeds} seeds' windows pooled as one model's (no spread per seed)"))
+    elif ensemble_of:
+        found = dataclasses.replace(found, sentence=found.sentence.replace(one, "one model (the ensemble: no spread)"))
     return found
 
 
 def baseline_verdict(model: str, validation: Mapping[float, Mapping[str, WindowScore]] | None,
-                     test: Mapping[str, "Evaluation"] | None, rule: VerdictRule = DEFAULT_RULE) -> BaselineVerdict:
+                     test: Mapping[str, "Evaluation"] | None, rule: VerdictRule = DEFAULT_RULE,
+                     ensemble_of: int = 0) -> BaselineVerdict:
     """The verdict from scores keyed "model" and by baseline label (`SHIP_FILE_MMG`, ...):
     `validation` window scores per horizon [s], `test` evaluations on the test logs (None or
     empty: not available). A label's validation loss is the mean over the horizons, as
-    ``val_loss_multistep``."""
+    ``val_loss_multistep``. `ensemble_of` > 0: the model is the mean-of-seeds ensemble of that
+    many seeds (one model; the sentence names it so)."""
     first = next(iter(validation.values())) if validation else None
     labels = [k for k in (first or test or {}) if k != "model"]
     cells: list[ChannelCell] = []
@@ -405,19 +414,19 @@ def baseline_verdict(model: str, validation: Mapping[float, Mapping[str, WindowS
             evidence[TEST] = by
     losses = {k: float(np.mean([scores[k].val_loss_multistep for scores in validation.values()]))
               for k in (first or {})}
-    return verdict_of(model, tuple(labels), tuple(cells), losses, evidence, rule)
+    return verdict_of(model, tuple(labels), tuple(cells), losses, evidence, rule, ensemble_of=ensemble_of)
 
 
 def verdict_of(model: str, labels: tuple[str, ...], cells: tuple[ChannelCell, ...], losses: dict[str, float],
                evidence: dict[str, dict[str, tuple[PairedCell, ...]]], rule: VerdictRule,
-               seeds: int = 1) -> BaselineVerdict:
+               seeds: int = 1, ensemble_of: int = 0) -> BaselineVerdict:
     """Judge the evidence of every split against every baseline; the test logs decide when
     there are any."""
     decided = TEST if TEST in evidence else VALIDATION
-    on_validation = {b: judged(model, b, cs, rule, seeds) for b, cs in evidence.get(VALIDATION, {}).items()}
+    on_validation = {b: judged(model, b, cs, rule, seeds, ensemble_of) for b, cs in evidence.get(VALIDATION, {}).items()}
     # `judge` is pure: decided on the validation windows, their judgements are the same ones
     judgements = (dict(on_validation) if decided == VALIDATION else
-                  {b: judged(model, b, cs, rule, seeds) for b, cs in evidence.get(decided, {}).items()})
+                  {b: judged(model, b, cs, rule, seeds, ensemble_of) for b, cs in evidence.get(decided, {}).items()})
     return BaselineVerdict(model, labels, cells, losses, decided, seeds, judgements, on_validation, evidence)
 
 

@@ -210,7 +210,7 @@ def ensemble_verdict(exp: Experiment, model: SeedEnsemble, evaluation: Evaluatio
     scores = scores_on_tests(exp, model, evaluation, tests)
     if not scores:
         return None, None
-    verdict = baseline_verdict(str(exp.experiment.model), None, scores)
+    verdict = baseline_verdict(str(exp.experiment.model), None, scores, ensemble_of=len(model.members))
     metrics = pd.concat([e.metrics.assign(baseline=label) for label, e in scores.items() if label != "model"],
                         ignore_index=True)
     return verdict, metrics

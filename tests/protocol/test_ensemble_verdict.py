@@ -69,4 +69,5 @@ def test_ensemble_verdict_equals_compare_against_baseline(tmp_path, scale):
                  (ours.change_high, theirs.change_high)):
         assert math.isclose(a, b, rel_tol=1e-4, abs_tol=1e-6), (a, b)
     assert ours.outcome.name.lower() == ("not_distinguishable" if scale < 0.1 else "worse")
-    assert recorded.statement().startswith("The hybrid") and "WARNING" not in recorded.statement()
+    assert recorded.statement().startswith("The hybrid ensemble (the mean of 2 seeds' forces) ")
+    assert "1 seed" not in ours.sentence and "one model (the ensemble: no spread)" in ours.sentence
