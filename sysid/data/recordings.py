@@ -82,8 +82,9 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
     """Read and check a processed run (CSV or Parquet), downsampled to `rate` [Hz] by taking
     samples. `columns` maps the log's own column names and units onto the channels
     (``[data.columns]``; default: the processed schema's headers). The log is checked
-    against its own GNSS track (`sysid.data.consistency`): a clear mismatch is a
-    `DataError` naming the file, the channel and the factor; a marginal one, or a log
+    against its own GNSS track, and its rudder's sign against its yaw response
+    (`sysid.data.consistency`): a clear mismatch is a `DataError` naming the file, the
+    channel and the factor (or the fix); a marginal one, or a log
     without a track, goes to `warn` (None: silent)."""
     path = Path(path)
     columns = columns if columns is not None else ColumnMap()
@@ -116,7 +117,8 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
     # after the plausible ranges (every channel beyond its range named in one line): the track
     # check finds the subtler faults (knots, a flipped sign, swapped channels)
     c = {name: frame[name].to_numpy() for name in ("x", "y", "psi", "u", "v", "r")}
-    track = check_track(path, t, c["x"], c["y"], c["psi"], c["u"], c["v"], c["r"], columns)
+    track = check_track(path, t, c["x"], c["y"], c["psi"], c["u"], c["v"], c["r"], columns,
+                        delta=frame["delta_rudder"].to_numpy())
     report_checks([track], warn)
     period = float(np.median(steps))
     stride = int(round(1.0 / rate / period))
@@ -206,16 +208,17 @@ def _ends_mid_row(path: Path) -> bool:
 
 
 def log_track(path: str | os.PathLike, columns: ColumnMap | None = None) -> TrackCheck:
-    """A log's channels against its own GNSS track (`sysid.data.consistency.check_track`)
-    at the file's own rate, whatever the other checks of `read_run` say; `DataError` when
+    """A log's channels against its own GNSS track and its rudder's sign against its yaw
+    response (`sysid.data.consistency.check_track`) at the file's own rate, whatever the other checks of `read_run` say; `DataError` when
     the channels cannot be read."""
     path = Path(path)
     columns = columns if columns is not None else ColumnMap()
     frame, _ = _channels(path, columns)
-    c = {name: frame[name].to_numpy() for name in ("t", "x", "y", "psi", "u", "v", "r")}
+    c = {name: frame[name].to_numpy() for name in ("t", "x", "y", "psi", "u", "v", "r", "delta_rudder")}
     if (np.diff(c["t"]) <= 0).any():
         return TrackCheck(path, reason="time not strictly increasing")
-    return check_track(path, c["t"], c["x"], c["y"], c["psi"], c["u"], c["v"], c["r"], columns)
+    return check_track(path, c["t"], c["x"], c["y"], c["psi"], c["u"], c["v"], c["r"], columns,
+                       delta=c["delta_rudder"])
 
 
 _UNIT_HINT = {"speed": "knots", "angle": "deg", "angular rate": "deg/s", "revolutions": "rpm"}
