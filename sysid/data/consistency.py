@@ -86,9 +86,8 @@ class ChannelCheck:
     def sentence(self) -> str:
         """"u is 1.94 x the track's speed (correlation 1.00): knots under an m/s name?"."""
         if self.channel == "delta_rudder":
-            head = (f"delta_rudder: the rudder sign looks reversed: positive rudder turns the ship to port here "
-                    f"(partial correlation {self.correlation:.2f} of dr/dt with the rudder over {self.samples} samples "
-                    "going ahead)" if self.factor < 0 else
+            head = ("delta_rudder: the rudder sign looks reversed: positive rudder turns the ship to port here"
+                    if self.factor < 0 else
                     f"delta_rudder turns the ship to starboard (partial correlation {self.correlation:.2f})")
         elif self.channel == "t":
             head = f"t: every rate is {self.factor:.3g} x the track's"
@@ -230,8 +229,9 @@ def check_rudder(t: np.ndarray, u: np.ndarray, r: np.ndarray, delta: np.ndarray,
                             "too little")
     if found.sign is RudderSign.STARBOARD:
         return ChannelCheck("delta_rudder", 1.0, found.correlation, found.samples, Verdict.CONSISTENT)
-    fix = (f"negate {columns.describe('delta_rudder')} in the log (sysid's positive rudder turns the ship "
-           "to starboard; [data.columns] converts units, not signs)")
+    fix = (f"partial correlation {found.correlation:.2f} of dr/dt with the rudder over {found.excited_s:.0f} s of "
+           f"rudder going ahead; negate {columns.describe('delta_rudder')} in the log (sysid's positive rudder "
+           "turns the ship to starboard; [data.columns] converts units, not signs)")
     verdict = Verdict.MISMATCH if found.sign is RudderSign.PORT_CLEAR else Verdict.MARGINAL
     return ChannelCheck("delta_rudder", -1.0, found.correlation, found.samples, verdict, fix)
 

@@ -25,7 +25,7 @@ import torch
 from preprocessing.schema import PROCESSED, PROCESSED_CHANNEL, PROCESSED_PLAUSIBLE_ABS
 from sysid.data.columns import QUANTITY, RELATIVE_WIND, SI_UNIT, ColumnMap, to_channels
 from sysid.data.consistency import TrackCheck, check_track, report_checks
-from sysid.data.csvfiles import LOG_SUFFIXES, not_a_file, read_table
+from sysid.data.csvfiles import LOG_SUFFIXES, not_a_file, read_table, row_name
 from sysid.errors import DataError
 from sysid.mmg.wind import relative_wind
 from sysid.channel_names import INPUTS, STATE
@@ -98,8 +98,8 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
     steps = np.diff(t)
     if (steps <= 0).any():
         row = int(np.argmax(steps <= 0)) + 1
-        raise DataError(f"{path}: {columns.describe('t')} (channel t) is not strictly increasing at data row "
-                        f"{row + 2} (t = {t[row]} s)")
+        raise DataError(f"{path}: {columns.describe('t')} (channel t) is not strictly increasing at "
+                        f"{row_name(path, row)} (t = {t[row]} s)")
     beyond = []
     for name, limit in _LIMITS.items():
         peak = np.abs(frame[name].to_numpy()).max()
@@ -187,12 +187,12 @@ def _channels(path: Path, columns: ColumnMap) -> tuple[pd.DataFrame, list[str]]:
         raise DataError(f"{path}: fewer than two data rows")
     bad = ~np.isfinite(values)
     if bad[-1].any() and not bad[:-1].any() and _ends_mid_row(path):
-        raise DataError(f"{path}: data row {len(frame) + 1}: the file ends in the middle of it (no line end, "
+        raise DataError(f"{path}: {row_name(path, len(frame) - 1)}: the file ends in the middle of it (no line end, "
                         f"{int(bad[-1].sum())} of {bad.shape[1]} channels missing): it is cut off (an interrupted "
                         "copy?); copy it again, or delete its last row")
     if bad.any():   # every channel with an empty cell, in one line
-        listed = "; ".join(f"{columns.describe(channel)} (channel {channel}) is empty, NaN or inf at data row "
-                           f"{int(np.argmax(bad[:, j])) + 2}" for j, channel in enumerate(recorded) if bad[:, j].any())
+        listed = "; ".join(f"{columns.describe(channel)} (channel {channel}) is empty, NaN or inf at "
+                           f"{row_name(path, int(np.argmax(bad[:, j])))}" for j, channel in enumerate(recorded) if bad[:, j].any())
         raise DataError(f"{path}: {listed} ({int(bad.any(axis=1).sum())} bad rows)")
     return frame, recorded
 

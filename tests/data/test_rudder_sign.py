@@ -73,7 +73,7 @@ def test_a_reversed_rudder_stops_reading_in_one_line(tmp_path, dataset_dir):
     message = str(info.value)
     assert "\n" not in message
     assert message.startswith(f"{path}: delta_rudder: the rudder sign looks reversed: positive rudder turns the "
-                              "ship to port here (partial correlation -0.45")
+                              "ship to port here: partial correlation -0.45 of dr/dt with the rudder over 92 s of rudder going ahead")
     assert "negate column 'delta_rudder [rad]' in the log" in message
     assert read_run(dataset_dir / ZIGZAG, warn=None).track.channels[-1].verdict is Verdict.CONSISTENT
 
