@@ -227,6 +227,9 @@ def check_rudder(t: np.ndarray, u: np.ndarray, r: np.ndarray, delta: np.ndarray,
         return ChannelCheck("delta_rudder", np.nan, np.nan, found.samples, Verdict.UNCHECKED,
                             f"{found.excited_s:.0f} s of |rudder| >= {np.degrees(EXCITED_ANGLE):.0f} deg going ahead: "
                             "too little")
+    if found.sign is RudderSign.UNCLEAR:
+        return ChannelCheck("delta_rudder", np.nan, found.correlation, found.samples, Verdict.UNCHECKED,
+                            "dr/dt does not follow the rudder")
     if found.sign is RudderSign.STARBOARD:
         return ChannelCheck("delta_rudder", 1.0, found.correlation, found.samples, Verdict.CONSISTENT)
     fix = (f"partial correlation {found.correlation:.2f} of dr/dt with the rudder over {found.excited_s:.0f} s of "

@@ -16,7 +16,8 @@ differences of r over about 1 s, is fitted by least squares as
 
 (the rudder's moment, the yaw damping, a bias; a first-order Nomoto model with the rudder
 force's speed scaling), and the partial correlation of dr/dt with u^2 delta given the other
-two terms says which way the rudder turns the ship: positive for this convention. It is read
+two terms says which way the rudder turns the ship: positive for this convention (below
+`CORRELATION_WEAK` in size it says nothing, a log whose r does not answer its rudder). It is read
 only with enough rudder (`EXCITED_S` of samples ahead with |delta| >= `EXCITED_ANGLE`);
 straight running and harbour logs give no claim. Of the 39 FRT-DS-ESSO logs, 29 (turning,
 zig-zag, random) are read, at 10 Hz and at 1 Hz alike, with partial correlations of +0.37 to
@@ -34,6 +35,7 @@ AHEAD_SPEED = 0.15               # u [m/s] above which a sample is going ahead
 EXCITED_ANGLE = np.radians(3.0)  # |delta| [rad] of a sample with rudder
 EXCITED_S = 30.0                 # rudder time [s] ahead the relation needs
 CORRELATION_CLEAR = 0.3          # a partial correlation at or below -0.3: the sign is reversed
+CORRELATION_WEAK = 0.1           # |partial correlation| below 0.1: no relation to read a sign from
 SPAN_S = 1.0                     # half-width of the central differences of r [s]
 
 
@@ -43,6 +45,7 @@ class RudderSign(enum.Enum):
     STARBOARD = "starboard"      # sysid's convention
     PORT_CLEAR = "port"          # reversed, clearly
     PORT_WEAK = "port (weak)"    # a negative relation too weak to claim
+    UNCLEAR = "unclear"          # rudder enough, but no relation between it and dr/dt
     NOT_READ = "not read"        # too little rudder going ahead
 
 
@@ -93,7 +96,9 @@ def rudder_response(t: np.ndarray, u: np.ndarray, r: np.ndarray, delta: np.ndarr
     y, x = _residual(r_dot[ahead], others), _residual(rudder, others)
     power = float(np.sqrt(np.einsum("i,i->", x, x) * np.einsum("i,i->", y, y)))
     corr = float(np.einsum("i,i->", x, y)) / power if power > 0 else 0.0
-    if corr > 0:
+    if abs(corr) < CORRELATION_WEAK:
+        sign = RudderSign.UNCLEAR
+    elif corr > 0:
         sign = RudderSign.STARBOARD
     elif corr <= -CORRELATION_CLEAR:
         sign = RudderSign.PORT_CLEAR

@@ -125,3 +125,27 @@ def test_train_logs_check_and_preprocess_say_it(tmp_path, dataset_dir, capsys):
         _check_tracks([{"ok": True, "file": "raw/zz.csv", "outputs": [str(path)]}])
     assert str(bad.value).startswith("raw/zz.csv: its processed log flipped.csv: delta_rudder: the rudder sign "
                                      "looks reversed")
+
+
+def test_a_yaw_rate_that_does_not_answer_the_rudder_gives_no_claim():
+    """The analytic run's r and delta are in phase sines (r is not driven by delta): whichever
+    sign delta has, no claim."""
+    from analytic_runs import analytic_run
+    run = analytic_run(600.0)
+    t, u, r, delta = (run[c].to_numpy() for c in ("t", "u_velo", "r_angvelo", "delta_rudder"))
+    for sign in (1.0, -1.0):
+        found = rudder_response(t, u, r, sign * delta)
+        assert found.excited_s > 300.0 and found.sign is RudderSign.UNCLEAR, found
+        assert check_rudder(t, u, r, sign * delta).verdict is Verdict.UNCHECKED
+
+
+def test_logs_simulated_by_the_mmg_turn_to_starboard():
+    """The convention's own truth: 1-Hz logs simulated by sysid's MMG (a perturbed Esso Osaka,
+    measurement noise on u, v, r) read as turning to starboard, and as reversed with delta
+    negated."""
+    from synthetic_rundir import measured_runs
+    for scenario, run in measured_runs().items():
+        t, u, r, delta = run.t, run.states[:, 1], run.states[:, 5], run.inputs[:, 1]
+        found = rudder_response(t, u, r, delta)
+        assert found.sign is RudderSign.STARBOARD and found.correlation > 0.4, (scenario, found)
+        assert rudder_response(t, u, r, -delta).sign is RudderSign.PORT_CLEAR, scenario
