@@ -112,12 +112,13 @@ class Pipeline:
         dt = schema.NOMINAL_DT
         k = np.rint((t - t[0]) / dt).astype(np.int64)
         jitter = np.abs(t - t[0] - k * dt)
+        lines = df.attrs.get("line", np.arange(len(t)) + 2)  # each row's line of the file (schema.file_line)
         if jitter.max() > 0.25 * dt:
-            row = int(np.argmax(jitter)) + 1
-            raise RawLogError(f"{name}: column t: row {row}: {t[row - 1]} s is off the 10 Hz grid")
+            row = int(np.argmax(jitter))
+            raise RawLogError(f"{name}: column t: line {lines[row]}: {t[row]} s is off the 10 Hz grid")
         if np.any(np.diff(k) == 0):
-            row = int(np.flatnonzero(np.diff(k) == 0)[0]) + 2
-            raise RawLogError(f"{name}: column t: row {row}: two samples within one 0.1 s step")
+            row = int(np.flatnonzero(np.diff(k) == 0)[0]) + 1
+            raise RawLogError(f"{name}: column t: line {lines[row]}: two samples within one 0.1 s step")
         n = int(k[-1]) + 1
         cols = {}
         for c in df.columns:

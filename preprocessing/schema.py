@@ -2,7 +2,8 @@
 
 Headers are ``name [unit]`` as in the public FRT-DS-ESSO files. `read_raw` returns a
 DataFrame with the bare names (``t``, ``gnss_fore_x``, ...) in SI units, or raises
-`RawLogError` naming the file, the column and the row (1-based data row, header excluded).
+`RawLogError` naming the file, the column and the row as the file's line (`file_line`: the
+header is line 1, the first data row line 2), so an editor opens the file at it.
 Documented repairs (degree headers converted to radians, exact duplicate rows dropped) are
 appended to the `repairs` list the caller passes in.
 """
@@ -23,6 +24,12 @@ class RawLogError(ValueError):
 
 
 # bare name -> unit, raw log
+def file_line(index: int) -> int:
+    """The line of a CSV file holding the data row whose pandas index (as `pd.read_csv` numbers
+    the rows, from 0) is `index`: the header is line 1, so line index + 2."""
+    return int(index) + 2
+
+
 RAW_COMMON = {
     "t": "s",
     "fog_yaw_rate": "rad/s",
@@ -126,8 +133,8 @@ def validate_raw(df: pd.DataFrame, path: str = "<raw log>",
     if len(empty) and empty.all():
         raise RawLogError(f"{path}: no data: every one of its {len(empty)} rows is empty (no number in any column)")
     if empty.any():  # blank lines, typically trailing ones from spreadsheet exports
-        repairs.append(f"dropped {int(empty.sum())} empty row(s), first at row "
-                       f"{int(np.flatnonzero(empty)[0]) + 1}")
+        repairs.append(f"dropped {int(empty.sum())} empty row(s), first at line "
+                       f"{file_line(df.index[np.flatnonzero(empty)[0]])}")
         df = df.loc[~empty]
     out = pd.DataFrame({_split_header(str(c))[0]: df[c] for c in df.columns})
     keep = list(RAW_COMMON) + list(gnss) + [k for k in RAW_OPTIONAL if k in have]
@@ -136,17 +143,21 @@ def validate_raw(df: pd.DataFrame, path: str = "<raw log>",
         values = pd.to_numeric(out[col], errors="coerce")
         bad = values.isna() & out[col].notna()
         if bad.any():
-            row = int(np.flatnonzero(bad.to_numpy())[0]) + 1
-            raise RawLogError(f"{path}: column {col}: row {row}: not a number "
-                              f"({out[col].iloc[row - 1]!r})")
+            first = int(np.flatnonzero(bad.to_numpy())[0])
+            raise RawLogError(f"{path}: column {col}: line {file_line(out.index[first])}: not a number "
+                              f"({out[col].iloc[first]!r})")
         values = values.astype(float)
         inf = np.isinf(values.to_numpy())
         if inf.any():
-            raise RawLogError(f"{path}: column {col}: row {int(np.flatnonzero(inf)[0]) + 1}: infinite value")
+            raise RawLogError(f"{path}: column {col}: line {file_line(out.index[np.flatnonzero(inf)[0]])}: "
+                              "infinite value")
         out[col] = values * scale.get(col, 1.0)
     out = _check_time(out, path, repairs)
     _check_ranges(out, path)
-    return out.reset_index(drop=True), latlon
+    lines = out.index.to_numpy() + 2  # each kept row's line of the file (`file_line`)
+    out = out.reset_index(drop=True)
+    out.attrs["line"] = lines          # for the pipeline's own row errors
+    return out, latlon
 
 
 def _check_time(df: pd.DataFrame, path: str, repairs: list[str]) -> pd.DataFrame:
@@ -156,20 +167,19 @@ def _check_time(df: pd.DataFrame, path: str, repairs: list[str]) -> pd.DataFrame
         raise RawLogError(f"{path}: column t: fewer than 2 rows")
     nan = np.isnan(t)
     if nan.any():
-        raise RawLogError(f"{path}: column t: row {int(np.flatnonzero(nan)[0]) + 1}: empty time ({int(nan.sum())} "
+        raise RawLogError(f"{path}: column t: line {file_line(df.index[np.flatnonzero(nan)[0]])}: empty time ({int(nan.sum())} "
                           "row(s); every row needs its time stamp: fill it in, or delete the row)")
     dup = df.duplicated(keep="first").to_numpy()
     if dup.any():
-        rows = np.flatnonzero(dup) + 1
-        repairs.append(f"dropped {len(rows)} exact duplicate row(s), first at row {rows[0]}")
+        rows = np.flatnonzero(dup)
+        repairs.append(f"dropped {len(rows)} exact duplicate row(s), first at line {file_line(df.index[rows[0]])}")
         df = df.loc[~dup]
         t = df["t"].to_numpy()
     step = np.diff(t)
     bad = np.flatnonzero(step <= 0.0)
     if len(bad):
-        row = int(df.index[bad[0] + 1]) + 1
         what = "repeated time with different values" if step[bad[0]] == 0 else "time goes backwards"
-        raise RawLogError(f"{path}: column t: row {row}: {what} (t = {t[bad[0] + 1]} s after "
+        raise RawLogError(f"{path}: column t: line {file_line(df.index[bad[0] + 1])}: {what} (t = {t[bad[0] + 1]} s after "
                           f"{t[bad[0]]} s)")
     med = float(np.median(step))
     if abs(med - NOMINAL_DT) > 0.02:
@@ -203,8 +213,8 @@ def _check_ranges(df: pd.DataFrame, path: str) -> None:
             low = bool(np.all(v[bad] < lo))
             fix = f"a negative {col}: the sensor's offset or sign?" if low and lo == 0.0 else _RANGE_FIX[unit]
             raise RawLogError(
-                f"{path}: column {col}: row {int(df.index[bad[0]]) + 1}: {len(bad)} row(s) outside "
-                f"[{lo:.3g}, {lim:.3g}] {unit}, up to {v[worst]:.6g} (row {int(df.index[worst]) + 1}): {fix}")
+                f"{path}: column {col}: line {file_line(df.index[bad[0]])}: {len(bad)} row(s) outside "
+                f"[{lo:.3g}, {lim:.3g}] {unit}, up to {v[worst]:.6g} (line {file_line(df.index[worst])}): {fix}")
 
 
 def read_raw(path: str | os.PathLike, repairs: list[str] | None = None) -> tuple[pd.DataFrame, bool]:
@@ -230,5 +240,5 @@ def _check_last_row(path: Path, n_columns: int, n_rows: int) -> None:
         return
     fields = tail.rsplit(b"\n", 1)[-1].count(b",") + 1
     if fields < n_columns:
-        raise RawLogError(f"{path}: row {n_rows}: {fields} of {n_columns} fields and no line end: the file "
+        raise RawLogError(f"{path}: line {file_line(n_rows - 1)}: {fields} of {n_columns} fields and no line end: the file "
                           "is cut off (an interrupted copy?); copy it again, or delete its last row")

@@ -80,7 +80,7 @@ def processed_run(df: pd.DataFrame, path) -> pd.DataFrame:
     if missing:
         raise schema.RawLogError(f"{path}: column {missing[0]}: missing from processed run")
     kept = df.dropna(how="all")
-    rows = kept.index.to_numpy() + 2   # data rows of the file (the header is row 1)
+    rows = kept.index.to_numpy() + 2   # each kept row's line of the file (the header is line 1)
     df = kept.reset_index(drop=True)
     if len(df) < 2:
         raise schema.RawLogError(f"{path}: fewer than two data rows")
@@ -90,13 +90,13 @@ def processed_run(df: pd.DataFrame, path) -> pd.DataFrame:
     if bad.any():
         row, col = np.argwhere(bad)[0]
         raise schema.RawLogError(f"{path}: column {used[col]} is empty, NaN or not a number at "
-                                 f"data row {rows[row]} ({int(bad.any(axis=1).sum())} bad rows); a truth is built "
+                                 f"line {rows[row]} ({int(bad.any(axis=1).sum())} bad rows); a truth is built "
                                  "from complete rows only: fill or cut them")
     t = values[:, used.index("t")]
     step = np.diff(t)
     if (step <= 0).any():
         k = int(np.argmax(step <= 0)) + 1
-        raise schema.RawLogError(f"{path}: column t is not strictly increasing at data row {rows[k]} "
+        raise schema.RawLogError(f"{path}: column t is not strictly increasing at line {rows[k]} "
                                  f"(t = {t[k]:g} s after {t[k - 1]:g} s): remove the repeated or earlier time")
     df[used] = values
     return df

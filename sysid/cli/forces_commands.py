@@ -61,7 +61,7 @@ def _read_force_inputs(path: Path):
     if bad.any():
         row, col = np.argwhere(bad)[0]
         cell = frame[FORCE_INPUTS[col]].iloc[row]
-        raise DataError(f"{path}: column {FORCE_INPUTS[col]!r} is not a finite number at data row {row + 2} "
+        raise DataError(f"{path}: column {FORCE_INPUTS[col]!r} is not a finite number at line {row + 2} "
                         f"({'empty' if pd.isna(cell) else f'found {cell}'})")
     return numeric.astype(float)
 
@@ -106,13 +106,13 @@ def forces(
     if bad.any():
         row, col = np.argwhere(bad)[0]
         state = ", ".join(f"{c} = {numeric[c].iloc[row]:g}" for c in ("u", "v", "r", "n_prop"))
-        raise DataError(f"{input_csv}: data row {row + 2}: {computed[col]} is {values[row, col]} ({state}): "
+        raise DataError(f"{input_csv}: line {row + 2}: {computed[col]} is {values[row, col]} ({state}): "
                         f"the state is beyond the model's range ({int(bad.any(axis=1).sum())} row(s)); nothing written")
     for name, limit in PLAUSIBLE.items():
         beyond = np.abs(numeric[name].to_numpy()) > limit
         if beyond.any():
             typer.secho(f"warning: {input_csv}: column {name!r} beyond {limit:g} on {int(beyond.sum())} row(s) "
-                        f"(first at data row {int(np.argmax(beyond)) + 2}): not a ship model's state"
+                        f"(first at line {int(np.argmax(beyond)) + 2}): not a ship model's state"
                         f"{_UNIT_HINT.get(name, '')}; forces computed but implausible", fg=typer.colors.YELLOW,
                         err=True)
     writing = progress(total=len(result), desc="writing", unit="rows", quiet=len(result) < 100_000)

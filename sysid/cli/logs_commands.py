@@ -20,8 +20,9 @@ def check(
                                                                  "schema's)."),
 ) -> None:
     """Check u, v_m and r of every log against its own track (d(x, y)/dt turned by psi, and
-    dpsi/dt): a table of file, channel, factor (log / track), correlation and verdict. Exit
-    code 2 with one line per clear mismatch (file, channel, factor)."""
+    dpsi/dt), and the rudder's sign against the yaw response: a table of file, channel, factor
+    (log / track; for delta_rudder +1 or -1, the sign found), correlation and verdict. Exit
+    code 2 with one line per clear mismatch (file, channel, factor or fix)."""
     from sysid.data.consistency import Verdict, report_checks
     from sysid.data.recordings import expand_paths, log_track
     from sysid.errors import DataError
@@ -33,20 +34,20 @@ def check(
     files = expand_paths(paths)
     checks, unreadable = [], []
     width = min(48, max(len(f.name) for f in files))
-    typer.echo(f"{'file':{width}s} {'channel':>7s} {'factor':>9s} {'corr':>6s}  verdict")
+    typer.echo(f"{'file':{width}s} {'channel':>12s} {'factor':>9s} {'corr':>6s}  verdict")
     for f in files:
         try:
             found = log_track(f, columns)
         except DataError as exc:
             unreadable.append(str(exc))
-            typer.echo(f"{f.name[:width]:{width}s} {'-':>7s} {'':>9s} {'':>6s}  unreadable (below)")
+            typer.echo(f"{f.name[:width]:{width}s} {'-':>12s} {'':>9s} {'':>6s}  unreadable (below)")
             continue
         checks.append(found)
         if not found.checked:
-            typer.echo(f"{f.name[:width]:{width}s} {'-':>7s} {'':>9s} {'':>6s}  not checked: {found.reason}")
+            typer.echo(f"{f.name[:width]:{width}s} {'-':>12s} {'':>9s} {'':>6s}  not checked: {found.reason}")
         for c in found.channels:
             hint = f" ({c.hint})" if c.hint else ""
-            typer.echo(f"{f.name[:width]:{width}s} {c.channel:>7s} {c.factor:9.4g} {c.correlation:6.3f}  "
+            typer.echo(f"{f.name[:width]:{width}s} {c.channel:>12s} {c.factor:9.4g} {c.correlation:6.3f}  "
                        f"{c.verdict.value}{hint}")
     bad = sum(len(c.worst(Verdict.MISMATCH)) for c in checks)
     marginal = sum(len(c.worst(Verdict.MARGINAL)) for c in checks)

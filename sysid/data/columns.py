@@ -7,6 +7,7 @@ import pandas as pd
 
 from sysid.config.column_map import (CHANNELS, DEFAULT_COLUMNS, QUANTITY, RELATIVE_WIND, SI_UNIT,  # noqa: F401
                                      UNITS, ColumnMap, ColumnSpec, parse_columns, unit_factor)
+from sysid.data.csvfiles import row_name
 from sysid.errors import ConfigError, DataError
 
 
@@ -40,7 +41,7 @@ def to_channels(columns: ColumnMap, frame: pd.DataFrame, path) -> pd.DataFrame:
             if text.any():   # every such column is named in one error below
                 row = int(np.argmax(text.to_numpy()))
                 text_cells.append(f"column {spec.column!r} (channel {channel}) holds "
-                                  f"{column.iloc[row]!r} at data row {row + 2}")
+                                  f"{column.iloc[row]!r} at {row_name(path, row)}")
                 continue
         try:
             factor = spec.factor

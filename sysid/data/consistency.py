@@ -30,6 +30,7 @@ from typing import Sequence
 import numpy as np
 
 from sysid.data.columns import QUANTITY, UNITS, ColumnMap
+from sysid.data.rudder_sign import EXCITED_ANGLE, RudderResponse, RudderSign, rudder_response
 from sysid.errors import DataError
 
 # per channel, k outside [1/b, b] (or k < 0): a clear mismatch (b = FACTOR_CLEAR), a marginal one
@@ -64,9 +65,12 @@ class ChannelCheck:
 
     Attributes
     ----------
-    channel : "u", "v", "r", or "t" (every rate off by one factor: the time's unit).
-    factor : k in log = k x track [-] (NaN when unchecked).
-    correlation : Pearson correlation of log and track on the kept samples [-].
+    channel : "u", "v", "r", "t" (every rate off by one factor: the time's unit), or
+        "delta_rudder" (the rudder's sign from the yaw response, `sysid.data.rudder_sign`).
+    factor : k in log = k x track [-] (NaN when unchecked); for delta_rudder +1 or -1, the
+        sign of the yaw response against sysid's convention.
+    correlation : Pearson correlation of log and track on the kept samples [-]; for
+        delta_rudder the partial correlation of dr/dt with the rudder term.
     samples : samples the fit kept.
     verdict : `Verdict`.
     hint : the likely cause ("knots under an m/s name?"), "" when none is known.
@@ -81,7 +85,11 @@ class ChannelCheck:
 
     def sentence(self) -> str:
         """"u is 1.94 x the track's speed (correlation 1.00): knots under an m/s name?"."""
-        if self.channel == "t":
+        if self.channel == "delta_rudder":
+            head = ("delta_rudder: the rudder sign looks reversed: positive rudder turns the ship to port here"
+                    if self.factor < 0 else
+                    f"delta_rudder turns the ship to starboard (partial correlation {self.correlation:.2f})")
+        elif self.channel == "t":
             head = f"t: every rate is {self.factor:.3g} x the track's"
         elif self.channel == "uv":
             head = f"u and v are the track's v and u ({self.factor:.3g} x)"
@@ -181,10 +189,13 @@ def _grade(channel: str, factor: float, corr: float) -> Verdict:
 
 
 def check_track(path: str | Path, t: np.ndarray, x: np.ndarray, y: np.ndarray, psi: np.ndarray,
-                u: np.ndarray, v: np.ndarray, r: np.ndarray, columns: ColumnMap | None = None) -> TrackCheck:
+                u: np.ndarray, v: np.ndarray, r: np.ndarray, columns: ColumnMap | None = None,
+                delta: np.ndarray | None = None) -> TrackCheck:
     """A log's u, v_m [m/s] and r [rad/s] against the rates of its own midship track x, y
     [m] (earth frame, north and east) and heading psi [rad], all (N,) at times t (N,) [s]
-    as read (SI by `columns`, whose declared units name the likely cause). Cost O(N).
+    as read (SI by `columns`, whose declared units name the likely cause); with the rudder
+    angle `delta` [rad] (N,), its sign read from the yaw response too (`check_rudder`),
+    unless r itself disagrees with the heading. Cost O(N).
 
     A log sampled more coarsely than every `MAX_PERIOD_S` is left unchecked (a turn's heading
     and track sampled this coarsely bias central differences), unless its time unit is off:
@@ -197,7 +208,35 @@ def check_track(path: str | Path, t: np.ndarray, x: np.ndarray, y: np.ndarray, p
     if period > MAX_PERIOD_S and not any(c.channel == "t" for c in result.channels):
         return TrackCheck(path, reason=f"sampled every {period:g} s: too coarse to check u, v and r against "
                                        f"the track's central differences (at most {MAX_PERIOD_S:g} s)")
-    return result
+    if delta is None or any(c.channel in ("r", "t", "psi") and c.verdict is Verdict.MISMATCH for c in result.channels):
+        return result  # r's own fault is named first; the rudder is read once r is right
+    rudder = check_rudder(t, u, r, delta, columns)
+    if rudder.verdict is Verdict.UNCHECKED:
+        return result
+    return TrackCheck(path, result.channels + (rudder,), result.reason)
+
+
+def check_rudder(t: np.ndarray, u: np.ndarray, r: np.ndarray, delta: np.ndarray,
+                 columns: ColumnMap | None = None) -> ChannelCheck:
+    """The rudder's sign (`sysid.data.rudder_sign.rudder_response`) of (N,) t [s], u [m/s],
+    r [rad/s] and delta [rad] as a channel check: a clearly reversed sign a mismatch, a weak
+    negative relation marginal, too little rudder going ahead unchecked."""
+    columns = columns if columns is not None else ColumnMap()
+    found: RudderResponse = rudder_response(t, u, r, delta)
+    if found.sign is RudderSign.NOT_READ:
+        return ChannelCheck("delta_rudder", np.nan, np.nan, found.samples, Verdict.UNCHECKED,
+                            f"{found.excited_s:.0f} s of |rudder| >= {np.degrees(EXCITED_ANGLE):.0f} deg going ahead: "
+                            "too little")
+    if found.sign is RudderSign.UNCLEAR:
+        return ChannelCheck("delta_rudder", np.nan, found.correlation, found.samples, Verdict.UNCHECKED,
+                            "dr/dt does not follow the rudder")
+    if found.sign is RudderSign.STARBOARD:
+        return ChannelCheck("delta_rudder", 1.0, found.correlation, found.samples, Verdict.CONSISTENT)
+    fix = (f"partial correlation {found.correlation:.2f} of dr/dt with the rudder over {found.excited_s:.0f} s of "
+           f"rudder going ahead; negate {columns.describe('delta_rudder')} in the log (sysid's positive rudder "
+           "turns the ship to starboard; [data.columns] converts units, not signs)")
+    verdict = Verdict.MISMATCH if found.sign is RudderSign.PORT_CLEAR else Verdict.MARGINAL
+    return ChannelCheck("delta_rudder", -1.0, found.correlation, found.samples, verdict, fix)
 
 
 def _against_track(path: Path, t: np.ndarray, x: np.ndarray, y: np.ndarray, psi: np.ndarray, u: np.ndarray,
@@ -276,7 +315,10 @@ def report_checks(checks: Sequence[TrackCheck], warn=None) -> None:
     """Raise one `DataError` with a line per clear mismatch of all `checks` (file, channel,
     factor); pass each marginal one, and once the logs that could not be checked, to
     `warn` (a callable taking a line)."""
-    errors = [line for check in checks for line in check.lines(Verdict.MISMATCH)]
+    errors = [f"{check.path}: {c.sentence()}" + ("" if c.channel == "delta_rudder" else
+                                                 " (the track check: give the unit in [data.columns], or fix the "
+                                                 "sign in the log)")
+              for check in checks for c in check.worst(Verdict.MISMATCH)]
     if warn is not None:
         for check in checks:
             for line in check.lines(Verdict.MARGINAL):
@@ -287,5 +329,4 @@ def report_checks(checks: Sequence[TrackCheck], warn=None) -> None:
             more = f" and {len(unchecked) - 1} more log(s)" if len(unchecked) > 1 else ""
             warn(f"{first.path}{more}: not checked against the GNSS track ({first.reason})")
     if errors:
-        raise DataError("\n".join(f"{line} (the track check: fix the unit or sign in [data.columns])"
-                                   for line in errors))
+        raise DataError("\n".join(errors))

@@ -90,6 +90,15 @@ def read_parquet_table(path: str | os.PathLike, expect: str = "a Parquet table")
         raise DataError(f"{path}: not a readable Parquet file ({reason}) (expected {expect})") from None
 
 
+def row_name(path: str | os.PathLike, index: int) -> str:
+    """Where the data row at position `index` (from 0) of a table read by `read_table` is,
+    for messages: "line N" of a CSV file (the header is line 1: N = index + 2, the number
+    an editor opens the file at), "row N" of a Parquet table (N = index + 1)."""
+    if Path(path).suffix.lower() in PARQUET_SUFFIXES:
+        return f"row {int(index) + 1}"
+    return f"line {int(index) + 2}"
+
+
 def read_table(path: str | os.PathLike, expect: str = "a table with a header row") -> pd.DataFrame:
     """A log as a DataFrame: Parquet for ``.parquet``/``.pq`` files, CSV otherwise."""
     if Path(path).suffix.lower() in PARQUET_SUFFIXES:

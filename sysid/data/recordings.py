@@ -25,7 +25,7 @@ import torch
 from preprocessing.schema import PROCESSED, PROCESSED_CHANNEL, PROCESSED_PLAUSIBLE_ABS
 from sysid.data.columns import QUANTITY, RELATIVE_WIND, SI_UNIT, ColumnMap, to_channels
 from sysid.data.consistency import TrackCheck, check_track, report_checks
-from sysid.data.csvfiles import LOG_SUFFIXES, not_a_file, read_table
+from sysid.data.csvfiles import LOG_SUFFIXES, not_a_file, read_table, row_name
 from sysid.errors import DataError
 from sysid.mmg.wind import relative_wind
 from sysid.channel_names import INPUTS, STATE
@@ -82,8 +82,9 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
     """Read and check a processed run (CSV or Parquet), downsampled to `rate` [Hz] by taking
     samples. `columns` maps the log's own column names and units onto the channels
     (``[data.columns]``; default: the processed schema's headers). The log is checked
-    against its own GNSS track (`sysid.data.consistency`): a clear mismatch is a
-    `DataError` naming the file, the channel and the factor; a marginal one, or a log
+    against its own GNSS track, and its rudder's sign against its yaw response
+    (`sysid.data.consistency`): a clear mismatch is a `DataError` naming the file, the
+    channel and the factor (or the fix); a marginal one, or a log
     without a track, goes to `warn` (None: silent)."""
     path = Path(path)
     columns = columns if columns is not None else ColumnMap()
@@ -97,8 +98,8 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
     steps = np.diff(t)
     if (steps <= 0).any():
         row = int(np.argmax(steps <= 0)) + 1
-        raise DataError(f"{path}: {columns.describe('t')} (channel t) is not strictly increasing at data row "
-                        f"{row + 2} (t = {t[row]} s)")
+        raise DataError(f"{path}: {columns.describe('t')} (channel t) is not strictly increasing at "
+                        f"{row_name(path, row)} (t = {t[row]} s)")
     beyond = []
     for name, limit in _LIMITS.items():
         peak = np.abs(frame[name].to_numpy()).max()
@@ -116,7 +117,8 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
     # after the plausible ranges (every channel beyond its range named in one line): the track
     # check finds the subtler faults (knots, a flipped sign, swapped channels)
     c = {name: frame[name].to_numpy() for name in ("x", "y", "psi", "u", "v", "r")}
-    track = check_track(path, t, c["x"], c["y"], c["psi"], c["u"], c["v"], c["r"], columns)
+    track = check_track(path, t, c["x"], c["y"], c["psi"], c["u"], c["v"], c["r"], columns,
+                        delta=frame["delta_rudder"].to_numpy())
     report_checks([track], warn)
     period = float(np.median(steps))
     stride = int(round(1.0 / rate / period))
@@ -185,12 +187,12 @@ def _channels(path: Path, columns: ColumnMap) -> tuple[pd.DataFrame, list[str]]:
         raise DataError(f"{path}: fewer than two data rows")
     bad = ~np.isfinite(values)
     if bad[-1].any() and not bad[:-1].any() and _ends_mid_row(path):
-        raise DataError(f"{path}: data row {len(frame) + 1}: the file ends in the middle of it (no line end, "
+        raise DataError(f"{path}: {row_name(path, len(frame) - 1)}: the file ends in the middle of it (no line end, "
                         f"{int(bad[-1].sum())} of {bad.shape[1]} channels missing): it is cut off (an interrupted "
                         "copy?); copy it again, or delete its last row")
     if bad.any():   # every channel with an empty cell, in one line
-        listed = "; ".join(f"{columns.describe(channel)} (channel {channel}) is empty, NaN or inf at data row "
-                           f"{int(np.argmax(bad[:, j])) + 2}" for j, channel in enumerate(recorded) if bad[:, j].any())
+        listed = "; ".join(f"{columns.describe(channel)} (channel {channel}) is empty, NaN or inf at "
+                           f"{row_name(path, int(np.argmax(bad[:, j])))}" for j, channel in enumerate(recorded) if bad[:, j].any())
         raise DataError(f"{path}: {listed} ({int(bad.any(axis=1).sum())} bad rows)")
     return frame, recorded
 
@@ -206,16 +208,17 @@ def _ends_mid_row(path: Path) -> bool:
 
 
 def log_track(path: str | os.PathLike, columns: ColumnMap | None = None) -> TrackCheck:
-    """A log's channels against its own GNSS track (`sysid.data.consistency.check_track`)
-    at the file's own rate, whatever the other checks of `read_run` say; `DataError` when
+    """A log's channels against its own GNSS track and its rudder's sign against its yaw
+    response (`sysid.data.consistency.check_track`) at the file's own rate, whatever the other checks of `read_run` say; `DataError` when
     the channels cannot be read."""
     path = Path(path)
     columns = columns if columns is not None else ColumnMap()
     frame, _ = _channels(path, columns)
-    c = {name: frame[name].to_numpy() for name in ("t", "x", "y", "psi", "u", "v", "r")}
+    c = {name: frame[name].to_numpy() for name in ("t", "x", "y", "psi", "u", "v", "r", "delta_rudder")}
     if (np.diff(c["t"]) <= 0).any():
         return TrackCheck(path, reason="time not strictly increasing")
-    return check_track(path, c["t"], c["x"], c["y"], c["psi"], c["u"], c["v"], c["r"], columns)
+    return check_track(path, c["t"], c["x"], c["y"], c["psi"], c["u"], c["v"], c["r"], columns,
+                       delta=c["delta_rudder"])
 
 
 _UNIT_HINT = {"speed": "knots", "angle": "deg", "angular rate": "deg/s", "revolutions": "rpm"}

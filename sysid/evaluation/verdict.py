@@ -21,6 +21,7 @@ and channel (the table beside the sentence, and the verdict of runs written befo
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING, Mapping, Sequence
@@ -160,12 +161,22 @@ class BaselineVerdict:
                                                                   >= c.horizon_s - 1e-6 * max(1.0, c.horizon_s)) for c in cells)
         return "the non-overlapping validation windows" if apart else "the validation windows"
 
+    @property
+    def seed_logs_text(self) -> str:
+        """" (each log's windows of all N seeds ...)" when the seeds' validation windows were
+        pooled per log as one model's (`seed_logs`), else ""."""
+        members = {j.n_members for j in self.validation_judgements.values()}
+        if self.seeds <= 1 or members != {1}:
+            return ""
+        return (f" (each log's windows of all {self.seeds} seeds pooled as one model's: the seeds drew different "
+                "validation blocks, so no window pairs with another seed's)")
+
     def decided_text(self) -> str:
         """"Decided on the test logs at 30 s and 100 s." (what the report and log say)."""
         hs = " and ".join(f"{h:g} s" for h in self.horizons_s)
         if self.decided_on == TEST:
             return f"Decided on the test logs at {hs}."
-        return f"Decided on {self.validation_windows} at {hs}: there are no test logs."
+        return f"Decided on {self.validation_windows}{self.seed_logs_text} at {hs}: there are no test logs."
 
     def statement(self) -> str:
         """The verdict in a few sentences (the report's first lines, the CLI's last)."""
@@ -176,7 +187,8 @@ class BaselineVerdict:
             off = [j.outcome.value.replace("its baseline", label) for label, j in self.validation_judgements.items()
                    if j.outcome is not Outcome.BEATS]
             if off:
-                text += f" On {self.validation_windows} the {self.model_name} " + " and ".join(off) + "."
+                text += (f" On {self.validation_windows}{self.seed_logs_text} the {self.model_name} "
+                         + " and ".join(off) + ".")
         if not self.beats_baseline:
             text += {Outcome.DIVERGED: " Use the baseline; train again with a smaller step or check the logs.",
                      Outcome.WORSE: " Use the baseline, or train and check again, before trusting this model.",
@@ -349,19 +361,34 @@ def _cells_per_log(model: np.ndarray, baseline: np.ndarray, nonfinite_after_s: n
     return out
 
 
-def judged(model: str, label: str, cells: Sequence[PairedCell], rule: VerdictRule, seeds: int = 1) -> Judgement:
-    """`judge` with the sentence's names: "The hybrid" against "its physics baseline MMG (ship file)"."""
+def judged(model: str, label: str, cells: Sequence[PairedCell], rule: VerdictRule, seeds: int = 1,
+           ensemble_of: int = 0) -> Judgement:
+    """`judge` with the sentence's names: "The hybrid" against "its physics baseline MMG (ship file)";
+    `seeds` > 1 on cells of one member (`seed_logs`: the seeds' windows pooled per log) says so,
+    as does `ensemble_of` > 0 (one model, the mean-of-seeds ensemble of that many seeds)."""
     name = MODEL_NAMES.get(model, model)
-    spread = f" (mean over {seeds} seeds)" if seeds > 1 else ""
-    return judge(cells, rule, model=f"The {name}{spread}", baseline=f"its physics baseline {label}")
+    pooled = seeds > 1 and all(c.model.shape[0] == 1 for c in cells)
+    spread = (f" ({seeds} seeds' windows pooled)" if pooled else f" (mean over {seeds} seeds)") if seeds > 1 else ""
+    if ensemble_of:
+        spread = f" ensemble (the mean of {ensemble_of} seeds' forces)"
+    found = judge(cells, rule, model=f"The {name}{spread}", baseline=f"its physics baseline {label}")
+    one = "1 seed (no spread: one model)"
+    if pooled:   # one member: every seed's windows, no seed's spread of its own
+        found = dataclasses.replace(found, sentence=found.sentence.replace(
+            one, f"{seeds} seeds' windows pooled as one model's (no spread per seed)"))
+    elif ensemble_of:
+        found = dataclasses.replace(found, sentence=found.sentence.replace(one, "one model (the ensemble: no spread)"))
+    return found
 
 
 def baseline_verdict(model: str, validation: Mapping[float, Mapping[str, WindowScore]] | None,
-                     test: Mapping[str, "Evaluation"] | None, rule: VerdictRule = DEFAULT_RULE) -> BaselineVerdict:
+                     test: Mapping[str, "Evaluation"] | None, rule: VerdictRule = DEFAULT_RULE,
+                     ensemble_of: int = 0) -> BaselineVerdict:
     """The verdict from scores keyed "model" and by baseline label (`SHIP_FILE_MMG`, ...):
     `validation` window scores per horizon [s], `test` evaluations on the test logs (None or
     empty: not available). A label's validation loss is the mean over the horizons, as
-    ``val_loss_multistep``."""
+    ``val_loss_multistep``. `ensemble_of` > 0: the model is the mean-of-seeds ensemble of that
+    many seeds (one model; the sentence names it so)."""
     first = next(iter(validation.values())) if validation else None
     labels = [k for k in (first or test or {}) if k != "model"]
     cells: list[ChannelCell] = []
@@ -387,19 +414,19 @@ def baseline_verdict(model: str, validation: Mapping[float, Mapping[str, WindowS
             evidence[TEST] = by
     losses = {k: float(np.mean([scores[k].val_loss_multistep for scores in validation.values()]))
               for k in (first or {})}
-    return verdict_of(model, tuple(labels), tuple(cells), losses, evidence, rule)
+    return verdict_of(model, tuple(labels), tuple(cells), losses, evidence, rule, ensemble_of=ensemble_of)
 
 
 def verdict_of(model: str, labels: tuple[str, ...], cells: tuple[ChannelCell, ...], losses: dict[str, float],
                evidence: dict[str, dict[str, tuple[PairedCell, ...]]], rule: VerdictRule,
-               seeds: int = 1) -> BaselineVerdict:
+               seeds: int = 1, ensemble_of: int = 0) -> BaselineVerdict:
     """Judge the evidence of every split against every baseline; the test logs decide when
     there are any."""
     decided = TEST if TEST in evidence else VALIDATION
-    on_validation = {b: judged(model, b, cs, rule, seeds) for b, cs in evidence.get(VALIDATION, {}).items()}
+    on_validation = {b: judged(model, b, cs, rule, seeds, ensemble_of) for b, cs in evidence.get(VALIDATION, {}).items()}
     # `judge` is pure: decided on the validation windows, their judgements are the same ones
     judgements = (dict(on_validation) if decided == VALIDATION else
-                  {b: judged(model, b, cs, rule, seeds) for b, cs in evidence.get(decided, {}).items()})
+                  {b: judged(model, b, cs, rule, seeds, ensemble_of) for b, cs in evidence.get(decided, {}).items()})
     return BaselineVerdict(model, labels, cells, losses, decided, seeds, judgements, on_validation, evidence)
 
 
@@ -438,6 +465,26 @@ def pseudo_log(cells: Sequence[PairedCell]) -> tuple[PairedCell, ...]:
     return tuple(out)
 
 
+def seed_logs(seeds: Sequence[Sequence[PairedCell]]) -> tuple[PairedCell, ...] | None:
+    """Validation cells of several seeds whose validation windows differ in number (blocks
+    drawn per seed, so no window pairs with another seed's, not even by position): one cell
+    per (log, horizon, channel) of any seed holding every seed's windows of that log, each
+    paired with the baseline on its own window, as one model's (one member). Every window of
+    every seed is judged, per log as one seed's are: a log worse in the seeds stays a cell
+    of its own. None when a seed's cells have several members."""
+    if any(c.model.shape[0] != 1 or c.baseline.shape[0] != 1 for cells in seeds for c in cells):
+        return None
+    groups: dict[tuple, list[PairedCell]] = {}
+    for cells in seeds:
+        for c in cells:
+            groups.setdefault(c.key, []).append(c)
+    return tuple(PairedCell(g[0].log, g[0].scenario, g[0].horizon_s, g[0].channel,
+                            np.concatenate([c.model for c in g], axis=1), np.concatenate([c.baseline for c in g], axis=1),
+                            np.concatenate([c.window_start_s for c in g]),
+                            next((c.divergence for c in g if c.divergence is not None), None))
+                 for g in groups.values())
+
+
 def seed_mean_verdict(verdicts: Sequence[BaselineVerdict], rule: VerdictRule = DEFAULT_RULE) -> BaselineVerdict:
     """The verdict of several seeds of one experiment: every seed is a member of the model
     (the bootstrap draws seeds too; their spread is shown); a baseline the same in every seed
@@ -467,8 +514,9 @@ def seed_mean_verdict(verdicts: Sequence[BaselineVerdict], rule: VerdictRule = D
             stacked = _members(seeds)
             if stacked is None and split == VALIDATION:
                 # validation blocks drawn per seed: the seeds' windows differ, so each log's cannot
-                # pair; paired by position in one pseudo-log per horizon, as before per-log cells
-                stacked = _members([pseudo_log(cells) for cells in seeds])
+                # pair; paired by position in one pseudo-log per horizon, as before per-log cells,
+                # or, their numbers of windows differing, every seed's windows of a log in its cell
+                stacked = _members([pseudo_log(cells) for cells in seeds]) or seed_logs(seeds)
             if stacked is not None:
                 evidence[split][label] = stacked
         if len(evidence[split]) != len(by):

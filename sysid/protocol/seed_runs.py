@@ -17,11 +17,13 @@ import pandas as pd
 from sysid.data.recordings import Run
 from sysid.dynamics.integrators import Integrator
 from sysid.device import compute_threads
-from sysid.evaluation.evaluate import evaluate_model
+from sysid.evaluation.evaluate import Evaluation, evaluate_model
+from sysid.evaluation.verdict import BaselineVerdict, baseline_verdict
 from sysid.config.experiment import Experiment
 from sysid.protocol.paper import run_variant
 from sysid.runs.rundir import RunDir
 from sysid.runs.layout import load_model, write_run
+from sysid.runs.lifecycle import scores_on_tests
 from sysid.protocol.seeds import seed_metrics
 from sysid.hybrid.ensemble import SeedEnsemble
 from sysid.sweep.inbox import complete_summary
@@ -176,7 +178,10 @@ def write_ensemble(name: str, exp: Experiment, group: SeedGroup, out: Path, test
                    threads: int | None = None):
     """The mean-of-seeds ensemble of a learned run, evaluated (with `threads` torch threads;
     None: as set) and written as a run directory whose ``[ensemble] members`` point at the
-    seeds' run directories: (its name, `Evaluation`, its path)."""
+    seeds' run directories: (its name, `Evaluation`, its path). Its verdict (summary.json
+    ``verdict``) is the one rule's on the test logs' per-log cells against its physics
+    baseline, the ship file's MMG with the run's ``[mmg] overrides`` (the MMG the hybrids
+    correct; `ensemble_verdict`), as ``sysid compare RUN --against baseline`` judges it."""
     if threads is not None:
         with compute_threads(threads):
             return write_ensemble(name, exp, group, out, tests)
@@ -184,11 +189,31 @@ def write_ensemble(name: str, exp: Experiment, group: SeedGroup, out: Path, test
     members = [load_model(out / "runs" / name / f"seed{seed}")[1] for seed in group.seeds]
     model = SeedEnsemble(members)
     evaluation = evaluate_model(model, tests, exp.evaluation.horizons, Integrator(exp.evaluation.integrator))
+    verdict, baseline_metrics = ensemble_verdict(exp, model, evaluation, tests)
     target = ensemble_name(name, exp.experiment.dataset)
     ens = exp.replace(experiment={"name": target},
                       ensemble={"members": tuple(f"../{name}/seed{seed}" for seed in group.seeds)})
-    path = write_run(out / "runs" / target, ens, model, evaluation, seconds=time.perf_counter() - started)
+    path = write_run(out / "runs" / target, ens, model, evaluation, seconds=time.perf_counter() - started,
+                     verdict=verdict, baseline_metrics=baseline_metrics)
     return target, evaluation, path
+
+
+def ensemble_verdict(exp: Experiment, model: SeedEnsemble, evaluation: Evaluation,
+                     tests: Sequence[Run]) -> tuple[BaselineVerdict | None, pd.DataFrame | None]:
+    """(the verdict of a mean-of-seeds ensemble, its baseline's metrics on the test logs), or
+    (None, None) without test logs: the ensemble's `evaluation` (its test predictions, made
+    once) paired window by window with its physics baseline's on the same test logs, the
+    ship file's MMG with ``[mmg] overrides`` (`physics_baselines`; one MMG rollout per
+    window, float64), judged by the one rule (`baseline_verdict`). The ensemble is one
+    model (no spread), and its predictions diverge only where they go non-finite (no
+    training range), as ``sysid compare RUN --against baseline``."""
+    scores = scores_on_tests(exp, model, evaluation, tests)
+    if not scores:
+        return None, None
+    verdict = baseline_verdict(str(exp.experiment.model), None, scores, ensemble_of=len(model.members))
+    metrics = pd.concat([e.metrics.assign(baseline=label) for label, e in scores.items() if label != "model"],
+                        ignore_index=True)
+    return verdict, metrics
 
 
 

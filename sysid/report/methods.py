@@ -247,7 +247,8 @@ def summary_items(source: ReportSource, ship_size: tuple[float, float] | None) -
 def verdict_items(source: ReportSource) -> list[tuple[str, str]]:
     """Each learned model of a reproduction against its physics baselines, by the one rule
     (docs: How sysid judges a model), as `sysid reproduce` prints it: a seed group's seeds
-    are members of one model; a learned run without a recorded verdict says so."""
+    are members of one model, a mean-of-seeds ensemble is one model (its own verdict); a
+    learned run without a recorded verdict says so."""
     items = []
     for run in source.runs:
         learned = run.model != ModelKind.MMG or bool(run.summary.identified)
@@ -256,10 +257,8 @@ def verdict_items(source: ReportSource) -> list[tuple[str, str]]:
         verdict = run.model_verdict
         label = f"Verdict: {run_label(run.name, run.model, run.dataset)}"
         if verdict is None:
-            items.append((label, "not judged: sysid reproduce records no verdict for a mean-of-seeds ensemble "
-                                 f"(sysid compare runs/{run.name} --against baseline judges it); its seeds, as members "
-                                 "of one model, are judged in the row of the same model without '(ensemble)'"
-                          if "ensemble" in run.name else "not judged: the run records no verdict"))
+            items.append((label, f"not judged: the run records no verdict (sysid compare runs/{run.name} --against "
+                                 "baseline judges it)"))
         else:
             items.append((label, ("" if verdict.beats_baseline else "WARNING: ") + verdict.statement()))
     return items

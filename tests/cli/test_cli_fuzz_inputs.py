@@ -46,12 +46,12 @@ FORCE_INPUT_CASES = {
     "binary": (BINARY, (), 2, "binary, not a text CSV"),
     "utf-16": (csv_text(force_rows()).encode("utf-16"), (), 2, "UTF-16/32 encoded"),
     "missing column": (csv_text(force_rows().drop(columns="delta_rudder")).encode(), (), 2, "delta_rudder"),
-    "text in a number column": (edited("u", "fast"), (), 2, "column 'u' is not a finite number at data row 4"),
-    "empty cell": (edited("r", ""), (), 2, "column 'r' is not a finite number at data row 4"),
+    "text in a number column": (edited("u", "fast"), (), 2, "column 'u' is not a finite number at line 4"),
+    "empty cell": (edited("r", ""), (), 2, "column 'r' is not a finite number at line 4"),
     "inf cell": (edited("v", "inf"), (), 2, "column 'v' is not a finite number"),
     "ragged rows": ((csv_text(force_rows()) + "1,2,3,4,5,6,7,8,9,10,11,12\n").encode(), (), 2,
                     "not a readable CSV"),
-    "u = 1e300 gives inf forces": (edited("u", 1e300), (), 2, "data row 4"),
+    "u = 1e300 gives inf forces": (edited("u", 1e300), (), 2, "line 4"),
     "n_prop = 1e200 gives inf forces": (edited("n_prop", 1e200), (), 2, "beyond the model's range"),
     "chunk 0": (csv_text(force_rows()).encode(), ("--chunk", "0"), 2, "--chunk 0"),
     "chunk -5": (csv_text(force_rows()).encode(), ("--chunk", "-5"), 2, "--chunk -5"),
@@ -102,7 +102,7 @@ def test_forces_flags_implausible_states_and_writes_exact_numbers(sysid, tmp_pat
     outcome = sysid("forces", src, "-o", out)
     assert outcome.code == 0, outcome.err
     warnings = [line for line in outcome.err.splitlines() if line.startswith("warning:")]
-    assert len(warnings) == 1 and "in.csv" in warnings[0] and "'u'" in warnings[0] and "data row 3" in warnings[0]
+    assert len(warnings) == 1 and "in.csv" in warnings[0] and "'u'" in warnings[0] and "line 3" in warnings[0]
     written = pd.read_csv(out)
     assert np.isfinite(written.drop(columns=FORCE_COLUMNS).to_numpy()).all()
     np.testing.assert_array_equal(written[FORCE_COLUMNS].to_numpy(), frame.to_numpy(dtype=float))

@@ -81,7 +81,7 @@ def test_forces_missing_column_and_nan(oracle_vectors, tmp_path):
     with pytest.raises(DataError, match=r"in.csv: missing column\(s\) \['delta_rudder'\]"):
         main(["forces", str(_forces_input(tmp_path, frame.drop(columns="delta_rudder"))), "-o", str(out)])
     frame.loc[3, "r"] = np.nan
-    with pytest.raises(DataError, match="in.csv: column 'r' is not a finite number at data row 5"):
+    with pytest.raises(DataError, match="in.csv: column 'r' is not a finite number at line 5"):
         main(["forces", str(_forces_input(tmp_path, frame)), "-o", str(out)])
     assert not out.exists()  # nothing half-written
     with pytest.raises(ShipDefinitionError, match="unknown ship 'nope'"):
@@ -112,7 +112,7 @@ def test_a_processed_log_cut_off_mid_row_is_named_as_such(dataset_dir, tmp_path)
     path = _processed(dataset_dir, tmp_path, lambda f: None)
     lines = path.read_text().splitlines()           # the header and 300 rows
     path.write_text("\n".join(lines[:-1] + [lines[-1][:40]]))   # the last row cut after 40 characters
-    with pytest.raises(DataError, match=r"run.csv: data row 301: the file ends in the middle of it \(no line end, "
+    with pytest.raises(DataError, match=r"run.csv: line 301: the file ends in the middle of it \(no line end, "
                                         r"\d+ of 13 channels missing\): it is cut off"):
         read_run(path)
     path.write_text("\n".join(lines))              # complete, only the last line end missing: read
@@ -121,7 +121,7 @@ def test_a_processed_log_cut_off_mid_row_is_named_as_such(dataset_dir, tmp_path)
 
 def test_processed_run_errors_name_file_and_field(dataset_dir, tmp_path):
     def nan(f): f.loc[120, "r_angvelo [rad/s]"] = np.nan
-    with pytest.raises(DataError, match=r"run.csv: column 'r_angvelo \[rad/s\]' \(channel r\) is empty, NaN or inf at data row 122"):
+    with pytest.raises(DataError, match=r"run.csv: column 'r_angvelo \[rad/s\]' \(channel r\) is empty, NaN or inf at line 122"):
         read_run(_processed(dataset_dir, tmp_path, nan))
 
     def backwards(f): f.loc[50, "t [s]"] = 1.0

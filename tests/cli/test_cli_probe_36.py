@@ -259,10 +259,10 @@ SYNTH_CASES = {  # name -> (how the processed log is changed, what the line says
     "binary": (lambda path, frame: path.write_bytes(BINARY), "binary, not a text CSV"),
     "NaN run": (lambda path, frame: frame.assign(**{"u_velo [m/s]": frame["u_velo [m/s]"].where(
         (frame.index < 100) | (frame.index >= 110))}).to_csv(path, index=False),
-                "column u_velo is empty, NaN or not a number at data row 102 (10 bad rows)"),
+                "column u_velo is empty, NaN or not a number at line 102 (10 bad rows)"),
     "duplicated time": (lambda path, frame: frame.assign(**{"t [s]": np.where(
         frame.index == 101, frame["t [s]"].shift(1), frame["t [s]"])}).to_csv(path, index=False),
-                        "column t is not strictly increasing at data row 103 (t = 10 s after 10 s)"),
+                        "column t is not strictly increasing at line 103 (t = 10 s after 10 s)"),
 }
 
 

@@ -110,8 +110,8 @@ def test_every_bad_column_is_named_in_one_line(dataset_dir, tmp_path):
     texts = tmp_path / "texts.csv"
     frame.to_csv(texts, index=False)
     with pytest.raises(DataError, match=r"texts\.csv: not a number in 2 column\(s\): column 'heading' \(channel psi\) "
-                                        r"holds 'NNE' at data row 7; column 'shaft' \(channel n_prop\) holds '12 rpm' "
-                                        r"at data row 5; write numbers only"):
+                                        r"holds 'NNE' at line 7; column 'shaft' \(channel n_prop\) holds '12 rpm' "
+                                        r"at line 5; write numbers only"):
         read_run(texts, columns=parse_columns(table, "exp.toml"))
 
 

@@ -6,6 +6,7 @@ windows judged are each log's non-overlapping ones, whose intervals hold the tru
 their confidence says (overlapping ones, resampled as if independent, do not)."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -262,3 +263,46 @@ def test_seeds_on_the_same_held_out_windows_pair_on_the_same_non_overlapping_one
     assert (j.n_logs, j.n_windows, j.n_members) == (1, 60, 2) and {c.log for c in j.cells} == {"random_log"}
     cells = seed_mean_verdict(verdicts, RULE).evidence[VALIDATION][SHIP_FILE_MMG]
     assert all(np.array_equal(c.window_start_s, 10.0 * np.arange(60)) and c.model.shape == (2, 60) for c in cells)
+
+
+def test_seeds_with_different_numbers_of_validation_windows_pool_every_window_per_log_and_keep_the_clause():
+    """Validation blocks drawn per seed give the seeds different numbers of windows (here the
+    second seed 100 of the good log's and 20 of the bad log's): no window pairs with another
+    seed's, not even by position. The seeds' windows pool per log as one model's, every window
+    of every seed judged: the bad log (truth 1.6 x the baseline's error) stays a materially
+    worse cell, as in each seed alone, and the identified MMG's sentence keeps its validation
+    clause, saying how the seeds were pooled (before, the validation verdict was dropped)."""
+    from verdict_cases import seed_verdict
+
+    from sysid.evaluation.verdict import TEST, verdict_of
+
+    fewer = WindowOrigins(("turn_good",) * 100 + ("zigzag_bad",) * 20,
+                          np.concatenate([HORIZON * np.arange(100), 100 + HORIZON * np.arange(20)]))
+    factor = {True: np.array([0.6] * W_GOOD + [1.6] * W_BAD), False: np.array([0.6] * 100 + [1.6] * 20)}
+    test = seed_verdict(0.8, "mmg").evidence[TEST]   # on the test logs 0.8 x the MMG's error on every window
+    seeds = []
+    for k, where in enumerate((origins(), fewer)):
+        model, baseline = errors(factor[k == 0], 10 + k)
+        on_validation = baseline_verdict("mmg", scores(model, baseline, where), None, RULE)
+        assert on_validation.judgements[SHIP_FILE_MMG].outcome is Outcome.WORSE   # each seed alone
+        seeds.append(verdict_of("mmg", (SHIP_FILE_MMG,), on_validation.cells, {},
+                                {TEST: test, VALIDATION: on_validation.evidence[VALIDATION]}, RULE))
+        assert ("On the non-overlapping validation windows the identified MMG is worse than MMG (ship file)."
+                in seeds[-1].statement())
+    pooled = seed_mean_verdict(seeds, RULE)
+    assert pooled.decided_on == TEST and pooled.judgements[SHIP_FILE_MMG].outcome is Outcome.BEATS
+    j = pooled.validation_judgements[SHIP_FILE_MMG]
+    assert (j.n_logs, j.n_windows, j.n_members) == (2, W_GOOD + W_BAD + 120, 1) and j.outcome is Outcome.WORSE
+    bad = [c for c in j.cells if c.log == "zigzag_bad"]
+    assert len(bad) == 3 and all(c.decision is CellDecision.MATERIALLY_WORSE and c.n_windows == W_BAD + 20 for c in bad)
+    assert all(0.4 < c.change < 0.8 for c in bad)   # the truth: +60 %
+    assert all(-0.5 < c.change < -0.3 for c in j.cells if c.log == "turn_good")   # the truth: -40 %
+    assert ("On the validation windows (each log's windows of all 2 seeds pooled as one model's: the seeds drew "
+            "different validation blocks, so no window pairs with another seed's) the identified MMG is worse than "
+            "MMG (ship file).") in pooled.statement()
+    assert "2 seeds' windows pooled as one model's (no spread per seed)" in j.sentence
+    # without test logs the pooled validation windows decide, and the sentence says how
+    alone = seed_mean_verdict([dataclasses.replace(v, evidence={VALIDATION: v.evidence[VALIDATION]}, decided_on=VALIDATION)
+                               for v in seeds], RULE)
+    assert alone.decided_on == VALIDATION and alone.outcome is Outcome.WORSE
+    assert "Decided on the validation windows (each log's windows of all 2 seeds pooled" in alone.statement()

@@ -105,7 +105,7 @@ def test_degrees_in_radian_fog_column(raw):
 def test_degrees_in_radian_rudder_column(raw):
     raw["delta_rudder [rad]"] = np.degrees(raw["delta_rudder [rad]"])
     msg = error_of(raw)
-    assert "delta_rudder" in msg and "row" in msg and "degrees" in msg
+    assert "delta_rudder" in msg and "line " in msg and "degrees" in msg
 
 
 def test_degrees_in_radian_wind_column(raw):
@@ -117,13 +117,13 @@ def test_text_in_numeric_column(raw):
     raw["n_prop [rps]"] = raw["n_prop [rps]"].astype(object)
     raw.loc[41, "n_prop [rps]"] = "ten"
     msg = error_of(raw)
-    assert "n_prop" in msg and "row 42" in msg
+    assert "n_prop" in msg and "line 43" in msg
 
 
 def test_time_going_backwards(raw):
     raw.loc[500, "t [s]"] = raw.loc[498, "t [s]"]
     msg = error_of(raw)
-    assert "column t" in msg and "row 501" in msg
+    assert "column t" in msg and "line 502" in msg
 
 
 def test_repeated_time_with_other_values(raw):
@@ -131,7 +131,7 @@ def test_repeated_time_with_other_values(raw):
     dup["n_prop [rps]"] = 3.0
     bad = pd.concat([raw.iloc[:301], dup, raw.iloc[301:]], ignore_index=True)
     msg = error_of(bad)
-    assert "column t" in msg and "row 302" in msg
+    assert "column t" in msg and "line 303" in msg
 
 
 def test_exact_duplicate_rows_are_dropped_and_logged(synthetic, raw):
@@ -142,8 +142,8 @@ def test_exact_duplicate_rows_are_dropped_and_logged(synthetic, raw):
 
 
 def test_empty_time_stamps_are_counted_with_the_fix(raw):
-    raw.loc[500:520, "t [s]"] = np.nan   # rows 501-521
-    assert error_of(raw) == ("log.csv: column t: row 501: empty time (21 row(s); every row needs its time stamp: "
+    raw.loc[500:520, "t [s]"] = np.nan   # lines 502-522
+    assert error_of(raw) == ("log.csv: column t: line 502: empty time (21 row(s); every row needs its time stamp: "
                              "fill it in, or delete the row)")
 
 
@@ -223,7 +223,7 @@ def test_cli_failed_file_leaves_no_output(synthetic, tmp_path, capsys):
     assert names == ["good.csv", "good.report.json", "manifest.json"]  # complete, sealed
     assert sorted(verify_manifest(out, "preprocessing")["files"]) == ["good.csv", "good.report.json"]
     err = capsys.readouterr().err
-    assert "bad.csv" in err and "column t" in err and "row 701" in err
+    assert "bad.csv" in err and "column t" in err and "line 702" in err
     report = json.loads((out / "good.report.json").read_text())
     assert report["outputs"] == ["good.csv"]
     processed = pd.read_csv(out / "good.csv")
@@ -240,11 +240,11 @@ def test_truncated_file_is_refused(synthetic, tmp_path):
     synthetic.raw.to_csv(path, index=False)
     text = path.read_text()
     lines = text.splitlines()
-    cut = "\n".join(lines[:501]) + "\n" + lines[501][: len(lines[501]) // 3]  # header, 500 rows, a third of row 501
+    cut = "\n".join(lines[:501]) + "\n" + lines[501][: len(lines[501]) // 3]  # header, 500 rows, a third of data row 501 (line 502)
     path.write_text(cut)
     with pytest.raises(RawLogError) as info:
         read_raw(path)
-    assert "cut.csv: row 501:" in str(info.value) and "cut off" in str(info.value)
+    assert "cut.csv: line 502:" in str(info.value) and "cut off" in str(info.value)
     path.write_text("\n".join(lines[:501]))  # the last row complete, no line end: read as it is
     assert len(read_raw(path)[0]) == 500
 

@@ -56,6 +56,11 @@ def test_reproduce_with_two_seeds(tmp_path, dataset_dir):
         assert np.allclose(hybrid[f"std_{c}"], values.std(0, ddof=1), atol=1e-5)
     assert set(hybrid.n_seeds) == {2}
     assert "Hybrid (ensemble)" in set(table.model)
+    # each ensemble records its verdict against the ship file's MMG, as its seeds do
+    from sysid.runs.rundir import RunDir
+    for name in ("nn_ensemble_D1", "hybrid_ensemble_D1"):
+        verdict = RunDir(out / "runs" / name).read_summary().verdict
+        assert verdict is not None and verdict.to_json()["baselines"] == ["MMG (ship file)"], name
     assert "± " in (out / "table7.md").read_text()
     # every run (sweep trials, side-by-side seeds, ensembles) keeps the ship file it was made with
     from sysid.mmg.ship import ships_dir

@@ -1,7 +1,8 @@
 """A reproduction states every learned model's verdict, in its report and in what `sysid
-reproduce` prints, by the one rule: the seeds of ``--seeds N`` as members of one model, a run
-without a verdict named as not judged. The verdicts are judged on made-up windows whose truth
-is known: a model 1.3 x the MMG's RMSE on every window is worse, 0.6 x and 0.8 x beat it."""
+reproduce` prints, by the one rule: the seeds of ``--seeds N`` as members of one model, their
+mean-of-seeds ensemble as one model of its own, a run without a verdict named as not judged.
+The verdicts are judged on made-up windows whose truth is known: a model 1.3 x the MMG's RMSE
+on every window is worse, 0.6 x, 0.7 x and 0.8 x beat it."""
 from __future__ import annotations
 
 import json
@@ -41,6 +42,9 @@ def reproduction(tmp_path_factory):
     shutil.copytree(group / "seed0", group / "seed1")
     for k, factor in enumerate((0.6, 0.8)):
         with_summary(group / f"seed{k}", verdict=verdict("hybrid", factor), beats_baseline=True, seed=k)
+    ensemble = runs / "hybrid_ensemble_D2"   # as `sysid.protocol.seed_runs.write_ensemble` records it
+    shutil.copytree(group / "seed0", ensemble)
+    with_summary(ensemble, verdict=verdict("hybrid", 0.7), beats_baseline=True)
     write_manifest(out, "reproduction")
     return out
 
@@ -50,12 +54,16 @@ def test_the_report_states_each_models_verdict(reproduction):
     from sysid.report.source import read_source
 
     items = dict(verdict_items(read_source(reproduction)))
-    assert set(items) == {"Verdict: NN D1", "Verdict: Hybrid D1", "Verdict: Hybrid D2"}
+    assert set(items) == {"Verdict: NN D1", "Verdict: Hybrid D1", "Verdict: Hybrid D2", "Verdict: Hybrid (ensemble) D2"}
     assert items["Verdict: Hybrid D1"].startswith("WARNING: The hybrid is WORSE than its physics baseline")
     both = items["Verdict: Hybrid D2"]  # the seeds as members: RMSE 0.6 x and 0.8 x the MMG's
     assert both.startswith("The hybrid (mean over 2 seeds) beats its physics baseline MMG (ship file)")
     assert "2 seeds or members (each alone -40 % to -20 %)" in both
-    assert items["Verdict: NN D1"] == "not judged: the run records no verdict"
+    ensemble = items["Verdict: Hybrid (ensemble) D2"]  # one model: RMSE 0.7 x the MMG's on every window
+    assert ensemble.startswith("The hybrid beats its physics baseline MMG (ship file)") and "-30 %" in ensemble
+    assert "no spread: one model" in ensemble and "not judged" not in ensemble
+    assert items["Verdict: NN D1"] == ("not judged: the run records no verdict (sysid compare runs/nn_D1 --against "
+                                       "baseline judges it)")
 
 
 def test_reproduce_prints_one_verdict_per_model(reproduction, capsys):
@@ -65,7 +73,8 @@ def test_reproduce_prints_one_verdict_per_model(reproduction, capsys):
     out, err = capsys.readouterr()
     assert (f"not judged against a physics baseline (no verdict recorded): nn_D1; sysid compare "
             f"{reproduction / 'runs' / 'nn_D1'} --against baseline judges one\n") in out
-    assert [line.split(":")[1] for line in out.splitlines() if line.startswith("verdict:")] == [" run hybrid_D2 (2 seeds)"]
+    assert [line.split(":")[1] for line in out.splitlines() if line.startswith("verdict:")] == [
+        " run hybrid_D2 (2 seeds)", " run hybrid_ensemble_D2"]
     assert "each alone -40 % to -20 %" in out
     assert [line.split(": The")[0] for line in err.splitlines()] == ["WARNING: run hybrid_D1"]
 
