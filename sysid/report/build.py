@@ -36,7 +36,7 @@ from sysid.report.figure_plan import FigureSpec, figure_plan  # noqa: E402
 from sysid.report.chosen_settings import chosen_section  # noqa: E402
 from sysid.report.quality import quality_rows  # noqa: E402
 from sysid.report.source import ReportSource, read_source  # noqa: E402
-from sysid.protocol.paper import run_label  # noqa: E402
+from sysid.protocol.paper import KIND_LABELS, run_label  # noqa: E402
 from sysid.data.display_units import DisplayUnits  # noqa: E402
 from sysid.report.tables import build_tables, verdict_table  # noqa: E402
 from sysid.report.maneuver_tables import record_plain_table  # noqa: E402
@@ -62,6 +62,18 @@ class ReportPaths:
     n_pages: int = 0
     notes: list[str] = field(default_factory=list)
     seconds: float = 0.0
+
+
+def _verdict_label(source, verdict) -> str:
+    """The judged model's name in the verdict table: its run's label, or for a verdict over
+    several seeds the model's kind with their number ("Hybrid (2 seeds)"): the cells hold
+    every seed's windows, not the first seed's alone."""
+    run = source.runs[0]
+    if verdict.seeds > 1:
+        kind = KIND_LABELS.get(run.model, run.model)
+        return f"{kind} {run.dataset} ({verdict.seeds} seeds)" if run.dataset not in ("", "-", None, "files") \
+            else f"{kind} ({verdict.seeds} seeds)"
+    return run_label(run.name, run.model, run.dataset)
 
 
 def ship_size(source: ReportSource) -> tuple[float, float] | None:
@@ -118,7 +130,7 @@ def _build(source_dir, out_dir, progress, sweeps, drawers: "_SvgDrawers", starte
     settings = [(run_label(r.name, r.model, r.dataset), changed_settings(r)) for r in source.runs]
     chosen = chosen_section(source)
     verdict = source.verdict
-    first = verdict_table(verdict, run_label(source.runs[0].name, source.runs[0].model, source.runs[0].dataset),
+    first = verdict_table(verdict, _verdict_label(source, verdict),
                           DisplayUnits.of_config(source.runs[0].config)) if verdict is not None else None
     built = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     title = f"sysid accuracy report: {source.title}"

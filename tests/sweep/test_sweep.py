@@ -127,10 +127,13 @@ def test_sweep_killed_part_way_resumes_without_training_a_trial_twice(tmp_path, 
     from sysid.report import build_report
     html = build_report(out, tmp_path / "report").html.read_text()
     assert "val_loss_multistep against the varied keys" in html and "Spread over 2 seeds" in html
-    # page 1: the chosen configuration's verdict, the mean over its 2 seeds with their spread
-    assert html.index('id="verdict"') < html.index('id="summary"') and "the mean over 2 seeds" in html
+    # page 1: the chosen configuration's verdict over its 2 seeds (their validation blocks differ: each
+    # log's windows of both seeds pooled as one model's), with the seeds' spread of the RMSE
+    assert html.index('id="verdict"') < html.index('id="summary"')
     verdict = html[html.index('id="verdict"'):html.index('id="summary"')]
-    assert verdict.count(" ± ") >= 3   # the model's RMSE ± its std over the seeds, per channel
+    assert "2 seeds&#39; windows pooled" in verdict or "2 seeds' windows pooled" in verdict, verdict
+    # per log and channel, the RMSE over both seeds' windows, named as the 2 seeds' (not the first seed's)
+    assert "Hybrid (2 seeds) RMSE" in verdict and verdict.count("validation (decides)") >= 3
     assert "Chosen" in html and summary["best"]["point"] in html
     # the resumed sweep refuses another sweep file
     path.write_text(path.read_text().replace("3e-3", "5e-3"))
