@@ -36,7 +36,7 @@ from sysid.report.figure_plan import FigureSpec, figure_plan  # noqa: E402
 from sysid.report.chosen_settings import chosen_section  # noqa: E402
 from sysid.report.quality import quality_rows  # noqa: E402
 from sysid.report.source import ReportSource, read_source  # noqa: E402
-from sysid.protocol.paper import KIND_LABELS, run_label  # noqa: E402
+from sysid.protocol.paper import run_label  # noqa: E402
 from sysid.data.display_units import DisplayUnits  # noqa: E402
 from sysid.report.tables import build_tables, verdict_table  # noqa: E402
 from sysid.report.maneuver_tables import record_plain_table  # noqa: E402
@@ -69,10 +69,8 @@ def _verdict_label(source, verdict) -> str:
     several seeds the model's kind with their number ("Hybrid (2 seeds)"): the cells hold
     every seed's windows, not the first seed's alone."""
     run = source.runs[0]
-    if verdict.seeds > 1:
-        kind = KIND_LABELS.get(run.model, run.model)
-        return f"{kind} {run.dataset} ({verdict.seeds} seeds)" if run.dataset not in ("", "-", None, "files") \
-            else f"{kind} ({verdict.seeds} seeds)"
+    if verdict.seeds > 1:   # the kind's label, named as a run of that name is ("Hybrid D2")
+        return f"{run_label(run.model, run.model, run.dataset)} ({verdict.seeds} seeds)"
     return run_label(run.name, run.model, run.dataset)
 
 
