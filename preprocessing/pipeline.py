@@ -95,20 +95,25 @@ class Result:
     report: QualityReport
 
 
+STAMP_RESOLUTION = 1e-6  # s; a stamp this close to its grid time is on it (a clock time's float)
+
+
 def _at_grid_times(t: np.ndarray, grid_t: np.ndarray, a: np.ndarray, column: str) -> np.ndarray:
     """Values of one raw column (shape (N,)) moved from their time stamps `t` [s] to the
     grid times `grid_t` [s] (each within 25 ms) by linear interpolation between the column's
-    finite samples: a stamp 10 ms off at 0.5 m/s is 5 mm of position. Empty cells stay
-    empty; directions [rad] are interpolated unwrapped and returned in [0, 2 pi); GGA fix
-    qualities are codes and are kept as they are."""
+    finite samples: a stamp 10 ms off at 0.5 m/s is 5 mm of position. Stamps within
+    `STAMP_RESOLUTION` of their grid time and empty cells stay as they are; directions [rad]
+    are interpolated unwrapped and returned in [0, 2 pi); GGA fix qualities are codes and
+    are kept as they are."""
     ok = np.isfinite(a)
-    if column.endswith("_fix") or ok.sum() < 2:
+    moved = ok & (np.abs(grid_t - t) > STAMP_RESOLUTION)
+    if column.endswith("_fix") or ok.sum() < 2 or not moved.any():
         return a
-    out = a.copy()
     values = np.unwrap(a[ok]) if column.endswith("_dir") else a[ok]
-    out[ok] = np.interp(grid_t[ok], t[ok], values)
+    out = a.copy()
+    out[moved] = np.interp(grid_t[moved], t[ok], values)
     if column.endswith("_dir"):
-        out[ok] = np.mod(out[ok], 2 * np.pi)
+        out[moved] = np.mod(out[moved], 2 * np.pi)
     return out
 
 
