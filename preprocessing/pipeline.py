@@ -398,8 +398,8 @@ class Pipeline:
         # step 10: take samples
         step = int(round(1.0 / (s.output_rate * dt)))
         i = resample.sample_indices(grid_index, step)
-        out = pd.DataFrame({
-            "t": np.round(g["t"][i], 6), "x_position_mid": x[i], "u_velo": u[i],
+        out = pd.DataFrame({   # t + 0.0: a grid phase a hair below 0 s is written 0.0, not -0.0
+            "t": np.round(g["t"][i], 6) + 0.0, "x_position_mid": x[i], "u_velo": u[i],
             "y_position_mid": y[i], "vm_velo": v[i], "psi_hat": wrap_pi(psi[i]),
             "r_angvelo": r[i], "n_prop": g["n_prop"][i], "delta_rudder": g["delta_rudder"][i],
             "wind_velo_relative_mid": ua[i], "wind_dir_relative_mid": ga[i],

@@ -64,10 +64,10 @@ def _apparent(tr, i, px, py):
 
 def _raw(tr, layout=LAYOUT, seed=0, jitter_ms=8, drop=DROPPED, gnss=0.015, fog_noise=0.002,
          bias=FOG_BIAS, anemo_speed=0.05, anemo_dir=ANEMO_DIR_NOISE, rows=2000,
-         antenna_turn=0.0, rudder_unit="rad") -> pd.DataFrame:
+         antenna_turn=0.0, rudder_unit="rad", start=START) -> pd.DataFrame:
     rng = np.random.default_rng(seed)
     k = np.arange(rows)
-    ms = np.rint((START + 0.1 * k) * 1000).astype(int) + rng.integers(-jitter_ms, jitter_ms + 1, rows)
+    ms = np.rint((start + 0.1 * k) * 1000).astype(int) + rng.integers(-jitter_ms, jitter_ms + 1, rows)
     i = ms[~np.isin(k, drop)]                       # index into the 1 ms truth = stamp in ms
     n = len(i)
     c, s = np.cos(tr["psi"][i]), np.sin(tr["psi"][i])
@@ -184,6 +184,16 @@ def test_quality_report_of_the_time_defects(truth):
     assert fog == [(pytest.approx(50.67), pytest.approx(50.67), "interpolated"),
                    (pytest.approx(120.37), pytest.approx(120.77), "interpolated")]
     assert rep.gaps_split == 0 and rep.baseline.rejected == 0 and rep.heading_gate.rejected == 0
+
+
+def test_a_log_starting_at_zero_with_a_late_first_stamp_starts_at_zero(truth):
+    """First stamp 6 ms late (seed 0), the others spread about the grid: outputs at 0, 1, ... s
+    (not 0.006, 1.006, ... s), the first written as 0.0, not -0.0."""
+    raw = _raw(truth, start=0.0, **QUIET)
+    assert raw["t [s]"].iloc[0] == pytest.approx(0.006)
+    seg = Pipeline(LAYOUT).run(raw, "probe").segments[0]
+    assert np.allclose(seg["t"], np.arange(len(seg)), atol=1e-9)
+    assert seg["t"].iloc[0] == 0.0 and not np.signbit(seg["t"].iloc[0])
 
 
 def test_heading_offset_turns_the_antenna_pair_about_midship(truth):
