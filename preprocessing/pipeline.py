@@ -23,7 +23,8 @@ import pandas as pd
 from scipy.integrate import cumulative_trapezoid
 
 from preprocessing.quality import QualityReport
-from preprocessing import anemometer, body_velocity, geodesy, gnss, gyro, resample, schema, smoothing
+from preprocessing import (anemometer, body_velocity, differencing, geodesy, gnss, gyro, resample, schema,
+                           smoothing)
 from preprocessing.frames import wrap_pi
 from preprocessing.schema import RawLogError
 from preprocessing.sensors import SensorLayout
@@ -110,8 +111,14 @@ def _at_grid_times(t: np.ndarray, grid_t: np.ndarray, a: np.ndarray, column: str
     if column.endswith("_fix") or ok.sum() < 2 or not moved.any():
         return a
     values = np.unwrap(a[ok]) if column.endswith("_dir") else a[ok]
+    tk = t[ok]
     out = a.copy()
-    out[moved] = np.interp(grid_t[moved], t[ok], values)
+    out[moved] = np.interp(grid_t[moved], tk, values)
+    for end, pair in ((grid_t < tk[0], slice(0, 2)), (grid_t > tk[-1], slice(-2, None))):
+        end &= moved                          # before the first / after the last sample: extrapolate
+        if end.any():
+            slope = np.diff(values[pair])[0] / np.diff(tk[pair])[0]
+            out[end] = values[pair][0] + slope * (grid_t[end] - tk[pair][0])
     if column.endswith("_dir"):
         out[moved] = np.mod(out[moved], 2 * np.pi)
     return out
@@ -386,9 +393,10 @@ class Pipeline:
         # step 6: central difference (earth frame) -> body frame, rotated by the heading
         # over each difference's window (not psi(t) alone: that lags v_m while turning)
         u_cd, v_cd = body_velocity.body_velocity(x, y, psi, dt, s.diff_dt)
-        # step 7: Kalman/RTS on u, v_m
-        u = smoothing.smooth_rate(u_cd, dt, s.velocity_q, s.velocity_r)
-        v = smoothing.smooth_rate(v_cd, dt, s.velocity_q, s.velocity_r)
+        # step 7: Kalman/RTS on u, v_m; the narrower differences near the ends weigh less
+        scale = differencing.noise_scale(len(x), dt, s.diff_dt)
+        u = smoothing.smooth_rate(u_cd, dt, s.velocity_q, s.velocity_r, scale)
+        v = smoothing.smooth_rate(v_cd, dt, s.velocity_q, s.velocity_r, scale)
         # step 8: r = low-passed FOG minus the estimated bias
         r = gyro.lowpass(fog - bias, 1.0 / dt, s.cutoff, s.lowpass_order)
         # step 9: wind
