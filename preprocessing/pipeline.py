@@ -102,12 +102,13 @@ STAMP_RESOLUTION = 1e-6  # s; a stamp this close to its grid time is on it (a cl
 def _at_grid_times(t: np.ndarray, grid_t: np.ndarray, a: np.ndarray, column: str) -> np.ndarray:
     """Values of one raw column (shape (N,)) moved from their time stamps `t` [s] to the
     grid times `grid_t` [s] (each within 25 ms) by linear interpolation between the column's
-    finite samples: a stamp 10 ms off at 0.5 m/s is 5 mm of position. Stamps within
-    `STAMP_RESOLUTION` of their grid time and empty cells stay as they are; directions [rad]
-    are interpolated unwrapped and returned in [0, 2 pi); GGA fix qualities are codes and
-    are kept as they are."""
-    ok = np.isfinite(a)
-    moved = ok & (np.abs(grid_t - t) > STAMP_RESOLUTION)
+    finite samples (extrapolated before the first and after the last): a stamp 10 ms off at
+    0.5 m/s is 5 mm of position. Stamps within `STAMP_RESOLUTION` of their grid time, empty
+    cells and NaN stamps stay as they are; directions [rad] are interpolated unwrapped and
+    returned in [0, 2 pi); GGA fix qualities are codes and are kept as they are."""
+    ok = np.isfinite(a) & np.isfinite(t)
+    with np.errstate(invalid="ignore"):
+        moved = ok & (np.abs(grid_t - t) > STAMP_RESOLUTION)
     if column.endswith("_fix") or ok.sum() < 2 or not moved.any():
         return a
     values = np.unwrap(a[ok]) if column.endswith("_dir") else a[ok]
@@ -139,6 +140,9 @@ class Pipeline:
 
     # -- step 1: grid and gaps ------------------------------------------------------------
     def _grid(self, df: pd.DataFrame, name: str, report: dict) -> tuple[np.ndarray, dict]:
+        """The columns on the 0.1 s grid (NaN at missing rows) and each grid sample's time
+        stamp [s] (NaN where missing). Every column but the GNSS ones is moved from its
+        stamps to the grid times here; the GNSS ones after their checks (`_at_grid_times`)."""
         t = df["t"].to_numpy()
         dt = schema.NOMINAL_DT
         k = np.rint((t - t[0]) / dt).astype(np.int64)
@@ -158,13 +162,16 @@ class Pipeline:
         cols = {}
         for c in df.columns:
             a = np.full(n, np.nan)
-            a[k] = _at_grid_times(t, grid_t, df[c].to_numpy(), c)
+            values = df[c].to_numpy()
+            a[k] = values if c.startswith("gnss_") else _at_grid_times(t, grid_t, values, c)
             cols[c] = a
         cols["t"] = t0 + np.arange(n) * dt
+        stamps = np.full(n, np.nan)
+        stamps[k] = t
         report["rows"] = len(t)
         report["missing_rows"] = n - len(t)
         report["time_jitter_max_s"] = float(jitter.max())
-        return k, cols
+        return stamps, cols
 
     def _fill(self, t: np.ndarray, arrays: list[np.ndarray], channel: str,
               report: dict, angle: bool = False) -> np.ndarray:
@@ -209,7 +216,7 @@ class Pipeline:
             df, latlon = schema.read_raw(raw, repairs)
         report: dict = {"file": name, "settings": asdict(s), "repairs": repairs, "gaps": [],
                         "segments": [], "dropped_segments": []}
-        _, g = self._grid(df, name, report)
+        stamps, g = self._grid(df, name, report)
         t = g["t"]
         dt = schema.NOMINAL_DT
 
@@ -250,6 +257,8 @@ class Pipeline:
                                   "gnss_heading_sigma_rad": sigma}
         for a in (fx, fy, ax, ay):
             a[~keep] = np.nan
+            # kept fixes only: a rejected one must not leak into its neighbours
+            a[:] = _at_grid_times(stamps, t, a, "gnss")
         valid &= self._fill(t, [fx, fy, ax, ay], "gnss", report)
 
         # segments
