@@ -366,7 +366,8 @@ class Pipeline:
 
     @staticmethod
     def _check_fog_units(name, psi_fog, psi_g) -> None:
-        """FOG in deg/s under a rad/s header turns ~57 times too fast against the GNSS."""
+        """FOG in deg/s under a rad/s header turns ~57 times too fast against the GNSS; a FOG
+        positive to port, or a mirrored local frame, turns against it."""
         step = 10
         ok = np.isfinite(psi_g)
         i = np.flatnonzero(ok)
@@ -382,6 +383,25 @@ class Pipeline:
         if ratio > 10.0:
             raise RawLogError(f"{name}: column fog_yaw_rate: turns {ratio:.0f} times faster than the "
                               "GNSS heading: degrees in a radian column?")
+        # 1-s heading changes of gyro and antennas: opposite signs mean a gyro counted positive
+        # to port, or a local frame mirrored (x east, y north); either way psi and r are wrong
+        unwrapped = np.full(len(psi_g), np.nan)
+        unwrapped[i] = np.unwrap(psi_g[i])
+        d_gnss = unwrapped[step:] - unwrapped[:-step]
+        d_fog = psi_fog[step:] - psi_fog[:-step]
+        with np.errstate(invalid="ignore"):
+            m = np.isfinite(d_gnss) & (np.abs(d_gnss) < 0.5)
+        turned = float(np.sum(np.abs(d_fog[m]))) / step     # rad turned by the gyro's account
+        if m.sum() < 10 * step or turned < 1.0:
+            return
+        corr = float(np.sum(d_gnss[m] * d_fog[m]) / np.sqrt(np.sum(d_gnss[m] ** 2) * np.sum(d_fog[m] ** 2)))
+        if corr < -0.5:
+            raise RawLogError(
+                f"{name}: column fog_yaw_rate: the gyro turns against the two-antenna heading "
+                f"(correlation {corr:.2f} of their 1-s changes over {turned:.1f} rad of turning): a gyro "
+                "counted positive to port (z up)? negate the column (sysid's yaw rate is positive to "
+                "starboard); or antenna x, y with x east and y north? sysid's local frame is x north, "
+                "y east: swap the x and y columns")
 
     def _segment(self, g: dict, fx, fy, ax, ay, measured, grid_index
                  ) -> tuple[pd.DataFrame, np.ndarray]:

@@ -102,6 +102,21 @@ def test_degrees_in_radian_fog_column(raw):
     assert "fog_yaw_rate" in msg and "degrees" in msg
 
 
+def test_gyro_positive_to_port_or_mirrored_frame(raw):
+    """A gyro counted positive to port (z up), or antenna x, y in a frame with x east and y
+    north, turns the heading against the gyro: both were processed without a word (a 'gyro
+    bias' of 1.6 deg/s on the known-truth probe) and now get one line naming the two causes."""
+    port = raw.copy()
+    port["fog_yaw_rate [rad/s]"] = -port["fog_yaw_rate [rad/s]"]
+    mirrored = raw.copy()
+    for a in ("fore", "aft"):
+        mirrored[[f"gnss_{a}_x [m]", f"gnss_{a}_y [m]"]] = raw[[f"gnss_{a}_y [m]", f"gnss_{a}_x [m]"]].to_numpy()
+    for bad in (port, mirrored):
+        msg = error_of(bad)
+        assert msg.startswith("log.csv: column fog_yaw_rate: the gyro turns against the two-antenna heading")
+        assert "negate the column" in msg and "swap the x and y columns" in msg
+
+
 def test_degrees_in_radian_rudder_column(raw):
     raw["delta_rudder [rad]"] = np.degrees(raw["delta_rudder [rad]"])
     msg = error_of(raw)
