@@ -50,8 +50,9 @@ RAW_OPTIONAL = {"gnss_fore_fix": "-", "gnss_aft_fix": "-"}
 PROCESSED_PLAUSIBLE_ABS = {"u": 20.0, "v": 20.0, "psi": 2 * np.pi, "r": 3.0, "delta_rudder": 1.6,
                            "wind_dir_true": 7.0, "wind_dir_relative": 7.0, "n_prop": 200.0, "wind_velo_true": 60.0}
 
-# headers in degrees accepted for a radian column, converted (a logged repair)
-_DEGREE_UNITS = {"rad": ("deg", np.pi / 180.0), "rad/s": ("deg/s", np.pi / 180.0)}
+# headers accepted for a column of another unit, converted (a logged repair): degrees for
+# radians, rpm for rps
+_CONVERTED_UNITS = {"rad": ("deg", np.pi / 180.0), "rad/s": ("deg/s", np.pi / 180.0), "rps": ("rpm", 1.0 / 60.0)}
 
 # plausibility limits in SI units; a value beyond means wrong units (e.g. degrees in rad)
 PLAUSIBLE_ABS = {
@@ -94,8 +95,8 @@ def _need(have: dict[str, str | None], names: dict[str, str], path: str, repairs
         got = have[name]
         if got is None or got == unit:
             continue
-        if unit in _DEGREE_UNITS and got == _DEGREE_UNITS[unit][0]:
-            scale[name] = _DEGREE_UNITS[unit][1]
+        if unit in _CONVERTED_UNITS and got == _CONVERTED_UNITS[unit][0]:
+            scale[name] = _CONVERTED_UNITS[unit][1]
             repairs.append(f"column {name}: header unit [{got}], converted to [{unit}]")
             continue
         raise RawLogError(f"{path}: column {name}: unit [{got}], expected [{unit}]")

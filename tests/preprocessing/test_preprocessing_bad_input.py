@@ -85,8 +85,8 @@ def test_missing_gnss_column(raw):
 
 
 def test_wrong_unit_header(raw):
-    msg = error_of(raw.rename(columns={"n_prop [rps]": "n_prop [rpm]"}))
-    assert "n_prop" in msg and "rpm" in msg
+    msg = error_of(raw.rename(columns={"n_prop [rps]": "n_prop [rad/s]"}))   # [rpm] is converted
+    assert msg == "log.csv: column n_prop: unit [rad/s], expected [rps]"
 
 
 def test_degree_header_is_converted_and_logged(synthetic, raw):

@@ -255,9 +255,12 @@ def test_heading_offset_turns_the_antenna_pair_about_midship(truth):
     assert wrong["psi_deg"] == pytest.approx(2.0, abs=0.01)
 
 
-def test_rudder_in_degrees_is_passed_through_in_radians(truth):
-    res = Pipeline(LAYOUT).run(_raw(truth, rudder_unit="deg", **QUIET), "probe")
-    assert "column delta_rudder: header unit [deg], converted to [rad]" in res.report.repairs
+def test_rudder_in_degrees_and_revolutions_in_rpm_are_passed_through_in_si(truth):
+    raw = _raw(truth, rudder_unit="deg", **QUIET)
+    raw = raw.rename(columns={"n_prop [rps]": "n_prop [rpm]"}).assign(**{"n_prop [rpm]": raw["n_prop [rps]"] * 60})
+    res = Pipeline(LAYOUT).run(raw, "probe")
+    assert res.report.repairs == ["column n_prop: header unit [rpm], converted to [rps]",
+                                  "column delta_rudder: header unit [deg], converted to [rad]"]
     _check(_errors(res.segments[0], truth), {"delta_rudder": 1e-4, "n_prop": 1.2e-3})
 
 
