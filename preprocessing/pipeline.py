@@ -10,8 +10,8 @@ Gaps: samples missing (absent rows, empty cells, rejected GNSS fixes) over at mo
 segments, each processed on its own; segments shorter than `min_segment` are dropped.
 Every such decision goes into the report. Samples are put on the nominal 0.1 s grid whose
 phase is the median of the time stamps', each column's values linearly interpolated from
-their stamps to the grid times (the largest deviation is reported; more than 25 ms is an
-error).
+their stamps to the grid times, the GNSS fixes after the baseline check and the heading gate
+from the kept ones (the largest deviation is reported; more than 25 ms is an error).
 """
 from __future__ import annotations
 
@@ -248,7 +248,7 @@ class Pipeline:
             repairs.append("fore and aft antennas swapped (heading 180 deg off the course)")
         report["swapped_antennas"] = any("swapped" in r for r in repairs)
         psi_fog = cumulative_trapezoid(np.nan_to_num(g["fog_yaw_rate"]), dx=dt, initial=0.0)
-        self._check_fog_units(name, psi_fog, psi_g)
+        self._check_fog_against_gnss(name, psi_fog, psi_g)
         _, keep, sigma = smoothing.gate_heading(psi_fog, psi_g, dt, s.gate_window,
                                                 s.gate_sigma, s.gate_floor)
         rej_gate = passed & ~keep
@@ -365,7 +365,7 @@ class Pipeline:
         return bool(np.mean(c < -0.7) > 0.8)
 
     @staticmethod
-    def _check_fog_units(name, psi_fog, psi_g) -> None:
+    def _check_fog_against_gnss(name, psi_fog, psi_g) -> None:
         """FOG in deg/s under a rad/s header turns ~57 times too fast against the GNSS; a FOG
         positive to port, or a mirrored local frame, turns against it."""
         step = 10
