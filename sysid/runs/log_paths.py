@@ -76,22 +76,18 @@ class RecordedLog:
         return next((p for p in self.candidates() if p.is_file()), None)
 
     def checked(self, run: Path, part: str) -> Path:
-        """The log to read: the first place that holds the recorded bytes, else the first that
-        holds a file (one warning line: it was edited); `DataError` when none does."""
-        there = [p for p in self.candidates() if p.is_file()]
-        if not there:
-            where = f" (or {self.hint}, where it was when the run was made)" if len(self.candidates()) > 1 else ""
+        """The log to read (`found`): `DataError` when it is at neither place, one warning
+        line when its bytes are not those the run recorded (it was edited)."""
+        path = self.found()
+        if path is None:
+            where = f" (nor at {self.hint}, where it was when the run was made)" if len(self.candidates()) > 1 else ""
             raise DataError(f"{run}: its {_PART_NAMES[part]} log {self.path} is missing{where}: move it back, or "
                             f"name the logs to use with --data DIR")
-        if self.sha256 is None:
-            return there[0]
-        for path in there:
-            if sha256_of(path) == self.sha256:
-                return path
-        logging.getLogger(__name__).warning(
-            f"{there[0]} differs from the {_PART_NAMES[part]} log the run {run} was made with (its SHA-256 in "
-            f"summary.json): the results are of the edited file (to reproduce the run's, put the original back)")
-        return there[0]
+        if self.sha256 is not None and sha256_of(path) != self.sha256:
+            logging.getLogger(__name__).warning(
+                f"{path} differs from the {_PART_NAMES[part]} log the run {run} was made with (its SHA-256 in "
+                f"summary.json): the results are of the edited file (to reproduce the run's, put the original back)")
+        return path
 
 
 _PART_NAMES = {"train": "training", "validation": "validation", "test": "test"}
