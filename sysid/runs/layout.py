@@ -3,14 +3,16 @@
 
 A **run directory** (``sysid train CONFIG -o runs/NAME``)::
 
-    config.toml        resolved experiment config (all defaults filled in)
+    config.toml        resolved experiment config (all defaults filled in; its logs and ship file
+                       named relative to the run directory, `sysid.runs.log_paths`)
     summary.json       {"name", "model": "mmg"|"nn"|"hybrid", "status": "complete"|"failed: ...",
                         "dataset": "D1"|"D2"|..., "ship", "seed", "created", "train_seconds",
                         "epochs", "best_epoch", "val_loss_multistep" (the run's validation
                         loss, "val_loss_definition"), "verdict" (`BaselineVerdict.to_dict`:
                         model vs physics baselines per split, horizon and channel) and
                         "beats_baseline", "data" (the logs used: training source, every file
-                        with its SHA-256, test set "files"|"paper"|"none"),
+                        with its SHA-256, absolute path and path relative to the run
+                        directory, test set "files"|"paper"|"none"),
                         "training_range" ({speed, yaw_rate, factor}: beyond factor times
                         the training logs' largest speed or |r| a prediction diverged),
                         "stopped": {stage: "early stop"|"epoch limit"|...},
