@@ -8,6 +8,7 @@ The truth is the same run evaluated before the move, in the same process, and th
 bytes. The project: the scratch tanker's ship file, two training logs and one test log
 simulated from its MMG with known derivatives (`scratch_ship.simulated_logs`), a hybrid
 trained 2 epochs (a few seconds)."""
+import hashlib
 import json
 import shutil
 
@@ -73,8 +74,7 @@ def test_the_run_names_its_logs_relative_to_itself(origin):
     assert config["experiment"]["ship"] == "../../tanker.toml"
     data = run.read_summary().data
     assert [(f.relative, f.file) for f in data.test] == [("../../test/random.csv", str(origin / "test" / "random.csv"))]
-    assert [f.sha256 for f in data.test] == [__import__("hashlib").sha256(
-        (origin / "test" / "random.csv").read_bytes()).hexdigest()]
+    assert [f.sha256 for f in data.test] == [hashlib.sha256((origin / "test" / "random.csv").read_bytes()).hexdigest()]
     exp = run.read_experiment()
     assert exp.data.test == (str(origin / "test" / "random.csv"),)
     assert exp.data.train == tuple(str(origin / "logs" / n) for n in ("turn.csv", "zigzag.csv"))
