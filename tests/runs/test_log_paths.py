@@ -98,6 +98,19 @@ def test_moved_project_evaluates_to_the_bit_as_before(origin, tmp_path, capsys):
     assert RunDir(run).read_experiment().data.test == (str(moved / "test" / "random.csv"),)
 
 
+def test_a_moved_project_says_when_its_ship_file_was_edited(origin, tmp_path, capsys):
+    """The ship file is named relative to the run too: the moved project's edited ship file
+    is the one the warning names (the run still uses its copy)."""
+    moved = _project(origin, tmp_path / "t2")
+    ship = moved / "tanker.toml"
+    ship.write_text(SCRATCH.replace("N_r = -0.049", "N_r = -0.060"))
+    out = in_process(capsys, "evaluate", moved / "runs" / "first", "-o", tmp_path / "m.csv")
+    assert out.code == 0, out.err
+    warnings = [line for line in out.err.splitlines() if "differs from" in line]
+    assert len(warnings) == 1 and str(ship) in warnings[0], out.err
+    np.testing.assert_array_equal(_metrics(moved / "runs" / "first"), _metrics(origin / "runs" / "first"))
+
+
 def test_a_run_copied_alone_finds_its_logs_where_they_were(origin, tmp_path, capsys):
     """The run directory without its project (the project stays): the absolute paths the
     run recorded are the fallback."""
