@@ -518,9 +518,9 @@ def seed_mean_verdict(verdicts: Sequence[BaselineVerdict], rule: VerdictRule = D
             seeds = [v.evidence[split][label] for v in verdicts]
             stacked = _members(seeds)
             if stacked is None and split == VALIDATION:
-                # validation blocks drawn per seed: the seeds' windows differ, so each log's cannot
-                # pair; paired by position in one pseudo-log per horizon, as before per-log cells,
-                # or, their numbers of windows differing, every seed's windows of a log in its cell
+                # validation blocks drawn per seed: the seeds' windows differ, so no log's pair; of
+                # equal numbers, paired by position in one pseudo-log per horizon (`pseudo_log`),
+                # else every seed's windows of a log in that log's cell (`seed_logs`)
                 stacked = _members([pseudo_log(cells) for cells in seeds]) or seed_logs(seeds)
             if stacked is not None:
                 evidence[split][label] = stacked
