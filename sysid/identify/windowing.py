@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -143,8 +144,12 @@ def cut_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction: 
     named: dict[str, Run] = {}
     for run in list(runs) + validation_runs:
         if run.name in named and named[run.name] is not run:
-            raise DataError(f"{run.path}: the same name as {named[run.name].path} among the training and validation "
-                            f"logs; sysid names a log by its file name ({run.name!r}): rename one of them")
+            other = named[run.name].path
+            if Path(other).resolve() == Path(run.path).resolve():
+                raise DataError(f"{run.path}: given twice among the training and validation logs (a log validates "
+                                "only what it did not train): keep it in one list")
+            raise DataError(f"{run.path}: the same name as {other} among the training and validation logs; sysid "
+                            f"names a log by its file name ({run.name!r}): rename one of them")
         named[run.name] = run
     copies = {copy for copy, _ in duplicate_runs(list(runs) + validation_runs)}
     parts: dict[str, list] = {"train": [], "val": []}

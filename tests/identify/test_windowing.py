@@ -99,3 +99,13 @@ def test_two_logs_of_one_name_are_refused_before_their_windows_merge(runs, datas
     first, second = read_run(a), read_run(b)
     with pytest.raises(DataError, match=rf"^{b}: the same name as {a} among the training and validation logs"):
         cut_windows([first, runs[2]], 10, 2.0, 0.3, True, torch.float64, 30.0, 0, validation_runs=[second])
+
+
+def test_one_log_for_training_and_validation_is_refused(runs, dataset_dir):
+    """The same file read as a training log and as a held-out validation log: named as given
+    twice (its validation windows would score what it trained)."""
+    from sysid.errors import DataError
+
+    again = read_run(dataset_dir / "berthing" / BERTHING[0])
+    with pytest.raises(DataError, match=rf"{BERTHING[0]}: given twice among the training and validation logs"):
+        cut_windows(runs[:2], 10, 2.0, 0.3, True, torch.float64, 30.0, 0, validation_runs=[again])
