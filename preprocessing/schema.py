@@ -224,7 +224,7 @@ def read_raw(path: str | os.PathLike, repairs: list[str] | None = None) -> tuple
     if not path.is_file():
         raise RawLogError(f"{path}: file not found")
     try:
-        df = pd.read_csv(path, skipinitialspace=True)
+        df = pd.read_csv(path, skipinitialspace=True, skip_blank_lines=False)   # a blank line: an empty row
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         raise RawLogError(f"{path}: not a readable CSV ({exc})") from None
     _check_last_row(path, len(df.columns), len(df))

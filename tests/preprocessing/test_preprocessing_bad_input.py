@@ -342,3 +342,25 @@ def test_empty_rows_dropped_and_logged(synthetic, raw, tmp_path):
 def test_no_gnss_at_all(raw):
     raw[["gnss_fore_x [m]", "gnss_aft_x [m]"]] = np.nan
     assert "no usable GNSS fix" in error_of(raw)
+
+
+def test_a_blank_line_keeps_the_lines_named_those_of_the_file(synthetic, tmp_path):
+    """A blank line inside a raw log (line 101) is an empty row, dropped and said at its line;
+    a bad time stamp after it is named at its own line of the file (703), as an editor shows it."""
+    from preprocessing.schema import read_raw
+    broken = synthetic.raw.copy()
+    broken.loc[700, "t [s]"] = 0.0          # data row 700: line 702 of the file as written
+    path = tmp_path / "blank.csv"
+    broken.to_csv(path, index=False)
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join(lines[:100] + [""] + lines[100:]) + "\n")
+    assert path.read_text().splitlines()[702].startswith("0.0,")   # line 703 (1-based)
+    with pytest.raises(RawLogError, match=r"blank.csv: column t: line 703: time goes backwards"):
+        read_raw(path)
+    good = tmp_path / "good.csv"
+    synthetic.raw.to_csv(good, index=False)
+    lines = good.read_text().splitlines()
+    good.write_text("\n".join(lines[:100] + [""] + lines[100:]) + "\n")
+    repairs: list[str] = []
+    frame, _ = read_raw(good, repairs)
+    assert len(frame) == len(synthetic.raw) and "dropped 1 empty row(s), first at line 101" in repairs
