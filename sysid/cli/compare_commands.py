@@ -213,6 +213,7 @@ def _contenders(sources):
     baseline's label), followed by the ship file MMGs that are a learned model's physics
     baseline and were not given."""
     from sysid.evaluation.comparison import Contender
+    from sysid.evaluation.divergence import PhysicalRange
     from sysid.maneuvers.any_model import load_maneuver_model
     from sysid.mmg.model import MMG
     from sysid.progress import progress
@@ -226,15 +227,18 @@ def _contenders(sources):
         key = (subject.ship.name, tuple(sorted(subject.ship.overrides.items())))
         if is_ship:
             ships.setdefault(key, label)
-        contenders.append((label, members, subject.kind, key, subject.ship))
+        contenders.append((label, members, subject.kind, key, subject.ship, subject.training_range))
     baselines = {}
-    for _, _, _kind, key, ship_ in contenders:
+    for _, _, _kind, key, ship_, _range in contenders:
         if key not in ships:   # the physics baseline, always shown beside the learned models
             name = "MMG (ship file)" if len({c[3] for c in contenders}) == 1 else f"MMG (ship file {ship_.name})"
             ships[key] = name
-            baselines[key] = (name, (MMG(ship_),), "mmg", key, ship_)
+            # judged against its learned models' training range, as `sysid train` judges a run's baselines
+            widest = PhysicalRange.widest([c[5] for c in contenders if c[3] == key])
+            baselines[key] = (name, (MMG(ship_),), "mmg", key, ship_, widest)
     rows = contenders + list(baselines.values())
-    chosen = [Contender(label, members, kind, ships[key]) for label, members, kind, key, _ in rows]
+    # a run's training range: beyond it a prediction diverged, as in `sysid train` and `sysid evaluate`
+    chosen = [Contender(label, members, kind, ships[key], limits) for label, members, kind, key, _, limits in rows]
     return chosen
 
 

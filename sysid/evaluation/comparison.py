@@ -24,6 +24,7 @@ from torch import nn
 from sysid.data.recordings import Run
 from sysid.data.scenario import scenario_of
 from sysid.dynamics.integrators import EULER, Integrator
+from sysid.evaluation.divergence import PhysicalRange
 from sysid.evaluation.evaluate import predict_windows
 from sysid.evaluation.judgement import (CHANNELS, DEFAULT_RULE, UNITS, Divergence, Judgement, PairedCell, VerdictRule,
                                        judge)
@@ -44,12 +45,15 @@ class Contender:
     """A model in the comparison. label : its name in every table; members : one force model,
     or the seeds of a seed folder (their spread is the evidence's); kind : "mmg", "nn" or
     "hybrid"; baseline : the label of its physics baseline (a `Contender` of the same
-    comparison; its own label for a ship file's MMG)."""
+    comparison; its own label for a ship file's MMG); limits : its training range, beyond
+    which a prediction diverged (`sysid.evaluation.divergence`; None: non-finite only, a
+    ship file's MMG)."""
 
     label: str
     members: tuple[nn.Module, ...]
     kind: str = "mmg"
     baseline: str = ""
+    limits: PhysicalRange | None = None
 
 
 @dataclass(frozen=True)
@@ -58,7 +62,8 @@ class WindowErrors:
 
     window_start_s : (W,) start time [s] of each window; errors : label -> (M, W, 3) RMSE of
     u, v_m [m/s] and r [rad/s] of each member; divergence : label -> where its prediction
-    first went non-finite (absent when it stayed finite)."""
+    first diverged (`sysid.evaluation.divergence.diverged_windows` against the contender's
+    training range; absent when it did not)."""
 
     log: str
     scenario: str
@@ -77,14 +82,6 @@ def _per_window_rmse(observed: torch.Tensor, predicted: torch.Tensor) -> np.ndar
     idx = list(VELOCITY_INDEX)
     err = (predicted[..., idx] - observed[..., idx]).detach().cpu().double()
     return torch.sqrt((err**2).mean(0)).numpy()
-
-
-def _first_divergence(log: str, horizon_s: float, t: np.ndarray, predicted: torch.Tensor) -> Divergence | None:
-    """Where a window prediction (H, W, 6) first holds a non-finite state, or None."""
-    bad = ~torch.isfinite(predicted).all(-1).cpu().numpy()   # (H, W)
-    if not bad.any():
-        return None
-    return Divergence(log, horizon_s, float(np.min(t[bad])))
 
 
 def window_errors(contenders: Sequence[Contender], runs: Sequence[Run], horizons: Sequence[float],
@@ -110,7 +107,7 @@ def window_errors(contenders: Sequence[Contender], runs: Sequence[Run], horizons
                         contender.label, np.zeros((len(contender.members), cell.n_windows, 3)))
                     if cell.n_windows:
                         errors[m] = _per_window_rmse(pred.observed, pred.predicted)
-                        where = _first_divergence(pred.run.name, float(horizon), pred.t, pred.predicted)
+                        where = pred.divergence(float(horizon), contender.limits)
                         if where is not None and contender.label not in cell.divergence:
                             cell.divergence[contender.label] = where
                 if on_done is not None:

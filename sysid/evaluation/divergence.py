@@ -6,6 +6,10 @@ channels is not finite, or when its speed sqrt(u^2 + v_m^2) exceeds `DIVERGENCE_
 the largest speed in the training logs and in the window's own record, or its |r| that
 factor times their largest |r|.
 Without training logs (an MMG used as defined) only non-finite states count.
+
+`diverged_windows` is the one place this rule is applied to window predictions: ``sysid
+train``, ``sysid evaluate``, ``sysid compare`` and the ensemble verdict of ``sysid reproduce
+--seeds N`` all call it, each with the model's training range (`PhysicalRange`).
 """
 from __future__ import annotations
 
@@ -48,6 +52,15 @@ class PhysicalRange:
 
     def to_dict(self) -> dict:
         return {"speed": self.speed, "yaw_rate": self.yaw_rate, "factor": self.factor}
+
+    @classmethod
+    def widest(cls, ranges: Sequence["PhysicalRange | None"]) -> "PhysicalRange | None":
+        """The widest of `ranges` (the seeds of an ensemble: each its own training logs); None
+        when none is given."""
+        kept = [r for r in ranges if r is not None]
+        if not kept:
+            return None
+        return cls(max(r.speed for r in kept), max(r.yaw_rate for r in kept), kept[0].factor)
 
     @classmethod
     def of_summary(cls, summary: RunSummary) -> "PhysicalRange | None":

@@ -73,12 +73,16 @@ class WindowPrediction:
         err = self.predicted[..., idx] - self.observed[..., idx]
         return torch.sqrt((err**2).mean(0)).detach().cpu().numpy().reshape(-1, 3)
 
+    def divergence(self, horizon_s: float, limits: PhysicalRange | None = None) -> Divergence | None:
+        """Where this file's prediction first diverged, by the one rule (`diverged_windows`,
+        against the training range `limits`; None: non-finite only), or None."""
+        return diverged_windows(self.predicted.detach().cpu().numpy(), self.t, self.run.name,
+                                horizon_s, limits, self.observed.detach().cpu().numpy())[1]
+
     def errors(self, horizon_s: float, limits: PhysicalRange | None = None) -> "WindowErrors":
         """This file's `WindowErrors` at `horizon_s`, divergence checked against `limits`."""
-        _, divergence = diverged_windows(self.predicted.detach().cpu().numpy(), self.t, self.run.name,
-                                         horizon_s, limits, self.observed.detach().cpu().numpy())
         return WindowErrors(scenario_of(self.run), self.run.name, float(horizon_s),
-                            np.asarray(self.t[0], dtype=float), self.window_rmse(), divergence)
+                            np.asarray(self.t[0], dtype=float), self.window_rmse(), self.divergence(horizon_s, limits))
 
 
 @dataclass(frozen=True, eq=False)

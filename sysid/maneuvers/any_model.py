@@ -97,7 +97,4 @@ def physics_baseline(subject: ManeuverModel) -> ManeuverModel | None:
 
 def _training_range(runs: list[Path]) -> PhysicalRange | None:
     """The widest training range the run directories recorded (None: none recorded one)."""
-    kept = [r for r in (PhysicalRange.of_summary(RunDir(p).read_summary()) for p in runs) if r is not None]
-    if not kept:
-        return None
-    return PhysicalRange(max(r.speed for r in kept), max(r.yaw_rate for r in kept), kept[0].factor)
+    return PhysicalRange.widest([PhysicalRange.of_summary(RunDir(p).read_summary()) for p in runs])

@@ -17,6 +17,7 @@ import pandas as pd
 from sysid.data.recordings import Run
 from sysid.dynamics.integrators import Integrator
 from sysid.device import compute_threads
+from sysid.evaluation.divergence import PhysicalRange
 from sysid.evaluation.evaluate import Evaluation, evaluate_model
 from sysid.evaluation.verdict import BaselineVerdict, baseline_verdict
 from sysid.config.experiment import Experiment
@@ -186,28 +187,33 @@ def write_ensemble(name: str, exp: Experiment, group: SeedGroup, out: Path, test
         with compute_threads(threads):
             return write_ensemble(name, exp, group, out, tests)
     started = time.perf_counter()
-    members = [load_model(out / "runs" / name / f"seed{seed}")[1] for seed in group.seeds]
+    seed_dirs = [out / "runs" / name / f"seed{seed}" for seed in group.seeds]
+    members = [load_model(p)[1] for p in seed_dirs]
     model = SeedEnsemble(members)
-    evaluation = evaluate_model(model, tests, exp.evaluation.horizons, Integrator(exp.evaluation.integrator))
-    verdict, baseline_metrics = ensemble_verdict(exp, model, evaluation, tests)
+    # the seeds' widest training range: beyond it a prediction diverged, as in each seed's run
+    limits = PhysicalRange.widest([PhysicalRange.of_summary(RunDir(p).read_summary()) for p in seed_dirs])
+    evaluation = evaluate_model(model, tests, exp.evaluation.horizons, Integrator(exp.evaluation.integrator),
+                                limits=limits)
+    verdict, baseline_metrics = ensemble_verdict(exp, model, evaluation, tests, limits)
     target = ensemble_name(name, exp.experiment.dataset)
     ens = exp.replace(experiment={"name": target},
                       ensemble={"members": tuple(f"../{name}/seed{seed}" for seed in group.seeds)})
     path = write_run(out / "runs" / target, ens, model, evaluation, seconds=time.perf_counter() - started,
-                     verdict=verdict, baseline_metrics=baseline_metrics)
+                     verdict=verdict, baseline_metrics=baseline_metrics, limits=limits)
     return target, evaluation, path
 
 
-def ensemble_verdict(exp: Experiment, model: SeedEnsemble, evaluation: Evaluation,
-                     tests: Sequence[Run]) -> tuple[BaselineVerdict | None, pd.DataFrame | None]:
+def ensemble_verdict(exp: Experiment, model: SeedEnsemble, evaluation: Evaluation, tests: Sequence[Run],
+                     limits: PhysicalRange | None = None) -> tuple[BaselineVerdict | None, pd.DataFrame | None]:
     """(the verdict of a mean-of-seeds ensemble, its baseline's metrics on the test logs), or
     (None, None) without test logs: the ensemble's `evaluation` (its test predictions, made
     once) paired window by window with its physics baseline's on the same test logs, the
     ship file's MMG with ``[mmg] overrides`` (`physics_baselines`; one MMG rollout per
     window, float64), judged by the one rule (`baseline_verdict`). The ensemble is one
-    model (no spread), and its predictions diverge only where they go non-finite (no
-    training range), as ``sysid compare RUN --against baseline``."""
-    scores = scores_on_tests(exp, model, evaluation, tests)
+    model (no spread); its `evaluation` and its baseline's mark a prediction diverged by the
+    one rule (`sysid.evaluation.divergence`) against `limits`, the seeds' widest training
+    range, as ``sysid train`` and ``sysid compare RUN --against baseline`` do."""
+    scores = scores_on_tests(exp, model, evaluation, tests, limits)
     if not scores:
         return None, None
     verdict = baseline_verdict(str(exp.experiment.model), None, scores, ensemble_of=len(model.members))

@@ -71,3 +71,45 @@ def test_ensemble_verdict_equals_compare_against_baseline(tmp_path, scale):
     assert ours.outcome.name.lower() == ("not_distinguishable" if scale < 0.1 else "worse")
     assert recorded.statement().startswith("The hybrid ensemble (the mean of 2 seeds' forces) ")
     assert "1 seed" not in ours.sentence and "one model (the ensemble: no spread)" in ours.sentence
+
+
+def test_a_finite_prediction_far_beyond_the_training_range_is_diverged_by_every_path(tmp_path):
+    """One divergence rule (`sysid.evaluation.divergence`): two hybrid seeds whose FNN adds a
+    correction of 100 N, 1000 N m turn the ship 10 to 20 times faster than any training or
+    recorded sample (|r| > 3 x the range) while every state stays finite. The seeds' runs, the
+    ensemble's own evaluation, its summary.json verdict and ``sysid compare`` all call it
+    DIVERGED on the same logs; judged on non-finite states alone it would not be."""
+    from sysid.cli.compare_commands import _contenders
+    from sysid.evaluation.comparison import Contender
+    from sysid.evaluation.divergence import PhysicalRange
+    from sysid.evaluation.judgement import Outcome
+    from sysid.hybrid.ensemble import SeedEnsemble
+    from sysid.evaluation.evaluate import predict_windows
+
+    exp = protocol_experiment("hybrid_D2").replace(evaluation={"horizons": (30.0,)})
+    tests = list(measured_runs(scale=0.5).values())
+    limits = PhysicalRange.of_runs(tests)   # the training range of the seeds: the logs' own
+    members = [_member(exp, seed, 100.0) for seed in (0, 1)]
+    for seed, member in zip((0, 1), members):
+        seed_eval = evaluate_model(member, tests, (30.0,), traces=False, limits=limits)
+        assert seed_eval.divergences and seed_eval.metrics["diverged"].any()
+        write_run(tmp_path / "runs" / "hybrid_D2" / f"seed{seed}", exp.replace(experiment={"seed": seed}), member,
+                  seed_eval, limits=limits)
+    ensemble = SeedEnsemble(members)
+    evaluation = evaluate_model(ensemble, tests, (30.0,), traces=True, limits=limits)
+    with torch.no_grad():
+        assert all(torch.isfinite(p.predicted).all() for p in predict_windows(ensemble, tests, 30.0))
+    assert evaluation.divergences and all(d.channel in ("speed", "r") for d in evaluation.divergences)
+    _, _, path = write_ensemble("hybrid_D2", exp, SeedGroup("hybrid_D2", [0, 1], pd.DataFrame(), {}, None, 0.0),
+                                tmp_path, tests, threads=1)
+    recorded = BaselineVerdict.from_dict(RunDir(path).read_summary().verdict.to_json())
+    assert recorded.outcome is Outcome.DIVERGED
+    contenders = _contenders([str(path)])
+    assert contenders[0].limits == limits
+    theirs = compare(contenders, tests, (30.0,), BASELINE).verdicts[contenders[0].label]
+    assert theirs.outcome is Outcome.DIVERGED
+    assert {d.log for d in theirs.divergences} == {d.log for d in recorded.judgements[SHIP_FILE_MMG].divergences}
+    # the same predictions judged on non-finite states alone (no training range): not diverged
+    bare = compare([Contender("ensemble", (ensemble,), "hybrid", "ship"), Contender("ship", contenders[1].members)],
+                   tests, (30.0,), BASELINE).verdicts["ensemble"]
+    assert bare.outcome is not Outcome.DIVERGED
