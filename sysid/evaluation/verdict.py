@@ -154,8 +154,11 @@ class BaselineVerdict:
     @property
     def validation_windows(self) -> str:
         """"the non-overlapping validation windows" when every judged validation cell's windows
-        start at least its horizon apart (per-log cells), else "the validation windows" (the
-        pseudo-log of overlapping ones)."""
+        start at least its horizon apart (per-log cells of one seed's or of seeds on the same
+        windows), else "the validation windows" (the pseudo-log of overlapping ones, or the
+        seeds' windows pooled per log, `seed_logs_text`)."""
+        if self.seed_logs_text:
+            return "the validation windows"
         cells = [c for by in self.evidence.get(VALIDATION, {}).values() for c in by]
         apart = cells and all(c.log != VALIDATION_LOG and np.all(np.diff(np.sort(c.window_start_s))
                                                                   >= c.horizon_s - 1e-6 * max(1.0, c.horizon_s)) for c in cells)
@@ -168,8 +171,8 @@ class BaselineVerdict:
         members = {j.n_members for j in self.validation_judgements.values()}
         if self.seeds <= 1 or members != {1}:
             return ""
-        return (f" (each log's windows of all {self.seeds} seeds pooled as one model's: the seeds drew different "
-                "validation blocks, so no window pairs with another seed's)")
+        return (f" (each log's windows of all {self.seeds} seeds pooled as one model's, a stretch of log several seeds "
+                "drew counted once: the seeds drew different validation blocks, so no window pairs with another seed's)")
 
     def decided_text(self) -> str:
         """"Decided on the test logs at 30 s and 100 s." (what the report and log say)."""
@@ -433,9 +436,11 @@ def verdict_of(model: str, labels: tuple[str, ...], cells: tuple[ChannelCell, ..
 def _members(seeds: Sequence[tuple[PairedCell, ...]]) -> tuple[PairedCell, ...] | None:
     """The cells of several seeds (each seed's cells in the same order) as one model's, every
     seed a member (a baseline the same in every seed counts once); None when the seeds' cells
-    are not on the same logs and windows."""
+    are not on the same windows, a window known by its identity: log, horizon and start
+    time. Windows of the pseudo-log `VALIDATION_LOG` are known by position only, so they
+    never pair across seeds."""
     first = seeds[0]
-    if any(len(cells) != len(first) for cells in seeds):
+    if any(len(cells) != len(first) for cells in seeds) or any(c.log == VALIDATION_LOG for c in first):
         return None
     same_baseline = all(np.array_equal(cells[i].baseline, c.baseline, equal_nan=True)
                         for cells in seeds for i, c in enumerate(first))
@@ -450,49 +455,76 @@ def _members(seeds: Sequence[tuple[PairedCell, ...]]) -> tuple[PairedCell, ...] 
     return tuple(stacked)
 
 
-def pseudo_log(cells: Sequence[PairedCell]) -> tuple[PairedCell, ...]:
-    """Validation `cells` as the one pseudo-log `VALIDATION_LOG`: per (horizon, channel) every
-    log's windows in the cells' order, numbered 0, 1, ... (the first divergence kept)."""
-    groups: dict[tuple[float, str], list[PairedCell]] = {}
-    for c in cells:
-        groups.setdefault((float(c.horizon_s), c.channel), []).append(c)
-    out = []
-    for (horizon, channel), group in groups.items():
-        model = np.concatenate([c.model for c in group], axis=1)
-        out.append(PairedCell(VALIDATION_LOG, "", horizon, channel, model,
-                              np.concatenate([c.baseline for c in group], axis=1), np.arange(model.shape[1], dtype=float),
-                              next((c.divergence for c in group if c.divergence is not None), None)))
-    return tuple(out)
+def stretches(start_s: np.ndarray, span_s: float) -> np.ndarray:
+    """(W,) the stretch of log each window belongs to, numbered 0, 1, ... in time order, from
+    window start times `start_s` (W,) [s] and their span [s]: in time order a window opens a
+    new stretch when it starts at least one span after the stretch's first window (1e-6
+    relative slack, as `WindowOrigins.non_overlapping`), else it joins it. Stretches start at
+    least a span apart, as a log's non-overlapping windows; the windows of one stretch
+    share most of their samples."""
+    slack = 1e-6 * max(1.0, span_s)
+    order = np.argsort(start_s, kind="stable")
+    label = np.empty(len(start_s), dtype=int)
+    n, opened = -1, -math.inf
+    for i in order:                # one pass per log; a few hundred windows
+        if start_s[i] >= opened + span_s - slack:
+            n, opened = n + 1, float(start_s[i])
+        label[i] = n
+    return label
+
+
+def _stretch_rms(errors: np.ndarray, label: np.ndarray) -> np.ndarray:
+    """(1, S) root mean square of per-window RMSE `errors` (W,) over each stretch `label` (W,)."""
+    n = int(label.max()) + 1 if label.size else 0
+    return np.sqrt(np.bincount(label, weights=errors**2, minlength=n) / np.bincount(label, minlength=n))[None, :]
+
+
+def _stretch_starts(start_s: np.ndarray, label: np.ndarray) -> np.ndarray:
+    """(S,) the start [s] of each stretch `label` (W,): its first window's."""
+    first = np.full(int(label.max()) + 1 if label.size else 0, math.inf)
+    np.minimum.at(first, label, start_s)
+    return first
 
 
 def seed_logs(seeds: Sequence[Sequence[PairedCell]]) -> tuple[PairedCell, ...] | None:
-    """Validation cells of several seeds whose validation windows differ in number (blocks
-    drawn per seed, so no window pairs with another seed's, not even by position): one cell
-    per (log, horizon, channel) of any seed holding every seed's windows of that log, each
-    paired with the baseline on its own window, as one model's (one member). Every window of
-    every seed is judged, per log as one seed's are: a log worse in the seeds stays a cell
-    of its own. None when a seed's cells have several members."""
-    if any(c.model.shape[0] != 1 or c.baseline.shape[0] != 1 for cells in seeds for c in cells):
+    """Validation cells of several seeds whose validation windows differ (blocks drawn per
+    seed, so no window pairs with another seed's): one cell per (log, horizon, channel) of
+    any seed holding every seed's windows of that log as one model's (one member), each paired
+    with the baseline on its own window. Windows of different seeds over the same stretch of
+    log (`stretches`: starts less than a horizon apart) are one piece of evidence, not
+    several: each stretch becomes one window of the cell, its model's and baseline's RMSE the
+    root mean square over its windows (as `judge` pools windows), starting at the stretch's
+    first window. The bootstrap then resamples each stretch once, as a test log's windows,
+    and a log worse in the seeds stays a cell of its own. None when a seed's cells have
+    several members or are windows of unknown identity (`VALIDATION_LOG`)."""
+    if any(c.model.shape[0] != 1 or c.baseline.shape[0] != 1 or c.log == VALIDATION_LOG
+           for cells in seeds for c in cells):
         return None
     groups: dict[tuple, list[PairedCell]] = {}
     for cells in seeds:
         for c in cells:
             groups.setdefault(c.key, []).append(c)
-    return tuple(PairedCell(g[0].log, g[0].scenario, g[0].horizon_s, g[0].channel,
-                            np.concatenate([c.model for c in g], axis=1), np.concatenate([c.baseline for c in g], axis=1),
-                            np.concatenate([c.window_start_s for c in g]),
-                            next((c.divergence for c in g if c.divergence is not None), None))
-                 for g in groups.values())
+    out = []
+    for g in groups.values():
+        starts = np.concatenate([c.window_start_s for c in g])
+        label = stretches(starts, float(g[0].horizon_s))
+        out.append(PairedCell(g[0].log, g[0].scenario, g[0].horizon_s, g[0].channel,
+                              _stretch_rms(np.concatenate([c.model[0] for c in g]), label),
+                              _stretch_rms(np.concatenate([c.baseline[0] for c in g]), label),
+                              _stretch_starts(starts, label),
+                              next((c.divergence for c in g if c.divergence is not None), None)))
+    return tuple(out)
 
 
 def seed_mean_verdict(verdicts: Sequence[BaselineVerdict], rule: VerdictRule = DEFAULT_RULE) -> BaselineVerdict:
     """The verdict of several seeds of one experiment: every seed is a member of the model
     (the bootstrap draws seeds too; their spread is shown); a baseline the same in every seed
     (the ship file's MMG) counts once, one identified per seed counts every seed. A seed's
-    cells pair with another's on the same log and windows; validation blocks drawn per seed
-    (``[training] validation = "blocks"``) give the seeds different windows, and their
-    validation cells are then paired by position in one pseudo-log per horizon
-    (`pseudo_log`). The pooled cells are the seeds' mean with their std, matched by split,
+    cells pair with another's on the same windows (same log, horizon and start time);
+    validation blocks drawn per seed (``[training] validation = "blocks"``) give the seeds
+    different windows, and their validation cells are then judged per log with every seed's
+    windows, each stretch of log once (`seed_logs`); validation windows of unknown identity
+    (`VALIDATION_LOG`) of several seeds are not judged. The pooled cells are the seeds' mean with their std, matched by split,
     horizon and channel; a cell some seed lacks is left out of them."""
     first = verdicts[0]
     if len(verdicts) == 1:
@@ -518,10 +550,9 @@ def seed_mean_verdict(verdicts: Sequence[BaselineVerdict], rule: VerdictRule = D
             seeds = [v.evidence[split][label] for v in verdicts]
             stacked = _members(seeds)
             if stacked is None and split == VALIDATION:
-                # validation blocks drawn per seed: the seeds' windows differ, so no log's pair; of
-                # equal numbers, paired by position in one pseudo-log per horizon (`pseudo_log`),
-                # else every seed's windows of a log in that log's cell (`seed_logs`)
-                stacked = _members([pseudo_log(cells) for cells in seeds]) or seed_logs(seeds)
+                # validation blocks drawn per seed: the seeds' windows differ, so none pairs with
+                # another seed's; every seed's windows of a log in that log's cell (`seed_logs`)
+                stacked = seed_logs(seeds)
             if stacked is not None:
                 evidence[split][label] = stacked
         if len(evidence[split]) != len(by):

@@ -15,7 +15,7 @@ import torch
 
 from sysid.dynamics.rollouts import WindowOrigins, WindowSet
 from sysid.evaluation.judgement import CHANNELS, CellDecision, Outcome, VerdictRule
-from sysid.evaluation.verdict import (SHIP_FILE_MMG, VALIDATION, VALIDATION_LOG, BaselineVerdict, WindowScore, pseudo_log,
+from sysid.evaluation.verdict import (SHIP_FILE_MMG, VALIDATION, VALIDATION_LOG, BaselineVerdict, WindowScore,
                                       seed_mean_verdict, validation_cells, window_score, baseline_verdict)
 
 RULE = VerdictRule(resamples=1000)
@@ -119,7 +119,12 @@ def test_a_non_finite_validation_window_names_its_log_and_time():
         in verdict.statement()
 
 
-def test_seeds_pool_per_log_on_the_same_windows_and_as_the_pseudo_log_on_different_ones():
+def test_seeds_pair_only_on_the_same_windows():
+    """Seeds pair window by window only on the same windows (log, horizon, start time): then
+    each seed is a member. Validation blocks drawn per seed give the same number of windows
+    on other stretches (here 1 s later): no window pairs with another seed's, each log is a
+    cell of its own, and the two seeds' windows over one stretch count once. Windows of unknown
+    identity (no origins) never pair by position: no validation verdict across seeds."""
     def seed(factor: float, where: WindowOrigins | None) -> BaselineVerdict:
         _, baseline = errors(np.full(W_GOOD + W_BAD, 1.0), 0)      # the same baseline in every seed
         return baseline_verdict("hybrid", scores(baseline * factor, baseline, where), None, RULE)
@@ -129,20 +134,54 @@ def test_seeds_pool_per_log_on_the_same_windows_and_as_the_pseudo_log_on_differe
     assert (j.n_logs, j.n_windows, j.n_members) == (2, W_GOOD + W_BAD, 2) and j.outcome is Outcome.BEATS
     assert j.member_changes == pytest.approx([-0.3, -0.2])
 
-    # validation blocks drawn per seed: the second seed's windows start 1 s later, so no log pairs
     shifted = WindowOrigins(origins().logs, origins().start_s + 1.0)
-    seeds = [seed(0.7, origins()), seed(0.8, shifted)]
-    differ = seed_mean_verdict(seeds, RULE)
+    differ = seed_mean_verdict([seed(0.7, origins()), seed(0.8, shifted)], RULE)
     k = differ.judgements[SHIP_FILE_MMG]
-    assert (k.n_logs, k.n_windows, k.n_members) == (1, W_GOOD + W_BAD, 2) and {c.log for c in k.cells} == {VALIDATION_LOG}
-    # as the pseudo-log verdicts of before pool: the same numbers
-    before = seed_mean_verdict([seed(0.7, None), seed(0.8, None)], RULE).judgements[SHIP_FILE_MMG]
-    assert (k.change, k.change_low, k.change_high, k.outcome) == (before.change, before.change_low,
-                                                                  before.change_high, before.outcome)
-    first = seeds[0].evidence[VALIDATION][SHIP_FILE_MMG]
-    again = pseudo_log(first)
-    assert [c.n_windows for c in again] == [W_GOOD + W_BAD] * 3
-    assert np.array_equal(again[0].model, np.concatenate([first[0].model, first[3].model], axis=1))
+    assert (k.n_logs, k.n_windows, k.n_members) == (2, W_GOOD + W_BAD, 1)   # a stretch of both seeds: one window
+    assert {c.log for c in k.cells} == {"turn_good", "zigzag_bad"} and k.outcome is Outcome.BEATS
+    # each stretch's RMSE pools its two windows: 0.7 and 0.8 x the same baseline, sqrt((0.49 + 0.64) / 2)
+    assert k.change == pytest.approx(math.sqrt((0.49 + 0.64) / 2) - 1, rel=1e-9)
+
+    unknown = seed_mean_verdict([seed(0.7, None), seed(0.8, None)], RULE)
+    assert VALIDATION not in unknown.evidence and not unknown.judgements
+
+
+def test_a_log_worse_in_every_seed_on_different_blocks_stays_materially_worse():
+    """Known truth: the model's error is 1.6 x the baseline's on the bad log and 0.6 x on the
+    good one, in each of two seeds whose validation blocks differ but hold the same number of
+    windows. Paired by position in one pseudo-log (before), the 120 good windows drowned the
+    24 bad ones and the seeds BEAT the baseline; per log the bad log is a materially worse
+    cell and the verdict WORSE, as each seed's alone."""
+    other = WindowOrigins(origins().logs, origins().start_s + HORIZON / 2)   # other blocks, the same counts
+    seeds = []
+    for k, where in enumerate((origins(), other)):
+        model, baseline = case(20 + k)
+        alone = baseline_verdict("hybrid", scores(model, baseline, where), None, RULE)
+        assert alone.outcome is Outcome.WORSE
+        seeds.append(alone)
+    pooled = seed_mean_verdict(seeds, RULE)
+    j = pooled.judgements[SHIP_FILE_MMG]
+    assert pooled.decided_on == VALIDATION and j.outcome is Outcome.WORSE and j.n_members == 1
+    assert {c.log for c in j.cells} == set(TRUE_FACTOR)
+    bad = [c for c in j.cells if c.log == "zigzag_bad"]
+    assert len(bad) == 3 and all(c.decision is CellDecision.MATERIALLY_WORSE for c in bad)
+    assert all(0.4 < c.change < 0.8 for c in bad)   # the truth: +60 %
+    # windows half a horizon apart share half their samples: a stretch holds both seeds' window
+    assert all(c.n_windows == W_BAD for c in bad)
+
+
+def test_one_stretch_drawn_by_two_seeds_is_one_piece_of_evidence():
+    """Two seeds whose windows start 1 s apart over the same stretches, with the same errors
+    (the same evidence twice): pooled per log, the interval of a cell is the one seed's alone,
+    not the narrower one of twice as many independent windows."""
+    model, baseline = case(5)
+    shifted = WindowOrigins(origins().logs, origins().start_s + 1.0)
+    one = baseline_verdict("hybrid", scores(model, baseline, origins()), None, RULE)
+    two = seed_mean_verdict([one, baseline_verdict("hybrid", scores(model, baseline, shifted), None, RULE)], RULE)
+    for a, b in zip(one.judgements[SHIP_FILE_MMG].cells, two.judgements[SHIP_FILE_MMG].cells):
+        assert (a.log, a.channel, a.n_windows) == (b.log, b.channel, b.n_windows)
+        assert b.change == pytest.approx(a.change, rel=1e-9)
+        assert b.change_high - b.change_low == pytest.approx(a.change_high - a.change_low, rel=0.15)
 
 
 def test_per_log_validation_cells_read_back_from_summary_json():
@@ -292,13 +331,14 @@ def test_seeds_with_different_numbers_of_validation_windows_pool_every_window_pe
     pooled = seed_mean_verdict(seeds, RULE)
     assert pooled.decided_on == TEST and pooled.judgements[SHIP_FILE_MMG].outcome is Outcome.BEATS
     j = pooled.validation_judgements[SHIP_FILE_MMG]
-    assert (j.n_logs, j.n_windows, j.n_members) == (2, W_GOOD + W_BAD + 120, 1) and j.outcome is Outcome.WORSE
+    # the second seed's windows start where the first's do: each stretch of log counts once
+    assert (j.n_logs, j.n_windows, j.n_members) == (2, W_GOOD + W_BAD, 1) and j.outcome is Outcome.WORSE
     bad = [c for c in j.cells if c.log == "zigzag_bad"]
-    assert len(bad) == 3 and all(c.decision is CellDecision.MATERIALLY_WORSE and c.n_windows == W_BAD + 20 for c in bad)
+    assert len(bad) == 3 and all(c.decision is CellDecision.MATERIALLY_WORSE and c.n_windows == W_BAD for c in bad)
     assert all(0.4 < c.change < 0.8 for c in bad)   # the truth: +60 %
     assert all(-0.5 < c.change < -0.3 for c in j.cells if c.log == "turn_good")   # the truth: -40 %
-    assert ("On the validation windows (each log's windows of all 2 seeds pooled as one model's: the seeds drew "
-            "different validation blocks, so no window pairs with another seed's) the identified MMG is worse than "
+    assert ("On the validation windows (each log's windows of all 2 seeds pooled as one model's, a stretch of log "
+            "several seeds drew counted once: the seeds drew different validation blocks, so no window pairs with another seed's) the identified MMG is worse than "
             "MMG (ship file).") in pooled.statement()
     assert "2 seeds' windows pooled as one model's (no spread per seed)" in j.sentence
     # without test logs the pooled validation windows decide, and the sentence says how
