@@ -157,6 +157,7 @@ class VerdictRule:
 
 
 DEFAULT_RULE = VerdictRule()   # the stated rule: 95 % confidence, 10 % material
+ONE_MEMBER = "1 seed (no spread: one model)"   # the evidence of a model of one member, in the sentence
 
 
 @dataclass(frozen=True)
@@ -248,14 +249,15 @@ class Judgement:
     def materially_worse(self) -> tuple[CellJudgement, ...]:
         return tuple(c for c in self.cells if c.decision is CellDecision.MATERIALLY_WORSE)
 
-    def evidence(self) -> str:
-        """"6 logs, 78 windows, 1 member (no spread: one seed)" or "..., 5 members (each alone
-        -31 % to -36 %)"."""
+    def evidence(self, one_member: str = ONE_MEMBER) -> str:
+        """"6 logs, 78 windows, 1 seed (no spread: one model)" or "..., 5 seeds or members (each
+        alone -31 % to -36 %)"; `one_member` says what a single member is (`ONE_MEMBER`: one
+        model of one seed)."""
         logs = f"{self.n_logs} log" + ("s" if self.n_logs != 1 else "")
         windows = f"{self.n_windows} window" + ("s" if self.n_windows != 1 else "")
         finite = [c for c in self.member_changes if math.isfinite(c)]
         if self.n_members == 1:
-            members = "1 seed (no spread: one model)"
+            members = one_member
         elif finite:
             members = f"{self.n_members} seeds or members (each alone {percent_text(min(finite))} to {percent_text(max(finite))})"
         else:
@@ -345,9 +347,11 @@ def _decided(cell: CellJudgement, low: float, high: float, rule: VerdictRule) ->
 
 
 def judge(cells: Sequence[PairedCell], rule: VerdictRule = VerdictRule(), model: str = "The model",
-          baseline: str = "its baseline") -> Judgement:
+          baseline: str = "its baseline", one_member: str = ONE_MEMBER) -> Judgement:
     """The verdict on `cells` under `rule` (see the module docstring); `model` and
-    `baseline` name them in the sentence ("The hybrid", "MMG (ship file)")."""
+    `baseline` name them in the sentence ("The hybrid", "MMG (ship file)"), `one_member` the
+    model's evidence when it has one member (`Judgement.evidence`: "one model (the ensemble:
+    no spread)")."""
     cells, groups = _checked(cells)
     M, B = cells[0].model.shape[0], cells[0].baseline.shape[0]
     alpha = (1 - rule.confidence) / 2
@@ -392,7 +396,7 @@ def judge(cells: Sequence[PairedCell], rule: VerdictRule = VerdictRule(), model:
                        member_changes, worst, len({c.log for c in cells}), n_windows, M,
                        tuple(sorted({float(c.horizon_s) for c in cells})), "", divergences)
     return _with_sentence(result, model, baseline, material, unjudged_material, diverged,
-                          None if enough else (deciding, rule.min_windows))
+                          None if enough else (deciding, rule.min_windows), one_member)
 
 
 def _checked(cells: Sequence[PairedCell]) -> tuple[list[PairedCell], dict[tuple[str, float], list[PairedCell]]]:
@@ -501,14 +505,14 @@ def _listed(cells: Sequence[CellJudgement], names: Mapping[str, str], limit: int
 
 def _with_sentence(j: Judgement, model: str, baseline: str, material: list[CellJudgement],
                    unjudged_material: list[CellJudgement], diverged: list[CellJudgement],
-                   too_few: tuple[int, int] | None = None) -> Judgement:
+                   too_few: tuple[int, int] | None = None, one_member: str = ONE_MEMBER) -> Judgement:
     """`j` with its sentence; `too_few`: (the most windows of one horizon, the windows a
-    decision needs) when there are fewer."""
+    decision needs) when there are fewer; `one_member`: as `judge`."""
     conf = f"{100 * j.confidence:g} %"
     tolerance = f"{100 * j.material:g} %"
     overall = (f"RMSE {percent_text(j.change)} overall ({conf} interval {interval_text(j.change_low, j.change_high)})"
                if math.isfinite(j.change) else "no cell to compare")
-    evidence = f"on {j.evidence()}"
+    evidence = f"on {j.evidence(one_member)}"
     names = place_names(j.cells)
     worst = f"; worst cells: {_listed(j.worst, names)}" if j.worst else ""
     if j.outcome is Outcome.DIVERGED:

@@ -21,7 +21,6 @@ and channel (the table beside the sentence, and the verdict of runs written befo
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING, Mapping, Sequence
@@ -31,8 +30,8 @@ import pandas as pd
 import torch
 
 from sysid.dynamics.rollouts import WindowOrigins, WindowSet, rollout_errors, velocity_loss
-from sysid.evaluation.judgement import (CHANNELS, DEFAULT_RULE, UNITS, Divergence, Judgement, Outcome, PairedCell, VerdictRule,
-                                        judge, percent_text)
+from sysid.evaluation.judgement import (CHANNELS, DEFAULT_RULE, ONE_MEMBER, UNITS, Divergence, Judgement, Outcome, PairedCell,
+                                        VerdictRule, judge, percent_text)
 
 if TYPE_CHECKING:
     from sysid.evaluation.evaluate import Evaluation
@@ -372,16 +371,15 @@ def judged(model: str, label: str, cells: Sequence[PairedCell], rule: VerdictRul
     name = MODEL_NAMES.get(model, model)
     pooled = seeds > 1 and all(c.model.shape[0] == 1 for c in cells)
     spread = (f" ({seeds} seeds' windows pooled)" if pooled else f" (mean over {seeds} seeds)") if seeds > 1 else ""
+    one_member = ONE_MEMBER
+    if pooled:   # one member: every seed's windows, no seed's spread of its own
+        one_member = f"{seeds} seeds' windows pooled as one model's (no spread per seed)"
     if ensemble_of:
         spread = f" ensemble (the mean of {ensemble_of} seeds' forces)"
-    found = judge(cells, rule, model=f"The {name}{spread}", baseline=f"its physics baseline {label}")
-    one = "1 seed (no spread: one model)"
-    if pooled:   # one member: every seed's windows, no seed's spread of its own
-        found = dataclasses.replace(found, sentence=found.sentence.replace(
-            one, f"{seeds} seeds' windows pooled as one model's (no spread per seed)"))
-    elif ensemble_of:
-        found = dataclasses.replace(found, sentence=found.sentence.replace(one, "one model (the ensemble: no spread)"))
-    return found
+        if not pooled:
+            one_member = "one model (the ensemble: no spread)"
+    return judge(cells, rule, model=f"The {name}{spread}", baseline=f"its physics baseline {label}",
+                 one_member=one_member)
 
 
 def baseline_verdict(model: str, validation: Mapping[float, Mapping[str, WindowScore]] | None,

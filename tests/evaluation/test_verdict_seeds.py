@@ -71,3 +71,23 @@ def test_seeds_whose_validation_horizons_differ_pool_each_cell_with_its_own():
     assert pooled[(VALIDATION, 30.0, "u")].model == pytest.approx(0.5)
     assert pooled[(VALIDATION, 30.0, "u")].model_std == pytest.approx(np.std([0.4, 0.6], ddof=1))
     assert pooled[(TEST, 30.0, "r")].model == pytest.approx(0.7)
+
+
+def test_the_sentence_names_its_members_from_the_data_not_by_rewriting_text():
+    """`judged` builds the evidence clause from what the cells hold: one model says "1 seed (no
+    spread: one model)", several seeds' windows pooled as one member say so, an ensemble says
+    it is one model; a baseline whose label holds the one-model words keeps its label."""
+    from sysid.evaluation.judgement import ONE_MEMBER, judge
+    from sysid.evaluation.verdict import judged
+
+    cells = seed_verdict(0.8, "mmg").evidence[TEST][SHIP_FILE_MMG]
+    plain = judge(cells, RULE, model="The identified MMG", baseline=f"its physics baseline {SHIP_FILE_MMG}")
+    assert judged("mmg", SHIP_FILE_MMG, cells, RULE).sentence == plain.sentence and ONE_MEMBER in plain.sentence
+    pooled = judged("mmg", SHIP_FILE_MMG, cells, RULE, seeds=3).sentence
+    assert pooled.startswith("The identified MMG (3 seeds' windows pooled) ")
+    assert "3 seeds' windows pooled as one model's (no spread per seed)" in pooled and ONE_MEMBER not in pooled
+    ensemble = judged("hybrid", SHIP_FILE_MMG, cells, RULE, ensemble_of=4).sentence
+    assert ensemble.startswith("The hybrid ensemble (the mean of 4 seeds' forces) ")
+    assert "one model (the ensemble: no spread)" in ensemble and ONE_MEMBER not in ensemble
+    odd = f"MMG {ONE_MEMBER}"   # a label that holds the words: left as it is
+    assert f"its physics baseline {odd}" in judged("mmg", odd, cells, RULE, seeds=3).sentence
