@@ -14,7 +14,7 @@ import pytest
 from sysid.config.column_map import parse_columns
 from sysid.data.consistency import Verdict, check_rudder
 from sysid.data.recordings import log_track, read_run
-from sysid.data.rudder_sign import CORRELATION_CLEAR, RudderSign, rudder_response
+from sysid.data.rudder_sign import REVERSED_CORRELATION, RudderSign, rudder_response
 from sysid.errors import DataError
 from tests.support.tiny_experiment import one_epoch_config
 
@@ -45,7 +45,7 @@ def test_every_real_log_turns_to_starboard_and_negated_to_port(dataset_dir):
     # every turning and zig-zag log is read; no berthing log is
     assert read.count("turning") == 15 and read.count("zigzag") == 8 and "berthing" not in read
     assert len(read) == 29
-    assert min(correlations) > CORRELATION_CLEAR + 0.05 and max(correlations) < 1.0
+    assert min(correlations) > REVERSED_CORRELATION + 0.05 and max(correlations) < 1.0
 
 
 def test_berthing_and_straight_running_give_no_claim(dataset_dir):
@@ -179,6 +179,6 @@ def test_an_autopilot_against_gusts_reads_the_right_way_round():
     t, u, r, delta = _course_keeping(4)
     found = [rudder_response(*(a[k] for a in (t, u, r, delta))) for k in range(4)]
     assert all(f.sign is RudderSign.STARBOARD and f.excited_s > 120.0 for f in found), found
-    assert min(f.correlation for f in found) > CORRELATION_CLEAR - 0.1
+    assert min(f.correlation for f in found) > REVERSED_CORRELATION - 0.1
     negated = [rudder_response(t[k], u[k], r[k], -delta[k]) for k in range(4)]
     assert all(f.sign in (RudderSign.PORT_WEAK, RudderSign.PORT_CLEAR) for f in negated), negated
