@@ -12,7 +12,7 @@ import pytest
 from pypdf import PdfReader
 
 from cli_harness import in_process
-from sysid.evaluation.judgement import Outcome
+from sysid.evaluation.judgement import CellDecision, Outcome
 from sysid.evaluation.verdict import SHIP_FILE_MMG, BaselineVerdict
 
 TRAIN = ("berthing/berthing_12-Nov-2020_13_37_05.csv", "berthing/berthing_12-Nov-2020_13_09_11.csv")
@@ -41,16 +41,19 @@ def test_a_bad_model_is_flagged_in_summary_on_stderr_and_on_page_one(dataset_dir
     assert summary["beats_baseline"] is False and summary["verdict"]["beats_baseline"] is False
     assert verdict.decided_on == "test" and verdict.baselines == (SHIP_FILE_MMG,) and verdict.worse
     # one test log of 3 windows at 30 s: 54-116 % worse in every cell, but its windows scatter too
-    # much to say so at 95 % confidence; the non-overlapping validation windows say it: worse
+    # much to say so at 95 % confidence; the non-overlapping validation windows (2 logs of 4 windows
+    # of 5 s) are too few as well, once their intervals are widened for so few windows
     judgement = verdict.judgements[SHIP_FILE_MMG]
     assert judgement.outcome is Outcome.NOT_DISTINGUISHABLE and (judgement.n_logs, judgement.n_windows) == (1, 3)
     assert all(c.change > 0.5 and c.n_windows == 3 for c in judgement.cells)
-    assert verdict.validation_judgements[SHIP_FILE_MMG].outcome is Outcome.WORSE
+    on_validation = verdict.validation_judgements[SHIP_FILE_MMG]
+    assert on_validation.outcome is Outcome.NOT_DISTINGUISHABLE and on_validation.change > 0.1
+    assert not any(c.decision is CellDecision.MATERIALLY_WORSE for c in on_validation.cells)
     warning = trained.err.strip().splitlines()[-1]   # the last line, on stderr
     assert warning.startswith("WARNING: The hybrid cannot be told apart from its physics baseline MMG (ship file) "
                               "on 3 windows: RMSE +"), trained.err
-    assert "Decided on the test logs at 30 s. On the non-overlapping validation windows the hybrid is worse than " \
-           "MMG (ship file)." in warning
+    assert "Decided on the test logs at 30 s. On the non-overlapping validation windows the hybrid cannot be told " \
+           "apart from MMG (ship file)." in warning
     # the verdict's test cells: the run's own metrics, and the MMG evaluated independently
     metrics = pd.read_csv(run / "metrics.csv").iloc[0]
     mmg_csv = tmp_path / "mmg.csv"
