@@ -77,7 +77,7 @@ def evaluate(
     typer.echo(f"evaluate: {len(runs)} file(s), horizons {', '.join(f'{h:g}' for h in horizons)} s, "
                f"{label} -> {output} ({time.perf_counter() - start:.1f} s)")
     if run_exp is not None:
-        _beside_baselines(run_exp, model, baselines, runs, horizons, chosen)
+        _beside_baselines(run_exp, model, baselines, runs, horizons, chosen, limits)
 
 
 def _model_to_judge(run_dir, model_kind: str, exp, ship, set_, quadrature: str):
@@ -186,9 +186,10 @@ def _window_work(runs, horizons) -> list[tuple[int, int]]:
     return work
 
 
-def _beside_baselines(exp, model, baselines, runs, horizons, method) -> None:
+def _beside_baselines(exp, model, baselines, runs, horizons, method, limits=None) -> None:
     """The run's physics baselines on the same windows, their RMSE printed beside the
-    model's, and the model's verdict against each (last line; stderr when not beaten)."""
+    model's, and the model's verdict against each (last line; stderr when not beaten); a
+    prediction beyond the run's training range `limits` diverged, as in its metrics."""
     import pandas as pd
     from sysid.evaluation.comparison import Contender, judge_against_baselines, metrics_of
     from sysid.evaluation.verdict import MODEL_NAMES
@@ -197,8 +198,8 @@ def _beside_baselines(exp, model, baselines, runs, horizons, method) -> None:
         typer.echo("verdict: none: an MMG used as defined is itself the physics baseline")
         return
     name = f"The {MODEL_NAMES.get(str(exp.experiment.model), str(exp.experiment.model))}"
-    errors, verdicts = judge_against_baselines(Contender(name, (model,)),
-                                               [Contender(k, (m,)) for k, m in baselines.items()],
+    errors, verdicts = judge_against_baselines(Contender(name, (model,), limits=limits),
+                                               [Contender(k, (m,), limits=limits) for k, m in baselines.items()],
                                                runs, horizons, method)
     rows = [metrics_of(errors, name).assign(model=name[4:])]
     rows += [metrics_of(errors, label).assign(model=label) for label in baselines]

@@ -73,12 +73,12 @@ def test_ensemble_verdict_equals_compare_against_baseline(tmp_path, scale):
     assert "1 seed" not in ours.sentence and "one model (the ensemble: no spread)" in ours.sentence
 
 
-def test_a_finite_prediction_far_beyond_the_training_range_is_diverged_by_every_path(tmp_path):
+def test_a_finite_prediction_far_beyond_the_training_range_is_diverged_by_every_path(tmp_path, capsys):
     """One divergence rule (`sysid.evaluation.divergence`): two hybrid seeds whose FNN adds a
     correction of 100 N, 1000 N m turn the ship 10 to 20 times faster than any training or
     recorded sample (|r| > 3 x the range) while every state stays finite. The seeds' runs, the
-    ensemble's own evaluation, its summary.json verdict and ``sysid compare`` all call it
-    DIVERGED on the same logs; judged on non-finite states alone it would not be."""
+    ensemble's own evaluation, its summary.json verdict, ``sysid evaluate RUN``'s verdict and
+    ``sysid compare`` all call it DIVERGED on the same logs; judged on non-finite states alone it would not be."""
     from sysid.cli.compare_commands import _contenders
     from sysid.evaluation.comparison import Contender
     from sysid.evaluation.divergence import PhysicalRange
@@ -109,6 +109,11 @@ def test_a_finite_prediction_far_beyond_the_training_range_is_diverged_by_every_
     theirs = compare(contenders, tests, (30.0,), BASELINE).verdicts[contenders[0].label]
     assert theirs.outcome is Outcome.DIVERGED
     assert {d.log for d in theirs.divergences} == {d.log for d in recorded.judgements[SHIP_FILE_MMG].divergences}
+    # `sysid evaluate RUN`'s verdict beside its baseline: the run's training range, the same rule
+    from sysid.cli.evaluate_commands import _beside_baselines
+    from sysid.dynamics.integrators import EULER
+    _beside_baselines(exp, ensemble, {SHIP_FILE_MMG: contenders[1].members[0]}, tests, (30.0,), EULER, limits)
+    assert capsys.readouterr().err.strip().splitlines()[-1].startswith("WARNING: The hybrid DIVERGED")
     # the same predictions judged on non-finite states alone (no training range): not diverged
     bare = compare([Contender("ensemble", (ensemble,), "hybrid", "ship"), Contender("ship", contenders[1].members)],
                    tests, (30.0,), BASELINE).verdicts["ensemble"]
