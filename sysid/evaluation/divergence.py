@@ -69,6 +69,31 @@ class PhysicalRange:
         return None if kept is None else cls(kept.speed, kept.yaw_rate, kept.factor)
 
 
+def diverged_steps(predicted: np.ndarray, limits: PhysicalRange | None = None,
+                   observed: np.ndarray | None = None) -> np.ndarray:
+    """(H, W) True where a predicted state (H, W, 6) diverged by the rule, against `limits`
+    widened to the `observed` (H, W, 6) states of these windows (as `diverged_windows`)."""
+    return _diverged(np.asarray(predicted, dtype=float), limits, observed)[0]
+
+
+def _diverged(predicted: np.ndarray, limits: PhysicalRange | None, observed: np.ndarray | None):
+    """(bad, non-finite, too fast, turning too fast, the limits widened) of states (H, W, 6)."""
+    if limits is not None and observed is not None:
+        seen = PhysicalRange.of_states(np.asarray(observed, dtype=float).reshape(-1, predicted.shape[-1]))
+        if seen is not None:
+            limits = PhysicalRange(max(limits.speed, seen.speed), max(limits.yaw_rate, seen.yaw_rate), limits.factor)
+    bad_finite = ~np.all(np.isfinite(predicted), axis=-1)                    # (H, W)
+    bad = bad_finite.copy()
+    speed = yaw = None
+    if limits is not None:
+        u, v, r = (predicted[..., i] for i in VELOCITY_INDEX)
+        with np.errstate(invalid="ignore"):
+            speed = np.hypot(u, v) > limits.factor * limits.speed
+            yaw = np.abs(r) > limits.factor * limits.yaw_rate
+        bad |= speed | yaw
+    return bad, bad_finite, speed, yaw, limits
+
+
 def diverged_windows(predicted: np.ndarray, t: np.ndarray, log: str, horizon_s: float,
                      limits: PhysicalRange | None = None,
                      observed: np.ndarray | None = None) -> tuple[np.ndarray, Divergence | None]:
@@ -83,19 +108,7 @@ def diverged_windows(predicted: np.ndarray, t: np.ndarray, log: str, horizon_s: 
     H, W = predicted.shape[:2]
     if not W:
         return np.zeros(0, dtype=bool), None
-    if limits is not None and observed is not None:
-        seen = PhysicalRange.of_states(np.asarray(observed, dtype=float).reshape(-1, predicted.shape[-1]))
-        if seen is not None:
-            limits = PhysicalRange(max(limits.speed, seen.speed), max(limits.yaw_rate, seen.yaw_rate), limits.factor)
-    bad_finite = ~np.all(np.isfinite(predicted), axis=-1)                    # (H, W)
-    bad = bad_finite.copy()
-    speed = yaw = None
-    if limits is not None:
-        u, v, r = (predicted[..., i] for i in VELOCITY_INDEX)
-        with np.errstate(invalid="ignore"):
-            speed = np.hypot(u, v) > limits.factor * limits.speed
-            yaw = np.abs(r) > limits.factor * limits.yaw_rate
-        bad |= speed | yaw
+    bad, bad_finite, speed, yaw, limits = _diverged(predicted, limits, observed)
     flags = bad.any(0)
     if not flags.any():
         return flags, None

@@ -29,7 +29,9 @@ import numpy as np
 import pandas as pd
 import torch
 
+from sysid.channel_names import VELOCITY_INDEX
 from sysid.dynamics.rollouts import WindowOrigins, WindowSet, rollout_errors, velocity_loss
+from sysid.evaluation.divergence import DIVERGENCE_FACTOR, PhysicalRange, diverged_steps
 from sysid.evaluation.judgement import (CHANNELS, DEFAULT_RULE, ONE_MEMBER, UNITS, Divergence, Judgement, Outcome, PairedCell,
                                         VerdictRule, judge, percent_text)
 
@@ -263,32 +265,35 @@ def cell_from_dict(d: Mapping) -> PairedCell:
 class WindowScore:
     """A model on validation windows: ``val_loss_multistep``, the RMSE of u, v_m [m/s], r
     [rad/s] over the windows' predicted steps, and each window's own (W, 3); origins: the log
-    and start time of each window (None: not known, one pseudo-log); nonfinite_after_s (W,):
-    the time [s] from a window's first sample to its first non-finite predicted one, NaN
-    where the prediction stayed finite."""
+    and start time of each window (None: not known, one pseudo-log); diverged_after_s (W,):
+    the time [s] from a window's first sample to its first diverged predicted one (the one
+    rule, `sysid.evaluation.divergence`), NaN where the prediction did not diverge."""
 
     val_loss_multistep: float
     rmse: tuple[float, float, float]
     window_rmse: np.ndarray | None = None
     origins: WindowOrigins | None = None
-    nonfinite_after_s: np.ndarray | None = None
+    diverged_after_s: np.ndarray | None = None
 
 
 def window_score(model, windows: WindowSet, w_v: torch.Tensor, errors: torch.Tensor | None = None,
-                 origins: WindowOrigins | None = None) -> WindowScore:
+                 origins: WindowOrigins | None = None, limits: PhysicalRange | None = None) -> WindowScore:
     """`WindowScore` of `model` on `windows` (Euler rollouts, as in training); `errors`: the
     velocity errors (T, W, 3) of those rollouts when already computed (`rollout_errors`);
-    `origins`: the log and start time of each window."""
+    `origins`: the log and start time of each window; `limits`: the training range beyond
+    which a prediction diverged (None: non-finite only)."""
     err = rollout_errors(model, windows) if errors is None else errors
     if origins is not None and len(origins) != err.shape[1]:
         raise ValueError(f"{len(origins)} window origins for {err.shape[1]} validation windows")
     rmse = torch.sqrt((err * err).reshape(-1, 3).mean(0))
     per_window = torch.sqrt((err * err).mean(0)).reshape(-1, 3)
-    bad = ~torch.isfinite(err).all(-1)                          # (T, W): step k predicts sample k + 1
-    first = (bad.to(torch.int8).argmax(0) + 1).double() * windows.dt
-    after = torch.where(bad.any(0), first, torch.full_like(first, math.nan))
+    observed = windows.states[1:].detach().cpu().double().numpy()        # (T, W, 6): step k predicts sample k + 1
+    predicted = observed.copy()
+    predicted[..., list(VELOCITY_INDEX)] += err.detach().cpu().double().numpy()
+    bad = diverged_steps(predicted, limits, observed)                    # (T, W)
+    after = np.where(bad.any(0), (bad.argmax(0) + 1) * float(windows.dt), math.nan)
     return WindowScore(float(velocity_loss(err, w_v)), tuple(float(v) for v in rmse),  # type: ignore[arg-type]
-                       per_window.detach().cpu().double().numpy(), origins, after.cpu().numpy())
+                       per_window.detach().cpu().double().numpy(), origins, after)
 
 
 def pooled_rmse(metrics: pd.DataFrame) -> dict[float, tuple[float, float, float]]:
@@ -329,7 +334,7 @@ def validation_cells(model: WindowScore, baseline: WindowScore, horizon_s: float
         return []
     origins = model.origins if model.origins is not None else baseline.origins
     if origins is not None:
-        after = model.nonfinite_after_s if model.nonfinite_after_s is not None else np.zeros(len(origins))
+        after = model.diverged_after_s if model.diverged_after_s is not None else np.full(len(origins), math.nan)
         return _cells_per_log(model.window_rmse, baseline.window_rmse, after, origins, horizon_s)
     W = len(model.window_rmse)
     bad = ~np.all(np.isfinite(model.window_rmse), axis=1)
@@ -340,23 +345,28 @@ def validation_cells(model: WindowScore, baseline: WindowScore, horizon_s: float
             for j, channel in enumerate(CHANNELS)]
 
 
-def _cells_per_log(model: np.ndarray, baseline: np.ndarray, nonfinite_after_s: np.ndarray, origins: WindowOrigins,
+def _cells_per_log(model: np.ndarray, baseline: np.ndarray, diverged_after_s: np.ndarray, origins: WindowOrigins,
                    horizon_s: float) -> list[PairedCell]:
     """One `PairedCell` per (log of `origins`, channel) at `horizon_s` [s] from the per-window
     RMSE (W, 3) of model and baseline, on the log's non-overlapping windows (starts at least
-    `horizon_s` apart); a log with a non-finite window, kept or not, diverged at the first
-    non-finite predicted sample (`nonfinite_after_s` (W,) [s] after each window's start)."""
+    `horizon_s` apart); a log with a diverged window, kept or not (a non-finite RMSE, or
+    `diverged_after_s` (W,) [s] after its start, NaN where it did not diverge), diverged at the
+    first such time."""
     if len(origins) != len(model):
         raise ValueError(f"{len(origins)} window origins for {len(model)} validation windows")
     kept = origins.non_overlapping(horizon_s)
     out = []
     for log, index in origins.by_log().items():
-        bad = np.flatnonzero(~np.all(np.isfinite(model[index]), axis=1))
+        nonfinite = ~np.all(np.isfinite(model[index]), axis=1)
+        far = np.isfinite(diverged_after_s[index]) & ~nonfinite
+        bad = np.flatnonzero(nonfinite | far)
         divergence = None
         if bad.size:
-            at = origins.start_s[index][bad] + np.nan_to_num(nonfinite_after_s[index][bad])   # log time [s]
+            at = origins.start_s[index][bad] + np.nan_to_num(diverged_after_s[index][bad])   # log time [s]
+            reason = ("non-finite" if not far.any() else f"beyond {DIVERGENCE_FACTOR:g} x the training range"
+                      if not nonfinite.any() else f"non-finite or beyond {DIVERGENCE_FACTOR:g} x the training range")
             divergence = Divergence(log, horizon_s, float(at.min()), "",
-                                    f"non-finite (in {bad.size} of its {index.size} validation windows)")
+                                    f"{reason} (in {bad.size} of its {index.size} validation windows)")
         judged = kept[log]
         out += [PairedCell(log, "", horizon_s, channel, model[judged, j][None, :], baseline[judged, j][None, :],
                            origins.start_s[judged], divergence) for j, channel in enumerate(CHANNELS)]

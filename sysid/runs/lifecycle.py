@@ -249,14 +249,14 @@ def _written(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[Run], 
     file's bytes read when the run started; its logs recorded relative to `home`, else
     `out_dir`) and the checkpoint removed."""
     history, training, validation_scores = None, None, None
+    limits = PhysicalRange.of_runs(runs)   # the training logs' range: beyond it a prediction diverged
     if trainer is not None:
         history, training = trainer.history_, trainer.summary_
         if training.failure is None:  # in the training dtype, as val_loss_multistep, at its horizons
-            validation_scores = _validation_scores(exp, trainer)
+            validation_scores = _validation_scores(exp, trainer, limits)
         model = trainer.model_.cpu().double()
     else:
         model = build_model(exp)
-    limits = PhysicalRange.of_runs(runs)   # the training logs' range: beyond it a prediction diverged
     evaluation, verdict, baseline_metrics, baseline_traces = _evaluated(exp, model, tests, limits, validation_scores,
                                                                         log)
     source = "files" if exp.data.train else (exp.experiment.dataset if exp.needs_training else "-")
@@ -301,9 +301,10 @@ def _fitted(exp: Experiment, runs: Sequence[Run], validation: Sequence[Run], out
         raise
 
 
-def _validation_scores(exp: Experiment, trainer: Trainer) -> dict:
+def _validation_scores(exp: Experiment, trainer: Trainer, limits: PhysicalRange | None = None) -> dict:
     """horizon [s] -> "model" or baseline label -> `WindowScore` on the trainer's validation
-    windows, each window named by its log (the verdict's cells per validation log)."""
+    windows, each window named by its log (the verdict's cells per validation log), a
+    prediction beyond the training range `limits` diverged."""
     validation_scores = {}
     for horizon, windows in trainer.validation_sets_.items():
         scored = {"model": trainer.model_, **physics_baselines(exp, trainer.model_, windows.states.dtype,
@@ -311,7 +312,8 @@ def _validation_scores(exp: Experiment, trainer: Trainer) -> dict:
         # the model's rollouts are the ones of its val_loss_multistep (`Trainer.objective`)
         errors = {"model": trainer.validation_errors_.get(horizon)}
         origins = trainer.validation_origins_.get(horizon)
-        validation_scores[horizon] = {k: window_score(m, windows, trainer.velocity_weights_, errors.get(k), origins)
+        validation_scores[horizon] = {k: window_score(m, windows, trainer.velocity_weights_, errors.get(k), origins,
+                                                      limits)
                                       for k, m in scored.items()}
     return validation_scores
 

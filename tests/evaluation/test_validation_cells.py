@@ -258,7 +258,7 @@ def test_a_divergence_in_a_window_left_out_still_diverges_the_cell():
     model, baseline = overlapping_log(1)
     bad = model.window_rmse.copy()
     bad[13, 0] = math.nan              # window 13 (t = 13 s) is not among 0, 10, 20, ...
-    after = model.nonfinite_after_s.copy()
+    after = model.diverged_after_s.copy()
     after[13] = 4.0
     cells = validation_cells(WindowScore(math.nan, (math.nan,) * 3, bad, model.origins, after), baseline, float(SPAN))
     assert all(np.all(np.isfinite(c.model)) for c in cells)
@@ -346,3 +346,32 @@ def test_seeds_with_different_numbers_of_validation_windows_pool_every_window_pe
                                for v in seeds], RULE)
     assert alone.decided_on == VALIDATION and alone.outcome is Outcome.WORSE
     assert "Decided on the validation windows (each log's windows of all 2 seeds pooled" in alone.statement()
+
+
+def test_a_finite_validation_prediction_beyond_the_training_range_diverges_its_log():
+    """The one divergence rule on validation windows too: a prediction whose |r| runs to 0.21
+    rad/s, finite but beyond 3 x the training range's 0.05 rad/s, diverges its log's cells at
+    the log time of its first such sample; judged on non-finite states alone (no training
+    range) it does not."""
+    from sysid.evaluation.divergence import PhysicalRange
+
+    W = 4
+    states = torch.zeros(T + 1, W, 6, dtype=torch.float64)
+    states[..., 1], states[..., 5] = 0.5, 0.01                       # u 0.5 m/s, r 0.01 rad/s recorded
+    windows = WindowSet(states, torch.zeros(T + 1, W, 4, dtype=torch.float64), DT)
+    where = WindowOrigins(("log_a", "log_a", "log_b", "log_b"), np.array([0.0, 30.0, 200.0, 230.0]))
+    err = torch.full((T, W, 3), 1e-3, dtype=torch.float64)
+    err[10:, 3, 2] = 0.2                                            # window 3: r = 0.21 rad/s from sample 11, t = 241 s
+    w_v = torch.ones(3, dtype=torch.float64)
+    limits = PhysicalRange(speed=1.0, yaw_rate=0.05)
+    base = window_score(None, windows, w_v, torch.full((T, W, 3), 2e-3, dtype=torch.float64), where, limits)
+    model = window_score(None, windows, w_v, err, where, limits)
+    assert np.isnan(model.diverged_after_s[:3]).all() and model.diverged_after_s[3] == 11.0
+    cells = validation_cells(model, base, HORIZON)
+    assert {c.log for c in cells if c.divergence is not None} == {"log_b"}
+    assert next(c for c in cells if c.log == "log_b").divergence.text() == \
+        "log_b at 30 s, t = 241 s: beyond 3 x the training range (in 1 of its 2 validation windows)"
+    verdict = baseline_verdict("hybrid", {HORIZON: {"model": model, SHIP_FILE_MMG: base}}, None, RULE)
+    assert verdict.outcome is Outcome.DIVERGED
+    bare = window_score(None, windows, w_v, err, where)             # no training range: finite, not diverged
+    assert all(c.divergence is None for c in validation_cells(bare, base, HORIZON))
