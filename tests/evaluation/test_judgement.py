@@ -85,7 +85,9 @@ def test_the_order_of_logs_changes_nothing(data, random):
 @given(ratio_sets, st.integers(0, 10 ** 6), st.integers(1, 12), st.sampled_from([0.3, 0.5, 0.9]))
 def test_one_scenario_60_percent_worse_fails_whatever_the_average(data, pick, bad_windows, others):
     """Every other cell 10-70 % better; one log's cells 60 % worse (+-20 % per window) on 1 to 12
-    windows: never "beats"; on 3 windows or more (`min_windows`) "worse", naming that log."""
+    windows: never "beats"; on more than 3 windows (`min_windows`) "worse", naming that log. On
+    exactly 3 the interval is widened 2.69 x for so few windows (`widening`), and a draw whose
+    3 windows scatter widely is rightly not decided (measured: 1 draw in 40)."""
     logs, windows, _, seed = data
     rng = np.random.default_rng(seed)
     ratios = uniform(logs, windows, lambda i, h, c, w: others * (1 + 0.1 * (2 * rng.random(w) - 1)))
@@ -96,9 +98,12 @@ def test_one_scenario_60_percent_worse_fails_whatever_the_average(data, pick, ba
     j = judge(cells_of(ratios), RULE)
     assert not j.beats
     assert all(c.log == bad for c in j.worst)
-    if bad_windows >= RULE.min_windows:
+    if bad_windows > RULE.min_windows:
         assert j.outcome is Outcome.WORSE
         assert {c.log for c in j.materially_worse} == {bad} and bad.title() in j.sentence
+    elif bad_windows == RULE.min_windows:
+        assert j.outcome in (Outcome.WORSE, Outcome.NOT_DISTINGUISHABLE)
+        assert {c.log for c in j.materially_worse} <= {bad}
     else:
         assert j.outcome is Outcome.NOT_DISTINGUISHABLE
 
