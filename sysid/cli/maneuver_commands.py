@@ -279,11 +279,28 @@ def _say_outcome(output: Path, results, shown, compared) -> None:
         typer.secho("WARNING: diverged (indices not valid): " + "; ".join(
             f"{own.maneuver.name} ({own.model}) at t = {own.diverged_at_s:.1f} s, {own.divergence}" for own in diverged),
             fg=typer.colors.YELLOW, err=True)
+    _print_gate(results)
     for r in results:
         if r.gate_off_share is not None and r.gate_off_share > MOSTLY_OUTSIDE:
-            typer.secho(f"  {r.maneuver.name}: kNN gate off on {100 * r.gate_off_share:.0f} % of the steps: the "
+            typer.secho(f"  {r.maneuver.name}: kNN gate off on {100 * r.gate_off_share:.1f} % of the steps: the "
                         "maneuver runs mostly outside the training data (the FNN is switched off there)",
                         fg=typer.colors.YELLOW)
+
+
+def _print_gate(results) -> None:
+    """Of a model with a kNN gate: per maneuver, the share of its steps outside the training
+    data (gate off: the FNN switched off, the physics MMG alone) and its largest d_kNN
+    against the gate's threshold."""
+    gated = [r for r in results if r.gate_off_share is not None]
+    if not gated:
+        return
+    threshold = next((r.knn_threshold for r in gated if r.knn_threshold is not None), None)
+    shown = f"threshold {threshold:.4g}" if threshold is not None else "each member's own threshold"
+    typer.echo(f"outside the training data (kNN gate, {shown}; where it is off the FNN is switched off and the "
+               "model runs as its physics MMG; per step in trajectories.csv: gate_on, knn_distance):")
+    for r in gated:
+        largest = f", largest d_kNN {max(r.knn_distance[:-1]):.4g}" if r.knn_distance is not None else ""
+        typer.echo(f"  {r.maneuver.name}: gate off on {100 * r.gate_off_share:.1f} % of the steps{largest}")
 
 
 def _recorded_runs(paths: list[Path], config: Optional[Path], run_columns=None):
