@@ -4,10 +4,16 @@ The file holds ``step(state (B, 6), inputs (B, 4)) -> state dt later`` of an MMG
 or hybrid model, kNN gate included, with the integration rule and dt fixed. It loads with
 torch alone (no sysid, no training code):
 
-- compiled (default): an AOTInductor package, native code, about 15-40 us per step::
+- compiled (default): an AOTInductor package, native code, tens of microseconds per step::
 
       step = torch._inductor.aoti_load_package("model.pt2")
-      x = step(x, u)                      # contiguous tensors; step.get_metadata(): dt, units
+      x = step(x, u)                      # step.get_metadata(): dt, units, frames
+
+  The package checks nothing by default: a tensor of another dtype, another number of rows
+  or another memory layout than contiguous (a column of a column-major array, ``.T``) is
+  read as if it were the exported one and gives wrong states without an error. With the
+  environment variable ``AOTI_RUNTIME_CHECK_INPUTS=1`` (set before the first call) it
+  refuses them; `ExportedStep` refuses them always.
 
 - portable (``compiled=False``): a `torch.export` program, any platform and later torch,
   eager speed::
@@ -121,11 +127,34 @@ class ExportedStep:
     def dt(self) -> float:
         return float(self.metadata["dt_s"])
 
+    @property
+    def batch(self) -> int:
+        return int(self.metadata.get("batch", 1))
+
+    @property
+    def dtype(self) -> torch.dtype:
+        return getattr(torch, self.metadata.get("dtype", "float64"))
+
+    def check(self, name: str, tensor: torch.Tensor, shape: tuple[int, ...]) -> None:
+        """ValueError unless `tensor` has the `shape` and dtype the file was exported for (a
+        compiled package reads any other as if it were, silently; `load_package` makes
+        every input contiguous)."""
+        if tuple(tensor.shape) != shape or tensor.dtype != self.dtype:
+            raise ValueError(f"exported step: {name} is {tuple(tensor.shape)} {str(tensor.dtype)[6:]}; the file "
+                             f"takes {shape} {str(self.dtype)[6:]} (its batch and dtype are fixed at export: "
+                             "x.to(dtype), or export again with --batch / --float32)")
+
     def __call__(self, state: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
+        """The state (B, 6) dt later from `state` (B, 6) with `inputs` (B, 4) held over the
+        step; refused (ValueError) unless both are of the exported batch and dtype."""
+        self.check("state", state, (self.batch, 6))
+        self.check("inputs", inputs, (self.batch, 4))
         return self.step(state, inputs)
 
     def predict(self, x0: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
         """States (T, B, 6) from x0 (B, 6) and inputs (T, B, 4) held over each step."""
+        self.check("x0", x0, (self.batch, 6))
+        self.check("inputs", inputs, (inputs.shape[0], self.batch, 4))
         with torch.no_grad():
             return run_steps(self.step, x0, inputs)
 
@@ -146,11 +175,14 @@ def step_latency(exported: ExportedStep, calls: int = 2000) -> tuple[float, floa
     x, inputs = straight_run(batch, dtype)
     u = inputs[0]
     times = []
+    step = exported.step   # the file's own call, as a controller makes it (the inputs are checked here, once)
+    exported.check("state", x, (batch, 6))
+    exported.check("inputs", u, (batch, 4))
     with torch.no_grad():
-        exported(x, u)
+        step(x, u)
         for _ in range(calls):
             start = time.perf_counter()
-            exported(x, u)
+            step(x, u)
             times.append(time.perf_counter() - start)
         start = time.perf_counter()
         exported.predict(x, inputs)

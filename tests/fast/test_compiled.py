@@ -5,6 +5,7 @@ same states), the lab's RK4 trajectories (test_mmg_oracle.py), and a fresh Pytho
 process that has only torch (the exported file must predict the same without sysid).
 """
 import json
+import os
 import re
 import subprocess
 import zipfile
@@ -222,6 +223,22 @@ def test_export_predicts_the_same_without_sysid(hybrid_run, zigzag, tmp_path, po
         extra = {"sysid.json": ""}
         torch.export.load(str(out), extra_files=extra)
         assert json.loads(extra["sysid.json"])["format"] == "torch.export"
+    x, u = states[:1].contiguous(), inputs[:1].contiguous()
+    for wrong in ((x.float(), u), (x.expand(2, 6).contiguous(), u.expand(2, 4).contiguous())):
+        with pytest.raises(ValueError, match=r"exported step: .* the file takes \(1, [46]\) float64"):
+            exported(*wrong)
+    column_major = inputs[:2].T.contiguous().T[:1]   # a row of a column-major array: read as its values
+    torch.testing.assert_close(exported(x, column_major), exported(x, u.clone()), rtol=0, atol=0)
+    if not portable:   # the package itself refuses them with its own checks on
+        for name, wrong in {"dtype": "x.float(), u.float()", "rows": "x.expand(2, 6).contiguous(), u.expand(2, 4).contiguous()",
+                            "stride": "x, torch.zeros(4, 2, dtype=torch.float64).T[:1]"}.items():   # a row of a column-major array
+            script = (f"import torch; step = {loader}; x = torch.zeros(1, 6, dtype=torch.float64); "
+                      f"u = torch.zeros(1, 4, dtype=torch.float64); x[0, 1] = 1.0\n"
+                      f"try:\n    step({wrong}); print('accepted')\nexcept RuntimeError as e:\n    print('refused', e)")
+            done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path,
+                                  timeout=300, env={**os.environ, "AOTI_RUNTIME_CHECK_INPUTS": "1"})
+            assert done.stdout.startswith("refused") and f"unmatched {'dim' if name == 'rows' else name}" in done.stdout, (
+                name, done.stdout[-500:], done.stderr[-500:])
 
 
 def test_trajectory_stacks_the_forces_of_every_euler_step(hybrid_run, zigzag):
