@@ -13,6 +13,7 @@ from sysid import logs
 from sysid.cli.app import app
 from sysid.cli.interrupts import on_interrupt
 from sysid.errors import DataError
+from sysid.records.columns import RMSE_UNITS
 
 
 def _label(path: str, taken: set[str], ship_name: str | None) -> str:
@@ -261,7 +262,7 @@ def _print(result) -> None:
     for (log, h), block in shown.groupby(["log", "horizon_s"], sort=False):
         scenario, n = block.scenario.iloc[0], int(block.n_windows.iloc[0])
         named = f" ({scenario})" if scenario and scenario != log else ""
-        typer.echo(f"\n{log}{named} at {h:g} s, {n} window{'s' if n != 1 else ''}: RMSE of u, v_m [m/s], r [rad/s]")
+        typer.echo(f"\n{log}{named} at {h:g} s, {n} window{'s' if n != 1 else ''}: {RMSE_UNITS}")
         wide = block.pivot_table(index="model", columns="channel", values="rmse", sort=False)
         with pd.option_context("display.width", 160, "display.float_format", "{:.4f}".format):
             typer.echo(wide[[c for c in ("u", "v_m", "r") if c in wide]].to_string())

@@ -14,10 +14,9 @@ from sysid.cli.app import app
 from sysid.cli.mmg_options import CompiledOption, QuadratureOption, SetOption, integrator_of, mmg_of, prediction_path
 from sysid.cli.outputs import claim, ship_file
 from sysid.errors import DataError
+from sysid.records.columns import RMSE_UNITS
 from sysid.store.target import OutputKind
 
-
-RMSE_UNITS = "RMSE of u, v_m [m/s] and r [rad/s]"   # the printed tables, as the metrics files: SI
 
 
 @app.command()

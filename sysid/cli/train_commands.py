@@ -17,6 +17,7 @@ from sysid.cli.interrupts import on_interrupt
 from sysid.cli.outputs import claim, experiment_inputs
 from sysid.config.choices import Solver
 from sysid.errors import DataError
+from sysid.records.columns import RMSE_UNITS
 from sysid.store.target import OutputKind
 
 
@@ -174,7 +175,7 @@ def _say_result(result, exp, output: Path, tests, start: float) -> None:
     from sysid.data.display_units import DisplayUnits
 
     if tests:
-        typer.echo("test logs, RMSE of u, v_m [m/s] and r [rad/s]:\n"
+        typer.echo(f"test logs, {RMSE_UNITS}:\n"
                    + result.evaluation.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     if result.failure:
         typer.secho(f"train: FAILED: {result.failure}; the run in {output} is marked failed", fg=typer.colors.RED, err=True)

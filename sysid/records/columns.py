@@ -7,6 +7,8 @@ import re
 
 from sysid.channel_names import FORCE, FORCE_COMPONENTS, INPUTS, STATE
 
+# the metrics' quantity and units, as printed beside their tables (the files are SI)
+RMSE_UNITS = "RMSE of u, v_m [m/s] and r [rad/s]"
 # metrics.csv: one row per file and horizon; RMSE of u, v_m [m/s] and r [rad/s]; diverged: a
 # window's prediction diverged, first at diverged_at_s [s] of the log (NaN otherwise)
 METRICS_COLUMNS = ["scenario", "file", "horizon_s", "n_windows", "rmse_u", "rmse_v", "rmse_r",

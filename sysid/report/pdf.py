@@ -212,19 +212,26 @@ class PdfReport:
         """A report figure on an A4 page: `draw(into=subfigure)` redraws it into the page's
         content box (page width, the aspect of its own `size` [in] kept up to the page
         height), the caption below it."""
-        w, h = size
-        content_w = PAGE[0] - 2 * MARGIN
-        content_h = min(PAGE[1] - 2 * MARGIN - 0.9, content_w * h / w)
-        page = Figure(figsize=PAGE, layout="constrained")
-        boxes: Any = page.subfigures(3, 3, width_ratios=[MARGIN, content_w, MARGIN],
-                                height_ratios=[MARGIN, content_h, PAGE[1] - MARGIN - content_h])
-        draw(into=boxes[1, 1])
-        boxes[2, 1].text(0.0, 0.85, "\n".join(textwrap.wrap(caption, 170)), fontsize=8.5, va="top",
-                         transform=boxes[2, 1].transSubfigure)
-        self._save(page)
+        self._save(figure_page(draw, size, caption)[0])
 
     def close(self) -> None:
         self._pdf.close()
+
+
+def figure_page(draw: Callable[..., FigureBase], size: tuple[float, float], caption: str) -> tuple[Figure, Any]:
+    """An A4 page (`PdfReport.add_figure`) and its content box: `draw(into=box)` fills the
+    box (the page's width less its margins, the aspect of `size` [in] kept up to the page
+    height), the caption below it."""
+    w, h = size
+    content_w = PAGE[0] - 2 * MARGIN
+    content_h = min(PAGE[1] - 2 * MARGIN - 0.9, content_w * h / w)
+    page = Figure(figsize=PAGE, layout="constrained")
+    boxes: Any = page.subfigures(3, 3, width_ratios=[MARGIN, content_w, MARGIN],
+                                 height_ratios=[MARGIN, content_h, PAGE[1] - MARGIN - content_h])
+    draw(into=boxes[1, 1])
+    boxes[2, 1].text(0.0, 0.85, "\n".join(textwrap.wrap(caption, 170)), fontsize=8.5, va="top",
+                     transform=boxes[2, 1].transSubfigure)
+    return page, boxes[1, 1]
 
 
 def pdf_style() -> AbstractContextManager:

@@ -4,7 +4,6 @@ channels or time in ms are found, with the factor of the fault; `sysid train` on
 knots beside one with r flipped stops with one line each (exit 2)."""
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
@@ -14,6 +13,7 @@ import pytest
 from sysid.data.consistency import (CORRELATION_MARGINAL, FACTOR_MARGINAL, Verdict, check_track,
                                     scale_factor)
 from sysid.data.recordings import read_runs
+from tests.support.tiny_experiment import one_epoch_config
 
 KNOT = 1852.0 / 3600.0  # m/s
 HEADERS = {"t": "t [s]", "x": "x_position_mid [m]", "y": "y_position_mid [m]", "psi": "psi_hat [rad]",
@@ -127,10 +127,7 @@ def _spoiled(tmp_path, dataset_dir):
 def test_training_on_a_log_in_knots_beside_one_with_r_flipped_stops(tmp_path, dataset_dir, capsys):
     from sysid.cli import main
     paths = _spoiled(tmp_path, dataset_dir)
-    config = tmp_path / "bad.toml"
-    config.write_text("[experiment]\nname = 'bad'\nmodel = 'hybrid'\nseed = 1\n"
-                      f"[data]\nfiles = {json.dumps([str(p) for p in paths])}\n"
-                      "[training]\nepochs = 1\nwarm_start_epochs = 1\n[evaluation]\nhorizons = [30.0]\n")
+    config = one_epoch_config(tmp_path / "bad.toml", paths)
     with pytest.raises(SystemExit) as stop:
         main(["train", str(config), "-o", str(tmp_path / "run")])
     assert stop.value.code == 2
@@ -144,7 +141,7 @@ def test_training_on_a_log_in_knots_beside_one_with_r_flipped_stops(tmp_path, da
 
 def test_logs_check_prints_the_table(tmp_path, dataset_dir, capsys):
     from sysid.cli import main
-    paths = _spoiled(tmp_path, dataset_dir)
+    _spoiled(tmp_path, dataset_dir)
     with pytest.raises(SystemExit) as stop:
         main(["logs", "check", str(tmp_path)])
     assert stop.value.code == 2

@@ -15,7 +15,7 @@ from sysid.data.recordings import read_run
 from sysid.data.splits import TEST, TRAINING, check_disjoint_runs, data_split
 from sysid.errors import ConfigError, DataError
 from sysid.runs.lifecycle import evaluation_runs, training_runs
-from own_logs import DEG, KNOT, OWN_COLUMNS, columns_table, write_own_log
+from own_logs import DEG, KNOT, columns_table, write_own_log
 
 ZIGZAG = "zigzag/zigzag_31-Jul-2020_13_57_45.csv"     # none of these is a paper test file
 BERTHING = "berthing/berthing_12-Nov-2020_13_37_05.csv"

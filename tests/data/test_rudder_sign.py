@@ -6,7 +6,6 @@ own fault, not the rudder's. `sysid train`, `sysid logs check` and `sysid prepro
 in one line naming the file, the column and the fix."""
 from __future__ import annotations
 
-import json
 
 import numpy as np
 import pandas as pd
@@ -17,6 +16,7 @@ from sysid.data.consistency import Verdict, check_rudder
 from sysid.data.recordings import log_track, read_run
 from sysid.data.rudder_sign import CORRELATION_CLEAR, RudderSign, rudder_response
 from sysid.errors import DataError
+from tests.support.tiny_experiment import one_epoch_config
 
 T, U, R, DELTA = "t [s]", "u_velo [m/s]", "r_angvelo [rad/s]", "delta_rudder [rad]"
 ZIGZAG = "zigzag/zigzag_31-Jul-2020_13_04_24.csv"   # the weakest zig-zag relation of the dataset
@@ -103,10 +103,7 @@ def test_train_logs_check_and_preprocess_say_it(tmp_path, dataset_dir, capsys):
     from sysid.cli import main
     from sysid.cli.preprocess_commands import _check_tracks
     path = _negated(tmp_path, dataset_dir, "flipped.csv", DELTA)
-    config = tmp_path / "bad.toml"
-    config.write_text("[experiment]\nname = 'bad'\nmodel = 'hybrid'\nseed = 1\n"
-                      f"[data]\nfiles = {json.dumps([str(path)])}\n"
-                      "[training]\nepochs = 1\nwarm_start_epochs = 1\n[evaluation]\nhorizons = [30.0]\n")
+    config = one_epoch_config(tmp_path / "bad.toml", [path])
     with pytest.raises(SystemExit) as stop:
         main(["train", str(config), "-o", str(tmp_path / "run")])
     assert stop.value.code == 2 and not (tmp_path / "run").exists()

@@ -23,6 +23,15 @@ def tiny_experiment(path: Path, dataset_dir: Path, *, seed: int, epochs: int, wa
     return path
 
 
+def one_epoch_config(path: Path, files) -> Path:
+    """A hybrid of one epoch on `files`, for the tests that expect training to stop on bad logs
+    before it starts; returns `path`."""
+    path.write_text("[experiment]\nname = 'bad'\nmodel = 'hybrid'\nseed = 1\n"
+                    f"[data]\nfiles = {json.dumps([str(f) for f in files])}\n"
+                    "[training]\nepochs = 1\nwarm_start_epochs = 1\n[evaluation]\nhorizons = [30.0]\n")
+    return path
+
+
 def tiny_test_file(dataset_dir: Path) -> Path:
     """The berthing run the tiny experiment is evaluated on."""
     return dataset_dir / "berthing" / TEST_FILE
