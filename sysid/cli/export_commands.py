@@ -21,7 +21,7 @@ def export(
     batch: int = typer.Option(1, "--batch", help="Ships per call (fixed in the file)."),
     float32: bool = typer.Option(False, "--float32", help="float32 instead of float64."),
     portable: bool = typer.Option(False, "--portable",
-                                  help="A torch.export program (any platform, eager speed) instead of native code."),
+                                  help="A torch.export program (any platform and later torch, tens of times slower) instead of native code."),
 ) -> None:
     """Export step(state, inputs) -> next state of a trained model (MMG, NN-only, hybrid with its
     kNN gate), loadable with torch alone; prints its latency."""
