@@ -95,12 +95,13 @@ def _with_gate(evaluation):
 
 def _print_gate(model, table) -> None:
     """Per file and horizon, how much of the prediction ran outside the training data."""
+    from sysid.hybrid.force_models import gate_off_meaning
     if "gate_off_share" not in table:
         return
     gate = getattr(model, "gate", None)
     shown = f", threshold {float(gate.threshold):.4g}" if gate is not None else ""
-    typer.echo(f"outside the training data (kNN gate{shown}; where it is off the FNN is switched off and the "
-               "model predicts as its physics MMG), gate_off_share in the metrics CSV:")
+    typer.echo(f"outside the training data (kNN gate{shown}; where it is off, {gate_off_meaning(model)}), "
+               "gate_off_share in the metrics CSV:")
     for row in table.itertuples():
         typer.echo(f"  {row.file} at {row.horizon_s:g} s: gate off on {100 * row.gate_off_share:.1f} % of the "
                    "window points" + (" (mostly outside the training data)" if row.gate_off_share > 0.5 else ""))

@@ -146,7 +146,8 @@ def forces(
         typer.echo(f"forces: {len(result)} rows, {source} -> {output} ({time.perf_counter() - start:.2f} s); "
                    "forces X, Y [N], moments N [N m]")
         if "gate_on" in result:
+            from sysid.hybrid.force_models import gate_off_meaning
             off = 1.0 - float(result["gate_on"].mean())
-            typer.echo(f"  kNN gate: off on {100 * off:.1f} % of the rows (gate_on 0: outside the training data, "
-                       "the FNN switched off)")
+            typer.echo(f"  kNN gate: off on {100 * off:.1f} % of the rows (gate_on 0: outside the training data; "
+                       f"{gate_off_meaning(model)})")
 

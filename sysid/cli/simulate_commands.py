@@ -91,12 +91,13 @@ def simulate(
     if baseline is not None:
         typer.echo(f"  RMSE vs record: {_rmse(out, 'mmg_')} ({baseline[0]}, the physics baseline: mmg_ columns)")
     if forces.gate_on is not None:
+        from sysid.hybrid.force_models import gate_off_meaning
         off = 1.0 - float(forces.gate_on[:-1].double().mean()) if steps else 0.0
         gate = getattr(model, "gate", None)
         shown = f", threshold {float(gate.threshold):.4g}" if gate is not None else ""
         typer.echo(f"  kNN gate{shown}: off on {100 * off:.1f} % of the steps (largest knn_distance "
-                   f"{float(forces.ood_distance.max()):.4g}); where off, the FNN is switched off and the model "
-                   "predicts as its physics MMG" + (": mostly outside the training data" if off > 0.5 else ""))
+                   f"{float(forces.ood_distance.max()):.4g}); where off, {gate_off_meaning(model)}"
+                   + (": mostly outside the training data" if off > 0.5 else ""))
 
 
 def _rmse(out, prefix: str) -> str:
