@@ -3,7 +3,8 @@
 Exports the run's model (the compiled package and the portable program) into a temporary
 folder, then times, each in a fresh python that imports torch alone (no sysid), one thread:
 the package through ``torch._inductor.aoti_load_package`` (checks off, and with
-``AOTI_RUNTIME_CHECK_INPUTS=1``), and the portable program through ``torch.export.load``;
+``AOTI_RUNTIME_CHECK_INPUTS=1``; the package exported ``--with-gate``, which returns the kNN
+gate's decision too), and the portable program through ``torch.export.load``;
 beside them, in this process, sysid's eager step of the same model. Prints the median time
 per step, each as a ratio to the compiled package's and as the share of a control period at
 1 Hz and 10 Hz, and the time of a 60-s look-ahead (60 steps of 1 s) of each.
@@ -37,6 +38,7 @@ with torch.no_grad():
     y = x
     for _ in range(60):
         y = step(y, u)
+        y = y[0] if isinstance(y, (tuple, list)) else y   # --with-gate: (state, gate_on)
     ahead = time.perf_counter() - t0
 times.sort()
 print(json.dumps({"step": times[len(times) // 2], "ahead": ahead, "sysid": "sysid" in sys.modules}))
@@ -92,11 +94,13 @@ def main() -> None:
     args = parser.parse_args()
     from sysid.cli import run
     with tempfile.TemporaryDirectory() as tmp:
-        compiled, portable = Path(tmp) / "model.pt2", Path(tmp) / "portable.pt2"
+        compiled, portable, gated = Path(tmp) / "model.pt2", Path(tmp) / "portable.pt2", Path(tmp) / "gated.pt2"
         run(["-q", "export", str(args.run_dir), "-o", str(compiled), "--dt", repr(args.dt)])
+        run(["-q", "export", str(args.run_dir), "-o", str(gated), "--dt", repr(args.dt), "--with-gate"])
         run(["-q", "export", str(args.run_dir), "-o", str(portable), "--dt", repr(args.dt), "--portable"])
         rows = {"compiled package (aoti_load_package)": fresh(compiled, "package", args.calls),
                 "compiled package, AOTI_RUNTIME_CHECK_INPUTS=1": fresh(compiled, "package", args.calls, True),
+                "compiled package --with-gate": fresh(gated, "package", args.calls),
                 "portable program (torch.export.load)": fresh(portable, "program", max(args.calls // 10, 100)),
                 "sysid eager step (in process)": eager(args.run_dir, args.dt, max(args.calls // 10, 100))}
     base = rows["compiled package (aoti_load_package)"]["step"]
