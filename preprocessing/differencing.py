@@ -24,6 +24,20 @@ def difference_span(n: int, sample_dt: float, diff_dt: float = 1.0) -> tuple[np.
     return lo, hi
 
 
+def noise_scale(n: int, sample_dt: float, diff_dt: float = 1.0) -> np.ndarray:
+    """Variance of each sample's difference (shape (n,)) relative to a full-width one's.
+
+    White position noise of std sigma gives a difference over hi - lo steps a std of
+    sqrt(2) sigma / ((hi - lo) sample_dt): the one-sided difference at either end, over one
+    step instead of 2 k, is 2 k times as noisy (20 times at 10 Hz and 1.0 s), so its
+    variance scale is (2 k / (hi - lo))^2 = 400.
+    """
+    if n < 2:
+        return np.ones(n)
+    lo, hi = difference_span(n, sample_dt, diff_dt)
+    return (float(np.max(hi - lo)) / (hi - lo)) ** 2
+
+
 def central_difference(p: np.ndarray, sample_dt: float, diff_dt: float = 1.0) -> np.ndarray:
     """Derivative of `p` (shape (N,), step `sample_dt` [s]) with half-width `diff_dt` [s]."""
     p = np.asarray(p, float)

@@ -8,8 +8,10 @@ gating); (5) midship position; (6) central difference; (7) Kalman/RTS on u, v_m;
 Gaps: samples missing (absent rows, empty cells, rejected GNSS fixes) over at most
 `max_interp_gap` seconds are linearly interpolated; a longer gap splits the run into
 segments, each processed on its own; segments shorter than `min_segment` are dropped.
-Every such decision goes into the report. Time stamps are snapped to the nominal 0.1 s grid
-(the largest deviation is reported; more than 25 ms is an error).
+Every such decision goes into the report. Samples are put on the nominal 0.1 s grid whose
+phase is the median of the time stamps', each column's values linearly interpolated from
+their stamps to the grid times, the GNSS fixes after the baseline check and the heading gate
+from the kept ones (the largest deviation is reported; more than 25 ms is an error).
 """
 from __future__ import annotations
 
@@ -21,7 +23,8 @@ import pandas as pd
 from scipy.integrate import cumulative_trapezoid
 
 from preprocessing.quality import QualityReport
-from preprocessing import anemometer, body_velocity, geodesy, gnss, gyro, resample, schema, smoothing
+from preprocessing import (anemometer, body_velocity, differencing, geodesy, gnss, gyro, resample, schema,
+                           smoothing)
 from preprocessing.frames import wrap_pi
 from preprocessing.schema import RawLogError
 from preprocessing.sensors import SensorLayout
@@ -93,6 +96,35 @@ class Result:
     report: QualityReport
 
 
+STAMP_RESOLUTION = 1e-6  # s; a stamp this close to its grid time is on it (a clock time's float)
+
+
+def _at_grid_times(t: np.ndarray, grid_t: np.ndarray, a: np.ndarray, column: str) -> np.ndarray:
+    """Values of one raw column (shape (N,)) moved from their time stamps `t` [s] to the
+    grid times `grid_t` [s] (each within 25 ms) by linear interpolation between the column's
+    finite samples (extrapolated before the first and after the last): a stamp 10 ms off at
+    0.5 m/s is 5 mm of position. Stamps within `STAMP_RESOLUTION` of their grid time, empty
+    cells and NaN stamps stay as they are; directions [rad] are interpolated unwrapped and
+    returned in [0, 2 pi); GGA fix qualities are codes and are kept as they are."""
+    ok = np.isfinite(a) & np.isfinite(t)
+    with np.errstate(invalid="ignore"):
+        moved = ok & (np.abs(grid_t - t) > STAMP_RESOLUTION)
+    if column.endswith("_fix") or ok.sum() < 2 or not moved.any():
+        return a
+    values = np.unwrap(a[ok]) if column.endswith("_dir") else a[ok]
+    tk = t[ok]
+    out = a.copy()
+    out[moved] = np.interp(grid_t[moved], tk, values)
+    for end, pair in ((grid_t < tk[0], slice(0, 2)), (grid_t > tk[-1], slice(-2, None))):
+        end &= moved                          # before the first / after the last sample: extrapolate
+        if end.any():
+            slope = np.diff(values[pair])[0] / np.diff(tk[pair])[0]
+            out[end] = values[pair][0] + slope * (grid_t[end] - tk[pair][0])
+    if column.endswith("_dir"):
+        out[moved] = np.mod(out[moved], 2 * np.pi)
+    return out
+
+
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """[start, stop) index ranges where `mask` is True."""
     d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
@@ -108,10 +140,17 @@ class Pipeline:
 
     # -- step 1: grid and gaps ------------------------------------------------------------
     def _grid(self, df: pd.DataFrame, name: str, report: dict) -> tuple[np.ndarray, dict]:
+        """The columns on the 0.1 s grid (NaN at missing rows) and each grid sample's time
+        stamp [s] (NaN where missing). Every column but the GNSS ones is moved from its
+        stamps to the grid times here; the GNSS ones after their checks (`_at_grid_times`)."""
         t = df["t"].to_numpy()
         dt = schema.NOMINAL_DT
         k = np.rint((t - t[0]) / dt).astype(np.int64)
-        jitter = np.abs(t - t[0] - k * dt)
+        # the grid's phase is the median one, not the first stamp's (whose jitter would
+        # shift every output time and every other sample's deviation)
+        t0 = t[0] + float(np.median(t - t[0] - k * dt))
+        grid_t = t0 + k * dt
+        jitter = np.abs(t - grid_t)
         lines = df.attrs.get("line", np.arange(len(t)) + 2)  # each row's line of the file (schema.file_line)
         if jitter.max() > 0.25 * dt:
             row = int(np.argmax(jitter))
@@ -123,13 +162,16 @@ class Pipeline:
         cols = {}
         for c in df.columns:
             a = np.full(n, np.nan)
-            a[k] = df[c].to_numpy()
+            values = df[c].to_numpy()
+            a[k] = values if c.startswith("gnss_") else _at_grid_times(t, grid_t, values, c)
             cols[c] = a
-        cols["t"] = t[0] + np.arange(n) * dt
+        cols["t"] = t0 + np.arange(n) * dt
+        stamps = np.full(n, np.nan)
+        stamps[k] = t
         report["rows"] = len(t)
         report["missing_rows"] = n - len(t)
         report["time_jitter_max_s"] = float(jitter.max())
-        return k, cols
+        return stamps, cols
 
     def _fill(self, t: np.ndarray, arrays: list[np.ndarray], channel: str,
               report: dict, angle: bool = False) -> np.ndarray:
@@ -174,7 +216,7 @@ class Pipeline:
             df, latlon = schema.read_raw(raw, repairs)
         report: dict = {"file": name, "settings": asdict(s), "repairs": repairs, "gaps": [],
                         "segments": [], "dropped_segments": []}
-        _, g = self._grid(df, name, report)
+        stamps, g = self._grid(df, name, report)
         t = g["t"]
         dt = schema.NOMINAL_DT
 
@@ -206,7 +248,7 @@ class Pipeline:
             repairs.append("fore and aft antennas swapped (heading 180 deg off the course)")
         report["swapped_antennas"] = any("swapped" in r for r in repairs)
         psi_fog = cumulative_trapezoid(np.nan_to_num(g["fog_yaw_rate"]), dx=dt, initial=0.0)
-        self._check_fog_units(name, psi_fog, psi_g)
+        self._check_fog_against_gnss(name, psi_fog, psi_g)
         _, keep, sigma = smoothing.gate_heading(psi_fog, psi_g, dt, s.gate_window,
                                                 s.gate_sigma, s.gate_floor)
         rej_gate = passed & ~keep
@@ -215,6 +257,8 @@ class Pipeline:
                                   "gnss_heading_sigma_rad": sigma}
         for a in (fx, fy, ax, ay):
             a[~keep] = np.nan
+            # kept fixes only: a rejected one must not leak into its neighbours
+            a[:] = _at_grid_times(stamps, t, a, "gnss")
         valid &= self._fill(t, [fx, fy, ax, ay], "gnss", report)
 
         # segments
@@ -321,8 +365,9 @@ class Pipeline:
         return bool(np.mean(c < -0.7) > 0.8)
 
     @staticmethod
-    def _check_fog_units(name, psi_fog, psi_g) -> None:
-        """FOG in deg/s under a rad/s header turns ~57 times too fast against the GNSS."""
+    def _check_fog_against_gnss(name, psi_fog, psi_g) -> None:
+        """FOG in deg/s under a rad/s header turns ~57 times too fast against the GNSS; a FOG
+        positive to port, or a mirrored local frame, turns against it."""
         step = 10
         ok = np.isfinite(psi_g)
         i = np.flatnonzero(ok)
@@ -338,6 +383,25 @@ class Pipeline:
         if ratio > 10.0:
             raise RawLogError(f"{name}: column fog_yaw_rate: turns {ratio:.0f} times faster than the "
                               "GNSS heading: degrees in a radian column?")
+        # 1-s heading changes of gyro and antennas: opposite signs mean a gyro counted positive
+        # to port, or a local frame mirrored (x east, y north); either way psi and r are wrong
+        unwrapped = np.full(len(psi_g), np.nan)
+        unwrapped[i] = np.unwrap(psi_g[i])
+        d_gnss = unwrapped[step:] - unwrapped[:-step]
+        d_fog = psi_fog[step:] - psi_fog[:-step]
+        with np.errstate(invalid="ignore"):
+            m = np.isfinite(d_gnss) & (np.abs(d_gnss) < 0.5)
+        turned = float(np.sum(np.abs(d_fog[m]))) / step     # rad turned by the gyro's account
+        if m.sum() < 10 * step or turned < 1.0:
+            return
+        corr = float(np.sum(d_gnss[m] * d_fog[m]) / np.sqrt(np.sum(d_gnss[m] ** 2) * np.sum(d_fog[m] ** 2)))
+        if corr < -0.5:
+            raise RawLogError(
+                f"{name}: column fog_yaw_rate: the gyro turns against the two-antenna heading "
+                f"(correlation {corr:.2f} of their 1-s changes over {turned:.1f} rad of turning): a gyro "
+                "counted positive to port (z up)? negate the column (sysid's yaw rate is positive to "
+                "starboard); or antenna x, y with x east and y north? sysid's local frame is x north, "
+                "y east: swap the x and y columns")
 
     def _segment(self, g: dict, fx, fy, ax, ay, measured, grid_index
                  ) -> tuple[pd.DataFrame, np.ndarray]:
@@ -358,9 +422,10 @@ class Pipeline:
         # step 6: central difference (earth frame) -> body frame, rotated by the heading
         # over each difference's window (not psi(t) alone: that lags v_m while turning)
         u_cd, v_cd = body_velocity.body_velocity(x, y, psi, dt, s.diff_dt)
-        # step 7: Kalman/RTS on u, v_m
-        u = smoothing.smooth_rate(u_cd, dt, s.velocity_q, s.velocity_r)
-        v = smoothing.smooth_rate(v_cd, dt, s.velocity_q, s.velocity_r)
+        # step 7: Kalman/RTS on u, v_m; the narrower differences near the ends weigh less
+        scale = differencing.noise_scale(len(x), dt, s.diff_dt)
+        u = smoothing.smooth_rate(u_cd, dt, s.velocity_q, s.velocity_r, scale)
+        v = smoothing.smooth_rate(v_cd, dt, s.velocity_q, s.velocity_r, scale)
         # step 8: r = low-passed FOG minus the estimated bias
         r = gyro.lowpass(fog - bias, 1.0 / dt, s.cutoff, s.lowpass_order)
         # step 9: wind
@@ -370,8 +435,8 @@ class Pipeline:
         # step 10: take samples
         step = int(round(1.0 / (s.output_rate * dt)))
         i = resample.sample_indices(grid_index, step)
-        out = pd.DataFrame({
-            "t": np.round(g["t"][i], 6), "x_position_mid": x[i], "u_velo": u[i],
+        out = pd.DataFrame({   # t + 0.0: a grid phase a hair below 0 s is written 0.0, not -0.0
+            "t": np.round(g["t"][i], 6) + 0.0, "x_position_mid": x[i], "u_velo": u[i],
             "y_position_mid": y[i], "vm_velo": v[i], "psi_hat": wrap_pi(psi[i]),
             "r_angvelo": r[i], "n_prop": g["n_prop"][i], "delta_rudder": g["delta_rudder"][i],
             "wind_velo_relative_mid": ua[i], "wind_dir_relative_mid": ga[i],

@@ -50,8 +50,9 @@ RAW_OPTIONAL = {"gnss_fore_fix": "-", "gnss_aft_fix": "-"}
 PROCESSED_PLAUSIBLE_ABS = {"u": 20.0, "v": 20.0, "psi": 2 * np.pi, "r": 3.0, "delta_rudder": 1.6,
                            "wind_dir_true": 7.0, "wind_dir_relative": 7.0, "n_prop": 200.0, "wind_velo_true": 60.0}
 
-# headers in degrees accepted for a radian column, converted (a logged repair)
-_DEGREE_UNITS = {"rad": ("deg", np.pi / 180.0), "rad/s": ("deg/s", np.pi / 180.0)}
+# headers accepted for a column of another unit, converted (a logged repair): degrees for
+# radians, rpm for rps
+_CONVERTED_UNITS = {"rad": ("deg", np.pi / 180.0), "rad/s": ("deg/s", np.pi / 180.0), "rps": ("rpm", 1.0 / 60.0)}
 
 # plausibility limits in SI units; a value beyond means wrong units (e.g. degrees in rad)
 PLAUSIBLE_ABS = {
@@ -94,8 +95,8 @@ def _need(have: dict[str, str | None], names: dict[str, str], path: str, repairs
         got = have[name]
         if got is None or got == unit:
             continue
-        if unit in _DEGREE_UNITS and got == _DEGREE_UNITS[unit][0]:
-            scale[name] = _DEGREE_UNITS[unit][1]
+        if unit in _CONVERTED_UNITS and got == _CONVERTED_UNITS[unit][0]:
+            scale[name] = _CONVERTED_UNITS[unit][1]
             repairs.append(f"column {name}: header unit [{got}], converted to [{unit}]")
             continue
         raise RawLogError(f"{path}: column {name}: unit [{got}], expected [{unit}]")
@@ -223,7 +224,7 @@ def read_raw(path: str | os.PathLike, repairs: list[str] | None = None) -> tuple
     if not path.is_file():
         raise RawLogError(f"{path}: file not found")
     try:
-        df = pd.read_csv(path, skipinitialspace=True)
+        df = pd.read_csv(path, skipinitialspace=True, skip_blank_lines=False)   # a blank line: an empty row
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         raise RawLogError(f"{path}: not a readable CSV ({exc})") from None
     _check_last_row(path, len(df.columns), len(df))

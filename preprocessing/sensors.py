@@ -18,7 +18,11 @@ class SensorLayout:
     ----------
     gnss_fore, gnss_aft : (x, y) [m] of the fore and aft GNSS antennas.
     gnss_baseline : nominal fore-aft antenna distance [m].
-    heading_offset : direction of the aft->fore baseline minus the bow direction [rad].
+    heading_offset : a turn [rad] of the antenna pair about midship beyond the listed
+        positions (clockwise seen from above): the aft->fore baseline points at the
+        positions' own direction plus it, and the antennas sit at the positions turned by it.
+        The positions' direction (antennas off the centreline or not parallel to it) needs
+        no offset.
     anemometer_1, anemometer_2 : (x, y) [m] of the two anemometers.
     fog : (x, y) [m] of the fibre-optic gyro (its position does not affect a yaw rate).
     """

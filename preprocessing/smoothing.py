@@ -40,24 +40,30 @@ def _inv_2x2(p: np.ndarray) -> np.ndarray:
     return np.array([[d, -b], [-c, a]]) / (a * d - b * c)
 
 
-def _run(kf: KalmanFilter, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Forward filter + RTS pass; NaN measurements are skipped (predict only)."""
+def _run(kf: KalmanFilter, z: np.ndarray, r: np.ndarray | None = None
+         ) -> tuple[np.ndarray, np.ndarray]:
+    """Forward filter + RTS pass; NaN measurements are skipped (predict only). `r`: each
+    measurement's variance (shape (N,)), else `kf.R` for all."""
     zs = [None if np.isnan(v) else np.array([[v]]) for v in z]
     kf.inv = _inv_1x1                    # dim_z = 1: S is 1x1
-    means, covs, _, _ = kf.batch_filter(zs)
+    rs = None if r is None else [np.array([[v]]) for v in r]
+    means, covs, _, _ = kf.batch_filter(zs, Rs=rs)
     xs, ps, _, _ = kf.rts_smoother(means, covs, inv=_inv_2x2)
     return xs[:, :, 0], ps
 
 
-def smooth_rate(z: np.ndarray, dt: float, q: float, r: float) -> np.ndarray:
+def smooth_rate(z: np.ndarray, dt: float, q: float, r: float,
+                r_scale: np.ndarray | None = None) -> np.ndarray:
     """Smoothed value of a noisy signal `z` (shape (N,), step dt [s]), same units as z.
 
     q : PSD of the white process noise driving the value's second derivative [unit^2/s^5].
-    r : variance of z's noise [unit^2].
+    r : variance of z's noise [unit^2]; r_scale : each sample's variance relative to r
+    (shape (N,); `differencing.noise_scale` for the narrower differences at the ends).
     """
     z = np.asarray(z, float)
-    first = z[np.isfinite(z)][0]
-    xs, _ = _run(_cv_filter(dt, q, r, first, 1.0), z)
+    first = int(np.flatnonzero(np.isfinite(z))[0])
+    r0 = r if r_scale is None else r * float(r_scale[first])
+    xs, _ = _run(_cv_filter(dt, q, r0, z[first], 1.0), z, None if r_scale is None else r * np.asarray(r_scale))
     return xs[:, 0]
 
 

@@ -53,7 +53,7 @@ def evaluate(
     exp = load_experiment(config) if config is not None else None
     run_exp, model, label = _model_to_judge(run_dir, model_kind, exp, ship, set_, quadrature)
     source = exp if exp is not None else run_exp   # where the logs, horizons and integrator come from
-    files, columns = _logs(data, source)
+    files, columns = _logs(data, source, run_dir if exp is None else None)
     horizons = list(horizon) if horizon else list(source.evaluation.horizons if source is not None else (30.0, 100.0))
     chosen = integrator_of(integrator or (str(source.evaluation.integrator) if source is not None else "euler"), False)
     ship_input = ship_file(ship) if ship is not None else (
@@ -128,15 +128,20 @@ def _model_to_judge(run_dir, model_kind: str, exp, ship, set_, quadrature: str):
     return run_exp, model, label
 
 
-def _logs(data, source):
+def _logs(data, source, run_dir=None):
     """(the logs to evaluate on, their [data.columns] or None): ``--data``, else the [data]
-    test logs of the config or run, else the paper's six test logs; exit 2 without any."""
+    test logs of the config or of the run at `run_dir` (found where they are now, checked
+    against what the run recorded: `RunDir.read_test_logs`), else the paper's six test
+    logs; exit 2 without any."""
     from sysid.data.datasets import test_files
     from sysid.data.recordings import expand_paths
     from sysid.data.splits import config_paths
 
     if data:
         files, columns = expand_paths(data), source.data.columns if source is not None else None
+    elif run_dir is not None and source.data.test:
+        from sysid.runs.rundir import RunDir
+        files, columns = RunDir(run_dir).read_test_logs(source), source.data.columns
     elif source is not None and source.data.test:   # only the test logs need to exist here
         files, columns = list(config_paths(source.data.test, "test", source.source)), source.data.columns
     elif source is not None and source.experiment.dataset:

@@ -289,10 +289,14 @@ def _warn_below_baseline(output: Path) -> None:
     ``--seeds N`` (``runs/NAME/seed*/``) are members of one model (`seed_mean_verdict`)."""
     from sysid.evaluation.verdict import BaselineVerdict, seed_mean_verdict
     from sysid.runs.rundir import RunDir
+    from sysid.store.manifest import seed_order
 
     runs = output / "runs"
     models: dict[str, list] = {}  # the model's name -> its run's summary, or its seeds'
-    for path in sorted(runs.glob("**/summary.json")):
+    def in_seed_order(path: Path) -> tuple:   # seed2 before seed10, as the report reads a seed folder
+        return tuple(seed_order(part) if part.startswith("seed") else (0, part) for part in path.parts)
+
+    for path in sorted(runs.glob("**/summary.json"), key=in_seed_order):
         rel = path.parent.relative_to(runs)
         group = rel.parent if rel.name.startswith("seed") and rel.parent != Path(".") else rel
         models.setdefault(group.as_posix(), []).append(RunDir(path.parent).read_summary())

@@ -80,7 +80,7 @@ SENSOR_KEYS: dict[str, tuple[str, str]] = {
     "gnss_fore": ("m", "[x, y] of the fore GNSS antenna from midship (x to the bow, y to starboard)"),
     "gnss_aft": ("m", "[x, y] of the aft GNSS antenna"),
     "gnss_baseline": ("m", "nominal distance between the two antennas"),
-    "heading_offset": ("rad", "direction of the aft-to-fore antenna baseline minus the bow direction"),
+    "heading_offset": ("rad", "turn of the antenna pair about midship beyond the positions listed (0 when they are surveyed)"),
     "anemometer_1": ("m", "[x, y] of the first anemometer"),
     "anemometer_2": ("m", "[x, y] of the second anemometer"),
     "fog": ("m", "[x, y] of the fibre-optic gyro"),

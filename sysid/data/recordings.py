@@ -159,9 +159,18 @@ def read_runs(paths: Iterable[str | os.PathLike], rate: float = 1.0, columns: Co
               warn=_log.warning) -> list[Run]:
     """`read_run` of each file; the errors of all files (a clear mismatch with its track
     in several logs, ...) as one `DataError`, a line per file. Logs without a track are
-    named once."""
+    named once. Two files of one name (``a/log.csv``, ``b/log.csv``) are refused: a log is
+    named by its file's stem in windows, cells, traces and tables."""
     runs, errors = [], []
-    for path in paths:
+    first: dict[str, Path] = {}
+    for path in paths:   # an iterator (a progress bar) is read once, as the files are
+        stem = Path(path).stem
+        if stem in first:
+            same = first[stem].resolve() == Path(path).resolve()
+            raise DataError(f"{path}: " + ("given twice" if same else f"the same name as {first[stem]}")
+                            + f"; sysid names a log by its file name ({stem!r}): "
+                            + ("give it once" if same else "rename one of them"))
+        first[stem] = Path(path)
         try:
             runs.append(read_run(path, rate, columns, warn=None))
         except DataError as exc:

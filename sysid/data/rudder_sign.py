@@ -34,7 +34,7 @@ import numpy as np
 AHEAD_SPEED = 0.15               # u [m/s] above which a sample is going ahead
 EXCITED_ANGLE = np.radians(3.0)  # |delta| [rad] of a sample with rudder
 EXCITED_S = 30.0                 # rudder time [s] ahead the relation needs
-CORRELATION_CLEAR = 0.3          # a partial correlation at or below -0.3: the sign is reversed
+REVERSED_CORRELATION = 0.3       # a partial correlation at or below -0.3: the sign is reversed
 CORRELATION_WEAK = 0.1           # |partial correlation| below 0.1: no relation to read a sign from
 SPAN_S = 1.0                     # half-width of the central differences of r [s]
 
@@ -100,7 +100,7 @@ def rudder_response(t: np.ndarray, u: np.ndarray, r: np.ndarray, delta: np.ndarr
         sign = RudderSign.UNCLEAR
     elif corr > 0:
         sign = RudderSign.STARBOARD
-    elif corr <= -CORRELATION_CLEAR:
+    elif corr <= -REVERSED_CORRELATION:
         sign = RudderSign.PORT_CLEAR
     else:
         sign = RudderSign.PORT_WEAK

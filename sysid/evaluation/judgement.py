@@ -14,8 +14,9 @@ within logs, over logs and over members, and decides at a stated confidence (`Ve
 - BEATS: better overall (interval below 0) and no cell more than ``material`` worse, neither
   with confidence nor in its point estimate (a cell +12 % worse on too few windows to be sure
   keeps the verdict open: more windows only sharpen a decision, never flip it);
-- NOT_DISTINGUISHABLE: otherwise, "on N windows"; always on fewer than ``min_windows`` windows
-  in all (one window's resampled interval has no width: no evidence either way).
+- NOT_DISTINGUISHABLE: otherwise, "on N windows"; always when no horizon has ``min_windows``
+  windows over all logs (one window's resampled interval has no width: no evidence either
+  way; one stretch of a log at several horizons is one piece of evidence, not several).
 
 The overall change is the geometric mean of the cells' ratios minus 1, every log, horizon and
 channel alike, so a scenario with few windows weighs as much as one with many.
@@ -90,7 +91,8 @@ class PairedCell:
     same windows.
 
     model : (M, W) per-window RMSE of each of M members (seeds or ensemble members; M = 1
-    for one model) [m/s or rad/s]; baseline : (B, W), B usually 1; window_start_s : (W,)
+    for one model) [m/s or rad/s]; baseline : (B, W), B usually 1 (B = M > 1: member k's own
+    baseline in row k, drawn with it); window_start_s : (W,)
     start time of each window [s]; divergence : where a model prediction diverged, or None.
     """
 
@@ -316,14 +318,15 @@ RATIO_CAP = 1e6   # the largest RMSE ratio of a draw: one whose baseline is exac
 
 def _resampled_ratio(mse_model: np.ndarray, mse_baseline: np.ndarray) -> np.ndarray:
     """(R,) RMSE ratio model / baseline of each draw, rounded to 12 digits (a model equal to
-    its baseline gives exactly 1). A draw whose baseline error is exactly 0 (an exact baseline
-    on every window drawn: straight running with v = r = 0 in noise-free logs) is 1 when the
-    model's is 0 too, else `RATIO_CAP`; no ratio exceeds `RATIO_CAP`, so every quantile and
+    its baseline gives exactly 1), within [1 / `RATIO_CAP`, `RATIO_CAP`]. A draw whose
+    baseline error is exactly 0 (an exact baseline on every window drawn: straight running
+    with v = r = 0 in noise-free logs) is 1 when the model's is 0 too, else `RATIO_CAP`; one
+    whose model error alone is 0 is 1 / `RATIO_CAP`: every ratio's log, every quantile and
     the overall change stay finite."""
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.sqrt(mse_model / mse_baseline)
     ratio = np.where(mse_baseline > 0, ratio, np.where(mse_model > 0, RATIO_CAP, 1.0))
-    return np.round(np.minimum(ratio, RATIO_CAP), 12)
+    return np.round(np.clip(ratio, 1 / RATIO_CAP, RATIO_CAP), 12)
 
 
 def _decided(cell: CellJudgement, low: float, high: float, rule: VerdictRule) -> CellJudgement:
@@ -351,7 +354,7 @@ def judge(cells: Sequence[PairedCell], rule: VerdictRule = VerdictRule(), model:
     R = rule.resamples
     rng = np.random.default_rng(rule.seed)   # drawn in this order: members, baselines, each log's windows, logs
     members = _counts(rng, M, R)
-    baselines = _counts(rng, B, R)
+    baselines = members if B == M > 1 else _counts(rng, B, R)   # B = M: each member's own baseline, paired
     judged, compared = _cell_judgements(groups, rng, R, M, members, baselines)
     if compared.ratios:   # every compared cell's interval, in one call
         bounds = iter(np.quantile(np.stack(compared.ratios, 1), [alpha, 1 - alpha], axis=0).T - 1)   # (cells, 2)
@@ -369,7 +372,11 @@ def judge(cells: Sequence[PairedCell], rule: VerdictRule = VerdictRule(), model:
     unjudged_material = [c for c in judged if c.decision is not CellDecision.MATERIALLY_WORSE
                          and c.change > rule.material]
     n_windows = sum(group[0].n_windows for group in groups.values())
-    enough = n_windows >= rule.min_windows   # fewer: the resampled interval is no evidence (one window: no width)
+    per_horizon: dict[float, int] = {}
+    for (_log, h), group in groups.items():
+        per_horizon[h] = per_horizon.get(h, 0) + group[0].n_windows
+    deciding = max(per_horizon.values())   # the windows of one horizon: another's cover the same stretches
+    enough = deciding >= rule.min_windows   # fewer: the resampled interval is no evidence (one window: no width)
     if diverged:
         outcome = Outcome.DIVERGED
     elif material or (enough and change_low > 0):
@@ -385,7 +392,7 @@ def judge(cells: Sequence[PairedCell], rule: VerdictRule = VerdictRule(), model:
                        member_changes, worst, len({c.log for c in cells}), n_windows, M,
                        tuple(sorted({float(c.horizon_s) for c in cells})), "", divergences)
     return _with_sentence(result, model, baseline, material, unjudged_material, diverged,
-                          None if enough else rule.min_windows)
+                          None if enough else (deciding, rule.min_windows))
 
 
 def _checked(cells: Sequence[PairedCell]) -> tuple[list[PairedCell], dict[tuple[str, float], list[PairedCell]]]:
@@ -442,20 +449,20 @@ def _cell_judgements(groups: dict[tuple[str, float], list[PairedCell]], rng: np.
                 judged.append(CellJudgement(**common, change=math.nan, change_low=math.nan, change_high=math.nan,
                                             decision=CellDecision.DIVERGED, divergence=c.divergence))
                 continue
-            if c.baseline_diverged or not mse_b > 0 or W == 0:
+            if c.baseline_diverged or W == 0:
                 judged.append(CellJudgement(**common, change=math.nan, change_low=math.nan, change_high=math.nan,
                                             decision=CellDecision.BASELINE_DIVERGED))
                 continue
             ratio = _resampled_ratio(_pooled_mse(c.model, members, windows),
                                      _pooled_mse(c.baseline, baselines, windows))
-            change = round(model_rmse / baseline_rmse, 12) - 1
+            change = float(_resampled_ratio(np.array([mse_m]), np.array([mse_b]))[0]) - 1   # an exact baseline too
             judged.append(CellJudgement(**common, change=change, change_low=math.nan, change_high=math.nan,
                                         decision=CellDecision.NOT_DISTINGUISHABLE))
             compared.ratios.append(ratio)
             with np.errstate(divide="ignore"):
                 compared.log_ratios.setdefault(log, []).append(np.log(ratio))
                 compared.point_logs.append(math.log(change + 1))
-                compared.member_logs.append(0.5 * np.log(np.mean(c.model**2, axis=1) / mse_b))
+                compared.member_logs.append(np.log(_resampled_ratio(np.mean(c.model**2, axis=1), np.full(M, mse_b))))
     return judged, compared
 
 
@@ -494,14 +501,16 @@ def _listed(cells: Sequence[CellJudgement], names: Mapping[str, str], limit: int
 
 def _with_sentence(j: Judgement, model: str, baseline: str, material: list[CellJudgement],
                    unjudged_material: list[CellJudgement], diverged: list[CellJudgement],
-                   too_few: int | None = None) -> Judgement:
-    """`j` with its sentence; `too_few`: the windows a decision needs, when there are fewer."""
+                   too_few: tuple[int, int] | None = None) -> Judgement:
+    """`j` with its sentence; `too_few`: (the most windows of one horizon, the windows a
+    decision needs) when there are fewer."""
     conf = f"{100 * j.confidence:g} %"
     tolerance = f"{100 * j.material:g} %"
     overall = (f"RMSE {percent_text(j.change)} overall ({conf} interval {interval_text(j.change_low, j.change_high)})"
                if math.isfinite(j.change) else "no cell to compare")
     evidence = f"on {j.evidence()}"
     names = place_names(j.cells)
+    worst = f"; worst cells: {_listed(j.worst, names)}" if j.worst else ""
     if j.outcome is Outcome.DIVERGED:
         places = list(dict.fromkeys(c.divergence.text() if c.divergence
                                     else f"{names[c.log]} {c.channel} at {c.horizon_s:g} s"
@@ -516,17 +525,21 @@ def _with_sentence(j: Judgement, model: str, baseline: str, material: list[CellJ
         text = f"{model} is WORSE than {baseline}: {why}; {overall}, {evidence}."
     elif j.outcome is Outcome.BEATS:
         text = (f"{model} beats {baseline} at {conf} confidence: {overall}, {evidence}; no cell more than "
-                f"{tolerance} worse at that confidence; worst cells: {_listed(j.worst, names)}.")
+                f"{tolerance} worse at that confidence{worst}.")
     elif too_few is not None:
-        text = (f"{model} cannot be told apart from {baseline}: {overall}, {evidence}; {j.n_windows} "
-                f"window{'s are' if j.n_windows != 1 else ' is'} too few to decide at {conf} confidence (a "
-                f"verdict needs at least {too_few}); worst cells: {_listed(j.worst, names)}.")
+        most, needed = too_few
+        count = (f"{j.n_windows} window{'s are' if j.n_windows != 1 else ' is'}" if most == j.n_windows else
+                 f"{j.n_windows} windows, {most} at the most at one horizon, are")
+        at = "" if most == j.n_windows else " at one horizon"
+        text = (f"{model} cannot be told apart from {baseline}: {overall}, {evidence}; {count} too few to decide "
+                f"at {conf} confidence (a verdict needs at least {needed}{at}){worst}.")
     elif unjudged_material:
         text = (f"{model} cannot be told apart from {baseline} on {j.n_windows} windows: {overall}, {evidence}; "
                 f"but {len(unjudged_material)} cell{'s are' if len(unjudged_material) > 1 else ' is'} more than "
                 f"{tolerance} worse without the evidence to decide at {conf} confidence: "
                 f"{_listed(sorted(unjudged_material, key=lambda c: -c.change), names)}.")
     else:
-        text = (f"{model} cannot be told apart from {baseline} on {j.n_windows} windows: {overall} includes no change, "
-                f"{evidence}; worst cells: {_listed(j.worst, names)}.")
+        includes = " includes no change" if math.isfinite(j.change) else ""
+        text = (f"{model} cannot be told apart from {baseline} on {j.n_windows} windows: {overall}{includes}, "
+                f"{evidence}{worst}.")
     return replace(j, sentence=text)

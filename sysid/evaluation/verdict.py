@@ -492,14 +492,19 @@ def seed_mean_verdict(verdicts: Sequence[BaselineVerdict], rule: VerdictRule = D
     cells pair with another's on the same log and windows; validation blocks drawn per seed
     (``[training] validation = "blocks"``) give the seeds different windows, and their
     validation cells are then paired by position in one pseudo-log per horizon
-    (`pseudo_log`). The pooled cells are the seeds' mean with their std."""
+    (`pseudo_log`). The pooled cells are the seeds' mean with their std, matched by split,
+    horizon and channel; a cell some seed lacks is left out of them."""
     first = verdicts[0]
     if len(verdicts) == 1:
         return first
     cells = []
-    for i, cell in enumerate(first.cells):
-        values = np.array([v.cells[i].model for v in verdicts])
-        baselines = {b: float(np.mean([v.cells[i].baselines[b] for v in verdicts])) for b in first.baselines}
+    by_seed = [{(c.split, float(c.horizon_s), c.channel): c for c in v.cells} for v in verdicts]
+    for cell in first.cells:   # those of every seed (a seed's blocks may hold no window of a long horizon)
+        key = (cell.split, float(cell.horizon_s), cell.channel)
+        if not all(key in mine for mine in by_seed):
+            continue
+        values = np.array([mine[key].model for mine in by_seed])
+        baselines = {b: float(np.mean([mine[key].baselines[b] for mine in by_seed])) for b in first.baselines}
         cells.append(ChannelCell(cell.split, cell.horizon_s, cell.channel, float(values.mean()), baselines,
                                  float(values.std(ddof=1))))
     losses = {k: float(np.mean([v.val_loss_multistep.get(k, math.nan) for v in verdicts]))
@@ -513,9 +518,9 @@ def seed_mean_verdict(verdicts: Sequence[BaselineVerdict], rule: VerdictRule = D
             seeds = [v.evidence[split][label] for v in verdicts]
             stacked = _members(seeds)
             if stacked is None and split == VALIDATION:
-                # validation blocks drawn per seed: the seeds' windows differ, so each log's cannot
-                # pair; paired by position in one pseudo-log per horizon, as before per-log cells,
-                # or, their numbers of windows differing, every seed's windows of a log in its cell
+                # validation blocks drawn per seed: the seeds' windows differ, so no log's pair; of
+                # equal numbers, paired by position in one pseudo-log per horizon (`pseudo_log`),
+                # else every seed's windows of a log in that log's cell (`seed_logs`)
                 stacked = _members([pseudo_log(cells) for cells in seeds]) or seed_logs(seeds)
             if stacked is not None:
                 evidence[split][label] = stacked

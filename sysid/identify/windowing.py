@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -134,11 +135,22 @@ def cut_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction: 
     Each file is cut into blocks of `block_s`; a random `val_fraction` of the blocks (seeded)
     is validation. Windows lie wholly inside one part, so none overlaps across the split.
     Given `validation_runs`, those are validation whole and `runs` training whole. The
-    windows follow the files' order, each file's in time order.
+    windows follow the files' order, each file's in time order. Two logs of one name are a
+    `DataError`: the validation windows' origins name their log by it.
     """
     rng = np.random.default_rng(seed)
     report = SplitReport()
     validation_runs = list(validation_runs)
+    named: dict[str, Run] = {}
+    for run in list(runs) + validation_runs:
+        if run.name in named and named[run.name] is not run:
+            other = named[run.name].path
+            if Path(other).resolve() == Path(run.path).resolve():
+                raise DataError(f"{run.path}: given twice among the training and validation logs (a log validates "
+                                "only what it did not train): keep it in one list")
+            raise DataError(f"{run.path}: the same name as {other} among the training and validation logs; sysid "
+                            f"names a log by its file name ({run.name!r}): rename one of them")
+        named[run.name] = run
     copies = {copy for copy, _ in duplicate_runs(list(runs) + validation_runs)}
     parts: dict[str, list] = {"train": [], "val": []}
     samples: tuple[list, list] = ([], [])

@@ -18,7 +18,7 @@ from sysid.mmg.model import MMG
 from sysid.mmg.ship import Ship, load_ship
 from sysid.runs.rundir import RunDir
 from sysid.runs.layout import load_model
-from sysid.store.manifest import has_manifest
+from sysid.store.manifest import has_manifest, seed_run_dirs
 
 BASELINE_LABEL = "MMG (ship file)"  # the physics baseline of a learned model, as `sysid compare` names it
 LEARNED_KINDS = ("nn", "hybrid")
@@ -71,7 +71,7 @@ def load_maneuver_model(path: str | os.PathLike) -> ManeuverModel:
                 members = [(f"{path.name} member {i}", m) for i, m in enumerate(model.members)]
             return ManeuverModel(path.name, model, ship_of(model), getattr(model, "kind", "mmg"), members,
                                  "ensemble members" if members else "", _training_range([path]), exp.data.columns)
-        seeds = sorted((p for p in path.glob("seed*") if has_manifest(p)), key=lambda p: (len(p.name), p.name))
+        seeds = seed_run_dirs(path)
         if not seeds:
             raise CheckpointError(f"{path}: neither a run directory (no manifest.json) nor a folder of seed run "
                                   "directories (seed0/, seed1/, ...)")

@@ -49,7 +49,7 @@ from sysid.maneuvers.base import Conditions, Maneuver, Side, TurningCircle, ZigZ
 from sysid.maneuvers.indices import INDEX_COLUMNS, KIND_INDICES, Track, maneuver_indices, zigzag_overshoots
 from sysid.maneuvers.simulate import gate_off_share, simulate_rows
 from sysid.device import compute_threads
-from sysid.store.manifest import has_manifest
+from sysid.store.manifest import has_manifest, seed_run_dirs
 from sysid.store.files import write_csv
 from sysid.workers import in_workers
 
@@ -328,7 +328,7 @@ def model_paths(path: str | os.PathLike) -> list[Path]:
     path = Path(path)
     if not path.is_dir() or has_manifest(path):
         return [path]
-    seeds = sorted((p for p in path.glob("seed*") if has_manifest(p)), key=lambda p: (len(p.name), p.name))
+    seeds = seed_run_dirs(path)
     return seeds or [path]  # none: loading `path` gives the clear error
 
 

@@ -218,10 +218,15 @@ class RangeSummary(JsonRecord):
 
 @dataclass(frozen=True)
 class LogFile(JsonRecord):
-    """A log a run used, as named in its config, with its SHA-256."""
+    """A log a run used: file, its absolute path when the run was made (in runs written
+    before `relative`, the path its config names); sha256, of its bytes; relative, the path
+    its config names, relative to the run directory (`sysid.runs.log_paths`; None: a run
+    written before, or a log of the paper's data set)."""
 
+    SPARSE = True
     file: str
     sha256: str
+    relative: str | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
 

@@ -18,7 +18,7 @@ from sysid.errors import CheckpointError
 from sysid.config.choices import ModelKind, TestLogs
 from sysid.data.splits import PAPER_TEST_STEMS
 from sysid.evaluation.verdict import BaselineVerdict, seed_mean_verdict
-from sysid.store.manifest import has_manifest, seed_folder, verify_manifest
+from sysid.store.manifest import has_manifest, seed_folder, seed_order, verify_manifest
 from sysid.store.target import OutputKind, record_file
 from sysid.runs.rundir import RunDir, read_table
 from sysid.records.base import read_json_object
@@ -212,7 +212,7 @@ def read_seed_group(path: Path) -> RunRecord:
     the seed means with their spread (`sysid.protocol.seeds.seed_metrics`); summary, history and
     traces are those of its first seed."""
     seed_dirs = sorted((p for p in path.iterdir() if p.is_dir() and p.name.startswith("seed")),
-                       key=lambda p: (len(p.name), p.name))
+                       key=lambda p: seed_order(p.name))
     if not seed_dirs:
         raise CheckpointError(f"{path}: neither a run directory nor a folder of seed runs (seed0/, seed1/, ...)")
     records = [read_run_dir(p) for p in seed_dirs]

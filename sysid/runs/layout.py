@@ -3,14 +3,16 @@
 
 A **run directory** (``sysid train CONFIG -o runs/NAME``)::
 
-    config.toml        resolved experiment config (all defaults filled in)
+    config.toml        resolved experiment config (all defaults filled in; its logs and ship file
+                       named relative to the run directory, `sysid.runs.log_paths`)
     summary.json       {"name", "model": "mmg"|"nn"|"hybrid", "status": "complete"|"failed: ...",
                         "dataset": "D1"|"D2"|..., "ship", "seed", "created", "train_seconds",
                         "epochs", "best_epoch", "val_loss_multistep" (the run's validation
                         loss, "val_loss_definition"), "verdict" (`BaselineVerdict.to_dict`:
                         model vs physics baselines per split, horizon and channel) and
                         "beats_baseline", "data" (the logs used: training source, every file
-                        with its SHA-256, test set "files"|"paper"|"none"),
+                        with its SHA-256, absolute path and path relative to the run
+                        directory, test set "files"|"paper"|"none"),
                         "training_range" ({speed, yaw_rate, factor}: beyond factor times
                         the training logs' largest speed or |r| a prediction diverged),
                         "stopped": {stage: "early stop"|"epoch limit"|...},
@@ -76,13 +78,14 @@ from sysid.hybrid.ensemble import SeedEnsemble
 from sysid.errors import CheckpointError
 from sysid.evaluation.divergence import PhysicalRange
 from sysid.evaluation.evaluate import Evaluation
-from sysid.config.experiment import Experiment, ship_overrides
+from sysid.config.experiment import Experiment, is_ship_path, ship_overrides
 from sysid.store.files import write_bytes, write_csv, write_text
 from sysid.mmg.model import MMG
 from sysid.hybrid.force_models import CorrectedModel, build_model
 from sysid.records.columns import baseline_folder
 from sysid.runs.rundir import BASELINE_METRICS_COLUMNS, RunDir
 from sysid.runs.knn_bank import KnnBank
+from sysid.runs.log_paths import portable_provenance, relative_to
 from sysid.records.summary import (VAL_LOSS_DEFINITION, DataSummary, GateSummary, IdentificationSummary, RangeSummary,
                                    RunSummary, TrainingDetails, UncertaintySummary, VerdictSummary)
 from sysid.runs.tensor_files import save_tensors
@@ -209,8 +212,8 @@ def write_run(run_dir: str | os.PathLike, exp: Experiment, model, evaluation: Ev
               history: pd.DataFrame | None = None, training=None,
               seconds: float | None = None, overwrite: bool = False, verdict=None,
               data: dict | None = None, baseline_metrics: pd.DataFrame | None = None, limits: PhysicalRange | None = None,
-              ship_definition: bytes | None = None, baseline_traces: dict[str, dict[str, pd.DataFrame]] | None = None
-              ) -> Path:
+              ship_definition: bytes | None = None, baseline_traces: dict[str, dict[str, pd.DataFrame]] | None = None,
+              home: str | os.PathLike | None = None) -> Path:
     """Write a complete run directory (config, ship file, weights, kNN bank, history,
     metrics, traces; `baseline_traces`: baseline label -> trace name -> `TRACE_COLUMNS` frame).
 
@@ -218,12 +221,18 @@ def write_run(run_dir: str | os.PathLike, exp: Experiment, model, evaluation: Ev
     started (`ship_definition`); None: read now. Staged (`sysid.store.staging`): the files
     go into a hidden directory beside `run_dir`, sealed with a manifest and moved into place
     complete; an existing `run_dir` is refused unless `overwrite`, which replaces all of it.
+    The logs of `data` are recorded relative to the run directory (`sysid.runs.log_paths`):
+    `home`, where it will live when it is written elsewhere and moved there (a sweep
+    trial's); None: `run_dir`.
     """
     if ship_definition is None:
         ship_definition = read_ship_definition(exp)
+    home = Path(home if home is not None else run_dir)
+    if data:
+        data = portable_provenance(data, home)
     with staged_directory(run_dir, "run", overwrite) as staging:
         _write_run_files(RunDir(staging), exp, model, evaluation, history, training, seconds, verdict, data,
-                         baseline_metrics, limits, ship_definition, baseline_traces)
+                         baseline_metrics, limits, ship_definition, baseline_traces, home)
     return Path(run_dir)
 
 
@@ -234,12 +243,17 @@ def read_ship_definition(exp: Experiment) -> bytes:
     return resolve_ship_path(exp.experiment.ship).read_bytes()
 
 
-def _used_files(exp: Experiment, data: dict | None) -> Experiment:
-    """`exp` with ``[data]`` train / validation / test as the files used (globs and
-    directories expanded), so the run's config.toml names what it was made from."""
+def _used_files(exp: Experiment, data: dict | None, home: Path) -> Experiment:
+    """`exp` as the run's config.toml names it: ``[data]`` train / validation / test as the
+    files used (globs and directories expanded; relative to the run directory `home` where
+    `data` records that, `sysid.runs.log_paths`) and a ship file relative to `home`, so
+    the run names what it was made from, found again when the project folder moves."""
+    ship = exp.experiment.ship
+    if is_ship_path(ship) and (relative := relative_to(ship, home)) is not None:
+        exp = exp.replace(experiment={"ship": relative})
     if not data or not exp.data.train:
         return exp
-    listed = {key: tuple(f["file"] for f in data[key]) for key in ("train", "validation", "test")
+    listed = {key: tuple(f.get("relative", f["file"]) for f in data[key]) for key in ("train", "validation", "test")
               if isinstance(data.get(key), list)}
     if data.get("held_out"):  # validation drawn from the training logs: all of them are [data] train
         listed["train"] += listed.pop("validation", ())
@@ -250,8 +264,9 @@ def _write_run_files(run: RunDir, exp: Experiment, model, evaluation: Evaluation
                      history: pd.DataFrame | None, training, seconds: float | None, verdict=None,
                      data: dict | None = None, baseline_metrics: pd.DataFrame | None = None, limits: PhysicalRange | None = None,
                      ship_definition: bytes | None = None,
-                     baseline_traces: dict[str, dict[str, pd.DataFrame]] | None = None) -> None:
-    write_text(_used_files(exp, data).to_toml(), run.config)
+                     baseline_traces: dict[str, dict[str, pd.DataFrame]] | None = None,
+                     home: Path | None = None) -> None:
+    write_text(_used_files(exp, data, home if home is not None else run.path).to_toml(), run.config)
     write_bytes(ship_definition if ship_definition is not None else read_ship_definition(exp),
                 run.ship_copy(exp.experiment.ship))
     save_model(model, run.path)

@@ -161,7 +161,8 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
                    progress: bool = True, log: Callable[[str], None] | None = None,
                    resume: bool = False, overwrite: bool = False,
                    validation: Sequence[Run] | None = None,
-                   on_epoch: Callable[[EpochReport], None] | None = None) -> RunResult:
+                   on_epoch: Callable[[EpochReport], None] | None = None,
+                   home: str | os.PathLike | None = None) -> RunResult:
     """Train `exp` (unless it is an MMG used as defined) on `train_runs` (default: its own
     training logs) with `validation` logs (default: its ``[data] validation``, else
     validation blocks of the training logs), evaluate it on `tests` at its horizons beside
@@ -177,6 +178,8 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
     than a test file, are a `ConfigError` before any training.
     `on_epoch` receives every epoch's `EpochReport` (sweeps report it to Ray Tune,
     tracking to MLflow). `log` takes the stage lines (default: this module's logger, INFO).
+    `home`: where the run directory will live when `out_dir` is a scratch place it is moved
+    from (a sweep trial's); its logs are recorded relative to it (`sysid.runs.log_paths`).
     """
     log = log if log is not None else logging.getLogger(__name__).info
     check_experiment_fits(exp, tests)
@@ -190,7 +193,7 @@ def run_experiment(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[
             runs, checked, held_out = _training_logs(exp, train_runs, data, checked, tests, log)
             trainer = _fitted(exp, runs, checked, out_dir, progress, log, resume, on_epoch)
         return _written(exp, out_dir, tests, runs, checked, held_out, trainer, started, overwrite, log,
-                        ship_definition)
+                        ship_definition, home)
 
 
 def run_seeds(experiments: Sequence[Experiment], out_dirs: Sequence[str | os.PathLike], tests: Sequence[Run],
@@ -198,7 +201,8 @@ def run_seeds(experiments: Sequence[Experiment], out_dirs: Sequence[str | os.Pat
               progress: bool = True, logs: Sequence[Callable[[str], None]] | None = None,
               group_log: Callable[[str], None] = print, resume: bool = False, overwrite: bool = False,
               validation: Sequence[Run] | None = None,
-              on_epochs: Sequence[Callable[[EpochReport], None] | None] | None = None) -> list[RunResult]:
+              on_epochs: Sequence[Callable[[EpochReport], None] | None] | None = None,
+              homes: Sequence[str | os.PathLike | None] | None = None) -> list[RunResult]:
     """`run_experiment` of the seeds of one configuration (`experiments`, equal but for
     ``[experiment] seed`` and name), each into its own run directory (`out_dirs`) with its
     own log, checkpoint and ``on_epoch``, their training stages side by side in this process
@@ -206,12 +210,14 @@ def run_seeds(experiments: Sequence[Experiment], out_dirs: Sequence[str | os.Pat
     Each run directory holds what `run_experiment` writes for its seed alone, its model
     equal to round-off. `resume` continues every seed from its checkpoint (a seed without
     one starts afresh), the unfinished ones side by side. Seeds that cannot share
-    (`side_by_side.refusal`) are a `ConfigError`: train them with `run_experiment`."""
+    (`side_by_side.refusal`) are a `ConfigError`: train them with `run_experiment`.
+    `homes`: each run's `home` (`run_experiment`)."""
     from sysid.identify.side_by_side import fit_side_by_side
 
     exp0 = experiments[0]
     logs = list(logs) if logs is not None else [group_log] * len(experiments)
     on_epochs = list(on_epochs) if on_epochs is not None else [None] * len(experiments)
+    homes = list(homes) if homes is not None else [None] * len(experiments)
     check_experiment_fits(exp0, tests)
     started = time.perf_counter()
     ship_definitions = [read_ship_definition(exp) for exp in experiments]
@@ -228,17 +234,20 @@ def run_seeds(experiments: Sequence[Experiment], out_dirs: Sequence[str | os.Pat
             raise
         share = (time.perf_counter() - started) / len(trainers)   # each seed's share of the group's time
         return [_written(exp, out, tests, runs, shared, held_out, trainer, time.perf_counter() - share, overwrite,
-                         log, ship)
-                for exp, out, trainer, log, ship in zip(experiments, out_dirs, trainers, logs, ship_definitions)]
+                         log, ship, home)
+                for exp, out, trainer, log, ship, home in zip(experiments, out_dirs, trainers, logs, ship_definitions,
+                                                              homes)]
 
 
 def _written(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[Run], runs: list[Run],
              validation: list[Run], held_out, trainer: Trainer | None, started: float, overwrite: bool,
-             log: Callable[[str], None], ship_definition: bytes | None = None) -> RunResult:
+             log: Callable[[str], None], ship_definition: bytes | None = None,
+             home: str | os.PathLike | None = None) -> RunResult:
     """A run after its training (`trainer` fitted; None: an MMG used as defined): validation
     scores beside the physics baselines, evaluation on `tests` with its verdict, the run
     directory written (its seconds counted from `started`; with `ship_definition`, the ship
-    file's bytes read when the run started) and the checkpoint removed."""
+    file's bytes read when the run started; its logs recorded relative to `home`, else
+    `out_dir`) and the checkpoint removed."""
     history, training, validation_scores = None, None, None
     if trainer is not None:
         history, training = trainer.history_, trainer.summary_
@@ -256,7 +265,7 @@ def _written(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[Run], 
     seconds = time.perf_counter() - started
     path = write_run(out_dir, exp, model, evaluation, history, training, seconds, overwrite,
                      verdict=verdict, data=data_used, baseline_metrics=baseline_metrics, limits=limits,
-                     ship_definition=ship_definition, baseline_traces=baseline_traces)
+                     ship_definition=ship_definition, baseline_traces=baseline_traces, home=home)
     if training is not None:
         TrainingCheckpoint(checkpoint_path(out_dir), exp.to_toml()).remove()
     return RunResult(path, exp, model, evaluation, history, training, seconds, verdict)

@@ -10,6 +10,10 @@ A run keeps a copy of the ship file it was made with (``ship/NAME.toml``); its e
 (`RunDir.read_experiment`) names that copy, so the run's MMG and physics baseline stay
 those it was trained and judged with after the original is moved or edited. A run written
 before the copy was kept names the original, as its config.toml does.
+
+The logs a run was made from are named relative to the run directory, with their absolute
+path and SHA-256 in summary.json (`sysid.runs.log_paths`): `read_experiment` finds them
+where they are now, `read_test_logs` checks the ones a command reads.
 """
 from __future__ import annotations
 
@@ -27,7 +31,8 @@ from sysid.config.experiment import Experiment, is_ship_path, load_experiment
 from sysid.errors import CheckpointError, ConfigError, IncompleteOutputError
 from sysid.records.columns import (BASELINE_METRICS_COLUMNS, HISTORY_COLUMNS, METRICS_COLUMNS,  # noqa: F401
                                    REQUIRED_METRICS_COLUMNS, TRACE_COLUMNS, baseline_folder, trace_name)
-from sysid.records.summary import RunSummary
+from sysid.records.summary import DataSummary, RunSummary
+from sysid.runs import log_paths
 from sysid.store.manifest import MANIFEST, has_manifest, verify_manifest
 
 if TYPE_CHECKING:
@@ -174,20 +179,45 @@ class RunDir:
 
     def read_experiment(self, ship: str | None = None) -> Experiment:
         """config.toml as an `Experiment` whose ship is the run's copy of its ship file
-        (`ship_copy`; a run without one: the file config.toml names), or `ship` when given
+        (`ship_copy`; a run without one: the file config.toml names, found again as its
+        logs are), or `ship` when given
         (a ship file or bundled name the user chose instead). When the original ship file
-        still exists and differs from the copy, one warning line names both."""
+        still exists and differs from the copy, one warning line names both. Its ``[data]``
+        logs are where they are now (`sysid.runs.log_paths.found_again`: relative to the run
+        directory, else where they were when it was made)."""
         try:
             exp = load_experiment(self.config)
         except ConfigError as exc:
             raise CheckpointError(f"{self.path}: bad run config ({exc})") from None
+        data = self._logs_recorded()
+        exp = exp.replace(data={part: log_paths.found_again(getattr(exp.data, part), data, self.path)
+                                for part in log_paths.PARTS if getattr(exp.data, part)})
         if ship is not None:
             return exp.replace(experiment={"ship": str(ship)})
         copy = self.ship_copy(exp.experiment.ship)
+        original = self._ship_found_again(exp.experiment.ship)
         if not copy.is_file():   # written before runs kept their ship file
-            return exp
-        _say_if_edited(exp.experiment.ship, copy, self.path)
+            return exp.replace(experiment={"ship": original})
+        _say_if_edited(original, copy, self.path)
         return exp.replace(experiment={"ship": str(copy.absolute())})
+
+    def _ship_found_again(self, ship: str) -> str:
+        """The ship file config.toml names (relative to the run directory), else where it
+        was when the run was made (summary.json ``ship``), else as named."""
+        if not is_ship_path(ship) or Path(ship).is_file() or not self.summary.is_file():
+            return ship
+        then = self.read_summary().ship
+        return then if then is not None and is_ship_path(then) and Path(then).is_file() else ship
+
+    def _logs_recorded(self) -> DataSummary | None:
+        """summary.json ``data`` (None: a run without it, or without summary.json yet)."""
+        return self.read_summary().data if self.summary.is_file() else None
+
+    def read_test_logs(self, exp: Experiment) -> list[Path]:
+        """The run's ``[data] test`` logs (of `exp`, its `read_experiment`) to read again:
+        `DataError` naming the run, the missing file and the fix; one warning line for a
+        log whose bytes differ from those the run recorded (`sysid.runs.log_paths.checked`)."""
+        return log_paths.checked(exp.data.test, self._logs_recorded(), self.path, "test")
 
     def read_metrics(self) -> pd.DataFrame:
         """metrics.csv as written (RMSE of u, v_m [m/s] and r [rad/s]); a run written before

@@ -61,11 +61,23 @@ def write_manifest(directory: str | os.PathLike, kind: str) -> Path:
     return write_text(json.dumps(doc, indent=1), directory / MANIFEST)
 
 
+def seed_order(name: str) -> tuple[int, str]:
+    """Sort key of seed folder names: seed2 before seed10 (``sysid reproduce --seeds N``'s
+    ``seed0``, ``seed1``, ...)."""
+    return len(name), name
+
+
+def seed_run_dirs(directory: str | os.PathLike) -> list[Path]:
+    """The seed run directories of a folder of seed runs (``seed*/`` with a manifest), in
+    seed order; empty when there are none."""
+    return sorted((p for p in Path(directory).glob("seed*") if (p / MANIFEST).is_file()), key=lambda p: seed_order(p.name))
+
+
 def seed_folder(directory: str | os.PathLike) -> str | None:
     """What to give instead when `directory` is a folder of seed runs (``runs/NAME/seed0``, ...
     of ``sysid reproduce --seeds N``) rather than one run; None otherwise."""
     directory = Path(directory)
-    seeds = sorted((p.name for p in directory.glob("seed*") if (p / MANIFEST).is_file()), key=lambda n: (len(n), n))
+    seeds = [p.name for p in seed_run_dirs(directory)]
     if (directory / MANIFEST).exists() or not seeds:
         return None
     return (f"{directory}: a folder of {len(seeds)} seed runs ({', '.join(seeds)}), not one run: give one seed "

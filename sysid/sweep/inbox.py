@@ -30,6 +30,7 @@ import tomllib
 from pathlib import Path, PurePosixPath
 
 
+from sysid.config.experiment import is_ship_path
 from sysid.errors import IncompleteOutputError
 from sysid.store.files import atomic_path, directory_mode
 from sysid.errors import CheckpointError
@@ -106,13 +107,20 @@ def read_journal(out: str | os.PathLike) -> list[dict]:
 USED_FILES = ("train", "validation", "test")  # [data] keys a run's config.toml lists as the files used
 
 
-def same_trial(written: dict, trial: dict) -> bool:
+def same_trial(written: dict, trial: dict, home: Path | None = None) -> bool:
     """Whether a run's config.toml (`written`) is its trial's resolved config (`trial`),
     both as TOML tables: every option alike except the ``[data]`` file lists, which the run
-    writes as the files it used (globs expanded, the test logs named)."""
-    def options(doc: dict) -> dict:
-        return {**doc, "data": {k: v for k, v in doc.get("data", {}).items() if k not in USED_FILES}}
-    return options(written) == options(trial)
+    writes as the files it used (globs expanded, the test logs named); its ship file,
+    named relative to the run directory `home` (`sysid.runs.log_paths`), is compared
+    where it points."""
+    def options(doc: dict, anchor: Path | None) -> dict:
+        experiment = dict(doc.get("experiment", {}))
+        ship = experiment.get("ship")
+        if anchor is not None and isinstance(ship, str) and is_ship_path(ship) and not os.path.isabs(ship):
+            experiment["ship"] = os.path.normpath(os.path.join(anchor, ship))
+        return {**doc, "experiment": experiment,
+                "data": {k: v for k, v in doc.get("data", {}).items() if k not in USED_FILES}}
+    return options(written, home) == options(trial, None)
 
 
 class RunInbox:
@@ -128,6 +136,11 @@ class RunInbox:
         if not parts or PurePosixPath(path).is_absolute() or ".." in parts:
             raise ValueError(f"trial path {path!r} is not inside the sweep's output")
         return self.out.joinpath(*parts)
+
+    def place(self, path: str) -> str:
+        """Where the run of trial `path` will live (the home its logs are recorded relative
+        to while it is written in a trial's scratch directory)."""
+        return str(self._run_dir(path))
 
     # -- one training per trial ------------------------------------------------------
     def claim(self, path: str, holder: str) -> str:
@@ -178,7 +191,7 @@ class RunInbox:
             os.chmod(arriving, directory_mode())
             unpack_run(blob, arriving)
             run = RunDir.open(arriving)
-            if not same_trial(run.read_config(), tomllib.loads(config)):
+            if not same_trial(run.read_config(), tomllib.loads(config), target):
                 raise IncompleteOutputError(f"{target}: the delivered run was trained with another config "
                                             "than its trial's; not kept")
             summary = run.read_summary()

@@ -236,7 +236,7 @@ def run_trial(trial: TrialSpec, inbox, data: TrialData, holder: str = "local",
         runs = data.training_runs(exp) if exp.needs_training else None
         run_experiment(exp, run_dir, data.tests, runs, data.root, progress=False, log=log,
                        resume=resume, validation=data.validation_runs(exp),
-                       on_epoch=_epoch_sender(trial, inbox, holder, report))
+                       on_epoch=_epoch_sender(trial, inbox, holder, report), home=call(inbox, "place", trial.path))
         summary = call(inbox, "deliver", trial.path, holder, pack_run(run_dir), trial.config, node)
     return result_row(trial, summary)
 
@@ -314,7 +314,8 @@ def run_group(trials: Sequence[TrialSpec], inbox, data: TrialData, holder: str =
             run_seeds(experiments, run_dirs, data.tests, data.training_runs(exp), data.root, progress=True,
                       logs=[seed_log(t.seed) for t in todo], group_log=log, resume=True,
                       validation=data.validation_runs(exp),
-                      on_epochs=[_epoch_sender(t, inbox, holder, report) for t in todo])
+                      on_epochs=[_epoch_sender(t, inbox, holder, report) for t in todo],
+                      homes=[call(inbox, "place", t.path) for t in todo])
             for trial, run_dir in zip(todo, run_dirs):
                 summary = call(inbox, "deliver", trial.path, holder, pack_run(run_dir), trial.config, node)
                 rows[trial.path] = result_row(trial, summary)

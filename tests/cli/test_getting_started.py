@@ -12,6 +12,7 @@ import pytest
 from cli_harness import in_process
 from sysid.package_data import bundled_dir
 from sysid.data.datasets import TEST_FILES
+from sysid.runs.rundir import RunDir
 
 LOGS = {"logs/monday_turn.csv": "turning/turn_14-Oct-2020_14_17_39.csv",
         "logs/monday_zigzag.csv": "zigzag/zigzag_31-Jul-2020_13_42_53.csv",
@@ -48,9 +49,13 @@ def test_getting_started_from_another_directory(tmp_path, dataset_dir, monkeypat
     out = in_process(capsys, "train", "../home/tanker/experiment.toml", "-o", run, "--test", "../home/tanker/test")
     assert out.code == 0, out.err
     resolved = (run / "config.toml").read_text()
-    # the run's config names what it was made from: the pattern's files, the test folder's log
-    assert str(project / "my_tanker.toml") in resolved and str(project / "logs" / "monday_turn.csv") in resolved
-    assert str(project / "test" / "wednesday_zigzag.csv") in resolved and 'dataset = ""' in resolved
+    # the run's config names what it was made from: the pattern's files, the test folder's log,
+    # relative to the run directory (sysid.runs.log_paths)
+    assert '"../../../home/tanker/my_tanker.toml"' in resolved and '"../../../home/tanker/logs/monday_turn.csv"' in resolved
+    assert '"../../../home/tanker/test/wednesday_zigzag.csv"' in resolved and 'dataset = ""' in resolved
+    exp = RunDir.open(run).read_experiment()
+    assert str(project / "logs" / "monday_turn.csv") in exp.data.train
+    assert exp.data.test == (str(project / "test" / "wednesday_zigzag.csv"),)
     summary = json.loads((run / "summary.json").read_text())
     assert summary["status"] == "complete" and summary["model"] == "hybrid"
     assert summary["verdict"]["decided_on"] == "test" and summary["data"]["test_set"] == "files"

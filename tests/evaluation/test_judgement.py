@@ -342,3 +342,60 @@ def test_fewer_windows_than_a_verdict_needs_decide_nothing():
     assert "; 1 window is too few to decide at 95 % confidence (a verdict needs at least 3)" in better.sentence
     assert judge(windows(3, 0.5), RULE).outcome is Outcome.BEATS
     assert judge(windows(3, 2.0), RULE).outcome is Outcome.WORSE
+
+
+def test_one_stretch_at_several_horizons_is_not_three_windows_of_evidence():
+    """One log with one window at each of three horizons: every resampled interval has no
+    width (one window, one log), so nothing is decided, whatever the sum of windows says;
+    three windows at one horizon (three logs) decide."""
+    one_each = [PairedCell("a", "Turn", h, ch, [[0.005]], [[0.01]], [0.0]) for h in (10.0, 30.0, 100.0) for ch in CHANNELS]
+    j = judge(one_each, RULE)
+    assert j.n_windows == 3 and j.change_low == j.change_high == pytest.approx(-0.5)
+    assert j.outcome is Outcome.NOT_DISTINGUISHABLE
+    assert ("3 windows, 1 at the most at one horizon, are too few to decide at 95 % confidence "
+            "(a verdict needs at least 3 at one horizon)") in j.sentence
+    three_logs = [PairedCell(f"log{k}", f"Log {k}", 30.0, ch, [[0.005 * (1 + 0.1 * k)]], [[0.01]], [0.0])
+                  for k in range(3) for ch in CHANNELS]
+    assert judge(three_logs, RULE).outcome is Outcome.BEATS
+
+
+def test_a_model_exact_on_a_cell_is_judged_not_refused():
+    """A model with no error at all against a baseline with some: the ratio is floored at
+    1 / RATIO_CAP (its log finite), the model beats the baseline."""
+    from sysid.evaluation.judgement import RATIO_CAP
+
+    cells = [PairedCell("a", "Turn", 30.0, ch, [[0.0] * 4], [[0.01, 0.02, 0.01, 0.02]], 30.0 * np.arange(4))
+             for ch in CHANNELS]
+    j = judge(cells, RULE)
+    assert j.outcome is Outcome.BEATS
+    assert j.change == pytest.approx(1 / RATIO_CAP - 1) and j.member_changes == pytest.approx((1 / RATIO_CAP - 1,))
+
+
+def test_a_baseline_exact_on_every_window_is_compared_not_called_diverged():
+    """The baseline exact on all of a cell's windows (a noise-free log of the ship file's own
+    MMG): a model with any error is RATIO_CAP times worse, materially so; a model exact too
+    changes nothing. Neither is "the baseline diverged", and the sentence lists no empty cells."""
+    from sysid.evaluation.judgement import RATIO_CAP
+
+    def cells(model: float) -> list[PairedCell]:
+        return [PairedCell("a", "Straight", 30.0, ch, [[model] * 4], [[0.0] * 4], 30.0 * np.arange(4)) for ch in CHANNELS]
+
+    worse, same = judge(cells(0.01), RULE), judge(cells(0.0), RULE)
+    assert worse.outcome is Outcome.WORSE and {c.decision for c in worse.cells} == {CellDecision.MATERIALLY_WORSE}
+    assert worse.change == pytest.approx(RATIO_CAP - 1)
+    assert same.outcome is Outcome.NOT_DISTINGUISHABLE and same.change == 0.0
+    assert {c.decision for c in same.cells} == {CellDecision.NOT_DISTINGUISHABLE}
+    assert "diverged" not in worse.sentence + same.sentence and "worst cells: ." not in same.sentence
+
+
+def test_each_seeds_own_baseline_is_drawn_with_its_seed():
+    """Seeds each with their own identified MMG (baseline rows B = M): every seed's model is
+    0.8 x its own baseline on every window, the baselines 10 times apart. Drawn paired, every
+    resample's ratio is 0.8: the interval is -20 % exactly; drawn apart it would mix one seed's
+    model with another's baseline."""
+    base = np.array([[0.01, 0.012, 0.011, 0.009], [0.1, 0.12, 0.11, 0.09], [0.05, 0.06, 0.055, 0.045]])
+    cells = [PairedCell(log, log, 30.0, ch, 0.8 * base, base, 30.0 * np.arange(4)) for log in ("a", "b") for ch in CHANNELS]
+    j = judge(cells, RULE)
+    assert j.change_low == pytest.approx(-0.2) and j.change_high == pytest.approx(-0.2)
+    assert all(c.change_low == pytest.approx(-0.2) and c.change_high == pytest.approx(-0.2) for c in j.cells)
+    assert j.outcome is Outcome.BEATS

@@ -48,3 +48,26 @@ def test_a_verdict_reads_back_from_summary_json_and_an_old_one_keeps_its_decisio
         assert "the pooled rule of a run written before sysid judged per log" in legacy.statement()
     table = verdict_table(BaselineVerdict.from_dict({**old, "beats_baseline": False}), "hybrid")
     assert [r[1] for r in table.rows] == ["all (pooled)"] * 3
+
+
+def test_seeds_whose_validation_horizons_differ_pool_each_cell_with_its_own():
+    """Validation blocks drawn per seed: one seed's blocks may hold no 100-s window (that
+    horizon left out), so the seeds' cells differ in number. Each pooled cell is the mean of
+    the same split, horizon and channel in every seed (0.4 and 0.6: 0.5); a cell one seed
+    lacks is left out of the table; the test cells pool as before (0.6 and 0.8 x the MMG's)."""
+    from dataclasses import replace
+
+    from sysid.evaluation.verdict import VALIDATION, ChannelCell
+
+    def validation(model: float, horizons) -> tuple:
+        return tuple(ChannelCell(VALIDATION, h, c, model, {SHIP_FILE_MMG: 1.0}) for h in horizons for c in ("u", "v_m", "r"))
+
+    a, b = seed_verdict(0.6), seed_verdict(0.8)
+    a = replace(a, cells=validation(0.4, (30.0, 100.0)) + a.cells)
+    b = replace(b, cells=validation(0.6, (30.0,)) + b.cells)
+    both = seed_mean_verdict([a, b], RULE)
+    pooled = {(c.split, c.horizon_s, c.channel): c for c in both.cells}
+    assert {k for k in pooled if k[0] == VALIDATION} == {(VALIDATION, 30.0, c) for c in ("u", "v_m", "r")}
+    assert pooled[(VALIDATION, 30.0, "u")].model == pytest.approx(0.5)
+    assert pooled[(VALIDATION, 30.0, "u")].model_std == pytest.approx(np.std([0.4, 0.6], ddof=1))
+    assert pooled[(TEST, 30.0, "r")].model == pytest.approx(0.7)

@@ -75,3 +75,37 @@ def test_the_verdicts_windows_are_each_logs_non_overlapping_ones(runs, held_out)
         (log, index), = o.by_log().items()
         assert np.allclose(o.start_s[kept[log]], o.start_s[index][::15])
         assert kept[log].size == -(-index.size // 15)
+
+
+def test_two_logs_of_one_name_are_refused_before_their_windows_merge(runs, dataset_dir, tmp_path):
+    """Two different logs named "log" (a/log.csv, b/log.csv): their validation windows would
+    be one log's in the verdict (one cell, the second's windows at the first's times dropped as
+    overlapping). Refused with one line naming both files, whether read together or one held
+    out for validation; the same file given twice is named as such."""
+    import shutil
+
+    from sysid.data.recordings import read_runs
+    from sysid.errors import DataError
+
+    for folder, name in zip("ab", BERTHING[:2]):
+        (tmp_path / folder).mkdir()
+        shutil.copy(dataset_dir / "berthing" / name, tmp_path / folder / "log.csv")
+    a, b = tmp_path / "a" / "log.csv", tmp_path / "b" / "log.csv"
+    with pytest.raises(DataError, match=rf"^{b}: the same name as {a}; sysid names a log by its file name "
+                                        r"\('log'\): rename one of them$"):
+        read_runs([a, b])
+    with pytest.raises(DataError, match=rf"^{a}: given twice; .* give it once$"):
+        read_runs([a, a])
+    first, second = read_run(a), read_run(b)
+    with pytest.raises(DataError, match=rf"^{b}: the same name as {a} among the training and validation logs"):
+        cut_windows([first, runs[2]], 10, 2.0, 0.3, True, torch.float64, 30.0, 0, validation_runs=[second])
+
+
+def test_one_log_for_training_and_validation_is_refused(runs, dataset_dir):
+    """The same file read as a training log and as a held-out validation log: named as given
+    twice (its validation windows would score what it trained)."""
+    from sysid.errors import DataError
+
+    again = read_run(dataset_dir / "berthing" / BERTHING[0])
+    with pytest.raises(DataError, match=rf"{BERTHING[0]}: given twice among the training and validation logs"):
+        cut_windows(runs[:2], 10, 2.0, 0.3, True, torch.float64, 30.0, 0, validation_runs=[again])

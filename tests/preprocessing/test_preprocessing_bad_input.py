@@ -85,8 +85,8 @@ def test_missing_gnss_column(raw):
 
 
 def test_wrong_unit_header(raw):
-    msg = error_of(raw.rename(columns={"n_prop [rps]": "n_prop [rpm]"}))
-    assert "n_prop" in msg and "rpm" in msg
+    msg = error_of(raw.rename(columns={"n_prop [rps]": "n_prop [rad/s]"}))   # [rpm] is converted
+    assert msg == "log.csv: column n_prop: unit [rad/s], expected [rps]"
 
 
 def test_degree_header_is_converted_and_logged(synthetic, raw):
@@ -100,6 +100,21 @@ def test_degrees_in_radian_fog_column(raw):
     raw["fog_yaw_rate [rad/s]"] = np.degrees(raw["fog_yaw_rate [rad/s]"])
     msg = error_of(raw)
     assert "fog_yaw_rate" in msg and "degrees" in msg
+
+
+def test_gyro_positive_to_port_or_mirrored_frame(raw):
+    """A gyro counted positive to port (z up), or antenna x, y in a frame with x east and y
+    north, turns the heading against the gyro: both were processed without a word (a 'gyro
+    bias' of 1.6 deg/s on the known-truth probe) and now get one line naming the two causes."""
+    port = raw.copy()
+    port["fog_yaw_rate [rad/s]"] = -port["fog_yaw_rate [rad/s]"]
+    mirrored = raw.copy()
+    for a in ("fore", "aft"):
+        mirrored[[f"gnss_{a}_x [m]", f"gnss_{a}_y [m]"]] = raw[[f"gnss_{a}_y [m]", f"gnss_{a}_x [m]"]].to_numpy()
+    for bad in (port, mirrored):
+        msg = error_of(bad)
+        assert msg.startswith("log.csv: column fog_yaw_rate: the gyro turns against the two-antenna heading")
+        assert "negate the column" in msg and "swap the x and y columns" in msg
 
 
 def test_degrees_in_radian_rudder_column(raw):
@@ -327,3 +342,25 @@ def test_empty_rows_dropped_and_logged(synthetic, raw, tmp_path):
 def test_no_gnss_at_all(raw):
     raw[["gnss_fore_x [m]", "gnss_aft_x [m]"]] = np.nan
     assert "no usable GNSS fix" in error_of(raw)
+
+
+def test_a_blank_line_keeps_the_lines_named_those_of_the_file(synthetic, tmp_path):
+    """A blank line inside a raw log (line 101) is an empty row, dropped and said at its line;
+    a bad time stamp after it is named at its own line of the file (703), as an editor shows it."""
+    from preprocessing.schema import read_raw
+    broken = synthetic.raw.copy()
+    broken.loc[700, "t [s]"] = 0.0          # data row 700: line 702 of the file as written
+    path = tmp_path / "blank.csv"
+    broken.to_csv(path, index=False)
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join(lines[:100] + [""] + lines[100:]) + "\n")
+    assert path.read_text().splitlines()[702].startswith("0.0,")   # line 703 (1-based)
+    with pytest.raises(RawLogError, match=r"blank.csv: column t: line 703: time goes backwards"):
+        read_raw(path)
+    good = tmp_path / "good.csv"
+    synthetic.raw.to_csv(good, index=False)
+    lines = good.read_text().splitlines()
+    good.write_text("\n".join(lines[:100] + [""] + lines[100:]) + "\n")
+    repairs: list[str] = []
+    frame, _ = read_raw(good, repairs)
+    assert len(frame) == len(synthetic.raw) and "dropped 1 empty row(s), first at line 101" in repairs

@@ -35,6 +35,15 @@ def test_central_difference_exact_on_quadratic():
     assert np.allclose(v[1:-1], 0.6 * t[1:-1] - 2, atol=1e-9)   # shrunk half-width at ends
 
 
+def test_noise_scale_of_the_narrower_differences_at_the_ends():
+    """A difference over m steps has a noise std proportional to 1 / m: at 10 Hz and 1.0 s the
+    full width is 20 steps, the one-sided ends 1 step (variance x 400), sample 3 six steps."""
+    scale = differencing.noise_scale(50, 0.1, 1.0)
+    assert scale[0] == pytest.approx(400.0) and scale[-1] == pytest.approx(400.0)
+    assert scale[3] == pytest.approx((20 / 6) ** 2) and scale[-4] == pytest.approx((20 / 6) ** 2)
+    assert np.all(scale[10:-10] == 1.0)
+
+
 def test_lowpass_minus_3db_at_cutoff_and_zero_phase():
     fs, t = 10.0, np.arange(0, 600, 0.1)
     for f, gain in ((0.2, 2 ** -0.5), (0.02, 1.0)):

@@ -89,3 +89,30 @@ def test_methods_name_the_gate_and_training_only_where_there_are_some(reproducti
     assert "val_loss_multistep 0.04000: the validation loss, L_v of the final model on" in paragraphs["NN D1"]
     assert paragraphs["MMG (lab X'vr)"].startswith("MMG (lab X'vr): MMG model (hull, propeller, rudder and wind "
                                                    "forces of the ship definition); not trained.")
+
+
+def test_eleven_seeds_print_the_verdict_the_report_states(tmp_path, capsys):
+    """Seeds are the model's members in the order seed0, seed1, ..., seed10 in the report; the
+    printed verdict draws them in that order too (not seed10 before seed2), so the bootstrap's
+    intervals, and the sentence, are the report's to the letter."""
+    from sysid.cli.train_commands import _warn_below_baseline
+    from sysid.report.methods import verdict_items
+    from sysid.report.source import read_source
+
+    out = write_reproduction(tmp_path, scale=0.5, names=("mmg_paper", "hybrid_D2"))
+    runs = out / "runs"
+    group = runs / "hybrid_D2"
+    shutil.move(str(group), str(runs / "seed0"))
+    group.mkdir()
+    shutil.move(str(runs / "seed0"), str(group / "seed0"))
+    factors = (0.5, 1.4, 0.6, 1.3, 0.7, 1.2, 0.8, 1.1, 0.55, 1.35, 0.9)   # seed k: factors[k] x the MMG's RMSE
+    for k, factor in enumerate(factors):
+        if k:
+            shutil.copytree(group / "seed0", group / f"seed{k}")
+        with_summary(group / f"seed{k}", verdict=verdict("hybrid", factor), beats_baseline=factor < 1, seed=k)
+    write_manifest(out, "reproduction")
+    stated = dict(verdict_items(read_source(out)))["Verdict: Hybrid D2"].removeprefix("WARNING: ")
+    _warn_below_baseline(out)
+    printed = capsys.readouterr()
+    lines = [line for line in (printed.out + printed.err).splitlines() if "run hybrid_D2 (11 seeds): " in line]
+    assert len(lines) == 1 and lines[0].split("run hybrid_D2 (11 seeds): ", 1)[1] == stated

@@ -9,6 +9,7 @@ import hashlib
 import json
 import os
 import subprocess
+import tomllib
 
 import pandas as pd
 import pytest
@@ -35,4 +36,8 @@ def test_a_sweep_on_own_logs_with_no_paper_data_from_a_folder_holding_sysid(tmp_
         assert validation_files(run) == ["harbour_check.csv"]
         shipped = json.loads((run / "summary.json").read_text())["data"]["validation"][0]["sha256"]
         assert shipped == hashlib.sha256(check.read_bytes()).hexdigest()
+        # written in a trial's scratch folder, it names its logs relative to where it lives now
+        named = tomllib.loads((run / "config.toml").read_text())["data"]["validation"]
+        assert not os.path.isabs(named[0])
+        assert [os.path.realpath(run / p) for p in named] == [os.path.realpath(check)]
     assert results.val_loss_multistep.notna().all() and (results.val_loss_multistep > 0).all()
