@@ -14,6 +14,7 @@ per step, each as a ratio to the compiled package's and as the share of a contro
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import os
 import subprocess
@@ -21,52 +22,12 @@ import sys
 import tempfile
 from pathlib import Path
 
-FRESH = r"""
-import json, sys, time, torch
-torch.set_num_threads(1)
-path, loader, calls = sys.argv[1], sys.argv[2], int(sys.argv[3])
-step = torch._inductor.aoti_load_package(path) if loader == "package" else torch.export.load(path).module()
-x = torch.tensor([[0.0, 0.4, 0.0, 0.0, 0.0, 0.0]], dtype=torch.float64)
-u = torch.tensor([[10.0, 0.1, 1.0, 0.5]], dtype=torch.float64)
-times = []
-with torch.no_grad():
-    for _ in range(50):
-        step(x, u)
-    for _ in range(calls):
-        t0 = time.perf_counter(); step(x, u); times.append(time.perf_counter() - t0)
-    t0 = time.perf_counter()
-    y = x
-    for _ in range(60):
-        y = step(y, u)
-        y = y[0] if isinstance(y, (tuple, list)) else y   # --with-gate: (state, gate_on)
-    ahead = time.perf_counter() - t0
-times.sort()
-print(json.dumps({"step": times[len(times) // 2], "ahead": ahead, "sysid": "sysid" in sys.modules}))
-"""
-
-
-def fresh(path: Path, loader: str, calls: int, checked: bool = False) -> dict:
-    env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    env.pop("AOTI_RUNTIME_CHECK_INPUTS", None)
-    if checked:
-        env["AOTI_RUNTIME_CHECK_INPUTS"] = "1"
-    done = subprocess.run([sys.executable, "-c", FRESH, str(path), loader, str(calls)], capture_output=True,
-                          text=True, env=env, check=True)
-    result = json.loads(done.stdout.strip().splitlines()[-1])
-    assert not result["sysid"]
-    return result
-
-
-def eager(run_dir: Path, dt: float, calls: int) -> dict:
+def timed(step, calls: int) -> dict:
+    """Median seconds per call of `step` at batch 1 (a straight run's state and inputs), and
+    the seconds of a 60-step look-ahead; run here and, by its source, in a fresh python."""
     import time
 
     import torch
-
-    from sysid.config.choices import Method
-    from sysid.fast.stepper import Step
-    from sysid.runs.layout import load_model
-    torch.set_num_threads(1)
-    step = Step(load_model(run_dir)[1], Method.EULER, dt)
     x = torch.tensor([[0.0, 0.4, 0.0, 0.0, 0.0, 0.0]], dtype=torch.float64)
     u = torch.tensor([[10.0, 0.1, 1.0, 0.5]], dtype=torch.float64)
     times = []
@@ -81,9 +42,43 @@ def eager(run_dir: Path, dt: float, calls: int) -> dict:
         y = x
         for _ in range(60):
             y = step(y, u)
+            y = y[0] if isinstance(y, (tuple, list)) else y   # --with-gate: (state, gate_on)
         ahead = time.perf_counter() - t0
     times.sort()
     return {"step": times[len(times) // 2], "ahead": ahead}
+
+
+FRESH = inspect.getsource(timed) + r"""
+import json, sys, torch
+torch.set_num_threads(1)
+path, loader, calls = sys.argv[1], sys.argv[2], int(sys.argv[3])
+step = torch._inductor.aoti_load_package(path) if loader == "package" else torch.export.load(path).module()
+print(json.dumps({**timed(step, calls), "sysid": "sysid" in sys.modules}))
+"""
+
+
+def fresh(path: Path, loader: str, calls: int, checked: bool = False) -> dict:
+    """`timed` of an exported file in a python with torch alone (one thread)."""
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    env.pop("AOTI_RUNTIME_CHECK_INPUTS", None)
+    if checked:
+        env["AOTI_RUNTIME_CHECK_INPUTS"] = "1"
+    done = subprocess.run([sys.executable, "-c", FRESH, str(path), loader, str(calls)], capture_output=True,
+                          text=True, env=env, check=True)
+    result = json.loads(done.stdout.strip().splitlines()[-1])
+    assert not result["sysid"]
+    return result
+
+
+def eager(run_dir: Path, dt: float, calls: int) -> dict:
+    """`timed` of sysid's eager step of the run's model, in this process."""
+    import torch
+
+    from sysid.config.choices import Method
+    from sysid.fast.stepper import Step
+    from sysid.runs.layout import load_model
+    torch.set_num_threads(1)
+    return timed(Step(load_model(run_dir)[1], Method.EULER, dt), calls)
 
 
 def main() -> None:
