@@ -42,6 +42,18 @@ def test_straight_running_rps_is_the_closed_form_of_the_standard_mmg():
     assert abs(surge_acceleration(model, U, np.array([n]))[0]) < 1e-12
 
 
+def test_an_nn_only_model_outside_its_data_at_rest_says_why_it_has_no_straight_running():
+    """NN-only with its gate fitted on straight running at 11.8 rps: with the propeller
+    stopped the state lies outside the training data, the FNN is off and no force acts
+    (du/dt = 0 exactly), which the error names."""
+    bank = torch.zeros(400, 6, dtype=torch.float64)
+    bank[:, 1] = torch.linspace(1.17248 - 0.05, 1.17248 + 0.05, 400)
+    model = _hybrid_without_correction(load_ship("kvlcc2_l7"), bank)
+    model.physics = False   # NN-only: F = gate * F_NN
+    with pytest.raises(ManeuverError, match=r"du/dt = 0 m/s\^2; at 0 rps the kNN gate is off: .*NN-only has no force"):
+        straight_running_rps(model, 1.17248)
+
+
 def test_straight_running_without_a_root_is_one_clear_error():
     with pytest.raises(ManeuverError, match="no propeller revolutions"):
         straight_running_rps(MMG(load_ship("kvlcc2_l7")), 1.1, max_rps=2.0)
