@@ -61,7 +61,7 @@ def hybrid_run(zigzag, tmp_path_factory):
     run_dir = tmp_path_factory.mktemp("run")
     write_text(exp.to_toml(), run_dir / "config.toml")
     save_model(model, run_dir)
-    write_text('{"model": "hybrid"}', run_dir / "summary.json")
+    write_text('{"name": "export_test", "model": "hybrid"}', run_dir / "summary.json")
     write_text("scenario,file,horizon_s,n_windows,rmse_u,rmse_v,rmse_r\n", run_dir / "metrics.csv")
     write_manifest(run_dir, "run")  # sealed, as a run written by sysid is
     return run_dir, load_model(run_dir)[1]
