@@ -70,14 +70,41 @@ def evaluate(
     evaluation = evaluate_model(model, runs, horizons, chosen, traces=False, limits=limits)
     for divergence in evaluation.divergences:
         typer.secho(f"WARNING: the prediction diverged on {divergence.text()}", fg=typer.colors.YELLOW, err=True)
-    table = evaluation.metrics
+    table = _with_gate(evaluation)
     write_csv(table, output, float_format="%.6g")
     with pd.option_context("display.width", 120, "display.float_format", "{:.5f}".format):
         typer.echo(f"{RMSE_UNITS}:\n" + table.to_string(index=False))
     typer.echo(f"evaluate: {len(runs)} file(s), horizons {', '.join(f'{h:g}' for h in horizons)} s, "
                f"{label} -> {output} ({time.perf_counter() - start:.1f} s)")
+    _print_gate(model, table)
     if run_exp is not None:
         _beside_baselines(run_exp, model, baselines, runs, horizons, chosen, limits)
+
+
+def _with_gate(evaluation):
+    """The metrics table; of a model with a kNN gate, with ``gate_off_share``: the share of
+    each file's window points at that horizon at which the gate switched the FNN off (the
+    physics MMG alone there: outside the training data)."""
+    from sysid.evaluation.evaluate import trace_name
+    table = evaluation.metrics
+    if not evaluation.gate_off_share:
+        return table
+    shares = [evaluation.gate_off_share.get(trace_name(f, h)) for f, h in zip(table.file, table.horizon_s)]
+    return table.assign(gate_off_share=[float("nan") if s is None else s for s in shares])
+
+
+def _print_gate(model, table) -> None:
+    """Per file and horizon, how much of the prediction ran outside the training data."""
+    from sysid.hybrid.force_models import gate_off_meaning
+    if "gate_off_share" not in table:
+        return
+    gate = getattr(model, "gate", None)
+    shown = f", threshold {float(gate.threshold):.4g}" if gate is not None else ""
+    typer.echo(f"outside the training data (kNN gate{shown}; where it is off, {gate_off_meaning(model)}), "
+               "gate_off_share in the metrics CSV:")
+    for row in table.itertuples():
+        typer.echo(f"  {row.file} at {row.horizon_s:g} s: gate off on {100 * row.gate_off_share:.1f} % of the "
+                   "window points" + (" (mostly outside the training data)" if row.gate_off_share > 0.5 else ""))
 
 
 def _model_to_judge(run_dir, model_kind: str, exp, ship, set_, quadrature: str):

@@ -21,7 +21,10 @@ def export(
     batch: int = typer.Option(1, "--batch", help="Ships per call (fixed in the file)."),
     float32: bool = typer.Option(False, "--float32", help="float32 instead of float64."),
     portable: bool = typer.Option(False, "--portable",
-                                  help="A torch.export program (any platform, eager speed) instead of native code."),
+                                  help="A torch.export program (any platform and later torch, tens of times slower) instead of native code."),
+    with_gate: bool = typer.Option(False, "--with-gate", help="Return the kNN gate's decision too: step(x, u) -> "
+                                                              "(x_next, gate_on), gate_on 1 where the FNN acted, 0 "
+                                                              "outside the training data."),
 ) -> None:
     """Export step(state, inputs) -> next state of a trained model (MMG, NN-only, hybrid with its
     kNN gate), loadable with torch alone; prints its latency."""
@@ -44,9 +47,10 @@ def export(
         raise DataError(f"-o {output}: an exported step is a .pt2 file; name it e.g. -o {output.with_suffix('.pt2')}")
     exp, model = load_model(run_dir, dtype)
     export_model(model, output, method, dt, batch, dtype, compiled=not portable,
-                 log=logs.indented())
+                 log=logs.indented(), gate=with_gate)
     per_step, prediction = step_latency(load_step(output), 200 if portable else 2000)
     kind = "torch.export program" if portable else "AOTInductor package"
+    outputs = "the state and the kNN gate's decision" if with_gate else "the state alone"
     typer.echo(f"export: {exp.experiment.model} model of {run_dir}, {method.value} dt {dt:g} s, batch {batch}, "
-               f"{str(dtype)[6:]} -> {output} ({kind})\n"
+               f"{str(dtype)[6:]} -> {output} ({kind}; returns {outputs})\n"
                f"  latency: {per_step * 1e6:.0f} us per step, {prediction * 1e3:.1f} ms per 100-step prediction")

@@ -1,4 +1,5 @@
-"""``sysid forces``: the MMG's force components and state derivatives for rows of states."""
+"""``sysid forces``: the force components (the MMG's, and a trained run's FNN correction with
+its kNN gate) and state derivatives for rows of states."""
 from __future__ import annotations
 
 import time
@@ -19,8 +20,11 @@ FORCE_INPUTS = [*STATE, *INPUTS]
 DERIVATIVES = [f"{c}_dot" for c in STATE]
 
 
-def force_columns(model, frame):
-    """Force components, totals and state derivatives (SI) for rows of `FORCE_INPUTS`."""
+def force_columns(model, frame, learned: bool = False):
+    """Force components (X, Y [N], N [N m]), totals and state derivatives (SI) for rows of
+    `FORCE_INPUTS`; of a `learned` model the FNN's correction (XNN, YNN, NNN) too and, with
+    a kNN gate, its distance ``knn_distance`` and decision ``gate_on`` (1: the FNN acts, 0:
+    outside the training data, the MMG alone)."""
     import pandas as pd
     import torch
     from sysid.dynamics.equations import state_derivative
@@ -31,7 +35,7 @@ def force_columns(model, frame):
         forces = model(state, inputs)
         deriv = state_derivative(state, forces.total, model.coefficients)
     out = {}
-    for comp in MMG_COMPONENTS:
+    for comp in (*MMG_COMPONENTS, "correction") if learned else MMG_COMPONENTS:
         arr = getattr(forces, comp).numpy()
         for j, axis in enumerate(FORCE):
             out[force_column(comp, axis)] = arr[:, j]
@@ -40,6 +44,9 @@ def force_columns(model, frame):
         out[axis] = total[:, j]
     for j, name in enumerate(DERIVATIVES):
         out[name] = deriv.numpy()[:, j]
+    if forces.gate_on is not None:
+        out["knn_distance"] = forces.ood_distance.numpy()
+        out["gate_on"] = forces.gate_on.numpy().astype(int)
     return pd.DataFrame(out, index=frame.index)
 
 
@@ -81,8 +88,15 @@ def forces(
     set_: Optional[List[str]] = SetOption,
     quadrature: str = QuadratureOption,
     chunk: int = typer.Option(65536, help="Rows per batch."),
+    run_dir: Optional[Path] = typer.Option(None, "--run", help="A run directory (sysid train): its model's forces "
+                                                               "(its MMG's components, the FNN's XNN, YNN, NNN, the "
+                                                               "kNN gate's knn_distance and gate_on)."),
 ) -> None:
-    """MMG force components (hull, propeller, rudder, wind; X, Y, N) and state derivatives per row."""
+    """MMG force components (hull, propeller, rudder, wind; X, Y [N], N [N m]) and state derivatives per row.
+
+    With --run, a trained model's: its MMG's components beside the FNN's correction, their
+    total, and the kNN gate's distance and decision per row (gate_on 0: outside the
+    training data, the FNN switched off)."""
     import numpy as np
     import pandas as pd
     from sysid.store.files import write_float_csv
@@ -91,14 +105,23 @@ def forces(
 
     start = time.perf_counter()
     checks.POSITIVE_COUNT.check("--chunk", chunk)
-    model = mmg_of(ship, set_, quadrature)
-    claim(output, OutputKind.FILE, [input_csv, ship_file(ship)])
+    if run_dir is not None:
+        from sysid.runs.layout import load_model
+        if set_ or quadrature != "exact":
+            raise DataError("--run: the run's model is its own (its ship file and [mmg] overrides); "
+                            "--set and --quadrature apply to a ship file's MMG without --run")
+        run_exp, model = load_model(run_dir)
+        learned = run_exp.needs_training
+        claim(output, OutputKind.FILE, [input_csv, run_dir])
+    else:
+        model, learned = mmg_of(ship, set_, quadrature), False
+        claim(output, OutputKind.FILE, [input_csv, ship_file(ship)])
     numeric = _read_force_inputs(input_csv)
     parts = []
     bounds = range(0, len(numeric), chunk)
     bar = progress(bounds, desc="forces", unit="batches", quiet=len(bounds) < 4)
     for lo in bar:
-        parts.append(force_columns(model, numeric.iloc[lo:lo + chunk]))
+        parts.append(force_columns(model, numeric.iloc[lo:lo + chunk], learned))
     result = pd.concat([numeric] + [pd.concat(parts)], axis=1)
     computed = result.columns[len(FORCE_INPUTS):]
     values = result[computed].to_numpy()
@@ -119,6 +142,12 @@ def forces(
     write_float_csv(result, output, on_block=writing.update)
     writing.close()
     if not logs.is_quiet():  # -q: warnings and errors only
-        typer.echo(f"forces: {len(result)} rows, ship {model.ship.name}, {quadrature} cross-flow -> {output} "
-                   f"({time.perf_counter() - start:.2f} s)")
+        source = f"run {run_dir}" if run_dir is not None else f"ship {model.ship.name}, {quadrature} cross-flow"
+        typer.echo(f"forces: {len(result)} rows, {source} -> {output} ({time.perf_counter() - start:.2f} s); "
+                   "forces X, Y [N], moments N [N m]")
+        if "gate_on" in result:
+            from sysid.hybrid.force_models import gate_off_meaning
+            off = 1.0 - float(result["gate_on"].mean())
+            typer.echo(f"  kNN gate: off on {100 * off:.1f} % of the rows (gate_on 0: outside the training data; "
+                       f"{gate_off_meaning(model)})")
 

@@ -142,7 +142,7 @@ def maneuver(
     results, shown, compiled, seconds = _simulated(subject, physics, maneuvers, conditions, compiled)
     compared = _written(target, subject, physics, conditions, sources, results, shown, compiled, seconds, logged,
                         report)
-    _say_outcome(output, results, shown, compared)
+    _say_outcome(output, results, shown, compared, subject.model)
     typer.echo(f"maneuver: {output} ({seconds:.1f} s simulating, {time.perf_counter() - start:.1f} s in all)")
 
 
@@ -262,7 +262,7 @@ def _written(target, subject, physics, conditions, sources, results, shown, comp
     return compared
 
 
-def _say_outcome(output: Path, results, shown, compared) -> None:
+def _say_outcome(output: Path, results, shown, compared, model=None) -> None:
     """The indices (beside the physics baseline's, if any), the comparison with the recorded
     maneuvers (if any), and warnings for diverged maneuvers and for maneuvers mostly outside
     the kNN gate's training data."""
@@ -279,11 +279,29 @@ def _say_outcome(output: Path, results, shown, compared) -> None:
         typer.secho("WARNING: diverged (indices not valid): " + "; ".join(
             f"{own.maneuver.name} ({own.model}) at t = {own.diverged_at_s:.1f} s, {own.divergence}" for own in diverged),
             fg=typer.colors.YELLOW, err=True)
+    _print_gate(results, model)
     for r in results:
         if r.gate_off_share is not None and r.gate_off_share > MOSTLY_OUTSIDE:
-            typer.secho(f"  {r.maneuver.name}: kNN gate off on {100 * r.gate_off_share:.0f} % of the steps: the "
+            typer.secho(f"  {r.maneuver.name}: kNN gate off on {100 * r.gate_off_share:.1f} % of the steps: the "
                         "maneuver runs mostly outside the training data (the FNN is switched off there)",
                         fg=typer.colors.YELLOW)
+
+
+def _print_gate(results, model=None) -> None:
+    """Of a model with a kNN gate: per maneuver, the share of its steps outside the training
+    data (gate off: the FNN switched off; `gate_off_meaning` of the model) and its largest
+    d_kNN against the gate's threshold."""
+    from sysid.hybrid.force_models import gate_off_meaning
+    gated = [r for r in results if r.gate_off_share is not None]
+    if not gated:
+        return
+    threshold = next((r.knn_threshold for r in gated if r.knn_threshold is not None), None)
+    shown = f"threshold {threshold:.4g}" if threshold is not None else "each member's own threshold"
+    typer.echo(f"outside the training data (kNN gate, {shown}; where it is off, {gate_off_meaning(model)}; "
+               "per step in trajectories.csv: gate_on, knn_distance):")
+    for r in gated:
+        largest = f", largest d_kNN {max(r.knn_distance[:-1]):.4g}" if r.knn_distance is not None else ""
+        typer.echo(f"  {r.maneuver.name}: gate off on {100 * r.gate_off_share:.1f} % of the steps{largest}")
 
 
 def _recorded_runs(paths: list[Path], config: Optional[Path], run_columns=None):

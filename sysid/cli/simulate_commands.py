@@ -1,4 +1,5 @@
-"""``sysid simulate``: one prediction of the MMG from a recorded state with the recorded inputs."""
+"""``sysid simulate``: one prediction of the MMG, or of a trained run beside its physics
+baseline, from a recorded state with the recorded inputs."""
 from __future__ import annotations
 
 import dataclasses
@@ -33,9 +34,15 @@ def simulate(
     set_: Optional[List[str]] = SetOption,
     quadrature: str = QuadratureOption,
     compiled: Optional[bool] = CompiledOption,
+    run_dir: Optional[Path] = typer.Option(None, "--run", help="A run directory (sysid train): predict with its model "
+                                                               "(MMG, NN-only, hybrid with its kNN gate) beside its "
+                                                               "physics baseline; --ship FILE loads it with FILE."),
 ) -> None:
-    """Predict from the recorded state at T with the recorded inputs (zero-order hold)."""
-    import numpy as np
+    """Predict from the recorded state at T with the recorded inputs (zero-order hold).
+
+    Forces [N] and moments [N m] per component; with --run, the FNN's correction, the kNN
+    gate's distance and decision at every step, and the physics baseline's prediction
+    (``mmg_`` columns) from the same state with the same inputs."""
     import torch
     from sysid.fast.compiled import predict
     from sysid.data.recordings import read_run
@@ -48,25 +55,57 @@ def simulate(
     checks.DURATION.check("--horizon", horizon)
     checks.TIME.check("--start", start)
     exp = load_experiment(config) if config is not None else None
-    ship_name = ship or (exp.experiment.ship if exp is not None else "esso_osaka")
-    overrides = [f"{k}={v!r}" for k, v in (exp.mmg.overrides.items() if exp is not None and not ship else ())]
-    model = mmg_of(ship_name, overrides + list(set_ or []), quadrature)
-    claim(output, OutputKind.FILE, [log, config, ship_file(ship_name)])
-    run = read_run(log, rate, exp.data.columns if exp is not None else None)
+    baseline = None
+    if run_dir is not None:
+        from sysid.runs.layout import load_model
+        from sysid.runs.lifecycle import physics_baselines
+        if set_ or quadrature != "exact":
+            raise DataError("--run: the run's model is its own (its ship file and [mmg] overrides); "
+                            "--set and --quadrature apply to a ship file's MMG without --run")
+        run_exp, model = load_model(run_dir, ship=ship)
+        baseline = next(iter(physics_baselines(run_exp, model, torch.float64).items()), None)
+        columns = exp.data.columns if exp is not None else run_exp.data.columns
+        claim(output, OutputKind.FILE, [log, config, run_dir, ship_file(ship) if ship else None])
+    else:
+        ship_name = ship or (exp.experiment.ship if exp is not None else "esso_osaka")
+        overrides = [f"{k}={v!r}" for k, v in (exp.mmg.overrides.items() if exp is not None and not ship else ())]
+        model = mmg_of(ship_name, overrides + list(set_ or []), quadrature)
+        columns = exp.data.columns if exp is not None else None
+        claim(output, OutputKind.FILE, [log, config, ship_file(ship_name)])
+    run = read_run(log, rate, columns)
     i0, steps = _window(run, log, start, horizon, rate)
     sl = slice(i0, i0 + steps + 1)
     x0 = torch.as_tensor(run.states[i0], dtype=torch.float64)
     inputs = torch.as_tensor(run.inputs[sl], dtype=torch.float64)
-    path = prediction_path("simulate", compiled, [model], [(1, steps)], chosen.method, run.dt)
+    models = [model] if baseline is None else [model, baseline[1]]
+    path = prediction_path("simulate", compiled, models, [(1, steps)], chosen.method, run.dt)
     chosen = dataclasses.replace(chosen, compiled=path.compiled)  # the method parsed once, above
     with torch.no_grad():
         pred = predict(model, x0, inputs, run.dt, chosen)
         forces = model(pred, inputs)
-    out = _prediction_frame(run, sl, i0, pred.numpy(), forces)
+        beside = None if baseline is None else predict(baseline[1], x0, inputs, run.dt, chosen).numpy()
+    out = _prediction_frame(run, sl, i0, pred.numpy(), forces, beside)
     write_csv(out, output, float_format="%.17g")
-    err = np.sqrt(((out[["u", "v", "r"]].to_numpy() - out[["obs_u", "obs_v", "obs_r"]].to_numpy()) ** 2).mean(0))
-    typer.echo(f"simulate: {run.name} from t = {run.t[i0]:.1f} s, {steps} {chosen.method} steps of {run.dt:g} s -> {output}\n"
-               f"  RMSE vs record: u {err[0]:.4f} m/s, v_m {err[1]:.4f} m/s, r {err[2]:.4f} rad/s")
+    typer.echo(f"simulate: {run.name} from t = {run.t[i0]:.1f} s, {steps} {chosen.method} steps of {run.dt:g} s -> {output}")
+    typer.echo(f"  RMSE vs record: {_rmse(out, '')}" + ("" if run_dir is None else f" ({run_exp.experiment.model} run)"))
+    if baseline is not None:
+        typer.echo(f"  RMSE vs record: {_rmse(out, 'mmg_')} ({baseline[0]}, the physics baseline: mmg_ columns)")
+    if forces.gate_on is not None:
+        from sysid.hybrid.force_models import gate_off_meaning
+        off = 1.0 - float(forces.gate_on[:-1].double().mean()) if steps else 0.0
+        gate = getattr(model, "gate", None)
+        shown = f", threshold {float(gate.threshold):.4g}" if gate is not None else ""
+        typer.echo(f"  kNN gate{shown}: off on {100 * off:.1f} % of the steps (largest knn_distance "
+                   f"{float(forces.ood_distance.max()):.4g}); where off, {gate_off_meaning(model)}"
+                   + (": mostly outside the training data" if off > 0.5 else ""))
+
+
+def _rmse(out, prefix: str) -> str:
+    """RMSE of the prediction (columns `prefix` u, v, r) against the record, in words."""
+    import numpy as np
+    predicted = out[[f"{prefix}{c}" for c in ("u", "v", "r")]].to_numpy()
+    err = np.sqrt(((predicted - out[["obs_u", "obs_v", "obs_r"]].to_numpy()) ** 2).mean(0))
+    return f"u {err[0]:.4f} m/s, v_m {err[1]:.4f} m/s, r {err[2]:.4f} rad/s"
 
 
 def _window(run, log: Path, start: float, horizon: float, rate: float) -> tuple[int, int]:
@@ -93,9 +132,12 @@ def _window(run, log: Path, start: float, horizon: float, rate: float) -> tuple[
     return i0, steps
 
 
-def _prediction_frame(run, sl: slice, i0: int, pred, forces):
+def _prediction_frame(run, sl: slice, i0: int, pred, forces, beside=None):
     """The simulate CSV: time, the predicted state `pred` (K+1, 6), the recorded inputs, the
-    force components (N, N m) and the recorded state (``obs_``), one row per step of `sl`."""
+    force components (N, N m; the FNN's XNN, YNN, NNN of a learned model), the kNN gate's
+    ``knn_distance`` and ``gate_on`` (1: the FNN acts) of a gated model, the physics
+    baseline's predicted state `beside` (K+1, 6) as ``mmg_`` columns, and the recorded
+    state (``obs_``), one row per step of `sl`."""
     import pandas as pd
 
     out = pd.DataFrame({"t": run.t[sl], "t_rel": run.t[sl] - run.t[i0]})
@@ -103,10 +145,17 @@ def _prediction_frame(run, sl: slice, i0: int, pred, forces):
         out[name] = pred[:, j]
     for j, name in enumerate(INPUTS):
         out[name] = run.inputs[sl, j]
-    for comp in MMG_COMPONENTS:
+    learned = beside is not None or forces.gate_on is not None   # a trained run: its FNN's columns too
+    for comp in (*MMG_COMPONENTS, "correction") if learned else MMG_COMPONENTS:
         arr = getattr(forces, comp).numpy()
         for j, axis in enumerate(FORCE):
             out[force_column(comp, axis)] = arr[:, j]
+    if forces.gate_on is not None:
+        out["knn_distance"] = forces.ood_distance.numpy()
+        out["gate_on"] = forces.gate_on.numpy().astype(int)
+    if beside is not None:
+        for j, name in enumerate(STATE):
+            out[f"mmg_{name}"] = beside[:, j]
     for j, name in enumerate(STATE):
         out[f"obs_{name}"] = run.states[sl, j]
     return out

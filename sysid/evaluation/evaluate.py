@@ -165,7 +165,8 @@ def window_samples(name: str, horizon_s: float, dt: float, error: type[Exception
 @dataclass
 class Evaluation:
     """Metrics (`METRICS_COLUMNS`), traces (file name -> `TRACE_COLUMNS` frame), the
-    share of steps on which the kNN gate switched the FNN off, per trace, and every file's
+    share of steps on which the kNN gate switched the FNN off, per trace name (file and
+    horizon; without traces, only for a model with a gate), and every file's
     per-window errors at every horizon (`WindowErrors`, in the metrics' row order)."""
 
     metrics: pd.DataFrame
@@ -204,6 +205,15 @@ def trace_frame(model: nn.Module, pred: WindowPrediction) -> pd.DataFrame:
     return frame[TRACE_COLUMNS]
 
 
+def predicted_gate_off_share(model: nn.Module, pred: WindowPrediction) -> float | None:
+    """Share of one file's window points (each window's start state and predicted states,
+    as its trace's ``gate_on``) at which the model's kNN gate switches its FNN off; None
+    for a model without a gate."""
+    with torch.no_grad():
+        on = model(pred.predicted, pred.inputs).gate_on
+    return None if on is None else float(1.0 - on.double().mean())
+
+
 def evaluate_model(model: nn.Module, runs: Sequence[Run], horizons: Sequence[float],
                    integrator: Integrator = EULER, traces: bool = True,
                    limits: PhysicalRange | None = None) -> Evaluation:
@@ -221,4 +231,6 @@ def evaluate_model(model: nn.Module, runs: Sequence[Run], horizons: Sequence[flo
                 name = trace_name(pred.run.name, horizon)
                 frames[name] = frame
                 shares[name] = float(1.0 - frame["gate_on"].mean())
+            elif len(pred.starts) and (share := predicted_gate_off_share(model, pred)) is not None:
+                shares[trace_name(pred.run.name, horizon)] = share
     return Evaluation(pd.DataFrame(rows, columns=METRICS_COLUMNS), frames, shares, windows)

@@ -360,7 +360,12 @@ def step_metadata(model: nn.Module, method: Method, dt: float, batch: int,
             "dtype": str(dtype).replace("torch.", ""), "state": ",".join(STATE), "inputs": ",".join(INPUTS),
             "units": "state x[m] u[m/s] y[m] v[m/s] psi[rad] r[rad/s]; inputs n_prop[rps] "
                      "delta_rudder[rad] wind_velo_true[m/s] wind_dir_true[rad, from]",
-            "signature": "step(state (batch, 6), inputs (batch, 4)) -> state after dt"}
+            "frames": "x, y midship position, earth frame (x north, y east); psi heading from x to y; "
+                      "u, v midship velocity, body frame (forward, starboard); r, delta_rudder positive "
+                      "to starboard; true wind from, earth frame, from x to y",
+            "signature": "step(state (batch, 6), inputs (batch, 4)) -> state after dt; inputs held over "
+                         "the step; contiguous tensors of this batch and dtype only (AOTI_RUNTIME_CHECK_INPUTS=1 "
+                         "makes a compiled package refuse others)"}
 
 
 def compiled_rollout_function(model: nn.Module, method: Method, dt: float, batch: int,

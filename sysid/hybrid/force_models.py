@@ -371,3 +371,12 @@ def build_model(exp: Experiment, dtype: torch.dtype = torch.float64) -> nn.Modul
 def correction_of(model: nn.Module) -> ForceCorrection | None:
     """The FNN term of a model, or None for MMG-only."""
     return model.correction_net if isinstance(model, CorrectedModel) else None
+
+
+def gate_off_meaning(model: nn.Module) -> str:
+    """What a step with the kNN gate off is, in words, for the model's kind: a hybrid's
+    (or its ensemble's) the MMG's alone; an NN-only model's no force at all (no physics
+    under its FNN: the ship keeps its velocity)."""
+    if str(getattr(model, "kind", "mmg")) == ModelKind.NN:
+        return "the FNN is switched off and NN-only has no force at all there (no physics under it)"
+    return "the FNN is switched off and the model predicts as its physics MMG there"

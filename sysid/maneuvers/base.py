@@ -190,7 +190,11 @@ class ManeuverResult:
     gate_off_share : share of steps with the kNN gate off at the step's start (None without
     a gate); model : label of the model that ran it; diverged_at_s : time from the execute
     [s] at which the simulation diverged (`sysid.maneuvers.simulate.first_divergence`; None:
-    it did not), divergence : why, in words.
+    it did not), divergence : why, in words; gate_on : (T,) the kNN gate's decision at each
+    step's start (1 on: the FNN acts; 0 off: the physics MMG alone; NaN on the last row,
+    which starts no step), knn_distance : (T,) d_kNN [feature units] of the state at t with
+    the inputs held from t, knn_threshold : the gate's threshold delta_kNN (off where
+    d_kNN exceeds it); all three None without a gate.
     """
 
     maneuver: Maneuver
@@ -204,6 +208,9 @@ class ManeuverResult:
     members: list["ManeuverResult"] = field(default_factory=list)
     diverged_at_s: float | None = None
     divergence: str = ""
+    gate_on: np.ndarray | None = None
+    knn_distance: np.ndarray | None = None
+    knn_threshold: float | None = None
 
     @property
     def diverged(self) -> bool:

@@ -5,6 +5,8 @@
   empty where not applicable), with an ensemble or seeds ``n_members`` and the standard
   deviation over the members ``<index>_std``; ``gate_off_share`` (kNN gate off at this share
   of the steps, empty without a gate) and ``mostly_outside`` (True when over half);
+  ``knn_distance_max`` (the largest d_kNN over the steps) and ``knn_threshold`` (the gate's
+  delta_kNN; the FNN is off where d_kNN exceeds it), empty without a gate;
   ``diverged`` and ``diverged_at_s`` (time from the execute [s] at which the simulation
   diverged, `sysid.maneuvers.simulate.first_divergence`; empty otherwise: its indices are
   not valid); each IMO criterion that applies as ``imo_<index>`` = "met" / "not met" /
@@ -12,7 +14,10 @@
 - ``criteria.csv`` (`criteria_table`): every criterion with value, limit, the values as
   ratios to L (lengths) or in deg (angles), met, the rule, and the model;
 - ``trajectories.csv`` (`trajectory_table`): every step of every maneuver (and of every
-  member), states and inputs in `sysid.channel_names`'s units (m, m/s, rad, rad/s, rps).
+  member), states and inputs in `sysid.channel_names`'s units (m, m/s, rad, rad/s, rps);
+  of a model with a kNN gate, ``gate_on`` (the gate's decision at the step's start: 1 the
+  FNN acts, 0 the physics MMG alone; empty on a maneuver's last row) and ``knn_distance``
+  (d_kNN of the state and the inputs held from it, in the gate's feature units).
 
 A learned model's physics baseline (`sysid.maneuvers.any_model.physics_baseline`) runs the
 same maneuvers under the same conditions: its rows follow the learned model's in all three
@@ -70,6 +75,8 @@ def indices_table(results: Sequence[ManeuverResult], L: float, U: float, scale: 
             row.update(spread(r))
         row["gate_off_share"] = r.gate_off_share
         row["mostly_outside"] = None if r.gate_off_share is None else bool(r.gate_off_share > MOSTLY_OUTSIDE)
+        row["knn_distance_max"] = float(np.nanmax(r.knn_distance)) if r.knn_distance is not None else None
+        row["knn_threshold"] = r.knn_threshold
         row["diverged"] = r.diverged
         row["diverged_at_s"] = r.diverged_at_s if r.diverged_at_s is not None else math.nan
         for c in criteria_for(r.maneuver, r.indices, L, U, scale):
@@ -121,7 +128,8 @@ def beside_baseline(indices: pd.DataFrame, learned: str, baseline: str = BASELIN
 def trajectory_table(results: Sequence[ManeuverResult]) -> pd.DataFrame:
     """Every step of every maneuver and member: maneuver, model, t [s], the state (`STATE`),
     the inputs held over the step (`INPUTS`; delta_rudder their mean over the step) and
-    ``rudder_angle`` [rad] at t."""
+    ``rudder_angle`` [rad] at t; ``gate_on`` and ``knn_distance`` where the model has a kNN
+    gate."""
     parts = []
     for r in results:
         for own in [r, *r.members]:
@@ -131,6 +139,10 @@ def trajectory_table(results: Sequence[ManeuverResult]) -> pd.DataFrame:
             frame.insert(0, "model", own.model)
             frame.insert(0, "maneuver", r.maneuver.name)
             frame["rudder_angle"] = own.rudder
+            if own.gate_on is not None:
+                frame["gate_on"] = own.gate_on
+            if own.knn_distance is not None:
+                frame["knn_distance"] = own.knn_distance
             parts.append(frame)
     return pd.concat(parts, ignore_index=True)
 
@@ -163,6 +175,7 @@ def summary_document(subject_label: str, kind: str, ship, conditions, sources: d
         "spread": spread, "n_members": len(results[0].members) if results else 0,
         "maneuvers": [r.maneuver.name for r in results],
         "gate_off_share": {r.maneuver.name: r.gate_off_share for r in results},
+        "knn_threshold": next((r.knn_threshold for r in results if r.knn_threshold is not None), None),
         "diverged_at_s": {r.maneuver.name: r.diverged_at_s for r in results if r.diverged},
         "baseline": shown,
     }

@@ -1,6 +1,6 @@
 """Standard maneuvers of any force model: conditions from the ship file and the model,
 closed-loop simulation (eager and batched over maneuvers, or compiled), indices, the kNN
-gate's share along the way, and the spread over an ensemble's members or seeds.
+gate's decision and distance at every step and its off share, and the spread over an ensemble's members or seeds.
 
     from sysid.maneuvers import load_maneuver_model, default_conditions, run_maneuvers, imo_maneuvers
     subject = load_maneuver_model("runs/hybrid_D2")                 # or "configs/ships/kvlcc2_l7.toml"
@@ -155,6 +155,37 @@ def gate_off_share(model: nn.Module, states: torch.Tensor, inputs: torch.Tensor)
     return off / total if total else None
 
 
+def gate_distances(model: nn.Module, states: torch.Tensor, inputs: torch.Tensor) -> np.ndarray | None:
+    """d_kNN (N,) of the rows (states (N, 6), inputs (N, 4)): the kNN distance the model's
+    gate compares with its threshold (an ensemble's: its members' mean); None without a gate."""
+    parts = []
+    with torch.no_grad():
+        for lo in range(0, states.shape[0], GATE_CHUNK):
+            d = model(states[lo:lo + GATE_CHUNK], inputs[lo:lo + GATE_CHUNK]).ood_distance
+            if d is None:
+                return None
+            parts.append(d.double().numpy())
+    return np.concatenate(parts) if parts else None
+
+
+def gate_threshold(model: nn.Module) -> float | None:
+    """The threshold delta_kNN of the model's one kNN gate; None without one (an MMG, a
+    model without a gate, an ensemble: each member has its own)."""
+    gate = getattr(model, "gate", None)
+    return float(gate.threshold) if gate is not None and getattr(model, "gate_enabled", True) else None
+
+
+def _with_distances(model: nn.Module, results: list[ManeuverResult]) -> list[ManeuverResult]:
+    """`results` of a gated model with each step's d_kNN (`gate_distances` of its state and
+    the inputs held from it) and the gate's threshold filled in."""
+    for r in results:
+        if r.gate_on is None:
+            continue
+        d = gate_distances(model, torch.as_tensor(r.states), torch.as_tensor(r.inputs))
+        r.knn_distance, r.knn_threshold = d, gate_threshold(model)
+    return results
+
+
 def _results(maneuvers: Sequence[Maneuver], conditions: Conditions, x0: torch.Tensor, record: torch.Tensor,
              label: str, limits: PhysicalRange | None = None) -> list[ManeuverResult]:
     """`ManeuverResult`s from a record (steps, B, `RECORD`) of closed-loop steps from x0 (B, 6);
@@ -172,6 +203,8 @@ def _results(maneuvers: Sequence[Maneuver], conditions: Conditions, x0: torch.Te
         on = record[:, b, 12]
         share = None if torch.isnan(on).any() else float((on < 0.5).double().mean())
         out.append(ManeuverResult(maneuver, t, s, r, u, indices, share, label))
+        if share is not None:   # the decision at each step's start; the last row starts none
+            out[-1].gate_on = np.append(on.double().numpy(), math.nan)
         if (found := first_divergence(t, s, conditions.speed, limits)) is not None:
             out[-1].diverged_at_s, out[-1].divergence = found
     return out
@@ -228,7 +261,7 @@ def simulate_maneuvers(model: nn.Module, maneuvers: Sequence[Maneuver], conditio
         record = run_eager(model, x0, orders, parameters, conditions.steps, conditions.dt, conditions.method)
     else:
         record = run_compiled(loop, x0, orders, parameters, conditions.steps, conditions.dt)
-    return _results(maneuvers, conditions, x0, record, label, limits)
+    return _with_distances(model, _results(maneuvers, conditions, x0, record, label, limits))
 
 
 def simulate_rows(model: nn.Module, maneuvers: Sequence[Maneuver], conditions: Sequence[Conditions], *,
@@ -249,8 +282,8 @@ def simulate_rows(model: nn.Module, maneuvers: Sequence[Maneuver], conditions: S
     starts = [_start([m], c) for m, c in zip(maneuvers, conditions)]
     x0, orders, parameters = (torch.cat(parts) for parts in zip(*starts))
     record = run_eager(model, x0, orders, parameters, max(c.steps for c in conditions), first.dt, first.method)
-    return [_results([m], c, x0[b:b + 1], record[:c.steps, b:b + 1], label, limits)[0]
-            for b, (m, c) in enumerate(zip(maneuvers, conditions))]
+    return _with_distances(model, [_results([m], c, x0[b:b + 1], record[:c.steps, b:b + 1], label, limits)[0]
+                                   for b, (m, c) in enumerate(zip(maneuvers, conditions))])
 
 
 def run_maneuvers(subject: ManeuverModel, maneuvers: Sequence[Maneuver], conditions: Conditions, *,

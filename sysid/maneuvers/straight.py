@@ -22,16 +22,39 @@ MAX_RPS = 200.0  # [rps] upper end of the search: beyond any ship's or model's p
 GRID = 2001
 
 
-def surge_acceleration(model: nn.Module, speed: float, rps: np.ndarray, wind_speed: float = 0.0,
-                       wind_direction: float = 0.0) -> np.ndarray:
-    """du/dt [m/s^2] (N,) in straight running at `speed` [m/s] for revolutions `rps` (N,)
-    [rps], rudder amidships, true wind `wind_speed` [m/s] from `wind_direction` [rad]."""
+def straight_rows(model: nn.Module, speed: float, rps: np.ndarray, wind_speed: float = 0.0,
+                  wind_direction: float = 0.0) -> tuple[torch.Tensor, torch.Tensor]:
+    """(states (N, 6), inputs (N, 4)) of straight running at `speed` [m/s] for revolutions
+    `rps` (N,) [rps], rudder amidships, true wind `wind_speed` [m/s] from `wind_direction`
+    [rad], in the model's dtype."""
     dtype = next((t.dtype for t in model.buffers() if t.is_floating_point()), torch.float64)
     n = torch.as_tensor(np.atleast_1d(rps), dtype=dtype)
     state = torch.zeros(len(n), 6, dtype=dtype)
     state[:, 1] = speed
     wind = (torch.full_like(n, wind_speed), torch.full_like(n, wind_direction))
-    inputs = torch.stack((n, torch.zeros_like(n), *wind), -1)
+    return state, torch.stack((n, torch.zeros_like(n), *wind), -1)
+
+
+def _gate_off_note(model: nn.Module, speed: float, rps: float, wind_speed: float, wind_direction: float) -> str:
+    """Words for a straight run at `rps` that lies outside the model's training data (its kNN
+    gate off there: the FNN switched off); "" where the gate is on or the model has none."""
+    decide = getattr(model, "gate_decision", None)
+    if decide is None:
+        return ""
+    with torch.no_grad():
+        on = decide(*straight_rows(model, speed, np.array([rps]), wind_speed, wind_direction))
+    if on is None or bool(on.all()):
+        return ""
+    bare = "NN-only has no force there" if str(getattr(model, "kind", "")) == "nn" else "the MMG alone acts there"
+    return (f"; at {rps:g} rps the kNN gate is off: straight running there lies outside the training data "
+            f"(the FNN is switched off, {bare})")
+
+
+def surge_acceleration(model: nn.Module, speed: float, rps: np.ndarray, wind_speed: float = 0.0,
+                       wind_direction: float = 0.0) -> np.ndarray:
+    """du/dt [m/s^2] (N,) in straight running at `speed` [m/s] for revolutions `rps` (N,)
+    [rps], rudder amidships, true wind `wind_speed` [m/s] from `wind_direction` [rad]."""
+    state, inputs = straight_rows(model, speed, rps, wind_speed, wind_direction)
     with torch.no_grad():
         return derivative(model, state, inputs)[:, 1].double().numpy()
 
@@ -48,7 +71,8 @@ def straight_running_rps(model: nn.Module, speed: float, wind_speed: float = 0.0
                             f"in 0..{max_rps:g} rps; pass the revolutions (--rps)")
     if accel[0] >= 0.0:
         raise ManeuverError(f"the model does not slow down at {speed:g} m/s with the propeller stopped "
-                            f"(du/dt = {accel[0]:.3g} m/s^2): no straight-running revolutions; pass --rps")
+                            f"(du/dt = {accel[0]:.3g} m/s^2{_gate_off_note(model, speed, 0.0, wind_speed, wind_direction)})"
+                            ": no straight-running revolutions; pass --rps")
     rising = np.nonzero((accel[:-1] < 0.0) & (accel[1:] >= 0.0))[0]
     if not len(rising):
         raise ManeuverError(f"no propeller revolutions in 0..{max_rps:g} rps hold {speed:g} m/s in the model "

@@ -119,7 +119,7 @@ def build_maneuver_report(source_dir: str | os.PathLike, out_dir: str | os.PathL
         specs.append(("criteria", "Indices against the IMO criteria", "Each assessed index divided by its IMO limit"
                       + (", each model on its own" if baseline is not None else ""),
                       partial(MF.criteria_chart, criteria, f"IMO criteria, {main}{beside.replace(' (dashed)', '')}")))
-    warnings = [f"{r.maneuver}: kNN gate off on {100 * r.gate_off_share:.0f} % of the steps: the maneuver runs "
+    warnings = [f"{r.maneuver}: kNN gate off on {100 * r.gate_off_share:.1f} % of the steps: the maneuver runs "
                 "mostly outside the training data" for r in indices.itertuples(index=False)
                 if "gate_off_share" in indices and not pd.isna(r.gate_off_share) and r.gate_off_share > 0.5]
     title = f"sysid maneuvers report: {main}"

@@ -40,7 +40,7 @@ def indices_plain_table(indices: pd.DataFrame, model: str | None = None) -> Plai
         if gate:
             share = d["gate_off_share"]
             outside = " (mostly outside)" if share > 0.5 else ""
-            cells.append("" if pd.isna(share) else f"{100 * share:.0f} %{outside}")
+            cells.append("" if pd.isna(share) else f"{100 * share:.1f} %{outside}")
             mark.append("not-met" if not pd.isna(share) and share > 0.5 else "")
         rows.append(cells)
         marks.append(mark)

@@ -5,6 +5,7 @@ same states), the lab's RK4 trajectories (test_mmg_oracle.py), and a fresh Pytho
 process that has only torch (the exported file must predict the same without sysid).
 """
 import json
+import os
 import re
 import subprocess
 import zipfile
@@ -60,7 +61,7 @@ def hybrid_run(zigzag, tmp_path_factory):
     run_dir = tmp_path_factory.mktemp("run")
     write_text(exp.to_toml(), run_dir / "config.toml")
     save_model(model, run_dir)
-    write_text('{"model": "hybrid"}', run_dir / "summary.json")
+    write_text('{"name": "export_test", "model": "hybrid"}', run_dir / "summary.json")
     write_text("scenario,file,horizon_s,n_windows,rmse_u,rmse_v,rmse_r\n", run_dir / "metrics.csv")
     write_manifest(run_dir, "run")  # sealed, as a run written by sysid is
     return run_dir, load_model(run_dir)[1]
@@ -222,6 +223,71 @@ def test_export_predicts_the_same_without_sysid(hybrid_run, zigzag, tmp_path, po
         extra = {"sysid.json": ""}
         torch.export.load(str(out), extra_files=extra)
         assert json.loads(extra["sysid.json"])["format"] == "torch.export"
+    assert not exported.gated
+    with pytest.raises(ValueError, match="--with-gate"):
+        exported.outputs(states[:1].contiguous(), inputs[:1].contiguous())
+    x, u = states[:1].contiguous(), inputs[:1].contiguous()
+    for wrong in ((x.float(), u), (x.expand(2, 6).contiguous(), u.expand(2, 4).contiguous())):
+        with pytest.raises(ValueError, match=r"exported step: .* the file takes \(1, [46]\) float64"):
+            exported(*wrong)
+    column_major = inputs[:2].T.contiguous().T[:1]   # a row of a column-major array: read as its values
+    torch.testing.assert_close(exported(x, column_major), exported(x, u.clone()), rtol=0, atol=0)
+    if not portable:   # the package itself refuses them with its own checks on
+        for name, wrong in {"dtype": "x.float(), u.float()", "rows": "x.expand(2, 6).contiguous(), u.expand(2, 4).contiguous()",
+                            "stride": "x, torch.zeros(4, 2, dtype=torch.float64).T[:1]"}.items():   # a row of a column-major array
+            script = (f"import torch; step = {loader}; x = torch.zeros(1, 6, dtype=torch.float64); "
+                      f"u = torch.zeros(1, 4, dtype=torch.float64); x[0, 1] = 1.0\n"
+                      f"try:\n    step({wrong}); print('accepted')\nexcept RuntimeError as e:\n    print('refused', e)")
+            done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path,
+                                  timeout=300, env={**os.environ, "AOTI_RUNTIME_CHECK_INPUTS": "1"})
+            assert done.stdout.startswith("refused") and f"unmatched {'dim' if name == 'rows' else name}" in done.stdout, (
+                name, done.stdout[-500:], done.stderr[-500:])
+
+
+@pytest.mark.parametrize("portable", [False, True])
+def test_an_export_with_the_gate_returns_its_decision_without_sysid(hybrid_run, zigzag, tmp_path, portable):
+    """``--with-gate``: step(x, u) -> (x_next, gate_on) in a python with torch alone; the
+    states are the eager Euler rollout's, the decisions the model's own gate's at each
+    step's start (on part of the zigzag, off on the rest)."""
+    from sysid.cli import run
+    from sysid.fast.export import load_step
+    run_dir, model = hybrid_run
+    states, inputs = zigzag
+    if not portable and compiled_step(model, Method.EULER, 1.0, 1) is None:
+        pytest.skip("compilation unavailable here")
+    out = tmp_path / "gated.pt2"
+    run(["export", str(run_dir), "-o", str(out), "--with-gate"] + (["--portable"] if portable else []))
+    with torch.no_grad():
+        eager = integrate(model, states[0], inputs, 1.0, "euler")
+        decided = model.gate_decision(eager[:-1], inputs[:-1]).to(torch.float64)
+    assert 0 < int(decided.sum()) < len(decided)   # the gate decides both ways along the zigzag
+    torch.save({"x0": states[:1].contiguous(), "inputs": inputs[:, None].contiguous()}, tmp_path / "case.pt")
+    loader = (f"torch.export.load({str(out)!r}).module()" if portable
+              else f"torch._inductor.aoti_load_package({str(out)!r})")
+    script = f"""
+import sys, torch
+case = torch.load({str(tmp_path / 'case.pt')!r})
+step = {loader}
+x, out, gates = case["x0"], [case["x0"]], []
+with torch.no_grad():
+    for u in case["inputs"][:-1]:
+        x, gate = step(x, u)
+        out.append(x)
+        gates.append(gate)
+torch.save({{"states": torch.stack(out), "gates": torch.stack(gates)}}, {str(tmp_path / 'out.pt')!r})
+print(any(m == "sysid" or m.startswith("sysid.") for m in sys.modules))
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip().splitlines()[-1] == "False"   # sysid not imported
+    fresh = torch.load(tmp_path / "out.pt")
+    torch.testing.assert_close(fresh["states"][:, 0], eager, rtol=1e-12, atol=1e-12)
+    torch.testing.assert_close(fresh["gates"][:, 0], decided, rtol=0, atol=0)
+    exported = load_step(out)
+    assert exported.gated and "gate_on" in exported.metadata["outputs"]
+    x, gate = exported.outputs(states[:1].contiguous(), inputs[:1].contiguous())
+    assert float(gate[0]) == float(decided[0]) and torch.equal(x, exported(states[:1].contiguous(), inputs[:1].contiguous()))
+    torch.testing.assert_close(exported.predict(states[:1], inputs[:, None])[:, 0], eager, rtol=1e-12, atol=1e-12)
 
 
 def test_trajectory_stacks_the_forces_of_every_euler_step(hybrid_run, zigzag):

@@ -42,6 +42,18 @@ def test_straight_running_rps_is_the_closed_form_of_the_standard_mmg():
     assert abs(surge_acceleration(model, U, np.array([n]))[0]) < 1e-12
 
 
+def test_an_nn_only_model_outside_its_data_at_rest_says_why_it_has_no_straight_running():
+    """NN-only with its gate fitted on straight running at 11.8 rps: with the propeller
+    stopped the state lies outside the training data, the FNN is off and no force acts
+    (du/dt = 0 exactly), which the error names."""
+    bank = torch.zeros(400, 6, dtype=torch.float64)
+    bank[:, 1] = torch.linspace(1.17248 - 0.05, 1.17248 + 0.05, 400)
+    model = _hybrid_without_correction(load_ship("kvlcc2_l7"), bank)
+    model.physics = False   # NN-only: F = gate * F_NN
+    with pytest.raises(ManeuverError, match=r"du/dt = 0 m/s\^2; at 0 rps the kNN gate is off: .*NN-only has no force"):
+        straight_running_rps(model, 1.17248)
+
+
 def test_straight_running_without_a_root_is_one_clear_error():
     with pytest.raises(ManeuverError, match="no propeller revolutions"):
         straight_running_rps(MMG(load_ship("kvlcc2_l7")), 1.1, max_rps=2.0)
@@ -92,6 +104,48 @@ def test_gate_share_says_a_maneuver_runs_outside_the_training_data():
     assert ours.gate_off_share == scan  # the loop's decisions are the gate's own scan's
     row = indices_table([ours], float(ship["L_pp"]), U0, None).iloc[0]
     assert bool(row["mostly_outside"]) and row["gate_off_share"] == ours.gate_off_share
+
+
+def test_each_steps_knn_distance_is_the_brute_force_one_and_decides_the_gate():
+    """Every step's d_kNN (and the gate's threshold) against a brute-force numpy kNN over
+    the gate's bank: the mean distance to the k nearest bank vectors; the threshold the
+    alpha-quantile of the bank's leave-one-out distances; the gate on exactly where d_kNN
+    is at most it. The trajectory table carries both per step, the indices table the
+    largest distance and the threshold."""
+    from sysid.maneuvers.outputs import trajectory_table
+    ship = load_ship("kvlcc2_l7")
+    U0 = 1.17248
+    bank_states = torch.zeros(400, 6, dtype=torch.float64)
+    bank_states[:, 1] = torch.linspace(U0 - 0.05, U0 + 0.05, 400)
+    hybrid = _hybrid_without_correction(ship, bank_states)
+    conditions, _ = default_conditions(MMG(ship), ship, duration=30.0, dt=0.2)
+    inputs = torch.zeros(400, 4, dtype=torch.float64)   # straight running with the rudder up to 5 deg
+    inputs[:, 0], inputs[:, 1] = conditions.rps, math.radians(5.0) * torch.sin(torch.arange(400.0) * 0.7)
+    wind = torch.stack(relative_wind(bank_states[:, 1], bank_states[:, 3], bank_states[:, 4], inputs[:, 2],
+                                     inputs[:, 3]), -1)
+    hybrid.gate.fit(hybrid.gate_coordinates(correction_inputs(bank_states, inputs, wind)))
+    result = simulate_maneuvers(hybrid, [TurningCircle(35.0)], conditions)[0]
+    bank = hybrid.gate.bank.numpy()
+    wind = torch.stack(relative_wind(*(torch.tensor(c) for c in (result.states[:, 1], result.states[:, 3],
+                                                                   result.states[:, 4], result.inputs[:, 2],
+                                                                   result.inputs[:, 3]))), -1)
+    z = hybrid.gate_coordinates(correction_inputs(torch.tensor(result.states), torch.tensor(result.inputs),
+                                                  wind)).detach().numpy()
+    k = hybrid.gate.k
+    brute = np.sort(np.linalg.norm(z[:, None] - bank[None], axis=-1), 1)[:, :k].mean(1)
+    loo = np.sort(np.linalg.norm(bank[:, None] - bank[None], axis=-1), 1)[:, 1:k + 1].mean(1)
+    threshold = np.sort(loo)[math.ceil(hybrid.gate.alpha * len(loo)) - 1]
+    np.testing.assert_allclose(result.knn_distance, brute, rtol=1e-9, atol=1e-12)
+    assert result.knn_threshold == pytest.approx(threshold, rel=1e-7)  # |a|^2 + |b|^2 - 2 a.b: round-off
+    np.testing.assert_array_equal(result.gate_on[:-1], (brute[:-1] <= threshold).astype(float))
+    assert math.isnan(result.gate_on[-1])  # the last state starts no step
+    assert 0.0 < result.gate_off_share < 1.0 and result.gate_off_share == pytest.approx(1 - result.gate_on[:-1].mean())
+    table = trajectory_table([result])
+    np.testing.assert_array_equal(table["knn_distance"].to_numpy(), result.knn_distance)
+    row = indices_table([result], float(ship["L_pp"]), U0, None).iloc[0]
+    assert row["knn_distance_max"] == pytest.approx(brute.max()) and row["knn_threshold"] == pytest.approx(threshold)
+    mmg = simulate_maneuvers(MMG(ship), [TurningCircle(35.0)], conditions)[0]
+    assert mmg.gate_on is None and mmg.knn_distance is None and "gate_on" not in trajectory_table([mmg])
 
 
 @pytest.mark.parametrize("seeds", [False, True])
