@@ -127,6 +127,21 @@ def split_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction
     return cut.train, cut.val, cut.samples, cut.report
 
 
+def _check_names(runs: Sequence[Run]) -> None:
+    """A `DataError` for a log given twice, or two logs of one name, among the training and
+    validation logs: a log is named by its file name in the windows' origins."""
+    named: dict[str, Run] = {}
+    for run in runs:
+        if run.name in named and named[run.name] is not run:
+            other = named[run.name].path
+            if Path(other).resolve() == Path(run.path).resolve():
+                raise DataError(f"{run.path}: given twice among the training and validation logs (a log validates "
+                                "only what it did not train): keep it in one list")
+            raise DataError(f"{run.path}: the same name as {other} among the training and validation logs; sysid "
+                            f"names a log by its file name ({run.name!r}): rename one of them")
+        named[run.name] = run
+
+
 def cut_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction: float,
                 exclude_suspect: bool = True, dtype=torch.float64, block_s: float = 30.0, seed: int = 0,
                 device: str | torch.device = "cpu", validation_runs: Sequence[Run] = ()) -> WindowCut:
@@ -141,16 +156,7 @@ def cut_windows(runs: Sequence[Run], steps: int, stride_s: float, val_fraction: 
     rng = np.random.default_rng(seed)
     report = SplitReport()
     validation_runs = list(validation_runs)
-    named: dict[str, Run] = {}
-    for run in list(runs) + validation_runs:
-        if run.name in named and named[run.name] is not run:
-            other = named[run.name].path
-            if Path(other).resolve() == Path(run.path).resolve():
-                raise DataError(f"{run.path}: given twice among the training and validation logs (a log validates "
-                                "only what it did not train): keep it in one list")
-            raise DataError(f"{run.path}: the same name as {other} among the training and validation logs; sysid "
-                            f"names a log by its file name ({run.name!r}): rename one of them")
-        named[run.name] = run
+    _check_names(list(runs) + validation_runs)
     copies = {copy for copy, _ in duplicate_runs(list(runs) + validation_runs)}
     parts: dict[str, list] = {"train": [], "val": []}
     samples: tuple[list, list] = ([], [])
