@@ -145,7 +145,7 @@ def closed_loop_indices(model: nn.Module, runs: Sequence[Run], maneuvers: Sequen
     prediction is the recorded run's) or a run without one."""
     rows = [i for i, m in enumerate(maneuvers) if m is not None and m.kind == "zigzag"]
     results = simulate_rows(model, [maneuvers[i] for i in rows],
-                            [approach_conditions(runs[i], executes[i], dt) for i in rows])
+                            [approach_conditions(runs[i], executes[i], dt) for i in rows], distances=False)
     found: list[dict[str, float] | None] = [None] * len(maneuvers)
     for i, result in zip(rows, results):
         found[i] = result.indices.as_dict()

@@ -268,12 +268,15 @@ def simulate_maneuvers(model: nn.Module, maneuvers: Sequence[Maneuver], conditio
 
 
 def simulate_rows(model: nn.Module, maneuvers: Sequence[Maneuver], conditions: Sequence[Conditions], *,
-                  label: str = "model", limits: PhysicalRange | None = None) -> list[ManeuverResult]:
+                  label: str = "model", limits: PhysicalRange | None = None,
+                  distances: bool = True) -> list[ManeuverResult]:
     """`simulate_maneuvers` (eager) of each maneuver under its own `Conditions` (approach
     speed, revolutions, rudder rate, wind and duration per row; one dt and integration rule
     for all), as one batched rollout to the longest duration: maneuver b is the first
     ``conditions[b].steps`` steps of its row. Rows do not interact, so each result equals
-    the maneuver simulated alone to round-off."""
+    the maneuver simulated alone to round-off. `distances`: each step's d_kNN filled in
+    (`gate_distances`: a whole-bank scan per step), else left None (the gate's decisions
+    and off share are there either way)."""
     if len(maneuvers) != len(conditions):
         raise ValueError(f"{len(maneuvers)} maneuvers with {len(conditions)} conditions")
     if not maneuvers:
@@ -285,8 +288,9 @@ def simulate_rows(model: nn.Module, maneuvers: Sequence[Maneuver], conditions: S
     starts = [_start([m], c) for m, c in zip(maneuvers, conditions)]
     x0, orders, parameters = (torch.cat(parts) for parts in zip(*starts))
     record = run_eager(model, x0, orders, parameters, max(c.steps for c in conditions), first.dt, first.method)
-    return _with_distances(model, [_results([m], c, x0[b:b + 1], record[:c.steps, b:b + 1], label, limits)[0]
-                                   for b, (m, c) in enumerate(zip(maneuvers, conditions))])
+    results = [_results([m], c, x0[b:b + 1], record[:c.steps, b:b + 1], label, limits)[0]
+               for b, (m, c) in enumerate(zip(maneuvers, conditions))]
+    return _with_distances(model, results) if distances else results
 
 
 def run_maneuvers(subject: ManeuverModel, maneuvers: Sequence[Maneuver], conditions: Conditions, *,
