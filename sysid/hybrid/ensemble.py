@@ -263,10 +263,6 @@ class MembersSideBySide(_Members):
     (`eager_rate`, ``no_grad_rate``) are defined, None where the ensemble's batched rate
     does not apply."""
 
-    # its rows are K + 1 blocks of different models: no one kNN distance per row
-    # (`sysid.maneuvers.simulate.gate_distances`)
-    distances_per_row = False
-
     def __init__(self, ensemble: SeedEnsemble):
         super().__init__()
         self.members = ensemble.members

@@ -157,10 +157,7 @@ def gate_off_share(model: nn.Module, states: torch.Tensor, inputs: torch.Tensor)
 
 def gate_distances(model: nn.Module, states: torch.Tensor, inputs: torch.Tensor) -> np.ndarray | None:
     """d_kNN (N,) of the rows (states (N, 6), inputs (N, 4)): the kNN distance the model's
-    gate compares with its threshold (an ensemble's: its members' mean); None without a gate
-    or where rows are not one model's (members side by side)."""
-    if not getattr(model, "distances_per_row", True):
-        return None
+    gate compares with its threshold (an ensemble's: its members' mean); None without a gate."""
     parts = []
     with torch.no_grad():
         for lo in range(0, states.shape[0], GATE_CHUNK):
