@@ -27,7 +27,6 @@ from sysid.errors import DataError
 from sysid.records.summary import DataSummary, LogFile
 from sysid.store.manifest import sha256_of
 
-ANCHOR = "the run directory"   # what a run's recorded log paths are relative to
 PARTS = ("train", "validation", "test")   # the [data] lists that name logs
 
 
