@@ -228,17 +228,19 @@ def _contenders(sources):
         if is_ship:
             ships.setdefault(key, label)
         contenders.append((label, members, subject.kind, key, subject.ship, subject.training_range))
+    # a ship file's MMG is judged against its learned models' widest training range, given or
+    # added, as `sysid train` judges a run's baselines
+    widest = {key: PhysicalRange.widest([c[5] for c in contenders if c[3] == key]) for key in {c[3] for c in contenders}}
     baselines = {}
     for _, _, _kind, key, ship_, _range in contenders:
         if key not in ships:   # the physics baseline, always shown beside the learned models
             name = "MMG (ship file)" if len({c[3] for c in contenders}) == 1 else f"MMG (ship file {ship_.name})"
             ships[key] = name
-            # judged against its learned models' training range, as `sysid train` judges a run's baselines
-            widest = PhysicalRange.widest([c[5] for c in contenders if c[3] == key])
-            baselines[key] = (name, (MMG(ship_),), "mmg", key, ship_, widest)
+            baselines[key] = (name, (MMG(ship_),), "mmg", key, ship_, widest[key])
     rows = contenders + list(baselines.values())
     # a run's training range: beyond it a prediction diverged, as in `sysid train` and `sysid evaluate`
-    chosen = [Contender(label, members, kind, ships[key], limits) for label, members, kind, key, _, limits in rows]
+    chosen = [Contender(label, members, kind, ships[key], limits if limits is not None else widest[key])
+              for label, members, kind, key, _, limits in rows]
     return chosen
 
 

@@ -103,6 +103,9 @@ def _print_gate(model, table) -> None:
     typer.echo(f"outside the training data (kNN gate{shown}; where it is off, {gate_off_meaning(model)}), "
                "gate_off_share in the metrics CSV:")
     for row in table.itertuples():
+        if row.gate_off_share != row.gate_off_share:   # NaN: the file is shorter than the horizon
+            typer.echo(f"  {row.file} at {row.horizon_s:g} s: no window (the log is shorter than the horizon)")
+            continue
         typer.echo(f"  {row.file} at {row.horizon_s:g} s: gate off on {100 * row.gate_off_share:.1f} % of the "
                    "window points" + (" (mostly outside the training data)" if row.gate_off_share > 0.5 else ""))
 

@@ -107,9 +107,9 @@ def forces(
     checks.POSITIVE_COUNT.check("--chunk", chunk)
     if run_dir is not None:
         from sysid.runs.layout import load_model
-        if set_ or quadrature != "exact":
+        if set_ or quadrature != "exact" or ship != ShipOption.default:
             raise DataError("--run: the run's model is its own (its ship file and [mmg] overrides); "
-                            "--set and --quadrature apply to a ship file's MMG without --run")
+                            "--ship, --set and --quadrature apply to a ship file's MMG without --run")
         run_exp, model = load_model(run_dir)
         learned = run_exp.needs_training
         claim(output, OutputKind.FILE, [input_csv, run_dir])

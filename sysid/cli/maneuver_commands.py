@@ -300,7 +300,7 @@ def _print_gate(results, model=None) -> None:
     typer.echo(f"outside the training data (kNN gate, {shown}; where it is off, {gate_off_meaning(model)}; "
                "per step in trajectories.csv: gate_on, knn_distance):")
     for r in gated:
-        largest = f", largest d_kNN {max(r.knn_distance[:-1]):.4g}" if r.knn_distance is not None else ""
+        largest = f", largest d_kNN {r.knn_distance_max:.4g}" if r.knn_distance is not None else ""
         typer.echo(f"  {r.maneuver.name}: gate off on {100 * r.gate_off_share:.1f} % of the steps{largest}")
 
 

@@ -458,7 +458,7 @@ def _checked(cells: Sequence[PairedCell]) -> tuple[list[PairedCell], dict[tuple[
 class _Compared:
     """The cells compared (model and baseline finite): per log the resampled log-ratios of
     its cells, each cell's point log-ratio, its (R,) resampled RMSE ratio and the (M,)
-    log-ratio of each member alone."""
+    log-ratio of each member alone (against its own baseline when each member has one)."""
 
     log_ratios: dict[str, list[np.ndarray]] = field(default_factory=dict)
     point_logs: list[float] = field(default_factory=list)
@@ -499,7 +499,8 @@ def _cell_judgements(groups: dict[tuple[str, float], list[PairedCell]], rng: np.
             with np.errstate(divide="ignore"):
                 compared.log_ratios.setdefault(log, []).append(np.log(ratio))
                 compared.point_logs.append(math.log(change + 1))
-                compared.member_logs.append(np.log(_resampled_ratio(np.mean(c.model**2, axis=1), np.full(M, mse_b))))
+                own = np.mean(c.baseline**2, axis=1) if c.baseline.shape[0] == M > 1 else np.full(M, mse_b)
+                compared.member_logs.append(np.log(_resampled_ratio(np.mean(c.model**2, axis=1), own)))
     return judged, compared
 
 

@@ -338,8 +338,11 @@ def validation_cells(model: WindowScore, baseline: WindowScore, horizon_s: float
         return _cells_per_log(model.window_rmse, baseline.window_rmse, after, origins, horizon_s)
     W = len(model.window_rmse)
     bad = ~np.all(np.isfinite(model.window_rmse), axis=1)
-    divergence = Divergence(VALIDATION_LOG, horizon_s, float(np.argmax(bad)), "", "non-finite (window "
-                            f"{int(np.argmax(bad))} of {W})") if bad.any() else None
+    if model.diverged_after_s is not None:   # the one rule: beyond the training range too
+        bad |= np.isfinite(model.diverged_after_s)
+    divergence = Divergence(VALIDATION_LOG, horizon_s, float(np.argmax(bad)), "", "non-finite or beyond "
+                            f"{DIVERGENCE_FACTOR:g} x the training range (window {int(np.argmax(bad))} of {W})"
+                            ) if bad.any() else None
     return [PairedCell(VALIDATION_LOG, "", horizon_s, channel, model.window_rmse[:, j][None, :],
                        baseline.window_rmse[:, j][None, :], np.arange(W, dtype=float), divergence)
             for j, channel in enumerate(CHANNELS)]

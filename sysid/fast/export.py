@@ -13,7 +13,8 @@ torch alone (no sysid, no training code):
   or another memory layout than contiguous (a column of a column-major array, ``.T``) is
   read as if it were the exported one and gives wrong states without an error. With the
   environment variable ``AOTI_RUNTIME_CHECK_INPUTS=1`` (set before the first call) it
-  refuses them; `ExportedStep` refuses them always.
+  refuses them; `ExportedStep` refuses another dtype or number of rows always and makes
+  its inputs contiguous.
 
 - portable (``compiled=False``): a `torch.export` program, any platform and later torch,
   tens of times slower than the package (it checks its inputs' shapes and dtype)::

@@ -215,3 +215,12 @@ class ManeuverResult:
     @property
     def diverged(self) -> bool:
         return self.diverged_at_s is not None
+
+    @property
+    def knn_distance_max(self) -> float | None:
+        """The largest d_kNN along the maneuver, its last row too (NaN rows of a diverged
+        run skipped; NaN when every row is); None without a gate."""
+        if self.knn_distance is None:
+            return None
+        finite = self.knn_distance[~np.isnan(self.knn_distance)]
+        return float(finite.max()) if finite.size else math.nan

@@ -5,7 +5,7 @@
   empty where not applicable), with an ensemble or seeds ``n_members`` and the standard
   deviation over the members ``<index>_std``; ``gate_off_share`` (kNN gate off at this share
   of the steps, empty without a gate) and ``mostly_outside`` (True when over half);
-  ``knn_distance_max`` (the largest d_kNN over the steps) and ``knn_threshold`` (the gate's
+  ``knn_distance_max`` (the largest d_kNN along the maneuver, NaN rows skipped) and ``knn_threshold`` (the gate's
   delta_kNN; the FNN is off where d_kNN exceeds it), empty without a gate;
   ``diverged`` and ``diverged_at_s`` (time from the execute [s] at which the simulation
   diverged, `sysid.maneuvers.simulate.first_divergence`; empty otherwise: its indices are
@@ -75,7 +75,7 @@ def indices_table(results: Sequence[ManeuverResult], L: float, U: float, scale: 
             row.update(spread(r))
         row["gate_off_share"] = r.gate_off_share
         row["mostly_outside"] = None if r.gate_off_share is None else bool(r.gate_off_share > MOSTLY_OUTSIDE)
-        row["knn_distance_max"] = float(np.nanmax(r.knn_distance)) if r.knn_distance is not None else None
+        row["knn_distance_max"] = r.knn_distance_max
         row["knn_threshold"] = r.knn_threshold
         row["diverged"] = r.diverged
         row["diverged_at_s"] = r.diverged_at_s if r.diverged_at_s is not None else math.nan

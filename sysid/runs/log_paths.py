@@ -27,15 +27,15 @@ from sysid.errors import DataError
 from sysid.records.summary import DataSummary, LogFile
 from sysid.store.manifest import sha256_of
 
-ANCHOR = "the run directory"   # what a run's recorded log paths are relative to
 PARTS = ("train", "validation", "test")   # the [data] lists that name logs
 
 
 def relative_to(path: str | os.PathLike, home: str | os.PathLike) -> str | None:
-    """`path` relative to the directory `home` (both made absolute), with ``/``
-    separators; None when it has no relative form (another drive)."""
+    """`path` (made absolute) relative to the directory `home` with its links resolved, as
+    a config names it (`load_experiment` anchors relative paths at the config's resolved
+    folder), with ``/`` separators; None when it has no relative form (another drive)."""
     try:
-        return Path(os.path.relpath(os.path.abspath(path), os.path.abspath(home))).as_posix()
+        return Path(os.path.relpath(os.path.abspath(path), Path(home).resolve())).as_posix()
     except ValueError:
         return None
 

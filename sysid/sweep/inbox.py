@@ -117,7 +117,7 @@ def same_trial(written: dict, trial: dict, home: Path | None = None) -> bool:
         experiment = dict(doc.get("experiment", {}))
         ship = experiment.get("ship")
         if anchor is not None and isinstance(ship, str) and is_ship_path(ship) and not os.path.isabs(ship):
-            experiment["ship"] = os.path.normpath(os.path.join(anchor, ship))
+            experiment["ship"] = os.path.normpath(os.path.join(Path(anchor).resolve(), ship))   # as load_experiment
         return {**doc, "experiment": experiment,
                 "data": {k: v for k, v in doc.get("data", {}).items() if k not in USED_FILES}}
     return options(written, home) == options(trial, None)

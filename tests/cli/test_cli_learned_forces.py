@@ -78,3 +78,13 @@ def test_simulate_and_forces_of_a_run_show_the_correction_and_the_gate(sysid, tr
 def test_a_run_takes_no_ship_overrides(sysid, trained, files, tmp_path):  # noqa: F811
     outcome = sysid("forces", files["test"], "--run", trained, "--set", "Xvr=0.1", "-o", tmp_path / "f.csv")
     assert outcome.code == 2 and "--run" in outcome.err and not (tmp_path / "f.csv").exists()
+
+
+def test_a_run_takes_no_other_ship(sysid, trained, tmp_path):  # noqa: F811
+    """--ship beside --run was ignored: the forces were those of the run's ship (Esso Osaka),
+    not of the KVLCC2 named. Refused, nothing written."""
+    rows = pd.DataFrame([[0.0, 0.5, 0.0, 0.01, 0.0, 0.01, 10.0, 0.1, 0.0, 0.0]], columns=list(STATE) + list(INPUTS))
+    rows.to_csv(tmp_path / "rows.csv", index=False)
+    outcome = sysid("forces", tmp_path / "rows.csv", "--run", trained, "--ship", "kvlcc2_l7", "-o", tmp_path / "f.csv")
+    assert outcome.code == 2 and "--ship" in outcome.err and "--run" in outcome.err
+    assert not (tmp_path / "f.csv").exists()

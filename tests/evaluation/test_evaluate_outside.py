@@ -49,3 +49,21 @@ def test_evaluate_states_the_share_outside_the_training_data(sysid, trained, fil
         assert f"{log.stem} at 30 s: gate off on {100 * share:.1f} % of the window points" in outcome.out
     assert table.at[wide.stem, "gate_off_share"] > table.at[files["test"].stem, "gate_off_share"]
     assert not math.isnan(table.at[wide.stem, "gate_off_share"])
+
+
+def test_a_log_shorter_than_the_horizon_has_no_share(sysid, trained, files, tmp_path):  # noqa: F811
+    """A log of 50 s beside the 127-s test log holds no window of 100 s: its gate_off_share
+    is empty and its line says so (it printed "gate off on nan %"); its 30-s share is the
+    brute-force kNN's."""
+    short = tmp_path / "short.csv"
+    pd.read_csv(files["test"]).iloc[:500].to_csv(short, index=False)   # 10 Hz: 50 s
+    out = tmp_path / "metrics.csv"
+    outcome = sysid("evaluate", trained, "--data", files["test"], short, "--horizon", "30", "--horizon", "100",
+                    "-o", out)
+    assert outcome.code == 0, outcome.err
+    table = pd.read_csv(out).set_index(["file", "horizon_s"])
+    assert table.at[("short", 100.0), "n_windows"] == 0 and math.isnan(table.at[("short", 100.0), "gate_off_share"])
+    assert table.at[("short", 30.0), "gate_off_share"] == pytest.approx(
+        _brute_force_off_share(trained, short, 30.0), abs=1e-6)
+    assert "short at 100 s: no window (the log is shorter than the horizon)" in outcome.out
+    assert "nan %" not in outcome.out

@@ -404,3 +404,16 @@ def test_each_seeds_own_baseline_is_drawn_with_its_seed():
     assert j.change_low == pytest.approx(-0.2) and j.change_high == pytest.approx(-0.2)
     assert all(c.change_low == pytest.approx(-0.2) and c.change_high == pytest.approx(-0.2) for c in j.cells)
     assert j.outcome is Outcome.BEATS
+
+
+def test_each_seed_alone_is_judged_against_its_own_baseline():
+    """Two seeds, each with its own identified MMG (B = M): seed 1 is 0.5 x its baseline of
+    1.0, seed 2 0.5 x its baseline of 2.0, so each alone is -50 % exactly. Against the seeds'
+    pooled baseline (MSE 2.5) seed 1 would read -68 % and seed 2 -37 %."""
+    starts = 30.0 * np.arange(6)
+    base = np.vstack([np.full(6, 1.0), np.full(6, 2.0)])
+    cells = [PairedCell("a", "a", 30.0, ch, 0.5 * base, base, starts) for ch in CHANNELS]
+    j = judge(cells, RULE)
+    assert j.member_changes == pytest.approx((-0.5, -0.5))
+    assert j.change == pytest.approx(-0.5)
+    assert "2 seeds or members (each alone -50 % to -50 %)" in j.sentence

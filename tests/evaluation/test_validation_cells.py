@@ -375,3 +375,28 @@ def test_a_finite_validation_prediction_beyond_the_training_range_diverges_its_l
     assert verdict.outcome is Outcome.DIVERGED
     bare = window_score(None, windows, w_v, err, where)             # no training range: finite, not diverged
     assert all(c.divergence is None for c in validation_cells(bare, base, HORIZON))
+
+
+def test_windows_of_unknown_origin_diverge_by_the_same_rule():
+    """The pseudo-log of windows whose logs are not known: the same finite prediction with |r|
+    0.21 rad/s, beyond 3 x the training range's 0.05 rad/s in window 3, diverges it (it was
+    judged on non-finite states alone there)."""
+    from sysid.evaluation.divergence import PhysicalRange
+
+    W = 4
+    states = torch.zeros(T + 1, W, 6, dtype=torch.float64)
+    states[..., 1], states[..., 5] = 0.5, 0.01
+    windows = WindowSet(states, torch.zeros(T + 1, W, 4, dtype=torch.float64), DT)
+    err = torch.full((T, W, 3), 1e-3, dtype=torch.float64)
+    err[10:, 3, 2] = 0.2
+    w_v = torch.ones(3, dtype=torch.float64)
+    limits = PhysicalRange(speed=1.0, yaw_rate=0.05)
+    base = window_score(None, windows, w_v, torch.full((T, W, 3), 2e-3, dtype=torch.float64), None, limits)
+    model = window_score(None, windows, w_v, err, None, limits)
+    cells = validation_cells(model, base, HORIZON)
+    assert {c.log for c in cells} == {VALIDATION_LOG}
+    assert all(c.divergence is not None and "window 3 of 4" in c.divergence.text() for c in cells)
+    verdict = baseline_verdict("hybrid", {HORIZON: {"model": model, SHIP_FILE_MMG: base}}, None, RULE)
+    assert verdict.outcome is Outcome.DIVERGED
+    bare = window_score(None, windows, w_v, err)
+    assert all(c.divergence is None for c in validation_cells(bare, base, HORIZON))

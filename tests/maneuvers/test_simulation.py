@@ -499,3 +499,29 @@ def test_the_eager_loop_equals_the_torch_step_with_the_whole_bank_scan(kind):
     torch.testing.assert_close(record[..., 12], expected[..., 12], rtol=0, atol=0, equal_nan=True)
     torch.testing.assert_close(record[..., 6:12], expected[..., 6:12], rtol=0, atol=1e-12)
     torch.testing.assert_close(record[..., :6], expected[..., :6], rtol=1e-10, atol=1e-12)
+
+
+def test_the_terminal_names_the_largest_distance_of_indices_csv(capsys):
+    """`sysid maneuver`'s line per maneuver gives indices.csv's knn_distance_max, the brute-force
+    kNN's largest along the maneuver; a NaN row (a diverged step) is skipped, not printed as the
+    largest (the terminal took Python's max of all rows but the last: NaN when the first was)."""
+    from sysid.cli.maneuver_commands import _print_gate
+    ship = load_ship("kvlcc2_l7")
+    bank_states = torch.zeros(200, 6, dtype=torch.float64)
+    bank_states[:, 1] = torch.linspace(1.1, 1.25, 200)
+    hybrid = _hybrid_without_correction(ship, bank_states)
+    conditions, _ = default_conditions(MMG(ship), ship, duration=20.0, dt=0.2)
+    result = simulate_maneuvers(hybrid, [TurningCircle(35.0)], conditions)[0]
+    bank = hybrid.gate.bank.numpy()
+    wind = torch.stack(relative_wind(*(torch.tensor(c) for c in (result.states[:, 1], result.states[:, 3],
+                                                                   result.states[:, 4], result.inputs[:, 2],
+                                                                   result.inputs[:, 3]))), -1)
+    z = hybrid.gate_coordinates(correction_inputs(torch.tensor(result.states), torch.tensor(result.inputs),
+                                                  wind)).detach().numpy()
+    brute = np.sort(np.linalg.norm(z[:, None] - bank[None], axis=-1), 1)[:, :hybrid.gate.k].mean(1)
+    result.knn_distance[0] = math.nan   # as a diverged step's
+    largest = float(np.max(brute[1:]))
+    row = indices_table([result], float(ship["L_pp"]), 1.17248, None).iloc[0]
+    assert row["knn_distance_max"] == pytest.approx(largest, rel=1e-9)
+    _print_gate([result], hybrid)
+    assert f"largest d_kNN {largest:.4g}" in capsys.readouterr().out

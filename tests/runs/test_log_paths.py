@@ -10,7 +10,9 @@ simulated from its MMG with known derivatives (`scratch_ship.simulated_logs`), a
 trained 2 epochs (a few seconds)."""
 import hashlib
 import json
+import os
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -217,3 +219,28 @@ def test_a_delivered_sweep_run_names_its_ship_relative_to_where_it_lives(tmp_pat
     assert not same_trial(written, trial, tmp_path / "other" / "deeper" / "p0")
     assert not same_trial({**written, "experiment": {"ship": "../../tanker.toml", "seed": 1}}, trial,
                           tmp_path / "trials" / "p0")
+
+
+def test_a_run_directory_reached_through_a_link_names_logs_its_reader_finds(tmp_path):
+    """runs/ a link to another disk: the relative path recorded for a log is read against the
+    run directory's resolved folder (as `load_experiment` anchors it) and must lead to the log
+    itself (it led to disk/logs/a.csv, which does not exist: found only through the absolute
+    hint, so lost once the project moved)."""
+    from sysid.runs.log_paths import portable_provenance
+    log = tmp_path / "proj" / "logs" / "a.csv"
+    log.parent.mkdir(parents=True)
+    log.write_text("t\n0\n")
+    (tmp_path / "disk" / "runs").mkdir(parents=True)
+    (tmp_path / "proj" / "runs").symlink_to(tmp_path / "disk" / "runs")
+    home = tmp_path / "proj" / "runs" / "first"           # not written yet
+    data = {"training": "files", "train": [{"file": str(log), "sha256": "0" * 64}]}
+    relative = portable_provenance(data, home)["train"][0]["relative"]
+    home.mkdir()
+    assert Path(os.path.normpath(os.path.join(home.resolve(), relative))) == log
+    assert (home.resolve() / relative).resolve() == log.resolve()
+    # a sweep's delivered run there: its ship file, named so relative to it, is its trial's
+    from sysid.runs.log_paths import relative_to
+    ship = tmp_path / "proj" / "tanker.toml"
+    trial = {"experiment": {"ship": str(ship), "seed": 0}, "data": {}}
+    written = {"experiment": {"ship": relative_to(ship, home), "seed": 0}, "data": {}}
+    assert same_trial(written, trial, home)
