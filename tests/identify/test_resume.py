@@ -15,6 +15,20 @@ def _config(tmp_path, dataset_dir):
     return config, tiny_test_file(dataset_dir)
 
 
+def _interrupt_after_saves(monkeypatch, n: int) -> list[int]:
+    """Ctrl-C right after the `n`-th checkpoint is saved; the epochs saved (filled as they are)."""
+    original, saves = TrainingCheckpoint.save, []
+
+    def save_then_interrupt(self, state):
+        original(self, state)
+        saves.append(state.epoch)
+        if len(saves) == n:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(TrainingCheckpoint, "save", save_then_interrupt)
+    return saves
+
+
 def test_interrupted_training_resumes_to_the_same_metrics(dataset_dir, tmp_path, monkeypatch, capsys):
     config, test_file = _config(tmp_path, dataset_dir)
     capsys.readouterr()
@@ -75,16 +89,8 @@ def test_a_checkpoint_of_torch_adam_resumes_to_the_same_metrics(dataset_dir, tmp
             f"{tmp_path / 'whole'} trains from the first epoch") in capsys.readouterr().err
     whole = (tmp_path / "whole" / "metrics.csv").read_text()
 
-    original = TrainingCheckpoint.save
-    saves, made = [], []
-
-    def save_then_interrupt(self, state):
-        original(self, state)
-        saves.append(state.epoch)
-        if len(saves) == 2:
-            raise KeyboardInterrupt
-
-    monkeypatch.setattr(TrainingCheckpoint, "save", save_then_interrupt)
+    made: list[float] = []
+    saves = _interrupt_after_saves(monkeypatch, 2)
     monkeypatch.setattr(loop, "adam", lambda params, lr: made.append(lr) or torch.optim.Adam(params, lr=lr, foreach=True))
     out = tmp_path / "parted"
     with pytest.raises(SystemExit):
@@ -154,16 +160,7 @@ def test_a_checkpoint_resumes_after_its_project_folder_moved(dataset_dir, tmp_pa
     config = _project(tmp_path / "a" / "tanker", dataset_dir)
     assert "logs/" in config.read_text() and str(dataset_dir) not in config.read_text()
     sysid(["train", str(config), "-o", str(config.parent / "runs" / "whole")])
-    original = TrainingCheckpoint.save
-    saves = []
-
-    def save_then_interrupt(self, state):
-        original(self, state)
-        saves.append(state.epoch)
-        if len(saves) == 2:
-            raise KeyboardInterrupt
-
-    monkeypatch.setattr(TrainingCheckpoint, "save", save_then_interrupt)
+    _interrupt_after_saves(monkeypatch, 2)
     with pytest.raises(SystemExit):
         main(["train", str(config), "-o", str(config.parent / "runs" / "parted")])
     monkeypatch.undo()

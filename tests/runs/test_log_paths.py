@@ -30,14 +30,14 @@ from scratch_ship import SCRATCH, simulated_logs
 
 TRUTH = {"N_r": -0.055}   # the ship file says -0.049
 RMSE = ["rmse_u", "rmse_v", "rmse_r"]
+EXPERIMENT = ("[experiment]\nname = 'first'\nmodel = 'hybrid'\nship = 'tanker.toml'\nseed = 0\n"
+              "[data]\ntrain = ['logs/*.csv']\ntest = ['test']\n"
+              "[training]\nepochs = 2\nwarm_start_epochs = 2\nthreads = 1\n[evaluation]\nhorizons = [30.0]\n")
 
 
-@pytest.fixture(scope="module")
-def origin(tmp_path_factory):
-    """A user's project: ``tanker.toml``, ``logs/`` (turn, zigzag), ``test/random.csv``,
-    ``experiment.toml`` (relative paths) and the run ``runs/first`` trained from it."""
-    from sysid.cli import run as sysid
-    folder = tmp_path_factory.mktemp("portable") / "tanker"
+def _write_project(folder):
+    """A user's project at `folder`: ``tanker.toml``, ``logs/`` (turn, zigzag),
+    ``test/random.csv``, ``experiment.toml`` (relative paths); returns its config."""
     (folder / "logs").mkdir(parents=True)
     (folder / "test").mkdir()
     (folder / "tanker.toml").write_text(SCRATCH)
@@ -45,11 +45,16 @@ def origin(tmp_path_factory):
     for log in (turn, zigzag):
         log.rename(folder / "logs" / log.name)
     random.rename(folder / "test" / random.name)
-    (folder / "experiment.toml").write_text(
-        "[experiment]\nname = 'first'\nmodel = 'hybrid'\nship = 'tanker.toml'\nseed = 0\n"
-        "[data]\ntrain = ['logs/*.csv']\ntest = ['test']\n"
-        "[training]\nepochs = 2\nwarm_start_epochs = 2\nthreads = 1\n[evaluation]\nhorizons = [30.0]\n")
-    sysid(["train", str(folder / "experiment.toml"), "-o", str(folder / "runs" / "first"), "-q"])
+    (folder / "experiment.toml").write_text(EXPERIMENT)
+    return folder / "experiment.toml"
+
+
+@pytest.fixture(scope="module")
+def origin(tmp_path_factory):
+    """A user's project (`_write_project`) and the run ``runs/first`` trained from it."""
+    from sysid.cli import run as sysid
+    folder = tmp_path_factory.mktemp("portable") / "tanker"
+    sysid(["train", str(_write_project(folder)), "-o", str(folder / "runs" / "first"), "-q"])
     return folder
 
 
@@ -245,19 +250,8 @@ def outside(tmp_path_factory):
     ``elsewhere/deep/run`` (``sysid train tanker/experiment.toml -o elsewhere/deep/run``)."""
     from sysid.cli import run as sysid
     study = tmp_path_factory.mktemp("outside") / "study"
-    project = study / "tanker"
-    (project / "logs").mkdir(parents=True)
-    (project / "test").mkdir()
-    (project / "tanker.toml").write_text(SCRATCH)
-    turn, zigzag, random = simulated_logs(project / "tanker.toml", project, TRUTH, seconds=120.0)
-    for log in (turn, zigzag):
-        log.rename(project / "logs" / log.name)
-    random.rename(project / "test" / random.name)
-    (project / "experiment.toml").write_text(
-        "[experiment]\nname = 'first'\nmodel = 'hybrid'\nship = 'tanker.toml'\nseed = 0\n"
-        "[data]\ntrain = ['logs/*.csv']\ntest = ['test']\n"
-        "[training]\nepochs = 2\nwarm_start_epochs = 2\nthreads = 1\n[evaluation]\nhorizons = [30.0]\n")
-    sysid(["train", str(project / "experiment.toml"), "-o", str(study / "elsewhere" / "deep" / "run"), "-q"])
+    config = _write_project(study / "tanker")
+    sysid(["train", str(config), "-o", str(study / "elsewhere" / "deep" / "run"), "-q"])
     return study
 
 
