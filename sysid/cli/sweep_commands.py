@@ -66,7 +66,7 @@ def sweep(
     if summary.failed or summary.missing:
         counts += f", {summary.failed} failed, {summary.missing} missing"
     typer.echo(f"sweep: {counts}; wrote {output} in {(time.perf_counter() - start) / 60:.1f} min "
-               f"(Tune's experiment: {summary.tune})")
+               f"(Tune's experiment: {summary.tune_at(output)})")
     if summary.failed or summary.missing:
         for row in results.trials.itertuples():
             if row.status not in ("complete", "stopped early"):

@@ -7,6 +7,11 @@ model's state, the best state, Adam's moments) is stored packed: one flat tensor
 and one layout string (`pack`), so that a save pickles a handful of tensors, not about two
 hundred (the MMG's coefficients are scalars of their own in a state dict). Version 1 files
 (every tensor on its own) still read.
+
+A checkpoint belongs to the resolved experiment TOML it was made with (``config``). Its logs
+and ship file are named there by absolute path, so it also keeps their SHA-256 (``files``,
+`files_of`): after the project folder is moved, the checkpoint still belongs to a config with
+the same options whose files hold the same bytes at their new paths (`TrainingCheckpoint.load`).
 """
 from __future__ import annotations
 
@@ -27,6 +32,8 @@ except ImportError:  # a private name: where a torch has it no more, the same va
 
 from sysid.errors import CheckpointError
 from sysid.store.files import atomic_path
+
+FILE_KEYS = ("train", "validation", "test")   # the [data] lists a checkpoint keeps the bytes of
 
 VERSION = 2
 VERSIONS = (1, 2)   # the layouts `TrainingCheckpoint.load` reads: 1 tensor by tensor, 2 packed
@@ -180,17 +187,20 @@ def _unpacked(state: dict, source: str | os.PathLike) -> dict:
 
 class TrainingCheckpoint:
     """One file holding the `CheckpointState` of the running training stage, with
-    ``version`` and ``config`` (the resolved experiment TOML it belongs to) before it."""
+    ``version``, ``config`` (the resolved experiment TOML it belongs to) and ``files`` (the
+    SHA-256 of the files the config names, `files_of`; None: not known) before it."""
 
-    def __init__(self, path: str | os.PathLike, config: str):
+    def __init__(self, path: str | os.PathLike, config: str, files: dict[str, list[str]] | None = None):
         self.path = Path(path)
         self.config = config
+        self.files = files
 
     def save(self, state: CheckpointState) -> None:
         # serialized in memory, then one write: torch's zip writer on a path writes record by
         # record (about a fifth slower for a ~300 kB checkpoint)
         buffer = io.BytesIO()
-        torch.save({"version": VERSION, "config": self.config, **state.to_packed()}, buffer)
+        files = {"files": self.files} if self.files is not None else {}
+        torch.save({"version": VERSION, "config": self.config, **files, **state.to_packed()}, buffer)
         with atomic_path(self.path, ".pt") as tmp:
             tmp.write_bytes(buffer.getbuffer())
 
@@ -206,12 +216,59 @@ class TrainingCheckpoint:
         if not isinstance(state, dict) or state.get("version") not in VERSIONS:
             raise CheckpointError(f"{self.path}: not a sysid training checkpoint (version "
                                   f"{state.get('version') if isinstance(state, dict) else '?'})")
-        if state.get("config") != self.config:
+        if not self.belongs(state.get("config"), state.get("files")):
             raise CheckpointError(f"{self.path}: made with another config; delete it or train without --resume")
         return CheckpointState.from_state_dict(state, self.path)
 
+    def belongs(self, config, files) -> bool:
+        """Whether a checkpoint saved with `config` and `files` is this config's: the same
+        TOML, or (a project moved since) the same options but for the paths of its ship file
+        and logs, whose bytes are those `files` recorded."""
+        if config == self.config:
+            return True
+        if not isinstance(config, str) or files is None or files != self.files:
+            return False
+        placeless = _without_paths(self.config)
+        return placeless is not None and _without_paths(config) == placeless
+
     def remove(self) -> None:
         self.path.unlink(missing_ok=True)
+
+
+def _without_paths(config: str) -> dict | None:
+    """A resolved experiment TOML without the paths `files_of` stands for (a ship file's,
+    the [data] lists); None when it is not TOML."""
+    import tomllib
+
+    from sysid.config.experiment import is_ship_path
+
+    try:
+        doc = tomllib.loads(config)
+    except tomllib.TOMLDecodeError:
+        return None
+    experiment = dict(doc.get("experiment", {}))
+    if is_ship_path(str(experiment.get("ship", ""))):
+        experiment.pop("ship")
+    data = {k: v for k, v in doc.get("data", {}).items() if k not in FILE_KEYS}
+    return {**doc, "experiment": experiment, "data": data}
+
+
+def files_of(exp) -> dict[str, list[str]] | None:
+    """The SHA-256 of the files the `Experiment` `exp` names by path: its ship file
+    (``"ship"``: a bundled ship's too) and each [data] list's logs (patterns and folders
+    expanded, in order); None when one of them cannot be read."""
+    from sysid.data.recordings import expand_paths
+    from sysid.errors import DataError, ShipDefinitionError
+    from sysid.mmg.ship import resolve_ship_path
+    from sysid.store.manifest import sha256_of
+
+    try:
+        out = {"ship": [sha256_of(resolve_ship_path(exp.experiment.ship))]}
+        for key in FILE_KEYS:
+            out[key] = [sha256_of(p) for p in expand_paths(list(getattr(exp.data, key)))]
+    except (DataError, ShipDefinitionError, OSError):
+        return None
+    return out
 
 
 class Checkpointing:
@@ -219,8 +276,9 @@ class Checkpointing:
     `start`) and the `CheckpointState` written after every epoch; none of either without
     a file."""
 
-    def __init__(self, path: str | os.PathLike | None, config: str, resume: bool = False):
-        self.file = TrainingCheckpoint(path, config) if path else None
+    def __init__(self, path: str | os.PathLike | None, config: str, resume: bool = False,
+                 files: dict[str, list[str]] | None = None):
+        self.file = TrainingCheckpoint(path, config, files) if path else None
         self.resume = resume
         self.resumed: CheckpointState | None = None
 

@@ -64,7 +64,7 @@ from sysid.hybrid.correction import ForceCorrection, correction_inputs
 from sysid.hybrid.force_models import CorrectedModel, PerMember, build_mmg
 from sysid.hybrid.knn_gate import KNNGate
 from sysid.hybrid.rollout_gate import with_rollout_gate
-from sysid.identify.checkpoint import Checkpointing
+from sysid.identify.checkpoint import Checkpointing, files_of
 from sysid.identify.journal import TrainingJournal
 from sysid.identify.loop import EpochReport, RunProgress, StageResult, TrainingLoop
 from sysid.identify.losses import VEL, adam, multistep_loss, output_penalty, weight_norm
@@ -184,7 +184,8 @@ class Trainer:
         self.experiment = experiment
         self.progress = progress
         self.journal = TrainingJournal(log, progress)
-        self.checkpointing = Checkpointing(checkpoint, experiment.to_toml(), resume)
+        files = files_of(experiment) if checkpoint is not None else None   # the files the config names, by bytes
+        self.checkpointing = Checkpointing(checkpoint, experiment.to_toml(), resume, files)
         self.resume = resume
         self.on_epoch = on_epoch
         self._validation_runs: list[Run] = []   # fit's validation logs

@@ -1,13 +1,22 @@
 """The logs a run directory was made from: how it records their paths, and how it finds
-them again after the project folder is moved or copied.
+them again after the project folder or the run is moved or copied.
 
 A run records every log of ``[data] train``, ``validation`` and ``test`` relative to the run
 directory itself, the folder its config.toml is in (``../../logs/turn.csv`` for the run
 ``runs/first`` of a project with ``logs/``): config.toml names them so, as any config names
 its logs relative to its own folder, and summary.json ``data`` keeps beside each one the
-absolute path it had when the run was made (``file``, the hint tried when the relative path
-finds nothing) and the SHA-256 of its bytes (`sysid.records.summary.LogFile`). A run written
-before (absolute paths, no ``relative``) reads as it always did.
+absolute path it had when the run was made (``file``) and the SHA-256 of its bytes
+(`sysid.records.summary.LogFile`). A log that shares no folder with the run but the file
+system's root (a run written with ``-o /scratch/...`` from a project in ``/work``) has no
+relative form: config.toml names it by its absolute path. A run written before (absolute
+paths, no ``relative``) reads as it always did.
+
+Where a log is looked for, in this order: relative to the run directory (a project moved
+or copied with its runs, or a run outside its project moved together with it, keeping
+their places to each other, uses the logs beside it, even edited: warned), then the
+absolute path it had when the run was made (a run moved or copied alone). A project moved
+while the run stays elsewhere cannot be followed: the run says so in one line with the fixes
+(its project's config where it is now, ``--config``, or ``--data``).
 
 `found_again` gives the config's files where they are now (nothing opened), `checked`
 the logs a command is about to read: a missing one is a `DataError` naming the run, the
@@ -33,11 +42,17 @@ PARTS = ("train", "validation", "test")   # the [data] lists that name logs
 def relative_to(path: str | os.PathLike, home: str | os.PathLike) -> str | None:
     """`path` (made absolute) relative to the directory `home` with its links resolved, as
     a config names it (`load_experiment` anchors relative paths at the config's resolved
-    folder), with ``/`` separators; None when it has no relative form (another drive)."""
+    folder), with ``/`` separators; None when it has no relative form worth keeping: another
+    drive, or no folder in common but the file system's root (``../../../work/tanker/...``
+    from a run in ``/scratch``: no move keeps that path, the absolute one says it plainly)."""
+    path, home = os.path.abspath(path), str(Path(home).resolve())
     try:
-        return Path(os.path.relpath(os.path.abspath(path), Path(home).resolve())).as_posix()
+        common = os.path.commonpath([path, home])
     except ValueError:
         return None
+    if common == Path(common).anchor:
+        return None
+    return Path(os.path.relpath(path, home)).as_posix()
 
 
 def portable_provenance(data: dict, home: str | os.PathLike) -> dict:
@@ -81,7 +96,8 @@ class RecordedLog:
         path = self.found()
         if path is None:
             where = f" (nor at {self.hint}, where it was when the run was made)" if len(self.candidates()) > 1 else ""
-            raise DataError(f"{run}: its {_PART_NAMES[part]} log {self.path} is missing{where}: move it back, or "
+            raise DataError(f"{run}: its {_PART_NAMES[part]} log {self.path} is missing{where}: move it back, "
+                            f"give the config of its project where it is now (--config DIR/experiment.toml), or "
                             f"name the logs to use with --data DIR")
         if self.sha256 is not None and sha256_of(path) != self.sha256:
             logging.getLogger(__name__).warning(

@@ -80,6 +80,16 @@ def write_output(spec: SweepSpec, out: Path, resume: bool) -> None:
     write_manifest(out, SWEEP_KIND)  # sealed as soon as it is made: sysid's from then on
 
 
+def recorded_tune(storage: TuneStorage, out: Path) -> str:
+    """Where Tune's experiment is, as sweep.json records it: relative to the sweep directory
+    `out` when inside it (``tune``: found again after the sweep folder is moved), else its
+    absolute path or URI."""
+    experiment = Path(storage.experiment)
+    if "://" in storage.storage_path or not experiment.resolve().is_relative_to(out.resolve()):
+        return storage.experiment
+    return experiment.resolve().relative_to(out.resolve()).as_posix()
+
+
 def _remove_unstarted(out: Path, existed: bool) -> None:
     """After a failure before the first trial: remove what this sweep wrote."""
     if (out / JOURNAL).exists() or not out.is_dir():
@@ -232,7 +242,7 @@ def run_sweep(spec: SweepSpec, out: str | os.PathLike, workers: int | None = Non
         raise
     results = collect_results(spec, out, trials, outcomes)
     summary = write_results(spec, out, results, time.perf_counter() - started,
-                            tune=tune_storage.experiment, mlflow=tracker.uri if tracker else None)
+                            tune=recorded_tune(tune_storage, out), mlflow=tracker.uri if tracker else None)
     if tracker is not None and parent is not None:  # the sweep's own run: counts, best, the results table
         tracker.metrics(parent, {"complete": summary.complete, "failed": summary.failed,
                                  "stopped_early": summary.stopped_early}

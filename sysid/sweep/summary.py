@@ -2,7 +2,9 @@
 `sysid.sweep.results.write_results`, read by the CLI and the report."""
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from sysid.runs.records import JsonRecord
@@ -27,8 +29,9 @@ class SweepSummary(JsonRecord):
     """A sweep: its name, base config, search ("grid" | "random" | "optuna"), seeds,
     objective, varied keys ("section.option"), trial counts (``stopped_early``: ended by the
     scheduler, "none" | "asha" | "median"), the chosen configuration (None: no configuration
-    completed all its seeds), the wall time [s], where Tune's experiment is (``tune``: a path
-    or URI) and the MLflow tracking URI (None: not tracked)."""
+    completed all its seeds), the wall time [s], where Tune's experiment is (``tune``: relative
+    to the sweep directory when inside it, else an absolute path or URI; `tune_at`) and the
+    MLflow tracking URI (None: not tracked)."""
 
     name: str
     base: str | None = None
@@ -47,3 +50,9 @@ class SweepSummary(JsonRecord):
     tune: str | None = None
     mlflow: str | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+
+    def tune_at(self, folder: str | os.PathLike) -> str | None:
+        """Where Tune's experiment is, for the sweep directory now at `folder`."""
+        if self.tune is None or "://" in self.tune or os.path.isabs(self.tune):
+            return self.tune
+        return str(Path(folder) / self.tune)

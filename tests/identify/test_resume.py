@@ -15,6 +15,20 @@ def _config(tmp_path, dataset_dir):
     return config, tiny_test_file(dataset_dir)
 
 
+def _interrupt_after_saves(monkeypatch, n: int) -> list[int]:
+    """Ctrl-C right after the `n`-th checkpoint is saved; the epochs saved (filled as they are)."""
+    original, saves = TrainingCheckpoint.save, []
+
+    def save_then_interrupt(self, state):
+        original(self, state)
+        saves.append(state.epoch)
+        if len(saves) == n:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(TrainingCheckpoint, "save", save_then_interrupt)
+    return saves
+
+
 def test_interrupted_training_resumes_to_the_same_metrics(dataset_dir, tmp_path, monkeypatch, capsys):
     config, test_file = _config(tmp_path, dataset_dir)
     capsys.readouterr()
@@ -75,16 +89,8 @@ def test_a_checkpoint_of_torch_adam_resumes_to_the_same_metrics(dataset_dir, tmp
             f"{tmp_path / 'whole'} trains from the first epoch") in capsys.readouterr().err
     whole = (tmp_path / "whole" / "metrics.csv").read_text()
 
-    original = TrainingCheckpoint.save
-    saves, made = [], []
-
-    def save_then_interrupt(self, state):
-        original(self, state)
-        saves.append(state.epoch)
-        if len(saves) == 2:
-            raise KeyboardInterrupt
-
-    monkeypatch.setattr(TrainingCheckpoint, "save", save_then_interrupt)
+    made: list[float] = []
+    saves = _interrupt_after_saves(monkeypatch, 2)
     monkeypatch.setattr(loop, "adam", lambda params, lr: made.append(lr) or torch.optim.Adam(params, lr=lr, foreach=True))
     out = tmp_path / "parted"
     with pytest.raises(SystemExit):
@@ -127,3 +133,51 @@ def test_a_version_1_checkpoint_resumes_to_the_same_metrics(dataset_dir, tmp_pat
     sysid(["train", str(config), "-o", str(out), "--test", str(test_file), "--resume"])
     assert "resumed after epoch 3" in capsys.readouterr().out
     assert (out / "metrics.csv").read_text() == whole
+
+
+def _project(folder, dataset_dir):
+    """A project with its own copies of the tiny experiment's logs and a config naming them
+    relative to itself (``logs/``, ``test/``); returns its config."""
+    from tiny_experiment import TRAIN_FILES, TEST_FILE
+    import shutil
+    (folder / "logs").mkdir(parents=True)
+    (folder / "test").mkdir()
+    for name in TRAIN_FILES:
+        shutil.copy(dataset_dir / "berthing" / name, folder / "logs" / name)
+    shutil.copy(dataset_dir / "berthing" / TEST_FILE, folder / "test" / TEST_FILE)
+    config = folder / "tiny.toml"
+    text = tiny_experiment(folder / "scratch.toml", dataset_dir, seed=5, epochs=5, warm_start_epochs=4).read_text()
+    config.write_text(text.replace(str(dataset_dir / "berthing"), "logs").replace("[data]\n", "[data]\ntest = ['test']\n", 1))
+    (folder / "scratch.toml").unlink()
+    return config
+
+
+def test_a_checkpoint_resumes_after_its_project_folder_moved(dataset_dir, tmp_path, monkeypatch, capsys):
+    """The checkpoint's config names the logs by absolute path; the project moved (the
+    original gone), its logs hold the same bytes at their new paths: the training resumes to
+    the metrics of the uninterrupted run. A training log edited since: refused in one line."""
+    import shutil
+    config = _project(tmp_path / "a" / "tanker", dataset_dir)
+    assert "logs/" in config.read_text() and str(dataset_dir) not in config.read_text()
+    sysid(["train", str(config), "-o", str(config.parent / "runs" / "whole")])
+    _interrupt_after_saves(monkeypatch, 2)
+    with pytest.raises(SystemExit):
+        main(["train", str(config), "-o", str(config.parent / "runs" / "parted")])
+    monkeypatch.undo()
+    moved = shutil.copytree(config.parent, tmp_path / "b" / "t2")
+    edited = shutil.copytree(config.parent, tmp_path / "c" / "t3")
+    shutil.rmtree(config.parent)
+    saved = torch.load(checkpoint_path(moved / "runs" / "parted"), weights_only=True)
+    assert str(tmp_path / "a" / "tanker" / "logs") in saved["config"]   # the old absolute paths
+    capsys.readouterr()
+    sysid(["train", str(moved / "tiny.toml"), "-o", str(moved / "runs" / "parted"), "--resume"])
+    assert "resumed after epoch 2" in capsys.readouterr().out
+    assert (moved / "runs" / "parted" / "metrics.csv").read_text() == (moved / "runs" / "whole" / "metrics.csv").read_text()
+    assert not checkpoint_path(moved / "runs" / "parted").exists()
+
+    log = next((edited / "logs").iterdir())
+    lines = log.read_text().splitlines(keepends=True)
+    log.write_text("".join(lines[:-1]))   # the last sample gone: another training set
+    from sysid.errors import CheckpointError
+    with pytest.raises(CheckpointError, match="made with another config"):
+        sysid(["train", str(edited / "tiny.toml"), "-o", str(edited / "runs" / "parted"), "--resume"])

@@ -42,11 +42,26 @@ def test_checkpoint_reads_into_the_state_and_writes_back_the_same(written, tmp_p
     losses = [row["early_stopping_loss"] for row in state.stage_history]
     assert state.best_loss == min(losses) and state.best_epoch == 1 + losses.index(min(losses))
     assert state.summary["n_train_windows"] == trainer.summary_.n_train_windows
-    TrainingCheckpoint(tmp_path / "again.pt", config).save(state)
     first = torch.load(path, weights_only=True)
+    TrainingCheckpoint(tmp_path / "again.pt", config, first["files"]).save(state)
     again = torch.load(tmp_path / "again.pt", weights_only=True)
-    assert list(first)[:2] == ["version", "config"] and _same(first, again)
+    assert list(first)[:3] == ["version", "config", "files"] and _same(first, again)
     assert _same(CheckpointState.from_state_dict(again, "again.pt").to_state_dict(), state.to_state_dict())
+
+
+def test_the_checkpoint_keeps_the_bytes_of_the_files_its_config_names(written, dataset_dir):
+    """``files``: the SHA-256 of the ship file and of each training log, in the config's
+    order (hashlib on the dataset's files), so a moved project's checkpoint is still its."""
+    import hashlib
+
+    from sysid.mmg.ship import resolve_ship_path
+    from tiny_experiment import TRAIN_FILES
+    path, _, _ = written
+    files = torch.load(path, weights_only=True)["files"]
+    digest = lambda p: hashlib.sha256(p.read_bytes()).hexdigest()  # noqa: E731
+    assert files == {"ship": [digest(resolve_ship_path("esso_osaka"))],
+                     "train": [digest(dataset_dir / "berthing" / name) for name in TRAIN_FILES],
+                     "validation": [], "test": []}
 
 
 @pytest.mark.parametrize("key", ["generator", "best_state"])

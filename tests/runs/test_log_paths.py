@@ -22,7 +22,7 @@ from sysid.data.recordings import read_runs
 from sysid.evaluation.evaluate import evaluate_model
 from sysid.records.summary import RunSummary
 from sysid.runs.layout import load_model
-from sysid.runs.log_paths import portable_provenance
+from sysid.runs.log_paths import portable_provenance, relative_to
 from sysid.runs.rundir import RunDir
 from sysid.store.manifest import write_manifest
 from sysid.sweep.inbox import same_trial
@@ -32,14 +32,14 @@ from scratch_ship import SCRATCH, simulated_logs
 
 TRUTH = {"N_r": -0.055}   # the ship file says -0.049
 RMSE = ["rmse_u", "rmse_v", "rmse_r"]
+EXPERIMENT = ("[experiment]\nname = 'first'\nmodel = 'hybrid'\nship = 'tanker.toml'\nseed = 0\n"
+              "[data]\ntrain = ['logs/*.csv']\ntest = ['test']\n"
+              "[training]\nepochs = 2\nwarm_start_epochs = 2\nthreads = 1\n[evaluation]\nhorizons = [30.0]\n")
 
 
-@pytest.fixture(scope="module")
-def origin(tmp_path_factory):
-    """A user's project: ``tanker.toml``, ``logs/`` (turn, zigzag), ``test/random.csv``,
-    ``experiment.toml`` (relative paths) and the run ``runs/first`` trained from it."""
-    from sysid.cli import run as sysid
-    folder = tmp_path_factory.mktemp("portable") / "tanker"
+def _write_project(folder):
+    """A user's project at `folder`: ``tanker.toml``, ``logs/`` (turn, zigzag),
+    ``test/random.csv``, ``experiment.toml`` (relative paths); returns its config."""
     (folder / "logs").mkdir(parents=True)
     (folder / "test").mkdir()
     (folder / "tanker.toml").write_text(SCRATCH)
@@ -47,11 +47,16 @@ def origin(tmp_path_factory):
     for log in (turn, zigzag):
         log.rename(folder / "logs" / log.name)
     random.rename(folder / "test" / random.name)
-    (folder / "experiment.toml").write_text(
-        "[experiment]\nname = 'first'\nmodel = 'hybrid'\nship = 'tanker.toml'\nseed = 0\n"
-        "[data]\ntrain = ['logs/*.csv']\ntest = ['test']\n"
-        "[training]\nepochs = 2\nwarm_start_epochs = 2\nthreads = 1\n[evaluation]\nhorizons = [30.0]\n")
-    sysid(["train", str(folder / "experiment.toml"), "-o", str(folder / "runs" / "first"), "-q"])
+    (folder / "experiment.toml").write_text(EXPERIMENT)
+    return folder / "experiment.toml"
+
+
+@pytest.fixture(scope="module")
+def origin(tmp_path_factory):
+    """A user's project (`_write_project`) and the run ``runs/first`` trained from it."""
+    from sysid.cli import run as sysid
+    folder = tmp_path_factory.mktemp("portable") / "tanker"
+    sysid(["train", str(_write_project(folder)), "-o", str(folder / "runs" / "first"), "-q"])
     return folder
 
 
@@ -206,10 +211,22 @@ def test_the_paper_data_sets_are_recorded_as_before(tmp_path):
              "test_set": "paper", "test": [{"file": "/data/frt-ds-esso/random/b.csv", "sha256": "1" * 64}]}
     assert portable_provenance(paper, tmp_path / "run") == paper
     own = {**paper, "training": "files", "test_set": "files"}
-    recorded = portable_provenance(own, "/p/runs/first")
-    assert recorded["train"][0]["relative"] == "../../../data/frt-ds-esso/turning/a.csv"
+    recorded = portable_provenance(own, "/data/runs/first")
+    assert recorded["train"][0]["relative"] == "../../frt-ds-esso/turning/a.csv"
     assert recorded["test"][0] == {"file": "/data/frt-ds-esso/random/b.csv", "sha256": "1" * 64,
-                                   "relative": "../../../data/frt-ds-esso/random/b.csv"}
+                                   "relative": "../../frt-ds-esso/random/b.csv"}
+
+
+def test_a_log_sharing_only_the_root_with_the_run_is_named_by_its_absolute_path():
+    """A run in /scratch made from logs in /data: no move keeps ``../../data/...`` true, so
+    there is no relative form (config.toml names the absolute path)."""
+    own = {"training": "files", "train": [{"file": "/data/logs/a.csv", "sha256": "0" * 64}],
+           "validation": "none", "test_set": "files", "test": [{"file": "/data/test/b.csv", "sha256": "1" * 64}]}
+    recorded = portable_provenance(own, "/scratch/runs/first")
+    assert recorded["train"] == [{"file": "/data/logs/a.csv", "sha256": "0" * 64}]
+    assert recorded["test"] == [{"file": "/data/test/b.csv", "sha256": "1" * 64}]
+    assert relative_to("/data/logs/a.csv", "/scratch/runs/first") is None
+    assert relative_to("/data/logs/a.csv", "/data/runs/first") == "../../logs/a.csv"
 
 
 def test_a_delivered_sweep_run_names_its_ship_relative_to_where_it_lives(tmp_path):
@@ -244,3 +261,75 @@ def test_a_run_directory_reached_through_a_link_names_logs_its_reader_finds(tmp_
     trial = {"experiment": {"ship": str(ship), "seed": 0}, "data": {}}
     written = {"experiment": {"ship": relative_to(ship, home), "seed": 0}, "data": {}}
     assert same_trial(written, trial, home)
+
+
+# -- a run written outside its project (sysid train CONFIG -o ELSEWHERE) ---------------------
+#
+# | moved                                  | the run finds its logs                     |
+# |----------------------------------------|--------------------------------------------|
+# | the run alone (the project stays)      | at their absolute paths                    |
+# | both, keeping their places to each other | relative to the run, in their new place  |
+# | the project alone (the run stays)      | cannot: one line, the fixes --config, --data |
+
+@pytest.fixture(scope="module")
+def outside(tmp_path_factory):
+    """A study folder: the project ``tanker`` and a run written outside it,
+    ``elsewhere/deep/run`` (``sysid train tanker/experiment.toml -o elsewhere/deep/run``)."""
+    from sysid.cli import run as sysid
+    study = tmp_path_factory.mktemp("outside") / "study"
+    config = _write_project(study / "tanker")
+    sysid(["train", str(config), "-o", str(study / "elsewhere" / "deep" / "run"), "-q"])
+    return study
+
+
+RUN = ("elsewhere", "deep", "run")
+
+
+def _evaluated(capsys, run, csv, *options):
+    out = in_process(capsys, "evaluate", run, "-o", csv, *options)
+    assert out.code == 0 and "differs from" not in out.err and "missing" not in out.err, out.err
+    return csv.read_bytes()
+
+
+def test_a_run_outside_its_project_names_its_logs_relative_to_itself(outside):
+    run = RunDir.open(outside.joinpath(*RUN))
+    assert run.read_config()["data"]["test"] == ["../../../tanker/test/random.csv"]
+    assert [(f.relative, f.file) for f in run.read_summary().data.test] == [
+        ("../../../tanker/test/random.csv", str(outside / "tanker" / "test" / "random.csv"))]
+
+
+def test_an_outside_run_moved_alone_finds_its_logs_where_they_are(outside, tmp_path, capsys):
+    before = _evaluated(capsys, outside.joinpath(*RUN), tmp_path / "before.csv")
+    study = shutil.copytree(outside, tmp_path / "study")   # the project stays where it was: the copy's own
+    run = shutil.move(study.joinpath(*RUN), tmp_path / "runs" / "run")
+    shutil.rmtree(study / "tanker")
+    assert _evaluated(capsys, run, tmp_path / "after.csv") == before
+    assert RunDir(run).read_experiment().data.test == (str(outside / "tanker" / "test" / "random.csv"),)
+
+
+def test_an_outside_run_and_its_project_moved_together_evaluate_as_before(outside, tmp_path, capsys):
+    first = shutil.copytree(outside, tmp_path / "a" / "study")
+    before = _evaluated(capsys, first.joinpath(*RUN), tmp_path / "before.csv")
+    moved = shutil.copytree(first, tmp_path / "b" / "s2")
+    shutil.rmtree(first)
+    assert _evaluated(capsys, moved.joinpath(*RUN), tmp_path / "after.csv") == before
+    assert RunDir(moved.joinpath(*RUN)).read_experiment().data.test == (str(moved / "tanker" / "test" / "random.csv"),)
+
+
+def test_an_outside_run_whose_project_moved_says_so_in_one_line_with_the_fixes(outside, tmp_path, capsys):
+    run = outside.joinpath(*RUN)
+    before = _evaluated(capsys, run, tmp_path / "before.csv")
+    project = shutil.move(outside / "tanker", tmp_path / "ships" / "tanker")   # the run stays
+    try:
+        out = in_process(capsys, "evaluate", run, "-o", tmp_path / "m.csv")
+        # either fix: the project's config where it is now, or its test logs
+        fixed = (_evaluated(capsys, run, tmp_path / "config.csv", "--config", project / "experiment.toml"),
+                 _evaluated(capsys, run, tmp_path / "data.csv", "--data", project / "test"))
+    finally:
+        shutil.move(project, outside / "tanker")
+    assert out.code == 2 and len(out.err.strip().splitlines()) == 1 and "Traceback" not in out.err, out.err
+    line = out.error_lines[0]
+    assert str(run) in line and str(outside / "tanker" / "test" / "random.csv") in line
+    assert "--config DIR/experiment.toml" in line and "--data DIR" in line
+    assert not (tmp_path / "m.csv").exists()
+    assert fixed == (before, before)

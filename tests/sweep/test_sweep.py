@@ -221,3 +221,65 @@ def test_a_sweep_failing_before_its_first_trial_leaves_no_output(tmp_path, datas
         with pytest.raises(RuntimeError, match="Tune could not start"):
             study.run_sweep(spec, out, workers=1, data=dataset_dir.parent, log=lambda m: None)
         assert (not out.exists()) if out.name == "new" else (out.is_dir() and not any(out.iterdir()))
+
+
+class _KilledAfter:
+    """A `RunInbox` whose driver dies (KeyboardInterrupt) once it holds the checkpoint of
+    epoch `epochs` of a trial."""
+
+    def __init__(self, out, epochs: int):
+        from sysid.sweep.inbox import RunInbox
+        self.inbox, self.left = RunInbox(str(out)), epochs
+
+    def __getattr__(self, name):
+        return getattr(self.inbox, name)
+
+    def save_checkpoint(self, path, holder, blob):
+        kept = self.inbox.save_checkpoint(path, holder, blob)
+        self.left -= 1
+        if self.left == 0:
+            raise KeyboardInterrupt
+        return kept
+
+
+def test_a_sweep_moved_with_its_project_resumes_its_interrupted_trial(tmp_path, dataset_dir):
+    """A sweep inside its project (``-o out``), its driver killed after a trial's second
+    epoch, the whole project folder moved (the original gone): resuming the moved sweep
+    continues that trial from its checkpoint (journal: resumed after 2 epochs; the trial's
+    config now names the logs by their new paths) to the history of an uninterrupted trial,
+    and the finished run finds its logs in the moved project."""
+    import shutil
+    from sysid.data.datasets import data_root
+    from sysid.runs.rundir import RunDir
+    from sysid.sweep.inbox import RunInbox
+    from sysid.sweep.study import write_output
+    from sysid.sweep.trial import read_trial_data, run_trial
+    from own_sweep import own_sweep_project
+
+    def trial_of(project):
+        spec = load_sweep(project / "own.toml")
+        trial = sweep_trials(spec)[0]
+        return spec, trial, read_trial_data([spec.base], data_root())
+
+    origin = tmp_path / "a" / "project"
+    own_sweep_project(origin, dataset_dir, epochs=4)
+    spec, trial, data = trial_of(origin)
+    write_output(spec, origin / "out", resume=False)
+    with pytest.raises(KeyboardInterrupt):
+        run_trial(trial, _KilledAfter(origin / "out", 2), data, "tune-a")
+    moved = shutil.copytree(origin, tmp_path / "b" / "moved")
+    shutil.rmtree(origin)
+
+    spec, trial, data = trial_of(moved)
+    assert str(moved / "my logs" / "harbour_0.csv") in trial.config
+    row = run_trial(trial, RunInbox(str(moved / "out")), data, "tune-b")
+    events = read_journal(moved / "out")
+    assert [(e["event"], e.get("after_epochs")) for e in events] == [("started", None), ("resumed", 2),
+                                                                        ("trained", None)]
+    whole = run_trial(trial, RunInbox(str(tmp_path / "whole")), data, "tune-c")   # never interrupted
+    run = moved / "out" / trial.path
+    assert row["status"] == "complete" and row["val_loss_multistep"] == whole["val_loss_multistep"]
+    history = [pd.read_csv(r / "history.csv").drop(columns="seconds") for r in (run, tmp_path / "whole" / trial.path)]
+    assert len(history[0]) == 4 and history[0].equals(history[1])   # the 4 epochs alike
+    assert RunDir.open(run).read_experiment().data.train == tuple(
+        str(moved / "my logs" / f"harbour_{i}.csv") for i in (0, 1))

@@ -161,3 +161,22 @@ def test_a_cluster_that_goes_away_mid_sweep_is_one_line_and_leaves_no_lock(tmp_p
             _kill_group(sweep)
         _kill_group(head)
         subprocess.run(["rm", "-rf", str(tmp)])
+
+
+def test_sweep_json_names_its_own_tune_folder_relative_to_itself(tmp_path):
+    """Tune's experiment inside the sweep directory is recorded as ``tune`` and found in the
+    moved folder; one elsewhere (``--storage``) by its absolute path, a URI as given."""
+    from sysid.sweep.runner import TuneStorage
+    from sysid.sweep.study import recorded_tune
+    from sysid.sweep.summary import SweepSummary
+
+    out = tmp_path / "project" / "out"
+    out.mkdir(parents=True)
+    own = recorded_tune(TuneStorage(str(out)), out)
+    assert own == "tune"
+    assert SweepSummary("s", tune=own).tune_at(tmp_path / "moved") == str(tmp_path / "moved" / "tune")
+    store = tmp_path / "store"
+    assert recorded_tune(TuneStorage(str(store), "own"), out) == str(store / "own")
+    assert SweepSummary("s", tune=str(store / "own")).tune_at(tmp_path / "moved") == str(store / "own")
+    assert recorded_tune(TuneStorage("s3://bucket/sweeps", "own"), out) == "s3://bucket/sweeps/own"
+    assert SweepSummary("s", tune="s3://bucket/sweeps/own").tune_at(out) == "s3://bucket/sweeps/own"

@@ -72,7 +72,7 @@ def test_every_epoch_is_in_tune_experiment_analysis(sweeps):
     tmp, _ = sweeps
     out = tmp / "plain"
     summary = json.loads((out / "sweep.json").read_text())
-    assert summary["tune"] == str(out / "tune")
+    assert summary["tune"] == "tune"   # inside the sweep directory: relative to it
     analysis = tune.ExperimentAnalysis(str(out / "tune"))
     frames = analysis.trial_dataframes
     assert len(frames) == 2
