@@ -60,7 +60,9 @@ def evaluate(
         None if run_dir is not None else ship_file(exp.experiment.ship if exp is not None else "esso_osaka"))
     claim(output, OutputKind.FILE, [run_dir, config, *(data or []), *files, ship_input, *_logs_of_run(run_exp)])
     rate = source.data.rate if source is not None else 1.0
-    runs = read_runs(progress(files, desc="reading", unit="files", quiet=len(files) < 4), rate, columns)
+    checked = source.data.rudder_sign_checked if source is not None else ()
+    runs = read_runs(progress(files, desc="reading", unit="files", quiet=len(files) < 4), rate, columns,
+                     rudder_sign_checked=checked)
     _check_windows_fit(runs, horizons)
     limits = _training_range(run_dir)
     baselines = _baselines(run_exp, model)
