@@ -128,7 +128,8 @@ class TrackCheck:
         rudder_sign_checked``), so it is read as it is."""
         mark = (Verdict.MISMATCH, Verdict.MARGINAL)
         return replace(self, channels=tuple(
-            replace(c, verdict=Verdict.USER_CHECKED) if c.channel == "delta_rudder" and c.verdict in mark else c
+            replace(c, verdict=Verdict.USER_CHECKED, hint="named in [data] rudder_sign_checked")
+            if c.channel == "delta_rudder" and c.verdict in mark else c
             for c in self.channels))
 
     @property

@@ -113,6 +113,7 @@ class TrainingSummary:
     def to_dict(self) -> dict:
         """Plain data (the records as their summary.json objects), None fields left out."""
         plain = dataclasses.asdict(dataclasses.replace(self, **dict.fromkeys(_RECORDS)))
+        plain["split"] = {k: v for k, v in plain["split"].items() if v is not None}  # astern counts: one-quadrant only
         return {f.name: (copy.deepcopy(value.to_json()) if f.name in _RECORDS else plain[f.name])
                 for f in dataclasses.fields(self) if (value := getattr(self, f.name)) is not None}
 

@@ -130,18 +130,15 @@ class GateSummary(JsonRecord):
 
 @dataclass(frozen=True)
 class SplitFile(JsonRecord):
-    """One training file's windows in the training/validation split and its data issues; under
-    a one-quadrant propeller model, astern_windows: its windows holding a sample outside that
-    model's quadrant (astern revolutions or going astern), astern_samples: its samples outside
-    it (absent: a four-quadrant propeller, or a run written before)."""
+    """One training file's windows in the training/validation split and its data issues. Under
+    a one-quadrant propeller model the trainer adds, after these, astern_windows (its windows
+    holding a sample outside that model's quadrant: astern revolutions or going astern) and
+    astern_samples (its samples outside it); read, they are in `extra`."""
 
-    SPARSE = True
     file: str
     train_windows: int
     val_windows: int
     issues: tuple[str, ...] = ()
-    astern_windows: int | None = None
-    astern_samples: int | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
 

@@ -296,3 +296,23 @@ def test_training_on_a_checked_log_records_the_override(tmp_path, capsys):
     assert recorded["tug_assist.csv"]["rudder_sign_checked"] == pytest.approx(read_as, abs=1e-4)
     assert "rudder_sign_checked" not in recorded["plain.csv"]
     assert plain.exists()
+
+
+def test_logs_check_shows_the_users_checked_sign(tmp_path, capsys):
+    """`sysid logs check --config` on the tug log: refused without the config's
+    rudder_sign_checked (exit 2), passed with it, its row naming the override."""
+    from sysid.cli import main
+    fooled = _nomoto_log(tmp_path / "tug_assist.csv", tug=True)
+    config = tmp_path / "exp.toml"
+    config.write_text("[experiment]\nname = 'tug'\nmodel = 'hybrid'\n[data]\ntrain = ['tug_assist.csv']\n")
+    with pytest.raises(SystemExit) as stop:
+        main(["logs", "check", str(fooled), "--config", str(config)])
+    assert stop.value.code == 2
+    capsys.readouterr()
+    config.write_text("[experiment]\nname = 'tug'\nmodel = 'hybrid'\n[data]\ntrain = ['tug_assist.csv']\n"
+                      "rudder_sign_checked = ['tug_assist']\n")
+    main(["logs", "check", str(fooled), "--config", str(config)])
+    out = capsys.readouterr().out.splitlines()
+    row = next(line for line in out if line.split()[:2] == ["tug_assist.csv", "delta_rudder"])
+    assert row.split()[2] == "-1" and row.endswith("sign checked by the user (named in [data] rudder_sign_checked)")
+    assert out[-1] == "logs check: 1 log(s), 0 clear mismatch(es), 0 marginal, 0 unreadable, 0 without a track"
