@@ -316,3 +316,21 @@ def test_logs_check_shows_the_users_checked_sign(tmp_path, capsys):
     row = next(line for line in out if line.split()[:2] == ["tug_assist.csv", "delta_rudder"])
     assert row.split()[2] == "-1" and row.endswith("sign checked by the user (named in [data] rudder_sign_checked)")
     assert out[-1] == "logs check: 1 log(s), 0 clear mismatch(es), 0 marginal, 0 unreadable, 0 without a track"
+
+
+def test_preprocess_keeps_a_checked_raw_logs_output(tmp_path):
+    """`sysid preprocess`'s check of its outputs (`_check_tracks`) on the tug log as the output
+    of raw/tug_run.csv: refused naming --rudder-sign-checked and the processed log's name for
+    training; kept with the raw log named."""
+    from sysid.cli.preprocess_commands import _check_tracks
+    out = _nomoto_log(tmp_path / "tug_run_seg1.csv", tug=True)
+    results = [{"ok": True, "file": "raw/tug_run.csv", "outputs": [str(out)]}]
+    with pytest.raises(DataError) as bad:
+        _check_tracks(results)
+    assert str(bad.value).startswith("raw/tug_run.csv: its processed log tug_run_seg1.csv: delta_rudder: the rudder "
+                                     "sign looks reversed")
+    assert str(bad.value).endswith('give --rudder-sign-checked tug_run and, to train, '
+                                   '[data] rudder_sign_checked = ["tug_run_seg1"]')
+    _check_tracks(results, ("tug_run",))
+    with pytest.raises(DataError):
+        _check_tracks(results, ("tug_run_seg1",))   # the raw log's name, not the output's
