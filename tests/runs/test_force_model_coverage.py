@@ -91,3 +91,9 @@ def test_a_run_counts_astern_samples_and_windows_per_log(tmp_path, capsys):
     assert "random 2 of the 30-s windows" in said.out + said.err
     train = {f["file"].rsplit("/", 1)[-1]: f for f in summary["data"]["train"]}
     assert train["zigzag.csv"]["astern_samples"] == 20 and train["turn.csv"]["astern_samples"] == 0
+    # `sysid evaluate` of the run on the same test log says it too
+    sysid(["evaluate", str(tmp_path / "run"), "--data", str(random), "--horizon", "30", "-o",
+           str(tmp_path / "metrics.csv")])
+    said = capsys.readouterr()
+    assert "model of the model's ship file, are scored as they are: random 20 samples, 2 of the 30-s windows" \
+        in said.err
