@@ -119,13 +119,13 @@ def compare(
     chosen = _contenders(sources)
     with compute_threads(1 if threads is None else threads):
         result, paths = _compare_and_write(chosen, files, rate, columns, horizons, against, method, target,
-                                           sources, report, output)
+                                           sources, report, output, exp.data.rudder_sign_checked if exp else ())
     _print(result)
     typer.echo(f"compare: {output} ({len(paths)} files, {time.perf_counter() - started:.1f} s)")
 
 
 def _compare_and_write(chosen, files, rate: float, columns, horizons, against: str, method, target, sources,
-                       report: bool, output: Path):
+                       report: bool, output: Path, rudder_sign_checked: tuple[str, ...] = ()):
     """Read the logs, predict every model on them, judge, and write the comparison staged
     into `target`; (the `Comparison`, the paths written)."""
     from sysid.dynamics.integrators import Integrator
@@ -133,7 +133,7 @@ def _compare_and_write(chosen, files, rate: float, columns, horizons, against: s
     from sysid.progress import progress
     from sysid.report.comparison_report import write_comparison
 
-    runs = _read_logs(files, rate, columns, horizons)
+    runs = _read_logs(files, rate, columns, horizons, rudder_sign_checked)
     logs.info(f"compare: {len(chosen)} models on {len(runs)} log(s) at {', '.join(f'{h:g}' for h in horizons)} s "
               f"({method.value}); verdicts against " + ("the first model, " + chosen[0].label if against == FIRST
                                                          else "each model's physics baseline"))
@@ -244,13 +244,14 @@ def _contenders(sources):
     return chosen
 
 
-def _read_logs(files, rate: float, columns, horizons):
-    """The logs read; exit 2 when none holds a window of a horizon, a warning for each too short."""
+def _read_logs(files, rate: float, columns, horizons, rudder_sign_checked: tuple[str, ...] = ()):
+    """The logs read (those named in `rudder_sign_checked` whatever their rudder check says); exit 2 when none holds a window of a horizon, a warning for each too short."""
     from sysid.data.recordings import read_runs
     from sysid.evaluation.evaluate import short_runs
     from sysid.progress import progress
 
-    runs = read_runs(progress(files, desc="reading", unit="logs", quiet=len(files) < 4), rate, columns)
+    runs = read_runs(progress(files, desc="reading", unit="logs", quiet=len(files) < 4), rate, columns,
+                     rudder_sign_checked=rudder_sign_checked)
     short = short_runs(runs, horizons)
     for h in horizons:
         if sum(s == h for _, s in short) == len(runs):

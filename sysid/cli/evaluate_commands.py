@@ -60,7 +60,9 @@ def evaluate(
         None if run_dir is not None else ship_file(exp.experiment.ship if exp is not None else "esso_osaka"))
     claim(output, OutputKind.FILE, [run_dir, config, *(data or []), *files, ship_input, *_logs_of_run(run_exp)])
     rate = source.data.rate if source is not None else 1.0
-    runs = read_runs(progress(files, desc="reading", unit="files", quiet=len(files) < 4), rate, columns)
+    checked = source.data.rudder_sign_checked if source is not None else ()
+    runs = read_runs(progress(files, desc="reading", unit="files", quiet=len(files) < 4), rate, columns,
+                     rudder_sign_checked=checked)
     _check_windows_fit(runs, horizons)
     limits = _training_range(run_dir)
     baselines = _baselines(run_exp, model)
@@ -70,6 +72,7 @@ def evaluate(
     evaluation = evaluate_model(model, runs, horizons, chosen, traces=False, limits=limits)
     for divergence in evaluation.divergences:
         typer.secho(f"WARNING: the prediction diverged on {divergence.text()}", fg=typer.colors.YELLOW, err=True)
+    _warn_astern(model, runs, horizons)
     table = _with_gate(evaluation)
     write_csv(table, output, float_format="%.6g")
     with pd.option_context("display.width", 120, "display.float_format", "{:.5f}".format):
@@ -129,6 +132,30 @@ def _model_to_judge(run_dir, model_kind: str, exp, ship, set_, quadrature: str):
         shown = ", ".join(f"{k}={v:g}" for k, v in model.ship.overrides.items()) or "none"
         label = f"MMG ({model.ship.name}, overrides: {shown})"
     return run_exp, model, label
+
+
+def _warn_astern(model, runs, horizons) -> None:
+    """A WARNING naming the logs whose windows hold samples with astern revolutions or going
+    astern when the model's propeller model is one-quadrant (`sysid.data.splits.log_conditions`):
+    scored as they are, outside that model's validity."""
+    from sysid.data.splits import log_conditions
+    from sysid.identify.windowing import AsternSamples
+    from sysid.mmg.coverage import one_quadrant_propeller
+
+    ship = getattr(getattr(model, "mmg", model), "ship", None)
+    if ship is None or not one_quadrant_propeller(ship.models):
+        return
+    astern = AsternSamples(tuple(sorted(ship.models.items())))
+    named = []
+    for run in runs:
+        found = log_conditions(run, astern.of, horizons)
+        if found["astern_samples"]:
+            named.append(f"{run.name} {found['astern_samples']} samples, " + ", ".join(
+                f"{n} of the {h}-s windows" for h, n in found["astern_windows"].items()))
+    if named:
+        typer.secho("WARNING: samples with astern revolutions or going astern, outside the one-quadrant propeller "
+                    "model of the model's ship file, are scored as they are: " + "; ".join(named),
+                    fg=typer.colors.YELLOW, err=True)
 
 
 def _logs(data, source, run_dir=None):

@@ -55,7 +55,7 @@ def _read_force_inputs(path: Path):
     non-UTF-8 or non-numeric file."""
     import numpy as np
     import pandas as pd
-    from sysid.data.csvfiles import read_csv_table
+    from sysid.data.csvfiles import read_csv_table, row_name
 
     frame = read_csv_table(path, f"a CSV with the header {' '.join(FORCE_INPUTS)}")
     missing = [c for c in FORCE_INPUTS if c not in frame.columns]
@@ -68,7 +68,7 @@ def _read_force_inputs(path: Path):
     if bad.any():
         row, col = np.argwhere(bad)[0]
         cell = frame[FORCE_INPUTS[col]].iloc[row]
-        raise DataError(f"{path}: column {FORCE_INPUTS[col]!r} is not a finite number at line {row + 2} "
+        raise DataError(f"{path}: column {FORCE_INPUTS[col]!r} is not a finite number at {row_name(path, row)} "
                         f"({'empty' if pd.isna(cell) else f'found {cell}'})")
     return numeric.astype(float)
 
@@ -99,6 +99,7 @@ def forces(
     training data, the FNN switched off)."""
     import numpy as np
     import pandas as pd
+    from sysid.data.csvfiles import row_name
     from sysid.store.files import write_float_csv
     from sysid.config import checks
     from sysid.progress import progress
@@ -129,13 +130,13 @@ def forces(
     if bad.any():
         row, col = np.argwhere(bad)[0]
         state = ", ".join(f"{c} = {numeric[c].iloc[row]:g}" for c in ("u", "v", "r", "n_prop"))
-        raise DataError(f"{input_csv}: line {row + 2}: {computed[col]} is {values[row, col]} ({state}): "
+        raise DataError(f"{input_csv}: {row_name(input_csv, row)}: {computed[col]} is {values[row, col]} ({state}): "
                         f"the state is beyond the model's range ({int(bad.any(axis=1).sum())} row(s)); nothing written")
     for name, limit in PLAUSIBLE.items():
         beyond = np.abs(numeric[name].to_numpy()) > limit
         if beyond.any():
             typer.secho(f"warning: {input_csv}: column {name!r} beyond {limit:g} on {int(beyond.sum())} row(s) "
-                        f"(first at line {int(np.argmax(beyond)) + 2}): not a ship model's state"
+                        f"(first at {row_name(input_csv, int(np.argmax(beyond)))}): not a ship model's state"
                         f"{_UNIT_HINT.get(name, '')}; forces computed but implausible", fg=typer.colors.YELLOW,
                         err=True)
     writing = progress(total=len(result), desc="writing", unit="rows", quiet=len(result) < 100_000)

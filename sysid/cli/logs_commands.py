@@ -17,7 +17,8 @@ def check(
     paths: List[Path] = typer.Argument(..., help="Log files, folders (searched for .csv and .parquet) or patterns."),
     config: Optional[Path] = typer.Option(None, "--config", help="Experiment config whose [data.columns] maps the "
                                                                  "logs' columns and units (default: the processed "
-                                                                 "schema's)."),
+                                                                 "schema's) and whose [data] rudder_sign_checked "
+                                                                 "names the logs whose rudder sign you checked."),
 ) -> None:
     """Check u, v_m and r of every log against its own track (d(x, y)/dt turned by psi, and
     dpsi/dt), and the rudder's sign against the yaw response: a table of file, channel, factor
@@ -28,16 +29,18 @@ def check(
     from sysid.errors import DataError
 
     columns = None
+    rudder_sign_checked: tuple[str, ...] = ()
     if config is not None:
         from sysid.config.experiment import load_experiment
-        columns = load_experiment(config).data.columns
+        data = load_experiment(config).data
+        columns, rudder_sign_checked = data.columns, data.rudder_sign_checked
     files = expand_paths(paths)
     checks, unreadable = [], []
     width = min(48, max(len(f.name) for f in files))
     typer.echo(f"{'file':{width}s} {'channel':>12s} {'factor':>9s} {'corr':>6s}  verdict")
     for f in files:
         try:
-            found = log_track(f, columns)
+            found = log_track(f, columns, rudder_sign_checked)
         except DataError as exc:
             unreadable.append(str(exc))
             typer.echo(f"{f.name[:width]:{width}s} {'-':>12s} {'':>9s} {'':>6s}  unreadable (below)")

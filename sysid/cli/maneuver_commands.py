@@ -316,10 +316,12 @@ def _recorded_runs(paths: list[Path], config: Optional[Path], run_columns=None):
     from sysid.maneuvers.recorded import recorded_maneuver_runs
 
     columns = run_columns
+    checked: tuple[str, ...] = ()
     if config is not None:
         from sysid.config.experiment import load_experiment
-        columns = load_experiment(config).data.columns
-    runs = read_runs(expand_paths(paths), columns=columns)
+        data = load_experiment(config).data
+        columns, checked = data.columns, data.rudder_sign_checked
+    runs = read_runs(expand_paths(paths), columns=columns, rudder_sign_checked=checked)
     found, other = recorded_maneuver_runs(runs)
     if not found:
         raise _error(f"--recorded: none of the {len(runs)} log(s) is a turning circle or a zig-zag (recognised "

@@ -111,6 +111,7 @@ def preprocess(
     reference: Optional[str] = typer.Option(None, "--reference", help="LAT,LON [deg] of the local origin for lat/lon logs."),
     swap_antennas: bool = typer.Option(False, "--swap-antennas", help="Repair logs whose fore/aft antennas are swapped."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output directory (all of it)."),
+    rudder_sign_checked: Optional[List[str]] = typer.Option(None, "--rudder-sign-checked", help="A raw log (file name without .csv) whose rudder sign you have checked, read as it is when the rudder check reads it reversed (tugs, wind, current, little rudder); repeat for several. Name it in [data] rudder_sign_checked when you train."),
 ) -> None:
     """Preprocess raw logs into processed 1 Hz runs plus a JSON quality report per run.
 
@@ -138,7 +139,7 @@ def preprocess(
     on_interrupt(f"nothing written to {outdir} (it is moved into place only when every file is done)")
     with target.staged() as staging:
         results = _processed(paths, layout, settings, staging, jobs, outdir)
-        _check_tracks(results)  # a clear mismatch: nothing moved into place
+        _check_tracks(results, tuple(rudder_sign_checked or ()))  # a clear mismatch: nothing moved into place
     order = {p: i for i, p in enumerate(paths)}
     results.sort(key=lambda r: order[r["file"]])
     _summary(results, outdir, time.perf_counter() - start)
@@ -200,9 +201,11 @@ def _processed(paths: list[str], layout, settings, staging: Path, jobs: int, out
     return results
 
 
-def _check_tracks(results: list[dict]) -> None:
+def _check_tracks(results: list[dict], rudder_sign_checked: tuple[str, ...] = ()) -> None:
     """Each processed output against its own GNSS track (`sysid.data.consistency`): a clear
-    mismatch is a `DataError`, a line per output naming the raw log; a marginal one a warning."""
+    mismatch is a `DataError`, a line per output naming the raw log; a marginal one a warning.
+    The outputs of a raw log named in `rudder_sign_checked` (its file's stem) are kept whatever
+    their rudder check says, with a warning."""
     from sysid import logs
     from sysid.data.consistency import Verdict
     from sysid.data.recordings import log_track
@@ -212,14 +215,27 @@ def _check_tracks(results: list[dict]) -> None:
         for out in r.get("outputs", []) if r["ok"] else []:
             if not out.endswith(".csv"):
                 continue
-            found = log_track(out)
+            checked = Path(r["file"]).stem in rudder_sign_checked
+            found = log_track(out, rudder_sign_checked=(Path(out).stem,) if checked else ())
             where = f"{r['file']}: its processed log {Path(out).name}"
             errors += [f"{where}: {c.sentence()} (the raw log's units or signs; docs: Input formats)"
+                       + (_rudder_fix(r["file"], out) if c.channel == "delta_rudder" else "")
                        for c in found.worst(Verdict.MISMATCH)]
             for c in found.worst(Verdict.MARGINAL):
                 logs.warning(f"{where}: {c.sentence()} (marginal; docs: Input formats, the track check)")
+            if (rudder := found.rudder_overridden) is not None:
+                logs.warning(f"{where}: delta_rudder: the rudder check reads the sign reversed (partial correlation "
+                             f"{rudder.correlation:.2f}); kept as it is: --rudder-sign-checked names the raw log")
     if errors:
         raise DataError("\n".join(errors))
+
+
+def _rudder_fix(raw: str, out: str) -> str:
+    """The second fix of a processed log's refused rudder sign: the raw log named with
+    --rudder-sign-checked, and the processed one in [data] rudder_sign_checked to train."""
+    return (f"; or, if you have checked its rudder sign and it is right (tugs, wind, current or little rudder can "
+            f"fool this check), give --rudder-sign-checked {Path(raw).stem} and, to train, "
+            f'[data] rudder_sign_checked = ["{Path(out).stem}"]')
 
 
 def _summary(results: list[dict], outdir: Path, seconds: float) -> None:

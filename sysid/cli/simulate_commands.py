@@ -65,14 +65,16 @@ def simulate(
         run_exp, model = load_model(run_dir, ship=ship)
         baseline = next(iter(physics_baselines(run_exp, model, torch.float64).items()), None)
         columns = exp.data.columns if exp is not None else run_exp.data.columns
+        checked = (exp if exp is not None else run_exp).data.rudder_sign_checked
         claim(output, OutputKind.FILE, [log, config, run_dir, ship_file(ship) if ship else None])
     else:
         ship_name = ship or (exp.experiment.ship if exp is not None else "esso_osaka")
         overrides = [f"{k}={v!r}" for k, v in (exp.mmg.overrides.items() if exp is not None and not ship else ())]
         model = mmg_of(ship_name, overrides + list(set_ or []), quadrature)
         columns = exp.data.columns if exp is not None else None
+        checked = exp.data.rudder_sign_checked if exp is not None else ()
         claim(output, OutputKind.FILE, [log, config, ship_file(ship_name)])
-    run = read_run(log, rate, columns)
+    run = read_run(log, rate, columns, rudder_sign_checked=checked)
     i0, steps = _window(run, log, start, horizon, rate)
     sl = slice(i0, i0 + steps + 1)
     x0 = torch.as_tensor(run.states[i0], dtype=torch.float64)

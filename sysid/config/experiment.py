@@ -112,6 +112,8 @@ class DataOptions:
     columns: ColumnMap = ColumnMap()  # [data.columns]: channel = column or { column, unit }
     rate: float = 1.0                # Hz
     exclude_suspect: bool = True     # drop windows touching frozen-GNSS segments
+    exclude_astern: bool = True      # drop training windows outside a one-quadrant propeller (n_prop < 0 or u < 0)
+    rudder_sign_checked: tuple[str, ...] = ()   # logs (file names without suffix) whose rudder sign the user checked
 
 
 @dataclass(frozen=True)
@@ -277,7 +279,7 @@ _SECTIONS = {f.name: f.type for f in fields(Experiment) if f.name != "source"}
 
 
 # the element type of every list option
-_ELEMENT_TYPES = {("data", "train"): str, ("data", "validation"): str, ("data", "test"): str, ("ensemble", "members"): str, ("network", "hidden"): int,
+_ELEMENT_TYPES = {("data", "train"): str, ("data", "rudder_sign_checked"): str, ("data", "validation"): str, ("data", "test"): str, ("ensemble", "members"): str, ("network", "hidden"): int,
                   ("identify", "parameters"): str, ("evaluation", "horizons"): float}
 _NAMES = {int: "an integer", float: "a finite number", str: "a string"}
 

@@ -72,6 +72,18 @@ KEYS: dict[tuple[str, str], KeyDoc] = {
                                    "the processed logs are 1 Hz."),
     ("data", "exclude_suspect"): KeyDoc("", "Leave out windows that touch a segment the preprocessing marked "
                                             "suspect (frozen GNSS)."),
+    ("data", "exclude_astern"): KeyDoc("", "Under a one-quadrant propeller model (the ship file's `[propeller] "
+                                           "model` other than `four_quadrant`): leave out of training and "
+                                           "validation the windows that hold a sample with astern revolutions "
+                                           "(`n_prop` < 0) or going astern (`u` < 0), where that model does not "
+                                           "hold; `false` keeps them. Counted per log in the training log and "
+                                           "summary.json either way; test windows are always kept and counted."),
+    ("data", "rudder_sign_checked"): KeyDoc("", "Logs (file names without `.csv`) whose rudder sign you have "
+                                                "checked yourself and which the rudder check still reads as "
+                                                "reversed (strong wind or current, tugs, little rudder): they are "
+                                                "read anyway, with a warning, and the run records the override beside "
+                                                "each (summary.json `data.train[i].rudder_sign_checked`). Empty: "
+                                                "every such log is refused."),
     ("mmg", "overrides"): KeyDoc("as in the ship file", "Ship-file coefficients replaced for this experiment, "
                                                         "e.g. `{ X_vr = 0.4535 }`; names as in the ship file."),
     ("network", "hidden"): KeyDoc("", "Widths of the FNN's hidden layers (tanh); 9 inputs and 3 outputs "

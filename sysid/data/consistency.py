@@ -23,7 +23,8 @@ correlation >= 0.994; v: k 1.007-1.32, >= 0.969; r: k 0.977-1.017, >= 0.959; doc
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass
+import json
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Sequence
 
@@ -57,6 +58,7 @@ class Verdict(enum.Enum):
     MARGINAL = "marginal"
     MISMATCH = "mismatch"
     UNCHECKED = "not checked"
+    USER_CHECKED = "sign checked by the user"   # the rudder read as reversed, named in [data] rudder_sign_checked
 
 
 @dataclass(frozen=True)
@@ -119,6 +121,21 @@ class TrackCheck:
 
     def worst(self, verdict: Verdict) -> tuple[ChannelCheck, ...]:
         return tuple(c for c in self.channels if c.verdict is verdict)
+
+    def rudder_sign_checked(self) -> TrackCheck:
+        """This check with a rudder read as reversed (clearly or marginally) marked
+        `Verdict.USER_CHECKED`: the user has checked this log's rudder sign (``[data]
+        rudder_sign_checked``), so it is read as it is."""
+        mark = (Verdict.MISMATCH, Verdict.MARGINAL)
+        return replace(self, channels=tuple(
+            replace(c, verdict=Verdict.USER_CHECKED, hint="named in [data] rudder_sign_checked")
+            if c.channel == "delta_rudder" and c.verdict in mark else c
+            for c in self.channels))
+
+    @property
+    def rudder_overridden(self) -> ChannelCheck | None:
+        """The rudder's check the user overrode (`rudder_sign_checked`), else None."""
+        return next((c for c in self.channels if c.verdict is Verdict.USER_CHECKED), None)
 
     def lines(self, verdict: Verdict) -> list[str]:
         """One line per channel with `verdict`, naming the file, the channel and the factor."""
@@ -313,9 +330,10 @@ def _named_fault(path: Path, found: dict[str, ChannelCheck], log: dict[str, np.n
 
 def report_checks(checks: Sequence[TrackCheck], warn=None) -> None:
     """Raise one `DataError` with a line per clear mismatch of all `checks` (file, channel,
-    factor); pass each marginal one, and once the logs that could not be checked, to
-    `warn` (a callable taking a line)."""
-    errors = [f"{check.path}: {c.sentence()}" + ("" if c.channel == "delta_rudder" else
+    factor; a reversed rudder with both fixes: negate the column, or name the log in ``[data]
+    rudder_sign_checked``); pass each marginal one, each rudder sign the user checked, and
+    once the logs that could not be checked, to `warn` (a callable taking a line)."""
+    errors = [f"{check.path}: {c.sentence()}" + (rudder_fixes(check.path) if c.channel == "delta_rudder" else
                                                  " (the track check: give the unit in [data.columns], or fix the "
                                                  "sign in the log)")
               for check in checks for c in check.worst(Verdict.MISMATCH)]
@@ -323,6 +341,9 @@ def report_checks(checks: Sequence[TrackCheck], warn=None) -> None:
         for check in checks:
             for line in check.lines(Verdict.MARGINAL):
                 warn(f"{line} (marginal; docs: Input formats, the track check)")
+            if (rudder := check.rudder_overridden) is not None:
+                warn(f"{check.path}: delta_rudder: the rudder check reads the sign reversed (partial correlation "
+                     f"{rudder.correlation:.2f}); read as it is: the log is named in [data] rudder_sign_checked")
         unchecked = [check for check in checks if not check.checked]
         if unchecked:
             first = unchecked[0]
@@ -330,3 +351,11 @@ def report_checks(checks: Sequence[TrackCheck], warn=None) -> None:
             warn(f"{first.path}{more}: not checked against the GNSS track ({first.reason})")
     if errors:
         raise DataError("\n".join(errors))
+
+
+def rudder_fixes(path: Path) -> str:
+    """The second fix of a refused rudder sign, after the first (negate the column): the log
+    named in ``[data] rudder_sign_checked`` when its sign is right and the check was fooled."""
+    return (f"; or, if you have checked the log's rudder sign and it is right (strong wind or current, tugs or "
+            f"little rudder can fool this check), name it in the experiment config: [data] rudder_sign_checked = "
+            f"[{json.dumps(Path(path).stem)}]")

@@ -4,6 +4,7 @@ is not installed."""
 from __future__ import annotations
 
 import codecs
+import csv
 import os
 from pathlib import Path
 
@@ -90,12 +91,34 @@ def read_parquet_table(path: str | os.PathLike, expect: str = "a Parquet table")
         raise DataError(f"{path}: not a readable Parquet file ({reason}) (expected {expect})") from None
 
 
+def record_lines(path: str | os.PathLike) -> list[int]:
+    """The line (from 1, as a text editor numbers them) on which each record of a CSV file that
+    `pd.read_csv` keeps begins, the header's first: a line holding nothing but spaces or tabs
+    is skipped as pandas skips it, and a quoted cell over several lines counts them all."""
+    lines: list[int] = []
+    with open(path, encoding="utf-8-sig", errors="replace", newline="") as fh:
+        reader = csv.reader(fh)
+        begins = 1
+        for record in reader:
+            if any(cell.strip(" \t") for cell in record) or len(record) > 1:
+                lines.append(begins)
+            begins = reader.line_num + 1
+    return lines
+
+
 def row_name(path: str | os.PathLike, index: int) -> str:
     """Where the data row at position `index` (from 0) of a table read by `read_table` is,
-    for messages: "line N" of a CSV file (the header is line 1: N = index + 2, the number
-    an editor opens the file at), "row N" of a Parquet table (N = index + 1)."""
+    for messages: "line N" of a CSV file, N the line a text editor shows (the file's header
+    line counted, and every blank line pandas skipped before the row), "row N" of a Parquet
+    table (N = index + 1)."""
     if Path(path).suffix.lower() in PARQUET_SUFFIXES:
         return f"row {int(index) + 1}"
+    try:
+        lines = record_lines(path)
+    except (OSError, csv.Error):   # unreadable now: the position pandas counted
+        lines = []
+    if int(index) + 1 < len(lines):
+        return f"line {lines[int(index) + 1]}"
     return f"line {int(index) + 2}"
 
 

@@ -16,7 +16,7 @@ import logging
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Collection, Iterable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -78,14 +78,16 @@ class Run:
 
 
 def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | None = None,
-             warn=_log.warning) -> Run:
+             warn=_log.warning, rudder_sign_checked: Collection[str] = ()) -> Run:
     """Read and check a processed run (CSV or Parquet), downsampled to `rate` [Hz] by taking
     samples. `columns` maps the log's own column names and units onto the channels
     (``[data.columns]``; default: the processed schema's headers). The log is checked
     against its own GNSS track, and its rudder's sign against its yaw response
     (`sysid.data.consistency`): a clear mismatch is a `DataError` naming the file, the
     channel and the factor (or the fix); a marginal one, or a log
-    without a track, goes to `warn` (None: silent)."""
+    without a track, goes to `warn` (None: silent). A log named (by its file's stem) in
+    `rudder_sign_checked` (``[data] rudder_sign_checked``) is read whatever its rudder check
+    says, the override recorded in its `Run.track` and said to `warn`."""
     path = Path(path)
     columns = columns if columns is not None else ColumnMap()
     if not (rate > 0 and np.isfinite(rate)):
@@ -119,6 +121,8 @@ def read_run(path: str | os.PathLike, rate: float = 1.0, columns: ColumnMap | No
     c = {name: frame[name].to_numpy() for name in ("x", "y", "psi", "u", "v", "r")}
     track = check_track(path, t, c["x"], c["y"], c["psi"], c["u"], c["v"], c["r"], columns,
                         delta=frame["delta_rudder"].to_numpy())
+    if path.stem in rudder_sign_checked:
+        track = track.rudder_sign_checked()
     report_checks([track], warn)
     period = float(np.median(steps))
     stride = int(round(1.0 / rate / period))
@@ -156,8 +160,8 @@ def _note_resampled(path: Path, file_rate: float, rate: float, stride: int) -> N
 
 
 def read_runs(paths: Iterable[str | os.PathLike], rate: float = 1.0, columns: ColumnMap | None = None,
-              warn=_log.warning) -> list[Run]:
-    """`read_run` of each file; the errors of all files (a clear mismatch with its track
+              warn=_log.warning, rudder_sign_checked: Collection[str] = ()) -> list[Run]:
+    """`read_run` of each file (`rudder_sign_checked`: the logs whose rudder sign the user checked); the errors of all files (a clear mismatch with its track
     in several logs, ...) as one `DataError`, a line per file. Logs without a track are
     named once. Two files of one name (``a/log.csv``, ``b/log.csv``) are refused: a log is
     named by its file's stem in windows, cells, traces and tables."""
@@ -172,7 +176,7 @@ def read_runs(paths: Iterable[str | os.PathLike], rate: float = 1.0, columns: Co
                             + ("give it once" if same else "rename one of them"))
         first[stem] = Path(path)
         try:
-            runs.append(read_run(path, rate, columns, warn=None))
+            runs.append(read_run(path, rate, columns, warn=None, rudder_sign_checked=rudder_sign_checked))
         except DataError as exc:
             errors.append(str(exc))
     if errors:
@@ -216,18 +220,21 @@ def _ends_mid_row(path: Path) -> bool:
     return last not in (b"\n", b"\r", b"")
 
 
-def log_track(path: str | os.PathLike, columns: ColumnMap | None = None) -> TrackCheck:
+def log_track(path: str | os.PathLike, columns: ColumnMap | None = None,
+              rudder_sign_checked: Collection[str] = ()) -> TrackCheck:
     """A log's channels against its own GNSS track and its rudder's sign against its yaw
     response (`sysid.data.consistency.check_track`) at the file's own rate, whatever the other checks of `read_run` say; `DataError` when
-    the channels cannot be read."""
+    the channels cannot be read. A log named in `rudder_sign_checked` has its reversed rudder
+    marked as the user's (`TrackCheck.rudder_sign_checked`)."""
     path = Path(path)
     columns = columns if columns is not None else ColumnMap()
     frame, _ = _channels(path, columns)
     c = {name: frame[name].to_numpy() for name in ("t", "x", "y", "psi", "u", "v", "r", "delta_rudder")}
     if (np.diff(c["t"]) <= 0).any():
         return TrackCheck(path, reason="time not strictly increasing")
-    return check_track(path, c["t"], c["x"], c["y"], c["psi"], c["u"], c["v"], c["r"], columns,
-                       delta=c["delta_rudder"])
+    found = check_track(path, c["t"], c["x"], c["y"], c["psi"], c["u"], c["v"], c["r"], columns,
+                        delta=c["delta_rudder"])
+    return found.rudder_sign_checked() if path.stem in rudder_sign_checked else found
 
 
 _UNIT_HINT = {"speed": "knots", "angle": "deg", "angular rate": "deg/s", "revolutions": "rpm"}

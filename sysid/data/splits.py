@@ -16,14 +16,15 @@ import os
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
 from sysid.config.choices import TestLogs
 from sysid.data.datasets import TEST_FILES, test_files, training_files
-from sysid.data.recordings import Run, duplicate_runs, expand_paths
+from sysid.data.recordings import Run, duplicate_runs, expand_paths, protocol_windows
 from sysid.errors import ConfigError, DataError
+from sysid.mmg.coverage import windows_touching
 
 TRAINING, VALIDATION, TEST = "training", "validation", "test"
 PAPER_TEST_STEMS = frozenset(Path(f).stem for f in TEST_FILES.values())
@@ -254,16 +255,38 @@ def check_disjoint_runs(parts: dict[str, Sequence[Run]], source: str = "") -> No
                             "in two parts; remove one, or cut the logs so that no samples are shared")
 
 
+def log_conditions(run: Run, astern: Callable[[Run], np.ndarray] | None, horizons: Sequence[float]) -> dict:
+    """The conditions of one log a run records beside its file (`provenance`): the rudder
+    check the user overrode, its samples outside a one-quadrant propeller (`astern`), and its
+    protocol windows at `horizons` [s] holding one ({"30": windows, ...})."""
+    out: dict = {}
+    if run.track is not None and (rudder := run.track.rudder_overridden) is not None:
+        out["rudder_sign_checked"] = round(float(rudder.correlation), 4)
+    if astern is not None:
+        flagged = astern(run)
+        out["astern_samples"] = int(flagged.sum())
+        if horizons:
+            out["astern_windows"] = {f"{h:g}": int(windows_touching(flagged, protocol_windows(len(run), H), H).sum())
+                                     for h in horizons if (H := int(round(h / run.dt)))}
+    return out
+
+
 def provenance(source: str, train: Sequence[Run], validation: Sequence[Run], test: Sequence[Run],
                val_fraction: float, block_s: float, held_out: HeldOutFiles | None = None,
-               split_seed: int = 0) -> dict:
+               split_seed: int = 0, astern: Callable[[Run], np.ndarray] | None = None,
+               horizons: Sequence[float] = ()) -> dict:
     """What a run was trained, validated and tested on, for summary.json: where the training
     data came from ("files", "D1", "D2", "-"), every log with its SHA-256, how validation
     was drawn and which test set it was ("files", "paper" or "none"). `held_out`: the
     validation logs were drawn from the training logs (``[training] validation = "files"``):
-    ``held_out`` names them per group with the share and ``split_seed`` of the draw."""
-    def files(runs):
-        return [{"file": str(r.path), "sha256": r.sha256 or file_sha256(r.path)} for r in runs]
+    ``held_out`` names them per group with the share and ``split_seed`` of the draw.
+    Per log, when it applies: ``rudder_sign_checked``, the partial correlation of a rudder
+    check the user overrode (``[data] rudder_sign_checked``); with `astern` (a one-quadrant
+    propeller: (N,) True for a run's samples outside its quadrant) ``astern_samples``, and for
+    a test log ``astern_windows``, its test windows at each of `horizons` [s] holding one."""
+    def files(runs, windows: bool = False):
+        return [{"file": str(r.path), "sha256": r.sha256 or file_sha256(r.path),
+                 **log_conditions(r, astern, horizons if windows else ())} for r in runs]
 
     stems = {r.path.stem for r in test}
     validation_text = files(validation) if validation else (
@@ -271,7 +294,7 @@ def provenance(source: str, train: Sequence[Run], validation: Sequence[Run], tes
         if train else "none")
     out = {"training": source, "train": files(train), "validation": validation_text,
            "test_set": (TestLogs.NONE if not test else TestLogs.PAPER if stems == PAPER_TEST_STEMS else TestLogs.FILES).value,
-           "test": files(test)}
+           "test": files(test, windows=True)}
     if held_out is not None:
         out["held_out"] = {"val_fraction": val_fraction, "split_seed": split_seed, "groups": held_out.groups}
     return out

@@ -66,6 +66,12 @@ class TrainingJournal:
             self.write(f"left out {name}: an exact copy of the start of another training file")
         self.write(f"{train} training and {val} validation windows of {steps} steps "
                    f"({report.suspect_windows} touching frozen GNSS left out)")
+        if report.astern_windows:   # under a one-quadrant propeller: every log with samples outside it
+            done = "left out" if report.astern_excluded else "kept ([data] exclude_astern = false)"
+            self.write(f"WARNING: {report.astern_windows} windows hold samples with astern revolutions or going "
+                       f"astern, outside the ship file's one-quadrant propeller model: {done}; per log: " + "; ".join(
+                           f"{f['file']} {f['astern_windows']} windows, {f['astern_samples']} samples"
+                           for f in report.files if f.get("astern_samples")))
 
     def resumed(self, label: str, epoch: int, path: Path | None) -> None:
         self.write(f"{label}: resumed after epoch {epoch} from {path}" if path is not None

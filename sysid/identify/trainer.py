@@ -72,8 +72,8 @@ from sysid.identify.solvers.base import Identification, IdentificationData, coef
 from sysid.identify.solvers.gradient import GradientIdentification, gradient_estimator, gradient_uncertainty
 from sysid.identify.solvers.least_squares import LevenbergMarquardtIdentification
 from sysid.identify.warm_start import implied_residual, standardize, warm_start
-from sysid.identify.windowing import (SplitReport, WindowCut, cut_windows, held_out_validation, objective_horizons,
-                                      split_windows)
+from sysid.identify.windowing import (AsternSamples, SplitReport, WindowCut, astern_of, cut_windows,
+                                      held_out_validation, objective_horizons, split_windows)
 from sysid.records.base import JsonRecord
 from sysid.records.summary import VAL_LOSS_DEFINITION, GateSummary, IdentificationSummary, UncertaintySummary
 
@@ -113,6 +113,7 @@ class TrainingSummary:
     def to_dict(self) -> dict:
         """Plain data (the records as their summary.json objects), None fields left out."""
         plain = dataclasses.asdict(dataclasses.replace(self, **dict.fromkeys(_RECORDS)))
+        plain["split"] = {k: v for k, v in plain["split"].items() if v is not None}  # astern counts: one-quadrant only
         return {f.name: (copy.deepcopy(value.to_json()) if f.name in _RECORDS else plain[f.name])
                 for f in dataclasses.fields(self) if (value := getattr(self, f.name)) is not None}
 
@@ -292,9 +293,14 @@ class Trainer:
         the validation windows' origins."""
         exp, t = self.experiment, self.experiment.training
         cut = cut_windows(runs, t.steps, t.stride_s, t.val_fraction, exp.data.exclude_suspect, dtype, t.block_s,
-                          exp.experiment.seed, device, self._validation_runs)
+                          exp.experiment.seed, device, self._validation_runs, self.astern())
         self.journal.split(cut.report, len(cut.train), len(cut.val), t.steps)
         return cut
+
+    def astern(self) -> AsternSamples | None:
+        """The samples outside the ship file's propeller model (`sysid.identify.windowing.astern_of`):
+        None under a four-quadrant propeller."""
+        return astern_of(self.experiment, build_mmg(self.experiment).ship.models)
 
     def disjoint_windows(self, runs: Sequence[Run], dtype, device) -> WindowSet:
         """Windows of T+1 samples of the training part that share no sample (slid by T+1):
@@ -302,7 +308,7 @@ class Trainer:
         exp, t = self.experiment, self.experiment.training
         return split_windows(runs, t.steps, float(t.steps + 1) / exp.data.rate, t.val_fraction,
                              exp.data.exclude_suspect, dtype, t.block_s, exp.experiment.seed, device,
-                             self._validation_runs)[0]
+                             self._validation_runs, self.astern())[0]
 
     def solver(self) -> Identification:
         """The identification strategy of ``[identify] solver``."""
@@ -438,7 +444,7 @@ class Trainer:
                 continue
             try:
                 cut = cut_windows(runs, steps, t.stride_s, t.val_fraction, exp.data.exclude_suspect, dtype,
-                                  t.block_s, exp.experiment.seed, device, self._validation_runs)
+                                  t.block_s, exp.experiment.seed, device, self._validation_runs, self.astern())
             except DataError:   # none that long
                 cut = None
             if cut is not None and len(cut.val):

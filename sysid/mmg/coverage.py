@@ -16,6 +16,29 @@ import numpy as np
 STANDARD_RUDDER_MAX_DEG = 35.0  # deg, the hard-over angle of the IMO maneuvers
 
 
+def one_quadrant_propeller(models: Mapping[str, str]) -> bool:
+    """Whether the propeller family of `models` (component -> family) holds for the first
+    quadrant only (n > 0, u > 0): every family but ``four_quadrant``."""
+    return models.get("propeller", "") != "four_quadrant"
+
+
+def astern_samples(models: Mapping[str, str], u: np.ndarray, n_prop: np.ndarray) -> np.ndarray:
+    """(N,) True for the samples outside the propeller model's quadrant: under a one-quadrant
+    propeller those with astern revolutions (n_prop < 0 [rps]) or going astern (u < 0 [m/s]);
+    none under ``four_quadrant``. u, n_prop: (N,)."""
+    if not one_quadrant_propeller(models):
+        return np.zeros(len(u), dtype=bool)
+    return (np.asarray(n_prop) < 0) | (np.asarray(u) < 0)
+
+
+def windows_touching(outside: np.ndarray, starts: np.ndarray, length: int) -> np.ndarray:
+    """(W,) True for the windows of `length` samples at `starts` (W,) holding at least one
+    sample flagged in `outside` (N,)."""
+    before = np.concatenate([[0], np.cumsum(outside)])
+    starts = np.asarray(starts, dtype=int)
+    return before[np.minimum(starts + length, len(outside))] - before[starts] > 0
+
+
 def outside_force_models(models: Mapping[str, str], u: np.ndarray, n_prop: np.ndarray,
                          delta: np.ndarray) -> list[str]:
     """Sentences naming the share of samples outside the force models `models` (component ->
@@ -25,7 +48,7 @@ def outside_force_models(models: Mapping[str, str], u: np.ndarray, n_prop: np.nd
     total = len(u)
     if not total:
         return out
-    if models.get("propeller", "") != "four_quadrant":
+    if one_quadrant_propeller(models):
         astern_n, astern_u = float(np.mean(n_prop < 0)), float(np.mean((u < 0) & (n_prop >= 0)))
         if astern_n > 0:
             out.append(f"{100 * astern_n:.1f} % of the samples have astern revolutions (n_prop < 0), which the "

@@ -130,7 +130,10 @@ class GateSummary(JsonRecord):
 
 @dataclass(frozen=True)
 class SplitFile(JsonRecord):
-    """One training file's windows in the training/validation split and its data issues."""
+    """One training file's windows in the training/validation split and its data issues. Under
+    a one-quadrant propeller model the trainer adds, after these, astern_windows (its windows
+    holding a sample outside that model's quadrant: astern revolutions or going astern) and
+    astern_samples (its samples outside it); read, they are in `extra`."""
 
     file: str
     train_windows: int
@@ -141,11 +144,16 @@ class SplitFile(JsonRecord):
 
 @dataclass(frozen=True)
 class SplitSummary(JsonRecord):
-    """"training.split" (`sysid.identify.trainer.SplitReport`)."""
+    """"training.split" (`sysid.identify.trainer.SplitReport`); astern_windows: the windows
+    outside a one-quadrant propeller model, left out when astern_excluded (``[data]
+    exclude_astern``), both absent under a four-quadrant propeller."""
 
+    SPARSE = True
     files: tuple[SplitFile, ...] = ()
     dropped_copies: tuple[str, ...] = ()
     suspect_windows: int = 0
+    astern_windows: int | None = None
+    astern_excluded: bool | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -221,12 +229,17 @@ class LogFile(JsonRecord):
     """A log a run used: file, its absolute path when the run was made (in runs written
     before `relative`, the path its config names); sha256, of its bytes; relative, the path
     its config names, relative to the run directory (`sysid.runs.log_paths`; None: a run
-    written before, or a log of the paper's data set)."""
+    written before, or a log of the paper's data set); rudder_sign_checked, astern_samples,
+    astern_windows: the log's conditions (`sysid.data.splits.log_conditions`), absent when
+    they do not apply."""
 
     SPARSE = True
     file: str
     sha256: str
     relative: str | None = None
+    rudder_sign_checked: float | None = None    # the rudder check's partial correlation the user overrode
+    astern_samples: int | None = None           # samples outside a one-quadrant propeller model
+    astern_windows: dict[str, int] | None = None   # a test log's windows holding one, per horizon [s]
     extra: dict[str, Any] = field(default_factory=dict)
 
 

@@ -34,6 +34,7 @@ from sysid.hybrid.force_models import CorrectedModel, build_mmg, build_model
 from sysid.mmg.coverage import outside_force_models
 from sysid.runs.layout import read_ship_definition, write_run
 from sysid.identify.trainer import EpochReport, Trainer, TrainingSummary, held_out_validation
+from sysid.identify.windowing import astern_of
 from sysid.config.checks import threads
 
 
@@ -58,12 +59,16 @@ class RunResult:
 
 def training_runs(exp: Experiment, data: str | os.PathLike | None = None) -> list[Run]:
     """The experiment's training logs (``[data] train`` or its data set), read and checked."""
-    return read_runs(data_split(exp, data).train, exp.data.rate, exp.data.columns)
+    return read_runs(data_split(exp, data).train, exp.data.rate, exp.data.columns,
+                     rudder_sign_checked=exp.data.rudder_sign_checked)
 
 
 def validation_runs(exp: Experiment) -> list[Run]:
     """The experiment's ``[data] validation`` logs, read (empty: validation blocks of the training logs)."""
-    return read_runs(data_split(exp).validation, exp.data.rate, exp.data.columns) if exp.data.validation else []
+    if not exp.data.validation:
+        return []
+    return read_runs(data_split(exp).validation, exp.data.rate, exp.data.columns,
+                     rudder_sign_checked=exp.data.rudder_sign_checked)
 
 
 def evaluation_runs(exp: Experiment, data: str | os.PathLike | None = None) -> list[Run]:
@@ -71,7 +76,7 @@ def evaluation_runs(exp: Experiment, data: str | os.PathLike | None = None) -> l
     paper data set, else none. Read only to evaluate."""
     split = data_split(exp, data)
     columns = exp.data.columns if split.test_source is TestLogs.FILES else None
-    return read_runs(split.test, exp.data.rate, columns)
+    return read_runs(split.test, exp.data.rate, columns, rudder_sign_checked=exp.data.rudder_sign_checked)
 
 
 def warn_outside_force_models(exp: Experiment, runs: Sequence[Run]) -> list[str]:
@@ -130,7 +135,7 @@ def cached_test_runs(data: str | os.PathLike | None = None) -> list[Run]:
 def cached_training_runs(exp: Experiment, data: str | os.PathLike | None = None) -> list[Run]:
     """`training_runs`, read once per process for each training set (files or data set, rate)."""
     key = ("training", None if data is None else str(data), exp.experiment.dataset, exp.data.train,
-           exp.data.columns, exp.data.rate)
+           exp.data.columns, exp.data.rate, exp.data.rudder_sign_checked)
     if key not in _READ:
         _READ[key] = training_runs(exp, data)
     return _READ[key]
@@ -260,8 +265,11 @@ def _written(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[Run], 
     evaluation, verdict, baseline_metrics, baseline_traces = _evaluated(exp, model, tests, limits, validation_scores,
                                                                         log)
     source = "files" if exp.data.train else (exp.experiment.dataset if exp.needs_training else "-")
+    astern = astern_of(exp, build_mmg(exp).ship.models)
     data_used = provenance(source, runs, validation, tests, exp.training.val_fraction, exp.training.block_s,
-                           held_out, exp.training.split_seed)
+                           held_out, exp.training.split_seed, astern.of if astern is not None else None,
+                           exp.evaluation.horizons)
+    _warn_astern_tests(data_used["test"], log)
     seconds = time.perf_counter() - started
     path = write_run(out_dir, exp, model, evaluation, history, training, seconds, overwrite,
                      verdict=verdict, data=data_used, baseline_metrics=baseline_metrics, limits=limits,
@@ -269,6 +277,16 @@ def _written(exp: Experiment, out_dir: str | os.PathLike, tests: Sequence[Run], 
     if training is not None:
         TrainingCheckpoint(checkpoint_path(out_dir), exp.to_toml()).remove()
     return RunResult(path, exp, model, evaluation, history, training, seconds, verdict)
+
+
+def _warn_astern_tests(recorded: list[dict], log: Callable[[str], None]) -> None:
+    """A WARNING line naming the test logs (`provenance`'s records) whose windows hold samples
+    outside a one-quadrant propeller model: scored as they are, outside that model's validity."""
+    named = [f"{Path(r['file']).stem} " + ", ".join(f"{n} of the {h}-s windows" for h, n in r["astern_windows"].items())
+             for r in recorded if any(r.get("astern_windows", {}).values())]
+    if named:
+        log("WARNING: test windows with astern revolutions or going astern, outside the ship file's one-quadrant "
+            "propeller model, are scored as they are (summary.json data.test astern_windows): " + "; ".join(named))
 
 
 def _training_logs(exp: Experiment, train_runs: Sequence[Run] | None, data: str | os.PathLike | None,

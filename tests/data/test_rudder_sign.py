@@ -6,6 +6,8 @@ own fault, not the rudder's. `sysid train`, `sysid logs check` and `sysid prepro
 in one line naming the file, the column and the fix."""
 from __future__ import annotations
 
+import json
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -13,7 +15,7 @@ import pytest
 
 from sysid.config.column_map import parse_columns
 from sysid.data.consistency import Verdict, check_rudder
-from sysid.data.recordings import log_track, read_run
+from sysid.data.recordings import log_track, read_run, read_runs
 from sysid.data.rudder_sign import REVERSED_CORRELATION, RudderSign, rudder_response
 from sysid.errors import DataError
 from tests.support.tiny_experiment import one_epoch_config
@@ -182,3 +184,153 @@ def test_an_autopilot_against_gusts_reads_the_right_way_round():
     assert min(f.correlation for f in found) > REVERSED_CORRELATION - 0.1
     negated = [rudder_response(t[k], u[k], r[k], -delta[k]) for k in range(4)]
     assert all(f.sign in (RudderSign.PORT_WEAK, RudderSign.PORT_CLEAR) for f in negated), negated
+
+
+
+def _nomoto_log(path, tug: bool, seconds: float = 600.0, dt: float = 0.1):
+    """A 1-Hz processed log of a first-order Nomoto ship (T dr/dt + r = K delta + m; K = 0.47
+    1/s, T = 8.6 s; u = 0.7 m/s +- 0.1 over 120 s, v_m +- 0.03 m/s over 90 s) whose rudder is logged in sysid's convention (K > 0: the
+    truth). `tug`: a tug's yaw moment m [rad/s], coloured noise of 30 s correlation time,
+    that the helmsman answers with rudder against it (delta = -0.6 m / K, within +-20 deg),
+    so the tug, not the rudder, turns the ship (net 0.4 m); else no tug and a zig-zag rudder
+    of +-15 deg every 40 s. The track (x, y, psi) is integrated from u and r at 10 Hz: the
+    log agrees with its GNSS track. Returns `path`."""
+    from processed_runs import write_processed_csv
+    K, T_yaw, u0 = 0.47, 8.6, 0.7
+    rng = np.random.default_rng(11)
+    n = int(round(seconds / dt))
+    m, r, psi, x, y = 0.0, 0.0, 0.0, 0.0, 0.0
+    rows = np.empty((n, 7))   # x, y, psi, r, delta, u, v_m
+    for i in range(n):
+        u, v = u0 + 0.1 * np.sin(2 * np.pi * i * dt / 120.0), 0.03 * np.sin(2 * np.pi * i * dt / 90.0)
+        if tug:
+            m += -m / 30.0 * dt + 0.15 * np.sqrt(2 * dt / 30.0) * rng.standard_normal()
+            delta = float(np.clip(-0.6 * m / K, -np.radians(20), np.radians(20)))
+        else:
+            delta = np.radians(15) * np.sign(np.sin(2 * np.pi * i * dt / 80.0) + 1e-9)
+        rows[i] = (x, y, psi, r, delta, u, v)
+        x, y = x + (u * np.cos(psi) - v * np.sin(psi)) * dt, y + (u * np.sin(psi) + v * np.cos(psi)) * dt
+        psi, r = psi + r * dt, r + (K * delta - r + m) / T_yaw * dt
+    sampled = rows[::int(round(1.0 / dt))]
+    t = np.arange(len(sampled), dtype=float)
+    ones = np.ones_like(t)
+    states = np.column_stack([sampled[:, 0], sampled[:, 5], sampled[:, 1], sampled[:, 6], sampled[:, 2], sampled[:, 3]])
+    inputs = np.column_stack([10.0 * ones, sampled[:, 4], 1.0 * ones, 0.5 * ones])
+    return write_processed_csv(path, t, states, inputs)
+
+
+def test_a_reversed_rudder_and_a_rudder_fooled_by_a_tug_are_refused_with_both_fixes(tmp_path):
+    """Known truth both ways: a zig-zag log with its rudder column negated (reversed) and a
+    berthing-like log whose rudder is right but whose tug turns the ship against it. The check
+    reads both as reversed; the one-line refusal names both fixes: negate the column, or name
+    the log in [data] rudder_sign_checked."""
+    reversed_log = _nomoto_log(tmp_path / "zz.csv", tug=False)
+    frame = pd.read_csv(reversed_log)
+    frame[DELTA] *= -1.0
+    frame.to_csv(reversed_log, index=False)
+    fooled = _nomoto_log(tmp_path / "tug_assist.csv", tug=True)
+    for path in (reversed_log, fooled):
+        t, u, r, delta = _signals(path)
+        assert rudder_response(t, u, r, delta).sign is RudderSign.PORT_CLEAR
+        with pytest.raises(DataError) as info:
+            read_run(path, warn=None)
+        message = str(info.value)
+        assert "\n" not in message and message.startswith(f"{path}: delta_rudder: the rudder sign looks reversed")
+        assert "negate column 'delta_rudder [rad]' in the log" in message
+        assert message.endswith(f'[data] rudder_sign_checked = ["{path.stem}"]')
+    # the first fix is right for the reversed log: negated back, it reads to starboard
+    frame[DELTA] *= -1.0
+    frame.to_csv(reversed_log, index=False)
+    assert read_run(reversed_log, warn=None).track.channels[-1].verdict is Verdict.CONSISTENT
+
+
+def test_a_log_whose_rudder_sign_the_user_checked_is_read_and_its_override_said(tmp_path):
+    """The tug log (rudder right, the check fooled): named in rudder_sign_checked it is read as
+    it is, its check kept as USER_CHECKED with the partial correlation it read, and the
+    override said to `warn`; another log in the same call is still refused."""
+    fooled = _nomoto_log(tmp_path / "tug_assist.csv", tug=True)
+    t, u, r, delta = _signals(fooled)
+    read_as = rudder_response(t, u, r, delta).correlation
+    assert read_as <= -REVERSED_CORRELATION
+    said: list[str] = []
+    run = read_runs([fooled], rudder_sign_checked=("tug_assist",), warn=said.append)[0]
+    assert run.track.rudder_overridden.correlation == pytest.approx(read_as)
+    assert run.track.rudder_overridden.verdict is Verdict.USER_CHECKED
+    assert said == [f"{fooled}: delta_rudder: the rudder check reads the sign reversed (partial correlation "
+                    f"{read_as:.2f}); read as it is: the log is named in [data] rudder_sign_checked"]
+    np.testing.assert_array_equal(run.inputs[:, 1], pd.read_csv(fooled)[DELTA].to_numpy())   # not negated
+    other = _nomoto_log(tmp_path / "zz.csv", tug=True)
+    with pytest.raises(DataError, match=r'zz.csv: delta_rudder: .*rudder_sign_checked = \["zz"\]$'):
+        read_runs([fooled, other], rudder_sign_checked=("tug_assist",), warn=None)
+    # a log whose check agrees is unchanged by being named
+    straight = read_run(_nomoto_log(tmp_path / "plain.csv", tug=False), rudder_sign_checked=("plain",), warn=None)
+    assert straight.track.rudder_overridden is None and straight.track.channels[-1].verdict is Verdict.CONSISTENT
+
+
+def test_training_on_a_checked_log_records_the_override(tmp_path, capsys):
+    """`sysid train` on the tug log: refused without [data] rudder_sign_checked (nothing
+    written); with it, trained, the override said in the training output and recorded in
+    summary.json beside that log (the partial correlation the check read), not beside the
+    other log."""
+    from sysid.cli import main
+    fooled = _nomoto_log(tmp_path / "tug_assist.csv", tug=True)
+    plain = _nomoto_log(tmp_path / "plain.csv", tug=False)
+    t, u, r, delta = _signals(fooled)
+    read_as = rudder_response(t, u, r, delta).correlation
+    body = ("[experiment]\nname = 'tug'\nmodel = 'hybrid'\nseed = 1\n"
+            "[data]\ntrain = ['tug_assist.csv', 'plain.csv']\n{checked}"
+            "[training]\nepochs = 1\nwarm_start_epochs = 1\n[evaluation]\nhorizons = [30.0]\n")
+    config = tmp_path / "tug.toml"
+    config.write_text(body.format(checked=""))
+    with pytest.raises(SystemExit) as stop:
+        main(["train", str(config), "-o", str(tmp_path / "refused")])
+    assert stop.value.code == 2 and not (tmp_path / "refused").exists()
+    assert 'rudder_sign_checked = ["tug_assist"]' in capsys.readouterr().err
+    config.write_text(body.format(checked="rudder_sign_checked = ['tug_assist']\n"))
+    main(["train", str(config), "-o", str(tmp_path / "run"), "--threads", "1"])
+    said = capsys.readouterr()
+    assert f"{fooled}: delta_rudder: the rudder check reads the sign reversed (partial correlation {read_as:.2f})" \
+        in said.out + said.err
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    recorded = {Path(f["file"]).name: f for f in summary["data"]["train"]}
+    assert recorded["tug_assist.csv"]["rudder_sign_checked"] == pytest.approx(read_as, abs=1e-4)
+    assert "rudder_sign_checked" not in recorded["plain.csv"]
+    assert plain.exists()
+
+
+def test_logs_check_shows_the_users_checked_sign(tmp_path, capsys):
+    """`sysid logs check --config` on the tug log: refused without the config's
+    rudder_sign_checked (exit 2), passed with it, its row naming the override."""
+    from sysid.cli import main
+    fooled = _nomoto_log(tmp_path / "tug_assist.csv", tug=True)
+    config = tmp_path / "exp.toml"
+    config.write_text("[experiment]\nname = 'tug'\nmodel = 'hybrid'\n[data]\ntrain = ['tug_assist.csv']\n")
+    with pytest.raises(SystemExit) as stop:
+        main(["logs", "check", str(fooled), "--config", str(config)])
+    assert stop.value.code == 2
+    capsys.readouterr()
+    config.write_text("[experiment]\nname = 'tug'\nmodel = 'hybrid'\n[data]\ntrain = ['tug_assist.csv']\n"
+                      "rudder_sign_checked = ['tug_assist']\n")
+    main(["logs", "check", str(fooled), "--config", str(config)])
+    out = capsys.readouterr().out.splitlines()
+    row = next(line for line in out if line.split()[:2] == ["tug_assist.csv", "delta_rudder"])
+    assert row.split()[2] == "-1" and row.endswith("sign checked by the user (named in [data] rudder_sign_checked)")
+    assert out[-1] == "logs check: 1 log(s), 0 clear mismatch(es), 0 marginal, 0 unreadable, 0 without a track"
+
+
+def test_preprocess_keeps_a_checked_raw_logs_output(tmp_path):
+    """`sysid preprocess`'s check of its outputs (`_check_tracks`) on the tug log as the output
+    of raw/tug_run.csv: refused naming --rudder-sign-checked and the processed log's name for
+    training; kept with the raw log named."""
+    from sysid.cli.preprocess_commands import _check_tracks
+    out = _nomoto_log(tmp_path / "tug_run_seg1.csv", tug=True)
+    results = [{"ok": True, "file": "raw/tug_run.csv", "outputs": [str(out)]}]
+    with pytest.raises(DataError) as bad:
+        _check_tracks(results)
+    assert str(bad.value).startswith("raw/tug_run.csv: its processed log tug_run_seg1.csv: delta_rudder: the rudder "
+                                     "sign looks reversed")
+    assert str(bad.value).endswith('give --rudder-sign-checked tug_run and, to train, '
+                                   '[data] rudder_sign_checked = ["tug_run_seg1"]')
+    _check_tracks(results, ("tug_run",))
+    with pytest.raises(DataError):
+        _check_tracks(results, ("tug_run_seg1",))   # the raw log's name, not the output's

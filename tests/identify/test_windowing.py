@@ -109,3 +109,36 @@ def test_one_log_for_training_and_validation_is_refused(runs, dataset_dir):
     again = read_run(dataset_dir / "berthing" / BERTHING[0])
     with pytest.raises(DataError, match=rf"{BERTHING[0]}: given twice among the training and validation logs"):
         cut_windows(runs[:2], 10, 2.0, 0.3, True, torch.float64, 30.0, 0, validation_runs=[again])
+
+
+STANDARD = (("hull", "standard"), ("propeller", "standard"), ("rudder", "standard"))
+
+
+def _astern_in(windows) -> np.ndarray:
+    """(W,) True for the windows holding a sample with n_prop < 0 or u < 0, read off their tensors."""
+    return ((windows.inputs[..., 0] < 0) | (windows.states[..., 1] < 0)).any(dim=0).numpy()
+
+
+def test_astern_windows_under_a_one_quadrant_propeller_are_counted_and_left_out(runs):
+    """The real berthing logs (astern revolutions) cut for a one-quadrant propeller: kept, the
+    windows are those of a four-quadrant cut and the report counts exactly the windows whose
+    own samples go astern; left out (the default), no training or validation window and no
+    training sample goes astern, and every other window is kept."""
+    from sysid.identify.windowing import AsternSamples
+    plain = cut_windows(runs, 5, 2.0, 0.3, True, torch.float64, 30.0, 0)
+    assert plain.report.astern_windows is None and "astern_samples" not in plain.report.files[0]
+    kept = cut_windows(runs, 5, 2.0, 0.3, True, torch.float64, 30.0, 0, astern=AsternSamples(STANDARD, False))
+    torch.testing.assert_close(kept.train.states, plain.train.states, rtol=0, atol=0)
+    torch.testing.assert_close(kept.val.inputs, plain.val.inputs, rtol=0, atol=0)
+    outside = int(_astern_in(plain.train).sum() + _astern_in(plain.val).sum())
+    assert outside > 50 and kept.report.astern_windows == outside and kept.report.astern_excluded is False
+    for entry, run in zip(kept.report.files, runs):
+        assert entry["astern_samples"] == int(((run.inputs[:, 0] < 0) | (run.states[:, 1] < 0)).sum()) > 0
+    assert sum(f["astern_windows"] for f in kept.report.files) == outside
+
+    left = cut_windows(runs, 5, 2.0, 0.3, True, torch.float64, 30.0, 0, astern=AsternSamples(STANDARD))
+    assert left.report.astern_windows == outside and left.report.astern_excluded is True
+    assert not _astern_in(left.train).any() and not _astern_in(left.val).any()
+    assert len(left.train) + len(left.val) == len(plain.train) + len(plain.val) - outside
+    states, inputs = left.samples
+    assert not ((inputs[:, 0] < 0) | (states[:, 1] < 0)).any() and len(states) < len(plain.samples[0])
