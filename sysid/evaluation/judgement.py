@@ -21,7 +21,9 @@ within logs, over logs and over members, and decides at a stated confidence (`Ve
 The overall change is the geometric mean of the cells' ratios minus 1, every log, horizon and
 channel alike, so a scenario with few windows weighs as much as one with many. Every interval
 is the bootstrap's percentile interval widened for few windows (`widening`: a percentile
-interval on 3 to 5 windows covers 70-85 %, not 95 %; benchmarks/verdict_coverage.md).
+interval on 3 to 5 windows covers 70-85 %, not 95 %; benchmarks/verdict_coverage.md); the
+overall interval by the degrees of freedom of the logs' and windows' spread (`deciding_windows`:
+two logs that disagree are two pieces of evidence, however many windows they hold).
 `judge` is pure: no I/O, no torch; the same cells, rule and seed give the same judgement,
 whatever the order of the cells.
 """
