@@ -347,14 +347,14 @@ def deciding_windows(scores: Sequence[np.ndarray]) -> float:
     the degrees of freedom of their sum are Welch-Satterthwaite's,
     (B + sum w_l)^2 / (B^2 / (L - 1) + sum w_l^2 / (W_l - 1)). The logs' windows alike (w = 0):
     L, the logs; the logs' means equal (B = 0): N - L + 1, N the windows; one log: its W; L
-    logs of one window: L. 0 without any spread (no interval width to widen)."""
+    logs of one window: L. 0 without any spread beyond round-off (no interval width to widen)."""
     scores = [np.asarray(x, dtype=float).reshape(-1) for x in scores if np.size(x)]
     L = len(scores)
     if L == 0:
         return 0.0
-    means = np.array([x.mean() for x in scores])
-    between = float(((means - means.mean()) ** 2).sum()) / L**2
-    within = np.array([((x - x.mean()) ** 2).sum() / (x.size**2 * L**2) for x in scores])
+    means = np.round([x.mean() for x in scores], 12)   # 12 digits, as `_resampled_ratio`: round-off is no spread
+    between = float(np.round(means - means.mean(), 12) @ np.round(means - means.mean(), 12)) / L**2
+    within = np.array([float((np.round(x - x.mean(), 12) ** 2).sum()) / (x.size**2 * L**2) for x in scores])
     dof = np.array([x.size - 1 for x in scores], dtype=float)
     total = between + float(within.sum())
     if not total > 0:
