@@ -21,7 +21,9 @@ within logs, over logs and over members, and decides at a stated confidence (`Ve
 The overall change is the geometric mean of the cells' ratios minus 1, every log, horizon and
 channel alike, so a scenario with few windows weighs as much as one with many. Every interval
 is the bootstrap's percentile interval widened for few windows (`widening`: a percentile
-interval on 3 to 5 windows covers 70-85 %, not 95 %; benchmarks/verdict_coverage.md).
+interval on 3 to 5 windows covers 70-85 %, not 95 %; benchmarks/verdict_coverage.md); the
+overall interval by the degrees of freedom of the logs' and windows' spread (`deciding_windows`:
+two logs that disagree are two pieces of evidence, however many windows they hold).
 `judge` is pure: no I/O, no torch; the same cells, rule and seed give the same judgement,
 whatever the order of the cells.
 """
@@ -336,12 +338,38 @@ def _resampled_ratio(mse_model: np.ndarray, mse_baseline: np.ndarray) -> np.ndar
     return np.round(np.clip(ratio, 1 / RATIO_CAP, RATIO_CAP), 12)
 
 
-def widening(n: int, confidence: float) -> float:
+def deciding_windows(scores: Sequence[np.ndarray]) -> float:
+    """The windows an overall interval rests on, as `widening` takes them: 1 + the degrees of
+    freedom of the spread that the bootstrap over logs and windows gives the mean of the logs'
+    mean scores, one (W_l,) array of per-window scores per log. That spread is a between-log
+    part B = sum((m_l - m)^2) / L^2 (m_l a log's mean score, m their mean), L - 1 degrees of
+    freedom, and a within-log part w_l = sum((x - m_l)^2) / (W_l^2 L^2) per log, W_l - 1 each;
+    the degrees of freedom of their sum are Welch-Satterthwaite's,
+    (B + sum w_l)^2 / (B^2 / (L - 1) + sum w_l^2 / (W_l - 1)). The logs' windows alike (w = 0):
+    L, the logs; the logs' means equal (B = 0): N - L + 1, N the windows; one log: its W; L
+    logs of one window: L. 0 without any spread beyond round-off (no interval width to widen)."""
+    scores = [np.asarray(x, dtype=float).reshape(-1) for x in scores if np.size(x)]
+    L = len(scores)
+    if L == 0:
+        return 0.0
+    means = np.round([x.mean() for x in scores], 12)   # 12 digits, as `_resampled_ratio`: round-off is no spread
+    between = float(np.round(means - means.mean(), 12) @ np.round(means - means.mean(), 12)) / L**2
+    within = np.array([float((np.round(x - x.mean(), 12) ** 2).sum()) / (x.size**2 * L**2) for x in scores])
+    dof = np.array([x.size - 1 for x in scores], dtype=float)
+    total = between + float(within.sum())
+    if not total > 0:
+        return 0.0
+    spread = (between**2 / (L - 1) if L > 1 else 0.0) + float((within[dof > 0] ** 2 / dof[dof > 0]).sum())
+    return 1 + total**2 / spread
+
+
+def widening(n: float, confidence: float) -> float:
     """The factor by which an interval resting on `n` windows is widened about its point
     estimate, in log-ratio: t_{n-1}(q) / z(q) * sqrt(n / (n - 1)), q = (1 + confidence) / 2,
     the Student-t small-sample correction of a percentile bootstrap interval (its spread is
     the plug-in one, divided by n, not n - 1). 2.69 at n = 3, 1.44 at 6, 1.10 at 20, 1.02 at
-    100; 1 below 2 windows (no spread to widen)."""
+    100; 1 below 2 windows (no spread to widen). `n` may be an effective number of windows
+    (`deciding_windows`), not a whole one."""
     if n < 2:
         return 1.0
     from scipy.stats import norm, t   # lazily: the rule's module imports no scipy
@@ -411,7 +439,9 @@ def judge(cells: Sequence[PairedCell], rule: VerdictRule = VerdictRule(), model:
         per_horizon[h] = per_horizon.get(h, 0) + group[0].n_windows
     deciding = max(per_horizon.values())   # the windows of one horizon: another's cover the same stretches
     if rule.small_sample and math.isfinite(change):
-        low, high = _widened(change + 1, change_low + 1, change_high + 1, widening(deciding, rule.confidence))
+        horizon = min(h for h, n in per_horizon.items() if n == deciding)
+        n = deciding_windows(_window_scores(groups, horizon)) or float(deciding)   # the logs' spread counts
+        low, high = _widened(change + 1, change_low + 1, change_high + 1, widening(n, rule.confidence))
         change_low, change_high = low - 1, high - 1
     enough = deciding >= rule.min_windows   # fewer: the resampled interval is no evidence (one window: no width)
     if diverged:
@@ -452,6 +482,21 @@ def _checked(cells: Sequence[PairedCell]) -> tuple[list[PairedCell], dict[tuple[
         if any(not np.array_equal(g.window_start_s, group[0].window_start_s) for g in group):
             raise ValueError(f"{log} at {h:g} s: the channels' cells are not on the same windows")
     return cells, groups
+
+
+def _window_scores(groups: dict[tuple[str, float], list[PairedCell]], horizon: float) -> list[np.ndarray]:
+    """Per log, the (W,) score of each of its windows at `horizon` [s]: the mean over the log's
+    compared channels of the window's log RMSE ratio (members and baselines pooled, capped as
+    `_resampled_ratio`), as the overall change weighs every channel alike. Logs with no
+    compared channel at that horizon give none."""
+    scores = []
+    for (_log, h), group in groups.items():
+        compared = [c for c in group if h == horizon and c.n_windows and not c.model_diverged
+                    and not c.baseline_diverged]
+        if compared:
+            scores.append(np.mean([np.log(_resampled_ratio(np.mean(c.model**2, axis=0), np.mean(c.baseline**2, axis=0)))
+                                   for c in compared], axis=0))
+    return scores
 
 
 @dataclass

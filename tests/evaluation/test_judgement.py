@@ -10,7 +10,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from sysid.evaluation.judgement import (CHANNELS, CellDecision, Divergence, Outcome, PairedCell, VerdictRule,
-                                        judge)
+                                        deciding_windows, judge)
 from sysid.protocol.paper import SCENARIO_ORDER, paper_table
 
 RULE = VerdictRule(resamples=1000)
@@ -417,3 +417,54 @@ def test_each_seed_alone_is_judged_against_its_own_baseline():
     assert j.member_changes == pytest.approx((-0.5, -0.5))
     assert j.change == pytest.approx(-0.5)
     assert "2 seeds or members (each alone -50 % to -50 %)" in j.sentence
+
+
+def test_the_overall_interval_rests_on_the_logs_when_each_logs_windows_are_alike():
+    """Windows alike within each log, the logs different: the spread is all between logs, so
+    the overall interval rests on L - 1 degrees of freedom, n = L (4 logs of 3 to 10 windows),
+    not on the 25 windows. Logs whose windows are the same values in another order (no spread
+    between logs): N - L + 1 = 28 on 3 logs of 10. By hand, logs [0, 2] and [2, 4]: between
+    part 0.5, within parts 0.125 each, (0.75)^2 / (0.25 + 2 x 0.125^2) = 2, n = 3. One log of
+    10 windows: 10; 5 logs of one window: 5 (the rule on one log or on logs of one window)."""
+    alike = [np.full(n, level) for n, level in ((3, -0.3), (5, -0.1), (10, 0.2), (7, 0.0))]
+    assert deciding_windows(alike) == pytest.approx(4.0, rel=1e-12)
+    values = np.random.default_rng(3).normal(size=10)
+    assert deciding_windows([values, values[::-1], np.roll(values, 3)]) == pytest.approx(28.0, rel=1e-9)
+    assert deciding_windows([np.array([0.0, 2.0]), np.array([2.0, 4.0])]) == pytest.approx(3.0, rel=1e-12)
+    assert deciding_windows([values]) == pytest.approx(10.0, rel=1e-12)
+    assert deciding_windows([np.array([v]) for v in values[:5]]) == pytest.approx(5.0, rel=1e-12)
+
+    from scipy.stats import norm, t
+    cells = [PairedCell(f"log{i}", "", 30.0, ch, np.exp(x) * np.full(x.size, 0.01), np.full(x.size, 0.01),
+                        30.0 * np.arange(x.size)) for i, x in enumerate(alike) for ch in CHANNELS]
+    plain, rule = judge(cells, VerdictRule(resamples=1000, small_sample=False)), judge(cells, RULE)
+    factor = t.ppf(0.975, 3) / norm.ppf(0.975) * math.sqrt(4 / 3)   # 3.18 / 1.96 x 1.15 = 1.87
+    centre = math.log(plain.change + 1)
+    for bound, widened in ((plain.change_low, rule.change_low), (plain.change_high, rule.change_high)):
+        assert math.log(widened + 1) - centre == pytest.approx(factor * (math.log(bound + 1) - centre), rel=1e-9)
+
+
+def test_two_logs_that_differ_widen_the_overall_interval_to_hold_the_truth():
+    """Two logs of 10 windows drawn as `benchmarks/verdict_coverage.py --clustered` draws them
+    (seed 34, tau 0.2): window log-ratios normal of sd 0.3 about log 0.8 + b, b = -0.008 and
+    -0.25 for the two logs. The truth over logs, exp(mu + sigma^2) - 1 = -12.8 %, lay outside
+    the interval widened by the 20 windows (-48 % to -14 %); the rule now widens by the logs'
+    spread, and its interval holds it."""
+    mu, sigma = math.log(0.8), 0.3
+    rng = np.random.default_rng(34)
+    b = rng.normal(0.0, 0.2, 2)
+    cells = []
+    for i in range(2):
+        base = 0.01 * np.exp(rng.normal(0.0, 0.3, 10))
+        model = base * np.exp(rng.normal(mu + b[i], sigma, 10))
+        cells.append(PairedCell(f"log{i}", "", 30.0, "u", model[None], base[None], 30.0 * np.arange(10)))
+    truth = math.exp(mu + sigma**2) - 1
+    from scipy.stats import norm, t
+    plain = judge(cells, VerdictRule(resamples=500, small_sample=False))
+    by_windows = t.ppf(0.975, 19) / norm.ppf(0.975) * math.sqrt(20 / 19)   # the rule before: the 20 windows
+    centre = math.log(plain.change + 1)
+    high_before = math.exp(centre + by_windows * (math.log(plain.change_high + 1) - centre)) - 1
+    assert high_before < truth   # the old interval missed the truth
+    j = judge(cells, VerdictRule(resamples=500))
+    assert j.change_low <= truth <= j.change_high
+    assert j.outcome is Outcome.NOT_DISTINGUISHABLE   # not "beats" on two logs this far apart
