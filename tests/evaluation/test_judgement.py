@@ -10,7 +10,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from sysid.evaluation.judgement import (CHANNELS, CellDecision, Divergence, Outcome, PairedCell, VerdictRule,
-                                        deciding_windows, judge)
+                                        deciding_windows, judge, widening)
 from sysid.protocol.paper import SCENARIO_ORDER, paper_table
 
 RULE = VerdictRule(resamples=1000)
@@ -468,3 +468,18 @@ def test_two_logs_that_differ_widen_the_overall_interval_to_hold_the_truth():
     j = judge(cells, VerdictRule(resamples=500))
     assert j.change_low <= truth <= j.change_high
     assert j.outcome is Outcome.NOT_DISTINGUISHABLE   # not "beats" on two logs this far apart
+
+
+def test_the_small_sample_widening_is_the_student_t_correction():
+    """`widening` against the closed form at 2 windows (one degree of freedom: the Cauchy
+    quantile tan(pi (q - 1/2))) and, bit for bit, against scipy.stats' t and normal
+    quantiles at 2-500 windows and several confidences."""
+    from scipy.stats import norm, t
+
+    q = (1 + 0.95) / 2
+    assert widening(2, 0.95) == pytest.approx(math.tan(math.pi * (q - 0.5)) / norm.ppf(q) * math.sqrt(2), rel=1e-12)
+    assert widening(3, 0.95) == pytest.approx(2.69, abs=0.005) and widening(1, 0.95) == 1.0
+    for confidence in (0.5, 0.8, 0.9, 0.95, 0.99, 0.999):
+        q = (1 + confidence) / 2
+        for n in range(2, 501):
+            assert widening(n, confidence) == float(t.ppf(q, n - 1) / norm.ppf(q) * math.sqrt(n / (n - 1)))
