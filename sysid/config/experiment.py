@@ -175,6 +175,8 @@ class IdentifyOptions(_Options):
     prior_weight : lambda >= 0 of the residuals sqrt(lambda) (theta - prior) / |prior| toward
         the values identification starts from (ship file with [mmg] overrides);
         levenberg_marquardt only, 0 = none.
+    integrator : the rule levenberg_marquardt integrates each window with over the log's
+        sample interval: "euler" (as training and the paper) or "rk4".
     """
 
     parameters: tuple[str, ...] = ()
@@ -186,6 +188,7 @@ class IdentifyOptions(_Options):
     start_states: StartStates | None = None  # None: estimated for levenberg_marquardt, recorded for gradient
     prior_weight: float = 0.0
     iterations: int = 40            # levenberg_marquardt's iteration limit
+    integrator: Method = Method.EULER   # levenberg_marquardt's integration rule
 
     def __post_init__(self):
         super().__post_init__()
@@ -406,6 +409,10 @@ def _range_checks(exp: Experiment) -> list[tuple[bool, str]]:
         (i.solver is Solver.LEVENBERG_MARQUARDT or i.prior_weight == 0,
          "[identify] prior_weight needs solver = \"levenberg_marquardt\""),
         (i.iterations >= 1, "[identify] iterations must be >= 1"),
+        (i.integrator in Method.offered(), f"[identify] integrator must be one of {Method.listing()}"),
+        (i.solver is Solver.LEVENBERG_MARQUARDT or i.integrator is Method.EULER,
+         f"[identify] integrator = '{i.integrator}' needs solver = \"levenberg_marquardt\" (gradient "
+         "identification integrates by Euler, as training)"),
         (i.solver is Solver.GRADIENT or i.stage is Stage.BEFORE,
          "[identify] solver = \"levenberg_marquardt\" identifies the MMG alone: stage \"joint\" (with "
          "the FNN) needs solver = \"gradient\""),
