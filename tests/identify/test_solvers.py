@@ -91,6 +91,9 @@ def test_levenberg_marquardt_integrates_by_the_configured_rule():
         solver = LevenbergMarquardtIdentification(exp).fit(mmg, _data(windows))
         found[rule] = np.array(list(coefficients(mmg, NAMES).values()))
         assert solver.estimator_.integrator == rule
+        said: list[str] = []
+        TrainingJournal(said.append).least_squares(solver)
+        assert ("disjoint windows integrated by RK4," in said[0]) is (rule == "rk4")
     np.testing.assert_allclose(found["rk4"], truth, rtol=1e-6)
     assert np.max(np.abs(found["euler"] / truth - 1)) > 0.01
 
