@@ -50,6 +50,7 @@ the config file that names it (`load_experiment`); a resolved config holds absol
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import os
 import re
@@ -63,6 +64,8 @@ from sysid.config.checks import path_component
 from sysid.errors import ConfigError
 from sysid.mmg.ship import parameter_name
 from sysid.store.toml_file import read_toml
+
+_LOG = logging.getLogger(__name__)
 
 
 _CHOICE_TYPES: dict[str, type[Choice]] = {
@@ -506,6 +509,10 @@ def parse_experiment(doc: dict, source: str = "<config>", directory: str | os.Pa
         sections = resolve_paths(sections, Path(directory))
     exp = Experiment(**sections, source=source)
     _validate(exp, source)
+    if exp.data.train and "ship" not in experiment:
+        _LOG.warning(f"{source}: [experiment] ship is not set, so your logs are modelled with the bundled "
+                     f"{exp.experiment.ship} (the paper's Esso Osaka 3 m model): set ship = \"my_ship.toml\" "
+                     f"(your ship file; `sysid init` writes one), or ship = \"{exp.experiment.ship}\" to keep it")
     return exp
 
 

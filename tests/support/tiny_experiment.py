@@ -26,7 +26,7 @@ def tiny_experiment(path: Path, dataset_dir: Path, *, seed: int, epochs: int, wa
 def one_epoch_config(path: Path, files) -> Path:
     """A hybrid of one epoch on `files`, for the tests that expect training to stop on bad logs
     before it starts; returns `path`."""
-    path.write_text("[experiment]\nname = 'bad'\nmodel = 'hybrid'\nseed = 1\n"
+    path.write_text("[experiment]\nname = 'bad'\nmodel = 'hybrid'\nseed = 1\nship = 'esso_osaka'\n"
                     f"[data]\nfiles = {json.dumps([str(f) for f in files])}\n"
                     "[training]\nepochs = 1\nwarm_start_epochs = 1\n[evaluation]\nhorizons = [30.0]\n")
     return path
@@ -39,7 +39,7 @@ def tiny_test_file(dataset_dir: Path) -> Path:
 
 def tiny_config(files, **sections) -> str:
     """A hybrid that trains in seconds on one file; `sections` replace or add keys."""
-    doc = {"experiment": {"name": "'fuzz'", "model": "'hybrid'", "seed": "1"},
+    doc = {"experiment": {"name": "'fuzz'", "model": "'hybrid'", "seed": "1", "ship": "'esso_osaka'"},
            "data": {"files": json.dumps([str(files["train"])])},
            "network": {"hidden": "[8]"},
            "training": {"epochs": "1", "warm_start_epochs": "2", "batch_size": "64", "max_minutes": "1.0"},
