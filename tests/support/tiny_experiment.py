@@ -16,7 +16,7 @@ def tiny_experiment(path: Path, dataset_dir: Path, *, seed: int, epochs: int, wa
     files = [str(dataset_dir / "berthing" / name) for name in TRAIN_FILES]
     patience_line = f"patience = {patience}\n" if patience is not None else ""
     path.write_text(
-        f"[experiment]\nname = 'tiny'\nmodel = 'hybrid'\nseed = {seed}\n"
+        f"[experiment]\nname = 'tiny'\nmodel = 'hybrid'\nseed = {seed}\nship = 'esso_osaka'\n"
         f"[data]\nfiles = {json.dumps(files)}\n"
         f"[training]\nepochs = {epochs}\n{patience_line}warm_start_epochs = {warm_start_epochs}\nbatch_size = 64\n"
         "[gate]\nk = 5\nspace = 'inputs'\n[evaluation]\nhorizons = [30.0]\n")
