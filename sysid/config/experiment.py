@@ -50,6 +50,7 @@ the config file that names it (`load_experiment`); a resolved config holds absol
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import os
 import re
@@ -63,6 +64,8 @@ from sysid.config.checks import path_component
 from sysid.errors import ConfigError
 from sysid.mmg.ship import parameter_name
 from sysid.store.toml_file import read_toml
+
+_LOG = logging.getLogger(__name__)
 
 
 _CHOICE_TYPES: dict[str, type[Choice]] = {
@@ -177,6 +180,8 @@ class IdentifyOptions(_Options):
     prior_weight : lambda >= 0 of the residuals sqrt(lambda) (theta - prior) / |prior| toward
         the values identification starts from (ship file with [mmg] overrides);
         levenberg_marquardt only, 0 = none.
+    integrator : the rule levenberg_marquardt integrates each window with over the log's
+        sample interval: "euler" (as training and the paper) or "rk4".
     """
 
     parameters: tuple[str, ...] = ()
@@ -188,6 +193,7 @@ class IdentifyOptions(_Options):
     start_states: StartStates | None = None  # None: estimated for levenberg_marquardt, recorded for gradient
     prior_weight: float = 0.0
     iterations: int = 40            # levenberg_marquardt's iteration limit
+    integrator: Method = Method.EULER   # levenberg_marquardt's integration rule
 
     def __post_init__(self):
         super().__post_init__()
@@ -408,6 +414,10 @@ def _range_checks(exp: Experiment) -> list[tuple[bool, str]]:
         (i.solver is Solver.LEVENBERG_MARQUARDT or i.prior_weight == 0,
          "[identify] prior_weight needs solver = \"levenberg_marquardt\""),
         (i.iterations >= 1, "[identify] iterations must be >= 1"),
+        (i.integrator in Method.offered(), f"[identify] integrator must be one of {Method.listing()}"),
+        (i.solver is Solver.LEVENBERG_MARQUARDT or i.integrator is Method.EULER,
+         f"[identify] integrator = '{i.integrator}' needs solver = \"levenberg_marquardt\" (gradient "
+         "identification integrates by Euler, as training)"),
         (i.solver is Solver.GRADIENT or i.stage is Stage.BEFORE,
          "[identify] solver = \"levenberg_marquardt\" identifies the MMG alone: stage \"joint\" (with "
          "the FNN) needs solver = \"gradient\""),
@@ -501,6 +511,10 @@ def parse_experiment(doc: dict, source: str = "<config>", directory: str | os.Pa
         sections = resolve_paths(sections, Path(directory))
     exp = Experiment(**sections, source=source)
     _validate(exp, source)
+    if exp.data.train and "ship" not in experiment:
+        _LOG.warning(f"{source}: [experiment] ship is not set, so your logs are modelled with the bundled "
+                     f"{exp.experiment.ship} (the paper's Esso Osaka 3 m model): set ship = \"my_ship.toml\" "
+                     f"(your ship file; `sysid init` writes one), or ship = \"{exp.experiment.ship}\" to keep it")
     return exp
 
 

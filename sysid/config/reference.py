@@ -162,6 +162,9 @@ KEYS: dict[tuple[str, str], KeyDoc] = {
     ("identify", "prior_weight"): KeyDoc("", "lambda >= 0 of a pull toward the ship file's values "
                                              "(levenberg_marquardt only); 0: none."),
     ("identify", "iterations"): KeyDoc("", "Iteration limit of levenberg_marquardt."),
+    ("identify", "integrator"): KeyDoc("", "Integration rule of levenberg_marquardt over each sample interval: "
+                                           "`euler` (as trained, the paper's) or `rk4` (coefficients nearer the "
+                                           "physical ones on logs of 1 s steps; levenberg_marquardt only)."),
     ("evaluation", "horizons"): KeyDoc("s", "Prediction horizons that define a good model: the test scores (RMSE "
                                             "of u, v_m, r over consecutive windows of each test file) and the "
                                             "verdict are at them, and so is the validation loss sweeps rank on "

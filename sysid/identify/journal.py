@@ -97,8 +97,10 @@ class TrainingJournal:
     def least_squares(self, solver) -> None:
         """The fit of a `sysid.identify.solvers.least_squares.LevenbergMarquardtIdentification`."""
         fit = solver.fit_
+        rule = solver.estimator_.integrator
         self.write(f"identify: Levenberg-Marquardt, start states {solver.start_states}, {solver.windows_} disjoint "
-                   f"windows, {fit.iterations} iterations ({fit.stopped}); multi-step loss training "
+                   f"windows" + (f" integrated by {rule.upper()}" if rule != "euler" else "")
+                   + f", {fit.iterations} iterations ({fit.stopped}); multi-step loss training "
                    f"{solver.train_loss_:.5f}, validation {solver.val_loss_:.5f}")
 
     def start_state_check(self, check, val_v: float, check_val: float) -> None:

@@ -118,6 +118,10 @@ def recorded_maneuver(run: Run, scenario: str = "") -> tuple[Maneuver, int]:
         rudder_deg, check_deg = angle, found.heading_deg
     else:
         rudder_deg, check_deg = angle, angle
+    if not 0.0 < check_deg <= 180.0:
+        raise DataError(f"{run.path}: a zig-zag's heading deviation of {check_deg:g} deg at its rudder reversals "
+                        "is no check angle in (0, 180] deg: not a zig-zag run (name its scenario, e.g. "
+                        "\"Zigzag 20/20\", or keep it out of the recorded runs)")
     return ZigZag(rudder_deg, check_deg, side), execute
 
 

@@ -275,7 +275,9 @@ def estimator_text(summary: RunSummary) -> str:
               else "each window integrated from its recorded first sample")
     if est.solver == Solver.LEVENBERG_MARQUARDT:
         how = (f"Levenberg-Marquardt on the multi-step residuals of {_or(est.windows, '?')} disjoint training "
-               f"windows, {starts}; {_or(est.iterations, '?')} iterations" + (f", {stopped}" if stopped else ""))
+               f"windows, {starts}" + (f", integrated by {INTEGRATORS.get(est.integrator, est.integrator)}"
+                                       if est.integrator and est.integrator != "euler" else "")
+               + f"; {_or(est.iterations, '?')} iterations" + (f", {stopped}" if stopped else ""))
         if est.prior_weight:
             how += f"; pulled toward the ship file's values with prior weight {est.prior_weight:g}"
     else:

@@ -80,3 +80,21 @@ def test_columns_parse_and_the_resolved_config_round_trips(tmp_path):
 def test_bad_column_maps_name_the_config_the_channel_and_the_fix(tmp_path, table, message):
     with pytest.raises(ConfigError, match=r"bad\.toml: \[data.columns\] " + message):
         load_experiment(_write(tmp_path / "bad.toml", "[data]\ntrain = ['a.csv']\n[data.columns]\n" + table + "\n"))
+
+
+def test_own_logs_without_a_ship_are_warned_of_the_paper_ship_they_get(tmp_path, caplog):
+    """Your logs in [data] train and no [experiment] ship: the config resolves to the bundled
+    Esso Osaka, and one WARNING names the config, the key, that ship and the fix. A config
+    that names its ship, or the paper's data set, is not warned."""
+    import logging
+    caplog.set_level(logging.WARNING, logger="sysid")
+    exp = load_experiment(_write(tmp_path / "own.toml", "[data]\ntrain = ['logs/*.csv']\n"))
+    assert exp.experiment.ship == "esso_osaka"
+    said = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert said == [f"{tmp_path / 'own.toml'}: [experiment] ship is not set, so your logs are modelled with the "
+                    "bundled esso_osaka (the paper's Esso Osaka 3 m model): set ship = \"my_ship.toml\" (your ship "
+                    "file; `sysid init` writes one), or ship = \"esso_osaka\" to keep it"]
+    caplog.clear()
+    load_experiment(_write(tmp_path / "named.toml", "ship = 'esso_osaka'\n[data]\ntrain = ['logs/*.csv']\n"))
+    parse_experiment({"experiment": {"model": "hybrid", "dataset": "D2"}})
+    assert [r for r in caplog.records if r.levelno == logging.WARNING] == []

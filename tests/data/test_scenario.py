@@ -5,6 +5,7 @@ signals alone, and a user's copy (renamed columns, knots and degrees, another fo
 the same; an analytic straight run and a short log named by its folder."""
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -88,3 +89,54 @@ def test_a_recorded_maneuver_in_no_named_folder_is_recognised_from_its_signals(d
     assert isinstance(maneuver, ZigZag) and (maneuver.rudder_deg, maneuver.check_deg) == (20.0, 20.0)
     maneuver, _ = recorded_maneuver(runs["log_2"])
     assert isinstance(maneuver, TurningCircle) and maneuver.rudder_deg == 35.0
+
+
+def _nomoto(delta_deg: np.ndarray, k_per_s: float = 0.2, t_s: float = 10.0) -> np.ndarray:
+    """Heading [rad] (N,) at 1 Hz of the first-order Nomoto ship T r' + r = K delta under the
+    rudder `delta_deg` [deg] (N,), from rest on course 0 (explicit Euler, dt = 1 s)."""
+    r, psi = 0.0, [0.0]
+    for d in np.radians(delta_deg[:-1]):
+        r += (k_per_s * d - r) / t_s
+        psi.append(psi[-1] + r)
+    return np.asarray(psi)
+
+
+def _zigzag_rudder(amplitude_deg: float, seconds: int, k_per_s: float = 0.2, t_s: float = 10.0) -> np.ndarray:
+    """The closed-loop zig-zag A/A rudder [deg] of the `_nomoto` ship: reversed when the heading
+    passes A on the side the rudder turns to, moved at most 5 deg per second."""
+    delta, side, r, psi, rudder = 0.0, 1.0, 0.0, 0.0, []
+    for _ in range(seconds):
+        if side * math.degrees(psi) >= amplitude_deg:
+            side = -side
+        delta += float(np.clip(side * amplitude_deg - delta, -5.0, 5.0))
+        rudder.append(delta)
+        r += (k_per_s * math.radians(delta) - r) / t_s
+        psi += r
+    return np.asarray(rudder)
+
+
+def test_a_meandering_run_that_turns_through_270_deg_or_swings_side_to_side_is_random():
+    """A rudder drawn at random every 5-15 s from +-30 deg (a meandering run) neither holds its
+    angle nor keeps to one side: random, though the Nomoto ship it steers turns through more
+    than 270 deg net in one run and swings side to side in the other. The same ship on a
+    held 35 deg rudder is a 35 deg turn, on a closed-loop 20/20 zig-zag a 20/20 zig-zag."""
+    t = np.arange(600.0)
+    n = np.full_like(t, 10.0)
+    found = {}
+    for seed in range(12):
+        rng = np.random.default_rng(seed)
+        plan = np.concatenate([[rng.uniform(-30, 30)] * int(rng.integers(5, 15)) for _ in range(120)])[:600]
+        psi = _nomoto(plan)
+        turned = abs(math.degrees(psi[-1]))
+        run = _run("meander", t, psi, np.radians(plan), n, "/logs/meander.csv")
+        found.setdefault("turns" if turned >= 270 else "keeps course" if turned < 90 else "other",
+                         []).append(recognise(run).kind)
+    assert len(found["turns"]) >= 1 and len(found["keeps course"]) >= 1
+    assert set(found["turns"]) | set(found["keeps course"]) == {Maneuver.RANDOM}
+
+    held = np.minimum(5.0 * t, 35.0)                 # 35 deg to starboard at 5 deg/s, held
+    turn = recognise(_run("turn", t, _nomoto(held), np.radians(held), n, "/logs/turn.csv"))
+    assert (turn.kind, turn.rudder_deg) == (Maneuver.TURNING, 35.0)
+    rudder = _zigzag_rudder(20.0, 600)
+    zigzag = recognise(_run("zz", t, _nomoto(rudder), np.radians(rudder), n, "/logs/zz.csv"))
+    assert (zigzag.kind, zigzag.rudder_deg, zigzag.heading_deg) == (Maneuver.ZIGZAG, 20.0, 20.0)

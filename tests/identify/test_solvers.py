@@ -15,6 +15,7 @@ from sysid import load_ship
 from sysid.config.choices import Solver
 from sysid.config.experiment import parse_experiment
 from sysid.device import compute_threads
+from sysid.errors import ConfigError
 from sysid.dynamics.rollouts import WindowSet
 from sysid.hybrid.force_models import build_mmg
 from sysid.identify.checkpoint import Checkpointing
@@ -47,12 +48,12 @@ def problem():
     return bench.SHIP, windows, bench.perturbed_start(ship, NAMES, 0), np.array([ship[n] for n in NAMES])
 
 
-def _experiment(ship: str, start: dict, solver: str, epochs: int = 1):
+def _experiment(ship: str, start: dict, solver: str, epochs: int = 1, integrator: str = "euler"):
     return parse_experiment({"experiment": {"name": "solvers", "model": "mmg", "ship": ship},
                              "mmg": {"overrides": start},
                              "training": {"steps": 10, "batch_size": 8, "patience": 1000},
                              "identify": {"parameters": NAMES, "solver": solver, "start_states": "recorded",
-                                          "epochs": epochs, "learning_rate": 0.01}})
+                                          "epochs": epochs, "learning_rate": 0.01, "integrator": integrator}})
 
 
 def _data(windows: WindowSet) -> IdentificationData:
@@ -70,6 +71,36 @@ def test_levenberg_marquardt_strategy_lands_on_the_truth(problem):
     np.testing.assert_allclose(list(coefficients(mmg, NAMES).values()), truth, rtol=1e-6)
     assert solver.stage_.history[0]["epoch"] == solver.fit_.iterations and solver.val_loss_ < 1e-10
     assert solver.estimator_.solver is Solver.LEVENBERG_MARQUARDT and list(solver.uncertainty_.names) == NAMES
+
+
+def test_levenberg_marquardt_integrates_by_the_configured_rule():
+    """Records of the true ship integrated by RK4 over 1 s steps (noise-free): with `[identify]
+    integrator = "rk4"` LM lands on the truth; with the default Euler it does not (its
+    coefficients absorb Euler's error over the 1 s step, 1 % or more in some derivative)."""
+    bench = load_benchmark("identification_kvlcc2")
+    ship = load_ship(bench.SHIP)
+    raw = bench.windows_from(bench.maneuvers(ship, {"turning35_stbd": 60, "zigzag10": 100}, "rk4"), 10,
+                             (0.0, 0.0, 0.0), 0)
+    windows = WindowSet(raw.states, raw.inputs, raw.dt)
+    truth = np.array([ship[n] for n in NAMES])
+    found = {}
+    for rule in ("rk4", "euler"):
+        exp = _experiment(bench.SHIP, bench.perturbed_start(ship, NAMES, 0), "levenberg_marquardt",
+                          integrator=rule)
+        mmg = build_mmg(exp, torch.float64)
+        solver = LevenbergMarquardtIdentification(exp).fit(mmg, _data(windows))
+        found[rule] = np.array(list(coefficients(mmg, NAMES).values()))
+        assert solver.estimator_.integrator == rule
+        said: list[str] = []
+        TrainingJournal(said.append).least_squares(solver)
+        assert ("disjoint windows integrated by RK4," in said[0]) is (rule == "rk4")
+    np.testing.assert_allclose(found["rk4"], truth, rtol=1e-6)
+    assert np.max(np.abs(found["euler"] / truth - 1)) > 0.01
+
+
+def test_an_integrator_other_than_euler_needs_levenberg_marquardt():
+    with pytest.raises(ConfigError, match=r"\[identify\] integrator = 'rk4' needs solver = \"levenberg_marquardt\""):
+        _experiment("kvlcc2_l7", {}, "gradient", integrator="rk4")
 
 
 def test_gradient_strategy_moves_towards_the_truth_through_the_loop(problem, tmp_path):

@@ -25,6 +25,21 @@ def test_the_turning_circles_and_zig_zags_of_a_folder(dataset_dir, tmp_path):
     assert [r.name for r in other] == ["log2", "log3"]
 
 
+def test_a_check_angle_beyond_180_deg_is_one_error_naming_the_log(dataset_dir, tmp_path):
+    """A zig-zag whose heading deviation at the reversals reads 185 deg (a meandering run taken
+    for one) is no IMO zig-zag: a DataError naming the log and the angle, so the folder's
+    other runs are still compared (`recorded_maneuver_runs` leaves it out)."""
+    from sysid.errors import DataError
+    from sysid.maneuvers.recorded import recorded_maneuver
+    path = tmp_path / "log0.csv"
+    shutil.copy(dataset_dir / "zigzag" / "zigzag_31-Jul-2020_13_04_24.csv", path)
+    run = read_runs([path], warn=None)[0]
+    with pytest.raises(DataError, match=r"log0\.csv: a zig-zag's heading deviation of 185 deg"):
+        recorded_maneuver(run, "Zigzag 20/185")
+    maneuver, _ = recorded_maneuver(run, "Zigzag 20/20")
+    assert (maneuver.rudder_deg, maneuver.check_deg) == (20.0, 20.0)
+
+
 def test_maneuver_with_recorded_logs(tmp_path, dataset_dir, capsys):
     from sysid.cli import run
     logs = tmp_path / "logs"

@@ -28,7 +28,7 @@ def own_sweep_project(project: Path, dataset_dir: Path, epochs: int = 2, logs_fo
         write_own_log(dataset_dir / "berthing" / log, logs / f"harbour_{i}.csv")
     write_own_log(dataset_dir / "berthing" / VALIDATION, logs / "harbour_check.csv")
     (project / "base.toml").write_text(
-        "[experiment]\nname = 'mine'\nmodel = 'hybrid'\nseed = 0\n"
+        "[experiment]\nname = 'mine'\nmodel = 'hybrid'\nseed = 0\nship = 'esso_osaka'\n"
         f"[data]\ntrain = ['{logs_folder}/harbour_0.csv', '{logs_folder}/harbour_1.csv']\n"
         f"validation = ['{logs_folder}/harbour_check.csv']\n"
         + columns_table() +

@@ -16,7 +16,7 @@ def tiny_experiment(path: Path, dataset_dir: Path, *, seed: int, epochs: int, wa
     files = [str(dataset_dir / "berthing" / name) for name in TRAIN_FILES]
     patience_line = f"patience = {patience}\n" if patience is not None else ""
     path.write_text(
-        f"[experiment]\nname = 'tiny'\nmodel = 'hybrid'\nseed = {seed}\n"
+        f"[experiment]\nname = 'tiny'\nmodel = 'hybrid'\nseed = {seed}\nship = 'esso_osaka'\n"
         f"[data]\nfiles = {json.dumps(files)}\n"
         f"[training]\nepochs = {epochs}\n{patience_line}warm_start_epochs = {warm_start_epochs}\nbatch_size = 64\n"
         "[gate]\nk = 5\nspace = 'inputs'\n[evaluation]\nhorizons = [30.0]\n")
@@ -26,7 +26,7 @@ def tiny_experiment(path: Path, dataset_dir: Path, *, seed: int, epochs: int, wa
 def one_epoch_config(path: Path, files) -> Path:
     """A hybrid of one epoch on `files`, for the tests that expect training to stop on bad logs
     before it starts; returns `path`."""
-    path.write_text("[experiment]\nname = 'bad'\nmodel = 'hybrid'\nseed = 1\n"
+    path.write_text("[experiment]\nname = 'bad'\nmodel = 'hybrid'\nseed = 1\nship = 'esso_osaka'\n"
                     f"[data]\nfiles = {json.dumps([str(f) for f in files])}\n"
                     "[training]\nepochs = 1\nwarm_start_epochs = 1\n[evaluation]\nhorizons = [30.0]\n")
     return path
@@ -39,7 +39,7 @@ def tiny_test_file(dataset_dir: Path) -> Path:
 
 def tiny_config(files, **sections) -> str:
     """A hybrid that trains in seconds on one file; `sections` replace or add keys."""
-    doc = {"experiment": {"name": "'fuzz'", "model": "'hybrid'", "seed": "1"},
+    doc = {"experiment": {"name": "'fuzz'", "model": "'hybrid'", "seed": "1", "ship": "'esso_osaka'"},
            "data": {"files": json.dumps([str(files["train"])])},
            "network": {"hidden": "[8]"},
            "training": {"epochs": "1", "warm_start_epochs": "2", "batch_size": "64", "max_minutes": "1.0"},

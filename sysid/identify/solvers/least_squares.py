@@ -1,6 +1,6 @@
 """Identification by Levenberg-Marquardt: least squares on the multi-step residuals of the
-disjoint windows of the training part in float64, Euler as in training, start states and
-prior as configured (`sysid.identify.levenberg_marquardt`), the sigma of that estimator, and
+disjoint windows of the training part in float64, integrated by `[identify] integrator`
+(Euler, as training, by default), start states and prior as configured (`sysid.identify.levenberg_marquardt`), the sigma of that estimator, and
 the same fit with the other start-state treatment beside it (`start_state_check`)."""
 from __future__ import annotations
 
@@ -40,13 +40,13 @@ class LevenbergMarquardtIdentification(Identification):
         model = build_mmg(self.experiment, torch.float64).to(device)
         prior = coefficients(model, names)
         weights = data.w_v.to(torch.float64)
-        fit = identify_levenberg_marquardt(model, windows, names, weights, Method.EULER, ident.start_states, prior,
+        fit = identify_levenberg_marquardt(model, windows, names, weights, ident.integrator, ident.start_states, prior,
                                            ident.prior_weight, ident.iterations)
         model.coefficients.assign(fit.coefficients)
-        self.uncertainty_ = fit_uncertainty(model, windows, names, fit, weights, Method.EULER, prior=prior,
+        self.uncertainty_ = fit_uncertainty(model, windows, names, fit, weights, ident.integrator, prior=prior,
                                             prior_weight=ident.prior_weight)
         self.check_ = start_state_check(build_mmg(self.experiment, torch.float64).to(device), windows, names, fit,
-                                        self.uncertainty_.std_error, weights, Method.EULER, prior,
+                                        self.uncertainty_.std_error, weights, ident.integrator, prior,
                                         ident.prior_weight, ident.iterations)
         self.fit_, self.windows_ = fit, len(windows)
 
@@ -67,6 +67,6 @@ class LevenbergMarquardtIdentification(Identification):
         self.stage_ = StageResult([row], fit.iterations, self.val_loss_, fit.stopped)
         self.estimator_ = IdentificationSummary(
             solver=Solver.LEVENBERG_MARQUARDT, start_states=ident.start_states, prior_weight=ident.prior_weight,
-            iterations=fit.iterations, windows=self.windows_, integrator=Method.EULER.value,
+            iterations=fit.iterations, windows=self.windows_, integrator=Method(ident.integrator).value,
             covariance=self.uncertainty_.method, start_state_check=check.summary(self.check_val_loss_))
         return self
