@@ -16,11 +16,21 @@ from sysid.errors import DataError
 from sysid.records.columns import RMSE_UNITS
 
 
-def _label(path: str, taken: set[str], ship_name: str | None) -> str:
+def _label(path: str, taken: set[str], ship_name: str | None, kind: str = "", seeds: int = 0) -> str:
     """A model's name in the tables: the run directory's or seed folder's name, "MMG (ship
-    file NAME)" for a ship; made unique with its parent folder, then a number."""
+    file NAME)" for a ship, a sweep's point folder (``trials/POINT``, `seeds` seed run
+    directories of models of `kind`) by its kind and seeds: "Hybrid (3 seeds)", "Hybrid
+    lr=0.003 (3 seeds)"; made unique with its parent folder, then a number."""
+    from sysid.protocol.paper import KIND_LABELS
+    from sysid.sweep.plan import TRIALS_DIR
+    from sysid.sweep.points import point_name
+    from sysid.store.target import OutputKind, record_file
+
     p = Path(path)
     label = f"MMG (ship file {ship_name})" if ship_name else p.name
+    if seeds and p.parent.name == TRIALS_DIR and record_file(p.parent.parent, OutputKind.SWEEP).is_file():
+        point = "" if p.name == point_name({}) else f" {p.name}"
+        label = f"{KIND_LABELS.get(kind, kind)}{point} ({seeds} seed{'s' if seeds != 1 else ''})"
     if label in taken and not ship_name:
         label = f"{p.parent.name}/{p.name}"
     base, k = label, 2
@@ -222,8 +232,9 @@ def _contenders(sources):
     for s in progress(sources, desc="loading models", unit="models", quiet=len(sources) < 4):
         subject = load_maneuver_model(s)
         is_ship = not Path(s).is_dir()
-        label = _label(s, taken, subject.ship.name if is_ship else None)
         members = tuple(m for _, m in subject.members) if subject.spread == "seeds" else (subject.model,)
+        label = _label(s, taken, subject.ship.name if is_ship else None, subject.kind,
+                       len(members) if subject.spread == "seeds" else 0)
         key = (subject.ship.name, tuple(sorted(subject.ship.overrides.items())))
         if is_ship:
             ships.setdefault(key, label)

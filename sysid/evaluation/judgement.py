@@ -604,6 +604,11 @@ def _with_sentence(j: Judgement, model: str, baseline: str, material: list[CellJ
         finite = f"{overall} in the cells that stayed finite" if math.isfinite(j.change) else "no cell stayed finite"
         text = (f"{model} DIVERGED (non-finite or far outside the training data's range) in {where}, "
                 f"so it does not beat {baseline}; {finite}, {evidence}.")
+    elif j.outcome is Outcome.WORSE and material and j.change < 0:   # worse in cells, better overall
+        cells = f"{len(material)} cell{'s' if len(material) != 1 else ''}"
+        text = (f"{model} is WORSE than {baseline} in {cells}, {'each ' if len(material) != 1 else ''}more than {tolerance} worse at {conf} confidence "
+                f"({_listed(material, names)}), although better overall: RMSE {percent_text(j.change)} "
+                f"({conf} interval {interval_text(j.change_low, j.change_high)}), {evidence}.")
     elif j.outcome is Outcome.WORSE:
         why = (f"more than {tolerance} worse at {conf} confidence in {_listed(material, names)}" if material
                else f"worse overall at {conf} confidence")

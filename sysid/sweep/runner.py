@@ -133,7 +133,9 @@ def progress_callback(total: int, names: Callable[[dict], str], log: Callable[[s
 
         def on_trial_recover(self, iteration, trials, trial, **info):
             self.retried += 1
-            self._line(f"retrying {names(trial.config)} after a failure (a lost node or a crash)")
+            cause = failure_cause(_trial_error(trial))
+            self._line(f"retrying {names(trial.config)} after a failure: {cause}" if cause
+                       else f"retrying {names(trial.config)} after a failure (a lost node or a crash)")
 
         def on_trial_error(self, iteration, trials, trial, **info):
             self._ended(trial)
@@ -141,6 +143,28 @@ def progress_callback(total: int, names: Callable[[dict], str], log: Callable[[s
             self._line(f"FAILED {names(trial.config)}")
 
     return SweepProgress()
+
+
+def _trial_error(trial) -> BaseException | None:
+    """The exception Tune recorded for `trial`'s last failure (its pickled copy), None when
+    there is none or it cannot be read back."""
+    try:
+        return trial.get_pickled_error()
+    except Exception:   # no error file, a storage that does not answer, a class that does not unpickle
+        return None
+
+
+def failure_cause(error: BaseException | None) -> str | None:
+    """The first line of the failure's own message: through Ray's wrappers (a trial's
+    exception, or an actor's it called, as `RayTaskError.cause`) to the exception raised;
+    None without one."""
+    seen = 0
+    while isinstance(getattr(error, "cause", None), BaseException) and seen < 8:
+        error, seen = error.cause, seen + 1   # type: ignore[union-attr]
+    if error is None:
+        return None
+    lines = [line.strip() for line in str(error).splitlines() if line.strip()]
+    return lines[0] if lines else type(error).__name__
 
 
 def make_scheduler(spec: SchedulerSpec, horizon: int):

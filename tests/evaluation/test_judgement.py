@@ -10,7 +10,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from sysid.evaluation.judgement import (CHANNELS, CellDecision, Divergence, Outcome, PairedCell, VerdictRule,
-                                        deciding_windows, judge, widening)
+                                        deciding_windows, interval_text, judge, widening)
 from sysid.protocol.paper import SCENARIO_ORDER, paper_table
 
 RULE = VerdictRule(resamples=1000)
@@ -241,6 +241,33 @@ def test_one_cell_11_percent_worse_keeps_the_verdict_open_until_the_evidence_say
     assert tight.outcome is Outcome.WORSE and "Log1 u at 30 s +11 %" in tight.sentence
 
 
+def test_worse_in_cells_but_better_overall_says_the_cells_first_then_the_overall_gain():
+    """Every cell exactly 50 % better but Log1 u at 30 s exactly +25 % and Log2 r at 100 s
+    exactly +40 % (20 windows each): WORSE by those two cells although the overall change is
+    the geometric mean of the 24 ratios, -46 %; the sentence says so in that order. With the
+    model worse everywhere the WORSE sentence keeps its form."""
+    ratios = uniform(4, 20, lambda i, h, c, w: np.full(w, 0.5))
+    ratios[("log1", 30.0, "u")] = np.full(20, 1.25)
+    ratios[("log2", 100.0, "r")] = np.full(20, 1.40)
+    j = judge(cells_of(ratios), RULE, model="mmg_id", baseline="hybrid")
+    truth = math.exp((22 * math.log(0.5) + math.log(1.25) + math.log(1.40)) / 24) - 1
+    assert j.outcome is Outcome.WORSE and j.change == pytest.approx(truth) and j.change_high < 0
+    assert j.sentence == (
+        "mmg_id is WORSE than hybrid in 2 cells, each more than 10 % worse at 95 % confidence "
+        "(Log1 u at 30 s +25 % (+25 % to +25 %, 20 windows); Log2 r at 100 s +40 % (+40 % to +40 %, 20 windows)), "
+        f"although better overall: RMSE -46 % (95 % interval {interval_text(j.change_low, j.change_high)}), "
+        "on 4 logs, 160 windows, 1 seed (no spread: one model).")
+    ratios[("log2", 100.0, "r")] = np.full(20, 0.5)
+    one = judge(cells_of(ratios), RULE)
+    assert one.sentence.startswith("The model is WORSE than its baseline in 1 cell, more than 10 % worse at 95 % "
+                                   "confidence (Log1 u at 30 s +25 % (+25 % to +25 %, 20 windows)), although")
+    worse = judge(cells_of(uniform(4, 20, lambda i, h, c, w: np.full(w, 1.25))), RULE)
+    assert worse.change == pytest.approx(0.25)
+    assert worse.sentence.startswith("The model is WORSE than its baseline: more than 10 % worse at 95 % confidence "
+                                     "in Log0 u at 30 s +25 % (+25 % to +25 %, 20 windows);")
+    assert "; RMSE +25 % overall (95 % interval +25 % to +25 %), on 4 logs" in worse.sentence
+
+
 def test_several_members_are_resampled_and_their_spread_is_shown():
     rng = np.random.default_rng(2)
     cells = []
@@ -295,7 +322,7 @@ def test_logs_of_one_scenario_are_named_by_the_log_in_the_sentence():
              for c in cells_of(ratios, rng=rng)]
     j = judge(cells, RULE, model="The hybrid", baseline="MMG (ship file)")
     assert j.outcome is Outcome.WORSE
-    assert "in Turning 20: turn_b r at 30 s +60 %" in j.sentence
+    assert "confidence (Turning 20: turn_b r at 30 s +60 %" in j.sentence
     assert "Turning 20 r" not in j.sentence and "turn_a" not in j.sentence
     assert place_names(j.cells) == {"turn_a": "Turning 20: turn_a", "turn_b": "Turning 20: turn_b",
                                     "zz_1": "Zigzag 20/20"}
