@@ -47,7 +47,8 @@ def test_scratch_ship_trains_evaluates_and_reports(tmp_path):
     assert verdict["outcome"] == "beats"
     assert verdict["statement"].startswith("The identified MMG beats its physics baseline MMG (ship file) at 95 % "
                                            "confidence: RMSE -")
-    assert verdict["statement"].endswith("Decided on the test logs at 30 s.")
+    # the test log decides; the validation clause may follow (2 logs' 6 windows: not distinguishable there)
+    assert "Decided on the test logs at 30 s." in verdict["statement"]
     out = tmp_path / "metrics.csv"
     sysid(["evaluate", str(run_dir), "--data", str(files[2]), "--horizon", "30", "-o", str(out)])
     assert pd.read_csv(out).rmse_r.iloc[0] < 0.01
