@@ -69,6 +69,18 @@ def test_rudder_mean_over_a_step_is_the_integral_of_the_rate_limited_ramp(angle,
     assert float(end) == pytest.approx(path[-1], abs=1e-15)
 
 
+def _brute_force_distances(hybrid, result) -> np.ndarray:
+    """The mean distance of each step of `result` to its k nearest rows of the gate's bank, by
+    numpy over the whole bank (the independent truth of the gate's own distances)."""
+    bank = hybrid.gate.bank.numpy()
+    wind = torch.stack(relative_wind(*(torch.tensor(c) for c in (result.states[:, 1], result.states[:, 3],
+                                                                   result.states[:, 4], result.inputs[:, 2],
+                                                                   result.inputs[:, 3]))), -1)
+    z = hybrid.gate_coordinates(correction_inputs(torch.tensor(result.states), torch.tensor(result.inputs),
+                                                  wind)).detach().numpy()
+    return np.sort(np.linalg.norm(z[:, None] - bank[None], axis=-1), 1)[:, :hybrid.gate.k].mean(1)
+
+
 def _hybrid_without_correction(ship, bank_states: torch.Tensor) -> CorrectedModel:
     """A hybrid whose FNN gives zero force (so its motion is the MMG's) and whose kNN gate
     (inputs space, k = 5) was fitted on `bank_states` in straight running."""
@@ -125,14 +137,8 @@ def test_each_steps_knn_distance_is_the_brute_force_one_and_decides_the_gate():
                                      inputs[:, 3]), -1)
     hybrid.gate.fit(hybrid.gate_coordinates(correction_inputs(bank_states, inputs, wind)))
     result = simulate_maneuvers(hybrid, [TurningCircle(35.0)], conditions)[0]
-    bank = hybrid.gate.bank.numpy()
-    wind = torch.stack(relative_wind(*(torch.tensor(c) for c in (result.states[:, 1], result.states[:, 3],
-                                                                   result.states[:, 4], result.inputs[:, 2],
-                                                                   result.inputs[:, 3]))), -1)
-    z = hybrid.gate_coordinates(correction_inputs(torch.tensor(result.states), torch.tensor(result.inputs),
-                                                  wind)).detach().numpy()
-    k = hybrid.gate.k
-    brute = np.sort(np.linalg.norm(z[:, None] - bank[None], axis=-1), 1)[:, :k].mean(1)
+    bank, k = hybrid.gate.bank.numpy(), hybrid.gate.k
+    brute = _brute_force_distances(hybrid, result)
     loo = np.sort(np.linalg.norm(bank[:, None] - bank[None], axis=-1), 1)[:, 1:k + 1].mean(1)
     threshold = np.sort(loo)[math.ceil(hybrid.gate.alpha * len(loo)) - 1]
     np.testing.assert_allclose(result.knn_distance, brute, rtol=1e-9, atol=1e-12)
@@ -512,13 +518,7 @@ def test_the_terminal_names_the_largest_distance_of_indices_csv(capsys):
     hybrid = _hybrid_without_correction(ship, bank_states)
     conditions, _ = default_conditions(MMG(ship), ship, duration=20.0, dt=0.2)
     result = simulate_maneuvers(hybrid, [TurningCircle(35.0)], conditions)[0]
-    bank = hybrid.gate.bank.numpy()
-    wind = torch.stack(relative_wind(*(torch.tensor(c) for c in (result.states[:, 1], result.states[:, 3],
-                                                                   result.states[:, 4], result.inputs[:, 2],
-                                                                   result.inputs[:, 3]))), -1)
-    z = hybrid.gate_coordinates(correction_inputs(torch.tensor(result.states), torch.tensor(result.inputs),
-                                                  wind)).detach().numpy()
-    brute = np.sort(np.linalg.norm(z[:, None] - bank[None], axis=-1), 1)[:, :hybrid.gate.k].mean(1)
+    brute = _brute_force_distances(hybrid, result)
     result.knn_distance[0] = math.nan   # as a diverged step's
     largest = float(np.max(brute[1:]))
     row = indices_table([result], float(ship["L_pp"]), 1.17248, None).iloc[0]
